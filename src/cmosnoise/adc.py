@@ -1,0 +1,59 @@
+"""Stage 9, analogue-to-digital conversion: electrons to digital numbers (DN).
+
+A linear ramp ADC (MODEL.md stage 9)::
+
+    K  = (2**bits - 1 - black_level_dn) / full_scale_e          # DN per e-
+    DN = clip(round(N_total * K + black_level_dn), 0, 2**bits - 1)
+
+``round`` is round-half-to-even (``numpy.rint``). The black level keeps
+negative noise excursions visible, as real sensors do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Transfer:
+    """The ADC's transfer function."""
+
+    gain_dn_per_e: float  #: K, DN per electron
+    black_level_dn: float
+    bits: int
+
+    @property
+    def max_code(self) -> int:
+        return 2**self.bits - 1
+
+    @classmethod
+    def from_settings(cls, bits: int, black_level_dn: float, full_scale_e: float) -> "Transfer":
+        if not 8 <= bits <= 16:
+            raise ValueError(f"bits must be in 8..16, got {bits}")
+        top = 2**bits - 1
+        if not 0 <= black_level_dn < top:
+            raise ValueError(f"black_level_dn must be in [0, {top}), got {black_level_dn}")
+        if full_scale_e <= 0:
+            raise ValueError(f"full_scale_e must be > 0, got {full_scale_e}")
+        return cls((top - black_level_dn) / full_scale_e, float(black_level_dn), bits)
+
+    @classmethod
+    def ideal(cls) -> "Transfer":
+        """1 DN per electron, no black level, 16-bit range (ADC switched off)."""
+        return cls(1.0, 0.0, 16)
+
+    def to_electrons(self, dn: np.ndarray) -> np.ndarray:
+        """Invert the transfer (ignoring quantization and clipping): DN -> e-."""
+        return (np.asarray(dn, dtype=np.float64) - self.black_level_dn) / self.gain_dn_per_e
+
+
+def convert(electrons: np.ndarray, transfer: Transfer) -> np.ndarray:
+    """Quantize charge (e-, float) to raw codes (DN, uint16)."""
+    # float64 so that rounding at .5 boundaries is the formula's, not float32's
+    v = electrons.astype(np.float64) * transfer.gain_dn_per_e
+    v += transfer.black_level_dn
+    np.rint(v, out=v)
+    np.clip(v, 0, transfer.max_code, out=v)
+    return v.astype(np.uint16)

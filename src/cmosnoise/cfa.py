@@ -1,0 +1,51 @@
+"""Colour filter array geometry.
+
+A Bayer pattern is named by its top-left 2 x 2 tile read row by row
+(``RGGB``, ``BGGR``, ``GRBG``, ``GBRG``); ``none`` is a monochrome sensor.
+Channels are numbered R = 0, G = 1, B = 2.
+"""
+
+import numpy as np
+
+BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
+CHANNEL_INDEX = {"R": 0, "G": 1, "B": 2}
+
+#: offsets (drow, dcol) of a pixel's nearest neighbours of the same colour.
+#: R and B sit on a 2-pixel grid; G is a quincunx, so its nearest G
+#: neighbours are the 4 diagonals and the 4 at distance 2 along rows/columns.
+RB_NEIGHBOURS = tuple((dr, dc) for dr in (-2, 0, 2) for dc in (-2, 0, 2) if (dr, dc) != (0, 0))
+G_NEIGHBOURS = ((-1, -1), (-1, 1), (1, -1), (1, 1), (-2, 0), (2, 0), (0, -2), (0, 2))
+MONO_NEIGHBOURS = tuple((dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0))
+
+
+def is_mono(pattern: str) -> bool:
+    return pattern == "none"
+
+
+def tile(pattern: str) -> np.ndarray:
+    """The 2 x 2 tile of channel indices of a Bayer pattern."""
+    if pattern not in BAYER_PATTERNS:
+        raise ValueError(f"not a Bayer pattern: {pattern!r}; use one of {BAYER_PATTERNS}")
+    return np.array([CHANNEL_INDEX[c] for c in pattern], dtype=np.int8).reshape(2, 2)
+
+
+def channel_map(pattern: str, shape: tuple[int, int]) -> np.ndarray:
+    """Channel index (0, 1, 2) of every pixel, shape ``shape``; all 1 for mono."""
+    rows, cols = shape
+    if is_mono(pattern):
+        return np.ones(shape, dtype=np.int8)
+    reps = ((rows + 1) // 2, (cols + 1) // 2)
+    return np.tile(tile(pattern), reps)[:rows, :cols]
+
+
+def masks(pattern: str, shape: tuple[int, int]) -> np.ndarray:
+    """Boolean masks, shape (3, rows, cols): which pixels sit under R, G, B."""
+    cmap = channel_map(pattern, shape)
+    return np.stack([cmap == c for c in range(3)])
+
+
+def same_colour_neighbour_offsets(pattern: str, channel: int) -> tuple[tuple[int, int], ...]:
+    """Offsets of the 8 nearest same-colour neighbours of a pixel of ``channel``."""
+    if is_mono(pattern):
+        return MONO_NEIGHBOURS
+    return G_NEIGHBOURS if channel == 1 else RB_NEIGHBOURS

@@ -1,0 +1,320 @@
+"""The configuration: one validated section per stage of MODEL.md.
+
+A configuration is YAML (or a dict) with one section per stage, each with an
+``enabled`` switch, plus the run settings (``seed``, ``scene``, ``run``). It
+is validated by pydantic: an unknown key, a wrong type or a value outside its
+physical range raises :class:`~cmosnoise.errors.CmosnoiseError` with a message
+that names the key, the value and what is allowed.
+
+Presets are partial configurations shipped in ``cmosnoise/presets/``; they are
+merged over the defaults. ``--set key.path=value`` overrides are merged last.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal, Optional, Union
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from .errors import CmosnoiseError
+from .units import aa_to_e_per_s, na_per_cm2_to_e_per_s
+
+
+class Section(BaseModel):
+    """Base of every section: unknown keys are errors, values are re-validated on assignment."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+# --------------------------------------------------------------------------- run
+class SceneSection(Section):
+    """What the sensor looks at (stage 1, the perfect image).
+
+    ``source`` is a built-in (``photo``, ``flat:LEVEL``, ``ramp``,
+    ``colorchecker``, ``zoneplate``, ``siemens``) or a path to an image.
+    """
+
+    source: str = "photo"
+    scale: Optional[float] = Field(
+        None, gt=0, description="linear files (16-bit, float, .npy): value that maps to 1.0; null: the file's own maximum"
+    )
+    fit: Literal["crop", "stretch"] = Field(
+        "crop", description="aspect mismatch: crop the scene's centre to the sensor's aspect, or stretch it"
+    )
+
+
+class RunSection(Section):
+    frames: int = Field(1, ge=1, le=1_000_000, description="number of frames to produce")
+    first_frame: int = Field(0, ge=0, description="index of the first frame (frame k's temporal noise depends only on seed and k)")
+
+
+# ------------------------------------------------------------------------ sensor
+class SensorSection(Section):
+    width: int = Field(640, ge=2, le=30000, description="columns, pixels")
+    height: int = Field(480, ge=2, le=30000, description="rows, pixels")
+    cfa: Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"] = "RGGB"
+    channel_responsivity: tuple[float, float, float] = Field(
+        (1.0, 1.0, 1.0), description="relative R, G, B responsivity of the colour filters"
+    )
+    full_well_e: float = Field(10000.0, gt=0, le=1e7, description="full-well capacity, e-")
+    temperature_c: float = Field(25.0, ge=-60, le=150, description="operating temperature, degrees C")
+    pixel_pitch_um: float = Field(2.2, gt=0, le=100, description="pixel pitch, um")
+
+    @field_validator("channel_responsivity")
+    @classmethod
+    def _non_negative(cls, v):
+        if any(x < 0 or not math.isfinite(x) for x in v):
+            raise ValueError("each relative responsivity must be a finite number >= 0")
+        return v
+
+
+class ExposureSection(Section):
+    integration_time_s: float = Field(0.03, gt=0, le=3600, description="integration (exposure) time, s")
+    peak_rate_e_per_s: float = Field(
+        100000.0, ge=0, description="photo-electron rate of a scene value of 1.0, e-/s per pixel"
+    )
+
+
+# ------------------------------------------------------------------------ stages
+class PrnuSection(Section):
+    enabled: bool = True
+    sigma_pct: float = Field(1.0, ge=0, le=100, description="PRNU, % of the signal (std of the gain map)")
+
+
+Kernel = list[list[float]]
+
+
+def _check_kernel(k: Kernel, name: str) -> Kernel:
+    if len(k) != 3 or any(len(row) != 3 for row in k):
+        raise ValueError(f"{name} must be 3 x 3")
+    flat = [float(x) for row in k for x in row]
+    if any(x < 0 or not math.isfinite(x) for x in flat):
+        raise ValueError(f"{name} entries must be finite and >= 0 (percent)")
+    total = sum(flat)
+    if total > 100.0 + 1e-9:
+        raise ValueError(f"{name} sums to {total:g} %; it must sum to at most 100 % (charge is not created)")
+    return [[float(x) for x in row] for row in k]
+
+
+class CrosstalkSection(Section):
+    """Diffusion crosstalk (stage 3): percent of a pixel's photo-charge landing in each neighbour.
+
+    ``kernel_pct`` is one 3 x 3 kernel, or ``{R: k, G: k, B: k}`` for a kernel per
+    CFA colour (the colour of the pixel where the charge was generated).
+    """
+
+    enabled: bool = True
+    kernel_pct: Union[Kernel, dict[Literal["R", "G", "B"], Kernel]] = Field(
+        default_factory=lambda: [[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]]
+    )
+
+    @field_validator("kernel_pct")
+    @classmethod
+    def _kernel(cls, v):
+        if isinstance(v, dict):
+            missing = {"R", "G", "B"} - set(v)
+            if missing:
+                raise ValueError(f"a per-colour kernel needs R, G and B; missing {sorted(missing)}")
+            return {c: _check_kernel(k, f"kernel for {c}") for c, k in v.items()}
+        return _check_kernel(v, "kernel")
+
+
+class ShotNoiseSection(Section):
+    enabled: bool = Field(True, description="photon shot noise (Poisson); off: the photo-charge enters as its mean")
+    gaussian_above_e: Optional[float] = Field(
+        None, gt=0, description="speed option: normal approximation where the mean exceeds this many e- (paper: 1000); null: exact Poisson"
+    )
+
+
+class AdcSection(Section):
+    enabled: bool = Field(True, description="off: ideal readout, 1 DN per e-, no black level, 16-bit range")
+    bits: int = Field(12, ge=8, le=16)
+    black_level_dn: float = Field(64.0, ge=0, description="offset added before quantization, DN")
+    full_scale_e: Optional[float] = Field(None, gt=0, description="charge mapped to the top code, e-; null: the full well")
+
+
+# ------------------------------------------------------------------------- root
+class Config(Section):
+    """A complete, resolved cmosnoise configuration."""
+
+    description: str = ""
+    seed: int = Field(0, ge=0, le=2**63 - 1)
+    scene: SceneSection = Field(default_factory=SceneSection)
+    run: RunSection = Field(default_factory=RunSection)
+    sensor: SensorSection = Field(default_factory=SensorSection)
+    exposure: ExposureSection = Field(default_factory=ExposureSection)
+    prnu: PrnuSection = Field(default_factory=PrnuSection)
+    crosstalk: CrosstalkSection = Field(default_factory=CrosstalkSection)
+    shot_noise: ShotNoiseSection = Field(default_factory=ShotNoiseSection)
+    adc: AdcSection = Field(default_factory=AdcSection)
+
+    @model_validator(mode="after")
+    def _cross_checks(self):
+        top = 2**self.adc.bits - 1
+        if self.adc.black_level_dn >= top:
+            raise ValueError(
+                f"adc.black_level_dn = {self.adc.black_level_dn:g} leaves no range: it must be below 2^bits - 1 = {top}"
+            )
+        if isinstance(self.crosstalk.kernel_pct, dict) and self.sensor.cfa == "none" and self.crosstalk.enabled:
+            raise ValueError("crosstalk.kernel_pct: a per-colour kernel needs a colour sensor (sensor.cfa is 'none')")
+        return self
+
+    # convenience -----------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, cols) of the sensor."""
+        return (self.sensor.height, self.sensor.width)
+
+    def to_dict(self) -> dict:
+        return self.model_dump(mode="json")
+
+    def to_yaml(self) -> str:
+        return yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None, width=100)
+
+
+# ----------------------------------------------------------------- error text
+def _format_loc(loc) -> str:
+    parts = []
+    for p in loc:
+        if isinstance(p, int):
+            parts.append(f"[{p}]")
+        elif p in ("list[list[float]]", "dict[literal['R','G','B'],list[list[float]]]") or str(p).startswith(("list[", "dict[", "function-")):
+            continue  # pydantic's union-branch labels, not user keys
+        else:
+            parts.append(("." if parts else "") + str(p))
+    return "".join(parts)
+
+
+def format_validation_error(err: ValidationError) -> str:
+    """One line per problem: ``key = value: what is allowed``."""
+    lines = []
+    seen = set()
+    for e in err.errors():
+        key = _format_loc(e.get("loc", ()))
+        msg = e.get("msg", "invalid")
+        msg = msg.removeprefix("Value error, ")
+        if e.get("type") == "extra_forbidden":
+            parent = key.rsplit(".", 1)[0] if "." in key else ""
+            line = f"unknown key '{key}'" + (f" in section '{parent}'" if parent else "")
+        elif "input" in e and not isinstance(e["input"], dict) and key:
+            line = f"{key} = {e['input']!r}: {msg}"
+        else:
+            line = f"{key}: {msg}" if key else msg
+        if line not in seen:
+            seen.add(line)
+            lines.append(line)
+    return "invalid configuration: " + "; ".join(lines)
+
+
+# ----------------------------------------------------------------- merging
+def deep_merge(base: dict, override: dict) -> dict:
+    """Recursively merge ``override`` into a copy of ``base`` (lists are replaced)."""
+    out = copy.deepcopy(base)
+    for k, v in override.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = deep_merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """Parse ``a.b.c=value`` (value in YAML syntax) into (["a", "b", "c"], value)."""
+    if "=" not in text:
+        raise CmosnoiseError(f"--set {text!r}: expected KEY=VALUE, e.g. prnu.sigma_pct=2")
+    key, _, raw = text.partition("=")
+    key = key.strip()
+    if not key or any(not p for p in key.split(".")):
+        raise CmosnoiseError(f"--set {text!r}: the key must be a dotted path such as prnu.sigma_pct")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    return key.split("."), value
+
+
+def apply_overrides(data: dict, overrides: list[str]) -> dict:
+    out = copy.deepcopy(data)
+    for text in overrides:
+        path, value = parse_override(text)
+        node = out
+        for p in path[:-1]:
+            nxt = node.get(p)
+            if not isinstance(nxt, dict):
+                nxt = {}
+                node[p] = nxt
+            node = nxt
+        node[path[-1]] = value
+    return out
+
+
+# ----------------------------------------------------------------- presets
+def _preset_dir():
+    return resources.files("cmosnoise") / "presets"
+
+
+def preset_names() -> list[str]:
+    return sorted(p.name[:-5] for p in _preset_dir().iterdir() if p.name.endswith(".yaml"))
+
+
+def preset_data(name: str) -> dict:
+    path = _preset_dir() / f"{name}.yaml"
+    if not path.is_file():
+        raise CmosnoiseError(f"unknown preset {name!r}; available: {', '.join(preset_names())}")
+    return yaml.safe_load(path.read_text()) or {}
+
+
+def read_yaml(path: str | Path) -> dict:
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except FileNotFoundError:
+        raise CmosnoiseError(f"config file {str(p)!r} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CmosnoiseError(f"config file {str(p)!r} cannot be read: {exc}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise CmosnoiseError(f"config file {str(p)!r} is not valid YAML: {exc}") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise CmosnoiseError(f"config file {str(p)!r} must hold a mapping of sections, not {type(data).__name__}")
+    return data
+
+
+def build_config(data: dict | None = None) -> Config:
+    """Validate a (partial) configuration dict merged over the defaults."""
+    try:
+        return Config.model_validate(data or {})
+    except ValidationError as exc:
+        raise CmosnoiseError(format_validation_error(exc)) from None
+
+
+def load_config(
+    path: str | Path | None = None,
+    preset: str | None = None,
+    overrides: list[str] | None = None,
+    extra: dict | None = None,
+) -> Config:
+    """Resolve a configuration: defaults <- preset <- file <- ``extra`` <- ``--set`` overrides."""
+    data: dict = {}
+    if preset:
+        data = deep_merge(data, preset_data(preset))
+    if path:
+        data = deep_merge(data, read_yaml(path))
+    if extra:
+        data = deep_merge(data, extra)
+    if overrides:
+        data = apply_overrides(data, overrides)
+    return build_config(data)
+
+
+def with_updates(config: Config, updates: dict) -> Config:
+    """A new validated configuration: ``config`` with ``updates`` merged in."""
+    return build_config(deep_merge(config.to_dict(), updates))

@@ -1,0 +1,71 @@
+"""Stage 3, diffusion crosstalk: photo-charge spreads to the neighbouring pixels.
+
+The kernel ``k`` (3 x 3, fractions) gives where a photo-electron generated in
+a pixel is collected: ``k[1, 1]`` is the fraction that stays (78.4 % in the
+paper's Fig. 4), ``k[1 + dr, 1 + dc]`` the fraction collected by the pixel at
+offset (dr, dc). ``sum(k) <= 1``; the rest is lost to the substrate.
+
+The kernel acts on the photo-electron **mean**, before the shot-noise draw:
+each electron lands in exactly one pixel, so collected counts stay independent
+Poisson variables with mean ``k * mu`` (Poisson thinning) and the shot noise
+is not smoothed (MODEL.md stage 3; the paper's MATLAB blurred the noisy image,
+which lowers the shot-noise variance by ``sum(k**2)``).
+
+A kernel per CFA colour models longer diffusion of red (deeper) photo-charge;
+the colour is that of the pixel where the charge was generated. Edges reflect.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from . import cfa as cfa_mod
+
+
+def kernel_fractions(kernel_pct) -> np.ndarray | dict[str, np.ndarray]:
+    """Kernel(s) from percent to fractions."""
+    if isinstance(kernel_pct, dict):
+        return {c: np.asarray(k, dtype=np.float64) / 100.0 for c, k in kernel_pct.items()}
+    return np.asarray(kernel_pct, dtype=np.float64) / 100.0
+
+
+def spread(mean_e: np.ndarray, kernel) -> np.ndarray:
+    """Spread charge with one kernel: ``out[p] = sum_d mean_e[p - d] * k[d]`` (e-)."""
+    return ndimage.convolve(mean_e, np.asarray(kernel, dtype=mean_e.dtype), mode="reflect")
+
+
+def apply(mean_e: np.ndarray, kernel, pattern: str = "none") -> np.ndarray:
+    """Mean photo-electrons (e-) after diffusion crosstalk.
+
+    Parameters
+    ----------
+    mean_e : (rows, cols) array, e-
+    kernel : 3 x 3 array of fractions, or ``{"R": k, "G": k, "B": k}``
+    pattern : CFA pattern, used only with per-colour kernels
+    """
+    if not isinstance(kernel, dict):
+        return spread(mean_e, kernel)
+    out = np.zeros_like(mean_e)
+    for name, mask in zip("RGB", cfa_mod.masks(pattern, mean_e.shape)):
+        out += spread(np.where(mask, mean_e, 0).astype(mean_e.dtype), kernel[name])
+    return out
+
+
+def channel_mixing_matrix(kernel, pattern: str) -> np.ndarray:
+    """3 x 3 matrix M with ``measured_channel_means = M @ true_channel_means``.
+
+    Found by passing flat single-colour fields through :func:`apply`: column j
+    is what a flat field of unit signal in channel j alone produces in the
+    R, G and B pixels. Its inverse undoes crosstalk's colour mixing.
+    """
+    shape = (16, 16)
+    masks = cfa_mod.masks(pattern, shape)
+    inner = (slice(4, -4), slice(4, -4))
+    m = np.zeros((3, 3))
+    for j in range(3):
+        field = masks[j].astype(np.float64)
+        out = apply(field, kernel, pattern)
+        for i in range(3):
+            m[i, j] = out[inner][masks[i][inner]].mean()
+    return m

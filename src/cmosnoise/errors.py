@@ -1,0 +1,9 @@
+"""The one exception type for mistakes a user can fix.
+
+The command line turns a :class:`CmosnoiseError` into one line on stderr and
+exit status 2; anything else is a bug and keeps its traceback.
+"""
+
+
+class CmosnoiseError(Exception):
+    """Bad input: the message names the parameter, the value and what is allowed."""

@@ -1,0 +1,228 @@
+"""The chain of MODEL.md section 2, composed from the stage modules.
+
+>>> from cmosnoise import Sensor, load_config
+>>> sensor = Sensor(load_config(preset="paper-fig3-prnu"), seed=7)   # fixed pattern drawn here
+>>> shot = sensor.expose("flat:0.5")                                 # mean charge of a scene
+>>> raw = shot.frame(0)                                              # uint16 DN, (rows, cols)
+>>> detail = shot.frame(0, detail=True)                              # plus electrons and each stage's part
+
+A :class:`Sensor` is a configuration plus a seed: everything fixed-pattern is
+drawn when it is built and never changes. An :class:`Exposure` holds what is
+fixed for one scene, exposure and temperature (the mean charge per pixel);
+its frame ``k`` draws the temporal noise from streams keyed by ``(seed, k)``,
+so any frame can be made alone, in any order, on any machine.
+
+This module contains no physics: each stage is a function in its own module.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+
+from . import adc, crosstalk, prnu, scene as scene_mod, shot_noise
+from .config import Config, load_config, with_updates
+from .seeds import fixed_rng, temporal_rng
+
+
+@dataclass
+class FrameDetail:
+    """One frame with its parts.
+
+    ``contributions`` maps each stage to what it added, in e-, shape (rows,
+    cols); they sum to ``electrons``. ``raw`` is the ADC output in DN.
+    """
+
+    index: int
+    raw: np.ndarray
+    electrons: np.ndarray
+    contributions: dict[str, np.ndarray]
+
+
+@dataclass
+class FixedPattern:
+    """A sensor instance's fixed-pattern maps (None where the stage is off)."""
+
+    prnu_gain: np.ndarray | None = None
+
+
+class Sensor:
+    """A simulated sensor: a configuration, a seed, and the fixed pattern drawn from them.
+
+    Parameters
+    ----------
+    config : Config, optional
+        Resolved configuration (defaults if omitted).
+    seed : int, optional
+        Overrides ``config.seed``.
+    """
+
+    def __init__(self, config: Config | None = None, seed: int | None = None):
+        config = config or load_config()
+        if seed is not None and seed != config.seed:
+            config = with_updates(config, {"seed": int(seed)})
+        self.config = config
+        self.timings: dict[str, float] = defaultdict(float)
+        t0 = time.perf_counter()
+        self.fixed = self._draw_fixed_pattern()
+        self.timings["fixed_pattern"] += time.perf_counter() - t0
+
+    @classmethod
+    def from_preset(cls, name: str, seed: int | None = None, overrides: list[str] | None = None) -> "Sensor":
+        return cls(load_config(preset=name, overrides=overrides), seed=seed)
+
+    # ------------------------------------------------------------ properties
+    @property
+    def seed(self) -> int:
+        return self.config.seed
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.config.shape
+
+    @property
+    def cfa(self) -> str:
+        return self.config.sensor.cfa
+
+    @property
+    def transfer(self) -> adc.Transfer:
+        a = self.config.adc
+        if not a.enabled:
+            return adc.Transfer.ideal()
+        full_scale = a.full_scale_e if a.full_scale_e is not None else self.config.sensor.full_well_e
+        return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale)
+
+    def stages_on(self) -> dict[str, bool]:
+        """Which stages of MODEL.md run in this configuration."""
+        c = self.config
+        return {
+            "prnu": c.prnu.enabled,
+            "crosstalk": c.crosstalk.enabled,
+            "shot_noise": c.shot_noise.enabled,
+            "adc": c.adc.enabled,
+        }
+
+    # ------------------------------------------------------------ fixed pattern
+    def _draw_fixed_pattern(self) -> FixedPattern:
+        c = self.config
+        fp = FixedPattern()
+        if c.prnu.enabled:
+            fp.prnu_gain = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
+        return fp
+
+    # ------------------------------------------------------------ scene
+    def scene_signal(self, scene: str | np.ndarray | None = None) -> np.ndarray:
+        """The scene through the CFA, relative signal in [0, 1], (rows, cols).
+
+        ``scene`` is a built-in name or path (see :mod:`cmosnoise.scene`), a
+        linear RGB array (rows, cols, 3) or a CFA-sampled array (rows, cols)
+        at the sensor's size; default: the configuration's scene.
+        """
+        c = self.config
+        if scene is None:
+            scene = c.scene.source
+        if isinstance(scene, str):
+            rgb = scene_mod.render(scene, self.shape, c.scene.scale, c.scene.fit)
+        else:
+            rgb = np.asarray(scene, dtype=np.float64)
+            if rgb.shape[:2] != self.shape or rgb.ndim not in (2, 3):
+                raise ValueError(f"scene array must be {self.shape} or {self.shape + (3,)}, got {rgb.shape}")
+            if rgb.ndim == 2:
+                return rgb
+        return scene_mod.to_cfa(rgb, self.cfa, c.sensor.channel_responsivity)
+
+    def expose(self, scene: str | np.ndarray | None = None) -> "Exposure":
+        """Mean charge of ``scene`` at the configured exposure and temperature."""
+        return Exposure(self, self.scene_signal(scene))
+
+    def capture(self, scene=None, frames: int = 1, first_frame: int = 0) -> np.ndarray:
+        """Raw frames ``first_frame .. first_frame + frames - 1``, (frames, rows, cols) uint16."""
+        shot = self.expose(scene)
+        return np.stack(list(shot.frames(frames, first_frame)))
+
+
+class Exposure:
+    """What is fixed for one scene on one sensor: the mean charge per pixel (e-)."""
+
+    def __init__(self, sensor: Sensor, signal: np.ndarray):
+        self.sensor = sensor
+        c = sensor.config
+        timings = sensor.timings
+        t0 = time.perf_counter()
+        #: stage 1: mean photo-electrons of the perfect image
+        self.perfect_e = scene_mod.photo_electrons(
+            signal, c.exposure.peak_rate_e_per_s, c.exposure.integration_time_s
+        )
+        mean = self.perfect_e
+        if sensor.fixed.prnu_gain is not None:
+            mean = prnu.apply(mean, sensor.fixed.prnu_gain)
+        #: after PRNU (stage 2)
+        self.after_prnu_e = mean
+        if c.crosstalk.enabled:
+            mean = crosstalk.apply(mean, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
+        #: after crosstalk (stage 3): the mean photo-charge that shot noise acts on
+        self.photo_mean_e = mean.astype(np.float32)
+        timings["expose"] += time.perf_counter() - t0
+
+    @property
+    def mean_charge_e(self) -> np.ndarray:
+        """Expected collected charge before the full-well clip (e-)."""
+        return self.photo_mean_e
+
+    # ------------------------------------------------------------ frames
+    def _electrons(self, k: int, keep: dict | None) -> np.ndarray:
+        """Charge at the ADC input in frame ``k`` (e-); fills ``keep`` with each stage's part."""
+        s = self.sensor
+        c = s.config
+        timings = s.timings
+        t0 = time.perf_counter()
+        if c.shot_noise.enabled:
+            n = shot_noise.collect(
+                self.photo_mean_e, None, c.sensor.full_well_e, temporal_rng(c.seed, "shot_noise", k),
+                c.shot_noise.gaussian_above_e,
+            )
+        else:
+            n = shot_noise.collect(np.zeros_like(self.photo_mean_e), self.photo_mean_e, c.sensor.full_well_e, None)
+        timings["shot_noise"] += time.perf_counter() - t0
+        if keep is not None:
+            keep["perfect"] = self.perfect_e
+            keep["prnu"] = self.after_prnu_e - self.perfect_e
+            keep["crosstalk"] = self.photo_mean_e - self.after_prnu_e
+            keep["shot_noise"] = n - self.mean_charge_e
+        return n
+
+    def _render(self, k: int, keep: dict | None) -> tuple[np.ndarray, np.ndarray]:
+        """(raw DN, charge at the ADC input in e-) of frame ``k``."""
+        electrons = self._electrons(k, keep)
+        t0 = time.perf_counter()
+        raw = adc.convert(electrons, self.sensor.transfer)
+        self.sensor.timings["adc"] += time.perf_counter() - t0
+        return raw, electrons
+
+    def frame(self, k: int, detail: bool = False):
+        """Frame ``k``: raw DN (rows, cols) uint16, or a :class:`FrameDetail`.
+
+        In a FrameDetail, ``contributions`` holds each stage's part in e-
+        (they sum to ``electrons``), plus ``quantization``: what the ADC's
+        rounding and clipping added, in e-.
+        """
+        keep = {} if detail else None
+        raw, electrons = self._render(int(k), keep)
+        if not detail:
+            return raw
+        keep["quantization"] = (self.sensor.transfer.to_electrons(raw) - electrons).astype(np.float32)
+        return FrameDetail(int(k), raw, electrons, keep)
+
+    def frames(self, n: int, first: int = 0) -> Iterator[np.ndarray]:
+        """Raw frames ``first .. first + n - 1``, one at a time."""
+        for k in range(first, first + n):
+            yield self.frame(k)
+
+    def frames_with_electrons(self, n: int, first: int = 0) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """(raw DN, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
+        for k in range(first, first + n):
+            yield self._render(k, None)

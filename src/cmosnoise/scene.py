@@ -1,0 +1,316 @@
+"""Stage 1, the perfect image: a scene becomes mean photo-electrons per pixel.
+
+A scene is linear RGB light, shape (rows, cols, 3), values in [0, 1] (1 is
+the sensor's peak rate). It comes from a file or a built-in:
+
+========================  ===================================================
+``photo``                 bundled photograph (coffee cup, CC0, see data/)
+``flat:LEVEL``            uniform grey at LEVEL in [0, 1]
+``ramp``                  horizontal linear ramp 0 -> 1
+``colorchecker``          the 24 patches of the ColorChecker Classic
+``zoneplate``             circular zone plate (frequency sweep to Nyquist)
+``siemens``               Siemens star with 36 spokes
+``spot``                  one lit pixel (value 1) at the centre, on black:
+                          the crosstalk measurement of the paper's Fig. 4
+a path                    8-bit PNG/JPEG/TIFF: sRGB-encoded, decoded to linear;
+                          16-bit or float TIFF/PNG and ``.npy``: already linear,
+                          scaled by the file's maximum (or a given ``scale``)
+========================  ===================================================
+
+File scenes are resampled to the sensor with area averaging (each sensor
+pixel collects the light falling on its area), or bilinear interpolation
+where the sensor has more pixels than the scene. The CFA then keeps each
+pixel's channel (times the channel's relative responsivity); a monochrome
+sensor takes the luminance.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import cfa as cfa_mod
+from .errors import CmosnoiseError
+
+#: Rec. 709 / sRGB luminance weights for linear RGB
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate", "siemens", "spot")
+
+#: ColorChecker Classic patches, sRGB 8-bit (X-Rite, post-2014 values),
+#: row by row from "dark skin" to "black".
+COLORCHECKER_SRGB8 = np.array(
+    [
+        [115, 82, 68], [194, 150, 130], [98, 122, 157], [87, 108, 67], [133, 128, 177], [103, 189, 170],
+        [214, 126, 44], [80, 91, 166], [193, 90, 99], [94, 60, 108], [157, 188, 64], [224, 163, 46],
+        [56, 61, 150], [70, 148, 73], [175, 54, 60], [231, 199, 31], [187, 86, 149], [8, 133, 161],
+        [243, 243, 242], [200, 200, 200], [160, 160, 160], [122, 122, 121], [85, 85, 85], [52, 52, 52],
+    ],
+    dtype=np.float64,
+)
+
+
+# ------------------------------------------------------------------ encoding
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """Decode sRGB-encoded values in [0, 1] to linear light (IEC 61966-2-1)."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(v: np.ndarray) -> np.ndarray:
+    """Encode linear light in [0, 1] as sRGB in [0, 1]."""
+    v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
+    return np.where(v <= 0.0031308, v * 12.92, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
+# ------------------------------------------------------------------ built-ins
+def flat(shape: tuple[int, int], level: float) -> np.ndarray:
+    """Uniform grey at ``level`` (fraction of the peak rate)."""
+    return np.full((*shape, 3), float(level))
+
+
+def ramp(shape: tuple[int, int]) -> np.ndarray:
+    """Horizontal ramp, linear light from 0 at the left edge to 1 at the right."""
+    rows, cols = shape
+    x = (np.arange(cols) + 0.5) / cols
+    return np.broadcast_to(x[None, :, None], (rows, cols, 3)).copy()
+
+
+def colorchecker(shape: tuple[int, int]) -> np.ndarray:
+    """The 24-patch ColorChecker on a dark grey surround (linear light)."""
+    rows, cols = shape
+    lin = srgb_to_linear(COLORCHECKER_SRGB8 / 255.0)
+    img = np.full((rows, cols, 3), srgb_to_linear(np.array(30 / 255.0)))
+    ph, pw = rows / 4, cols / 6
+    border = 0.12
+    for i in range(4):
+        for j in range(6):
+            r0, r1 = int(round((i + border) * ph)), int(round((i + 1 - border) * ph))
+            c0, c1 = int(round((j + border) * pw)), int(round((j + 1 - border) * pw))
+            img[r0:r1, c0:c1] = lin[i * 6 + j]
+    return img
+
+
+def colorchecker_patches(shape: tuple[int, int]) -> list[tuple[slice, slice]]:
+    """Central regions (half of each patch) of the 24 patches, for measuring them."""
+    rows, cols = shape
+    ph, pw = rows / 4, cols / 6
+    out = []
+    for i in range(4):
+        for j in range(6):
+            out.append(
+                (slice(int((i + 0.3) * ph), int((i + 0.7) * ph)), slice(int((j + 0.3) * pw), int((j + 0.7) * pw)))
+            )
+    return out
+
+
+def zoneplate(shape: tuple[int, int]) -> np.ndarray:
+    """Circular zone plate: cos(a r^2), local frequency a r / pi cycles/pixel.
+
+    The frequency reaches Nyquist (0.5 cycles/pixel) at the middle of the
+    shorter edge, so the corners alias, as a zone plate should show.
+    """
+    rows, cols = shape
+    y = np.arange(rows) - (rows - 1) / 2
+    x = np.arange(cols) - (cols - 1) / 2
+    r2 = y[:, None] ** 2 + x[None, :] ** 2
+    r_edge = min(rows, cols) / 2
+    v = 0.5 + 0.5 * np.cos(np.pi / 2 * r2 / r_edge)
+    return np.repeat(v[..., None], 3, axis=2)
+
+
+def siemens(shape: tuple[int, int], spokes: int = 36) -> np.ndarray:
+    """Siemens star: ``spokes`` black and white sectors around the centre."""
+    rows, cols = shape
+    y = np.arange(rows) - (rows - 1) / 2
+    x = np.arange(cols) - (cols - 1) / 2
+    theta = np.arctan2(y[:, None], x[None, :])
+    v = (np.sin(spokes / 2 * theta) > 0).astype(np.float64) * 0.9 + 0.05
+    return np.repeat(v[..., None], 3, axis=2)
+
+
+def spot(shape: tuple[int, int]) -> np.ndarray:
+    """One lit pixel (value 1) at ``(rows // 2, cols // 2)``, all else black."""
+    img = np.zeros((*shape, 3))
+    img[shape[0] // 2, shape[1] // 2] = 1.0
+    return img
+
+
+def bundled_photo_path() -> Path:
+    return Path(str(resources.files("cmosnoise") / "data" / "coffee.jpg"))
+
+
+# ------------------------------------------------------------------ files
+def _decode_array(a: np.ndarray, name: str, scale: float | None) -> np.ndarray:
+    """Turn a decoded file array into linear RGB, (rows, cols, 3), float64."""
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.ndim != 3 or a.shape[2] not in (1, 2, 3, 4):
+        raise CmosnoiseError(f"scene {name!r}: expected a (rows, cols) or (rows, cols, 3) image, got shape {a.shape}")
+    if a.shape[2] in (2, 4):  # drop alpha
+        a = a[..., :-1]
+    if a.shape[2] == 1:
+        a = np.repeat(a, 3, axis=2)
+    if a.dtype == np.uint8:
+        lin = srgb_to_linear(a / 255.0)
+        if scale is not None:
+            lin = lin * (255.0 / scale)
+        return lin
+    if a.dtype.kind not in "uif" or a.dtype == np.bool_:
+        raise CmosnoiseError(f"scene {name!r}: unsupported pixel type {a.dtype}")
+    a = a.astype(np.float64)
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise CmosnoiseError(f"scene {name!r}: {int(bad.sum())} values are NaN or infinite; a scene must be finite light levels >= 0")
+    if (a < 0).any():
+        raise CmosnoiseError(f"scene {name!r}: {int((a < 0).sum())} values are negative (min {a.min():g}); light levels must be >= 0")
+    denom = scale if scale is not None else a.max()
+    if denom <= 0:
+        return np.zeros_like(a)
+    return a / denom
+
+
+def load_file(path: str | Path, scale: float | None = None) -> np.ndarray:
+    """Read an image file as linear RGB in [0, 1] (see module docstring)."""
+    p = Path(path)
+    name = str(path)
+    if not p.exists():
+        raise CmosnoiseError(f"scene {name!r}: no such file (built-in scenes: {', '.join(BUILTINS)})")
+    if p.is_dir():
+        raise CmosnoiseError(f"scene {name!r} is a folder, not an image file")
+    suffix = p.suffix.lower()
+    try:
+        if suffix == ".npy":
+            a = np.load(p, allow_pickle=False)
+        elif suffix in (".tif", ".tiff"):
+            import tifffile
+
+            a = tifffile.imread(p)
+        else:
+            import imageio.v3 as iio
+
+            a = iio.imread(p)
+    except CmosnoiseError:
+        raise
+    except Exception as exc:  # any decoder failure is the file's fault
+        raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {exc}") from None
+    a = np.asarray(a)
+    if a.size == 0:
+        raise CmosnoiseError(f"scene {name!r} is empty")
+    return _decode_array(a, name, scale)
+
+
+# ------------------------------------------------------------------ resampling
+def _axis_matrix(n_in: int, n_out: int) -> sp.csr_matrix:
+    """(n_out, n_in) weights: area average when shrinking, linear interpolation when growing."""
+    if n_out == n_in:
+        return sp.identity(n_in, format="csr")
+    rows_idx, cols_idx, vals = [], [], []
+    if n_out < n_in:
+        s = n_in / n_out
+        start = np.arange(n_out) * s
+        end = start + s
+        first = np.floor(start).astype(int)
+        for k in range(int(np.ceil(s)) + 1):
+            j = first + k
+            overlap = np.minimum(end, j + 1) - np.maximum(start, j)
+            ok = (overlap > 1e-12) & (j < n_in)
+            rows_idx.append(np.nonzero(ok)[0])
+            cols_idx.append(j[ok])
+            vals.append(overlap[ok] / s)
+    else:
+        x = (np.arange(n_out) + 0.5) * n_in / n_out - 0.5
+        x = np.clip(x, 0, n_in - 1)
+        j0 = np.minimum(np.floor(x).astype(int), n_in - 2) if n_in > 1 else np.zeros(n_out, int)
+        w = x - j0
+        idx = np.arange(n_out)
+        rows_idx += [idx, idx]
+        cols_idx += [j0, np.minimum(j0 + 1, n_in - 1)]
+        vals += [1 - w, w]
+    return sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows_idx), np.concatenate(cols_idx))), shape=(n_out, n_in)
+    )
+
+
+def resample(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Resample (rows, cols, C) to ``shape``: area averaging down, bilinear up.
+
+    Area averaging conserves the mean light level exactly, so a scene's
+    exposure does not depend on the sensor's resolution.
+    """
+    rows, cols = shape
+    wr = _axis_matrix(img.shape[0], rows)
+    wc = _axis_matrix(img.shape[1], cols)
+    out = np.empty((rows, cols, img.shape[2]))
+    for c in range(img.shape[2]):
+        out[..., c] = (wc @ (wr @ img[..., c]).T).T
+    return out
+
+
+def crop_to_aspect(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Centre crop of ``img`` with the aspect ratio of ``shape``."""
+    h, w = img.shape[:2]
+    target = shape[1] / shape[0]
+    if w / h > target:
+        new_w = max(1, int(round(h * target)))
+        c0 = (w - new_w) // 2
+        return img[:, c0 : c0 + new_w]
+    new_h = max(1, int(round(w / target)))
+    r0 = (h - new_h) // 2
+    return img[r0 : r0 + new_h]
+
+
+# ------------------------------------------------------------------ public
+def render(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
+    """The scene ``source`` as linear RGB at the sensor's ``shape``, (rows, cols, 3), float64."""
+    if not isinstance(source, str) or not source:
+        raise CmosnoiseError(f"scene.source = {source!r}: give a built-in ({', '.join(BUILTINS)}) or an image path")
+    name = source.strip()
+    low = name.lower()
+    if low.startswith("flat:") or low == "flat":
+        text = name.partition(":")[2] or "0.5"
+        try:
+            level = float(text)
+        except ValueError:
+            raise CmosnoiseError(f"scene 'flat:{text}': LEVEL must be a number in [0, 1]") from None
+        if not (0.0 <= level <= 1.0):
+            raise CmosnoiseError(f"scene 'flat:{text}': LEVEL = {level:g} is outside [0, 1] (fraction of the peak rate)")
+        return flat(shape, level)
+    if low == "ramp":
+        return ramp(shape)
+    if low == "colorchecker":
+        return colorchecker(shape)
+    if low == "zoneplate":
+        return zoneplate(shape)
+    if low == "siemens":
+        return siemens(shape)
+    if low == "spot":
+        return spot(shape)
+    if low == "photo":
+        img = load_file(bundled_photo_path())
+    else:
+        img = load_file(name, scale)
+    if fit == "crop":
+        img = crop_to_aspect(img, shape)
+    return resample(img, shape)
+
+
+def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """Sample linear RGB (rows, cols, 3) through the CFA: (rows, cols) relative signal.
+
+    Each pixel keeps its own channel times that channel's relative
+    responsivity; a monochrome sensor (``pattern='none'``) takes the luminance.
+    """
+    if cfa_mod.is_mono(pattern):
+        return rgb @ LUMINANCE
+    cmap = cfa_mod.channel_map(pattern, rgb.shape[:2])
+    resp = np.asarray(responsivity, dtype=np.float64)
+    return np.take_along_axis(rgb, cmap[..., None].astype(np.intp), axis=2)[..., 0] * resp[cmap]
+
+
+def photo_electrons(signal: np.ndarray, peak_rate_e_per_s: float, integration_time_s: float) -> np.ndarray:
+    """Mean photo-electrons per pixel: ``signal * peak_rate * t_int`` (e-), float32."""
+    return (signal * (peak_rate_e_per_s * integration_time_s)).astype(np.float32)

@@ -1,0 +1,39 @@
+"""Random streams keyed by what they are for (MODEL.md section 1).
+
+A sensor instance is a configuration plus a seed. Each stage draws its fixed
+pattern from a stream keyed by ``(seed, FIXED, stage)`` and its temporal noise
+in frame ``k`` from a stream keyed by ``(seed, TEMPORAL, stage, k)``. So frame
+``k`` is the same whether frames are made one by one, in chunks, out of order
+or on different machines, and switching one stage on or off leaves every other
+stage's random numbers unchanged.
+"""
+
+import numpy as np
+
+FIXED = 0
+TEMPORAL = 1
+
+#: stage numbers of MODEL.md section 2; they key the random streams.
+STAGE_IDS = {
+    "prnu": 2,
+    "crosstalk": 3,
+    "dark_current": 4,
+    "shot_noise": 5,
+    "source_follower": 6,
+    "row_noise": 7,
+    "column_noise": 8,
+}
+
+
+def fixed_rng(seed: int, stage: str) -> np.random.Generator:
+    """Generator for a stage's fixed pattern; the same for every frame."""
+    ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage]))
+    return np.random.Generator(np.random.PCG64(ss))
+
+
+def temporal_rng(seed: int, stage: str, frame: int) -> np.random.Generator:
+    """Generator for a stage's temporal noise in frame ``frame`` (0-based)."""
+    if frame < 0:
+        raise ValueError(f"frame index must be >= 0, got {frame}")
+    ss = np.random.SeedSequence(seed, spawn_key=(TEMPORAL, STAGE_IDS[stage], frame))
+    return np.random.Generator(np.random.PCG64(ss))
