@@ -186,7 +186,7 @@ class Exposure:
                 c.shot_noise.gaussian_above_e,
             )
         else:
-            n = shot_noise.collect(np.zeros_like(self.photo_mean_e), self.photo_mean_e, c.sensor.full_well_e, None)
+            n = shot_noise.collect(None, self.photo_mean_e, c.sensor.full_well_e, None)
         timings["shot_noise"] += time.perf_counter() - t0
         if keep is not None:
             keep["perfect"] = self.perfect_e

@@ -12,28 +12,33 @@ import numpy as np
 
 
 def collect(
-    noisy_mean_e: np.ndarray,
+    noisy_mean_e: np.ndarray | None,
     exact_mean_e: np.ndarray | None,
     full_well_e: float,
-    rng: np.random.Generator,
+    rng: np.random.Generator | None,
     gaussian_above_e: float | None = None,
 ) -> np.ndarray:
     """Collected charge in one frame (e-), float32.
 
     Parameters
     ----------
-    noisy_mean_e : (rows, cols) array
+    noisy_mean_e : (rows, cols) array or None
         Mean charge whose shot noise is simulated (e-).
     exact_mean_e : (rows, cols) array or None
         Mean charge that enters without shot noise (e-).
     full_well_e : float
         Full-well capacity (e-); the charge is clipped there.
-    rng : numpy.random.Generator
-        This frame's temporal stream for the stage.
+    rng : numpy.random.Generator or None
+        This frame's temporal stream for the stage (needed with ``noisy_mean_e``).
     gaussian_above_e : float or None
         Speed option: where the mean exceeds this, draw ``Normal(mu, sqrt(mu))``
         rounded to whole electrons instead of Poisson (the paper used 1000).
     """
+    if noisy_mean_e is None:
+        if exact_mean_e is None:
+            raise ValueError("collect needs a noisy or an exact mean charge")
+        n = np.array(exact_mean_e, dtype=np.float32)
+        return np.minimum(n, np.float32(full_well_e), out=n)
     lam = np.asarray(noisy_mean_e, dtype=np.float64)
     if gaussian_above_e is None:
         n = rng.poisson(lam).astype(np.float32)
