@@ -108,7 +108,8 @@ def main() -> None:
     try:
         app()
     except CmosnoiseError as exc:
-        print(f"cmosnoise: error: {exc}", file=sys.stderr)
+        message = " ".join(str(exc).split())  # one line, whatever a library put in it
+        print(f"cmosnoise: error: {message}", file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:
         print("cmosnoise: interrupted", file=sys.stderr)

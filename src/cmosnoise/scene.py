@@ -196,7 +196,8 @@ def load_file(path: str | Path, scale: float | None = None) -> np.ndarray:
     except CmosnoiseError:
         raise
     except Exception as exc:  # any decoder failure is the file's fault
-        raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {exc}") from None
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {first}") from None
     a = np.asarray(a)
     if a.size == 0:
         raise CmosnoiseError(f"scene {name!r} is empty")

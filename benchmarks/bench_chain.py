@@ -1,0 +1,67 @@
+"""Frames per second of the full chain at 1920 x 1080 RGGB, next to a plain NumPy reference.
+
+The reference does the least any simulator must: a Poisson draw, Gaussian
+read noise, and quantization to uint16, on the same mean image. Both are
+timed in the same run, so their ratio is meaningful on a busy machine.
+
+    python benchmarks/bench_chain.py [--frames 20] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from cmosnoise import Sensor, load_config
+
+
+def best_fps(fn, frames: int, repeats: int) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for k in range(frames):
+            fn(k)
+        best = min(best, time.perf_counter() - t0)
+    return frames / best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--scene", default="photo")
+    args = ap.parse_args()
+
+    cfg = load_config(extra={"sensor": {"width": 1920, "height": 1080, "cfa": "RGGB"}})
+    t0 = time.perf_counter()
+    sensor = Sensor(cfg, seed=1)
+    t_fixed = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    shot = sensor.expose(args.scene)
+    t_expose = time.perf_counter() - t0
+    on = [k for k, v in sensor.stages_on().items() if v]
+
+    mean = shot.mean_charge_e.astype(np.float64)
+    k_gain = sensor.transfer.gain_dn_per_e
+    rng = np.random.default_rng(0)
+
+    def reference(_k):
+        n = rng.poisson(mean) + rng.normal(0.0, 2.0, mean.shape)
+        return np.clip(np.rint(n * k_gain + 64), 0, 4095).astype(np.uint16)
+
+    fps_ref = best_fps(reference, args.frames, args.repeats)
+    fps_chain = best_fps(shot.frame, args.frames, args.repeats)
+
+    print(f"cmosnoise full chain, 1920 x 1080 {cfg.sensor.cfa}, stages on: {', '.join(on)}")
+    print(f"  sensor set-up (fixed pattern)     {t_fixed * 1000:8.1f} ms (once per sensor)")
+    print(f"  expose scene '{args.scene}'            {t_expose * 1000:8.1f} ms (once per scene)")
+    print(f"  {'':32s} {'frames/s':>10s} {'ms/frame':>10s}")
+    print(f"  {'full chain':32s} {fps_chain:10.1f} {1000 / fps_chain:10.1f}")
+    print(f"  {'NumPy reference (Poisson+Gauss+q)':32s} {fps_ref:10.1f} {1000 / fps_ref:10.1f}")
+    print(f"  ratio chain / reference time: {fps_ref / fps_chain:.2f}")
+
+
+if __name__ == "__main__":
+    main()

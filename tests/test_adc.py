@@ -1,0 +1,62 @@
+"""Stage 9: the ADC follows MODEL.md's formula exactly."""
+
+import numpy as np
+import pytest
+
+from cmosnoise import Sensor
+from cmosnoise.adc import Transfer, convert
+
+from conftest import quiet_config
+
+
+def reference(n, bits, black, full_scale):
+    top = 2**bits - 1
+    k = (top - black) / full_scale
+    return np.clip(np.rint(n.astype(np.float64) * k + black), 0, top).astype(np.uint16)
+
+
+@pytest.mark.parametrize("bits,black,fs", [(8, 0, 255.0), (10, 16, 6000.0), (12, 64, 10000.0), (16, 1000, 33333.3)])
+def test_formula_black_level_rounding_and_clipping(bits, black, fs):
+    rng = np.random.default_rng(bits)
+    n = rng.uniform(-0.2 * fs, 1.3 * fs, 200_000).astype(np.float32)
+    t = Transfer.from_settings(bits, black, fs)
+    out = convert(n, t)
+    np.testing.assert_array_equal(out, reference(n, bits, black, fs))
+    assert out.min() == 0 and out.max() == 2**bits - 1
+    assert t.gain_dn_per_e == pytest.approx((2**bits - 1 - black) / fs)
+
+
+def test_half_codes_round_to_even_and_negative_charge_stays_above_zero():
+    t = Transfer.from_settings(12, 64, 4031.0)  # K = 1 DN/e- exactly
+    n = np.array([0.5, 1.5, 2.5, -63.6, -64.4, -200, 4031.0, 5000.0], np.float32)
+    assert convert(n, t).tolist() == [64, 66, 66, 0, 0, 0, 4095, 4095]
+
+
+def test_ideal_readout_when_adc_is_off():
+    cfg = quiet_config(adc={"enabled": False}, sensor={"width": 8, "height": 8, "cfa": "none"},
+                       exposure={"integration_time_s": 1, "peak_rate_e_per_s": 1234.4})
+    raw = Sensor(cfg).capture(scene="flat:1.0")
+    assert (raw == 1234).all()
+
+
+def test_all_stages_off_gives_the_perfect_image_quantized():
+    cfg = quiet_config(sensor={"width": 32, "height": 24})
+    sensor = Sensor(cfg)
+    shot = sensor.expose("colorchecker")
+    raw = shot.frame(0)
+    np.testing.assert_array_equal(raw, convert(shot.perfect_e, sensor.transfer))
+
+
+def test_full_scale_defaults_to_full_well():
+    cfg = quiet_config(sensor={"full_well_e": 5000}, adc={"bits": 10, "black_level_dn": 0})
+    assert Sensor(cfg).transfer.gain_dn_per_e == pytest.approx(1023 / 5000)
+    cfg = quiet_config(sensor={"full_well_e": 5000}, adc={"bits": 10, "black_level_dn": 0, "full_scale_e": 2000})
+    assert Sensor(cfg).transfer.gain_dn_per_e == pytest.approx(1023 / 2000)
+
+
+def test_full_well_clips_before_the_adc():
+    cfg = quiet_config(sensor={"width": 8, "height": 8, "full_well_e": 1000, "cfa": "none"},
+                       adc={"bits": 12, "black_level_dn": 0, "full_scale_e": 4095},
+                       exposure={"integration_time_s": 1, "peak_rate_e_per_s": 3000})
+    raw = Sensor(cfg).capture(scene="flat:1.0")
+    assert (raw == 1000).all()  # 1 DN/e-, charge stopped at the full well, not at the ADC top

@@ -1,0 +1,134 @@
+"""The command line as a user runs it: outputs, reproducibility, and clear errors."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import tifffile
+import yaml
+
+CLI = [sys.executable, "-m", "cmosnoise.cli"]
+
+
+def run(*args, cwd=None):
+    return subprocess.run([*CLI, *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_simulate_writes_the_four_outputs(tmp_path):
+    out = tmp_path / "run1"
+    r = run("simulate", "--scene", "flat:0.5", "--frames", "3", "--seed", "7",
+            "--set", "prnu.sigma_pct=2", "--set", "sensor.width=96", "--set", "sensor.height=64", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "preview.png", "raw.tiff", "summary.json"]
+    with tifffile.TiffFile(out / "raw.tiff") as tf:
+        data = tf.asarray()
+        meta = tf.shaped_metadata[0]
+        assert tf.pages[0].tags[33422].value == bytes([0, 1, 1, 2])  # RGGB
+    assert data.shape == (3, 64, 96) and data.dtype == np.uint16
+    assert meta["cfa"] == "RGGB" and meta["black_level_dn"] == 64 and meta["bits"] == 12
+    cfg = yaml.safe_load((out / "config.yaml").read_text())
+    assert cfg["seed"] == 7 and cfg["prnu"]["sigma_pct"] == 2 and cfg["run"]["frames"] == 3
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["frames"] == 3 and summary["stages"]["prnu"] is True
+    assert summary["signal"]["mean_e"] > 0 and summary["temporal_noise"]["rms_e"] > 0
+    import imageio.v3 as iio
+    assert iio.imread(out / "preview.png").shape == (64, 96, 3)
+
+    # the written config reproduces raw.tiff bit for bit
+    again = tmp_path / "again"
+    r = run("simulate", "--config", out / "config.yaml", "--out", again)
+    assert r.returncode == 0, r.stderr
+    np.testing.assert_array_equal(tifffile.imread(again / "raw.tiff"), data)
+
+
+def test_first_frame_option_reproduces_a_slice_of_a_longer_run(tmp_path):
+    common = ["--scene", "ramp", "--seed", "4", "--set", "sensor.width=40", "--set", "sensor.height=30"]
+    assert run("simulate", *common, "--frames", "10", "--out", tmp_path / "a").returncode == 0
+    assert run("simulate", *common, "--first-frame", "3", "--frames", "3", "--out", tmp_path / "b").returncode == 0
+    a = tifffile.imread(tmp_path / "a" / "raw.tiff")
+    b = tifffile.imread(tmp_path / "b" / "raw.tiff")
+    np.testing.assert_array_equal(a[3:6], b)
+
+
+def test_simulate_with_no_arguments_uses_the_bundled_photo(tmp_path):
+    r = run("simulate", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "cmosnoise-out" / "raw.tiff").exists()
+    assert "480x640" in r.stdout
+
+
+def test_presets_and_config_commands(tmp_path):
+    r = run("presets")
+    assert r.returncode == 0 and "paper-fig3-prnu" in r.stdout
+    r = run("config", "--preset", "paper-fig3-prnu")
+    assert r.returncode == 0
+    cfg = yaml.safe_load(r.stdout)
+    assert cfg["prnu"]["sigma_pct"] == 10 and cfg["sensor"]["width"] == 14
+    (tmp_path / "my.yaml").write_text(r.stdout)
+    r = run("simulate", "--config", tmp_path / "my.yaml", "--out", tmp_path / "o")
+    assert r.returncode == 0, r.stderr
+
+
+@pytest.fixture
+def bad_inputs(tmp_path):
+    (tmp_path / "junk.png").write_text("not an image")
+    a = np.ones((8, 8)); a[2, 2] = np.nan
+    np.save(tmp_path / "nan.npy", a)
+    (tmp_path / "afile").write_text("x")
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--set", "prnu.sigma_pct=1", "--set", "prnu.colour=2"], "unknown key 'prnu.colour'"),
+        (["--set", "prnu.sigma_pct=-3"], "prnu.sigma_pct = -3"),
+        (["--set", "crosstalk.kernel_pct=[[5,5,5],[5,70,5],[5,5,5]]"], "sums to 110 %"),
+        (["--set", "adc.bits=6"], "adc.bits = 6"),
+        (["--scene", "{tmp}/missing.png"], "no such file"),
+        (["--scene", "{tmp}/junk.png"], "cannot be read"),
+        (["--scene", "{tmp}/nan.npy"], "NaN"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_no_output(bad_inputs, args, needle):
+    out = bad_inputs / "out"
+    args = [a.replace("{tmp}", str(bad_inputs)) for a in args]
+    r = run("simulate", *args, "--out", out)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], r.stderr
+    assert "Traceback" not in r.stderr
+    assert not out.exists()
+    assert not [p for p in bad_inputs.iterdir() if p.name.startswith(".cmosnoise-tmp")]
+
+
+def test_unwritable_output_folder_is_a_clear_error(bad_inputs):
+    # a folder below a regular file can never be created, even by root
+    r = run("simulate", "--out", bad_inputs / "afile" / "sub")
+    assert r.returncode == 2 and "cannot be written" in r.stderr and "Traceback" not in r.stderr
+    r = run("simulate", "--out", bad_inputs / "afile")
+    assert r.returncode == 2 and "is a file" in r.stderr
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_read_only_parent_is_a_clear_error(tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        r = run("simulate", "--out", ro / "out")
+        assert r.returncode == 2 and "cannot be written" in r.stderr
+    finally:
+        ro.chmod(0o700)
+
+
+def test_error_during_the_run_leaves_an_existing_folder_untouched(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    r = run("simulate", "--scene", tmp_path / "missing.png", "--out", out)
+    assert r.returncode == 2
+    assert [p.name for p in out.iterdir()] == ["keep.txt"]

@@ -1,0 +1,70 @@
+"""The configuration contract: names, validation, presets, overrides."""
+
+import pytest
+import yaml
+
+from cmosnoise import CmosnoiseError, load_config, preset_names
+from cmosnoise.config import build_config
+
+
+def test_defaults_validate_and_round_trip_through_yaml():
+    cfg = load_config()
+    again = build_config(yaml.safe_load(cfg.to_yaml()))
+    assert again == cfg
+
+
+@pytest.mark.parametrize(
+    "override,needle",
+    [
+        ("prnu.sigmapct=2", "unknown key 'prnu.sigmapct'"),
+        ("prnu.sigma_pct=-1", "prnu.sigma_pct = -1"),
+        ("adc.bits=7", "adc.bits = 7"),
+        ("adc.bits=17", "adc.bits = 17"),
+        ("sensor.cfa=RGBW", "sensor.cfa = 'RGBW'"),
+        ("crosstalk.kernel_pct=[[10,10,10],[10,40,10],[10,10,10]]", "sums to 120 %"),
+        ("crosstalk.kernel_pct=[[1,1],[1,1]]", "3 x 3"),
+        ("sensor.width=abc", "sensor.width = 'abc'"),
+        ("adc.black_level_dn=5000", "black_level_dn"),
+        ("exposure.integration_time_s=0", "integration_time_s = 0"),
+    ],
+)
+def test_bad_values_name_the_key_and_value(override, needle):
+    with pytest.raises(CmosnoiseError) as info:
+        load_config(overrides=[override])
+    assert needle in str(info.value)
+
+
+def test_set_parses_yaml_values_and_nested_keys():
+    cfg = load_config(overrides=["prnu.sigma_pct=2.5", "sensor.cfa=BGGR", "crosstalk.enabled=false", "seed=9"])
+    assert cfg.prnu.sigma_pct == 2.5 and cfg.sensor.cfa == "BGGR" and not cfg.crosstalk.enabled and cfg.seed == 9
+    with pytest.raises(CmosnoiseError, match="KEY=VALUE"):
+        load_config(overrides=["prnu.sigma_pct"])
+
+
+def test_per_colour_kernel_is_accepted_and_needs_all_colours():
+    k = [[0, 1, 0], [1, 90, 1], [0, 1, 0]]
+    cfg = load_config(extra={"crosstalk": {"kernel_pct": {"R": k, "G": k, "B": k}}})
+    assert set(cfg.crosstalk.kernel_pct) == {"R", "G", "B"}
+    with pytest.raises(CmosnoiseError, match="missing"):
+        load_config(extra={"crosstalk": {"kernel_pct": {"R": k, "G": k}}})
+
+
+def test_presets_exist_and_resolve():
+    names = preset_names()
+    for name in ["paper-fig3-prnu", "paper-fig4-crosstalk"]:
+        assert name in names
+    for name in names:
+        assert load_config(preset=name).description
+    with pytest.raises(CmosnoiseError, match="unknown preset"):
+        load_config(preset="nope")
+
+
+def test_config_file_errors(tmp_path):
+    with pytest.raises(CmosnoiseError, match="does not exist"):
+        load_config(tmp_path / "none.yaml")
+    (tmp_path / "bad.yaml").write_text("prnu: [1, 2\n")
+    with pytest.raises(CmosnoiseError, match="not valid YAML"):
+        load_config(tmp_path / "bad.yaml")
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(CmosnoiseError, match="mapping"):
+        load_config(tmp_path / "list.yaml")

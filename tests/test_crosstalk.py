@@ -1,0 +1,93 @@
+"""Stage 3: diffusion crosstalk kernel on the mean."""
+
+import numpy as np
+import pytest
+
+from cmosnoise import Sensor, load_config
+from cmosnoise import crosstalk
+from cmosnoise.cfa import masks
+
+from conftest import quiet_config
+
+
+def test_single_lit_pixel_spreads_exactly_as_the_kernel_says():
+    cfg = load_config(preset="paper-fig4-crosstalk")
+    shot = Sensor(cfg).expose()
+    mu = shot.mean_charge_e
+    peak = cfg.exposure.peak_rate_e_per_s * cfg.exposure.integration_time_s
+    k = np.array(cfg.crosstalk.kernel_pct) / 100
+    np.testing.assert_allclose(mu[3:6, 3:6], k * peak, rtol=1e-6)
+    outside = mu.copy()
+    outside[3:6, 3:6] = 0
+    assert np.all(outside == 0)
+    assert mu[4, 4] / peak == pytest.approx(0.784, rel=1e-6)
+
+
+def test_raw_frame_of_fig4_preset_reads_the_kernel():
+    cfg = load_config(preset="paper-fig4-crosstalk")
+    sensor = Sensor(cfg)
+    raw = sensor.capture()[0]
+    e = sensor.transfer.to_electrons(raw)
+    peak = cfg.exposure.peak_rate_e_per_s * cfg.exposure.integration_time_s
+    k = np.array(cfg.crosstalk.kernel_pct) / 100
+    # 16-bit ADC: one DN is 10000/65535 e-, rounding error at most half of that
+    np.testing.assert_allclose(e[3:6, 3:6], k * peak, atol=0.5 * 10000 / 65535 + 1e-6)
+
+
+def test_per_colour_kernel_follows_the_colour_where_charge_was_generated():
+    kr = np.zeros((3, 3)); kr[1, 1] = 0.5; kr[0, 1] = 0.5  # red charge: half goes up
+    kg = np.zeros((3, 3)); kg[1, 1] = 1.0
+    kb = np.zeros((3, 3)); kb[1, 1] = 0.9  # blue: 10 % lost
+    mu = np.zeros((8, 8), np.float32)
+    mu[4, 4] = 100  # RGGB: (even, even) is red
+    mu[5, 5] = 100  # blue
+    mu[4, 5] = 100  # green
+    out = crosstalk.apply(mu, {"R": kr, "G": kg, "B": kb}, "RGGB")
+    assert out[4, 4] == pytest.approx(50) and out[3, 4] == pytest.approx(50)
+    assert out[5, 5] == pytest.approx(90)
+    assert out[4, 5] == pytest.approx(100)
+    assert out.sum() == pytest.approx(290)
+
+
+def test_charge_is_conserved_up_to_the_kernel_sum():
+    rng = np.random.default_rng(0)
+    mu = np.zeros((40, 40), np.float32)
+    mu[5:-5, 5:-5] = rng.uniform(0, 1000, (30, 30))
+    k = np.array([[1, 3, 1], [3, 80, 3], [1, 3, 1]]) / 100
+    out = crosstalk.apply(mu, k)
+    assert out.sum() == pytest.approx(mu.sum() * k.sum(), rel=1e-5)
+
+
+def test_edges_reflect():
+    mu = np.zeros((5, 5), np.float32)
+    mu[0, 2] = 100.0
+    k = np.zeros((3, 3)); k[0, 1] = 0.2; k[1, 1] = 0.8  # 20 % goes one row up
+    out = crosstalk.apply(mu, k)
+    # the charge a reflected border sends up comes back into row 0
+    assert out[0, 2] == pytest.approx(80.0)
+    assert out[1, 2] == 0.0
+
+
+def test_mixing_matrix_of_uniform_kernel():
+    k = np.array([[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]]) / 100
+    m = crosstalk.channel_mixing_matrix(k, "RGGB")
+    # column j: a flat field in channel j alone. Red charge: R keeps 78.4 %;
+    # every G pixel has 2 red edge neighbours; every B pixel 4 red corners.
+    np.testing.assert_allclose(m[:, 0], [0.784, 2 * 0.045, 4 * 0.009])
+    # green charge: R and B have 4 green edge neighbours; G keeps 78.4 % + 4 green corners
+    np.testing.assert_allclose(m[:, 1], [4 * 0.045, 0.784 + 4 * 0.009, 4 * 0.045])
+    # charge conservation per 2 x 2 tile (1 R, 2 G, 1 B pixels)
+    counts = np.array([1, 2, 1])
+    np.testing.assert_allclose(counts @ m, counts * k.sum())
+
+
+def test_crosstalk_switched_off_leaves_the_mean():
+    cfg = quiet_config(sensor={"width": 16, "height": 16})
+    shot = Sensor(cfg).expose("ramp")
+    np.testing.assert_array_equal(shot.mean_charge_e, shot.perfect_e)
+
+
+def test_cfa_masks_partition_the_sensor():
+    m = masks("GBRG", (4, 6))
+    assert (m.sum(axis=0) == 1).all()
+    assert m[1, 0, 0] and m[2, 0, 1] and m[0, 1, 0] and m[1, 1, 1]

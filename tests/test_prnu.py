@@ -1,0 +1,51 @@
+"""Stage 2: PRNU gain map, fixed and Normal(1, sigma)."""
+
+import numpy as np
+from scipy import stats
+
+from cmosnoise import Sensor, load_config
+from cmosnoise.prnu import gain_map
+
+from conftest import assert_close
+
+
+def test_gain_map_is_normal_with_configured_sigma():
+    g = gain_map((400, 500), 3.0, np.random.default_rng(1)).astype(np.float64).ravel()
+    n = g.size
+    assert_close(g.mean(), 1.0, 0.03 / np.sqrt(n), "mean gain")
+    assert_close(g.std(ddof=1), 0.03, 0.03 / np.sqrt(2 * (n - 1)), "gain std")
+    assert stats.kstest(g, stats.norm(1, 0.03).cdf).pvalue > 1e-6
+
+
+def test_gain_map_is_clipped_at_zero():
+    g = gain_map((300, 300), 80.0, np.random.default_rng(2))
+    assert g.min() == 0.0
+    frac0 = (g == 0).mean()
+    p = stats.norm(1, 0.8).cdf(0)
+    assert_close(frac0, p, np.sqrt(p * (1 - p) / g.size), "fraction clipped")
+
+
+def test_paper_fig3_preset_frame_average_has_10_pct_spatial_std():
+    cfg = load_config(preset="paper-fig3-prnu", overrides=["shot_noise.enabled=true"])
+    assert cfg.sensor.width == 14 and cfg.prnu.sigma_pct == 10
+    sensor = Sensor(cfg, seed=3)
+    raw = sensor.capture(frames=400).astype(np.float64)
+    t = sensor.transfer
+    img = t.to_electrons(raw.mean(axis=0))
+    n = img.size
+    mean = img.mean()
+    assert_close(mean, 1000.0, 100 / np.sqrt(n) + np.sqrt(1000 / 400 / n), "mean e-")
+    rel = img.std(ddof=1) / mean
+    # shot noise in a 400-frame average adds sqrt(1000/400) e- in quadrature; quantization ~ 2.5 e-/sqrt(12)/20
+    expected = np.sqrt(0.10**2 + (1000 / 400) / 1000**2)
+    assert_close(rel, expected, expected / np.sqrt(2 * (n - 1)), "PRNU of the frame average")
+
+
+def test_prnu_is_fixed_across_frames_and_same_for_same_seed():
+    cfg = load_config(preset="paper-fig3-prnu")
+    a = Sensor(cfg, seed=5).capture(frames=3)
+    b = Sensor(cfg, seed=5).capture(frames=3)
+    c = Sensor(cfg, seed=6).capture(frames=1)
+    assert np.array_equal(a, b)
+    assert np.array_equal(a[0], a[2])  # shot noise off: PRNU alone, fixed
+    assert not np.array_equal(a[0], c[0])

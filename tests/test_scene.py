@@ -1,0 +1,89 @@
+"""Stage 1: scenes, decoding, resampling, CFA sampling."""
+
+import numpy as np
+import pytest
+
+from cmosnoise import CmosnoiseError, Sensor, scene
+
+from conftest import quiet_config
+
+
+def test_srgb_round_trip_and_known_values():
+    v = np.linspace(0, 1, 1001)
+    np.testing.assert_allclose(scene.linear_to_srgb(scene.srgb_to_linear(v)), v, atol=1e-12)
+    assert scene.srgb_to_linear(np.array(0.5)) == pytest.approx(0.21404, abs=1e-5)
+
+
+def test_area_resampling_conserves_mean_light_and_is_exact_for_integer_factors():
+    rng = np.random.default_rng(0)
+    img = rng.uniform(0, 1, (300, 400, 3))
+    out = scene.resample(img, (90, 120))  # factor 3.33
+    np.testing.assert_allclose(out.mean(axis=(0, 1)), img.mean(axis=(0, 1)), rtol=1e-12)
+    out2 = scene.resample(img, (150, 200))
+    np.testing.assert_allclose(out2, img.reshape(150, 2, 200, 2, 3).mean(axis=(1, 3)), rtol=1e-12)
+
+
+def test_upsampling_is_bilinear_and_keeps_flat_fields():
+    img = np.full((10, 20, 3), 0.3)
+    np.testing.assert_allclose(scene.resample(img, (37, 71)), 0.3)
+
+
+def test_8bit_png_is_decoded_as_srgb(tmp_path):
+    import imageio.v3 as iio
+
+    a = np.full((20, 30, 3), 128, np.uint8)
+    iio.imwrite(tmp_path / "s.png", a)
+    lin = scene.load_file(tmp_path / "s.png")
+    np.testing.assert_allclose(lin, scene.srgb_to_linear(np.array(128 / 255)), rtol=1e-12)
+
+
+def test_npy_and_16bit_tiff_are_linear_scaled_by_max_or_given_scale(tmp_path):
+    import tifffile
+
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    np.save(tmp_path / "s.npy", a)
+    np.testing.assert_allclose(scene.load_file(tmp_path / "s.npy")[..., 0], a / 11)
+    np.testing.assert_allclose(scene.load_file(tmp_path / "s.npy", scale=22)[..., 1], a / 22)
+    b = (np.arange(12).reshape(3, 4) * 1000).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "s.tif", b)
+    np.testing.assert_allclose(scene.load_file(tmp_path / "s.tif")[..., 2], b / 11000)
+
+
+def test_bad_scene_files_are_clear_errors(tmp_path):
+    with pytest.raises(CmosnoiseError, match="no such file"):
+        scene.load_file(tmp_path / "missing.png")
+    (tmp_path / "junk.png").write_text("not an image")
+    with pytest.raises(CmosnoiseError, match="cannot be read"):
+        scene.load_file(tmp_path / "junk.png")
+    a = np.ones((4, 4)); a[1, 1] = np.nan
+    np.save(tmp_path / "nan.npy", a)
+    with pytest.raises(CmosnoiseError, match="NaN"):
+        scene.load_file(tmp_path / "nan.npy")
+    np.save(tmp_path / "neg.npy", -a)
+    with pytest.raises(CmosnoiseError):
+        scene.load_file(tmp_path / "neg.npy")
+    with pytest.raises(CmosnoiseError, match="outside"):
+        scene.render("flat:1.5", (4, 4))
+
+
+def test_cfa_sampling_keeps_each_pixels_channel_and_responsivity():
+    rgb = np.zeros((4, 4, 3)); rgb[..., 0] = 0.1; rgb[..., 1] = 0.2; rgb[..., 2] = 0.3
+    out = scene.to_cfa(rgb, "GRBG", (1.0, 0.5, 2.0))
+    assert out[0, 0] == pytest.approx(0.1) and out[0, 1] == pytest.approx(0.1)  # G, R
+    assert out[1, 0] == pytest.approx(0.6) and out[1, 1] == pytest.approx(0.1)  # B, G
+    mono = scene.to_cfa(rgb, "none")
+    assert mono[0, 0] == pytest.approx(0.2126 * 0.1 + 0.7152 * 0.2 + 0.0722 * 0.3)
+
+
+@pytest.mark.parametrize("name", ["photo", "ramp", "colorchecker", "zoneplate", "siemens", "spot", "flat:0.25"])
+def test_builtin_scenes_render_at_any_size_in_range(name):
+    for shape in [(48, 64), (121, 77)]:
+        img = scene.render(name, shape)
+        assert img.shape == (*shape, 3)
+        assert np.isfinite(img).all() and img.min() >= 0 and img.max() <= 1
+
+
+def test_photo_electrons_scale_with_peak_rate_and_time():
+    cfg = quiet_config(exposure={"integration_time_s": 0.5, "peak_rate_e_per_s": 2000}, sensor={"cfa": "none"})
+    shot = Sensor(cfg).expose("flat:0.3")
+    np.testing.assert_allclose(shot.perfect_e, 0.3 * 2000 * 0.5, rtol=1e-6)
