@@ -16,6 +16,7 @@ def quiet_config(**sections):
         "prnu": {"enabled": False},
         "crosstalk": {"enabled": False},
         "shot_noise": {"enabled": False},
+        "dark_current": {"enabled": False},
     }
     for k, v in sections.items():
         base[k] = {**base.get(k, {}), **v}

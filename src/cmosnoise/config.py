@@ -131,6 +131,103 @@ class ShotNoiseSection(Section):
     )
 
 
+# --------------------------------------------------------------- dark current
+RATE_UNITS = ("e_per_s", "aA", "nA_per_cm2")
+
+
+def _one_of(obj, base: str, units=RATE_UNITS, required: bool = True):
+    given = [u for u in units if getattr(obj, f"{base}_{u}", None) is not None]
+    names = " or ".join(f"{base}_{u}" for u in units)
+    if len(given) > 1:
+        raise ValueError(f"give {base} once, as {names}; got {', '.join(base + '_' + u for u in given)}")
+    if required and not given:
+        raise ValueError(f"missing {base}: give {names}")
+
+
+def rate_e_per_s(obj, base: str, pixel_pitch_um: float) -> float | None:
+    """The rate ``base`` of ``obj`` in e-/s, whichever unit it was given in."""
+    from .units import aa_to_e_per_s, na_per_cm2_to_e_per_s
+
+    for unit, conv in (
+        ("e_per_s", lambda v: v),
+        ("aA", aa_to_e_per_s),
+        ("nA_per_cm2", lambda v: na_per_cm2_to_e_per_s(v, pixel_pitch_um)),
+    ):
+        v = getattr(obj, f"{base}_{unit}", None)
+        if v is not None:
+            return float(conv(v))
+    return None
+
+
+class DarkTail(Section):
+    """White-pixel tail: ``ppm_above`` ppm of pixels above a threshold, tail values up to a maximum."""
+
+    ppm_above: float = Field(ge=0, le=1e6, description="parts per million of pixels above the threshold")
+    threshold_e_per_s: Optional[float] = Field(None, ge=0)
+    threshold_aA: Optional[float] = Field(None, ge=0)
+    threshold_nA_per_cm2: Optional[float] = Field(None, ge=0)
+    max_e_per_s: Optional[float] = Field(None, gt=0, description="largest extra dark current of a tail pixel")
+    max_aA: Optional[float] = Field(None, gt=0)
+    max_nA_per_cm2: Optional[float] = Field(None, gt=0)
+
+    @model_validator(mode="after")
+    def _units(self):
+        _one_of(self, "threshold")
+        _one_of(self, "max")
+        return self
+
+
+class DarkPoint(Section):
+    """A characterization point: the DCNU body (family, mean, std) and tail at one temperature."""
+
+    temperature_c: float = Field(ge=-60, le=150)
+    distribution: Literal["logistic", "inverse_gaussian", "lognormal", "normal", "gamma"]
+    mean_e_per_s: Optional[float] = Field(None, ge=0)
+    mean_aA: Optional[float] = Field(None, ge=0)
+    mean_nA_per_cm2: Optional[float] = Field(None, ge=0)
+    std_e_per_s: Optional[float] = Field(None, gt=0)
+    std_aA: Optional[float] = Field(None, gt=0)
+    std_nA_per_cm2: Optional[float] = Field(None, gt=0)
+    tail: Optional[DarkTail] = None
+
+    @model_validator(mode="after")
+    def _units(self):
+        _one_of(self, "mean")
+        _one_of(self, "std")
+        return self
+
+
+def _default_dark_points():
+    # Our defaults for a present-day ~2 um 4T pixel, with the paper's families;
+    # the body roughly doubles every 7-8 C. 250 aA = 1560 e-/s.
+    return [
+        {"temperature_c": 25, "distribution": "logistic", "mean_e_per_s": 8.0, "std_e_per_s": 2.5,
+         "tail": {"ppm_above": 50, "threshold_e_per_s": 100, "max_e_per_s": 2000}},
+        {"temperature_c": 45, "distribution": "inverse_gaussian", "mean_e_per_s": 50.0, "std_e_per_s": 18.0,
+         "tail": {"ppm_above": 100, "threshold_aA": 80, "max_e_per_s": 7000}},
+        {"temperature_c": 65, "distribution": "lognormal", "mean_e_per_s": 320.0, "std_e_per_s": 130.0,
+         "tail": {"ppm_above": 200, "threshold_aA": 250, "max_e_per_s": 25000}},
+    ]
+
+
+class DarkCurrentSection(Section):
+    """Dark current (stage 4, MODEL.md sections 3 and 4)."""
+
+    enabled: bool = True
+    shot_noise: bool = Field(True, description="dark shot noise (Poisson); off: dark charge enters as its mean")
+    doubling_c: float = Field(7.0, gt=0, le=100, description="the body doubles every doubling_c degrees C")
+    tail_doubling_c: float = Field(10.0, gt=0, le=100, description="the white-pixel tail doubles every tail_doubling_c C")
+    points: list[DarkPoint] = Field(default_factory=lambda: [DarkPoint(**p) for p in _default_dark_points()], min_length=1)
+
+    @field_validator("points")
+    @classmethod
+    def _distinct(cls, v):
+        temps = [p.temperature_c for p in v]
+        if len(set(temps)) != len(temps):
+            raise ValueError(f"characterization temperatures must differ, got {temps}")
+        return sorted(v, key=lambda p: p.temperature_c)
+
+
 class AdcSection(Section):
     enabled: bool = Field(True, description="off: ideal readout, 1 DN per e-, no black level, 16-bit range")
     bits: int = Field(12, ge=8, le=16)
@@ -150,6 +247,7 @@ class Config(Section):
     exposure: ExposureSection = Field(default_factory=ExposureSection)
     prnu: PrnuSection = Field(default_factory=PrnuSection)
     crosstalk: CrosstalkSection = Field(default_factory=CrosstalkSection)
+    dark_current: DarkCurrentSection = Field(default_factory=DarkCurrentSection)
     shot_noise: ShotNoiseSection = Field(default_factory=ShotNoiseSection)
     adc: AdcSection = Field(default_factory=AdcSection)
 
@@ -162,7 +260,34 @@ class Config(Section):
             )
         if isinstance(self.crosstalk.kernel_pct, dict) and self.sensor.cfa == "none" and self.crosstalk.enabled:
             raise ValueError("crosstalk.kernel_pct: a per-colour kernel needs a colour sensor (sensor.cfa is 'none')")
+        self.dark_points()  # every point's body and ppm must be reachable
         return self
+
+    def dark_points(self):
+        """The dark-current characterization points in e-/s (validated: reachable ppm, valid body)."""
+        from .dark_current import Point
+        from .heavy_tail import UnreachablePpm
+
+        pitch = self.sensor.pixel_pitch_um
+        out = []
+        for i, p in enumerate(self.dark_current.points):
+            where = f"dark_current.points[{i}]"
+            tail = p.tail
+            point = Point(
+                p.temperature_c, p.distribution,
+                rate_e_per_s(p, "mean", pitch), rate_e_per_s(p, "std", pitch),
+                tail.ppm_above if tail else 0.0,
+                rate_e_per_s(tail, "threshold", pitch) if tail else None,
+                rate_e_per_s(tail, "max", pitch) if tail else 0.0,
+            )
+            if point.family in ("inverse_gaussian", "lognormal", "gamma") and point.mean <= 0:
+                raise ValueError(f"{where}: a {point.family} body needs a mean > 0, got {point.mean:g} e-/s")
+            try:
+                point.model()
+            except UnreachablePpm as exc:
+                raise ValueError(f"{where}.tail.ppm_above = {tail.ppm_above:g}: {exc}") from None
+            out.append(point)
+        return out
 
     # convenience -----------------------------------------------------------
     @property
@@ -171,7 +296,8 @@ class Config(Section):
         return (self.sensor.height, self.sensor.width)
 
     def to_dict(self) -> dict:
-        return self.model_dump(mode="json")
+        """Plain data; unset optional keys (null) are left out, as they read back as defaults."""
+        return self.model_dump(mode="json", exclude_none=True)
 
     def to_yaml(self) -> str:
         return yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None, width=100)

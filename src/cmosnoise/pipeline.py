@@ -24,7 +24,7 @@ from typing import Iterator
 
 import numpy as np
 
-from . import adc, crosstalk, prnu, scene as scene_mod, shot_noise
+from . import adc, crosstalk, dark_current, prnu, scene as scene_mod, shot_noise
 from .config import Config, load_config, with_updates
 from .seeds import fixed_rng, temporal_rng
 
@@ -48,6 +48,8 @@ class FixedPattern:
     """A sensor instance's fixed-pattern maps (None where the stage is off)."""
 
     prnu_gain: np.ndarray | None = None
+    dark_state: dark_current.DarkState | None = None  #: DCNU parameters at the sensor's temperature
+    dark_rate: np.ndarray | None = None  #: dark-current map at the sensor's temperature, e-/s
 
 
 class Sensor:
@@ -102,6 +104,8 @@ class Sensor:
         return {
             "prnu": c.prnu.enabled,
             "crosstalk": c.crosstalk.enabled,
+            "dark_current": c.dark_current.enabled,
+            "dark_shot_noise": c.dark_current.enabled and c.dark_current.shot_noise,
             "shot_noise": c.shot_noise.enabled,
             "adc": c.adc.enabled,
         }
@@ -112,6 +116,12 @@ class Sensor:
         fp = FixedPattern()
         if c.prnu.enabled:
             fp.prnu_gain = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
+        if c.dark_current.enabled:
+            d = c.dark_current
+            fp.dark_state = dark_current.at_temperature(
+                c.dark_points(), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c
+            )
+            fp.dark_rate = dark_current.rate_map(fp.dark_state, self.shape, fixed_rng(c.seed, "dark_current"))
         return fp
 
     # ------------------------------------------------------------ scene
@@ -166,12 +176,25 @@ class Exposure:
             mean = crosstalk.apply(mean, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
         #: after crosstalk (stage 3): the mean photo-charge that shot noise acts on
         self.photo_mean_e = mean.astype(np.float32)
+        #: stage 4: mean dark electrons (None with dark current off)
+        self.dark_mean_e = None
+        if sensor.fixed.dark_rate is not None:
+            self.dark_mean_e = dark_current.mean_charge(sensor.fixed.dark_rate, c.exposure.integration_time_s)
+        # what shot noise acts on, and what enters as its mean
+        noisy, exact = [], []
+        (noisy if c.shot_noise.enabled else exact).append(self.photo_mean_e)
+        if self.dark_mean_e is not None:
+            (noisy if c.dark_current.shot_noise else exact).append(self.dark_mean_e)
+        self._noisy_e = sum(noisy[1:], noisy[0]) if noisy else None
+        self._exact_e = sum(exact[1:], exact[0]) if exact else None
         timings["expose"] += time.perf_counter() - t0
 
     @property
     def mean_charge_e(self) -> np.ndarray:
-        """Expected collected charge before the full-well clip (e-)."""
-        return self.photo_mean_e
+        """Expected collected charge before the full-well clip: photo + dark (e-)."""
+        if self.dark_mean_e is None:
+            return self.photo_mean_e
+        return self.photo_mean_e + self.dark_mean_e
 
     # ------------------------------------------------------------ frames
     def _electrons(self, k: int, keep: dict | None) -> np.ndarray:
@@ -180,18 +203,15 @@ class Exposure:
         c = s.config
         timings = s.timings
         t0 = time.perf_counter()
-        if c.shot_noise.enabled:
-            n = shot_noise.collect(
-                self.photo_mean_e, None, c.sensor.full_well_e, temporal_rng(c.seed, "shot_noise", k),
-                c.shot_noise.gaussian_above_e,
-            )
-        else:
-            n = shot_noise.collect(None, self.photo_mean_e, c.sensor.full_well_e, None)
+        rng = temporal_rng(c.seed, "shot_noise", k) if self._noisy_e is not None else None
+        n = shot_noise.collect(self._noisy_e, self._exact_e, c.sensor.full_well_e, rng, c.shot_noise.gaussian_above_e)
         timings["shot_noise"] += time.perf_counter() - t0
         if keep is not None:
             keep["perfect"] = self.perfect_e
             keep["prnu"] = self.after_prnu_e - self.perfect_e
             keep["crosstalk"] = self.photo_mean_e - self.after_prnu_e
+            if self.dark_mean_e is not None:
+                keep["dark_current"] = self.dark_mean_e
             keep["shot_noise"] = n - self.mean_charge_e
         return n
 

@@ -23,6 +23,8 @@ from .output import OutputFolder, raw_metadata, write_json, write_raw_tiff
 from .pipeline import Sensor
 from .preview import preview
 from .summary import RunStats
+from . import white_pixels
+from .units import e_per_s_to_aa
 
 
 def _white_dn(sensor: Sensor) -> float:
@@ -53,7 +55,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
             for raw, electrons in shot.frames_with_electrons(n, first):
                 stats.update(raw, electrons)
                 if not frame0:
-                    frame0.append(raw)
+                    frame0.extend([raw, electrons])
                 advance()
                 yield raw
 
@@ -70,12 +72,39 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
 
         iio.imwrite(tmp / "preview.png", preview(frame0[0], sensor.cfa, transfer.black_level_dn, _white_dn(sensor)))
         (tmp / "config.yaml").write_text(config.to_yaml())
-        summary = build_summary(sensor, shot, stats, t_frames, n)
+        summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
         write_json(tmp / "summary.json", summary)
     return summary
 
 
-def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int) -> dict:
+def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict | None:
+    """Dark-current figures: the map's statistics, white pixels and couplets (map and frame 0)."""
+    state, rate = sensor.fixed.dark_state, sensor.fixed.dark_rate
+    if state is None:
+        return None
+    c = sensor.config
+    t_int = c.exposure.integration_time_s
+    out = {
+        "temperature_c": state.temperature_c,
+        "body": {"family": state.family, "mean_e_per_s": state.mean, "std_e_per_s": state.std},
+        "tail": {"fraction": state.tail_fraction, "max_e_per_s": state.tail_max},
+        "map_mean_e_per_s": float(rate.mean()),
+        "map_median_e_per_s": float(np.median(rate)),
+        "mean_dark_e_per_frame": float(rate.mean() * t_int),
+    }
+    if state.threshold is not None:
+        thr = state.threshold
+        out["threshold_e_per_s"] = thr
+        out["threshold_aA"] = e_per_s_to_aa(thr)
+        out["ppm_expected"] = state.expected_ppm_above()
+        out["map"] = white_pixels.report(rate, thr, sensor.cfa)
+        # frame 0: charge above the expected photo-charge, as a rate
+        excess = (electrons0 - shot.photo_mean_e) / t_int
+        out["frame0"] = white_pixels.report(excess, thr, sensor.cfa)
+    return out
+
+
+def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, electrons0: np.ndarray) -> dict:
     c = sensor.config
     t = sensor.transfer
     measured = stats.result()
@@ -106,6 +135,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int) 
             "rms_dn": measured.get("temporal_noise_dn"),
             "method": measured.get("temporal_noise_method"),
         },
+        "dark_current": dark_current_summary(sensor, shot, electrons0),
         "timings_s": {
             "total": round(wall_s, 6),
             "per_frame": round(wall_s / max(n, 1), 6),

@@ -1,0 +1,120 @@
+"""A body distribution plus a thin uniform tail (MODEL.md section 4).
+
+``value = body + tail`` where ``tail ~ Uniform(0, tail_max)`` for a fraction
+``f`` of the pixels and 0 for the rest. Used for the dark-current
+non-uniformity (white pixels) and the per-pixel flicker-noise sigma.
+
+Users do not give ``f``; they give what a data sheet gives, the parts per
+million of pixels above a threshold. :meth:`HeavyTail.from_ppm` solves::
+
+    (1 - f) P(body > thr) + f P(body + U > thr) = ppm * 1e-6
+
+counting the body's own exceedance, and rejects a ppm outside what any
+``f`` in [0, 1] reaches. The interface follows ``scipy.stats``: ``sf``,
+``cdf``, ``rvs``, plus :meth:`values` for maps drawn from fixed uniform
+variates (so that a pixel keeps its rank when parameters change).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import integrate
+
+from .distributions import tabulated_ppf
+
+
+class UnreachablePpm(ValueError):
+    """The requested ppm cannot be produced by any tail fraction in [0, 1]."""
+
+    def __init__(self, ppm: float, low_ppm: float, high_ppm: float, threshold: float, tail_max: float):
+        self.ppm, self.low_ppm, self.high_ppm = ppm, low_ppm, high_ppm
+        super().__init__(
+            f"{ppm:g} ppm above {threshold:g} cannot be reached with this body and a tail up to {tail_max:g}: "
+            f"reachable is {low_ppm:.4g} to {high_ppm:.6g} ppm (the body alone gives {low_ppm:.4g})"
+        )
+
+
+def _sf_body_plus_uniform(body, x: float, tail_max: float) -> float:
+    """P(max(body, 0) + U > x), U ~ Uniform(0, tail_max)."""
+    if tail_max <= 0:
+        return float(body.sf(x)) if x >= 0 else 1.0
+    if x < 0:
+        return 1.0
+    # P(B + U > x) = (1/M) * integral_0^M sf_B(x - t) dt, with sf_B(y) = 1 for y < 0 (clipping)
+    lo = max(x - tail_max, 0.0)
+    part, _ = integrate.quad(lambda y: body.sf(y), lo, x, limit=200)
+    below = max(tail_max - x, 0.0)  # t > x: x - t < 0, the clipped body always exceeds
+    return (part + below) / tail_max
+
+
+@dataclass(frozen=True)
+class HeavyTail:
+    """``max(body, 0) + Bernoulli(f) * Uniform(0, tail_max)``.
+
+    Parameters
+    ----------
+    body : frozen scipy.stats distribution
+    tail_fraction : float in [0, 1]
+    tail_max : float >= 0 (same units as the body)
+    """
+
+    body: object
+    tail_fraction: float
+    tail_max: float
+
+    @classmethod
+    def from_ppm(cls, body, ppm_above: float, threshold: float, tail_max: float) -> "HeavyTail":
+        """Solve the tail fraction that puts ``ppm_above`` ppm above ``threshold``."""
+        p = ppm_above * 1e-6
+        s0 = float(body.sf(threshold)) if threshold >= 0 else 1.0
+        s1 = _sf_body_plus_uniform(body, threshold, tail_max)
+        if s1 - s0 <= 1e-15:
+            if abs(p - s0) <= 1e-12:
+                return cls(body, 0.0, tail_max)
+            raise UnreachablePpm(ppm_above, s0 * 1e6, s0 * 1e6, threshold, tail_max)
+        f = (p - s0) / (s1 - s0)
+        if f < -1e-12 or f > 1 + 1e-12:
+            raise UnreachablePpm(ppm_above, s0 * 1e6, s1 * 1e6, threshold, tail_max)
+        return cls(body, float(min(max(f, 0.0), 1.0)), tail_max)
+
+    # ------------------------------------------------------------ scipy-like
+    def sf(self, x):
+        """P(value > x)."""
+        x = np.asarray(x, dtype=np.float64)
+        body_sf = np.where(x >= 0, self.body.sf(x), 1.0)
+        if self.tail_fraction == 0:
+            return body_sf
+        tail_sf = np.vectorize(lambda v: _sf_body_plus_uniform(self.body, v, self.tail_max))(x)
+        return (1 - self.tail_fraction) * body_sf + self.tail_fraction * tail_sf
+
+    def cdf(self, x):
+        return 1.0 - self.sf(x)
+
+    def ppm_above(self, threshold: float) -> float:
+        """Expected parts per million above ``threshold``."""
+        return float(self.sf(threshold)) * 1e6
+
+    def mean(self) -> float:
+        """Mean of the clipped body plus the tail's share."""
+        m = float(self.body.expect(lambda v: np.maximum(v, 0.0)))
+        return m + self.tail_fraction * self.tail_max / 2
+
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray) -> np.ndarray:
+        """Values from fixed uniform variates (one triple per pixel), float64.
+
+        ``u_body`` is the pixel's body quantile, ``u_member < tail_fraction``
+        puts it in the tail, ``u_tail`` is where in the tail. The same
+        variates under other parameters give the same ranks in the body and
+        nested tail sets (a larger fraction adds pixels, never removes them).
+        """
+        v = np.maximum(tabulated_ppf(self.body, u_body), 0.0)
+        if self.tail_fraction > 0 and self.tail_max > 0:
+            v += np.where(u_member < self.tail_fraction, u_tail * self.tail_max, 0.0)
+        return v
+
+    def rvs(self, size, random_state: np.random.Generator) -> np.ndarray:
+        """Independent draws (each pixel its own variates)."""
+        u = random_state.random((3, *np.atleast_1d(size)))
+        return self.values(u[0], u[1], u[2])

@@ -1,0 +1,92 @@
+"""White pixels and couplets: the defects the paper's Fig. 9 is about.
+
+A white pixel is one whose dark current (or dark signal) is above a
+threshold. A **couplet** is two white pixels that are neighbours in the same
+colour plane: for R and B the 8 nearest same-colour pixels (2 pixels away),
+for G the 4 diagonal G pixels and the 4 G pixels 2 away along the row and
+column, for a monochrome sensor the 8 adjacent pixels. A median filter over
+same-colour neighbours cannot remove a couplet, because each pixel's
+neighbour makes its high value look plausible.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import cfa as cfa_mod
+
+
+def _pair_offsets(pattern: str) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+    """(offsets for every pixel, offsets for green pixels only), each pair counted once."""
+    if cfa_mod.is_mono(pattern):
+        return [(0, 1), (1, 0), (1, 1), (1, -1)], []
+    # (0, 2) and (2, 0) are same-colour for every channel;
+    # R and B: also the diagonals (2, +-2); G: the diagonals (1, +-1) instead
+    return [(0, 2), (2, 0)], [(1, 1), (1, -1)]
+
+
+def _shifted_pairs(a: np.ndarray, b_mask: np.ndarray, dr: int, dc: int):
+    """Boolean array over pixels p where a[p] and b_mask[p + (dr, dc)] both hold."""
+    rows, cols = a.shape
+    r0, r1 = 0, rows - dr
+    c0, c1 = max(0, -dc), cols - max(0, dc)
+    out = np.zeros_like(a, dtype=bool)
+    out[r0:r1, c0:c1] = a[r0:r1, c0:c1] & b_mask[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
+    return out
+
+
+def couplet_pairs(mask: np.ndarray, pattern: str) -> np.ndarray:
+    """Coordinates of every couplet: array (n, 2, 2) of ((r1, c1), (r2, c2))."""
+    mask = np.asarray(mask, dtype=bool)
+    all_offsets, green_offsets = _pair_offsets(pattern)
+    pairs = []
+    if not cfa_mod.is_mono(pattern):
+        cmap = cfa_mod.channel_map(pattern, mask.shape)
+        green = cmap == 1
+        rb = ~green
+        offsets = [(o, mask) for o in all_offsets] + [(o, mask & green) for o in green_offsets]
+        offsets += [(o, mask & rb) for o in [(2, 2), (2, -2)]]
+    else:
+        offsets = [(o, mask) for o in all_offsets]
+    for (dr, dc), start in offsets:
+        hit = _shifted_pairs(start, mask, dr, dc)
+        r, c = np.nonzero(hit)
+        pairs.append(np.stack([np.stack([r, c], -1), np.stack([r + dr, c + dc], -1)], 1))
+    return np.concatenate(pairs) if pairs else np.zeros((0, 2, 2), int)
+
+
+def count_couplets(mask: np.ndarray, pattern: str) -> int:
+    """Number of couplets (pairs of same-colour neighbouring white pixels)."""
+    return int(len(couplet_pairs(mask, pattern)))
+
+
+def expected_couplets(shape: tuple[int, int], pattern: str, white_fraction: float) -> float:
+    """Couplets expected if white pixels were placed at random with this density.
+
+    Each of the array's same-colour neighbour pairs is a couplet with
+    probability ``white_fraction**2``.
+    """
+    n_pairs = count_couplets(np.ones(shape, dtype=bool), pattern)
+    return n_pairs * white_fraction**2
+
+
+def report(values: np.ndarray, threshold: float, pattern: str) -> dict:
+    """White pixels above ``threshold`` in a map or frame and the couplets they form.
+
+    ``values`` and ``threshold`` are in the same unit (e.g. e-/s, or DN).
+    """
+    mask = np.asarray(values) > threshold
+    n = int(mask.sum())
+    frac = n / mask.size
+    return {
+        "threshold": float(threshold),
+        "white_pixels": n,
+        "ppm": frac * 1e6,
+        "couplets": count_couplets(mask, pattern),
+        "couplets_expected_random": expected_couplets(mask.shape, pattern, frac),
+    }
+
+
+def dark_rate_from_raw(raw: np.ndarray, black_level_dn: float, gain_dn_per_e: float, integration_time_s: float) -> np.ndarray:
+    """Dark-current estimate from a dark raw frame: ``(DN - black) / K / t_int`` (e-/s)."""
+    return (np.asarray(raw, dtype=np.float64) - black_level_dn) / gain_dn_per_e / integration_time_s
