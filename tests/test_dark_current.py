@@ -1,0 +1,265 @@
+"""Stage 4: dark-current non-uniformity, temperature, dark shot noise, white pixels and couplets."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from cmosnoise import CmosnoiseError, Sensor, load_config
+from cmosnoise import dark_current, white_pixels
+from cmosnoise.distributions import body
+from cmosnoise.units import aa_to_e_per_s, na_per_cm2_to_e_per_s
+
+from conftest import Z, assert_close, quiet_config
+
+
+def dark_cfg(points, shape=(1000, 1000), temperature=25.0, **extra):
+    return quiet_config(
+        dark_current={"enabled": True, "points": points},
+        sensor={"width": shape[1], "height": shape[0], "temperature_c": temperature, "cfa": "none", **extra},
+    )
+
+
+FAMILIES = [
+    # mean and std chosen so that clipping at 0 is negligible (P(body < 0) < 1e-12)
+    ("logistic", 25, 100, 8),
+    ("inverse_gaussian", 45, 60, 20),
+    ("lognormal", 65, 500, 200),
+    ("normal", 30, 100, 10),
+    ("gamma", 40, 60, 15),
+]
+
+
+@pytest.mark.parametrize("family,temp,mean,std", FAMILIES)
+def test_body_has_configured_moments_and_family_shape(family, temp, mean, std):
+    cfg = dark_cfg([{"temperature_c": temp, "distribution": family, "mean_e_per_s": mean, "std_e_per_s": std}],
+                   temperature=temp)
+    m = Sensor(cfg, seed=1).fixed.dark_rate.astype(np.float64).ravel()
+    n = m.size
+    d = body(family, mean, std)
+    kurt = float(d.stats(moments="k"))  # excess kurtosis: sets the standard error of the std
+    assert_close(m.mean(), mean, std / np.sqrt(n), f"{family} mean")
+    assert_close(m.std(ddof=1), std, std * np.sqrt((kurt + 2) / (4 * n)), f"{family} std")
+    assert stats.kstest(m, d.cdf).pvalue > 1e-6
+    if family != "normal":
+        assert stats.kstest(m, stats.norm(mean, std).cdf).pvalue < 1e-12
+
+
+def test_negative_body_values_are_clipped_at_zero():
+    cfg = dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_e_per_s": 1, "std_e_per_s": 1}], shape=(300, 300))
+    m = Sensor(cfg).fixed.dark_rate
+    p0 = stats.norm(1, 1).cdf(0)
+    assert m.min() == 0
+    frac = (m == 0).mean()
+    assert abs(frac - p0) <= Z * np.sqrt(p0 * (1 - p0) / m.size)
+
+
+def _count_above(cfg):
+    sensor = Sensor(cfg, seed=2)
+    state = sensor.fixed.dark_state
+    rate = sensor.fixed.dark_rate
+    return (rate > state.threshold).sum(), rate.size, state
+
+
+@pytest.mark.parametrize("preset", ["paper-fig9-vga", "paper-fig9-5m"])
+def test_fig9_presets_give_4000_ppm_above_250_aA(preset):
+    cfg = load_config(preset=preset)
+    count, n, state = _count_above(cfg)
+    assert state.threshold == pytest.approx(aa_to_e_per_s(250))
+    p = 4000e-6
+    assert abs(count - n * p) <= Z * np.sqrt(n * p * (1 - p)), f"{count / n * 1e6:.0f} ppm"
+
+
+def test_units_aA_and_nA_per_cm2_convert():
+    assert aa_to_e_per_s(1) == pytest.approx(6.241509, rel=1e-6)
+    # 1 nA/cm^2 on a 2.2 um pixel: 1e-9 A/cm^2 * 4.84e-8 cm^2 / q = 302.09 e-/s
+    assert na_per_cm2_to_e_per_s(1, 2.2) == pytest.approx(302.09, rel=1e-4)
+    a = dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_aA": 16, "std_e_per_s": 1}], shape=(4, 4))
+    b = dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_nA_per_cm2": 1, "std_e_per_s": 1}], shape=(4, 4),
+                 pixel_pitch_um=2.2)
+    assert a.dark_points()[0].mean == pytest.approx(16 * 6.241509, rel=1e-6)
+    assert b.dark_points()[0].mean == pytest.approx(302.09, rel=1e-4)
+
+
+def test_unreachable_ppm_is_rejected_with_the_reachable_range():
+    point = {"temperature_c": 65, "distribution": "lognormal", "mean_e_per_s": 500, "std_e_per_s": 200,
+             "tail": {"ppm_above": 100, "threshold_aA": 250, "max_e_per_s": 80000}}
+    with pytest.raises(CmosnoiseError) as info:
+        dark_cfg([point])
+    msg = str(info.value)
+    assert "dark_current.points[0].tail.ppm_above = 100" in msg and "reachable is 825.6 to" in msg
+
+
+def test_rate_given_twice_or_not_at_all_is_rejected():
+    with pytest.raises(CmosnoiseError, match="give mean once"):
+        dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_e_per_s": 1, "mean_aA": 1, "std_e_per_s": 1}])
+    with pytest.raises(CmosnoiseError, match="missing std"):
+        dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_e_per_s": 1}])
+
+
+# ------------------------------------------------------------------ temperature
+def _default_points():
+    return load_config().dark_points()
+
+
+def test_between_points_log_linear_interpolation():
+    pts = _default_points()
+    s = dark_current.at_temperature(pts, 35.0)
+    assert s.mean == pytest.approx(np.sqrt(8.0 * 50.0))
+    assert s.std == pytest.approx(np.sqrt(2.5 * 18.0))
+    fa, fb = pts[0].model().tail_fraction, pts[1].model().tail_fraction
+    assert s.tail_fraction == pytest.approx((fa + fb) / 2)
+    assert dark_current.at_temperature(pts, 45.0).family == "inverse_gaussian"
+    assert dark_current.at_temperature(pts, 34.0).family == "logistic"
+    assert dark_current.at_temperature(pts, 36.0).family == "inverse_gaussian"
+
+
+def test_parameters_are_continuous_in_temperature():
+    pts = _default_points()
+    for t in [25.0, 35.0, 45.0, 55.0, 65.0]:
+        lo = dark_current.at_temperature(pts, t - 1e-7)
+        hi = dark_current.at_temperature(pts, t + 1e-7)
+        for attr in ["mean", "std", "tail_fraction", "tail_max"]:
+            assert getattr(lo, attr) == pytest.approx(getattr(hi, attr), rel=1e-5), (t, attr)
+
+
+def test_outside_points_the_doubling_laws_apply():
+    pts = _default_points()
+    at65 = dark_current.at_temperature(pts, 65.0)
+    at79 = dark_current.at_temperature(pts, 79.0, doubling_c=7.0, tail_doubling_c=10.0)
+    assert at79.mean == pytest.approx(at65.mean * 4)
+    assert at79.std == pytest.approx(at65.std * 4)
+    assert at79.tail_max == pytest.approx(at65.tail_max * 2**1.4)
+    assert at79.tail_fraction == at65.tail_fraction
+    at11 = dark_current.at_temperature(pts, 11.0)
+    assert at11.mean == pytest.approx(8.0 / 4)
+
+
+def test_map_mean_follows_temperature_through_the_sensor():
+    means = {}
+    for t in [20, 25, 35, 45, 65, 72]:
+        cfg = load_config(overrides=[f"sensor.temperature_c={t}", "sensor.width=200", "sensor.height=200"])
+        means[t] = Sensor(cfg, seed=3).fixed.dark_rate.mean()
+    assert means[20] < means[25] < means[35] < means[45] < means[65] < means[72]
+
+
+def test_white_pixels_stay_in_place_and_body_keeps_rank_across_temperature_and_exposure():
+    no_tails = [{k: v for k, v in p.items() if k != "tail"} for p in load_config().to_dict()["dark_current"]["points"]]
+    body, tail = {}, {}
+    for t in [25, 35, 45, 65, 75]:
+        size = [f"sensor.temperature_c={t}", "sensor.width=500", "sensor.height=400"]
+        full = Sensor(load_config(overrides=size), seed=4).fixed.dark_rate.astype(np.float64)
+        body[t] = Sensor(load_config(overrides=size, extra={"dark_current": {"points": no_tails}}), seed=4).fixed.dark_rate
+        tail[t] = full - body[t]  # the same seed draws the same body: the difference is the tail alone
+    members = {t: tail[t] > 1e-3 for t in tail}
+    assert 0 < members[25].sum() < members[75].sum()
+    temps = sorted(tail)
+    for lo, hi in zip(temps, temps[1:]):
+        assert np.all(members[hi][members[lo]]), f"a white pixel at {lo} C is gone at {hi} C"
+        both = members[lo]
+        order = np.argsort(tail[lo][both], kind="stable")
+        assert np.all(np.diff(tail[hi][both][order]) >= -1e-3 * tail[hi].max())  # tail ranks kept
+        pos = (body[lo] > 0) & (body[hi] > 0)
+        order = np.argsort(body[lo][pos], kind="stable")
+        assert np.all(np.diff(body[hi][pos][order].astype(np.float64)) >= -1e-4 * body[hi].max())  # body ranks kept
+    # the map does not depend on the exposure time
+    a = Sensor(load_config(overrides=["sensor.width=64", "sensor.height=64"]), seed=5).fixed.dark_rate
+    b = Sensor(load_config(overrides=["sensor.width=64", "sensor.height=64", "exposure.integration_time_s=2"]), seed=5).fixed.dark_rate
+    np.testing.assert_array_equal(a, b)
+
+
+# ------------------------------------------------------------------ dark shot noise
+def test_dark_shot_noise_variance_equals_mean_dark_charge():
+    cfg = quiet_config(
+        dark_current={"enabled": True, "shot_noise": True,
+                      "points": [{"temperature_c": 65, "distribution": "lognormal", "mean_e_per_s": 300, "std_e_per_s": 100}]},
+        sensor={"width": 64, "height": 64, "temperature_c": 65, "cfa": "none", "full_well_e": 1e6},
+        exposure={"integration_time_s": 0.5},
+    )
+    sensor = Sensor(cfg, seed=6)
+    shot = sensor.expose("flat:0")
+    frames = 60
+    e = np.stack([shot.frame(k, detail=True).electrons for k in range(frames)]).astype(np.float64)
+    mu = shot.dark_mean_e.astype(np.float64)
+    var = e.var(axis=0, ddof=1)
+    ratio = (var / mu).mean()
+    se = np.sqrt(np.mean(2 / (frames - 1) + 1 / (frames * mu)) / mu.size)
+    assert_close(ratio, 1.0, se, "dark variance / dark mean")
+    # with dark shot noise off the dark charge is the same every frame
+    cfg_off = cfg.model_copy(update={"dark_current": cfg.dark_current.model_copy(update={"shot_noise": False})})
+    shot = Sensor(cfg_off, seed=6).expose("flat:0")
+    np.testing.assert_array_equal(shot.frame(0, detail=True).electrons, shot.frame(1, detail=True).electrons)
+
+
+# ------------------------------------------------------------------ couplets
+def test_couplets_are_same_colour_neighbours():
+    m = np.zeros((10, 10), bool)
+    m[2, 2] = m[2, 4] = True  # two R pixels 2 apart: a couplet
+    assert white_pixels.count_couplets(m, "RGGB") == 1
+    m = np.zeros((10, 10), bool)
+    m[2, 2] = m[3, 3] = True  # R and B diagonal: different colours
+    assert white_pixels.count_couplets(m, "RGGB") == 0
+    m = np.zeros((10, 10), bool)
+    m[2, 3] = m[3, 4] = True  # G and G diagonal: a couplet
+    assert white_pixels.count_couplets(m, "RGGB") == 1
+    m = np.zeros((10, 10), bool)
+    m[2, 2] = m[4, 4] = True  # R and R diagonal 2 away: a couplet
+    assert white_pixels.count_couplets(m, "RGGB") == 1
+    m = np.zeros((10, 10), bool)
+    m[2, 3] = m[4, 5] = True  # G and G diagonal 2 away: not among G's 8 nearest
+    assert white_pixels.count_couplets(m, "RGGB") == 0
+    m = np.zeros((10, 10), bool)
+    m[2, 2] = m[3, 3] = True
+    assert white_pixels.count_couplets(m, "none") == 1
+    pairs = white_pixels.couplet_pairs(m, "none")
+    assert pairs.tolist() == [[[2, 2], [3, 3]]]
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG", "none"])
+def test_expected_couplets_for_random_placement(pattern):
+    rng = np.random.default_rng(7)
+    shape, p = (200, 300), 0.01
+    counts = [white_pixels.count_couplets(rng.random(shape) < p, pattern) for _ in range(200)]
+    # the expectation given the realised density, averaged over realisations ~ n_pairs p^2
+    expected = white_pixels.expected_couplets(shape, pattern, p)
+    assert expected == pytest.approx(200 * 300 * 4 * p**2, rel=0.02)  # 8 neighbours, pairs counted once
+    se = np.std(counts, ddof=1) / np.sqrt(len(counts))
+    assert_close(np.mean(counts), expected, se, "couplets at random")
+
+
+def test_more_couplets_at_5mp_than_vga_on_the_same_scene():
+    counts = {}
+    for preset in ["paper-fig9-vga", "paper-fig9-5m"]:
+        sensor = Sensor(load_config(preset=preset), seed=8)
+        r = white_pixels.report(sensor.fixed.dark_rate, sensor.fixed.dark_state.threshold, sensor.cfa)
+        counts[preset] = r["couplets"]
+        # the count is what random placement at the realised density predicts (Poisson error)
+        assert abs(r["couplets"] - r["couplets_expected_random"]) <= Z * np.sqrt(r["couplets_expected_random"])
+    assert counts["paper-fig9-5m"] > 5 * counts["paper-fig9-vga"]
+
+
+def test_report_from_a_dark_raw_frame_finds_the_maps_white_pixels():
+    cfg = load_config(preset="paper-fig9-vga", overrides=["scene.source=flat:0"])
+    sensor = Sensor(cfg, seed=9)
+    raw = sensor.expose().frame(0)
+    t = sensor.transfer
+    rate = white_pixels.dark_rate_from_raw(raw, t.black_level_dn, t.gain_dn_per_e, cfg.exposure.integration_time_s)
+    thr = sensor.fixed.dark_state.threshold
+    from_raw = white_pixels.report(rate, thr, sensor.cfa)
+    from_map = white_pixels.report(sensor.fixed.dark_rate, thr, sensor.cfa)
+    # shot noise near the threshold moves a few pixels across it: sqrt(1560 * 0.25) e- ~ 20 e- ~ 80 e-/s
+    near = ((sensor.fixed.dark_rate > thr - 5 * 80) & (sensor.fixed.dark_rate < thr + 5 * 80)).sum()
+    assert abs(from_raw["white_pixels"] - from_map["white_pixels"]) <= near
+    assert from_raw["white_pixels"] > 1000
+
+
+def test_summary_reports_dark_current_figures(tmp_path):
+    from cmosnoise.run import simulate
+
+    s = simulate(load_config(preset="paper-fig9-vga"), tmp_path / "o")
+    d = s["dark_current"]
+    assert d["temperature_c"] == 65 and d["threshold_aA"] == pytest.approx(250)
+    assert d["ppm_expected"] == pytest.approx(4000, rel=1e-6)
+    assert abs(d["map"]["ppm"] - 4000) <= Z * np.sqrt(4000e-6 / (640 * 480)) * 1e6
+    for key in ["white_pixels", "couplets", "couplets_expected_random"]:
+        assert key in d["frame0"] and key in d["map"]
+    assert d["map_median_e_per_s"] < d["map_mean_e_per_s"]  # the tail pulls the mean up
