@@ -17,6 +17,9 @@ def quiet_config(**sections):
         "crosstalk": {"enabled": False},
         "shot_noise": {"enabled": False},
         "dark_current": {"enabled": False},
+        "source_follower": {"enabled": False},
+        "row_noise": {"enabled": False},
+        "column_noise": {"enabled": False},
     }
     for k, v in sections.items():
         base[k] = {**base.get(k, {}), **v}

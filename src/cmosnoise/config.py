@@ -228,6 +228,51 @@ class DarkCurrentSection(Section):
         return sorted(v, key=lambda p: p.temperature_c)
 
 
+# ------------------------------------------------------------ readout noise
+class FlickerTail(Section):
+    """Very noisy pixels: ``ppm_above`` ppm of pixels with a flicker sigma above ``threshold_e``."""
+
+    ppm_above: float = Field(ge=0, le=1e6)
+    threshold_e: float = Field(gt=0, description="flicker sigma threshold, e- rms")
+    max_e: float = Field(gt=0, description="largest extra sigma of a tail pixel, e- rms")
+
+
+class FlickerSection(Section):
+    """Flicker/RTS: per-pixel fixed sigma ~ Gumbel body (clipped at 0) + uniform tail."""
+
+    enabled: bool = True
+    gumbel_loc_e: float = Field(0.8, ge=-1000, le=1000, description="location of the gumbel_r body, e- rms")
+    gumbel_scale_e: float = Field(0.25, gt=0, le=1000, description="scale of the gumbel_r body, e- rms")
+    tail: Optional[FlickerTail] = Field(default_factory=lambda: FlickerTail(ppm_above=100, threshold_e=4.0, max_e=12.0))
+
+
+class SourceFollowerSection(Section):
+    """Source-follower noise (stage 6), input-referred."""
+
+    enabled: bool = True
+    thermal_sigma_e: float = Field(2.0, ge=0, le=10000, description="thermal noise, e- rms per pixel per frame")
+    flicker: FlickerSection = Field(default_factory=FlickerSection)
+
+
+class RowNoiseSection(Section):
+    enabled: bool = True
+    sigma_e: float = Field(0.4, ge=0, le=10000, description="temporal row noise, e- rms per row per frame")
+    fixed_sigma_e: float = Field(0.0, ge=0, le=10000, description="fixed row offsets, e- rms (the paper neglects them)")
+
+
+class ColumnTemporalSection(Section):
+    enabled: bool = True
+    gumbel_loc_e: float = Field(0.4, ge=-1000, le=1000, description="location of the per-column sigma's gumbel_r, e- rms")
+    gumbel_scale_e: float = Field(0.1, gt=0, le=1000, description="scale of the per-column sigma's gumbel_r, e- rms")
+
+
+class ColumnNoiseSection(Section):
+    enabled: bool = True
+    temporal: ColumnTemporalSection = Field(default_factory=ColumnTemporalSection)
+    vfpn_sigma_e: float = Field(0.8, ge=0, le=10000, description="vertical fixed pattern noise: column offsets, e- rms")
+    gain_sigma_pct: float = Field(0.0, ge=0, le=50, description="column gain mismatch, % rms")
+
+
 class AdcSection(Section):
     enabled: bool = Field(True, description="off: ideal readout, 1 DN per e-, no black level, 16-bit range")
     bits: int = Field(12, ge=8, le=16)
@@ -249,6 +294,9 @@ class Config(Section):
     crosstalk: CrosstalkSection = Field(default_factory=CrosstalkSection)
     dark_current: DarkCurrentSection = Field(default_factory=DarkCurrentSection)
     shot_noise: ShotNoiseSection = Field(default_factory=ShotNoiseSection)
+    source_follower: SourceFollowerSection = Field(default_factory=SourceFollowerSection)
+    row_noise: RowNoiseSection = Field(default_factory=RowNoiseSection)
+    column_noise: ColumnNoiseSection = Field(default_factory=ColumnNoiseSection)
     adc: AdcSection = Field(default_factory=AdcSection)
 
     @model_validator(mode="after")
@@ -261,7 +309,21 @@ class Config(Section):
         if isinstance(self.crosstalk.kernel_pct, dict) and self.sensor.cfa == "none" and self.crosstalk.enabled:
             raise ValueError("crosstalk.kernel_pct: a per-colour kernel needs a colour sensor (sensor.cfa is 'none')")
         self.dark_points()  # every point's body and ppm must be reachable
+        self.flicker_model()
         return self
+
+    def flicker_model(self):
+        """The flicker-sigma distribution (validated: reachable ppm)."""
+        from .heavy_tail import UnreachablePpm
+        from .source_follower import flicker_model
+
+        f = self.source_follower.flicker
+        try:
+            if f.tail is None:
+                return flicker_model(f.gumbel_loc_e, f.gumbel_scale_e)
+            return flicker_model(f.gumbel_loc_e, f.gumbel_scale_e, f.tail.ppm_above, f.tail.threshold_e, f.tail.max_e)
+        except UnreachablePpm as exc:
+            raise ValueError(f"source_follower.flicker.tail.ppm_above = {f.tail.ppm_above:g}: {exc}") from None
 
     def dark_points(self):
         """The dark-current characterization points in e-/s (validated: reachable ppm, valid body)."""

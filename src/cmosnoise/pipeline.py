@@ -24,7 +24,7 @@ from typing import Iterator
 
 import numpy as np
 
-from . import adc, crosstalk, dark_current, prnu, scene as scene_mod, shot_noise
+from . import adc, column_noise, crosstalk, dark_current, prnu, row_noise, scene as scene_mod, shot_noise, source_follower
 from .config import Config, load_config, with_updates
 from .seeds import fixed_rng, temporal_rng
 
@@ -50,6 +50,11 @@ class FixedPattern:
     prnu_gain: np.ndarray | None = None
     dark_state: dark_current.DarkState | None = None  #: DCNU parameters at the sensor's temperature
     dark_rate: np.ndarray | None = None  #: dark-current map at the sensor's temperature, e-/s
+    flicker_sigma: np.ndarray | None = None  #: per-pixel flicker sigma, e- rms
+    row_offset: np.ndarray | None = None  #: fixed row offsets, e-, (rows, 1)
+    column_sigma: np.ndarray | None = None  #: per-column temporal sigma, e- rms, (1, cols)
+    vfpn: np.ndarray | None = None  #: fixed column offsets, e-, (1, cols)
+    column_gain: np.ndarray | None = None  #: fixed column gains, (1, cols)
 
 
 class Sensor:
@@ -107,6 +112,10 @@ class Sensor:
             "dark_current": c.dark_current.enabled,
             "dark_shot_noise": c.dark_current.enabled and c.dark_current.shot_noise,
             "shot_noise": c.shot_noise.enabled,
+            "source_follower": c.source_follower.enabled,
+            "flicker": c.source_follower.enabled and c.source_follower.flicker.enabled,
+            "row_noise": c.row_noise.enabled,
+            "column_noise": c.column_noise.enabled,
             "adc": c.adc.enabled,
         }
 
@@ -122,6 +131,24 @@ class Sensor:
                 c.dark_points(), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c
             )
             fp.dark_rate = dark_current.rate_map(fp.dark_state, self.shape, fixed_rng(c.seed, "dark_current"))
+        rows, cols = self.shape
+        sf = c.source_follower
+        if sf.enabled and sf.flicker.enabled:
+            fp.flicker_sigma = source_follower.flicker_sigma_map(
+                c.flicker_model(), self.shape, fixed_rng(c.seed, "source_follower")
+            )
+        if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
+            fp.row_offset = row_noise.fixed_offsets(rows, c.row_noise.fixed_sigma_e, fixed_rng(c.seed, "row_noise"))
+        cn = c.column_noise
+        if cn.enabled:
+            if cn.temporal.enabled:
+                fp.column_sigma = column_noise.temporal_sigma_map(
+                    cols, cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e, fixed_rng(c.seed, "column_noise", 0)
+                )
+            if cn.vfpn_sigma_e > 0:
+                fp.vfpn = column_noise.vfpn_offsets(cols, cn.vfpn_sigma_e, fixed_rng(c.seed, "column_noise", 1))
+            if cn.gain_sigma_pct > 0:
+                fp.column_gain = column_noise.gain_map(cols, cn.gain_sigma_pct, fixed_rng(c.seed, "column_noise", 2))
         return fp
 
     # ------------------------------------------------------------ scene
@@ -206,13 +233,44 @@ class Exposure:
         rng = temporal_rng(c.seed, "shot_noise", k) if self._noisy_e is not None else None
         n = shot_noise.collect(self._noisy_e, self._exact_e, c.sensor.full_well_e, rng, c.shot_noise.gaussian_above_e)
         timings["shot_noise"] += time.perf_counter() - t0
+        collected = n
+        fp = s.fixed
+        t0 = time.perf_counter()
+        if c.source_follower.enabled:
+            sfn = source_follower.noise(
+                s.shape, c.source_follower.thermal_sigma_e, fp.flicker_sigma, temporal_rng(c.seed, "source_follower", k)
+            )
+            n = n + sfn
+        t1 = time.perf_counter()
+        timings["source_follower"] += t1 - t0
+        if c.row_noise.enabled:
+            rown = row_noise.temporal(s.shape[0], c.row_noise.sigma_e, temporal_rng(c.seed, "row_noise", k))
+            if fp.row_offset is not None:
+                rown = rown + fp.row_offset
+            n = n + rown
+        t2 = time.perf_counter()
+        timings["row_noise"] += t2 - t1
+        before_columns = n
+        if c.column_noise.enabled:
+            offset = fp.vfpn
+            if fp.column_sigma is not None:
+                ct = column_noise.temporal(fp.column_sigma, temporal_rng(c.seed, "column_noise", k))
+                offset = ct if offset is None else offset + ct
+            n = column_noise.apply(n, fp.column_gain, offset)
+        timings["column_noise"] += time.perf_counter() - t2
         if keep is not None:
             keep["perfect"] = self.perfect_e
             keep["prnu"] = self.after_prnu_e - self.perfect_e
             keep["crosstalk"] = self.photo_mean_e - self.after_prnu_e
             if self.dark_mean_e is not None:
                 keep["dark_current"] = self.dark_mean_e
-            keep["shot_noise"] = n - self.mean_charge_e
+            keep["shot_noise"] = collected - self.mean_charge_e
+            if c.source_follower.enabled:
+                keep["source_follower"] = sfn
+            if c.row_noise.enabled:
+                keep["row_noise"] = np.broadcast_to(rown, s.shape).astype(np.float32)
+            if c.column_noise.enabled:
+                keep["column_noise"] = n - before_columns
         return n
 
     def _render(self, k: int, keep: dict | None) -> tuple[np.ndarray, np.ndarray]:

@@ -25,9 +25,13 @@ STAGE_IDS = {
 }
 
 
-def fixed_rng(seed: int, stage: str) -> np.random.Generator:
-    """Generator for a stage's fixed pattern; the same for every frame."""
-    ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage]))
+def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
+    """Generator for a stage's fixed pattern; the same for every frame.
+
+    ``part`` separates the fixed maps of one stage (e.g. column sigma,
+    VFPN offsets, column gains), so switching one off leaves the others.
+    """
+    ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage], part))
     return np.random.Generator(np.random.PCG64(ss))
 
 

@@ -1,0 +1,21 @@
+"""Stage 7, row noise (e-): one value per row, added to the whole row.
+
+Temporal: ``Normal(0, sigma_e)`` per row per frame (paper Section VII-C;
+noise entering through the reset, transfer-gate or read lines). The fixed
+row component, which the paper neglects, is optional: ``Normal(0,
+fixed_sigma_e)`` per row, drawn once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def fixed_offsets(rows: int, fixed_sigma_e: float, rng: np.random.Generator) -> np.ndarray:
+    """Fixed per-row offsets (e-), shape (rows, 1), float32."""
+    return (fixed_sigma_e * rng.standard_normal((rows, 1))).astype(np.float32)
+
+
+def temporal(rows: int, sigma_e: float, rng: np.random.Generator) -> np.ndarray:
+    """One frame's row noise (e-), shape (rows, 1), float32: broadcast it over the columns."""
+    return (sigma_e * rng.standard_normal((rows, 1))).astype(np.float32)

@@ -1,0 +1,49 @@
+"""Stage 6, source-follower noise (input-referred, e-): thermal plus flicker/RTS.
+
+Thermal noise is ``Normal(0, thermal_sigma_e)`` in every pixel and frame.
+
+Flicker/RTS (paper Section VII-B): each pixel has a fixed temporal sigma,
+drawn once from a Fisher-Tippett-Gumbel body (``gumbel_r(loc, scale)``,
+clipped at 0) plus a thin uniform tail of very noisy pixels (MODEL.md
+section 4, the same heavy-tail map as the dark current). In each frame the
+pixel gets ``Normal(0, sigma_i)``. That is the paper's simplification:
+the per-pixel noise is Gaussian in time, only its size varies over the array.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from .heavy_tail import HeavyTail
+
+
+def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float | None = None,
+                  threshold_e: float | None = None, max_e: float = 0.0) -> HeavyTail:
+    """Distribution of the per-pixel flicker sigma over the array (e-)."""
+    b = stats.gumbel_r(loc=gumbel_loc_e, scale=gumbel_scale_e)
+    if ppm_above is None or threshold_e is None or max_e <= 0:
+        return HeavyTail(b, 0.0, 0.0)
+    return HeavyTail.from_ppm(b, ppm_above, threshold_e, max_e)
+
+
+def flicker_sigma_map(model: HeavyTail, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
+    """Fixed per-pixel flicker sigma (e-), float32, from the sensor's fixed stream."""
+    u = rng.random((3, *shape))
+    return model.values(u[0], u[1], u[2]).astype(np.float32)
+
+
+def noise(shape: tuple[int, int], thermal_sigma_e: float, flicker_sigma: np.ndarray | None,
+          rng: np.random.Generator) -> np.ndarray:
+    """One frame of source-follower noise (e-), float32: thermal + per-pixel flicker.
+
+    Both are zero-mean normal, so they are drawn as one normal with the
+    per-pixel standard deviation ``sqrt(thermal**2 + flicker_i**2)``.
+    """
+    if flicker_sigma is None:
+        sigma = np.float32(thermal_sigma_e)
+    else:
+        sigma = np.sqrt(np.float32(thermal_sigma_e) ** 2 + flicker_sigma * flicker_sigma)
+    out = rng.standard_normal(shape, dtype=np.float32)
+    out *= sigma
+    return out
