@@ -37,3 +37,41 @@ def assert_close(measured, expected, se, what=""):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def temporal_variance_se(sensor, dof: float, signal_e=0.0) -> float:
+    """Standard error (DN^2) of a pooled temporal variance with ``dof`` degrees of freedom per pixel.
+
+    Estimators: the mean over pixels of per-pixel sample variances over L
+    frames (dof = L - 1), or of var(A - B)/2 over P independent frame pairs
+    (dof = P). A normal term of variance v contributes 2 v^2 / dof per
+    independent sample: pixels (each with its own v: dark shot, flicker,
+    photon shot), rows (one sample per row) and columns (one per column).
+    """
+    c = sensor.config
+    fp = sensor.fixed
+    k2 = sensor.transfer.gain_dn_per_e ** 2
+    rows, cols = sensor.shape
+    v_pix = np.zeros(sensor.shape) + signal_e
+    if fp.dark_rate is not None and c.dark_current.shot_noise:
+        v_pix = v_pix + fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s
+    if c.source_follower.enabled:
+        v_pix = v_pix + c.source_follower.thermal_sigma_e**2
+        if fp.flicker_sigma is not None:
+            v_pix = v_pix + fp.flicker_sigma.astype(np.float64) ** 2
+    v_pix = v_pix * k2 + 1 / 12
+    se2 = np.mean(2 * v_pix**2) / v_pix.size
+    if c.row_noise.enabled:
+        se2 += 2 * (c.row_noise.sigma_e**2 * k2) ** 2 / rows
+    if fp.column_sigma is not None:
+        se2 += np.mean(2 * (fp.column_sigma.astype(np.float64) ** 2 * k2) ** 2) / cols
+    return float(np.sqrt(se2 / dof))
+
+
+def std_se_with_noise(true_var: float, noise_var: float, n: int) -> float:
+    """Standard error of ``sqrt(var(x) - noise_var)`` for n values x = o + e (o fixed pattern, e noise).
+
+    var(x) - noise_var has se sqrt((2 (true_var + noise_var)^2) / (n - 1));
+    the square root divides it by 2 sqrt(true_var).
+    """
+    return float(np.sqrt(2 / (n - 1)) * (true_var + noise_var) / (2 * np.sqrt(true_var)))

@@ -81,13 +81,35 @@ class HeavyTail:
 
     # ------------------------------------------------------------ scipy-like
     def sf(self, x):
-        """P(value > x)."""
+        """P(value > x), for scalars or arrays."""
         x = np.asarray(x, dtype=np.float64)
-        body_sf = np.where(x >= 0, self.body.sf(x), 1.0)
-        if self.tail_fraction == 0:
+        body_sf = np.where(x >= 0, self.body.sf(np.maximum(x, 0)), 1.0)
+        if self.tail_fraction == 0 or self.tail_max <= 0:
             return body_sf
-        tail_sf = np.vectorize(lambda v: _sf_body_plus_uniform(self.body, v, self.tail_max))(x)
+        if x.size <= 16:
+            tail_sf = np.vectorize(lambda v: _sf_body_plus_uniform(self.body, v, self.tail_max))(x)
+        else:
+            tail_sf = self._tail_sf_tabulated(x)
         return (1 - self.tail_fraction) * body_sf + self.tail_fraction * tail_sf
+
+    def _tail_sf_tabulated(self, x: np.ndarray) -> np.ndarray:
+        """P(max(body, 0) + U > x) for many x: the integral of the body's sf, tabulated once.
+
+        With I(y) = integral_0^y sf_B(t) dt (sf_B = 1 below 0, the clip),
+        P = (I(x) - I(x - M) + max(M - x, 0)) / M.
+        """
+        m = self.tail_max
+        top = float(max(np.max(x), 0.0)) + 1e-9
+        grid = np.linspace(0.0, top, 40001)
+        sfg = self.body.sf(grid)
+        cum = np.concatenate([[0.0], np.cumsum((sfg[1:] + sfg[:-1]) / 2 * np.diff(grid))])
+
+        def integral(y):
+            return np.interp(np.clip(y, 0.0, top), grid, cum)
+
+        xc = np.maximum(x, 0.0)
+        p = (integral(xc) - integral(xc - m) + np.maximum(m - xc, 0.0)) / m
+        return np.where(x < 0, 1.0, np.clip(p, 0.0, 1.0))
 
     def cdf(self, x):
         return 1.0 - self.sf(x)

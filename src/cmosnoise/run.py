@@ -23,7 +23,7 @@ from .output import OutputFolder, raw_metadata, write_json, write_raw_tiff
 from .pipeline import Sensor
 from .preview import preview
 from .summary import RunStats
-from . import white_pixels
+from . import noise_budget, white_pixels
 from .units import e_per_s_to_aa
 
 
@@ -109,6 +109,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
     t = sensor.transfer
     measured = stats.result()
     timings = {k: round(v, 6) for k, v in sensor.timings.items()}
+    predicted = noise_budget.budget(sensor, float(shot.photo_mean_e.mean()))
     return {
         "cmosnoise_version": __version__,
         "seed": c.seed,
@@ -131,9 +132,18 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "saturated_fraction": measured.get("saturated_fraction"),
         },
         "temporal_noise": {
-            "rms_e": measured.get("temporal_noise_e"),
+            # measured from raw DN (quantization included), and converted with K
             "rms_dn": measured.get("temporal_noise_dn"),
+            "rms_e": None if measured.get("temporal_noise_dn") is None else measured["temporal_noise_dn"] / t.gain_dn_per_e,
+            # measured on the charge at the ADC input (no quantization)
+            "rms_e_before_adc": measured.get("temporal_noise_e"),
             "method": measured.get("temporal_noise_method"),
+            "predicted_rms_e": predicted["temporal_total_e"],
+            "predicted_rms_dn": predicted["temporal_total_dn"],
+        },
+        "noise_budget": {
+            "dark": noise_budget.budget(sensor, 0.0),
+            "scene_mean": predicted,
         },
         "dark_current": dark_current_summary(sensor, shot, electrons0),
         "timings_s": {

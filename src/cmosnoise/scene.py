@@ -10,6 +10,8 @@ the sensor's peak rate). It comes from a file or a built-in:
 ``colorchecker``          the 24 patches of the ColorChecker Classic
 ``zoneplate``             circular zone plate (frequency sweep to Nyquist)
 ``siemens``               Siemens star with 36 spokes
+``steps:N``               N horizontal bands, light levels 4**-(N-1) .. 1/16, 1/4, 1
+                          from top to bottom (N = 4 by default)
 ``spot``                  one lit pixel (value 1) at the centre, on black:
                           the crosstalk measurement of the paper's Fig. 4
 a path                    8-bit PNG/JPEG/TIFF: sRGB-encoded, decoded to linear;
@@ -38,7 +40,7 @@ from .errors import CmosnoiseError
 #: Rec. 709 / sRGB luminance weights for linear RGB
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
-BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate", "siemens", "spot")
+BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate", "siemens", "steps:N", "spot")
 
 #: ColorChecker Classic patches, sRGB 8-bit (X-Rite, post-2014 values),
 #: row by row from "dark skin" to "black".
@@ -130,6 +132,18 @@ def siemens(shape: tuple[int, int], spokes: int = 36) -> np.ndarray:
     theta = np.arctan2(y[:, None], x[None, :])
     v = (np.sin(spokes / 2 * theta) > 0).astype(np.float64) * 0.9 + 0.05
     return np.repeat(v[..., None], 3, axis=2)
+
+
+def steps(shape: tuple[int, int], n: int = 4) -> np.ndarray:
+    """``n`` horizontal bands at levels ``4**-(n-1-i)``, darkest at the top."""
+    rows, cols = shape
+    band = np.minimum((np.arange(rows) * n) // rows, n - 1)
+    levels = 4.0 ** -(n - 1 - np.arange(n))
+    return np.broadcast_to(levels[band][:, None, None], (rows, cols, 3)).copy()
+
+
+def steps_levels(n: int = 4) -> np.ndarray:
+    return 4.0 ** -(n - 1 - np.arange(n))
 
 
 def spot(shape: tuple[int, int]) -> np.ndarray:
@@ -290,6 +304,11 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
         return siemens(shape)
     if low == "spot":
         return spot(shape)
+    if low.startswith("steps"):
+        text = name.partition(":")[2] or "4"
+        if not text.isdigit() or not 1 <= int(text) <= 16:
+            raise CmosnoiseError(f"scene 'steps:{text}': N must be a whole number of bands from 1 to 16")
+        return steps(shape, int(text))
     if low == "photo":
         img = load_file(bundled_photo_path())
     else:

@@ -1,0 +1,184 @@
+"""Stages 6 to 8: source follower (thermal + flicker), row noise, column noise and VFPN."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from cmosnoise import CmosnoiseError, Sensor, load_config, noise_budget
+from cmosnoise.heavy_tail import HeavyTail
+
+from conftest import Z, assert_close, quiet_config, temporal_variance_se
+
+
+def dark_stack(cfg, frames, seed=0, scene="flat:0"):
+    shot = Sensor(cfg, seed=seed).expose(scene)
+    return np.stack([shot.frame(k, detail=True).electrons for k in range(frames)]).astype(np.float64)
+
+
+# ------------------------------------------------------------------ flicker
+def test_flicker_sigma_map_is_gumbel_body_plus_uniform_tail_with_configured_ppm():
+    cfg = quiet_config(
+        source_follower={"enabled": True, "thermal_sigma_e": 0.5,
+                         "flicker": {"enabled": True, "gumbel_loc_e": 0.8, "gumbel_scale_e": 0.25,
+                                     "tail": {"ppm_above": 300, "threshold_e": 4.0, "max_e": 12.0}}},
+        sensor={"width": 1000, "height": 1000, "cfa": "none"},
+    )
+    sigma = Sensor(cfg, seed=1).fixed.flicker_sigma.astype(np.float64).ravel()
+    n, p = sigma.size, 300e-6
+    count = (sigma > 4.0).sum()
+    assert abs(count - n * p) <= Z * np.sqrt(n * p * (1 - p))
+    model = cfg.flicker_model()
+    assert stats.kstest(sigma, lambda x: model.cdf(x)).pvalue > 1e-6
+    body = sigma[sigma < 3.0]  # the body, where the tail's share is ~1e-4 of the pixels
+    loc, scale = stats.gumbel_r.fit(body)
+    assert_close(loc, 0.8, 1.1 * 0.25 / np.sqrt(body.size), "gumbel loc")  # asymptotic se of the MLE
+    assert_close(scale, 0.25, 0.78 * 0.25 / np.sqrt(body.size), "gumbel scale")
+
+
+def test_measured_per_pixel_temporal_sigma_fits_the_configured_gumbel():
+    loc, scale, thermal = 0.8, 0.25, 0.5
+    cfg = quiet_config(
+        source_follower={"enabled": True, "thermal_sigma_e": thermal,
+                         "flicker": {"enabled": True, "gumbel_loc_e": loc, "gumbel_scale_e": scale, "tail": None}},
+        sensor={"width": 80, "height": 80, "cfa": "none"},
+    )
+    frames = 400
+    e = dark_stack(cfg, frames, seed=2)
+    s2 = e.var(axis=0, ddof=1).ravel()
+    flicker = np.sqrt(np.maximum(s2 - thermal**2, 0))  # thermal removed in quadrature
+    # KS against gumbel_r: the estimator's own spread (sqrt(2/(F-1)) of s^2, ~4 % of sigma)
+    # is small beside the Gumbel's spread, so a correct stage passes and a wrong family fails
+    assert stats.kstest(flicker, stats.gumbel_r(loc, scale).cdf).pvalue > 1e-6
+    assert stats.kstest(flicker, stats.norm(flicker.mean(), flicker.std()).cdf).pvalue < 1e-6
+    # the frame-to-frame values of one pixel are normal with that pixel's sigma
+    sigma = np.sqrt(thermal**2 + Sensor(cfg, seed=2).fixed.flicker_sigma.astype(np.float64) ** 2)
+    z = (e / sigma).ravel()
+    assert stats.kstest(z[:500_000], stats.norm().cdf).pvalue > 1e-6
+
+
+def test_unreachable_flicker_ppm_is_rejected():
+    with pytest.raises(CmosnoiseError, match="source_follower.flicker.tail.ppm_above = 0.001.*reachable"):
+        load_config(overrides=["source_follower.flicker.tail={ppm_above: 0.001, threshold_e: 1.0, max_e: 5}"])
+
+
+def test_thermal_noise_alone_is_normal_with_configured_sigma():
+    cfg = quiet_config(source_follower={"enabled": True, "thermal_sigma_e": 3.0, "flicker": {"enabled": False}},
+                       sensor={"width": 300, "height": 300, "cfa": "none"})
+    e = dark_stack(cfg, 4).ravel()
+    assert_close(e.std(ddof=1), 3.0, 3.0 / np.sqrt(2 * (e.size - 1)), "thermal sigma")
+    assert stats.kstest(e, stats.norm(0, 3).cdf).pvalue > 1e-6
+
+
+# ------------------------------------------------------------------ rows
+def test_row_noise_is_one_value_per_row_per_frame():
+    cfg = quiet_config(row_noise={"enabled": True, "sigma_e": 2.0}, source_follower={"enabled": True, "thermal_sigma_e": 1.5, "flicker": {"enabled": False}},
+                       sensor={"width": 200, "height": 300, "cfa": "none"})
+    shot = Sensor(cfg, seed=3).expose("flat:0")
+    d0, d1 = shot.frame(0, detail=True), shot.frame(1, detail=True)
+    rn = d0.contributions["row_noise"]
+    assert np.all(rn == rn[:, :1]) and not np.array_equal(rn, d1.contributions["row_noise"])
+    frames = 200
+    e = np.stack([shot.frame(k, detail=True).electrons for k in range(frames)]).astype(np.float64)
+    row_means = e.mean(axis=2)  # (frames, rows)
+    v = row_means.var(axis=0, ddof=1).mean()
+    expected = 2.0**2 + 1.5**2 / 200
+    assert_close(v, expected, expected * np.sqrt(2 / ((frames - 1) * 300)), "variance of row means")
+
+
+def test_fixed_row_offsets_are_fixed():
+    cfg = quiet_config(row_noise={"enabled": True, "sigma_e": 0.0, "fixed_sigma_e": 5.0}, sensor={"width": 10, "height": 3000, "cfa": "none"})
+    s = Sensor(cfg, seed=4)
+    off = s.fixed.row_offset.ravel().astype(np.float64)
+    assert_close(off.std(ddof=1), 5.0, 5.0 / np.sqrt(2 * (off.size - 1)), "row offsets")
+    shot = s.expose("flat:0")
+    np.testing.assert_array_equal(shot.frame(0, detail=True).electrons, shot.frame(5, detail=True).electrons)
+
+
+# ------------------------------------------------------------------ columns
+def test_column_sigma_map_follows_gumbel():
+    cfg = quiet_config(column_noise={"enabled": True, "temporal": {"gumbel_loc_e": 0.6, "gumbel_scale_e": 0.2}, "vfpn_sigma_e": 0},
+                       sensor={"width": 20000, "height": 2, "cfa": "none"})
+    sig = Sensor(cfg, seed=5).fixed.column_sigma.ravel().astype(np.float64)
+    assert stats.kstest(sig, stats.gumbel_r(0.6, 0.2).cdf).pvalue > 1e-6
+    assert stats.kstest(sig, stats.norm(sig.mean(), sig.std()).cdf).pvalue < 1e-6
+
+
+def test_measured_column_temporal_noise_follows_the_columns_sigma():
+    cfg = quiet_config(column_noise={"enabled": True, "temporal": {"gumbel_loc_e": 1.0, "gumbel_scale_e": 0.3}, "vfpn_sigma_e": 0},
+                       source_follower={"enabled": True, "thermal_sigma_e": 1.0, "flicker": {"enabled": False}},
+                       sensor={"width": 1500, "height": 20, "cfa": "none"})
+    frames = 300
+    sensor = Sensor(cfg, seed=6)
+    e = dark_stack(cfg, frames, seed=6)
+    col_means = e.mean(axis=1)  # (frames, cols)
+    v = col_means.var(axis=0, ddof=1) - 1.0 / 20  # thermal's share of a column mean removed
+    true = sensor.fixed.column_sigma.ravel().astype(np.float64) ** 2
+    # per column: (F-1) s^2 / var ~ chi2(F-1); pooled, the ratio is 1 within sqrt(2/(F-1)/C)
+    ratio = ((v + 1.0 / 20) / (true + 1.0 / 20)).mean()
+    assert_close(ratio, 1.0, np.sqrt(2 / (frames - 1) / true.size), "column variance ratio")
+    est = np.sqrt(np.maximum(v, 0))
+    assert stats.kstest(est, stats.gumbel_r(1.0, 0.3).cdf).pvalue > 1e-6
+
+
+def test_vfpn_is_fixed_same_for_same_seed_and_has_configured_sigma():
+    cfg = quiet_config(column_noise={"enabled": True, "temporal": {"enabled": False}, "vfpn_sigma_e": 6.0},
+                       source_follower={"enabled": True, "thermal_sigma_e": 2.0, "flicker": {"enabled": False}},
+                       sensor={"width": 4000, "height": 30, "cfa": "none"})
+    a, b = Sensor(cfg, seed=7), Sensor(cfg, seed=7)
+    np.testing.assert_array_equal(a.fixed.vfpn, b.fixed.vfpn)
+    shot = a.expose("flat:0")
+    c0 = shot.frame(0, detail=True).contributions["column_noise"]
+    c9 = shot.frame(9, detail=True).contributions["column_noise"]
+    np.testing.assert_allclose(c0, c9, atol=1e-5)  # the same pattern in every frame (float32 (n + v) - n)
+    frames = 20
+    e = np.stack([shot.frame(k, detail=True).electrons for k in range(frames)]).astype(np.float64)
+    col = e.mean(axis=(0, 1))  # frame-averaged column means
+    n = col.size
+    expected = np.sqrt(36 + 4 / (30 * frames))  # thermal left in a column mean of 30 x 20 samples
+    assert_close(col.std(ddof=1), expected, expected / np.sqrt(2 * (n - 1)), "VFPN std")
+    # switching column temporal noise on does not change the VFPN offsets
+    cfg2 = load_config(extra={**cfg.to_dict(), "column_noise": {**cfg.to_dict()["column_noise"], "temporal": {"enabled": True}}})
+    np.testing.assert_array_equal(Sensor(cfg2, seed=7).fixed.vfpn, a.fixed.vfpn)
+
+
+def test_column_gain_mismatch_scales_the_signal_per_column():
+    cfg = quiet_config(column_noise={"enabled": True, "temporal": {"enabled": False}, "vfpn_sigma_e": 0, "gain_sigma_pct": 5.0},
+                       sensor={"width": 3000, "height": 4, "cfa": "none"},
+                       exposure={"integration_time_s": 0.01, "peak_rate_e_per_s": 100000})
+    sensor = Sensor(cfg, seed=8)
+    e = sensor.expose("flat:1.0").frame(0, detail=True).electrons.astype(np.float64)
+    g = e.mean(axis=0) / 1000.0
+    np.testing.assert_allclose(g, sensor.fixed.column_gain.ravel(), rtol=1e-5)
+    assert_close(g.std(ddof=1), 0.05, 0.05 / np.sqrt(2 * (g.size - 1)), "column gain std")
+
+
+# ------------------------------------------------------------------ the total
+def test_total_dark_temporal_noise_matches_two_frame_difference_in_e_and_dn():
+    cfg = load_config(overrides=["scene.source=flat:0"])
+    sensor = Sensor(cfg, seed=9)
+    shot = sensor.expose()
+    pairs = 10
+    measured_dn2 = np.mean([np.var(shot.frame(2 * i).astype(np.float64) - shot.frame(2 * i + 1)) / 2 for i in range(pairs)])
+    b = noise_budget.budget(sensor, 0.0)
+    k = sensor.transfer.gain_dn_per_e
+    se = temporal_variance_se(sensor, pairs)
+    assert_close(measured_dn2, b["temporal_total_dn"] ** 2, se, "dark temporal variance, DN^2")
+    assert_close(measured_dn2 / k**2, b["temporal_total_e"] ** 2, se / k**2, "dark temporal variance, e-^2")
+    assert 1.5 < b["temporal_total_e"] < 5  # "a few e-" for the default 4T pixel
+    assert b["dominant_temporal"] == "thermal"
+
+
+def test_summary_lists_each_sources_contribution(tmp_path):
+    from cmosnoise.run import simulate
+
+    cfg = load_config(overrides=["scene.source=flat:0", "run.frames=6"])
+    s = simulate(cfg, tmp_path / "o")
+    dark = s["noise_budget"]["dark"]["temporal_rms_e"]
+    for src in ["thermal", "flicker", "row", "column", "dark_shot", "quantization"]:
+        assert dark[src] > 0
+    tn = s["temporal_noise"]
+    # 5 consecutive pairs of 6 frames; consecutive pairs share a frame, which at most
+    # doubles the variance of their mean: allow sqrt(2) times the independent-pair se
+    se = np.sqrt(2) * temporal_variance_se(Sensor(cfg), 5)
+    assert_close(tn["rms_dn"] ** 2, tn["predicted_rms_dn"] ** 2, se, "summary temporal noise, DN^2")
+    assert s["noise_budget"]["scene_mean"]["dominant_temporal"] == "thermal"
