@@ -23,8 +23,19 @@ app = typer.Typer(
 err_console = Console(stderr=True)
 
 
-def _run_overrides(scene, frames, first_frame, seed) -> dict:
+def _run_overrides(scene, frames, first_frame, seed, process=None, dark_frames=None, formats=None) -> dict:
     extra: dict = {}
+    if process:
+        extra.setdefault("processing", {})["enabled"] = True
+    if dark_frames is not None:
+        extra.setdefault("processing", {})["dark_frames"] = dark_frames
+        if dark_frames > 0:
+            extra["processing"]["enabled"] = True
+    for f in formats or []:
+        if f.lower() not in ("tiff", "dng"):
+            raise CmosnoiseError(f"--format {f!r}: use tiff (always written) or dng")
+        if f.lower() == "dng":
+            extra.setdefault("run", {})["dng"] = True
     if scene is not None:
         extra.setdefault("scene", {})["source"] = scene
     if frames is not None:
@@ -71,12 +82,15 @@ def simulate(
     seed: Optional[int] = typer.Option(None, "--seed", help="sensor instance seed"),
     set_: Optional[List[str]] = SetOpt,
     out: Path = typer.Option(Path("cmosnoise-out"), "--out", "-o", help="output folder"),
+    process: bool = typer.Option(False, "--process", help="also write processed.png (and processed.mp4) through the processing chain"),
+    dark_frames: Optional[int] = typer.Option(None, "--dark-frames", help="dark calibration: make a master dark from N dark frames"),
+    format_: Optional[List[str]] = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
 ):
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
     from .run import simulate as run_simulate
 
-    cfg = load_config(config, preset, set_, extra=_run_overrides(scene, frames, first_frame, seed))
+    cfg = load_config(config, preset, set_, extra=_run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_))
     summary = run_simulate(cfg, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height))
     sig, tn = summary["signal"], summary["temporal_noise"]
     noise = f", temporal noise {tn['rms_e']:.2f} e- ({tn['rms_dn']:.2f} DN)" if tn["rms_e"] is not None else ""
@@ -84,6 +98,27 @@ def simulate(
         f"wrote {summary['frames']} frame(s) {cfg.sensor.height}x{cfg.sensor.width} {cfg.sensor.cfa} to {out}/ "
         f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {summary['timings_s']['per_frame'] * 1000:.1f} ms/frame)"
     )
+
+
+@app.command()
+def process(
+    raw: Path = typer.Argument(..., help="raw frames: a TIFF (frames, rows, cols) or (rows, cols) of uint16 codes"),
+    dark: Optional[Path] = typer.Option(None, "--dark", help="dark frames (averaged into a master dark) or a master dark"),
+    config: Optional[Path] = ConfigOpt,
+    set_: Optional[List[str]] = SetOpt,
+    cfa: Optional[str] = typer.Option(None, "--cfa", help="RGGB, BGGR, GRBG, GBRG or none (default: from the file's metadata)"),
+    black_level: Optional[float] = typer.Option(None, "--black-level", help="black level, DN (default: from the metadata)"),
+    bits: Optional[int] = typer.Option(None, "--bits", help="bit depth (default: from the metadata)"),
+    out: Path = typer.Option(Path("cmosnoise-processed"), "--out", "-o", help="output folder"),
+):
+    """Process raw frames that already exist (from cmosnoise or a real camera) into pictures."""
+    from .process import process_file
+
+    cfg = load_config(config, None, set_)
+    overrides = {k: v for k, v in {"cfa": cfa, "black_level_dn": black_level, "bits": bits}.items() if v is not None}
+    result = process_file(raw, cfg.processing, out, dark, overrides)
+    typer.echo(f"processed {result['frames']} frame(s) {result['rows']}x{result['cols']} {result['cfa']} into {out}/ "
+               f"({result['ms_per_frame']:.0f} ms/frame)")
 
 
 @app.command()

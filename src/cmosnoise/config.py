@@ -51,6 +51,42 @@ class SceneSection(Section):
 class RunSection(Section):
     frames: int = Field(1, ge=1, le=1_000_000, description="number of frames to produce")
     first_frame: int = Field(0, ge=0, description="index of the first frame (frame k's temporal noise depends only on seed and k)")
+    dng: bool = Field(False, description="also write every raw frame as a DNG (dng/frame_NNNNNN.dng)")
+
+
+class DefectsSection(Section):
+    method: Literal["off", "median", "map"] = Field(
+        "off", description="off; median: replace pixels outside their same-colour neighbours' range; map: defect map from the master dark"
+    )
+    threshold_sigma: float = Field(6.0, gt=0, le=1000, description="detection threshold, in robust standard deviations")
+
+
+class WhiteBalanceSection(Section):
+    mode: Literal["sensor", "gains", "grey_world", "none"] = Field(
+        "sensor", description="sensor: undo the channel responsivities; gains: the given gains; grey_world: make the mean grey"
+    )
+    gains: Optional[tuple[float, float, float]] = Field(None, description="R, G, B gains for mode 'gains'")
+
+    @model_validator(mode="after")
+    def _gains(self):
+        if self.mode == "gains" and self.gains is None:
+            raise ValueError("white_balance.mode 'gains' needs gains: [r, g, b]")
+        if self.gains is not None and any(g <= 0 or not math.isfinite(g) for g in self.gains):
+            raise ValueError(f"white_balance.gains must be finite and > 0, got {list(self.gains)}")
+        return self
+
+
+class ProcessingSection(Section):
+    """From raw to picture (MODEL.md section 5): each step switchable."""
+
+    enabled: bool = Field(False, description="write processed.png (and processed.mp4 for several frames)")
+    dark_frames: int = Field(0, ge=0, le=100000, description="dark calibration: master dark from this many dark frames (0: off)")
+    defects: DefectsSection = Field(default_factory=DefectsSection)
+    crosstalk_compensation: bool = Field(True, description="undo crosstalk's colour mixing with the inverse 3 x 3 matrix")
+    white_balance: WhiteBalanceSection = Field(default_factory=WhiteBalanceSection)
+    demosaic: Literal["bilinear", "malvar2004", "menon2007"] = "bilinear"
+    white_dn: Optional[float] = Field(None, gt=0, description="raw code shown as white; null: the scene's white (simulation) or the white level (files)")
+    video_fps: float = Field(10.0, gt=0, le=240)
 
 
 # ------------------------------------------------------------------------ sensor
@@ -298,6 +334,7 @@ class Config(Section):
     row_noise: RowNoiseSection = Field(default_factory=RowNoiseSection)
     column_noise: ColumnNoiseSection = Field(default_factory=ColumnNoiseSection)
     adc: AdcSection = Field(default_factory=AdcSection)
+    processing: ProcessingSection = Field(default_factory=ProcessingSection)
 
     @model_validator(mode="after")
     def _cross_checks(self):

@@ -172,9 +172,17 @@ class Sensor:
                 return rgb
         return scene_mod.to_cfa(rgb, self.cfa, c.sensor.channel_responsivity)
 
-    def expose(self, scene: str | np.ndarray | None = None) -> "Exposure":
-        """Mean charge of ``scene`` at the configured exposure and temperature."""
-        return Exposure(self, self.scene_signal(scene))
+    def expose(self, scene: str | np.ndarray | None = None, sequence: int = 0) -> "Exposure":
+        """Mean charge of ``scene`` at the configured exposure and temperature.
+
+        ``sequence`` numbers independent frame series of the same sensor
+        (0: the run; 1: the dark frames of a dark calibration).
+        """
+        return Exposure(self, self.scene_signal(scene), sequence)
+
+    def dark_frames(self, n: int) -> "Iterator[np.ndarray]":
+        """``n`` dark frames (no light) for dark calibration, from their own noise sequence."""
+        return self.expose("flat:0", sequence=1).frames(n)
 
     def capture(self, scene=None, frames: int = 1, first_frame: int = 0) -> np.ndarray:
         """Raw frames ``first_frame .. first_frame + frames - 1``, (frames, rows, cols) uint16."""
@@ -185,8 +193,9 @@ class Sensor:
 class Exposure:
     """What is fixed for one scene on one sensor: the mean charge per pixel (e-)."""
 
-    def __init__(self, sensor: Sensor, signal: np.ndarray):
+    def __init__(self, sensor: Sensor, signal: np.ndarray, sequence: int = 0):
         self.sensor = sensor
+        self.sequence = sequence
         c = sensor.config
         timings = sensor.timings
         t0 = time.perf_counter()
@@ -230,7 +239,7 @@ class Exposure:
         c = s.config
         timings = s.timings
         t0 = time.perf_counter()
-        rng = temporal_rng(c.seed, "shot_noise", k) if self._noisy_e is not None else None
+        rng = temporal_rng(c.seed, "shot_noise", k, self.sequence) if self._noisy_e is not None else None
         n = shot_noise.collect(self._noisy_e, self._exact_e, c.sensor.full_well_e, rng, c.shot_noise.gaussian_above_e)
         timings["shot_noise"] += time.perf_counter() - t0
         collected = n
@@ -238,13 +247,13 @@ class Exposure:
         t0 = time.perf_counter()
         if c.source_follower.enabled:
             sfn = source_follower.noise(
-                s.shape, c.source_follower.thermal_sigma_e, fp.flicker_sigma, temporal_rng(c.seed, "source_follower", k)
+                s.shape, c.source_follower.thermal_sigma_e, fp.flicker_sigma, temporal_rng(c.seed, "source_follower", k, self.sequence)
             )
             n = n + sfn
         t1 = time.perf_counter()
         timings["source_follower"] += t1 - t0
         if c.row_noise.enabled:
-            rown = row_noise.temporal(s.shape[0], c.row_noise.sigma_e, temporal_rng(c.seed, "row_noise", k))
+            rown = row_noise.temporal(s.shape[0], c.row_noise.sigma_e, temporal_rng(c.seed, "row_noise", k, self.sequence))
             if fp.row_offset is not None:
                 rown = rown + fp.row_offset
             n = n + rown
@@ -254,7 +263,7 @@ class Exposure:
         if c.column_noise.enabled:
             offset = fp.vfpn
             if fp.column_sigma is not None:
-                ct = column_noise.temporal(fp.column_sigma, temporal_rng(c.seed, "column_noise", k))
+                ct = column_noise.temporal(fp.column_sigma, temporal_rng(c.seed, "column_noise", k, self.sequence))
                 offset = ct if offset is None else offset + ct
             n = column_noise.apply(n, fp.column_gain, offset)
         timings["column_noise"] += time.perf_counter() - t2

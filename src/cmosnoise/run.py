@@ -5,7 +5,10 @@
 - ``raw.tiff``: raw frames, uint16 DN, (frames, rows, cols), CFA/black level/bits in the metadata
 - ``config.yaml``: the resolved configuration, seed included (re-running it reproduces raw.tiff)
 - ``summary.json``: key figures (signal and temporal noise in e- and DN, stages, timings)
-- ``preview.png``: frame 0 as a picture
+- ``preview.png``: frame 0 as a picture, the pre-processing view (no dark calibration, no defect correction)
+- with processing on: ``processed.png`` (frame 0 through the whole chain), ``processed.mp4``
+  (several frames), ``master_dark.tiff`` (with dark calibration)
+- with ``run.dng``: ``dng/frame_NNNNNN.dng``, every raw frame as a DNG
 """
 
 from __future__ import annotations
@@ -19,11 +22,14 @@ import numpy as np
 
 from . import __version__
 from .config import Config
-from .output import OutputFolder, raw_metadata, write_json, write_raw_tiff
+from dataclasses import asdict
+
+from . import calibration, noise_budget, white_pixels
+from .dng import write_dng
+from .output import OutputFolder, VideoWriter, raw_metadata, write_float_tiff, write_json, write_raw_tiff
 from .pipeline import Sensor
-from .preview import preview
+from .process import Processor, RawInfo
 from .summary import RunStats
-from . import noise_budget, white_pixels
 from .units import e_per_s_to_aa
 
 
@@ -35,12 +41,25 @@ def _white_dn(sensor: Sensor) -> float:
     return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
 
 
+def raw_info(sensor: Sensor) -> RawInfo:
+    """What the processing chain needs to know about this sensor's raw frames."""
+    c = sensor.config
+    t = sensor.transfer
+    return RawInfo(
+        cfa=sensor.cfa, black_level_dn=t.black_level_dn, bits=t.bits, white_dn=_white_dn(sensor),
+        crosstalk_kernel_pct=c.crosstalk.kernel_pct if c.crosstalk.enabled else None,
+        responsivity=tuple(c.sensor.channel_responsivity),
+    )
+
+
 def simulate(config: Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None) -> dict:
     """Run the simulation of ``config`` and write the results into ``out``; returns the summary.
 
     ``progress``, if given, is called with the frame count and returns a
     context manager whose value is called once per frame (``advance()``).
     """
+    import imageio.v3 as iio
+
     folder = OutputFolder(out)  # fails early if out cannot be written
     with folder as tmp:
         t_start = time.perf_counter()
@@ -48,33 +67,84 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
         transfer = sensor.transfer
+        proc_cfg = config.processing
+        info = raw_info(sensor)
+
+        master = None
+        t0 = time.perf_counter()
+        if proc_cfg.dark_frames > 0:
+            master = calibration.master_dark(sensor.dark_frames(proc_cfg.dark_frames))
+            write_float_tiff(tmp / "master_dark.tiff", master, {"frames": proc_cfg.dark_frames, **asdict(info)})
+        t_dark = time.perf_counter() - t0
+        processor = Processor(proc_cfg, info, master)
+
         stats = RunStats(transfer.max_code)
         frame0: list[np.ndarray] = []
+        video = VideoWriter(tmp / "processed.mp4", proc_cfg.video_fps) if proc_cfg.enabled and n > 1 else None
+        if config.run.dng:
+            (tmp / "dng").mkdir()
+        t_process = 0.0
 
         def frames(advance):
-            for raw, electrons in shot.frames_with_electrons(n, first):
+            nonlocal t_process
+            for k, (raw, electrons) in enumerate(shot.frames_with_electrons(n, first), start=first):
                 stats.update(raw, electrons)
                 if not frame0:
                     frame0.extend([raw, electrons])
+                if config.run.dng:
+                    write_dng(tmp / "dng" / f"frame_{k:06d}.dng", raw, sensor.cfa, transfer.black_level_dn,
+                              transfer.max_code, processor.mixing, info.responsivity)
+                if video is not None:
+                    tp = time.perf_counter()
+                    video.append(processor.render(raw))
+                    t_process += time.perf_counter() - tp
                 advance()
                 yield raw
 
         meta = raw_metadata(
             sensor.cfa, transfer.black_level_dn, transfer.bits, transfer.gain_dn_per_e,
             first_frame=first, seed=config.seed, cmosnoise_version=__version__,
+            scene_white_dn=info.white_dn, channel_responsivity=list(info.responsivity),
+            crosstalk_kernel_pct=info.crosstalk_kernel_pct,
         )
         cm = progress(n) if progress else contextlib.nullcontext(lambda: None)
-        with cm as advance:
-            write_raw_tiff(tmp / "raw.tiff", frames(advance), n, sensor.shape, meta)
+        try:
+            with cm as advance:
+                write_raw_tiff(tmp / "raw.tiff", frames(advance), n, sensor.shape, meta)
+        finally:
+            if video is not None:
+                video.close()
         t_frames = time.perf_counter() - t_start
 
-        import imageio.v3 as iio
-
-        iio.imwrite(tmp / "preview.png", preview(frame0[0], sensor.cfa, transfer.black_level_dn, _white_dn(sensor)))
+        iio.imwrite(tmp / "preview.png", processor.render(frame0[0], pre=True))
+        if proc_cfg.enabled:
+            tp = time.perf_counter()
+            iio.imwrite(tmp / "processed.png", processor.render(frame0[0]))
+            t_process += time.perf_counter() - tp
         (tmp / "config.yaml").write_text(config.to_yaml())
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
+        summary["processing"] = processing_summary(processor, frame0[0], master, t_dark, t_process, n)
         write_json(tmp / "summary.json", summary)
     return summary
+
+
+def processing_summary(processor: Processor, raw0: np.ndarray, master, t_dark: float, t_process: float, n: int) -> dict:
+    s = processor.settings
+    out = {
+        "enabled": s.enabled,
+        "dark_frames": s.dark_frames,
+        "defects": s.defects.method,
+        "crosstalk_compensation": s.crosstalk_compensation and processor.mixing is not None,
+        "white_balance": s.white_balance.mode,
+        "demosaic": s.demosaic,
+        "dark_calibration_s": round(t_dark, 6),
+        "processing_s": round(t_process, 6),
+    }
+    if processor.mixing is not None:
+        out["crosstalk_mixing_matrix"] = processor.mixing.round(6).tolist()
+    if processor.defect_map is not None:
+        out["defect_map_pixels"] = int(processor.defect_map.sum())
+    return out
 
 
 def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict | None:

@@ -35,9 +35,15 @@ def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
     return np.random.Generator(np.random.PCG64(ss))
 
 
-def temporal_rng(seed: int, stage: str, frame: int) -> np.random.Generator:
-    """Generator for a stage's temporal noise in frame ``frame`` (0-based)."""
+def temporal_rng(seed: int, stage: str, frame: int, sequence: int = 0) -> np.random.Generator:
+    """Generator for a stage's temporal noise in frame ``frame`` (0-based).
+
+    ``sequence`` separates frame series taken at other times by the same
+    sensor, such as the dark frames of a dark calibration (sequence 1), so
+    that their noise never repeats the scene frames'.
+    """
     if frame < 0:
         raise ValueError(f"frame index must be >= 0, got {frame}")
-    ss = np.random.SeedSequence(seed, spawn_key=(TEMPORAL, STAGE_IDS[stage], frame))
+    key = (TEMPORAL, STAGE_IDS[stage], frame) if sequence == 0 else (TEMPORAL, STAGE_IDS[stage], frame, sequence)
+    ss = np.random.SeedSequence(seed, spawn_key=key)
     return np.random.Generator(np.random.PCG64(ss))

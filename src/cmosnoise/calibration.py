@@ -1,0 +1,36 @@
+"""Black level and dark calibration (MODEL.md section 5).
+
+Dark calibration subtracts a **master dark**: the mean of n dark frames taken
+by the same sensor instance at the same temperature and exposure. It removes
+the fixed dark pattern (DCNU, VFPN, fixed row offsets), not the dark shot
+noise of the frame at hand, and it cannot restore a white pixel that has
+saturated (the scene's charge is gone).
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+import numpy as np
+
+
+def subtract_black(raw: np.ndarray, black_level_dn: float) -> np.ndarray:
+    """Raw DN to signal above black (DN), float32; may be negative."""
+    return raw.astype(np.float32) - np.float32(black_level_dn)
+
+
+def master_dark(frames: Iterable[np.ndarray]) -> np.ndarray:
+    """Mean of dark frames (DN, black level included), float32, accumulated one frame at a time."""
+    total = None
+    n = 0
+    for f in frames:
+        total = f.astype(np.float64) if total is None else total + f
+        n += 1
+    if n == 0:
+        raise ValueError("a master dark needs at least one dark frame")
+    return (total / n).astype(np.float32)
+
+
+def subtract_dark(signal_dn: np.ndarray, master_dark_dn: np.ndarray, black_level_dn: float) -> np.ndarray:
+    """Signal above black minus the master dark's signal above black (DN)."""
+    return signal_dn - (master_dark_dn - np.float32(black_level_dn))

@@ -1,0 +1,110 @@
+"""Defect correction on the CFA image (MODEL.md section 5).
+
+Two correctors, so users can compare them:
+
+- :func:`correct_isolated` is the single-defect corrector of a typical ISP: a
+  pixel that lies outside the range of its same-colour neighbours by more
+  than a threshold (far from their median, and supported by none of them) is
+  replaced by their median. It removes single white pixels. It cannot remove
+  a **couplet**: each pixel of the pair has the other among its neighbours,
+  which makes its high value look plausible (the paper's Fig. 9 point).
+- :func:`correct_with_map` replaces the pixels of a defect map (from the
+  master dark) by the median of their non-defective same-colour neighbours,
+  which removes couplets too.
+
+Same-colour neighbours are those of :mod:`cmosnoise.cfa` (8 per pixel).
+Edges reflect, which keeps the CFA phase.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import cfa as cfa_mod
+
+MAD_TO_SIGMA = 1.4826
+
+
+def _offsets_per_pixel(pattern: str, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray | None]:
+    """(R/B or mono offsets, G offsets or None) as arrays (8, 2)."""
+    if cfa_mod.is_mono(pattern):
+        return np.array(cfa_mod.MONO_NEIGHBOURS), None
+    return np.array(cfa_mod.RB_NEIGHBOURS), np.array(cfa_mod.G_NEIGHBOURS)
+
+
+def neighbours(img: np.ndarray, pattern: str) -> np.ndarray:
+    """The 8 same-colour neighbours of every pixel: array (8, rows, cols)."""
+    rows, cols = img.shape
+    pad = np.pad(img, 2, mode="reflect")
+
+    def shifted(offsets):
+        return np.stack([pad[2 + dr : 2 + dr + rows, 2 + dc : 2 + dc + cols] for dr, dc in offsets])
+
+    rb, g = _offsets_per_pixel(pattern, img.shape)
+    if g is None:
+        return shifted(rb)
+    green = cfa_mod.channel_map(pattern, img.shape) == 1
+    return np.where(green[None], shifted(g), shifted(rb))
+
+
+def neighbours_at(img: np.ndarray, pattern: str, r: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The 8 same-colour neighbours of the pixels (r, c) only: array (8, len(r))."""
+    pad = np.pad(img, 2, mode="reflect")
+    rb, g = _offsets_per_pixel(pattern, img.shape)
+    offs = np.broadcast_to(rb[:, None, :], (8, len(r), 2)).copy()
+    if g is not None:
+        green = cfa_mod.channel_map(pattern, img.shape)[r, c] == 1
+        offs[:, green] = g[:, None, :]
+    return pad[2 + r[None] + offs[..., 0], 2 + c[None] + offs[..., 1]]
+
+
+def robust_sigma(values: np.ndarray) -> float:
+    """Standard deviation estimated from the median absolute deviation."""
+    v = values[np.isfinite(values)]
+    return float(MAD_TO_SIGMA * np.median(np.abs(v - np.median(v))))
+
+
+def correct_isolated(img: np.ndarray, pattern: str, threshold_sigma: float = 6.0,
+                     threshold_dn: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Replace pixels outside their neighbours' range by more than the threshold.
+
+    The threshold is ``threshold_dn`` if given, else ``threshold_sigma``
+    times the robust spread of (pixel - neighbour median), estimated on
+    every 4th row. Returns (corrected image, mask of replaced pixels).
+    """
+    nb = neighbours(img, pattern)
+    if threshold_dn is None:
+        sample = img[::4] - np.median(nb[:, ::4], axis=0)
+        threshold_dn = threshold_sigma * robust_sigma(sample)
+    mask = (img > nb.max(axis=0) + threshold_dn) | (img < nb.min(axis=0) - threshold_dn)
+    out = img.copy()
+    r, c = np.nonzero(mask)
+    out[r, c] = np.median(nb[:, r, c], axis=0)
+    return out, mask
+
+
+def defect_map(master_dark_signal: np.ndarray, threshold_sigma: float = 6.0, threshold_dn: float | None = None) -> np.ndarray:
+    """Defective (leaky) pixels of a master dark (signal above black, DN): bool map.
+
+    A pixel is defective if it exceeds the median by more than
+    ``threshold_dn``, or by ``threshold_sigma`` times the dark's robust spread.
+    """
+    med = float(np.median(master_dark_signal))
+    thr = threshold_dn if threshold_dn is not None else threshold_sigma * robust_sigma(master_dark_signal)
+    return master_dark_signal > med + thr
+
+
+def correct_with_map(img: np.ndarray, pattern: str, defects: np.ndarray) -> np.ndarray:
+    """Replace mapped defects by the median of their non-defective same-colour neighbours.
+
+    A defect whose 8 neighbours are all defective keeps its value.
+    """
+    out = img.copy()
+    r, c = np.nonzero(defects)
+    if len(r) == 0:
+        return out
+    vals = neighbours_at(img, pattern, r, c).astype(np.float64)
+    vals[neighbours_at(defects, pattern, r, c)] = np.nan
+    ok = np.isfinite(vals).any(axis=0)
+    out[r[ok], c[ok]] = np.nanmedian(vals[:, ok], axis=0)
+    return out

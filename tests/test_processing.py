@@ -1,0 +1,208 @@
+"""From raw to picture: calibration, defect correction, crosstalk compensation, demosaicing, DNG."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import tifffile
+
+from cmosnoise import CmosnoiseError, Sensor, calibration, load_config, noise_budget, scene, white_pixels
+from cmosnoise.config import ProcessingSection
+from cmosnoise.dng import write_dng
+from cmosnoise.process import Processor, RawInfo, validate_raw
+from cmosnoise.run import raw_info
+
+from conftest import assert_close, quiet_config, temporal_variance_se
+
+
+def processor_for(sensor, master=None, **settings):
+    return Processor(ProcessingSection(**settings), raw_info(sensor), master)
+
+
+def patch_means(img, shape):
+    return np.array([img[r, c].reshape(-1, img.shape[-1] if img.ndim == 3 else 1).mean(axis=0)
+                     for r, c in scene.colorchecker_patches(shape)])
+
+
+@pytest.mark.parametrize("pattern", ["none", "RGGB", "BGGR", "GRBG", "GBRG"])
+@pytest.mark.parametrize("method", ["bilinear", "malvar2004", "menon2007"])
+def test_noise_free_raw_processes_back_to_the_scene(pattern, method):
+    if pattern == "none" and method != "bilinear":
+        pytest.skip("no demosaicing for a monochrome sensor")
+    shape = (240, 360)
+    cfg = quiet_config(sensor={"width": shape[1], "height": shape[0], "cfa": pattern})
+    sensor = Sensor(cfg)
+    raw = sensor.expose("colorchecker").frame(0)
+    out = processor_for(sensor, demosaic=method).render(raw).astype(np.float64)
+    truth = scene.colorchecker(shape)
+    if pattern == "none":
+        expected = scene.linear_to_srgb(truth @ scene.LUMINANCE) * 255
+        # monochrome: pixel by pixel, within ADC and 8-bit rounding (~0.6 + 0.5 codes)
+        assert np.abs(out - expected).max() <= 1.2
+    else:
+        expected = scene.linear_to_srgb(truth) * 255
+        err = np.abs(patch_means(out, shape) - patch_means(expected, shape))
+        assert err.max() <= 1.2, f"largest patch error {err.max():.2f} codes"
+
+
+def _delta_e(rgb8_a, rgb8_b):
+    import colour
+
+    def lab(x):
+        return colour.XYZ_to_Lab(colour.sRGB_to_XYZ(np.asarray(x) / 255.0))
+
+    return colour.delta_E(lab(rgb8_a), lab(rgb8_b), method="CIE 2000")
+
+
+def test_crosstalk_compensation_restores_colorchecker_colours():
+    shape = (240, 360)
+    cfg = quiet_config(crosstalk={"enabled": True}, sensor={"width": shape[1], "height": shape[0], "cfa": "RGGB"})
+    sensor = Sensor(cfg)
+    raw = sensor.expose("colorchecker").frame(0)
+    truth = patch_means(scene.linear_to_srgb(scene.colorchecker(shape)) * 255, shape)
+    on = patch_means(processor_for(sensor).render(raw).astype(float), shape)
+    off = patch_means(processor_for(sensor, crosstalk_compensation=False).render(raw).astype(float), shape)
+    de_on, de_off = _delta_e(on, truth), _delta_e(off, truth)
+    print(f"\ncolorchecker mean dE2000: compensation on {de_on.mean():.2f} (max {de_on.max():.2f}), "
+          f"off {de_off.mean():.2f} (max {de_off.max():.2f})")
+    assert de_on.max() < 1.0  # below a just-noticeable difference
+    assert de_off.mean() > 3.0  # visibly desaturated
+    # desaturated: the chroma of the coloured patches drops without compensation
+    chroma = lambda x: x.max(axis=1) - x.min(axis=1)
+    assert np.all(chroma(off[:18]) <= chroma(truth[:18]) + 1.5)
+
+
+def test_dark_calibration_leaves_only_temporal_noise():
+    n = 16
+    cfg = load_config(overrides=["sensor.temperature_c=65", "exposure.integration_time_s=0.25",
+                                 "sensor.width=640", "sensor.height=480"])
+    sensor = Sensor(cfg, seed=1)
+    master = calibration.master_dark(sensor.dark_frames(n))
+    raw = sensor.expose("flat:0").frame(0)
+    before = calibration.subtract_black(raw, sensor.transfer.black_level_dn).astype(np.float64)
+    after = processor_for(sensor, master, dark_frames=n).cfa_image(raw).astype(np.float64)
+    temporal = noise_budget.budget(sensor, 0.0)["temporal_total_dn"] ** 2
+    expected = temporal * (1 + 1 / n)  # the frame's noise plus what is left in the master dark
+    se = temporal_variance_se(sensor, 1) * (1 + 1 / n)
+    assert_close(after.var(), expected, se, "residual spatial variance after dark calibration")
+    assert before.var() > 20 * expected  # the DCNU dominated before
+
+
+def _defects_after(method, sensor, shot, raw, master):
+    k = sensor.transfer.gain_dn_per_e
+    p = processor_for(sensor, master, dark_frames=8, defects={"method": method})
+    residual = p.cfa_image(raw) - shot.photo_mean_e * k
+    bad = np.abs(residual) > 150 * k  # 6 sigma of photon + dark shot + read noise (~25 e-)
+    return bad.sum(), white_pixels.count_couplets(bad, sensor.cfa)
+
+
+def test_median_removes_single_white_pixels_but_not_couplets_and_the_map_removes_both():
+    cfg = load_config(preset="paper-fig9-5m")
+    sensor = Sensor(cfg, seed=0)
+    shot = sensor.expose()
+    raw = shot.frame(0)
+    master = calibration.master_dark(sensor.dark_frames(8))
+    bad0, couplets0 = _defects_after("off", sensor, shot, raw, master)
+    bad_med, couplets_med = _defects_after("median", sensor, shot, raw, master)
+    bad_map, couplets_map = _defects_after("map", sensor, shot, raw, master)
+    print(f"\nfig9-5m after dark calibration: off {bad0} defects / {couplets0} couplets; "
+          f"median {bad_med} / {couplets_med}; map {bad_map} / {couplets_map}")
+    singles0 = bad0 - 2 * couplets0
+    singles_med = bad_med - 2 * couplets_med
+    assert couplets0 >= 10 and singles0 > 1000
+    assert singles_med <= 0.05 * singles0  # single defects are removed
+    assert couplets_med >= 0.7 * couplets0  # couplets survive the median corrector
+    assert couplets_map == 0 and bad_map <= 0.01 * bad0  # the defect map removes both
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG", "none"])
+def test_dng_reads_back_through_rawpy(tmp_path, pattern):
+    rawpy = pytest.importorskip("rawpy")
+    cfg = load_config(overrides=[f"sensor.cfa={pattern}", "sensor.width=96", "sensor.height=64"])
+    sensor = Sensor(cfg)
+    raw = sensor.expose().frame(0)
+    p = processor_for(sensor)
+    write_dng(tmp_path / "f.dng", raw, pattern, 64, 4095, p.mixing)
+    with rawpy.imread(str(tmp_path / "f.dng")) as r:
+        np.testing.assert_array_equal(r.raw_image, raw)
+        assert r.black_level_per_channel == [64] * 4 and r.white_level == 4095
+        if pattern != "none":
+            codes = {"R": 0, "G": 1, "B": 2}
+            desc = r.color_desc.decode()
+            seen = "".join(desc[i] for i in r.raw_pattern.ravel())
+            assert seen == pattern
+            assert r.postprocess().shape == (64, 96, 3)  # LibRaw decodes it
+        else:
+            assert r.num_colors == 1
+
+
+def test_simulate_writes_processed_outputs_and_dngs(tmp_path):
+    from cmosnoise.run import simulate
+
+    cfg = load_config(preset="paper-fig9-vga", overrides=["run.frames=3", "run.dng=true", "sensor.width=160", "sensor.height=120"])
+    s = simulate(cfg, tmp_path / "o")
+    names = sorted(p.name for p in (tmp_path / "o").iterdir())
+    assert names == ["config.yaml", "dng", "master_dark.tiff", "preview.png", "processed.mp4", "processed.png", "raw.tiff", "summary.json"]
+    assert sorted(p.name for p in (tmp_path / "o" / "dng").iterdir()) == [f"frame_{k:06d}.dng" for k in range(3)]
+    import imageio.v2 as iio2
+
+    assert iio2.get_reader(tmp_path / "o" / "processed.mp4").count_frames() == 3
+    assert s["processing"]["dark_frames"] == 8 and s["processing"]["defects"] == "median"
+
+
+def test_process_command_reproduces_the_simulators_processing(tmp_path):
+    from cmosnoise.run import simulate
+    import imageio.v3 as iio
+
+    cfg = load_config(preset="paper-fig9-vga", overrides=["sensor.width=160", "sensor.height=120"])
+    simulate(cfg, tmp_path / "sim")
+    r = subprocess.run([sys.executable, "-m", "cmosnoise.cli", "process", tmp_path / "sim" / "raw.tiff",
+                        "--dark", tmp_path / "sim" / "master_dark.tiff", "--set", "processing.defects.method=median",
+                        "--out", tmp_path / "proc"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    np.testing.assert_array_equal(iio.imread(tmp_path / "proc" / "processed.png"), iio.imread(tmp_path / "sim" / "processed.png"))
+
+
+def _run(*args):
+    return subprocess.run([sys.executable, "-m", "cmosnoise.cli", *map(str, args)], capture_output=True, text=True)
+
+
+@pytest.mark.parametrize("case,needle", [
+    ("float", "pixel type float32 is not raw data"),
+    ("4d", "is not raw frames"),
+    ("darksize", "master dark is 20 x 30 but the raw frames are 40 x 60"),
+    ("demosaic", "processing.demosaic = 'ahd'"),
+    ("nometa", "does not record cfa, black_level_dn, bits"),
+    ("mapnodark", "needs a master dark"),
+])
+def test_process_bad_input_is_one_clear_line(tmp_path, case, needle):
+    good = (np.arange(40 * 60) % 4000).reshape(40, 60).astype(np.uint16)
+    meta = {"cfa": "RGGB", "black_level_dn": 64, "bits": 12}
+    path = tmp_path / "raw.tiff"
+    args = []
+    if case == "float":
+        tifffile.imwrite(path, good.astype(np.float32), metadata=meta)
+    elif case == "4d":
+        tifffile.imwrite(path, np.zeros((2, 2, 40, 60), np.uint16), metadata=meta)
+    else:
+        tifffile.imwrite(path, good, metadata=meta if case != "nometa" else None)
+    if case == "darksize":
+        tifffile.imwrite(tmp_path / "dark.tiff", np.zeros((20, 30), np.uint16))
+        args = ["--dark", tmp_path / "dark.tiff"]
+    if case == "demosaic":
+        args = ["--set", "processing.demosaic=ahd"]
+    if case == "mapnodark":
+        args = ["--set", "processing.defects.method=map"]
+    r = _run("process", path, *args, "--out", tmp_path / "out")
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0] and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_validate_raw_accepts_2d_and_3d_codes():
+    assert validate_raw(np.zeros((4, 6), np.uint16), "x").shape == (1, 4, 6)
+    assert validate_raw(np.zeros((3, 4, 6), np.uint8), "x").dtype == np.uint16
+    with pytest.raises(CmosnoiseError):
+        validate_raw(np.zeros((4, 6, 3), np.float64), "x")
