@@ -122,6 +122,67 @@ def process(
 
 
 @app.command()
+def characterize(
+    config: Optional[Path] = ConfigOpt,
+    preset: Optional[str] = PresetOpt,
+    set_: Optional[List[str]] = SetOpt,
+    seed: Optional[int] = typer.Option(None, "--seed", help="sensor instance seed"),
+    steps: int = typer.Option(40, "--steps", min=5, max=1000, help="exposure times in the photon-transfer series"),
+    stack_frames: int = typer.Option(16, "--stack-frames", min=2, max=10000, help="frames per stack for DSNU and PRNU"),
+    emva_export: Optional[Path] = typer.Option(None, "--emva-export", help="also write the frames and an EMVA 1288 descriptor here"),
+    frames_from: Optional[Path] = typer.Option(None, "--frames-from", help="characterize frames from an EMVA 1288 descriptor (folder or file) instead"),
+    out: Path = typer.Option(Path("cmosnoise-characterization"), "--out", "-o", help="output folder"),
+):
+    """EMVA 1288 characterization: measured values next to the values the configuration implies."""
+    from rich.table import Table
+
+    from . import characterize as ch
+    from .output import OutputFolder, write_json
+    from .pipeline import Sensor
+
+    folder = OutputFolder(out)
+    export_folder = OutputFolder(emva_export) if emva_export is not None else None
+    model = None
+    if frames_from is not None:
+        m = ch.load(frames_from)
+        if config or preset or set_:
+            model = ch.model_values(Sensor(load_config(config, preset, set_, extra={"seed": seed} if seed is not None else None)))
+    else:
+        sensor = Sensor(load_config(config, preset, set_, extra={"seed": seed} if seed is not None else None))
+        with Progress(TextColumn("[bold]measuring"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                      console=err_console, disable=not err_console.is_terminal) as p:
+            task = p.add_task("series", total=steps + 1)
+            m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=lambda: p.advance(task))
+        model = ch.model_values(sensor, m.stack_texp_s)
+    results = ch.evaluate(m)
+    with folder as tmp:
+        ch.plot_curves(m, results, tmp)
+        write_json(tmp / "characterization.json", {
+            "measured": results, "model": model, "notes": ch.DEFINITION_NOTES,
+            "series": {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
+                       "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark},
+        })
+    reference = None
+    if export_folder is not None:
+        with export_folder as tmp:
+            ch.export(m, tmp)
+        try:
+            reference = ch.reference_results(emva_export / ch.DESCRIPTOR)
+        except CmosnoiseError:
+            reference = None  # emva1288 not installed: nothing to compare with
+    tab = Table(title="EMVA 1288 characterization" + (" (measured vs. the configuration)" if model else ""))
+    cols = ["quantity", "unit", "measured", "model", "deviation %"] + (["emva1288"] if reference else [])
+    for col in cols:
+        tab.add_column(col, justify="left" if col == "quantity" else "right")
+    for (key, _, _, fmt), row in zip(ch.TABLE_ROWS, ch.table(results, model)):
+        ref = [fmt.format(reference[key]) if reference and key in reference else ""] if reference else []
+        tab.add_row(*row, *ref)
+    Console().print(tab)
+    typer.echo(f"wrote characterization.json, photon_transfer.png, snr.png to {out}/"
+               + (f"; EMVA 1288 data set to {emva_export}/" if emva_export else ""))
+
+
+@app.command()
 def presets():
     """List the presets, one line each."""
     for name in preset_names():

@@ -513,6 +513,15 @@ def read_yaml(path: str | Path) -> dict:
     return data
 
 
+def build_section(cls, data: dict, name: str):
+    """Validate one section alone (errors name ``name.key``)."""
+    try:
+        return cls.model_validate(data)
+    except ValidationError as exc:
+        msg = format_validation_error(exc).replace("invalid configuration: ", f"invalid configuration: {name}.")
+        raise CmosnoiseError(msg) from None
+
+
 def build_config(data: dict | None = None) -> Config:
     """Validate a (partial) configuration dict merged over the defaults."""
     try:

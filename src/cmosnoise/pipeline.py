@@ -78,6 +78,25 @@ class Sensor:
         self.fixed = self._draw_fixed_pattern()
         self.timings["fixed_pattern"] += time.perf_counter() - t0
 
+    def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
+        """The same sensor instance at another exposure: the fixed pattern is shared, not redrawn.
+
+        Valid because nothing fixed-pattern depends on the exposure (MODEL.md section 1).
+        """
+        updates = {}
+        if integration_time_s is not None:
+            updates["integration_time_s"] = float(integration_time_s)
+        if peak_rate_e_per_s is not None:
+            updates["peak_rate_e_per_s"] = float(peak_rate_e_per_s)
+        from .config import ExposureSection, build_section
+
+        exposure = build_section(ExposureSection, {**self.config.exposure.model_dump(), **updates}, "exposure")
+        other = object.__new__(Sensor)
+        other.config = self.config.model_copy(update={"exposure": exposure})
+        other.timings = self.timings
+        other.fixed = self.fixed
+        return other
+
     @classmethod
     def from_preset(cls, name: str, seed: int | None = None, overrides: list[str] | None = None) -> "Sensor":
         return cls(load_config(preset=name, overrides=overrides), seed=seed)
