@@ -23,8 +23,10 @@ app = typer.Typer(
 err_console = Console(stderr=True)
 
 
-def _run_overrides(scene, frames, first_frame, seed, process=None, dark_frames=None, formats=None) -> dict:
+def _run_overrides(scene, frames, first_frame, seed, process=None, dark_frames=None, formats=None, report=False) -> dict:
     extra: dict = {}
+    if report:
+        extra.setdefault("run", {})["report"] = True
     if process:
         extra.setdefault("processing", {})["enabled"] = True
     if dark_frames is not None:
@@ -85,12 +87,13 @@ def simulate(
     process: bool = typer.Option(False, "--process", help="also write processed.png (and processed.mp4) through the processing chain"),
     dark_frames: Optional[int] = typer.Option(None, "--dark-frames", help="dark calibration: make a master dark from N dark frames"),
     format_: Optional[List[str]] = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
+    report: bool = typer.Option(False, "--report", help="also write report.html (self-contained run report)"),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
 ):
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
     from .run import simulate as run_simulate
 
-    cfg = load_config(config, preset, set_, extra=_run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_))
+    cfg = load_config(config, preset, set_, extra=_run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
     summary = run_simulate(cfg, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height))
     sig, tn = summary["signal"], summary["temporal_noise"]
     noise = f", temporal noise {tn['rms_e']:.2f} e- ({tn['rms_dn']:.2f} DN)" if tn["rms_e"] is not None else ""
@@ -180,6 +183,23 @@ def characterize(
     Console().print(tab)
     typer.echo(f"wrote characterization.json, photon_transfer.png, snr.png to {out}/"
                + (f"; EMVA 1288 data set to {emva_export}/" if emva_export else ""))
+
+
+@app.command()
+def figures(
+    out: Path = typer.Option(Path("cmosnoise-figures"), "--out", "-o", help="output folder"),
+    seed: int = typer.Option(0, "--seed", help="sensor instance seed"),
+):
+    """Regenerate the paper's figures (3, 5, 6, 7, 9, 10, 11) as PNGs with an index.html gallery."""
+    from .figures import write_gallery
+    from .output import OutputFolder
+
+    with OutputFolder(out) as tmp:
+        with Progress(TextColumn("[bold]figure"), TextColumn("{task.description}"), console=err_console,
+                      disable=not err_console.is_terminal) as p:
+            task = p.add_task("", total=None)
+            items = write_gallery(tmp, seed, progress=lambda name: p.update(task, description=name))
+    typer.echo(f"wrote {len(items)} figures and index.html to {out}/")
 
 
 @app.command()

@@ -52,6 +52,7 @@ class RunSection(Section):
     frames: int = Field(1, ge=1, le=1_000_000, description="number of frames to produce")
     first_frame: int = Field(0, ge=0, description="index of the first frame (frame k's temporal noise depends only on seed and k)")
     dng: bool = Field(False, description="also write every raw frame as a DNG (dng/frame_NNNNNN.dng)")
+    report: bool = Field(False, description="also write report.html, a self-contained run report")
 
 
 class DefectsSection(Section):

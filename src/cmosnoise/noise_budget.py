@@ -78,5 +78,33 @@ def budget(sensor, signal_e: float = 0.0) -> dict:
         "dominant_temporal": max(tv, key=tv.get) if tv else None,
         "fixed_pattern_rms_e": _rms(fv),
         "fixed_pattern_total_e": math.sqrt(total_f),
+        "snr_temporal": signal_e / math.sqrt(total_t) if signal_e > 0 else 0.0,
         "snr": signal_e / math.sqrt(total_t + total_f) if signal_e > 0 else 0.0,
+    }
+
+
+def saturation_e(sensor) -> float:
+    """Charge at saturation: the full well, or the ADC's full scale if that comes first (e-)."""
+    t = sensor.transfer
+    return float(min(sensor.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
+
+
+def key_figures(sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
+    """SNR (temporal and fixed pattern) at several signal levels, and the dynamic range."""
+    sat = saturation_e(sensor)
+    levels = sorted({*levels_e, round(sat / 2, 3)})
+    dark = budget(sensor, 0.0)["temporal_total_e"]
+    at = {f"{lvl:g}": budget(sensor, lvl) for lvl in levels if lvl < sat}
+
+    def db(v):
+        return 20 * math.log10(v) if v > 0 else None
+
+    return {
+        "saturation_e": sat,
+        "dark_temporal_noise_e": dark,
+        "dynamic_range": sat / dark,
+        "dynamic_range_db": 20 * math.log10(sat / dark),
+        # temporal SNR (the EMVA 1288 convention), and with the fixed pattern added
+        "snr_temporal_db_at_signal_e": {k: db(b["snr_temporal"]) for k, b in at.items()},
+        "snr_total_db_at_signal_e": {k: db(b["snr"]) for k, b in at.items()},
     }

@@ -125,6 +125,10 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
         summary["processing"] = processing_summary(processor, frame0[0], master, t_dark, t_process, n)
         write_json(tmp / "summary.json", summary)
+        if config.run.report:
+            from . import report
+
+            (tmp / "report.html").write_text(report.build(sensor, shot, summary, frame0[0], processor))
     return summary
 
 
@@ -215,6 +219,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "dark": noise_budget.budget(sensor, 0.0),
             "scene_mean": predicted,
         },
+        "key_figures": noise_budget.key_figures(sensor),
         "dark_current": dark_current_summary(sensor, shot, electrons0),
         "timings_s": {
             "total": round(wall_s, 6),

@@ -1,0 +1,121 @@
+"""Plots shared by the run report and the paper's figures (matplotlib, Agg).
+
+Every plot has labelled axes with units, a legend where there is more than
+one thing to tell apart, and a title.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def figure(*args, **kwargs):
+    return _plt().subplots(*args, **kwargs)
+
+
+def to_png_bytes(fig, dpi: int = 100) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    _plt().close(fig)
+    return buf.getvalue()
+
+
+def image_png_bytes(img: np.ndarray) -> bytes:
+    import imageio.v3 as iio
+
+    return iio.imwrite("<bytes>", img, extension=".png")
+
+
+def data_uri(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+
+
+# ------------------------------------------------------------------ histograms
+def dark_current_histogram(ax, rate: np.ndarray, state, title: str = "") -> None:
+    """Dark-current map on a log count axis, body and tail told apart, threshold marked (paper Figs. 5, 6)."""
+    r = rate.ravel().astype(np.float64)
+    top = max(float(r.max()), 1.0)
+    bins = np.linspace(0, top * 1.02, 200)
+    ax.hist(r, bins=bins, color="C0", alpha=0.8, label=f"map ({r.size} pixels)")
+    if state is not None and state.tail_fraction > 0:
+        body_top = float(state.model.body.ppf(1 - 1e-7))
+        ax.axvspan(body_top, top * 1.02, color="C3", alpha=0.08,
+                   label=f"white-pixel tail: {100 * state.tail_fraction:.3g} % of pixels up to {state.tail_max:.0f} e-/s")
+    if state is not None and state.threshold is not None:
+        above = 1e6 * float((r > state.threshold).mean())
+        ax.axvline(state.threshold, color="C3", ls="--",
+                   label=f"threshold {state.threshold:.0f} e-/s: {above:.0f} ppm above")
+    ax.set_yscale("log")
+    ax.set_xlabel("dark current [e-/s per pixel]")
+    ax.set_ylabel("pixels per bin (log)")
+    ax.set_title(title or "Dark-current non-uniformity")
+    ax.legend(fontsize=8)
+
+
+def temporal_noise_histogram(ax, sigma: np.ndarray, model=None, threshold: float | None = None, title: str = "",
+                             xlabel: str = "per-pixel temporal noise [e- rms]") -> None:
+    """Per-pixel temporal noise on a log count axis, with the model's density (paper Fig. 7)."""
+    s = sigma.ravel().astype(np.float64)
+    bins = np.linspace(0, max(float(s.max()), 1e-6) * 1.02, 150)
+    counts, edges, _ = ax.hist(s, bins=bins, color="C0", alpha=0.8, label=f"pixels ({s.size})")
+    if model is not None:
+        x = (edges[1:] + edges[:-1]) / 2
+        expected = s.size * np.diff(model.cdf(edges))
+        ax.plot(x, np.maximum(expected, 1e-3), "C1-", lw=1.5, label="model: Gumbel body + uniform tail")
+    if threshold is not None:
+        ax.axvline(threshold, color="C3", ls="--", label=f"tail threshold {threshold:g}")
+    ax.set_yscale("log")
+    ax.set_ylim(bottom=0.5)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("pixels per bin (log)")
+    ax.set_title(title or "Temporal noise across the array")
+    ax.legend(fontsize=8)
+
+
+def noise_budget_bars(ax, dark: dict, scene: dict) -> None:
+    """Each temporal source's rms at dark and at the scene's mean level."""
+    names = sorted(set(dark["temporal_rms_e"]) | set(scene["temporal_rms_e"]),
+                   key=lambda n: -scene["temporal_rms_e"].get(n, 0))
+    y = np.arange(len(names))
+    ax.barh(y - 0.2, [dark["temporal_rms_e"].get(n, 0) for n in names], 0.4, label="dark")
+    ax.barh(y + 0.2, [scene["temporal_rms_e"].get(n, 0) for n in names], 0.4,
+            label=f"scene mean ({scene['signal_e']:.0f} e-)")
+    ax.set_yticks(y, names)
+    ax.invert_yaxis()
+    ax.set_xlabel("temporal noise [e- rms]")
+    ax.set_title("Noise budget")
+    ax.legend()
+
+
+def circle_couplets(ax, pairs: np.ndarray, offset=(0, 0), scale: float = 1.0, radius: float = 6.0, color="white") -> None:
+    """Circle each couplet (pairs of (row, col)) on an image axis."""
+    from matplotlib.patches import Circle
+
+    for (r1, c1), (r2, c2) in pairs:
+        cy = ((r1 + r2) / 2 - offset[0]) * scale
+        cx = ((c1 + c2) / 2 - offset[1]) * scale
+        ax.add_patch(Circle((cx, cy), radius, fill=False, color=color, lw=2))
+
+
+def densest_window(mask: np.ndarray, size: tuple[int, int]) -> tuple[int, int]:
+    """Top-left corner of the ``size`` window holding the most True pixels."""
+    from scipy import ndimage
+
+    h, w = min(size[0], mask.shape[0]), min(size[1], mask.shape[1])
+    counts = ndimage.uniform_filter(mask.astype(np.float32), size=(h, w), mode="constant")
+    r, c = np.unravel_index(np.argmax(counts), counts.shape)
+    r0 = int(np.clip(r - h // 2, 0, mask.shape[0] - h))
+    c0 = int(np.clip(c - w // 2, 0, mask.shape[1] - w))
+    return r0, c0

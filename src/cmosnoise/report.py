@@ -1,0 +1,177 @@
+"""The run report: one self-contained HTML file (images embedded, no network, no server).
+
+It holds the resolved parameters grouped by stage, the noise budget (table
+and bar chart), the histograms the paper plots (dark-current map, Figs. 5
+and 6; per-pixel temporal noise, Fig. 7), the perfect, raw and processed
+images side by side, a zoom on the densest white pixels with the couplets
+circled (Fig. 9), and the key figures of ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import datetime
+import html
+import json
+
+import numpy as np
+
+from . import __version__, plots, scene as scene_mod, white_pixels
+from .reconstruction import encode_srgb8
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;max-width:1200px;color:#222;padding:0 1em}
+h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.8em}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ddd;padding:.25em .6em;text-align:left;font-size:.92em}
+th{background:#f3f3f3}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.row{display:flex;flex-wrap:wrap;gap:1em}.row figure{margin:0}figcaption{font-size:.9em;color:#555;max-width:420px}
+img.pix{image-rendering:pixelated}.params{display:flex;flex-wrap:wrap;gap:1.2em;align-items:flex-start}
+"""
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, (list, tuple, dict)):
+        return html.escape(json.dumps(v))
+    return html.escape(str(v))
+
+
+def _flatten(d: dict, prefix: str = "") -> list[tuple[str, object]]:
+    out = []
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out += _flatten(v, key + ".")
+        else:
+            out.append((key, v))
+    return out
+
+
+def _table(rows, header=None, cls="") -> str:
+    h = "".join(f"<th>{html.escape(str(c))}</th>" for c in header) if header else ""
+    body = "".join(
+        "<tr>" + "".join(f'<td class="num">{_fmt(c)}</td>' if isinstance(c, (int, float)) else f"<td>{_fmt(c)}</td>" for c in r) + "</tr>"
+        for r in rows
+    )
+    return f'<table class="{cls}">' + (f"<tr>{h}</tr>" if h else "") + body + "</table>"
+
+
+def _img(png: bytes, alt: str, width: int | None = None, pixelated: bool = False) -> str:
+    w = f' width="{width}"' if width else ""
+    cls = ' class="pix"' if pixelated else ""
+    return f'<img src="{plots.data_uri(png)}" alt="{html.escape(alt)}"{w}{cls}>'
+
+
+def _figure(png: bytes, caption: str, width: int | None = 380, pixelated: bool = False) -> str:
+    return f"<figure>{_img(png, caption, width, pixelated)}<figcaption>{html.escape(caption)}</figcaption></figure>"
+
+
+def build(sensor, shot, summary: dict, raw0: np.ndarray, processor) -> str:
+    """The report's HTML text."""
+    c = sensor.config
+    parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>cmosnoise run report</title><style>{CSS}</style></head><body>"]
+    parts.append(f"<h1>cmosnoise run report</h1><p>cmosnoise {__version__}, {datetime.datetime.now():%Y-%m-%d %H:%M}; "
+                 f"{sensor.shape[1]} x {sensor.shape[0]} {html.escape(sensor.cfa)} sensor, seed {c.seed}, scene "
+                 f"<code>{html.escape(c.scene.source)}</code>, {summary['frames']} frame(s) from frame {summary['first_frame']}.</p>")
+
+    # ---- key figures
+    kf = summary["key_figures"]
+    tn = summary["temporal_noise"]
+    rows = [
+        ("mean signal", summary["signal"]["mean_e"], "e-"),
+        ("mean signal", summary["signal"]["mean_dn"], "DN"),
+        ("temporal noise, predicted", tn["predicted_rms_e"], "e- rms"),
+        ("temporal noise, measured (frame differences)", tn["rms_e"] if tn["rms_e"] is not None else "needs 2 frames", "e- rms"),
+        ("dark temporal noise", kf["dark_temporal_noise_e"], "e- rms"),
+        ("saturation", kf["saturation_e"], "e-"),
+        ("dynamic range", kf["dynamic_range_db"], "dB"),
+    ]
+    rows += [(f"SNR at {lvl} e-: temporal / with fixed pattern", f"{v:.1f} / {kf['snr_total_db_at_signal_e'][lvl]:.1f}", "dB")
+             for lvl, v in kf["snr_temporal_db_at_signal_e"].items()]
+    dc = summary.get("dark_current")
+    if dc and "map" in dc:
+        rows += [
+            (f"ppm above {dc['threshold_aA']:.0f} aA ({dc['threshold_e_per_s']:.0f} e-/s), map", dc["map"]["ppm"], "ppm"),
+            ("ppm above threshold, configured", dc["ppm_expected"], "ppm"),
+            ("white pixels (map) / couplets / couplets expected at random",
+             f"{dc['map']['white_pixels']} / {dc['map']['couplets']} / {dc['map']['couplets_expected_random']:.1f}", ""),
+            ("white pixels (frame 0) / couplets / expected at random",
+             f"{dc['frame0']['white_pixels']} / {dc['frame0']['couplets']} / {dc['frame0']['couplets_expected_random']:.1f}", ""),
+        ]
+    parts.append("<h2>Key figures</h2>" + _table(rows, ["quantity", "value", "unit"], "keyfigures"))
+
+    # ---- images
+    t = sensor.transfer
+    white = processor.white_above_black
+    perfect_rgb = scene_mod.render(c.scene.source, sensor.shape, c.scene.scale, c.scene.fit) if isinstance(c.scene.source, str) else None
+    raw_view = encode_srgb8((raw0.astype(np.float32) - t.black_level_dn) / white)
+    imgs = []
+    if perfect_rgb is not None:
+        perfect = encode_srgb8(perfect_rgb if not processor.mono else perfect_rgb @ scene_mod.LUMINANCE)
+        imgs.append(_figure(plots.image_png_bytes(perfect), "perfect image (the scene at the sensor's resolution)"))
+    imgs.append(_figure(plots.image_png_bytes(raw_view), "raw frame 0 (CFA samples as grey, black level removed)"))
+    imgs.append(_figure(plots.image_png_bytes(processor.render(raw0, pre=True)), "pre-processing view (preview.png)"))
+    imgs.append(_figure(plots.image_png_bytes(processor.render(raw0)), "through the processing chain (processed.png)"))
+    parts.append("<h2>Images</h2><div class='row'>" + "".join(imgs) + "</div>")
+
+    # ---- noise budget
+    nb = summary["noise_budget"]
+    names = sorted(set(nb["dark"]["temporal_rms_e"]) | set(nb["scene_mean"]["temporal_rms_e"]))
+    rows = [(n, nb["dark"]["temporal_rms_e"].get(n, 0.0), nb["scene_mean"]["temporal_rms_e"].get(n, 0.0)) for n in names]
+    rows.append(("total (temporal)", nb["dark"]["temporal_total_e"], nb["scene_mean"]["temporal_total_e"]))
+    fp_names = sorted(set(nb["dark"]["fixed_pattern_rms_e"]) | set(nb["scene_mean"]["fixed_pattern_rms_e"]))
+    rows += [(f"fixed pattern: {n}", nb["dark"]["fixed_pattern_rms_e"].get(n, 0.0), nb["scene_mean"]["fixed_pattern_rms_e"].get(n, 0.0)) for n in fp_names]
+    fig, ax = plots.figure(figsize=(6.4, 3.6))
+    plots.noise_budget_bars(ax, nb["dark"], nb["scene_mean"])
+    parts.append("<h2>Noise budget</h2><div class='row'>"
+                 + _table(rows, ["source", "at dark [e- rms]", f"at the scene mean, {nb['scene_mean']['signal_e']:.0f} e- [e- rms]"], "budget")
+                 + _figure(plots.to_png_bytes(fig), f"dominant temporal source at the scene mean: {nb['scene_mean']['dominant_temporal']}", 520)
+                 + "</div>")
+
+    # ---- histograms
+    hist = []
+    fp = sensor.fixed
+    if fp.dark_rate is not None:
+        fig, ax = plots.figure(figsize=(6.4, 4))
+        plots.dark_current_histogram(ax, fp.dark_rate, fp.dark_state, f"Dark-current map at {c.sensor.temperature_c:g} C ({fp.dark_state.family} body)")
+        hist.append(_figure(plots.to_png_bytes(fig), "dark-current non-uniformity, log counts (paper Figs. 5 and 6)", 520))
+    if fp.flicker_sigma is not None:
+        fig, ax = plots.figure(figsize=(6.4, 4))
+        tail = c.source_follower.flicker.tail
+        plots.temporal_noise_histogram(ax, fp.flicker_sigma, c.flicker_model(), tail.threshold_e if tail else None,
+                                       "Flicker/RTS sigma per pixel", "flicker/RTS sigma [e- rms]")
+        hist.append(_figure(plots.to_png_bytes(fig), "per-pixel temporal (flicker/RTS) noise, log counts (paper Fig. 7)", 520))
+    if hist:
+        parts.append("<h2>Distributions</h2><div class='row'>" + "".join(hist) + "</div>")
+
+    # ---- couplets
+    if fp.dark_rate is not None and fp.dark_state.threshold is not None:
+        mask = fp.dark_rate > fp.dark_state.threshold
+        if mask.any():
+            h, w = min(64, sensor.shape[0]), min(96, sensor.shape[1])
+            all_pairs = white_pixels.couplet_pairs(mask, sensor.cfa)
+            target = mask
+            if len(all_pairs):  # zoom where the couplets are densest
+                target = np.zeros_like(mask)
+                target[all_pairs[:, 0, 0], all_pairs[:, 0, 1]] = True
+            r0, c0 = plots.densest_window(target, (h, w))
+            crop = processor.render(raw0, pre=True)[r0 : r0 + h, c0 : c0 + w]
+            scale = 8
+            fig, ax = plots.figure(figsize=(6.4, 6.4 * h / w))
+            ax.imshow(crop, interpolation="nearest", extent=(0, w * scale, h * scale, 0))
+            pairs = white_pixels.couplet_pairs(mask[r0 : r0 + h, c0 : c0 + w], sensor.cfa)
+            plots.circle_couplets(ax, pairs + 0.5, scale=scale, radius=2.2 * scale)
+            ax.set_title(f"Densest white pixels: rows {r0}-{r0 + h - 1}, cols {c0}-{c0 + w - 1}; {len(pairs)} couplet(s) circled")
+            ax.set_xlabel("column (x8 zoom)")
+            ax.set_ylabel("row (x8 zoom)")
+            parts.append("<h2>White pixels and couplets</h2>" + _figure(plots.to_png_bytes(fig), "pre-processing view, zoomed; circles: couplets (paper Fig. 9)", 640))
+
+    # ---- parameters
+    cfg = c.to_dict()
+    tables = []
+    for section, value in cfg.items():
+        rows = _flatten(value) if isinstance(value, dict) else [("", value)]
+        tables.append(f"<div><h3>{html.escape(section)}</h3>{_table(rows, ['key', 'value'], 'params')}</div>")
+    parts.append("<h2>Parameters</h2><div class='params'>" + "".join(tables) + "</div>")
+    parts.append("</body></html>")
+    return "".join(parts)

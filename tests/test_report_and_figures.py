@@ -1,0 +1,129 @@
+"""The run report, the paper's figures gallery, and readable plots."""
+
+import base64
+import io
+import shutil
+import subprocess
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cmosnoise import load_config, plots
+from cmosnoise.run import simulate
+
+
+class _Collector(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.imgs, self.tables, self.links, self.scripts = [], [], [], 0
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "img":
+            self.imgs.append(a.get("src", ""))
+        if tag == "table":
+            self.tables.append(a.get("class", ""))
+        if tag in ("a", "link", "script", "iframe") and (a.get("href") or a.get("src")):
+            self.links.append(a.get("href") or a.get("src"))
+        if tag == "script":
+            self.scripts += 1
+
+
+@pytest.fixture(scope="module")
+def report_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("r") / "run"
+    cfg = load_config(preset="paper-fig9-vga", overrides=["run.frames=2", "run.report=true"])
+    summary = simulate(cfg, out)
+    return out, summary
+
+
+def test_report_is_self_contained_with_images_and_tables(report_run):
+    out, summary = report_run
+    text = (out / "report.html").read_text()
+    c = _Collector()
+    c.feed(text)
+    assert len(c.imgs) >= 8  # perfect, raw, pre, processed, budget chart, 2 histograms, couplet zoom
+    import imageio.v3 as iio
+
+    for src in c.imgs:
+        assert src.startswith("data:image/png;base64,")
+        img = iio.imread(io.BytesIO(base64.b64decode(src.split(",", 1)[1])), extension=".png")
+        assert img.size > 0
+    assert {"keyfigures", "budget", "params"} <= set(c.tables)
+    assert not c.links and c.scripts == 0  # nothing to fetch, nothing to run
+    assert "http://" not in text and "https://" not in text
+    for needle in ["Noise budget", "Distributions", "White pixels and couplets", "Parameters", "dark_current",
+                   f"{summary['dark_current']['map']['couplets']} /"]:
+        assert needle in text
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no Chromium here: apt-get install chromium to run this check")
+def test_report_opens_in_headless_chromium_without_network(report_run, tmp_path):
+    out, _ = report_run
+    # a copy with a probe appended: the title reports whether every image decoded
+    probe = ("<script>document.title = Array.from(document.images).every(i => i.complete && i.naturalWidth > 0)"
+             " ? 'IMAGES-OK ' + document.images.length + ' TABLES ' + document.querySelectorAll('table').length"
+             " : 'IMAGES-BROKEN';</script>")
+    page = tmp_path / "probe.html"
+    page.write_text((out / "report.html").read_text().replace("</body>", probe + "</body>"))
+    r = subprocess.run([
+        CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync",
+        "--host-resolver-rules=MAP * ~NOTFOUND", f"--user-data-dir={tmp_path / 'profile'}",
+        "--virtual-time-budget=10000", "--dump-dom", page.as_uri(),
+    ], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    import re
+
+    m = re.search(r"<title>IMAGES-OK (\d+) TABLES (\d+)</title>", r.stdout)
+    assert m, r.stdout[:500]
+    assert int(m.group(1)) >= 8 and int(m.group(2)) >= 10
+
+
+def test_summary_has_the_reports_key_figures(report_run):
+    _, s = report_run
+    kf = s["key_figures"]
+    assert kf["dynamic_range_db"] == pytest.approx(20 * np.log10(kf["saturation_e"] / kf["dark_temporal_noise_e"]))
+    for lvl, v in kf["snr_temporal_db_at_signal_e"].items():
+        assert v >= kf["snr_total_db_at_signal_e"][lvl]  # fixed pattern only adds noise
+
+
+def test_figures_gallery_holds_every_figure(tmp_path):
+    from cmosnoise.figures import FIGURES, write_gallery
+
+    items = write_gallery(tmp_path, seed=0)
+    names = [n for n, _ in items]
+    assert len(names) == len(FIGURES) == 7
+    for fig in ["fig3", "fig5", "fig6", "fig7", "fig9", "fig10", "fig11"]:
+        assert any(n.startswith(fig + "_") for n in names)
+    index = (tmp_path / "index.html").read_text()
+    c = _Collector()
+    c.feed(index)
+    assert sorted(c.imgs) == sorted(names)
+    import imageio.v3 as iio
+
+    for n, caption in items:
+        assert iio.imread(tmp_path / n).shape[0] > 200
+        assert "seed" in caption.lower() and len(caption) > 80  # a caption that states the parameters
+
+
+def test_plots_have_labels_units_titles_and_legends():
+    from cmosnoise import Sensor
+    from cmosnoise.noise_budget import budget
+
+    sensor = Sensor(load_config(overrides=["sensor.width=200", "sensor.height=150"]))
+    fig, axes = plots.figure(1, 3)
+    plots.dark_current_histogram(axes[0], sensor.fixed.dark_rate, sensor.fixed.dark_state)
+    plots.temporal_noise_histogram(axes[1], sensor.fixed.flicker_sigma, sensor.config.flicker_model(), 4.0)
+    plots.noise_budget_bars(axes[2], budget(sensor, 0), budget(sensor, 500))
+    for ax in axes:
+        assert ax.get_title() and ax.get_xlabel()
+        assert "[" in ax.get_xlabel()  # a unit
+        assert ax.get_legend() is not None
+    assert all(ax.get_ylabel() for ax in axes[:2])
+    plots.to_png_bytes(fig)
