@@ -94,9 +94,10 @@ def test_export_round_trips_and_the_reference_implementation_agrees(default_run,
     pytest.importorskip("emva1288")
     ref = ch.reference_results(descriptor)
     assert not hasattr(np, "asfarray") or np.__version__.startswith("1.")  # the numpy 2 shim is taken away again
-    # the reference implementation computes the same EMVA quantities from the same frames
+    # the reference implementation computes the same EMVA quantities from the same frames; only its
+    # choice of fit range differs slightly (seen: 0.001 %)
     for key in ["system_gain_K_dn_per_e", "temporal_dark_noise_e", "dsnu_e", "prnu_pct", "dark_current_mean_e_per_s"]:
-        assert ref[key] == pytest.approx(res[key], rel=0.01), key
+        assert ref[key] == pytest.approx(res[key], rel=1e-3), key
 
 
 def test_load_rejects_a_bad_descriptor(tmp_path):
