@@ -81,7 +81,7 @@ def main() -> None:
         proc = Processor(settings, raw_info(sensor), master)
         pre = label.startswith("pre")
         proc.render(raw, pre=pre)
-        fps = best_fps(lambda _k: proc.render(raw, pre=pre), 3, args.repeats)
+        fps = best_fps(lambda _k, proc=proc, pre=pre: proc.render(raw, pre=pre), 3, args.repeats)
         print(f"  {label:32s} {1000 / fps:10.1f} ms")
 
 

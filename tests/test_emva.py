@@ -1,7 +1,6 @@
 """EMVA 1288 view of simulated frames: temporal dark noise, DSNU (with its column part) and PRNU."""
 
 import numpy as np
-import pytest
 from scipy import signal
 
 from cmosnoise import Sensor, emva, load_config, noise_budget

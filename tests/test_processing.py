@@ -10,7 +10,7 @@ import tifffile
 from cmosnoise import CmosnoiseError, Sensor, calibration, load_config, noise_budget, scene, white_pixels
 from cmosnoise.config import ProcessingSection
 from cmosnoise.dng import write_dng
-from cmosnoise.process import Processor, RawInfo, validate_raw
+from cmosnoise.process import Processor, validate_raw
 from cmosnoise.run import raw_info
 
 from conftest import assert_close, quiet_config, temporal_variance_se
@@ -128,7 +128,6 @@ def test_dng_reads_back_through_rawpy(tmp_path, pattern):
         np.testing.assert_array_equal(r.raw_image, raw)
         assert r.black_level_per_channel == [64] * 4 and r.white_level == 4095
         if pattern != "none":
-            codes = {"R": 0, "G": 1, "B": 2}
             desc = r.color_desc.decode()
             seen = "".join(desc[i] for i in r.raw_pattern.ravel())
             assert seen == pattern

@@ -5,7 +5,6 @@ import pytest
 from scipy import stats
 
 from cmosnoise import CmosnoiseError, Sensor, load_config, noise_budget
-from cmosnoise.heavy_tail import HeavyTail
 
 from conftest import Z, assert_close, quiet_config, temporal_variance_se
 

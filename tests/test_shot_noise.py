@@ -6,7 +6,7 @@ from scipy import stats
 from cmosnoise import Sensor
 from cmosnoise.shot_noise import collect
 
-from conftest import Z, assert_close, quiet_config
+from conftest import assert_close, quiet_config
 
 
 def _stack(sensor, scene, frames):

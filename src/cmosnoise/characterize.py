@@ -24,7 +24,6 @@ substrate and the PRNU gain map).
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable

@@ -183,7 +183,6 @@ def _one_of(obj, base: str, units=RATE_UNITS, required: bool = True):
 
 def rate_e_per_s(obj, base: str, pixel_pitch_um: float) -> float | None:
     """The rate ``base`` of ``obj`` in e-/s, whichever unit it was given in."""
-    from .units import aa_to_e_per_s, na_per_cm2_to_e_per_s
 
     for unit, conv in (
         ("e_per_s", lambda v: v),

@@ -64,11 +64,8 @@ def fig5_dark_temperatures(seed: int = 0):
     for t, (m, st) in maps.items():
         z = ((m - st.mean) / st.std).ravel()
         ax.hist(z, bins=bins, histtype="step", lw=1.5, label=f"{t} C: {st.family} body, mean {st.mean:.0f} e-/s, std {st.std:.1f} e-/s")
-    ax.set_yscale("log")
-    ax.set_xlabel("(dark current - body mean) / body std  [shifted and scaled]")
-    ax.set_ylabel("pixels per bin (log)")
-    ax.set_title("Dark-current distribution at 25, 45 and 65 C")
-    ax.legend(fontsize=8)
+    plots.log_histogram_axes(ax, "(dark current - body mean) / body std  [shifted and scaled]",
+                             "Dark-current distribution at 25, 45 and 65 C")
     return "fig5_dark_temperatures.png", plots.to_png_bytes(fig), (
         "Fig. 5: shifted and scaled dark-current histograms of one sensor instance (400 x 500 pixels, default "
         "characterization points: logistic at 25 C, inverse Gaussian at 45 C, lognormal at 65 C, each with a uniform "
@@ -86,11 +83,7 @@ def fig6_body_and_tail(seed: int = 0):
     bins = np.linspace(0, top, 200)
     b.hist(body.ravel(), bins=bins, alpha=0.7, label=f"body: {state.family}, mean {state.mean:.0f} e-/s, std {state.std:.0f} e-/s")
     b.hist(tail[tail > 0].ravel(), bins=bins, alpha=0.7, color="C3", label=f"tail: Uniform(0, {state.tail_max:.0f}) e-/s for {100 * state.tail_fraction:.3f} %")
-    b.set_yscale("log")
-    b.set_xlabel("dark current [e-/s per pixel]")
-    b.set_ylabel("pixels per bin (log)")
-    b.set_title("The two distributions, apart")
-    b.legend(fontsize=8)
+    plots.log_histogram_axes(b, "dark current [e-/s per pixel]", "The two distributions, apart")
     return "fig6_body_and_tail.png", plots.to_png_bytes(fig), (
         "Fig. 6: two distributions give the realistic histogram: a lognormal body (320 e-/s mean, 130 e-/s std at 65 C) "
         "plus a uniform tail whose fraction is solved so that 200 ppm of pixels lie above 250 aA (1560 e-/s). "

@@ -43,6 +43,15 @@ def data_uri(png: bytes) -> str:
 
 
 # ------------------------------------------------------------------ histograms
+def log_histogram_axes(ax, xlabel: str, title: str, ylabel: str = "pixels per bin (log)") -> None:
+    """Log count axis, labels, title and a legend: the dress of every histogram here."""
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+
+
 def dark_current_histogram(ax, rate: np.ndarray, state, title: str = "") -> None:
     """Dark-current map on a log count axis, body and tail told apart, threshold marked (paper Figs. 5, 6)."""
     r = rate.ravel().astype(np.float64)
@@ -57,11 +66,7 @@ def dark_current_histogram(ax, rate: np.ndarray, state, title: str = "") -> None
         above = 1e6 * float((r > state.threshold).mean())
         ax.axvline(state.threshold, color="C3", ls="--",
                    label=f"threshold {state.threshold:.0f} e-/s: {above:.0f} ppm above")
-    ax.set_yscale("log")
-    ax.set_xlabel("dark current [e-/s per pixel]")
-    ax.set_ylabel("pixels per bin (log)")
-    ax.set_title(title or "Dark-current non-uniformity")
-    ax.legend(fontsize=8)
+    log_histogram_axes(ax, "dark current [e-/s per pixel]", title or "Dark-current non-uniformity")
 
 
 def temporal_noise_histogram(ax, sigma: np.ndarray, model=None, threshold: float | None = None, title: str = "",
@@ -76,12 +81,8 @@ def temporal_noise_histogram(ax, sigma: np.ndarray, model=None, threshold: float
         ax.plot(x, np.maximum(expected, 1e-3), "C1-", lw=1.5, label="model: Gumbel body + uniform tail")
     if threshold is not None:
         ax.axvline(threshold, color="C3", ls="--", label=f"tail threshold {threshold:g}")
-    ax.set_yscale("log")
+    log_histogram_axes(ax, xlabel, title or "Temporal noise across the array")
     ax.set_ylim(bottom=0.5)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("pixels per bin (log)")
-    ax.set_title(title or "Temporal noise across the array")
-    ax.legend(fontsize=8)
 
 
 def noise_budget_bars(ax, dark: dict, scene: dict) -> None:
