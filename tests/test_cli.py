@@ -132,3 +132,18 @@ def test_error_during_the_run_leaves_an_existing_folder_untouched(tmp_path):
     r = run("simulate", "--scene", tmp_path / "missing.png", "--out", out)
     assert r.returncode == 2
     assert [p.name for p in out.iterdir()] == ["keep.txt"]
+
+
+def test_a_file_scene_is_recorded_by_absolute_path(tmp_path):
+    import imageio.v3 as iio
+
+    (tmp_path / "a").mkdir()
+    iio.imwrite(tmp_path / "a" / "s.png", np.full((20, 30, 3), 100, np.uint8))
+    r = run("simulate", "--scene", "s.png", "--set", "sensor.width=30", "--set", "sensor.height=20", "--out", tmp_path / "o",
+            cwd=tmp_path / "a")
+    assert r.returncode == 0, r.stderr
+    cfg = yaml.safe_load((tmp_path / "o" / "config.yaml").read_text())
+    assert cfg["scene"]["source"] == str((tmp_path / "a" / "s.png").resolve())
+    r = run("simulate", "--config", tmp_path / "o" / "config.yaml", "--out", tmp_path / "o2", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "o2" / "raw.tiff"), tifffile.imread(tmp_path / "o" / "raw.tiff"))

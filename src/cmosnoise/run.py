@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
-from .config import Config
+from .config import Config, with_updates
 from dataclasses import asdict
 
 from . import calibration, noise_budget, white_pixels
@@ -60,6 +60,9 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
     """
     import imageio.v3 as iio
 
+    source = config.scene.source
+    if Path(source).is_file():  # record a file scene by its absolute path: config.yaml reruns from anywhere
+        config = with_updates(config, {"scene": {"source": str(Path(source).resolve())}})
     folder = OutputFolder(out)  # fails early if out cannot be written
     with folder as tmp:
         t_start = time.perf_counter()
