@@ -66,8 +66,8 @@ def _figure(png: bytes, caption: str, width: int | None = 380, pixelated: bool =
     return f"<figure>{_img(png, caption, width, pixelated)}<figcaption>{html.escape(caption)}</figcaption></figure>"
 
 
-def build(sensor, shot, summary: dict, raw0: np.ndarray, processor) -> str:
-    """The report's HTML text."""
+def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarray, processed: np.ndarray) -> str:
+    """The report's HTML text; ``pre_view`` and ``processed`` are frame 0 through the processor (8-bit)."""
     c = sensor.config
     parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>cmosnoise run report</title><style>{CSS}</style></head><body>"]
     parts.append(f"<h1>cmosnoise run report</h1><p>cmosnoise {__version__}, {datetime.datetime.now():%Y-%m-%d %H:%M}; "
@@ -110,8 +110,8 @@ def build(sensor, shot, summary: dict, raw0: np.ndarray, processor) -> str:
         perfect = encode_srgb8(perfect_rgb if not processor.mono else perfect_rgb @ scene_mod.LUMINANCE)
         imgs.append(_figure(plots.image_png_bytes(perfect), "perfect image (the scene at the sensor's resolution)"))
     imgs.append(_figure(plots.image_png_bytes(raw_view), "raw frame 0 (CFA samples as grey, black level removed)"))
-    imgs.append(_figure(plots.image_png_bytes(processor.render(raw0, pre=True)), "pre-processing view (preview.png)"))
-    imgs.append(_figure(plots.image_png_bytes(processor.render(raw0)), "through the processing chain (processed.png)"))
+    imgs.append(_figure(plots.image_png_bytes(pre_view), "pre-processing view (preview.png)"))
+    imgs.append(_figure(plots.image_png_bytes(processed), "through the processing chain (processed.png)"))
     parts.append("<h2>Images</h2><div class='row'>" + "".join(imgs) + "</div>")
 
     # ---- noise budget
@@ -155,7 +155,7 @@ def build(sensor, shot, summary: dict, raw0: np.ndarray, processor) -> str:
                 target = np.zeros_like(mask)
                 target[all_pairs[:, 0, 0], all_pairs[:, 0, 1]] = True
             r0, c0 = plots.densest_window(target, (h, w))
-            crop = processor.render(raw0, pre=True)[r0 : r0 + h, c0 : c0 + w]
+            crop = pre_view[r0 : r0 + h, c0 : c0 + w]
             scale = 8
             fig, ax = plots.figure(figsize=(6.4, 6.4 * h / w))
             ax.imshow(crop, interpolation="nearest", extent=(0, w * scale, h * scale, 0))

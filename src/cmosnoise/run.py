@@ -119,11 +119,15 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
                 video.close()
         t_frames = time.perf_counter() - t_start
 
-        iio.imwrite(tmp / "preview.png", processor.render(frame0[0], pre=True))
-        if proc_cfg.enabled:
+        pre_view = processor.render(frame0[0], pre=True)
+        iio.imwrite(tmp / "preview.png", pre_view)
+        processed = None
+        if proc_cfg.enabled or config.run.report:
             tp = time.perf_counter()
-            iio.imwrite(tmp / "processed.png", processor.render(frame0[0]))
+            processed = processor.render(frame0[0])
             t_process += time.perf_counter() - tp
+        if proc_cfg.enabled:
+            iio.imwrite(tmp / "processed.png", processed)
         (tmp / "config.yaml").write_text(config.to_yaml())
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
         summary["processing"] = processing_summary(processor, frame0[0], master, t_dark, t_process, n)
@@ -131,7 +135,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         if config.run.report:
             from . import report
 
-            (tmp / "report.html").write_text(report.build(sensor, shot, summary, frame0[0], processor))
+            (tmp / "report.html").write_text(report.build(sensor, summary, frame0[0], processor, pre_view, processed))
     return summary
 
 
