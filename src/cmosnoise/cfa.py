@@ -43,9 +43,3 @@ def masks(pattern: str, shape: tuple[int, int]) -> np.ndarray:
     cmap = channel_map(pattern, shape)
     return np.stack([cmap == c for c in range(3)])
 
-
-def same_colour_neighbour_offsets(pattern: str, channel: int) -> tuple[tuple[int, int], ...]:
-    """Offsets of the 8 nearest same-colour neighbours of a pixel of ``channel``."""
-    if is_mono(pattern):
-        return MONO_NEIGHBOURS
-    return G_NEIGHBOURS if channel == 1 else RB_NEIGHBOURS

@@ -408,7 +408,7 @@ def _format_loc(loc) -> str:
     for p in loc:
         if isinstance(p, int):
             parts.append(f"[{p}]")
-        elif p in ("list[list[float]]", "dict[literal['R','G','B'],list[list[float]]]") or str(p).startswith(("list[", "dict[", "function-")):
+        elif str(p).startswith(("list[", "dict[", "function-")):
             continue  # pydantic's union-branch labels, not user keys
         else:
             parts.append(("." if parts else "") + str(p))

@@ -25,7 +25,7 @@ from . import cfa as cfa_mod
 MAD_TO_SIGMA = 1.4826
 
 
-def _offsets_per_pixel(pattern: str, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray | None]:
+def _offsets(pattern: str) -> tuple[np.ndarray, np.ndarray | None]:
     """(R/B or mono offsets, G offsets or None) as arrays (8, 2)."""
     if cfa_mod.is_mono(pattern):
         return np.array(cfa_mod.MONO_NEIGHBOURS), None
@@ -40,7 +40,7 @@ def neighbours(img: np.ndarray, pattern: str) -> np.ndarray:
     def shifted(offsets):
         return np.stack([pad[2 + dr : 2 + dr + rows, 2 + dc : 2 + dc + cols] for dr, dc in offsets])
 
-    rb, g = _offsets_per_pixel(pattern, img.shape)
+    rb, g = _offsets(pattern)
     if g is None:
         return shifted(rb)
     green = cfa_mod.channel_map(pattern, img.shape) == 1
@@ -50,7 +50,7 @@ def neighbours(img: np.ndarray, pattern: str) -> np.ndarray:
 def neighbours_at(img: np.ndarray, pattern: str, r: np.ndarray, c: np.ndarray) -> np.ndarray:
     """The 8 same-colour neighbours of the pixels (r, c) only: array (8, len(r))."""
     pad = np.pad(img, 2, mode="reflect")
-    rb, g = _offsets_per_pixel(pattern, img.shape)
+    rb, g = _offsets(pattern)
     offs = np.broadcast_to(rb[:, None, :], (8, len(r), 2)).copy()
     if g is not None:
         green = cfa_mod.channel_map(pattern, img.shape)[r, c] == 1

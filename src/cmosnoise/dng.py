@@ -8,12 +8,12 @@ and AsShotNeutral) describing the simulated sensor's colour space.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
+
+from .output import atomic_file
 
 #: CIE XYZ (D65) to linear sRGB
 XYZ_TO_SRGB = np.array(
@@ -71,9 +71,7 @@ def write_dng(path: str | Path, raw: np.ndarray, cfa: str, black_level_dn: float
             (50778, 3, 1, (21,), True),  # CalibrationIlluminant1: D65
             (50728, 5, 3, _rationals(neutral, False), True),  # AsShotNeutral
         ]
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_file(path) as tmp:
         photometric = 32803 if cfa != "none" else "minisblack"
         tifffile.imwrite(tmp, np.ascontiguousarray(raw, dtype=np.uint16), photometric=photometric,
                          subfiletype=0, extratags=tags, metadata=None, software="cmosnoise")
@@ -82,7 +80,3 @@ def write_dng(path: str | Path, raw: np.ndarray, cfa: str, black_level_dn: float
             # not write that combination, so the tag is set afterwards
             with tifffile.TiffFile(tmp, mode="r+b") as tif:
                 tif.pages[0].tags["PhotometricInterpretation"].overwrite(34892)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise

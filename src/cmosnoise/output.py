@@ -7,6 +7,7 @@ half-written output behind.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -75,13 +76,14 @@ class OutputFolder:
         return False
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write a single file via a temporary file and rename."""
+@contextlib.contextmanager
+def atomic_file(path: str | Path):
+    """Yield a temporary path beside ``path``; rename it to ``path`` on success, remove it on error."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
+        yield Path(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -97,10 +97,6 @@ class Sensor:
         other.fixed = self.fixed
         return other
 
-    @classmethod
-    def from_preset(cls, name: str, seed: int | None = None, overrides: list[str] | None = None) -> "Sensor":
-        return cls(load_config(preset=name, overrides=overrides), seed=seed)
-
     # ------------------------------------------------------------ properties
     @property
     def seed(self) -> int:

@@ -68,8 +68,11 @@ class Processor:
         self.mono = cfa_mod.is_mono(info.cfa)
         self._wb_gains: np.ndarray | None = None
         self.mixing = None
+        self._compensation = None  # inverse of the mixing matrix, when compensation is on
         if info.crosstalk_kernel_pct is not None and not self.mono:
             self.mixing = crosstalk.channel_mixing_matrix(crosstalk.kernel_fractions(info.crosstalk_kernel_pct), info.cfa)
+            if settings.crosstalk_compensation:
+                self._compensation = np.linalg.inv(self.mixing)
         self.defect_map = None
         if settings.defects.method == "map":
             if master_dark is None:
@@ -117,8 +120,8 @@ class Processor:
         if self.mono:
             return x
         rgb = reconstruction.demosaic(x, self.info.cfa, self.settings.demosaic)
-        if self.settings.crosstalk_compensation and self.mixing is not None:
-            rgb = reconstruction.apply_matrix(rgb, np.linalg.inv(self.mixing))
+        if self._compensation is not None:
+            rgb = reconstruction.apply_matrix(rgb, self._compensation)
         return rgb * self.white_balance_gains(rgb)
 
     def white_balance_gains(self, rgb: np.ndarray) -> np.ndarray:

@@ -103,12 +103,10 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
     # ---- images
     t = sensor.transfer
     white = processor.white_above_black
-    perfect_rgb = scene_mod.render(c.scene.source, sensor.shape, c.scene.scale, c.scene.fit) if isinstance(c.scene.source, str) else None
+    perfect_rgb = scene_mod.render(c.scene.source, sensor.shape, c.scene.scale, c.scene.fit)
     raw_view = encode_srgb8((raw0.astype(np.float32) - t.black_level_dn) / white)
-    imgs = []
-    if perfect_rgb is not None:
-        perfect = encode_srgb8(perfect_rgb if not processor.mono else perfect_rgb @ scene_mod.LUMINANCE)
-        imgs.append(_figure(plots.image_png_bytes(perfect), "perfect image (the scene at the sensor's resolution)"))
+    perfect = encode_srgb8(perfect_rgb if not processor.mono else perfect_rgb @ scene_mod.LUMINANCE)
+    imgs = [_figure(plots.image_png_bytes(perfect), "perfect image (the scene at the sensor's resolution)")]
     imgs.append(_figure(plots.image_png_bytes(raw_view), "raw frame 0 (CFA samples as grey, black level removed)"))
     imgs.append(_figure(plots.image_png_bytes(pre_view), "pre-processing view (preview.png)"))
     imgs.append(_figure(plots.image_png_bytes(processed), "through the processing chain (processed.png)"))

@@ -83,6 +83,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
 
         stats = RunStats(transfer.max_code)
         frame0: list[np.ndarray] = []
+        rendered0: list[np.ndarray] = []
         video = VideoWriter(tmp / "processed.mp4", proc_cfg.video_fps) if proc_cfg.enabled and n > 1 else None
         if config.run.dng:
             (tmp / "dng").mkdir()
@@ -99,7 +100,10 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
                               transfer.max_code, processor.mixing, info.responsivity)
                 if video is not None:
                     tp = time.perf_counter()
-                    video.append(processor.render(raw))
+                    picture = processor.render(raw)
+                    video.append(picture)
+                    if k == first:
+                        rendered0.append(picture)  # frame 0's processed picture, reused below
                     t_process += time.perf_counter() - tp
                 advance()
                 yield raw
@@ -121,8 +125,8 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
 
         pre_view = processor.render(frame0[0], pre=True)
         iio.imwrite(tmp / "preview.png", pre_view)
-        processed = None
-        if proc_cfg.enabled or config.run.report:
+        processed = rendered0[0] if rendered0 else None
+        if processed is None and (proc_cfg.enabled or config.run.report):
             tp = time.perf_counter()
             processed = processor.render(frame0[0])
             t_process += time.perf_counter() - tp
@@ -130,7 +134,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
             iio.imwrite(tmp / "processed.png", processed)
         (tmp / "config.yaml").write_text(config.to_yaml())
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
-        summary["processing"] = processing_summary(processor, frame0[0], master, t_dark, t_process, n)
+        summary["processing"] = processing_summary(processor, t_dark, t_process)
         write_json(tmp / "summary.json", summary)
         if config.run.report:
             from . import report
@@ -139,7 +143,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
     return summary
 
 
-def processing_summary(processor: Processor, raw0: np.ndarray, master, t_dark: float, t_process: float, n: int) -> dict:
+def processing_summary(processor: Processor, t_dark: float, t_process: float) -> dict:
     s = processor.settings
     out = {
         "enabled": s.enabled,
