@@ -66,7 +66,6 @@ def main() -> None:
     from cmosnoise import calibration
     from cmosnoise.config import ProcessingSection
     from cmosnoise.process import Processor
-    from cmosnoise.run import raw_info
 
     raw = shot.frame(0)
     master = calibration.master_dark(sensor.dark_frames(4))
@@ -78,7 +77,7 @@ def main() -> None:
         ("dark cal + map + Malvar 2004", ProcessingSection(dark_frames=4, defects={"method": "map"}, demosaic="malvar2004")),
         ("dark cal + map + Menon 2007", ProcessingSection(dark_frames=4, defects={"method": "map"}, demosaic="menon2007")),
     ]:
-        proc = Processor(settings, raw_info(sensor), master)
+        proc = Processor(settings, sensor.raw_info(), master)
         pre = label.startswith("pre")
         proc.render(raw, pre=pre)
         fps = best_fps(lambda _k, proc=proc, pre=pre: proc.render(raw, pre=pre), 3, args.repeats)

@@ -49,7 +49,7 @@ def temporal_variance_se(sensor, dof: float, signal_e=0.0) -> float:
     photon shot), rows (one sample per row) and columns (one per column).
     """
     c = sensor.config
-    fp = sensor.fixed
+    fp = sensor.fixed_pattern
     k2 = sensor.transfer.gain_dn_per_e ** 2
     rows, cols = sensor.shape
     v_pix = np.zeros(sensor.shape) + signal_e

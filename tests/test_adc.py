@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from cmosnoise import Sensor
-from cmosnoise.adc import Transfer, convert
+from cmosnoise.model.stages.adc import Transfer, convert
 
 from conftest import quiet_config
 

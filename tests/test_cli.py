@@ -10,7 +10,7 @@ import pytest
 import tifffile
 import yaml
 
-CLI = [sys.executable, "-m", "cmosnoise.cli"]
+CLI = [sys.executable, "-m", "cmosnoise"]
 
 
 def run(*args, cwd=None):

@@ -5,7 +5,7 @@ import pytest
 
 from cmosnoise import Sensor, load_config
 from cmosnoise import crosstalk
-from cmosnoise.cfa import masks
+from cmosnoise.model.cfa import masks
 
 from conftest import quiet_config
 

@@ -6,8 +6,9 @@ from scipy import stats
 
 from cmosnoise import CmosnoiseError, Sensor, load_config
 from cmosnoise import dark_current, white_pixels
-from cmosnoise.distributions import body
-from cmosnoise.units import aa_to_e_per_s, na_per_cm2_to_e_per_s
+from cmosnoise.model.distributions import body
+from cmosnoise.model.physics import dark_points
+from cmosnoise.model.units import aa_to_e_per_s, na_per_cm2_to_e_per_s
 
 from conftest import Z, assert_close, quiet_config
 
@@ -33,7 +34,7 @@ FAMILIES = [
 def test_body_has_configured_moments_and_family_shape(family, temp, mean, std):
     cfg = dark_cfg([{"temperature_c": temp, "distribution": family, "mean_e_per_s": mean, "std_e_per_s": std}],
                    temperature=temp)
-    m = Sensor(cfg, seed=1).fixed.dark_rate.astype(np.float64).ravel()
+    m = Sensor(cfg, seed=1).fixed_pattern.dark_rate.astype(np.float64).ravel()
     n = m.size
     d = body(family, mean, std)
     kurt = float(d.stats(moments="k"))  # excess kurtosis: sets the standard error of the std
@@ -46,7 +47,7 @@ def test_body_has_configured_moments_and_family_shape(family, temp, mean, std):
 
 def test_negative_body_values_are_clipped_at_zero():
     cfg = dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_e_per_s": 1, "std_e_per_s": 1}], shape=(300, 300))
-    m = Sensor(cfg).fixed.dark_rate
+    m = Sensor(cfg).fixed_pattern.dark_rate
     p0 = stats.norm(1, 1).cdf(0)
     assert m.min() == 0
     frac = (m == 0).mean()
@@ -55,8 +56,8 @@ def test_negative_body_values_are_clipped_at_zero():
 
 def _count_above(cfg):
     sensor = Sensor(cfg, seed=2)
-    state = sensor.fixed.dark_state
-    rate = sensor.fixed.dark_rate
+    state = sensor.fixed_pattern.dark_state
+    rate = sensor.fixed_pattern.dark_rate
     return (rate > state.threshold).sum(), rate.size, state
 
 
@@ -76,8 +77,8 @@ def test_units_aA_and_nA_per_cm2_convert():
     a = dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_aA": 16, "std_e_per_s": 1}], shape=(4, 4))
     b = dark_cfg([{"temperature_c": 25, "distribution": "normal", "mean_nA_per_cm2": 1, "std_e_per_s": 1}], shape=(4, 4),
                  pixel_pitch_um=2.2)
-    assert a.dark_points()[0].mean == pytest.approx(16 * 6.241509, rel=1e-6)
-    assert b.dark_points()[0].mean == pytest.approx(302.09, rel=1e-4)
+    assert dark_points(a)[0].mean == pytest.approx(16 * 6.241509, rel=1e-6)
+    assert dark_points(b)[0].mean == pytest.approx(302.09, rel=1e-4)
 
 
 def test_unreachable_ppm_is_rejected_with_the_reachable_range():
@@ -98,7 +99,7 @@ def test_rate_given_twice_or_not_at_all_is_rejected():
 
 # ------------------------------------------------------------------ temperature
 def _default_points():
-    return load_config().dark_points()
+    return dark_points(load_config())
 
 
 def test_between_points_log_linear_interpolation():
@@ -138,7 +139,7 @@ def test_map_mean_follows_temperature_through_the_sensor():
     means = {}
     for t in [20, 25, 35, 45, 65, 72]:
         cfg = load_config(overrides=[f"sensor.temperature_c={t}", "sensor.width=200", "sensor.height=200"])
-        means[t] = Sensor(cfg, seed=3).fixed.dark_rate.mean()
+        means[t] = Sensor(cfg, seed=3).fixed_pattern.dark_rate.mean()
     assert means[20] < means[25] < means[35] < means[45] < means[65] < means[72]
 
 
@@ -147,8 +148,8 @@ def test_white_pixels_stay_in_place_and_body_keeps_rank_across_temperature_and_e
     body, tail = {}, {}
     for t in [25, 35, 45, 65, 75]:
         size = [f"sensor.temperature_c={t}", "sensor.width=500", "sensor.height=400"]
-        full = Sensor(load_config(overrides=size), seed=4).fixed.dark_rate.astype(np.float64)
-        body[t] = Sensor(load_config(overrides=size, extra={"dark_current": {"points": no_tails}}), seed=4).fixed.dark_rate
+        full = Sensor(load_config(overrides=size), seed=4).fixed_pattern.dark_rate.astype(np.float64)
+        body[t] = Sensor(load_config(overrides=size, extra={"dark_current": {"points": no_tails}}), seed=4).fixed_pattern.dark_rate
         tail[t] = full - body[t]  # the same seed draws the same body: the difference is the tail alone
     members = {t: tail[t] > 1e-3 for t in tail}
     assert 0 < members[25].sum() < members[75].sum()
@@ -162,8 +163,8 @@ def test_white_pixels_stay_in_place_and_body_keeps_rank_across_temperature_and_e
         order = np.argsort(body[lo][pos], kind="stable")
         assert np.all(np.diff(body[hi][pos][order].astype(np.float64)) >= -1e-4 * body[hi].max())  # body ranks kept
     # the map does not depend on the exposure time
-    a = Sensor(load_config(overrides=["sensor.width=64", "sensor.height=64"]), seed=5).fixed.dark_rate
-    b = Sensor(load_config(overrides=["sensor.width=64", "sensor.height=64", "exposure.integration_time_s=2"]), seed=5).fixed.dark_rate
+    a = Sensor(load_config(overrides=["sensor.width=64", "sensor.height=64"]), seed=5).fixed_pattern.dark_rate
+    b = Sensor(load_config(overrides=["sensor.width=64", "sensor.height=64", "exposure.integration_time_s=2"]), seed=5).fixed_pattern.dark_rate
     np.testing.assert_array_equal(a, b)
 
 
@@ -230,7 +231,7 @@ def test_more_couplets_at_5mp_than_vga_on_the_same_scene():
     counts = {}
     for preset in ["paper-fig9-vga", "paper-fig9-5m"]:
         sensor = Sensor(load_config(preset=preset), seed=8)
-        r = white_pixels.report(sensor.fixed.dark_rate, sensor.fixed.dark_state.threshold, sensor.cfa)
+        r = white_pixels.report(sensor.fixed_pattern.dark_rate, sensor.fixed_pattern.dark_state.threshold, sensor.cfa)
         counts[preset] = r["couplets"]
         # the count is what random placement at the realised density predicts (Poisson error)
         assert abs(r["couplets"] - r["couplets_expected_random"]) <= Z * np.sqrt(r["couplets_expected_random"])
@@ -243,17 +244,17 @@ def test_report_from_a_dark_raw_frame_finds_the_maps_white_pixels():
     raw = sensor.expose().frame(0)
     t = sensor.transfer
     rate = white_pixels.dark_rate_from_raw(raw, t.black_level_dn, t.gain_dn_per_e, cfg.exposure.integration_time_s)
-    thr = sensor.fixed.dark_state.threshold
+    thr = sensor.fixed_pattern.dark_state.threshold
     from_raw = white_pixels.report(rate, thr, sensor.cfa)
-    from_map = white_pixels.report(sensor.fixed.dark_rate, thr, sensor.cfa)
+    from_map = white_pixels.report(sensor.fixed_pattern.dark_rate, thr, sensor.cfa)
     # shot noise near the threshold moves a few pixels across it: sqrt(1560 * 0.25) e- ~ 20 e- ~ 80 e-/s
-    near = ((sensor.fixed.dark_rate > thr - 5 * 80) & (sensor.fixed.dark_rate < thr + 5 * 80)).sum()
+    near = ((sensor.fixed_pattern.dark_rate > thr - 5 * 80) & (sensor.fixed_pattern.dark_rate < thr + 5 * 80)).sum()
     assert abs(from_raw["white_pixels"] - from_map["white_pixels"]) <= near
     assert from_raw["white_pixels"] > 1000
 
 
 def test_summary_reports_dark_current_figures(tmp_path):
-    from cmosnoise.run import simulate
+    from cmosnoise.app.run import simulate
 
     s = simulate(load_config(preset="paper-fig9-vga"), tmp_path / "o")
     d = s["dark_current"]

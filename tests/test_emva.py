@@ -4,7 +4,7 @@ import numpy as np
 from scipy import signal
 
 from cmosnoise import Sensor, emva, load_config, noise_budget
-from cmosnoise.scene import steps_levels
+from cmosnoise.model.scene import steps_levels
 
 from conftest import assert_close, quiet_config, std_se_with_noise, temporal_variance_se
 
@@ -32,13 +32,13 @@ def test_emva_dsnu_column_part_is_the_vfpn_and_pixel_part_the_dcnu():
     k = sensor.transfer.gain_dn_per_e
     dark = stack(sensor.expose("flat:0"), frames)
     d = emva.dsnu(dark)
-    dcnu_var = float(np.var(sensor.fixed.dark_rate.astype(np.float64) * t_int))
+    dcnu_var = float(np.var(sensor.fixed_pattern.dark_rate.astype(np.float64) * t_int))
     temporal_var = noise_budget.budget(sensor, 0.0)["temporal_total_e"] ** 2
     # a column mean carries the pixel-level pattern and the averaged temporal noise of its rows
     col_noise = (dcnu_var + temporal_var / frames) / rows
     col_e = d["column"] / k
     assert_close(col_e, 3.0, std_se_with_noise(9.0, col_noise, cols), "DSNU column part vs vfpn_sigma_e")
-    realized = float(np.var(sensor.fixed.vfpn.astype(np.float64), ddof=1))
+    realized = float(np.var(sensor.fixed_pattern.vfpn.astype(np.float64), ddof=1))
     # against the instance's own offsets only the column-mean noise remains: se of var(o + e) - w
     se_var = np.sqrt((4 * realized * col_noise + 2 * col_noise**2) / cols)
     assert_close(col_e**2, realized, se_var, "DSNU column part vs this sensor's offsets")

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cmosnoise.distributions import body
-from cmosnoise.heavy_tail import HeavyTail, UnreachablePpm
+from cmosnoise.model.distributions import body
+from cmosnoise.model.heavy_tail import HeavyTail, UnreachablePpm
 
 from conftest import Z
 

@@ -4,7 +4,7 @@ import numpy as np
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
-from cmosnoise.prnu import gain_map
+from cmosnoise.model.stages.prnu import gain_map
 
 from conftest import assert_close
 

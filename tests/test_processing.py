@@ -9,15 +9,14 @@ import tifffile
 
 from cmosnoise import CmosnoiseError, Sensor, calibration, load_config, noise_budget, scene, white_pixels
 from cmosnoise.config import ProcessingSection
-from cmosnoise.dng import write_dng
-from cmosnoise.process import Processor, validate_raw
-from cmosnoise.run import raw_info
+from cmosnoise.io.dng import write_dng
+from cmosnoise.isp.process import Processor, validate_raw
 
 from conftest import assert_close, quiet_config, temporal_variance_se
 
 
 def processor_for(sensor, master=None, **settings):
-    return Processor(ProcessingSection(**settings), raw_info(sensor), master)
+    return Processor(ProcessingSection(**settings), sensor.raw_info(), master)
 
 
 def patch_means(img, shape):
@@ -144,7 +143,7 @@ def test_dng_reads_back_through_rawpy(tmp_path, pattern):
 
 
 def test_simulate_writes_processed_outputs_and_dngs(tmp_path):
-    from cmosnoise.run import simulate
+    from cmosnoise.app.run import simulate
 
     cfg = load_config(preset="paper-fig9-vga", overrides=["run.frames=3", "run.dng=true", "sensor.width=160", "sensor.height=120"])
     s = simulate(cfg, tmp_path / "o")
@@ -158,12 +157,12 @@ def test_simulate_writes_processed_outputs_and_dngs(tmp_path):
 
 
 def test_process_command_reproduces_the_simulators_processing(tmp_path):
-    from cmosnoise.run import simulate
+    from cmosnoise.app.run import simulate
     import imageio.v3 as iio
 
     cfg = load_config(preset="paper-fig9-vga", overrides=["sensor.width=160", "sensor.height=120"])
     simulate(cfg, tmp_path / "sim")
-    r = subprocess.run([sys.executable, "-m", "cmosnoise.cli", "process", tmp_path / "sim" / "raw.tiff",
+    r = subprocess.run([sys.executable, "-m", "cmosnoise", "process", tmp_path / "sim" / "raw.tiff",
                         "--dark", tmp_path / "sim" / "master_dark.tiff", "--set", "processing.defects.method=median",
                         "--out", tmp_path / "proc"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -171,7 +170,7 @@ def test_process_command_reproduces_the_simulators_processing(tmp_path):
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, "-m", "cmosnoise.cli", *map(str, args)], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "cmosnoise", *map(str, args)], capture_output=True, text=True)
 
 
 @pytest.mark.parametrize("case,needle", [

@@ -5,6 +5,7 @@ import pytest
 from scipy import stats
 
 from cmosnoise import CmosnoiseError, Sensor, load_config, noise_budget
+from cmosnoise.model.physics import flicker_model
 
 from conftest import Z, assert_close, quiet_config, temporal_variance_se
 
@@ -22,11 +23,11 @@ def test_flicker_sigma_map_is_gumbel_body_plus_uniform_tail_with_configured_ppm(
                                      "tail": {"ppm_above": 300, "threshold_e": 4.0, "max_e": 12.0}}},
         sensor={"width": 1000, "height": 1000, "cfa": "none"},
     )
-    sigma = Sensor(cfg, seed=1).fixed.flicker_sigma.astype(np.float64).ravel()
+    sigma = Sensor(cfg, seed=1).fixed_pattern.flicker_sigma.astype(np.float64).ravel()
     n, p = sigma.size, 300e-6
     count = (sigma > 4.0).sum()
     assert abs(count - n * p) <= Z * np.sqrt(n * p * (1 - p))
-    model = cfg.flicker_model()
+    model = flicker_model(cfg)
     assert stats.kstest(sigma, lambda x: model.cdf(x)).pvalue > 1e-6
     body = sigma[sigma < 3.0]  # the body, where the tail's share is ~1e-4 of the pixels
     loc, scale = stats.gumbel_r.fit(body)
@@ -50,7 +51,7 @@ def test_measured_per_pixel_temporal_sigma_fits_the_configured_gumbel():
     assert stats.kstest(flicker, stats.gumbel_r(loc, scale).cdf).pvalue > 1e-6
     assert stats.kstest(flicker, stats.norm(flicker.mean(), flicker.std()).cdf).pvalue < 1e-6
     # the frame-to-frame values of one pixel are normal with that pixel's sigma
-    sigma = np.sqrt(thermal**2 + Sensor(cfg, seed=2).fixed.flicker_sigma.astype(np.float64) ** 2)
+    sigma = np.sqrt(thermal**2 + Sensor(cfg, seed=2).fixed_pattern.flicker_sigma.astype(np.float64) ** 2)
     z = (e / sigma).ravel()
     assert stats.kstest(z[:500_000], stats.norm().cdf).pvalue > 1e-6
 
@@ -87,7 +88,7 @@ def test_row_noise_is_one_value_per_row_per_frame():
 def test_fixed_row_offsets_are_fixed():
     cfg = quiet_config(row_noise={"enabled": True, "sigma_e": 0.0, "fixed_sigma_e": 5.0}, sensor={"width": 10, "height": 3000, "cfa": "none"})
     s = Sensor(cfg, seed=4)
-    off = s.fixed.row_offset.ravel().astype(np.float64)
+    off = s.fixed_pattern.row_offset.ravel().astype(np.float64)
     assert_close(off.std(ddof=1), 5.0, 5.0 / np.sqrt(2 * (off.size - 1)), "row offsets")
     shot = s.expose("flat:0")
     np.testing.assert_array_equal(shot.frame(0, detail=True).electrons, shot.frame(5, detail=True).electrons)
@@ -97,7 +98,7 @@ def test_fixed_row_offsets_are_fixed():
 def test_column_sigma_map_follows_gumbel():
     cfg = quiet_config(column_noise={"enabled": True, "temporal": {"gumbel_loc_e": 0.6, "gumbel_scale_e": 0.2}, "vfpn_sigma_e": 0},
                        sensor={"width": 20000, "height": 2, "cfa": "none"})
-    sig = Sensor(cfg, seed=5).fixed.column_sigma.ravel().astype(np.float64)
+    sig = Sensor(cfg, seed=5).fixed_pattern.column_sigma.ravel().astype(np.float64)
     assert stats.kstest(sig, stats.gumbel_r(0.6, 0.2).cdf).pvalue > 1e-6
     assert stats.kstest(sig, stats.norm(sig.mean(), sig.std()).cdf).pvalue < 1e-6
 
@@ -111,7 +112,7 @@ def test_measured_column_temporal_noise_follows_the_columns_sigma():
     e = dark_stack(cfg, frames, seed=6)
     col_means = e.mean(axis=1)  # (frames, cols)
     v = col_means.var(axis=0, ddof=1) - 1.0 / 20  # thermal's share of a column mean removed
-    true = sensor.fixed.column_sigma.ravel().astype(np.float64) ** 2
+    true = sensor.fixed_pattern.column_sigma.ravel().astype(np.float64) ** 2
     # per column: (F-1) s^2 / var ~ chi2(F-1); pooled, the ratio is 1 within sqrt(2/(F-1)/C)
     ratio = ((v + 1.0 / 20) / (true + 1.0 / 20)).mean()
     assert_close(ratio, 1.0, np.sqrt(2 / (frames - 1) / true.size), "column variance ratio")
@@ -124,7 +125,7 @@ def test_vfpn_is_fixed_same_for_same_seed_and_has_configured_sigma():
                        source_follower={"enabled": True, "thermal_sigma_e": 2.0, "flicker": {"enabled": False}},
                        sensor={"width": 4000, "height": 30, "cfa": "none"})
     a, b = Sensor(cfg, seed=7), Sensor(cfg, seed=7)
-    np.testing.assert_array_equal(a.fixed.vfpn, b.fixed.vfpn)
+    np.testing.assert_array_equal(a.fixed_pattern.vfpn, b.fixed_pattern.vfpn)
     shot = a.expose("flat:0")
     c0 = shot.frame(0, detail=True).contributions["column_noise"]
     c9 = shot.frame(9, detail=True).contributions["column_noise"]
@@ -137,7 +138,7 @@ def test_vfpn_is_fixed_same_for_same_seed_and_has_configured_sigma():
     assert_close(col.std(ddof=1), expected, expected / np.sqrt(2 * (n - 1)), "VFPN std")
     # switching column temporal noise on does not change the VFPN offsets
     cfg2 = load_config(extra={**cfg.to_dict(), "column_noise": {**cfg.to_dict()["column_noise"], "temporal": {"enabled": True}}})
-    np.testing.assert_array_equal(Sensor(cfg2, seed=7).fixed.vfpn, a.fixed.vfpn)
+    np.testing.assert_array_equal(Sensor(cfg2, seed=7).fixed_pattern.vfpn, a.fixed_pattern.vfpn)
 
 
 def test_column_gain_mismatch_scales_the_signal_per_column():
@@ -147,7 +148,7 @@ def test_column_gain_mismatch_scales_the_signal_per_column():
     sensor = Sensor(cfg, seed=8)
     e = sensor.expose("flat:1.0").frame(0, detail=True).electrons.astype(np.float64)
     g = e.mean(axis=0) / 1000.0
-    np.testing.assert_allclose(g, sensor.fixed.column_gain.ravel(), rtol=1e-5)
+    np.testing.assert_allclose(g, sensor.fixed_pattern.column_gain.ravel(), rtol=1e-5)
     assert_close(g.std(ddof=1), 0.05, 0.05 / np.sqrt(2 * (g.size - 1)), "column gain std")
 
 
@@ -168,7 +169,7 @@ def test_total_dark_temporal_noise_matches_two_frame_difference_in_e_and_dn():
 
 
 def test_summary_lists_each_sources_contribution(tmp_path):
-    from cmosnoise.run import simulate
+    from cmosnoise.app.run import simulate
 
     cfg = load_config(overrides=["scene.source=flat:0", "run.frames=6"])
     s = simulate(cfg, tmp_path / "o")

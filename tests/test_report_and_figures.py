@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cmosnoise import load_config, plots
-from cmosnoise.run import simulate
+from cmosnoise.app.run import simulate
 
 
 class _Collector(HTMLParser):
@@ -93,7 +93,7 @@ def test_summary_has_the_reports_key_figures(report_run):
 
 
 def test_figures_gallery_holds_every_figure(tmp_path):
-    from cmosnoise.figures import FIGURES, write_gallery
+    from cmosnoise.app.figures import FIGURES, write_gallery
 
     items = write_gallery(tmp_path, seed=0)
     names = [n for n, _ in items]
@@ -113,12 +113,12 @@ def test_figures_gallery_holds_every_figure(tmp_path):
 
 def test_plots_have_labels_units_titles_and_legends():
     from cmosnoise import Sensor
-    from cmosnoise.noise_budget import budget
+    from cmosnoise.analysis.noise_budget import budget
 
     sensor = Sensor(load_config(overrides=["sensor.width=200", "sensor.height=150"]))
     fig, axes = plots.figure(1, 3)
-    plots.dark_current_histogram(axes[0], sensor.fixed.dark_rate, sensor.fixed.dark_state)
-    plots.temporal_noise_histogram(axes[1], sensor.fixed.flicker_sigma, sensor.config.flicker_model(), 4.0)
+    plots.dark_current_histogram(axes[0], sensor.fixed_pattern.dark_rate, sensor.fixed_pattern.dark_state)
+    plots.temporal_noise_histogram(axes[1], sensor.fixed_pattern.flicker_sigma, sensor.flicker_model, 4.0)
     plots.noise_budget_bars(axes[2], budget(sensor, 0), budget(sensor, 500))
     for ax in axes:
         assert ax.get_title() and ax.get_xlabel()

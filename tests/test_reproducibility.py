@@ -5,7 +5,7 @@ import tracemalloc
 import numpy as np
 
 from cmosnoise import Sensor, load_config
-from cmosnoise.output import write_raw_tiff
+from cmosnoise.io.output import write_raw_tiff
 
 
 def _cfg():
@@ -31,10 +31,10 @@ def test_frames_3_to_5_equal_a_run_of_only_those_frames():
 
 def test_a_stages_fixed_pattern_does_not_depend_on_other_stages():
     base = {"sensor": {"width": 64, "height": 48}}
-    g1 = Sensor(load_config(extra=base), seed=5).fixed.prnu_gain
-    g2 = Sensor(load_config(extra={**base, "crosstalk": {"enabled": False}, "shot_noise": {"enabled": False}}), seed=5).fixed.prnu_gain
+    g1 = Sensor(load_config(extra=base), seed=5).fixed_pattern.prnu_gain
+    g2 = Sensor(load_config(extra={**base, "crosstalk": {"enabled": False}, "shot_noise": {"enabled": False}}), seed=5).fixed_pattern.prnu_gain
     np.testing.assert_array_equal(g1, g2)
-    assert Sensor(load_config(extra={**base, "prnu": {"enabled": False}}), seed=5).fixed.prnu_gain is None
+    assert Sensor(load_config(extra={**base, "prnu": {"enabled": False}}), seed=5).fixed_pattern.prnu_gain is None
 
 
 def test_contributions_sum_to_the_electron_image():

@@ -4,7 +4,7 @@ import numpy as np
 from scipy import stats
 
 from cmosnoise import Sensor
-from cmosnoise.shot_noise import collect
+from cmosnoise.model.stages.shot_noise import collect
 
 from conftest import assert_close, quiet_config
 

@@ -2,12 +2,63 @@
 
 The model follows Gow et al., "A Comprehensive Tool for Modeling CMOS
 Image-Sensor-Noise Performance" (IEEE TED 2007), as specified in MODEL.md.
+
+The public API, imported on first use so that ``import cmosnoise`` stays fast::
+
+    from cmosnoise import Sensor, load_config          # the model
+    from cmosnoise import Processor                    # raw to picture
+    from cmosnoise import white_pixels, noise_budget   # analysis modules
+
+See ARCHITECTURE.md for the layers behind these names.
 """
 
-from .config import Config, load_config, preset_names
+from __future__ import annotations
+
+import importlib
+
+from ._version import __version__
 from .errors import CmosnoiseError
-from .pipeline import Exposure, FrameDetail, Sensor
 
-__version__ = "0.1.0"
+#: public names -> the module that defines them
+_NAMES = {
+    "Config": "config.schema",
+    "preset_names": "config.loading",
+    "load_config": "model.physics",
+    "Sensor": "model.sensor",
+    "Exposure": "model.sensor",
+    "FrameDetail": "model.sensor",
+    "FixedPattern": "model.sensor",
+    "RawInfo": "model.raw_info",
+    "Processor": "isp.process",
+}
 
-__all__ = ["Config", "CmosnoiseError", "Exposure", "FrameDetail", "Sensor", "load_config", "preset_names", "__version__"]
+#: modules reachable as ``cmosnoise.<name>`` (the stable names of the flat layout)
+_MODULES = {
+    "scene": "model.scene", "cfa": "model.cfa", "units": "model.units", "seeds": "model.seeds",
+    "distributions": "model.distributions", "heavy_tail": "model.heavy_tail",
+    "prnu": "model.stages.prnu", "crosstalk": "model.stages.crosstalk", "dark_current": "model.stages.dark_current",
+    "shot_noise": "model.stages.shot_noise", "source_follower": "model.stages.source_follower",
+    "row_noise": "model.stages.row_noise", "column_noise": "model.stages.column_noise", "adc": "model.stages.adc",
+    "calibration": "isp.calibration", "defects": "isp.defects", "reconstruction": "isp.reconstruction",
+    "process": "isp.process",
+    "noise_budget": "analysis.noise_budget", "emva": "analysis.emva", "characterize": "analysis.characterize",
+    "white_pixels": "analysis.white_pixels",
+    "plots": "app.plots",
+}
+
+__all__ = ["CmosnoiseError", "__version__", *_NAMES, *_MODULES]
+
+
+def __getattr__(name: str):
+    if name in _NAMES:
+        value = getattr(importlib.import_module(f".{_NAMES[name]}", __name__), name)
+    elif name in _MODULES:
+        value = importlib.import_module(f".{_MODULES[name]}", __name__)
+    else:
+        raise AttributeError(f"module 'cmosnoise' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(__all__)

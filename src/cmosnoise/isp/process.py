@@ -21,41 +21,14 @@ Fig. 9 "pre-processing" images; ``preview.png`` shows it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from . import calibration, cfa as cfa_mod, crosstalk, defects, reconstruction
-from .config import ProcessingSection
-from .errors import CmosnoiseError
-
-
-@dataclass
-class RawInfo:
-    """What processing needs to know about raw frames."""
-
-    cfa: str
-    black_level_dn: float
-    bits: int
-    white_dn: float | None = None  #: raw code of scene white (None: the white level)
-    crosstalk_kernel_pct: object = None  #: the sensor's crosstalk kernel(s), for compensation
-    responsivity: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    extra: dict = field(default_factory=dict)
-
-    @property
-    def white_level_dn(self) -> int:
-        return 2**self.bits - 1
-
-    @classmethod
-    def from_metadata(cls, meta: dict) -> "RawInfo":
-        return cls(
-            cfa=meta["cfa"],
-            black_level_dn=float(meta["black_level_dn"]),
-            bits=int(meta["bits"]),
-            white_dn=meta.get("scene_white_dn"),
-            crosstalk_kernel_pct=meta.get("crosstalk_kernel_pct"),
-            responsivity=tuple(meta.get("channel_responsivity", (1.0, 1.0, 1.0))),
-        )
+from ..config import ProcessingSection
+from ..errors import CmosnoiseError
+from ..model import cfa as cfa_mod
+from ..model.raw_info import RawInfo
+from ..model.stages import crosstalk
+from . import calibration, defects, reconstruction
 
 
 class Processor:
@@ -159,7 +132,7 @@ def validate_raw(data: np.ndarray, name: str) -> np.ndarray:
 
 def read_dark(path, black_level_dn: float) -> np.ndarray:
     """A master dark from a file: the mean of a dark-frame stack, or an already averaged frame."""
-    from .output import read_raw_tiff
+    from ..io.output import read_raw_tiff
 
     data, _ = read_raw_tiff(path)
     if data.dtype.kind not in "uif":
@@ -171,49 +144,3 @@ def read_dark(path, black_level_dn: float) -> np.ndarray:
     if not np.isfinite(data).all():
         raise CmosnoiseError(f"dark file {str(path)!r} contains NaN or infinite values")
     return calibration.master_dark(iter(data))
-
-
-def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, overrides: dict | None = None) -> dict:
-    """Process a raw TIFF into ``out``: processed.png (frame 0), processed.mp4 (several frames), summary.json."""
-    import time
-
-    import imageio.v3 as iio
-
-    from .config import build_config
-    from .output import OutputFolder, VideoWriter, read_raw_tiff, write_json
-
-    folder = OutputFolder(out)
-    name = str(raw_path)
-    data, meta = read_raw_tiff(raw_path)
-    data = validate_raw(data, name)
-    meta = {**meta, **(overrides or {})}
-    missing = [k for k in ("cfa", "black_level_dn", "bits") if k not in meta]
-    if missing:
-        flags = {"cfa": "--cfa", "black_level_dn": "--black-level", "bits": "--bits"}
-        raise CmosnoiseError(f"raw file {name!r} does not record {', '.join(missing)}; give {', '.join(flags[m] for m in missing)}")
-    # the sensor description is validated like a configuration
-    build_config({"sensor": {"cfa": meta["cfa"]}, "adc": {"bits": meta["bits"], "black_level_dn": meta["black_level_dn"]}})
-    info = RawInfo.from_metadata(meta)
-    if data.max() > info.white_level_dn:
-        raise CmosnoiseError(f"raw file {name!r}: codes up to {int(data.max())} do not fit {info.bits} bits; give --bits")
-    master = read_dark(dark_path, info.black_level_dn) if dark_path is not None else None
-    processor = Processor(settings, info, master)
-    processor.check_shape(data.shape[1:])
-    with folder as tmp:
-        t0 = time.perf_counter()
-        iio.imwrite(tmp / "processed.png", processor.render(data[0]))
-        iio.imwrite(tmp / "preview.png", processor.render(data[0], pre=True))
-        if len(data) > 1:
-            with VideoWriter(tmp / "processed.mp4", settings.video_fps) as video:
-                for frame in data:
-                    video.append(processor.render(frame))
-        elapsed = time.perf_counter() - t0
-        result = {
-            "raw": name, "frames": int(len(data)), "rows": int(data.shape[1]), "cols": int(data.shape[2]),
-            "cfa": info.cfa, "black_level_dn": info.black_level_dn, "bits": info.bits,
-            "dark": None if dark_path is None else str(dark_path),
-            "settings": settings.model_dump(mode="json"),
-            "ms_per_frame": 1000 * elapsed / (len(data) + 1),
-        }
-        write_json(tmp / "summary.json", result)
-    return result

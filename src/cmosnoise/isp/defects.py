@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import cfa as cfa_mod
+from ..model import cfa as cfa_mod
 
 MAD_TO_SIGMA = 1.4826
 

@@ -14,14 +14,18 @@ listed apart: DSNU (dark-current map, row and column offsets) and PRNU.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from ..model.sensor import Sensor
 
-def temporal_variances(sensor, signal_e: float = 0.0) -> dict[str, float]:
+
+def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:
     """Each temporal source's variance (e-^2) at mean photo-signal ``signal_e``."""
     c = sensor.config
-    fp = sensor.fixed
+    fp = sensor.fixed_pattern
     t = sensor.transfer
     g2 = float(np.mean(fp.column_gain.astype(np.float64) ** 2)) if fp.column_gain is not None else 1.0
     out: dict[str, float] = {}
@@ -41,10 +45,10 @@ def temporal_variances(sensor, signal_e: float = 0.0) -> dict[str, float]:
     return out
 
 
-def fixed_pattern_variances(sensor, signal_e: float = 0.0) -> dict[str, float]:
+def fixed_pattern_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:
     """Each fixed-pattern source's spatial variance (e-^2) at mean photo-signal ``signal_e``."""
     c = sensor.config
-    fp = sensor.fixed
+    fp = sensor.fixed_pattern
     out: dict[str, float] = {}
     if fp.dark_rate is not None:
         out["dcnu"] = float(np.var(fp.dark_rate.astype(np.float64))) * c.exposure.integration_time_s**2
@@ -63,7 +67,7 @@ def _rms(variances: dict[str, float]) -> dict[str, float]:
     return {k: math.sqrt(max(v, 0.0)) for k, v in variances.items()}
 
 
-def budget(sensor, signal_e: float = 0.0) -> dict:
+def budget(sensor: Sensor, signal_e: float = 0.0) -> dict:
     """Noise budget at ``signal_e``: rms per source (e-), totals in e- and DN, and the dominant source."""
     tv = temporal_variances(sensor, signal_e)
     fv = fixed_pattern_variances(sensor, signal_e)
@@ -83,15 +87,9 @@ def budget(sensor, signal_e: float = 0.0) -> dict:
     }
 
 
-def saturation_e(sensor) -> float:
-    """Charge at saturation: the full well, or the ADC's full scale if that comes first (e-)."""
-    t = sensor.transfer
-    return float(min(sensor.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
-
-
-def key_figures(sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
+def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
     """SNR (temporal and fixed pattern) at several signal levels, and the dynamic range."""
-    sat = saturation_e(sensor)
+    sat = sensor.saturation_e
     levels = sorted({*levels_e, round(sat / 2, 3)})
     dark = budget(sensor, 0.0)["temporal_total_e"]
     at = {f"{lvl:g}": budget(sensor, lvl) for lvl in levels if lvl < sat}

@@ -1,28 +1,20 @@
-"""The configuration: one validated section per stage of MODEL.md.
+"""The configuration schema: one pydantic section per stage of MODEL.md.
 
 A configuration is YAML (or a dict) with one section per stage, each with an
-``enabled`` switch, plus the run settings (``seed``, ``scene``, ``run``). It
-is validated by pydantic: an unknown key, a wrong type or a value outside its
-physical range raises :class:`~cmosnoise.errors.CmosnoiseError` with a message
-that names the key, the value and what is allowed.
-
-Presets are partial configurations shipped in ``cmosnoise/presets/``; they are
-merged over the defaults. ``--set key.path=value`` overrides are merged last.
+``enabled`` switch, plus the run settings (``seed``, ``scene``, ``run``).
+Every key has a type, a unit in its description and a physical range; an
+unknown key is an error. The schema holds no physics: what the values imply
+(reachable ppm, valid distributions) is checked by :mod:`cmosnoise.model.physics`.
 """
 
 from __future__ import annotations
 
-import copy
 import math
-from importlib import resources
-from pathlib import Path
-from typing import Any, Literal, Optional, Union
+from typing import Literal, Optional, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from .errors import CmosnoiseError
-from .units import aa_to_e_per_s, na_per_cm2_to_e_per_s
 
 
 class Section(BaseModel):
@@ -181,20 +173,6 @@ def _one_of(obj, base: str, units=RATE_UNITS, required: bool = True):
         raise ValueError(f"missing {base}: give {names}")
 
 
-def rate_e_per_s(obj, base: str, pixel_pitch_um: float) -> float | None:
-    """The rate ``base`` of ``obj`` in e-/s, whichever unit it was given in."""
-
-    for unit, conv in (
-        ("e_per_s", lambda v: v),
-        ("aA", aa_to_e_per_s),
-        ("nA_per_cm2", lambda v: na_per_cm2_to_e_per_s(v, pixel_pitch_um)),
-    ):
-        v = getattr(obj, f"{base}_{unit}", None)
-        if v is not None:
-            return float(conv(v))
-    return None
-
-
 class DarkTail(Section):
     """White-pixel tail: ``ppm_above`` ppm of pixels above a threshold, tail values up to a maximum."""
 
@@ -345,48 +323,7 @@ class Config(Section):
             )
         if isinstance(self.crosstalk.kernel_pct, dict) and self.sensor.cfa == "none" and self.crosstalk.enabled:
             raise ValueError("crosstalk.kernel_pct: a per-colour kernel needs a colour sensor (sensor.cfa is 'none')")
-        self.dark_points()  # every point's body and ppm must be reachable
-        self.flicker_model()
         return self
-
-    def flicker_model(self):
-        """The flicker-sigma distribution (validated: reachable ppm)."""
-        from .heavy_tail import UnreachablePpm
-        from .source_follower import flicker_model
-
-        f = self.source_follower.flicker
-        try:
-            if f.tail is None:
-                return flicker_model(f.gumbel_loc_e, f.gumbel_scale_e)
-            return flicker_model(f.gumbel_loc_e, f.gumbel_scale_e, f.tail.ppm_above, f.tail.threshold_e, f.tail.max_e)
-        except UnreachablePpm as exc:
-            raise ValueError(f"source_follower.flicker.tail.ppm_above = {f.tail.ppm_above:g}: {exc}") from None
-
-    def dark_points(self):
-        """The dark-current characterization points in e-/s (validated: reachable ppm, valid body)."""
-        from .dark_current import Point
-        from .heavy_tail import UnreachablePpm
-
-        pitch = self.sensor.pixel_pitch_um
-        out = []
-        for i, p in enumerate(self.dark_current.points):
-            where = f"dark_current.points[{i}]"
-            tail = p.tail
-            point = Point(
-                p.temperature_c, p.distribution,
-                rate_e_per_s(p, "mean", pitch), rate_e_per_s(p, "std", pitch),
-                tail.ppm_above if tail else 0.0,
-                rate_e_per_s(tail, "threshold", pitch) if tail else None,
-                rate_e_per_s(tail, "max", pitch) if tail else 0.0,
-            )
-            if point.family in ("inverse_gaussian", "lognormal", "gamma") and point.mean <= 0:
-                raise ValueError(f"{where}: a {point.family} body needs a mean > 0, got {point.mean:g} e-/s")
-            try:
-                point.model()
-            except UnreachablePpm as exc:
-                raise ValueError(f"{where}.tail.ppm_above = {tail.ppm_above:g}: {exc}") from None
-            out.append(point)
-        return out
 
     # convenience -----------------------------------------------------------
     @property
@@ -402,153 +339,3 @@ class Config(Section):
         return yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None, width=100)
 
 
-# ----------------------------------------------------------------- error text
-def _format_loc(loc) -> str:
-    parts = []
-    for p in loc:
-        if isinstance(p, int):
-            parts.append(f"[{p}]")
-        elif str(p).startswith(("list[", "dict[", "function-")):
-            continue  # pydantic's union-branch labels, not user keys
-        else:
-            parts.append(("." if parts else "") + str(p))
-    return "".join(parts)
-
-
-def format_validation_error(err: ValidationError) -> str:
-    """One line per problem: ``key = value: what is allowed``."""
-    lines = []
-    seen = set()
-    for e in err.errors():
-        key = _format_loc(e.get("loc", ()))
-        msg = e.get("msg", "invalid")
-        msg = msg.removeprefix("Value error, ")
-        if e.get("type") == "extra_forbidden":
-            parent = key.rsplit(".", 1)[0] if "." in key else ""
-            line = f"unknown key '{key}'" + (f" in section '{parent}'" if parent else "")
-        elif "input" in e and not isinstance(e["input"], dict) and key:
-            line = f"{key} = {e['input']!r}: {msg}"
-        else:
-            line = f"{key}: {msg}" if key else msg
-        if line not in seen:
-            seen.add(line)
-            lines.append(line)
-    return "invalid configuration: " + "; ".join(lines)
-
-
-# ----------------------------------------------------------------- merging
-def deep_merge(base: dict, override: dict) -> dict:
-    """Recursively merge ``override`` into a copy of ``base`` (lists are replaced)."""
-    out = copy.deepcopy(base)
-    for k, v in override.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = deep_merge(out[k], v)
-        else:
-            out[k] = copy.deepcopy(v)
-    return out
-
-
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """Parse ``a.b.c=value`` (value in YAML syntax) into (["a", "b", "c"], value)."""
-    if "=" not in text:
-        raise CmosnoiseError(f"--set {text!r}: expected KEY=VALUE, e.g. prnu.sigma_pct=2")
-    key, _, raw = text.partition("=")
-    key = key.strip()
-    if not key or any(not p for p in key.split(".")):
-        raise CmosnoiseError(f"--set {text!r}: the key must be a dotted path such as prnu.sigma_pct")
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else None
-    except yaml.YAMLError:
-        value = raw
-    return key.split("."), value
-
-
-def apply_overrides(data: dict, overrides: list[str]) -> dict:
-    out = copy.deepcopy(data)
-    for text in overrides:
-        path, value = parse_override(text)
-        node = out
-        for p in path[:-1]:
-            nxt = node.get(p)
-            if not isinstance(nxt, dict):
-                nxt = {}
-                node[p] = nxt
-            node = nxt
-        node[path[-1]] = value
-    return out
-
-
-# ----------------------------------------------------------------- presets
-def _preset_dir():
-    return resources.files("cmosnoise") / "presets"
-
-
-def preset_names() -> list[str]:
-    return sorted(p.name[:-5] for p in _preset_dir().iterdir() if p.name.endswith(".yaml"))
-
-
-def preset_data(name: str) -> dict:
-    path = _preset_dir() / f"{name}.yaml"
-    if not path.is_file():
-        raise CmosnoiseError(f"unknown preset {name!r}; available: {', '.join(preset_names())}")
-    return yaml.safe_load(path.read_text()) or {}
-
-
-def read_yaml(path: str | Path) -> dict:
-    p = Path(path)
-    try:
-        text = p.read_text()
-    except FileNotFoundError:
-        raise CmosnoiseError(f"config file {str(p)!r} does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CmosnoiseError(f"config file {str(p)!r} cannot be read: {exc}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise CmosnoiseError(f"config file {str(p)!r} is not valid YAML: {exc}") from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise CmosnoiseError(f"config file {str(p)!r} must hold a mapping of sections, not {type(data).__name__}")
-    return data
-
-
-def build_section(cls, data: dict, name: str):
-    """Validate one section alone (errors name ``name.key``)."""
-    try:
-        return cls.model_validate(data)
-    except ValidationError as exc:
-        msg = format_validation_error(exc).replace("invalid configuration: ", f"invalid configuration: {name}.")
-        raise CmosnoiseError(msg) from None
-
-
-def build_config(data: dict | None = None) -> Config:
-    """Validate a (partial) configuration dict merged over the defaults."""
-    try:
-        return Config.model_validate(data or {})
-    except ValidationError as exc:
-        raise CmosnoiseError(format_validation_error(exc)) from None
-
-
-def load_config(
-    path: str | Path | None = None,
-    preset: str | None = None,
-    overrides: list[str] | None = None,
-    extra: dict | None = None,
-) -> Config:
-    """Resolve a configuration: defaults <- preset <- file <- ``extra`` <- ``--set`` overrides."""
-    data: dict = {}
-    if preset:
-        data = deep_merge(data, preset_data(preset))
-    if path:
-        data = deep_merge(data, read_yaml(path))
-    if extra:
-        data = deep_merge(data, extra)
-    if overrides:
-        data = apply_overrides(data, overrides)
-    return build_config(data)
-
-
-def with_updates(config: Config, updates: dict) -> Config:
-    """A new validated configuration: ``config`` with ``updates`` merged in."""
-    return build_config(deep_merge(config.to_dict(), updates))

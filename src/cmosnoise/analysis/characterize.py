@@ -26,15 +26,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from ..errors import CmosnoiseError
+from ..model.seeds import SEQ_EMVA_BRIGHT, SEQ_EMVA_DARK, SEQ_EMVA_STACK_BRIGHT, SEQ_EMVA_STACK_DARK
 from . import emva, noise_budget
-from .errors import CmosnoiseError
 
-#: frame-series sequence numbers: each series has its own temporal noise
-_SEQ_BRIGHT, _SEQ_DARK, _SEQ_STACK_BRIGHT, _SEQ_STACK_DARK = 100, 101, 102, 103
+if TYPE_CHECKING:
+    from ..model.sensor import Sensor
 
 
 @dataclass
@@ -60,24 +61,22 @@ def _pair_stats(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return (float(a.mean()) + float(b.mean())) / 2, emva.temporal_variance(a, b)
 
 
-def measure(sensor, steps: int = 40, stack_frames: int = 16, keep_frames: bool = False,
+def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames: bool = False,
             progress: Callable[[], None] | None = None) -> Measurement:
     """Run the EMVA 1288 measurement series on ``sensor`` (a :class:`cmosnoise.Sensor`).
 
     The irradiation is set so that saturation is reached at 1 s; exposure
     times run from 1/steps to 1.3 s.
     """
-    c = sensor.config
     t = sensor.transfer
-    sat_e = min(c.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e)
-    rate = sat_e / 1.0  # photo-electrons per second per pixel at scene value 1
+    rate = sensor.saturation_e / 1.0  # photo-electrons per second per pixel at scene value 1
     texp = np.linspace(1.3 / steps, 1.3, steps)
     mu_y, mu_yd, s2_y, s2_yd = (np.zeros(steps) for _ in range(4))
     frames: dict = {}
     for i, ti in enumerate(texp):
         s = sensor.with_exposure(ti, rate)
-        bright = s.expose("flat:1.0", sequence=_SEQ_BRIGHT)
-        dark = s.expose("flat:0", sequence=_SEQ_DARK)
+        bright = s.expose("flat:1.0", sequence=SEQ_EMVA_BRIGHT)
+        dark = s.expose("flat:0", sequence=SEQ_EMVA_DARK)
         a, b = bright.frame(2 * i), bright.frame(2 * i + 1)
         da, db = dark.frame(2 * i), dark.frame(2 * i + 1)
         mu_y[i], s2_y[i] = _pair_stats(a, b)
@@ -89,8 +88,8 @@ def measure(sensor, steps: int = 40, stack_frames: int = 16, keep_frames: bool =
             progress()
     t50 = 0.5  # half of saturation
     s = sensor.with_exposure(t50, rate)
-    sb = s.expose("flat:1.0", sequence=_SEQ_STACK_BRIGHT)
-    sd = s.expose("flat:0", sequence=_SEQ_STACK_DARK)
+    sb = s.expose("flat:1.0", sequence=SEQ_EMVA_STACK_BRIGHT)
+    sd = s.expose("flat:0", sequence=SEQ_EMVA_STACK_DARK)
     stack_bright = np.stack(list(sb.frames(stack_frames)))
     stack_dark = np.stack(list(sd.frames(stack_frames)))
     if progress:
@@ -163,15 +162,15 @@ def evaluate(m: Measurement) -> dict:
     }
 
 
-def model_values(sensor, stack_texp_s: float = 0.5) -> dict:
+def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
     """The same quantities as the simulated sensor instance implies them (its configuration and maps)."""
     c = sensor.config
     t = sensor.transfer
-    fp = sensor.fixed
+    fp = sensor.fixed_pattern
     k = t.gain_dn_per_e
     tv = noise_budget.temporal_variances(sensor, 0.0)
     read_var = sum(v for name, v in tv.items() if name not in ("dark_shot", "quantization", "photon_shot"))
-    sat_e = min(c.sensor.full_well_e, (t.max_code - t.black_level_dn) / k)
+    sat_e = sensor.saturation_e
     s = sensor.with_exposure(1.0, 1.0)
     shot = s.expose("flat:1.0")
     signal = shot.photo_mean_e.astype(np.float64)

@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import cfa as cfa_mod
-from .errors import CmosnoiseError
+from ..errors import CmosnoiseError
 
 #: Rec. 709 / sRGB luminance weights for linear RGB
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])

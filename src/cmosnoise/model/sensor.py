@@ -24,9 +24,12 @@ from typing import Iterator
 
 import numpy as np
 
-from . import adc, column_noise, crosstalk, dark_current, prnu, row_noise, scene as scene_mod, shot_noise, source_follower
-from .config import Config, load_config, with_updates
-from .seeds import fixed_rng, temporal_rng
+from ..config import Config, ExposureSection, build_section
+from . import scene as scene_mod
+from .physics import dark_points, flicker_model, load_config, with_updates
+from .raw_info import RawInfo
+from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, fixed_rng, temporal_rng
+from .stages import adc, column_noise, crosstalk, dark_current, prnu, row_noise, shot_noise, source_follower
 
 
 @dataclass
@@ -43,9 +46,12 @@ class FrameDetail:
     contributions: dict[str, np.ndarray]
 
 
-@dataclass
+@dataclass(frozen=True)
 class FixedPattern:
-    """A sensor instance's fixed-pattern maps (None where the stage is off)."""
+    """A sensor instance's fixed-pattern maps (None where the stage is off).
+
+    Drawn once by :class:`Sensor`; read them through ``sensor.fixed_pattern``.
+    """
 
     prnu_gain: np.ndarray | None = None
     dark_state: dark_current.DarkState | None = None  #: DCNU parameters at the sensor's temperature
@@ -68,14 +74,14 @@ class Sensor:
         Overrides ``config.seed``.
     """
 
-    def __init__(self, config: Config | None = None, seed: int | None = None):
+    def __init__(self, config: Config | None = None, seed: int | None = None, *, fixed_pattern: FixedPattern | None = None):
         config = config or load_config()
         if seed is not None and seed != config.seed:
             config = with_updates(config, {"seed": int(seed)})
         self.config = config
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
-        self.fixed = self._draw_fixed_pattern()
+        self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern()
         self.timings["fixed_pattern"] += time.perf_counter() - t0
 
     def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
@@ -88,16 +94,32 @@ class Sensor:
             updates["integration_time_s"] = float(integration_time_s)
         if peak_rate_e_per_s is not None:
             updates["peak_rate_e_per_s"] = float(peak_rate_e_per_s)
-        from .config import ExposureSection, build_section
-
         exposure = build_section(ExposureSection, {**self.config.exposure.model_dump(), **updates}, "exposure")
-        other = object.__new__(Sensor)
-        other.config = self.config.model_copy(update={"exposure": exposure})
+        other = Sensor(self.config.model_copy(update={"exposure": exposure}), fixed_pattern=self._fixed)
         other.timings = self.timings
-        other.fixed = self.fixed
         return other
 
-    # ------------------------------------------------------------ properties
+    # ------------------------------------------------------------ fixed pattern, read-only
+    @property
+    def fixed_pattern(self) -> FixedPattern:
+        """Every fixed-pattern map of this sensor instance (None where a stage is off)."""
+        return self._fixed
+
+    @property
+    def dark_rate(self) -> np.ndarray | None:
+        """Dark-current map at the sensor's temperature, e-/s per pixel, (rows, cols) float32."""
+        return self._fixed.dark_rate
+
+    @property
+    def dark_state(self) -> dark_current.DarkState | None:
+        """The DCNU parameters (body, tail, threshold) at the sensor's temperature."""
+        return self._fixed.dark_state
+
+    @property
+    def flicker_model(self):
+        """The distribution the per-pixel flicker sigma was drawn from (e- rms)."""
+        return flicker_model(self.config)
+
     @property
     def seed(self) -> int:
         return self.config.seed
@@ -118,6 +140,30 @@ class Sensor:
         full_scale = a.full_scale_e if a.full_scale_e is not None else self.config.sensor.full_well_e
         return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale)
 
+    @property
+    def saturation_e(self) -> float:
+        """Charge at saturation: the full well, or the ADC's full scale if that comes first (e-)."""
+        t = self.transfer
+        return float(min(self.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
+
+    @property
+    def white_dn(self) -> float:
+        """The raw code of scene white: a scene value of 1, or the top code if that is lower."""
+        c = self.config
+        t = self.transfer
+        white_e = c.exposure.peak_rate_e_per_s * c.exposure.integration_time_s
+        return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
+
+    def raw_info(self) -> RawInfo:
+        """What the processing chain needs to know about this sensor's raw frames."""
+        c = self.config
+        t = self.transfer
+        return RawInfo(
+            cfa=self.cfa, black_level_dn=t.black_level_dn, bits=t.bits, white_dn=self.white_dn,
+            crosstalk_kernel_pct=c.crosstalk.kernel_pct if c.crosstalk.enabled else None,
+            responsivity=tuple(c.sensor.channel_responsivity),
+        )
+
     def stages_on(self) -> dict[str, bool]:
         """Which stages of MODEL.md run in this configuration."""
         c = self.config
@@ -137,34 +183,33 @@ class Sensor:
     # ------------------------------------------------------------ fixed pattern
     def _draw_fixed_pattern(self) -> FixedPattern:
         c = self.config
-        fp = FixedPattern()
+        maps: dict = {}
         if c.prnu.enabled:
-            fp.prnu_gain = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
+            maps["prnu_gain"] = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
         if c.dark_current.enabled:
             d = c.dark_current
-            fp.dark_state = dark_current.at_temperature(
-                c.dark_points(), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c
-            )
-            fp.dark_rate = dark_current.rate_map(fp.dark_state, self.shape, fixed_rng(c.seed, "dark_current"))
+            state = dark_current.at_temperature(dark_points(c), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c)
+            maps["dark_state"] = state
+            maps["dark_rate"] = dark_current.rate_map(state, self.shape, fixed_rng(c.seed, "dark_current"))
         rows, cols = self.shape
         sf = c.source_follower
         if sf.enabled and sf.flicker.enabled:
-            fp.flicker_sigma = source_follower.flicker_sigma_map(
-                c.flicker_model(), self.shape, fixed_rng(c.seed, "source_follower")
+            maps["flicker_sigma"] = source_follower.flicker_sigma_map(
+                flicker_model(c), self.shape, fixed_rng(c.seed, "source_follower")
             )
         if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
-            fp.row_offset = row_noise.fixed_offsets(rows, c.row_noise.fixed_sigma_e, fixed_rng(c.seed, "row_noise"))
+            maps["row_offset"] = row_noise.fixed_offsets(rows, c.row_noise.fixed_sigma_e, fixed_rng(c.seed, "row_noise"))
         cn = c.column_noise
         if cn.enabled:
             if cn.temporal.enabled:
-                fp.column_sigma = column_noise.temporal_sigma_map(
+                maps["column_sigma"] = column_noise.temporal_sigma_map(
                     cols, cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e, fixed_rng(c.seed, "column_noise", 0)
                 )
             if cn.vfpn_sigma_e > 0:
-                fp.vfpn = column_noise.vfpn_offsets(cols, cn.vfpn_sigma_e, fixed_rng(c.seed, "column_noise", 1))
+                maps["vfpn"] = column_noise.vfpn_offsets(cols, cn.vfpn_sigma_e, fixed_rng(c.seed, "column_noise", 1))
             if cn.gain_sigma_pct > 0:
-                fp.column_gain = column_noise.gain_map(cols, cn.gain_sigma_pct, fixed_rng(c.seed, "column_noise", 2))
-        return fp
+                maps["column_gain"] = column_noise.gain_map(cols, cn.gain_sigma_pct, fixed_rng(c.seed, "column_noise", 2))
+        return FixedPattern(**maps)
 
     # ------------------------------------------------------------ scene
     def scene_signal(self, scene: str | np.ndarray | None = None) -> np.ndarray:
@@ -187,7 +232,7 @@ class Sensor:
                 return rgb
         return scene_mod.to_cfa(rgb, self.cfa, c.sensor.channel_responsivity)
 
-    def expose(self, scene: str | np.ndarray | None = None, sequence: int = 0) -> "Exposure":
+    def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> "Exposure":
         """Mean charge of ``scene`` at the configured exposure and temperature.
 
         ``sequence`` numbers independent frame series of the same sensor
@@ -197,7 +242,7 @@ class Sensor:
 
     def dark_frames(self, n: int) -> "Iterator[np.ndarray]":
         """``n`` dark frames (no light) for dark calibration, from their own noise sequence."""
-        return self.expose("flat:0", sequence=1).frames(n)
+        return self.expose("flat:0", sequence=SEQ_DARK_CALIBRATION).frames(n)
 
     def capture(self, scene=None, frames: int = 1, first_frame: int = 0) -> np.ndarray:
         """Raw frames ``first_frame .. first_frame + frames - 1``, (frames, rows, cols) uint16."""
@@ -208,7 +253,7 @@ class Sensor:
 class Exposure:
     """What is fixed for one scene on one sensor: the mean charge per pixel (e-)."""
 
-    def __init__(self, sensor: Sensor, signal: np.ndarray, sequence: int = 0):
+    def __init__(self, sensor: Sensor, signal: np.ndarray, sequence: int = SEQ_SCENE):
         self.sensor = sensor
         self.sequence = sequence
         c = sensor.config
@@ -219,8 +264,8 @@ class Exposure:
             signal, c.exposure.peak_rate_e_per_s, c.exposure.integration_time_s
         )
         mean = self.perfect_e
-        if sensor.fixed.prnu_gain is not None:
-            mean = prnu.apply(mean, sensor.fixed.prnu_gain)
+        if sensor.fixed_pattern.prnu_gain is not None:
+            mean = prnu.apply(mean, sensor.fixed_pattern.prnu_gain)
         #: after PRNU (stage 2)
         self.after_prnu_e = mean
         if c.crosstalk.enabled:
@@ -229,8 +274,8 @@ class Exposure:
         self.photo_mean_e = mean.astype(np.float32)
         #: stage 4: mean dark electrons (None with dark current off)
         self.dark_mean_e = None
-        if sensor.fixed.dark_rate is not None:
-            self.dark_mean_e = dark_current.mean_charge(sensor.fixed.dark_rate, c.exposure.integration_time_s)
+        if sensor.fixed_pattern.dark_rate is not None:
+            self.dark_mean_e = dark_current.mean_charge(sensor.fixed_pattern.dark_rate, c.exposure.integration_time_s)
         # what shot noise acts on, and what enters as its mean
         noisy, exact = [], []
         (noisy if c.shot_noise.enabled else exact).append(self.photo_mean_e)
@@ -258,7 +303,7 @@ class Exposure:
         n = shot_noise.collect(self._noisy_e, self._exact_e, c.sensor.full_well_e, rng, c.shot_noise.gaussian_above_e)
         timings["shot_noise"] += time.perf_counter() - t0
         collected = n
-        fp = s.fixed
+        fp = s.fixed_pattern
         t0 = time.perf_counter()
         if c.source_follower.enabled:
             sfn = source_follower.noise(

@@ -11,8 +11,9 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-from .config import load_config, preset_data, preset_names
-from .errors import CmosnoiseError
+from ..config import preset_data, preset_names
+from ..errors import CmosnoiseError
+from ..model.physics import load_config
 
 app = typer.Typer(
     help="Simulate CMOS image-sensor noise (Gow et al. model) and see what it does to pictures.",
@@ -115,7 +116,7 @@ def process(
     out: Path = typer.Option(Path("cmosnoise-processed"), "--out", "-o", help="output folder"),
 ):
     """Process raw frames that already exist (from cmosnoise or a real camera) into pictures."""
-    from .process import process_file
+    from .run import process_file
 
     cfg = load_config(config, None, set_)
     overrides = {k: v for k, v in {"cfa": cfa, "black_level_dn": black_level, "bits": bits}.items() if v is not None}
@@ -139,9 +140,9 @@ def characterize(
     """EMVA 1288 characterization: measured values next to the values the configuration implies."""
     from rich.table import Table
 
-    from . import characterize as ch
-    from .output import OutputFolder, write_json
-    from .pipeline import Sensor
+    from ..analysis import characterize as ch
+    from ..io.output import OutputFolder, write_json
+    from ..model.sensor import Sensor
 
     folder = OutputFolder(out)
     export_folder = OutputFolder(emva_export) if emva_export is not None else None
@@ -192,7 +193,7 @@ def figures(
 ):
     """Regenerate the paper's figures (3, 5, 6, 7, 9, 10, 11) as PNGs with an index.html gallery."""
     from .figures import write_gallery
-    from .output import OutputFolder
+    from ..io.output import OutputFolder
 
     with OutputFolder(out) as tmp:
         with Progress(TextColumn("[bold]figure"), TextColumn("{task.description}"), console=err_console,

@@ -17,7 +17,7 @@ from typing import Iterable
 
 import numpy as np
 
-from .errors import CmosnoiseError
+from ..errors import CmosnoiseError
 
 #: TIFF/EP CFA colour codes (0 red, 1 green, 2 blue)
 _CFA_CODES = {"R": 0, "G": 1, "B": 2}

@@ -13,11 +13,13 @@ from typing import Callable
 
 import numpy as np
 
-from . import __version__, calibration, plots, white_pixels
-from .config import load_config, with_updates
-from .pipeline import Sensor
-from .process import Processor
-from .run import raw_info
+from .._version import __version__
+from ..analysis import white_pixels
+from ..isp import calibration
+from ..isp.process import Processor
+from ..model.physics import flicker_model, load_config, with_updates
+from ..model.sensor import Sensor
+from . import plots
 
 
 def fig3_prnu(seed: int = 0):
@@ -53,7 +55,7 @@ def _dark_maps(temps, shape=(400, 500), seed=0, tails=True):
     for t in temps:
         cfg = with_updates(base, {"sensor": {"temperature_c": t}, "dark_current": {"points": pts}})
         s = Sensor(cfg, seed=seed)
-        out[t] = (s.fixed.dark_rate.astype(np.float64), s.fixed.dark_state)
+        out[t] = (s.dark_rate.astype(np.float64), s.dark_state)
     return out
 
 
@@ -115,7 +117,7 @@ def fig7_temporal_noise(seed: int = 0, frames: int = 100):
     e = np.stack([shot.frame(k, detail=True).electrons for k in range(frames)]).astype(np.float64)
     sigma = e.std(axis=0, ddof=1)
     fig, ax = plots.figure(figsize=(7.5, 4.6))
-    plots.temporal_noise_histogram(ax, sigma, _TotalSigma(cfg.flicker_model(), 1.0), 5.0,
+    plots.temporal_noise_histogram(ax, sigma, _TotalSigma(flicker_model(cfg), 1.0), 5.0,
                                    f"Per-pixel temporal noise measured over {frames} dark frames")
     return "fig7_temporal_noise.png", plots.to_png_bytes(fig), (
         f"Fig. 7: temporal noise of each pixel measured over {frames} dark frames (300 x 300 pixels): thermal 1 e- plus "
@@ -131,12 +133,12 @@ def fig9_couplets(seed: int = 0):
         shot = sensor.expose()
         raw = shot.frame(0)
         master = calibration.master_dark(sensor.dark_frames(cfg.processing.dark_frames))
-        proc = Processor(cfg.processing, raw_info(sensor), master)
+        proc = Processor(cfg.processing, sensor.raw_info(), master)
         k = sensor.transfer.gain_dn_per_e
         residual = proc.cfa_image(raw) - shot.photo_mean_e * k
         panels[name] = dict(
             sensor=sensor, pre=proc.render(raw, pre=True), post=proc.render(raw),
-            white=sensor.fixed.dark_rate > sensor.fixed.dark_state.threshold,
+            white=sensor.dark_rate > sensor.dark_state.threshold,
             left=np.abs(residual) > 150 * k,
         )
     big = panels["paper-fig9-5m"]
@@ -179,7 +181,7 @@ def fig10_vfpn(seed: int = 0, levels=(30, 120, 500, 2000)):
     for ax, peak in zip(axes.ravel(), levels):
         s = sensor.with_exposure(peak / base.exposure.peak_rate_e_per_s)
         raw = s.expose().frame(0)
-        proc = Processor(base.processing, raw_info(s))
+        proc = Processor(base.processing, s.raw_info())
         ax.imshow(proc.render(raw), cmap="gray", vmin=0, vmax=255)
         ax.set_title(f"peak {peak} e-: sigma_VFPN / peak = {100 * 6 / peak:.1f} %")
         ax.set_xticks([])
@@ -195,9 +197,9 @@ def fig11_full(seed: int = 0):
     cfg = load_config(preset="paper-fig11-full")
     sensor = Sensor(cfg, seed=seed)
     raw = sensor.expose().frame(0)
-    proc = Processor(cfg.processing, raw_info(sensor))
-    from . import scene as scene_mod
-    from .reconstruction import encode_srgb8
+    proc = Processor(cfg.processing, sensor.raw_info())
+    from ..isp.reconstruction import encode_srgb8
+    from ..model import scene as scene_mod
 
     perfect = encode_srgb8(scene_mod.render("photo", sensor.shape))
     fig, axes = plots.figure(1, 2, figsize=(12, 4.8))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import cfa as cfa_mod
+from ..model import cfa as cfa_mod
 
 
 def _pair_offsets(pattern: str) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:

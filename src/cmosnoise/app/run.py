@@ -1,4 +1,4 @@
-"""The main job: simulate frames of a scene and write them with their record.
+"""The jobs: simulate frames of a scene and write them with their record; process raw files.
 
 ``simulate(config, out)`` writes into ``out``:
 
@@ -15,41 +15,25 @@ from __future__ import annotations
 
 import contextlib
 import time
+from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from . import __version__
-from .config import Config, with_updates
-from dataclasses import asdict
-
-from . import calibration, noise_budget, white_pixels
-from .dng import write_dng
-from .output import OutputFolder, VideoWriter, raw_metadata, write_float_tiff, write_json, write_raw_tiff
-from .pipeline import Sensor
-from .process import Processor, RawInfo
-from .summary import RunStats
-from .units import e_per_s_to_aa
-
-
-def _white_dn(sensor: Sensor) -> float:
-    """The code of scene white: a scene value of 1, or the ADC's full scale if that is lower."""
-    c = sensor.config
-    t = sensor.transfer
-    white_e = c.exposure.peak_rate_e_per_s * c.exposure.integration_time_s
-    return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
-
-
-def raw_info(sensor: Sensor) -> RawInfo:
-    """What the processing chain needs to know about this sensor's raw frames."""
-    c = sensor.config
-    t = sensor.transfer
-    return RawInfo(
-        cfa=sensor.cfa, black_level_dn=t.black_level_dn, bits=t.bits, white_dn=_white_dn(sensor),
-        crosstalk_kernel_pct=c.crosstalk.kernel_pct if c.crosstalk.enabled else None,
-        responsivity=tuple(c.sensor.channel_responsivity),
-    )
+from .._version import __version__
+from ..analysis import noise_budget, white_pixels
+from ..analysis.run_stats import RunStats
+from ..config import Config, ProcessingSection, build_config
+from ..errors import CmosnoiseError
+from ..io.dng import write_dng
+from ..io.output import OutputFolder, VideoWriter, raw_metadata, read_raw_tiff, write_float_tiff, write_json, write_raw_tiff
+from ..isp import calibration
+from ..isp.process import Processor, read_dark, validate_raw
+from ..model.physics import with_updates
+from ..model.raw_info import RawInfo
+from ..model.sensor import Sensor
+from ..model.units import e_per_s_to_aa
 
 
 def simulate(config: Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None) -> dict:
@@ -71,7 +55,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         n, first = config.run.frames, config.run.first_frame
         transfer = sensor.transfer
         proc_cfg = config.processing
-        info = raw_info(sensor)
+        info = sensor.raw_info()
 
         master = None
         t0 = time.perf_counter()
@@ -164,7 +148,7 @@ def processing_summary(processor: Processor, t_dark: float, t_process: float) ->
 
 def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict | None:
     """Dark-current figures: the map's statistics, white pixels and couplets (map and frame 0)."""
-    state, rate = sensor.fixed.dark_state, sensor.fixed.dark_rate
+    state, rate = sensor.dark_state, sensor.dark_rate
     if state is None:
         return None
     c = sensor.config
@@ -238,3 +222,47 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "stages": timings,
         },
     }
+
+
+def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, overrides: dict | None = None) -> dict:
+    """Process a raw TIFF into ``out``: processed.png (frame 0), processed.mp4 (several frames), summary.json."""
+    import time
+
+    import imageio.v3 as iio
+
+
+    folder = OutputFolder(out)
+    name = str(raw_path)
+    data, meta = read_raw_tiff(raw_path)
+    data = validate_raw(data, name)
+    meta = {**meta, **(overrides or {})}
+    missing = [k for k in ("cfa", "black_level_dn", "bits") if k not in meta]
+    if missing:
+        flags = {"cfa": "--cfa", "black_level_dn": "--black-level", "bits": "--bits"}
+        raise CmosnoiseError(f"raw file {name!r} does not record {', '.join(missing)}; give {', '.join(flags[m] for m in missing)}")
+    # the sensor description is validated like a configuration
+    build_config({"sensor": {"cfa": meta["cfa"]}, "adc": {"bits": meta["bits"], "black_level_dn": meta["black_level_dn"]}})
+    info = RawInfo.from_metadata(meta)
+    if data.max() > info.white_level_dn:
+        raise CmosnoiseError(f"raw file {name!r}: codes up to {int(data.max())} do not fit {info.bits} bits; give --bits")
+    master = read_dark(dark_path, info.black_level_dn) if dark_path is not None else None
+    processor = Processor(settings, info, master)
+    processor.check_shape(data.shape[1:])
+    with folder as tmp:
+        t0 = time.perf_counter()
+        iio.imwrite(tmp / "processed.png", processor.render(data[0]))
+        iio.imwrite(tmp / "preview.png", processor.render(data[0], pre=True))
+        if len(data) > 1:
+            with VideoWriter(tmp / "processed.mp4", settings.video_fps) as video:
+                for frame in data:
+                    video.append(processor.render(frame))
+        elapsed = time.perf_counter() - t0
+        result = {
+            "raw": name, "frames": int(len(data)), "rows": int(data.shape[1]), "cols": int(data.shape[2]),
+            "cfa": info.cfa, "black_level_dn": info.black_level_dn, "bits": info.bits,
+            "dark": None if dark_path is None else str(dark_path),
+            "settings": settings.model_dump(mode="json"),
+            "ms_per_frame": 1000 * elapsed / (len(data) + 1),
+        }
+        write_json(tmp / "summary.json", result)
+    return result

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import linear_to_srgb
+from ..model.scene import linear_to_srgb
 
 DEMOSAIC_METHODS = ("bilinear", "malvar2004", "menon2007")
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from . import cfa as cfa_mod
+from .. import cfa as cfa_mod
 
 
 def kernel_fractions(kernel_pct) -> np.ndarray | dict[str, np.ndarray]:

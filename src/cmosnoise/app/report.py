@@ -15,8 +15,11 @@ import json
 
 import numpy as np
 
-from . import __version__, plots, scene as scene_mod, white_pixels
-from .reconstruction import encode_srgb8
+from .._version import __version__
+from ..analysis import white_pixels
+from ..isp.reconstruction import encode_srgb8
+from ..model import scene as scene_mod
+from . import plots
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2em auto;max-width:1200px;color:#222;padding:0 1em}
@@ -128,7 +131,7 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
 
     # ---- histograms
     hist = []
-    fp = sensor.fixed
+    fp = sensor.fixed_pattern
     if fp.dark_rate is not None:
         fig, ax = plots.figure(figsize=(6.4, 4))
         plots.dark_current_histogram(ax, fp.dark_rate, fp.dark_state, f"Dark-current map at {c.sensor.temperature_c:g} C ({fp.dark_state.family} body)")
@@ -136,7 +139,7 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
     if fp.flicker_sigma is not None:
         fig, ax = plots.figure(figsize=(6.4, 4))
         tail = c.source_follower.flicker.tail
-        plots.temporal_noise_histogram(ax, fp.flicker_sigma, c.flicker_model(), tail.threshold_e if tail else None,
+        plots.temporal_noise_histogram(ax, fp.flicker_sigma, sensor.flicker_model, tail.threshold_e if tail else None,
                                        "Flicker/RTS sigma per pixel", "flicker/RTS sigma [e- rms]")
         hist.append(_figure(plots.to_png_bytes(fig), "per-pixel temporal (flicker/RTS) noise, log counts (paper Fig. 7)", 520))
     if hist:

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .distributions import body as body_dist
-from .heavy_tail import HeavyTail
+from ..distributions import body as body_dist
+from ..heavy_tail import HeavyTail
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from .heavy_tail import HeavyTail
+from ..heavy_tail import HeavyTail
 
 
 def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float | None = None,

@@ -13,6 +13,14 @@ import numpy as np
 FIXED = 0
 TEMPORAL = 1
 
+#: frame series ("sequences") of one sensor instance: each has its own temporal noise
+SEQ_SCENE = 0  #: the run's frames
+SEQ_DARK_CALIBRATION = 1  #: the dark frames averaged into a master dark
+SEQ_EMVA_BRIGHT = 100  #: EMVA 1288 photon-transfer series, bright pairs
+SEQ_EMVA_DARK = 101  #: EMVA 1288 photon-transfer series, dark pairs
+SEQ_EMVA_STACK_BRIGHT = 102  #: EMVA 1288 bright stack (spatial statistics)
+SEQ_EMVA_STACK_DARK = 103  #: EMVA 1288 dark stack
+
 #: stage numbers of MODEL.md section 2; they key the random streams.
 STAGE_IDS = {
     "prnu": 2,

@@ -1,0 +1,5 @@
+"""``python -m cmosnoise``: the command line."""
+
+from .app.cli import main
+
+main()

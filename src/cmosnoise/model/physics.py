@@ -1,0 +1,96 @@
+"""What a configuration implies: the physics objects built from its values.
+
+The configuration layer validates types and ranges; this module turns a
+:class:`~cmosnoise.config.Config` into the model's objects (dark-current
+characterization points in e-/s, the flicker-sigma distribution) and checks
+what only the physics can tell: that every ppm is reachable and every body
+distribution valid. :func:`load_config` is the public entry: resolved and
+checked, ready for :class:`~cmosnoise.model.sensor.Sensor`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..config import Config, merge_updates, resolve_config
+from ..errors import CmosnoiseError
+from .heavy_tail import HeavyTail, UnreachablePpm
+from .stages.dark_current import Point
+from .stages.source_follower import flicker_model as _flicker_model
+from .units import aa_to_e_per_s, na_per_cm2_to_e_per_s
+
+_RATE_CONVERSIONS = (
+    ("e_per_s", lambda v, pitch: v),
+    ("aA", lambda v, pitch: aa_to_e_per_s(v)),
+    ("nA_per_cm2", na_per_cm2_to_e_per_s),
+)
+
+
+def rate_e_per_s(section, base: str, pixel_pitch_um: float) -> float | None:
+    """The rate ``base`` of a config section in e-/s, whichever unit it was given in (None if absent)."""
+    for unit, conv in _RATE_CONVERSIONS:
+        v = getattr(section, f"{base}_{unit}", None)
+        if v is not None:
+            return float(conv(v, pixel_pitch_um))
+    return None
+
+
+def _invalid(message: str) -> CmosnoiseError:
+    return CmosnoiseError(f"invalid configuration: {message}")
+
+
+def flicker_model(config: Config) -> HeavyTail:
+    """The per-pixel flicker-sigma distribution (e- rms) of ``config``; raises on an unreachable ppm."""
+    f = config.source_follower.flicker
+    try:
+        if f.tail is None:
+            return _flicker_model(f.gumbel_loc_e, f.gumbel_scale_e)
+        return _flicker_model(f.gumbel_loc_e, f.gumbel_scale_e, f.tail.ppm_above, f.tail.threshold_e, f.tail.max_e)
+    except UnreachablePpm as exc:
+        raise _invalid(f"source_follower.flicker.tail.ppm_above = {f.tail.ppm_above:g}: {exc}") from None
+
+
+def dark_points(config: Config) -> list[Point]:
+    """The dark-current characterization points in e-/s; raises on an invalid body or unreachable ppm."""
+    pitch = config.sensor.pixel_pitch_um
+    out = []
+    for i, p in enumerate(config.dark_current.points):
+        where = f"dark_current.points[{i}]"
+        tail = p.tail
+        point = Point(
+            p.temperature_c, p.distribution,
+            rate_e_per_s(p, "mean", pitch), rate_e_per_s(p, "std", pitch),
+            tail.ppm_above if tail else 0.0,
+            rate_e_per_s(tail, "threshold", pitch) if tail else None,
+            rate_e_per_s(tail, "max", pitch) if tail else 0.0,
+        )
+        if point.family in ("inverse_gaussian", "lognormal", "gamma") and point.mean <= 0:
+            raise _invalid(f"{where}: a {point.family} body needs a mean > 0, got {point.mean:g} e-/s")
+        try:
+            point.model()
+        except UnreachablePpm as exc:
+            raise _invalid(f"{where}.tail.ppm_above = {tail.ppm_above:g}: {exc}") from None
+        out.append(point)
+    return out
+
+
+def check(config: Config) -> Config:
+    """``config`` itself, once its dark-current points and flicker tail are known to be reachable."""
+    dark_points(config)
+    flicker_model(config)
+    return config
+
+
+def load_config(
+    path: str | Path | None = None,
+    preset: str | None = None,
+    overrides: list[str] | None = None,
+    extra: dict | None = None,
+) -> Config:
+    """Resolve a configuration (defaults <- preset <- file <- ``extra`` <- ``--set``) and check its physics."""
+    return check(resolve_config(path, preset, overrides, extra))
+
+
+def with_updates(config: Config, updates: dict) -> Config:
+    """A new checked configuration: ``config`` with ``updates`` merged in."""
+    return check(merge_updates(config, updates))

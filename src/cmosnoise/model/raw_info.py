@@ -1,0 +1,38 @@
+"""What raw frames are: CFA, black level, bit depth, scene white and crosstalk.
+
+A :class:`RawInfo` travels with raw frames (TIFF metadata, DNG tags) and
+tells the processing chain how to read them, whether they came from a
+simulated :class:`~cmosnoise.model.sensor.Sensor` or from a file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class RawInfo:
+    """What processing needs to know about raw frames."""
+
+    cfa: str
+    black_level_dn: float
+    bits: int
+    white_dn: float | None = None  #: raw code of scene white (None: the white level)
+    crosstalk_kernel_pct: object = None  #: the sensor's crosstalk kernel(s), for compensation
+    responsivity: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def white_level_dn(self) -> int:
+        return 2**self.bits - 1
+
+    @classmethod
+    def from_metadata(cls, meta: dict) -> "RawInfo":
+        return cls(
+            cfa=meta["cfa"],
+            black_level_dn=float(meta["black_level_dn"]),
+            bits=int(meta["bits"]),
+            white_dn=meta.get("scene_white_dn"),
+            crosstalk_kernel_pct=meta.get("crosstalk_kernel_pct"),
+            responsivity=tuple(meta.get("channel_responsivity", (1.0, 1.0, 1.0))),
+        )
