@@ -5,7 +5,7 @@ import tracemalloc
 import numpy as np
 
 from cmosnoise import Sensor, load_config
-from cmosnoise.io.output import write_raw_tiff
+from cmosnoise.io.raw_tiff import write_raw_tiff
 
 
 def _cfg():

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .emva import temporal_variance
+
 
 class RunStats:
     """Accumulates mean signal and temporal noise (e- and DN) over frames."""
@@ -33,8 +35,8 @@ class RunStats:
         self._sum_mean_dn += raw64.mean()
         self._sum_sat += int(np.count_nonzero(raw >= self.max_code))
         if self._prev is not None:
-            self._sum_tvar_dn += np.var(raw64 - self._prev[0]) / 2
-            self._sum_tvar_e += np.var(e64 - self._prev[1]) / 2
+            self._sum_tvar_dn += temporal_variance(raw64, self._prev[0])
+            self._sum_tvar_e += temporal_variance(e64, self._prev[1])
             self._pairs += 1
         self._prev = (raw64, e64)
 

@@ -141,6 +141,7 @@ def characterize(
     from rich.table import Table
 
     from ..analysis import characterize as ch
+    from ..analysis.emva_reference import reference_results
     from ..io.output import OutputFolder, write_json
     from ..model.sensor import Sensor
 
@@ -171,7 +172,7 @@ def characterize(
         with export_folder as tmp:
             ch.export(m, tmp)
         try:
-            reference = ch.reference_results(emva_export / ch.DESCRIPTOR)
+            reference = reference_results(emva_export / ch.DESCRIPTOR)
         except CmosnoiseError:
             reference = None  # emva1288 not installed: nothing to compare with
     tab = Table(title="EMVA 1288 characterization" + (" (measured vs. the configuration)" if model else ""))

@@ -27,7 +27,9 @@ from ..analysis.run_stats import RunStats
 from ..config import Config, ProcessingSection, build_config
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
-from ..io.output import OutputFolder, VideoWriter, raw_metadata, read_raw_tiff, write_float_tiff, write_json, write_raw_tiff
+from ..io.output import OutputFolder, write_json
+from ..io.raw_tiff import raw_metadata, read_raw_tiff, write_float_tiff, write_raw_tiff
+from ..io.video import VideoWriter
 from ..isp import calibration
 from ..isp.process import Processor, read_dark, validate_raw
 from ..model.physics import with_updates
@@ -245,7 +247,7 @@ def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, ove
     info = RawInfo.from_metadata(meta)
     if data.max() > info.white_level_dn:
         raise CmosnoiseError(f"raw file {name!r}: codes up to {int(data.max())} do not fit {info.bits} bits; give --bits")
-    master = read_dark(dark_path, info.black_level_dn) if dark_path is not None else None
+    master = read_dark(dark_path) if dark_path is not None else None
     processor = Processor(settings, info, master)
     processor.check_shape(data.shape[1:])
     with folder as tmp:

@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from .output import atomic_file
+from .raw_tiff import cfa_tags
 
 #: CIE XYZ (D65) to linear sRGB
 XYZ_TO_SRGB = np.array(
     [[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560], [0.0556434, -0.2040259, 1.0572252]]
 )
-_CFA_CODES = {"R": 0, "G": 1, "B": 2}
 
 
 def _rationals(values, signed: bool) -> list[int]:
@@ -64,8 +64,7 @@ def write_dng(path: str | Path, raw: np.ndarray, cfa: str, black_level_dn: float
     if cfa != "none":
         cm, neutral = camera_matrices(mixing, responsivity)
         tags += [
-            (33421, 3, 2, (2, 2), True),  # CFARepeatPatternDim
-            (33422, 1, 4, bytes(_CFA_CODES[c] for c in cfa), True),  # CFAPattern
+            *cfa_tags(cfa),  # CFARepeatPatternDim, CFAPattern
             (50710, 1, 3, (0, 1, 2), True),  # CFAPlaneColor
             (50721, 10, 9, _rationals(cm.ravel(), True), True),  # ColorMatrix1
             (50778, 3, 1, (21,), True),  # CalibrationIlluminant1: D65

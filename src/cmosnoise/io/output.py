@@ -13,15 +13,10 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
 from ..errors import CmosnoiseError
-
-#: TIFF/EP CFA colour codes (0 red, 1 green, 2 blue)
-_CFA_CODES = {"R": 0, "G": 1, "B": 2}
-
 
 class OutputFolder:
     """Context manager: ``with OutputFolder(out) as tmp: write into tmp`` then it is moved to ``out``.
@@ -100,90 +95,3 @@ def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
-def raw_metadata(cfa: str, black_level_dn: float, bits: int, gain_dn_per_e: float, **extra) -> dict:
-    """The metadata recorded with raw frames (TIFF ImageDescription, JSON)."""
-    return {
-        "cfa": cfa,
-        "black_level_dn": float(black_level_dn),
-        "bits": int(bits),
-        "white_level_dn": 2**bits - 1,
-        "gain_dn_per_e": float(gain_dn_per_e),
-        **extra,
-    }
-
-
-def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape: tuple[int, int], metadata: dict) -> None:
-    """Write ``n`` uint16 frames of ``shape`` as one (n, rows, cols) TIFF series, frame by frame.
-
-    The CFA pattern also goes into the TIFF/EP ``CFARepeatPatternDim`` and
-    ``CFAPattern`` tags so that raw tools can read it.
-    """
-    import tifffile
-
-    extratags = []
-    cfa = metadata.get("cfa", "none")
-    if cfa != "none":
-        extratags = [
-            (33421, "H", 2, (2, 2), True),
-            (33422, "B", 4, bytes(_CFA_CODES[c] for c in cfa), True),
-        ]
-    with tifffile.TiffWriter(path, bigtiff=n * shape[0] * shape[1] * 2 > 2**31) as tw:
-        tw.write(
-            frames, shape=(n, *shape), dtype="uint16", photometric="minisblack",
-            metadata=metadata, extratags=extratags,
-        )
-
-
-def write_float_tiff(path: str | Path, image: np.ndarray, metadata: dict) -> None:
-    """A float32 image (e.g. a master dark, DN) with JSON metadata."""
-    import tifffile
-
-    tifffile.imwrite(path, image.astype(np.float32), photometric="minisblack", metadata=metadata)
-
-
-def read_raw_tiff(path: str | Path) -> tuple[np.ndarray, dict]:
-    """Read raw frames written by :func:`write_raw_tiff`: (frames, rows, cols) uint16 and metadata."""
-    import tifffile
-
-    try:
-        with tifffile.TiffFile(path) as tf:
-            data = tf.asarray()
-            meta = dict(tf.shaped_metadata[0]) if tf.shaped_metadata else {}
-    except FileNotFoundError:
-        raise CmosnoiseError(f"raw file {str(path)!r} does not exist") from None
-    except Exception as exc:
-        raise CmosnoiseError(f"raw file {str(path)!r} cannot be read as TIFF: {exc}") from None
-    meta.pop("shape", None)
-    if data.ndim == 2:
-        data = data[None]
-    return data, meta
-
-
-class VideoWriter:
-    """H.264 MP4 written frame by frame (imageio with the ffmpeg binary shipped by imageio-ffmpeg)."""
-
-    def __init__(self, path: str | Path, fps: float):
-        import imageio.v2 as iio2
-
-        self._writer = iio2.get_writer(
-            str(path), fps=fps, codec="libx264", quality=8, macro_block_size=2, ffmpeg_log_level="error",
-            pixelformat="yuv420p",
-        )
-
-    def append(self, frame: np.ndarray) -> None:
-        if frame.ndim == 2:
-            frame = np.repeat(frame[..., None], 3, axis=2)
-        rows, cols = frame.shape[:2]
-        self._writer.append_data(np.ascontiguousarray(frame[: rows - rows % 2, : cols - cols % 2]))  # yuv420p: even sizes
-
-    def close(self) -> None:
-        self._writer.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-        return False

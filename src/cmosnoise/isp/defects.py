@@ -19,11 +19,9 @@ Edges reflect, which keeps the CFA phase.
 from __future__ import annotations
 
 import numpy as np
+from scipy import stats
 
 from ..model import cfa as cfa_mod
-
-MAD_TO_SIGMA = 1.4826
-
 
 def _offsets(pattern: str) -> tuple[np.ndarray, np.ndarray | None]:
     """(R/B or mono offsets, G offsets or None) as arrays (8, 2)."""
@@ -59,9 +57,8 @@ def neighbours_at(img: np.ndarray, pattern: str, r: np.ndarray, c: np.ndarray) -
 
 
 def robust_sigma(values: np.ndarray) -> float:
-    """Standard deviation estimated from the median absolute deviation."""
-    v = values[np.isfinite(values)]
-    return float(MAD_TO_SIGMA * np.median(np.abs(v - np.median(v))))
+    """Standard deviation estimated from the median absolute deviation (finite values only)."""
+    return float(stats.median_abs_deviation(values[np.isfinite(values)], axis=None, scale="normal"))
 
 
 def correct_isolated(img: np.ndarray, pattern: str, threshold_sigma: float = 6.0,

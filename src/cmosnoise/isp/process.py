@@ -130,9 +130,9 @@ def validate_raw(data: np.ndarray, name: str) -> np.ndarray:
     return data.astype(np.uint16, copy=False)
 
 
-def read_dark(path, black_level_dn: float) -> np.ndarray:
+def read_dark(path) -> np.ndarray:
     """A master dark from a file: the mean of a dark-frame stack, or an already averaged frame."""
-    from ..io.output import read_raw_tiff
+    from ..io.raw_tiff import read_raw_tiff
 
     data, _ = read_raw_tiff(path)
     if data.dtype.kind not in "uif":

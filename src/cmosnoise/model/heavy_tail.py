@@ -101,8 +101,7 @@ class HeavyTail:
         m = self.tail_max
         top = float(max(np.max(x), 0.0)) + 1e-9
         grid = np.linspace(0.0, top, 40001)
-        sfg = self.body.sf(grid)
-        cum = np.concatenate([[0.0], np.cumsum((sfg[1:] + sfg[:-1]) / 2 * np.diff(grid))])
+        cum = integrate.cumulative_trapezoid(self.body.sf(grid), grid, initial=0.0)
 
         def integral(y):
             return np.interp(np.clip(y, 0.0, top), grid, cum)
@@ -117,11 +116,6 @@ class HeavyTail:
     def ppm_above(self, threshold: float) -> float:
         """Expected parts per million above ``threshold``."""
         return float(self.sf(threshold)) * 1e6
-
-    def mean(self) -> float:
-        """Mean of the clipped body plus the tail's share."""
-        m = float(self.body.expect(lambda v: np.maximum(v, 0.0)))
-        return m + self.tail_fraction * self.tail_max / 2
 
     def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray) -> np.ndarray:
         """Values from fixed uniform variates (one triple per pixel), float64.
@@ -138,5 +132,14 @@ class HeavyTail:
 
     def rvs(self, size, random_state: np.random.Generator) -> np.ndarray:
         """Independent draws (each pixel its own variates)."""
-        u = random_state.random((3, *np.atleast_1d(size)))
-        return self.values(u[0], u[1], u[2])
+        return self.values(*variates(tuple(np.atleast_1d(size)), random_state))
+
+
+def variates(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
+    """The fixed uniforms of a heavy-tailed map: array (3, *shape) of (body quantile, tail membership, tail magnitude).
+
+    Drawn once per sensor instance from the stage's fixed stream; passed to
+    :meth:`HeavyTail.values`, the same variates under other parameters keep
+    every pixel's rank.
+    """
+    return rng.random((3, *shape))

@@ -138,11 +138,11 @@ def steps(shape: tuple[int, int], n: int = 4) -> np.ndarray:
     """``n`` horizontal bands at levels ``4**-(n-1-i)``, darkest at the top."""
     rows, cols = shape
     band = np.minimum((np.arange(rows) * n) // rows, n - 1)
-    levels = 4.0 ** -(n - 1 - np.arange(n))
-    return np.broadcast_to(levels[band][:, None, None], (rows, cols, 3)).copy()
+    return np.broadcast_to(steps_levels(n)[band][:, None, None], (rows, cols, 3)).copy()
 
 
 def steps_levels(n: int = 4) -> np.ndarray:
+    """The light levels of the ``steps:n`` bands, top to bottom: ``4**-(n-1) .. 1/4, 1``."""
     return 4.0 ** -(n - 1 - np.arange(n))
 
 

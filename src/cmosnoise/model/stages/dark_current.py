@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..distributions import body as body_dist
-from ..heavy_tail import HeavyTail
+from ..heavy_tail import HeavyTail, variates
 
 
 @dataclass(frozen=True)
@@ -103,15 +103,9 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     )
 
 
-def variates(shape: tuple[int, int], rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The fixed per-pixel uniforms (body quantile, tail membership, tail magnitude)."""
-    return rng.random(shape), rng.random(shape), rng.random(shape)
-
-
 def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
     """Fixed dark-current map at ``state``'s temperature, e-/s per pixel, float32 (>= 0)."""
-    u_body, u_member, u_tail = variates(shape, rng)
-    return state.model.values(u_body, u_member, u_tail).astype(np.float32)
+    return state.model.values(*variates(shape, rng)).astype(np.float32)
 
 
 def mean_charge(rate_e_per_s: np.ndarray, integration_time_s: float) -> np.ndarray:

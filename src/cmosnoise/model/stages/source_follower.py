@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from ..heavy_tail import HeavyTail
+from ..heavy_tail import HeavyTail, variates
 
 
 def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float | None = None,
@@ -29,8 +29,7 @@ def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float |
 
 def flicker_sigma_map(model: HeavyTail, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
     """Fixed per-pixel flicker sigma (e-), float32, from the sensor's fixed stream."""
-    u = rng.random((3, *shape))
-    return model.values(u[0], u[1], u[2]).astype(np.float32)
+    return model.values(*variates(shape, rng)).astype(np.float32)
 
 
 def noise(shape: tuple[int, int], thermal_sigma_e: float, flicker_sigma: np.ndarray | None,
