@@ -10,7 +10,7 @@ checked, ready for :class:`~cmosnoise.model.sensor.Sensor`.
 
 from __future__ import annotations
 
-from pathlib import Path
+import functools
 
 from ..config import Config, merge_updates, resolve_config
 from ..errors import CmosnoiseError
@@ -81,14 +81,14 @@ def check(config: Config) -> Config:
     return config
 
 
-def load_config(
-    path: str | Path | None = None,
-    preset: str | None = None,
-    overrides: list[str] | None = None,
-    extra: dict | None = None,
-) -> Config:
-    """Resolve a configuration (defaults <- preset <- file <- ``extra`` <- ``--set``) and check its physics."""
-    return check(resolve_config(path, preset, overrides, extra))
+@functools.wraps(resolve_config, assigned=("__module__", "__annotations__"))
+def load_config(*args, **kwargs) -> Config:
+    """Resolve a configuration (defaults <- preset <- file <- ``extra`` <- ``--set``) and check its physics.
+
+    Takes the arguments of :func:`cmosnoise.config.resolve_config`:
+    ``path``, ``preset``, ``overrides`` (``--set`` strings), ``extra`` (a dict).
+    """
+    return check(resolve_config(*args, **kwargs))
 
 
 def with_updates(config: Config, updates: dict) -> Config:
