@@ -1,5 +1,12 @@
 """Shared helpers: every statistical tolerance comes from the estimator's sampling error."""
 
+import contextlib
+import io
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 
@@ -75,3 +82,38 @@ def std_se_with_noise(true_var: float, noise_var: float, n: int) -> float:
     the square root divides it by 2 sqrt(true_var).
     """
     return float(np.sqrt(2 / (n - 1)) * (true_var + noise_var) / (2 * np.sqrt(true_var)))
+
+
+# ------------------------------------------------------------------ the command line
+@dataclass
+class CliResult:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@contextlib.contextmanager
+def _cwd(path):
+    old = os.getcwd()
+    if path is not None:
+        os.chdir(path)
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
+def cli(*args, cwd=None) -> CliResult:
+    """Run ``cmosnoise ARGS`` in this process (no interpreter start-up), as the console script would."""
+    from cmosnoise.app.cli import run
+
+    out, err = io.StringIO(), io.StringIO()
+    with _cwd(cwd), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = run([str(a) for a in args])
+    return CliResult(code, out.getvalue(), err.getvalue())
+
+
+def cli_subprocess(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
+    """Run ``python -m cmosnoise ARGS`` as a separate process: for exit codes, signals, the real entry point."""
+    return subprocess.run([sys.executable, "-m", "cmosnoise", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=timeout)

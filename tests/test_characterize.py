@@ -9,7 +9,7 @@ from cmosnoise import Sensor, load_config, noise_budget
 from cmosnoise import characterize as ch
 from cmosnoise.analysis.emva_reference import reference_results
 
-from conftest import Z, temporal_variance_se
+from conftest import Z, temporal_variance_se, cli
 
 
 @pytest.fixture(scope="module")
@@ -113,23 +113,21 @@ def test_load_rejects_a_bad_descriptor(tmp_path):
 
 def test_characterize_command_end_to_end(tmp_path):
     import json
-    import subprocess
-    import sys
 
     small = ["--set", "sensor.width=160", "--set", "sensor.height=120", "--steps", "12", "--stack-frames", "4"]
-    r = subprocess.run([sys.executable, "-m", "cmosnoise", "characterize", *small, "--out", tmp_path / "c",
-                        "--emva-export", tmp_path / "e"], capture_output=True, text=True, timeout=600)
+    r = cli("characterize", *small, "--out", tmp_path / "c",
+                        "--emva-export", tmp_path / "e")
     assert r.returncode == 0, r.stderr
     assert "System gain K" in r.stdout and "DSNU1288" in r.stdout
     assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["characterization.json", "photon_transfer.png", "snr.png"]
     data = json.loads((tmp_path / "c" / "characterization.json").read_text())
     assert set(data["model"]) <= set(data["measured"])  # every model value has its measured partner
     assert (tmp_path / "e" / ch.DESCRIPTOR).exists()
-    r = subprocess.run([sys.executable, "-m", "cmosnoise", "characterize", "--frames-from", tmp_path / "e",
-                        "--out", tmp_path / "c2"], capture_output=True, text=True, timeout=600)
+    r = cli("characterize", "--frames-from", tmp_path / "e",
+                        "--out", tmp_path / "c2")
     assert r.returncode == 0, r.stderr
     again = json.loads((tmp_path / "c2" / "characterization.json").read_text())
     assert again["measured"]["system_gain_K_dn_per_e"] == pytest.approx(data["measured"]["system_gain_K_dn_per_e"], rel=1e-9)
-    r = subprocess.run([sys.executable, "-m", "cmosnoise", "characterize", "--frames-from", tmp_path / "nowhere",
-                        "--out", tmp_path / "c3"], capture_output=True, text=True)
+    r = cli("characterize", "--frames-from", tmp_path / "nowhere",
+                        "--out", tmp_path / "c3")
     assert r.returncode == 2 and "cannot be read" in r.stderr and "Traceback" not in r.stderr

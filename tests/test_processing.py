@@ -1,7 +1,5 @@
 """From raw to picture: calibration, defect correction, crosstalk compensation, demosaicing, DNG."""
 
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -12,7 +10,7 @@ from cmosnoise.config import ProcessingSection
 from cmosnoise.io.dng import write_dng
 from cmosnoise.isp.process import Processor, validate_raw
 
-from conftest import assert_close, quiet_config, temporal_variance_se
+from conftest import assert_close, quiet_config, temporal_variance_se, cli
 
 
 def processor_for(sensor, master=None, **settings):
@@ -162,15 +160,15 @@ def test_process_command_reproduces_the_simulators_processing(tmp_path):
 
     cfg = load_config(preset="paper-fig9-vga", overrides=["sensor.width=160", "sensor.height=120"])
     simulate(cfg, tmp_path / "sim")
-    r = subprocess.run([sys.executable, "-m", "cmosnoise", "process", tmp_path / "sim" / "raw.tiff",
+    r = cli("process", tmp_path / "sim" / "raw.tiff",
                         "--dark", tmp_path / "sim" / "master_dark.tiff", "--set", "processing.defects.method=median",
-                        "--out", tmp_path / "proc"], capture_output=True, text=True)
+                        "--out", tmp_path / "proc")
     assert r.returncode == 0, r.stderr
     np.testing.assert_array_equal(iio.imread(tmp_path / "proc" / "processed.png"), iio.imread(tmp_path / "sim" / "processed.png"))
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, "-m", "cmosnoise", *map(str, args)], capture_output=True, text=True)
+    return cli(*args)
 
 
 @pytest.mark.parametrize("case,needle", [

@@ -8,6 +8,7 @@ from html.parser import HTMLParser
 
 import numpy as np
 import pytest
+from conftest import Z
 
 from cmosnoise import load_config, plots
 from cmosnoise.app.run import simulate
@@ -92,23 +93,64 @@ def test_summary_has_the_reports_key_figures(report_run):
         assert v >= kf["snr_total_db_at_signal_e"][lvl]  # fixed pattern only adds noise
 
 
-def test_figures_gallery_holds_every_figure(tmp_path):
-    from cmosnoise.app.figures import FIGURES, write_gallery
+@pytest.fixture(scope="module")
+def gallery(tmp_path_factory):
+    from cmosnoise.app.figures import FIGURES
 
-    items = write_gallery(tmp_path, seed=0)
+    return {f.__name__: f(seed=0) for f in FIGURES}
+
+
+@pytest.mark.slow
+def test_figures_gallery_holds_every_figure(tmp_path, gallery, monkeypatch):
+    from cmosnoise.app import figures
+
+    made = list(gallery.values())
+    monkeypatch.setattr(figures, "FIGURES", [lambda seed, f=f: f for f in gallery.values()])  # reuse, do not redraw
+    items = figures.write_gallery(tmp_path, seed=0)
     names = [n for n, _ in items]
-    assert len(names) == len(FIGURES) == 7
+    assert names == [f.name for f in made]
     for fig in ["fig3", "fig5", "fig6", "fig7", "fig9", "fig10", "fig11"]:
         assert any(n.startswith(fig + "_") for n in names)
-    index = (tmp_path / "index.html").read_text()
     c = _Collector()
-    c.feed(index)
+    c.feed((tmp_path / "index.html").read_text())
     assert sorted(c.imgs) == sorted(names)
     import imageio.v3 as iio
 
     for n, caption in items:
         assert iio.imread(tmp_path / n).shape[0] > 200
         assert "seed" in caption.lower() and len(caption) > 80  # a caption that states the parameters
+
+
+@pytest.mark.slow
+def test_each_figure_shows_what_the_paper_shows(gallery):
+    # Fig. 3: 10 % PRNU on 196 pixels; the sample std's relative SE is 1/sqrt(2 (n - 1))
+    f3 = gallery["fig3_prnu"].facts
+    assert f3["mean_e"] == pytest.approx(1000, abs=Z * 100 / np.sqrt(f3["pixels"]))
+    assert f3["prnu_pct"] == pytest.approx(10, abs=Z * 10 / np.sqrt(2 * (f3["pixels"] - 1)))
+    # Fig. 5: the paper's family per temperature, and dark current rising with it
+    f5 = gallery["fig5_dark_temperatures"].facts
+    assert f5["families"] == {25: "logistic", 45: "inverse_gaussian", 65: "lognormal"}
+    assert f5["map_mean_e_per_s"][25] < f5["map_mean_e_per_s"][45] < f5["map_mean_e_per_s"][65]
+    # Fig. 6: the white-pixel count above 250 aA is binomial around the configured ppm
+    f6 = gallery["fig6_body_and_tail"].facts
+    n, p = f6["pixels"], f6["ppm_configured"] * 1e-6
+    assert abs(f6["above_threshold"] - n * p) <= Z * np.sqrt(n * p * (1 - p))
+    # Fig. 7: per-pixel sample variances are unbiased for each pixel's own variance
+    f7 = gallery["fig7_temporal_noise"].facts
+    assert abs(f7["mean_measured_var_e2"] - f7["mean_true_var_e2"]) <= Z * f7["se_mean_var_e2"]
+    # Fig. 9: more couplets at 5 MP than at VGA, and dark cal + median leaves some at 5 MP
+    f9 = gallery["fig9_couplets"].facts
+    assert f9["paper-fig9-5m"]["couplets_map"] > f9["paper-fig9-vga"]["couplets_map"]
+    assert f9["paper-fig9-5m"]["couplets_after_processing"] > 0
+    # Fig. 10: column means hold the 6 e- VFPN plus the shot noise they average (peak/rows at most);
+    # the std of cols values has a relative SE of 1/sqrt(2 (cols - 1))
+    f10 = gallery["fig10_vfpn"].facts
+    for peak, measured in f10["column_mean_std_e"].items():
+        lo, hi = f10["vfpn_sigma_e"], np.sqrt(f10["vfpn_sigma_e"] ** 2 + peak / f10["rows"])
+        se = hi / np.sqrt(2 * (f10["cols"] - 1))
+        assert lo - Z * se <= measured <= hi + Z * se, peak
+    # Fig. 11: every stage on
+    assert all(gallery["fig11_full"].facts["stages"].values())
 
 
 def test_plots_have_labels_units_titles_and_legends():

@@ -222,16 +222,31 @@ def config_cmd(
     typer.echo(load_config(config, preset, set_).to_yaml(), nl=False)
 
 
-def main() -> None:
+def run(argv: list[str] | None = None) -> int:
+    """Run the command line on ``argv`` (default: ``sys.argv[1:]``) in this process; returns the exit status.
+
+    A :class:`CmosnoiseError` becomes one line on stderr and status 2, a
+    usage error click's message and status 2, Ctrl-C status 130.
+    """
     try:
-        app()
+        result = app(args=argv, prog_name="cmosnoise", standalone_mode=False)
+        return result if isinstance(result, int) else 0
+    except typer.Exit as exc:
+        return exc.exit_code
+    except typer.TyperException as exc:  # usage errors: click's message, status 2
+        exc.show()
+        return exc.exit_code
     except CmosnoiseError as exc:
         message = " ".join(str(exc).split())  # one line, whatever a library put in it
         print(f"cmosnoise: error: {message}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:
+        return 2
+    except (KeyboardInterrupt, typer.Abort):
         print("cmosnoise: interrupted", file=sys.stderr)
-        sys.exit(130)
+        return 130
+
+
+def main() -> None:
+    sys.exit(run())
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """The paper's figures, regenerated with this tool (``cmosnoise figures --out DIR``).
 
-Each function runs one of the paper's experiments and returns
-(file name, PNG bytes, caption); the caption states the parameters.
+Each function runs one of the paper's experiments and returns a
+:class:`Figure`: file name, PNG bytes, a caption that states the parameters,
+and the facts the figure shows, measured (so a test can check them).
 :func:`write_gallery` writes them all with an ``index.html``.
 """
 
@@ -9,7 +10,7 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -20,6 +21,13 @@ from ..isp.process import Processor
 from ..model.physics import flicker_model, load_config, with_updates
 from ..model.sensor import Sensor
 from . import plots
+
+
+class Figure(NamedTuple):
+    name: str  #: file name of the PNG
+    png: bytes
+    caption: str
+    facts: dict  #: what the figure shows, measured from the data it plots
 
 
 def fig3_prnu(seed: int = 0):
@@ -41,9 +49,10 @@ def fig3_prnu(seed: int = 0):
     b.set_ylabel("pixels per bin")
     b.set_title(f"mean {e.mean():.0f} e-, std {e.std(ddof=1):.0f} e- ({100 * e.std(ddof=1) / e.mean():.1f} %)")
     b.legend()
-    return "fig3_prnu.png", plots.to_png_bytes(fig), (
+    facts = {"pixels": int(e.size), "mean_e": float(e.mean()), "prnu_pct": float(100 * e.std(ddof=1) / e.mean())}
+    return Figure("fig3_prnu.png", plots.to_png_bytes(fig), (
         "Fig. 3: 10 % PRNU on a flat grey scene of mean 1000 e-, 14 x 14 monochrome pixels (preset paper-fig3-prnu; "
-        f"only PRNU on, 12-bit ADC, seed {seed}).")
+        f"only PRNU on, 12-bit ADC, seed {seed})."), facts)
 
 
 def _dark_maps(temps, shape=(400, 500), seed=0, tails=True):
@@ -68,10 +77,12 @@ def fig5_dark_temperatures(seed: int = 0):
         ax.hist(z, bins=bins, histtype="step", lw=1.5, label=f"{t} C: {st.family} body, mean {st.mean:.0f} e-/s, std {st.std:.1f} e-/s")
     plots.log_histogram_axes(ax, "(dark current - body mean) / body std  [shifted and scaled]",
                              "Dark-current distribution at 25, 45 and 65 C")
-    return "fig5_dark_temperatures.png", plots.to_png_bytes(fig), (
+    facts = {"families": {t: st.family for t, (m, st) in maps.items()},
+             "map_mean_e_per_s": {t: float(m.mean()) for t, (m, st) in maps.items()}}
+    return Figure("fig5_dark_temperatures.png", plots.to_png_bytes(fig), (
         "Fig. 5: shifted and scaled dark-current histograms of one sensor instance (400 x 500 pixels, default "
         "characterization points: logistic at 25 C, inverse Gaussian at 45 C, lognormal at 65 C, each with a uniform "
-        f"white-pixel tail). The shape, not only the location, changes with temperature. Seed {seed}.")
+        f"white-pixel tail). The shape, not only the location, changes with temperature. Seed {seed}."), facts)
 
 
 def fig6_body_and_tail(seed: int = 0):
@@ -86,10 +97,12 @@ def fig6_body_and_tail(seed: int = 0):
     b.hist(body.ravel(), bins=bins, alpha=0.7, label=f"body: {state.family}, mean {state.mean:.0f} e-/s, std {state.std:.0f} e-/s")
     b.hist(tail[tail > 0].ravel(), bins=bins, alpha=0.7, color="C3", label=f"tail: Uniform(0, {state.tail_max:.0f}) e-/s for {100 * state.tail_fraction:.3f} %")
     plots.log_histogram_axes(b, "dark current [e-/s per pixel]", "The two distributions, apart")
-    return "fig6_body_and_tail.png", plots.to_png_bytes(fig), (
+    facts = {"pixels": int(rate.size), "above_threshold": int((rate > state.threshold).sum()),
+             "ppm_configured": float(state.expected_ppm_above()), "threshold_e_per_s": float(state.threshold)}
+    return Figure("fig6_body_and_tail.png", plots.to_png_bytes(fig), (
         "Fig. 6: two distributions give the realistic histogram: a lognormal body (320 e-/s mean, 130 e-/s std at 65 C) "
         "plus a uniform tail whose fraction is solved so that 200 ppm of pixels lie above 250 aA (1560 e-/s). "
-        f"400 x 500 pixels, seed {seed}.")
+        f"400 x 500 pixels, seed {seed}."), facts)
 
 
 class _TotalSigma:
@@ -119,10 +132,13 @@ def fig7_temporal_noise(seed: int = 0, frames: int = 100):
     fig, ax = plots.figure(figsize=(7.5, 4.6))
     plots.temporal_noise_histogram(ax, sigma, _TotalSigma(flicker_model(cfg), 1.0), 5.0,
                                    f"Per-pixel temporal noise measured over {frames} dark frames")
-    return "fig7_temporal_noise.png", plots.to_png_bytes(fig), (
+    true_var = 1.0 + sensor.fixed_pattern.flicker_sigma.astype(np.float64) ** 2  # each pixel's own variance
+    facts = {"frames": frames, "mean_measured_var_e2": float(np.mean(sigma**2)), "mean_true_var_e2": float(true_var.mean()),
+             "se_mean_var_e2": float(np.sqrt(np.mean(2 * true_var**2 / (frames - 1)) / true_var.size))}
+    return Figure("fig7_temporal_noise.png", plots.to_png_bytes(fig), (
         f"Fig. 7: temporal noise of each pixel measured over {frames} dark frames (300 x 300 pixels): thermal 1 e- plus "
         "a flicker/RTS sigma per pixel from a Gumbel body (location 1.5 e-, scale 0.4 e-) and a uniform tail "
-        f"(2000 ppm above 5 e-, up to 15 e-). The line is the model, before the estimator's own spread. Seed {seed}.")
+        f"(2000 ppm above 5 e-, up to 15 e-). The line is the model, before the estimator's own spread. Seed {seed}."), facts)
 
 
 def fig9_couplets(seed: int = 0):
@@ -141,6 +157,9 @@ def fig9_couplets(seed: int = 0):
             white=sensor.dark_rate > sensor.dark_state.threshold,
             left=np.abs(residual) > 150 * k,
         )
+    facts = {name: {"couplets_map": white_pixels.count_couplets(p["white"], "RGGB"),
+                    "couplets_after_processing": white_pixels.count_couplets(p["left"], "RGGB")}
+             for name, p in panels.items()}
     big = panels["paper-fig9-5m"]
     rows, cols = big["sensor"].shape
     pairs = white_pixels.couplet_pairs(big["left"], "RGGB")
@@ -167,30 +186,37 @@ def fig9_couplets(seed: int = 0):
             ax.set_xticks([])
             ax.set_yticks([])
     fig.suptitle("500 e- peak after 0.25 s; 65 C, dark mean 500 e-/s, tail to 80000 e-/s, 4000 ppm > 250 aA; dark cal on")
-    return "fig9_couplets.png", plots.to_png_bytes(fig), (
+    return Figure("fig9_couplets.png", plots.to_png_bytes(fig), (
         "Fig. 9: the same part of the scene on a VGA and a 5 MP sensor with the paper's worst-case dark current "
         "(presets paper-fig9-vga and paper-fig9-5m). Left: before processing, couplets of white pixels circled; right: "
         "after dark calibration (8 dark frames) and median defect correction, couplets that survive circled. More pixels "
-        f"at the same ppm means more couplets, and the median corrector cannot remove them. Seed {seed}.")
+        f"at the same ppm means more couplets, and the median corrector cannot remove them. Seed {seed}."), facts)
 
 
 def fig10_vfpn(seed: int = 0, levels=(30, 120, 500, 2000)):
     fig, axes = plots.figure(2, 2, figsize=(11, 8.4))
     base = load_config(preset="paper-fig10-vfpn", overrides=["scene.source=photo"])
     sensor = Sensor(base, seed=seed)
+    column_std = {}
     for ax, peak in zip(axes.ravel(), levels):
         s = sensor.with_exposure(peak / base.exposure.peak_rate_e_per_s)
-        raw = s.expose().frame(0)
+        shot = s.expose()
+        detail = shot.frame(0, detail=True)
+        raw = detail.raw
+        # column means of (charge - its expectation): VFPN plus the shot noise the column mean leaves
+        column_std[peak] = float(np.std((detail.electrons - shot.mean_charge_e).mean(axis=0), ddof=1))
         proc = Processor(base.processing, s.raw_info())
         ax.imshow(proc.render(raw), cmap="gray", vmin=0, vmax=255)
         ax.set_title(f"peak {peak} e-: sigma_VFPN / peak = {100 * 6 / peak:.1f} %")
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle("sigma_VFPN = 6 e- with photon shot noise, four light levels (each shown with its peak as white)")
-    return "fig10_vfpn.png", plots.to_png_bytes(fig), (
+    facts = {"vfpn_sigma_e": base.column_noise.vfpn_sigma_e, "rows": sensor.shape[0], "cols": sensor.shape[1],
+             "column_mean_std_e": column_std}
+    return Figure("fig10_vfpn.png", plots.to_png_bytes(fig), (
         f"Fig. 10: column fixed-pattern noise of 6 e- rms (preset paper-fig10-vfpn, photo scene, monochrome 640 x 480) at "
         f"peak signals of {', '.join(map(str, levels))} e-. Plain in low light, hard to see at high light, where shot "
-        f"noise and the larger signal hide it. Seed {seed}.")
+        f"noise and the larger signal hide it. Seed {seed}."), facts)
 
 
 def fig11_full(seed: int = 0):
@@ -208,10 +234,11 @@ def fig11_full(seed: int = 0):
         ax.set_title(title)
         ax.set_xticks([])
         ax.set_yticks([])
-    return "fig11_full.png", plots.to_png_bytes(fig), (
+    facts = {"stages": sensor.stages_on()}
+    return Figure("fig11_full.png", plots.to_png_bytes(fig), (
         "Fig. 11: the whole chain with exaggerated values (preset paper-fig11-full): 4 % PRNU, crosstalk, dark current at "
         "45 C with 2000 ppm white pixels, 4 e- thermal noise, heavy flicker, 1.5 e- row noise, noisy columns and 3 e- "
-        f"VFPN, 400 e- peak, 10-bit ADC; pre-processing view. Seed {seed}.")
+        f"VFPN, 400 e- peak, 10-bit ADC; pre-processing view. Seed {seed}."), facts)
 
 
 FIGURES: list[Callable] = [fig3_prnu, fig5_dark_temperatures, fig6_body_and_tail, fig7_temporal_noise,
@@ -224,9 +251,9 @@ def write_gallery(folder: Path, seed: int = 0, progress: Callable[[str], None] |
     for f in FIGURES:
         if progress:
             progress(f.__name__)
-        name, png, caption = f(seed=seed)
-        (folder / name).write_bytes(png)
-        items.append((name, caption))
+        figure = f(seed=seed)
+        (folder / figure.name).write_bytes(figure.png)
+        items.append((figure.name, figure.caption))
     cards = "".join(
         f"<figure><a href='{n}'><img src='{n}' alt='{html.escape(c[:60])}'></a><figcaption>{html.escape(c)}</figcaption></figure>"
         for n, c in items
