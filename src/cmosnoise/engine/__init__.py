@@ -1,0 +1,12 @@
+"""The noise engine: counter-based random numbers and the fused frame kernel.
+
+- :mod:`.philox`: Philox4x32-10, a block of random words per (index, frame, sequence, try);
+- :mod:`.fdmath`: log, exp, cos of a turn and log-gamma in plain IEEE float64;
+- :mod:`.samplers`: normal (Box-Muller) and Poisson (inversion, PTRS) on those
+  uniforms, vectorized with NumPy: the specification, and :class:`Stream`;
+- :mod:`.kernel`: the same arithmetic fused into one numba loop over a frame
+  or a region of it, parallel over rows.
+
+Nothing here knows about configurations or sensors: arrays and numbers in,
+arrays out.
+"""

@@ -1,14 +1,17 @@
 """Random streams keyed by what they are for (MODEL.md section 1).
 
 A sensor instance is a configuration plus a seed. Each stage draws its fixed
-pattern from a stream keyed by ``(seed, FIXED, stage)`` and its temporal noise
-in frame ``k`` from a stream keyed by ``(seed, TEMPORAL, stage, k)``. So frame
-``k`` is the same whether frames are made one by one, in chunks, out of order
-or on different machines, and switching one stage on or off leaves every other
-stage's random numbers unchanged.
+pattern from a generator keyed by ``(seed, FIXED, stage, part)`` and its
+temporal noise from a counter-based stream keyed by ``(seed, TEMPORAL,
+stage)`` with counter (pixel, frame, sequence, try). So frame ``k`` is the
+same whether frames are made one by one, in chunks, out of order, cropped or
+on different machines, and switching one stage on or off, or changing one
+parameter, leaves every other random number unchanged.
 """
 
 import numpy as np
+
+from ..engine.samplers import Stream
 
 FIXED = 0
 TEMPORAL = 1
@@ -33,6 +36,10 @@ STAGE_IDS = {
 }
 
 
+#: the stages with temporal noise, in the engine's key order
+TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise")
+
+
 def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
     """Generator for a stage's fixed pattern; the same for every frame.
 
@@ -43,15 +50,20 @@ def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
     return np.random.Generator(np.random.PCG64(ss))
 
 
-def temporal_rng(seed: int, stage: str, frame: int, sequence: int = 0) -> np.random.Generator:
-    """Generator for a stage's temporal noise in frame ``frame`` (0-based).
+def stream_key(seed: int, stage: str) -> tuple[int, int]:
+    """The two 32-bit key words of a stage's temporal noise (Philox4x32), from ``(seed, TEMPORAL, stage)``."""
+    ss = np.random.SeedSequence(seed, spawn_key=(TEMPORAL, STAGE_IDS[stage]))
+    k0, k1 = ss.generate_state(2, np.uint32)
+    return int(k0), int(k1)
 
-    ``sequence`` separates frame series taken at other times by the same
-    sensor, such as the dark frames of a dark calibration (sequence 1), so
-    that their noise never repeats the scene frames'.
+
+def temporal_stream(seed: int, stage: str, frame: int, sequence: int = SEQ_SCENE) -> Stream:
+    """A stage's temporal random numbers in frame ``frame`` (0-based) of frame series ``sequence``.
+
+    Counter-based (MODEL.md section 1): the draw of pixel ``i`` depends on
+    nothing but (seed, stage, frame, sequence, i), so frames, crops, threads
+    and machines never change a bit.
     """
     if frame < 0:
         raise ValueError(f"frame index must be >= 0, got {frame}")
-    key = (TEMPORAL, STAGE_IDS[stage], frame) if sequence == 0 else (TEMPORAL, STAGE_IDS[stage], frame, sequence)
-    ss = np.random.SeedSequence(seed, spawn_key=key)
-    return np.random.Generator(np.random.PCG64(ss))
+    return Stream(stream_key(seed, stage), int(frame), int(sequence))

@@ -25,10 +25,12 @@ from typing import Iterator
 import numpy as np
 
 from ..config import Config, ExposureSection, build_section
+from ..engine import kernel
+from ..errors import CmosnoiseError
 from . import scene as scene_mod
 from .physics import dark_points, flicker_model, load_config, with_updates
 from .raw_info import RawInfo
-from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, fixed_rng, temporal_rng
+from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, stream_key, temporal_stream
 from .stages import adc, column_noise, crosstalk, dark_current, prnu, row_noise, shot_noise, source_follower
 
 
@@ -82,6 +84,7 @@ class Sensor:
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
         self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern()
+        self._sf_sigma: np.ndarray | None = None
         self.timings["fixed_pattern"] += time.perf_counter() - t0
 
     def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
@@ -114,6 +117,15 @@ class Sensor:
     def dark_state(self) -> dark_current.DarkState | None:
         """The DCNU parameters (body, tail, threshold) at the sensor's temperature."""
         return self._fixed.dark_state
+
+    @property
+    def source_follower_sigma(self) -> np.ndarray:
+        """Each pixel's fixed source-follower sigma, thermal and flicker together (e-), (rows, cols) float32."""
+        if self._sf_sigma is None:
+            self._sf_sigma = source_follower.total_sigma(
+                self.config.source_follower.thermal_sigma_e, self._fixed.flicker_sigma, self.shape
+            )
+        return self._sf_sigma
 
     @property
     def flicker_model(self):
@@ -283,6 +295,7 @@ class Exposure:
             (noisy if c.dark_current.shot_noise else exact).append(self.dark_mean_e)
         self._noisy_e = sum(noisy[1:], noisy[0]) if noisy else None
         self._exact_e = sum(exact[1:], exact[0]) if exact else None
+        self._plan: kernel.FramePlan | None = None
         timings["expose"] += time.perf_counter() - t0
 
     @property
@@ -293,76 +306,138 @@ class Exposure:
         return self.photo_mean_e + self.dark_mean_e
 
     # ------------------------------------------------------------ frames
-    def _electrons(self, k: int, keep: dict | None) -> np.ndarray:
-        """Charge at the ADC input in frame ``k`` (e-); fills ``keep`` with each stage's part."""
+    def plan(self) -> kernel.FramePlan:
+        """What every frame of this exposure shares, for the engine (built once, then reused)."""
+        if self._plan is None:
+            s = self.sensor
+            c = s.config
+            fp = s.fixed_pattern
+            keys = np.array([stream_key(c.seed, st) for st in TEMPORAL_STAGES], dtype=np.uint64)
+            cn = c.column_noise
+            cols = s.shape[1]
+
+            def col(a, fill):
+                return np.full(cols, fill) if a is None else a.ravel().astype(np.float64)
+
+            t = s.transfer
+            self._plan = kernel.FramePlan(
+                shape=s.shape, keys=keys, sequence=self.sequence, full_well_e=float(c.sensor.full_well_e),
+                noisy_e=self._noisy_e, exact_e=self._exact_e,
+                normal_above_e=c.shot_noise.gaussian_above_e if c.shot_noise.gaussian_above_e is not None else np.inf,
+                sf_sigma_e=s.source_follower_sigma if c.source_follower.enabled else None,
+                row_sigma_e=c.row_noise.sigma_e if c.row_noise.enabled else None,
+                row_offset_e=(np.zeros(s.shape[0]) if fp.row_offset is None else fp.row_offset.ravel().astype(np.float64)),
+                col_sigma_e=col(fp.column_sigma, 0.0) if cn.enabled else None,
+                col_offset_e=col(fp.vfpn, 0.0) if cn.enabled else None,
+                col_gain=col(fp.column_gain, 1.0) if cn.enabled else None,
+                adc=(t.gain_dn_per_e, t.black_level_dn, t.max_code) if c.adc.enabled else None,
+            )
+        return self._plan
+
+    def _electrons(self, k: int, region: tuple[int, int, int, int], keep: dict | None) -> np.ndarray:
+        """Charge at the ADC input in frame ``k`` (e-, float64) of ``region``, stage by stage.
+
+        The NumPy implementation of the engine's scheme: the fused kernel
+        gives the same bits. Fills ``keep`` with each stage's part.
+        """
         s = self.sensor
         c = s.config
-        timings = s.timings
-        t0 = time.perf_counter()
-        rng = temporal_rng(c.seed, "shot_noise", k, self.sequence) if self._noisy_e is not None else None
-        n = shot_noise.collect(self._noisy_e, self._exact_e, c.sensor.full_well_e, rng, c.shot_noise.gaussian_above_e)
-        timings["shot_noise"] += time.perf_counter() - t0
+        r0, r1, c0, c1 = region
+        rows, cols = np.arange(r0, r1), np.arange(c0, c1)
+        win = (slice(r0, r1), slice(c0, c1))
+        index = (rows[:, None] * s.shape[1] + cols[None, :]).astype(np.uint64)
+
+        def stream(stage):
+            return temporal_stream(c.seed, stage, k, self.sequence)
+
+        noisy = self._noisy_e[win] if self._noisy_e is not None else None
+        exact = self._exact_e[win] if self._exact_e is not None else None
+        n = shot_noise.collect(noisy, exact, c.sensor.full_well_e, stream("shot_noise") if noisy is not None else None,
+                               c.shot_noise.gaussian_above_e, index)
         collected = n
         fp = s.fixed_pattern
-        t0 = time.perf_counter()
         if c.source_follower.enabled:
-            sfn = source_follower.noise(
-                s.shape, c.source_follower.thermal_sigma_e, fp.flicker_sigma, temporal_rng(c.seed, "source_follower", k, self.sequence)
-            )
+            sfn = source_follower.noise(s.source_follower_sigma[win], stream("source_follower"), index)
             n = n + sfn
-        t1 = time.perf_counter()
-        timings["source_follower"] += t1 - t0
         if c.row_noise.enabled:
-            rown = row_noise.temporal(s.shape[0], c.row_noise.sigma_e, temporal_rng(c.seed, "row_noise", k, self.sequence))
+            rown = row_noise.temporal(rows, c.row_noise.sigma_e, stream("row_noise"))
             if fp.row_offset is not None:
-                rown = rown + fp.row_offset
+                rown = rown + fp.row_offset[r0:r1]
             n = n + rown
-        t2 = time.perf_counter()
-        timings["row_noise"] += t2 - t1
         before_columns = n
         if c.column_noise.enabled:
-            offset = fp.vfpn
+            offset = fp.vfpn[:, c0:c1] if fp.vfpn is not None else None
             if fp.column_sigma is not None:
-                ct = column_noise.temporal(fp.column_sigma, temporal_rng(c.seed, "column_noise", k, self.sequence))
+                ct = column_noise.temporal(fp.column_sigma, cols, stream("column_noise"))
                 offset = ct if offset is None else offset + ct
-            n = column_noise.apply(n, fp.column_gain, offset)
-        timings["column_noise"] += time.perf_counter() - t2
+            n = column_noise.apply(n, fp.column_gain[:, c0:c1] if fp.column_gain is not None else None, offset)
         if keep is not None:
-            keep["perfect"] = self.perfect_e
-            keep["prnu"] = self.after_prnu_e - self.perfect_e
-            keep["crosstalk"] = self.photo_mean_e - self.after_prnu_e
+            keep["perfect"] = self.perfect_e[win]
+            keep["prnu"] = self.after_prnu_e[win] - self.perfect_e[win]
+            keep["crosstalk"] = self.photo_mean_e[win] - self.after_prnu_e[win]
             if self.dark_mean_e is not None:
-                keep["dark_current"] = self.dark_mean_e
-            keep["shot_noise"] = collected - self.mean_charge_e
+                keep["dark_current"] = self.dark_mean_e[win]
+            keep["shot_noise"] = (collected - self.mean_charge_e[win]).astype(np.float32)
             if c.source_follower.enabled:
-                keep["source_follower"] = sfn
+                keep["source_follower"] = sfn.astype(np.float32)
             if c.row_noise.enabled:
-                keep["row_noise"] = np.broadcast_to(rown, s.shape).astype(np.float32)
+                keep["row_noise"] = np.broadcast_to(rown, n.shape).astype(np.float32)
             if c.column_noise.enabled:
-                keep["column_noise"] = n - before_columns
+                keep["column_noise"] = (n - before_columns).astype(np.float32)
         return n
 
-    def _render(self, k: int, keep: dict | None) -> tuple[np.ndarray, np.ndarray]:
-        """(raw DN, charge at the ADC input in e-) of frame ``k``."""
-        electrons = self._electrons(k, keep)
+    def _region(self, region) -> tuple[int, int, int, int]:
+        rows, cols = self.sensor.shape
+        if region is None:
+            return (0, rows, 0, cols)
+        try:
+            r0, r1, c0, c1 = (int(v) for v in region)
+        except (TypeError, ValueError):
+            raise CmosnoiseError(f"region = {region!r}: give (row0, row1, col0, col1)") from None
+        if not (0 <= r0 < r1 <= rows and 0 <= c0 < c1 <= cols):
+            raise CmosnoiseError(
+                f"region = {(r0, r1, c0, c1)}: must satisfy 0 <= row0 < row1 <= {rows} and 0 <= col0 < col1 <= {cols}"
+            )
+        return r0, r1, c0, c1
+
+    def _render(self, k: int, keep: dict | None = None, region=None, electrons: bool = True):
+        """(raw, charge at the ADC input in e- or None) of frame ``k``.
+
+        ``raw`` is uint16 DN, or float32 e- with the ADC off (the ideal
+        readout, unclipped). The fused kernel renders it where numba is
+        installed and no stage detail is asked for; otherwise the stages run
+        one by one on the NumPy samplers (same bits).
+        """
+        k = _frame_index(k)
+        region = self._region(region)
+        timings = self.sensor.timings
         t0 = time.perf_counter()
-        raw = adc.convert(electrons, self.sensor.transfer)
-        self.sensor.timings["adc"] += time.perf_counter() - t0
-        return raw, electrons
+        if keep is None and kernel.AVAILABLE:
+            raw, e = kernel.render(self.plan(), k, region, electrons)
+            timings["frame_kernel"] += time.perf_counter() - t0
+            return raw, e
+        e = self._electrons(k, region, keep)
+        t = self.sensor.transfer
+        raw = adc.convert(e, t) if self.sensor.config.adc.enabled else e.astype(np.float32)
+        timings["frame_numpy"] += time.perf_counter() - t0
+        return raw, e.astype(np.float32)
 
-    def frame(self, k: int, detail: bool = False):
-        """Frame ``k``: raw DN (rows, cols) uint16, or a :class:`FrameDetail`.
+    def frame(self, k: int, detail: bool = False, region=None):
+        """Frame ``k``: raw (rows, cols) uint16 DN (float32 e- with the ADC off), or a :class:`FrameDetail`.
 
-        In a FrameDetail, ``contributions`` holds each stage's part in e-
-        (they sum to ``electrons``), plus ``quantization``: what the ADC's
-        rounding and clipping added, in e-.
+        ``region = (row0, row1, col0, col1)`` renders only that rectangle,
+        bit-identical to the same crop of the whole frame. In a FrameDetail,
+        ``contributions`` holds each stage's part in e- (they sum to
+        ``electrons``), plus ``quantization``: what the ADC's rounding and
+        clipping added, in e-.
         """
         keep = {} if detail else None
-        raw, electrons = self._render(int(k), keep)
+        raw, electrons = self._render(k, keep, region, electrons=detail)
         if not detail:
             return raw
-        keep["quantization"] = (self.sensor.transfer.to_electrons(raw) - electrons).astype(np.float32)
-        return FrameDetail(int(k), raw, electrons, keep)
+        if self.sensor.config.adc.enabled:
+            keep["quantization"] = (self.sensor.transfer.to_electrons(raw) - electrons).astype(np.float32)
+        return FrameDetail(_frame_index(k), raw, electrons, keep)
 
     def frames(self, n: int, first: int = 0) -> Iterator[np.ndarray]:
         """Raw frames ``first .. first + n - 1``, one at a time."""
@@ -370,6 +445,18 @@ class Exposure:
             yield self.frame(k)
 
     def frames_with_electrons(self, n: int, first: int = 0) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """(raw DN, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
+        """(raw, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
         for k in range(first, first + n):
-            yield self._render(k, None)
+            yield self._render(k)
+
+
+def _frame_index(k) -> int:
+    """A frame number: a whole number >= 0 (1.7 is refused, not truncated)."""
+    if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)):
+        if isinstance(k, (float, np.floating)) and float(k).is_integer():
+            k = int(k)
+        else:
+            raise CmosnoiseError(f"frame = {k!r}: a frame number must be a whole number >= 0")
+    if k < 0:
+        raise CmosnoiseError(f"frame = {k}: a frame number must be >= 0")
+    return int(k)

@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
+from ...engine.samplers import Stream
+
 
 def temporal_sigma_map(cols: int, gumbel_loc_e: float, gumbel_scale_e: float, rng: np.random.Generator) -> np.ndarray:
     """Fixed per-column temporal sigma (e-), shape (1, cols), float32, >= 0."""
@@ -31,14 +33,18 @@ def gain_map(cols: int, gain_sigma_pct: float, rng: np.random.Generator) -> np.n
     return np.maximum(1.0 + gain_sigma_pct / 100.0 * rng.standard_normal(cols), 0.0).astype(np.float32)[None, :]
 
 
-def temporal(sigma: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """One frame's column noise (e-), shape (1, cols): ``Normal(0, sigma_c)`` per column."""
-    return (sigma * rng.standard_normal(sigma.shape)).astype(np.float32)
+def temporal(sigma: np.ndarray, columns: np.ndarray, stream: Stream) -> np.ndarray:
+    """One frame's column noise (e-) of the column numbers ``columns``, shape (1, len), float64.
+
+    ``sigma`` is the per-column sigma map (1, cols); ``Normal(0, sigma_c)`` per column.
+    """
+    columns = np.asarray(columns)
+    return (np.asarray(sigma, np.float64)[0, columns] * stream.normal(columns))[None, :]
 
 
 def apply(signal_e: np.ndarray, gain: np.ndarray | None, offset_e: np.ndarray | None) -> np.ndarray:
     """The column amplifier: ``signal * gain + offset`` per column (e-)."""
-    out = signal_e * gain if gain is not None else signal_e.copy()
+    out = signal_e * gain if gain is not None else signal_e
     if offset_e is not None:
-        out += offset_e
+        out = out + offset_e
     return out

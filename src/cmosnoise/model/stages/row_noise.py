@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...engine.samplers import Stream
+
 
 def fixed_offsets(rows: int, fixed_sigma_e: float, rng: np.random.Generator) -> np.ndarray:
     """Fixed per-row offsets (e-), shape (rows, 1), float32."""
     return (fixed_sigma_e * rng.standard_normal((rows, 1))).astype(np.float32)
 
 
-def temporal(rows: int, sigma_e: float, rng: np.random.Generator) -> np.ndarray:
-    """One frame's row noise (e-), shape (rows, 1), float32: broadcast it over the columns."""
-    return (sigma_e * rng.standard_normal((rows, 1))).astype(np.float32)
+def temporal(rows: np.ndarray, sigma_e: float, stream: Stream) -> np.ndarray:
+    """One frame's row noise (e-) of the row numbers ``rows``, shape (len(rows), 1), float64."""
+    return (sigma_e * stream.normal(np.asarray(rows)))[:, None]

@@ -3,51 +3,56 @@
 The collected charge is ``N ~ Poisson(mu_photo + mu_dark)``: photon and dark
 shot noise in one draw (a sum of independent Poisson variables is Poisson).
 A part whose shot noise is switched off enters as its mean. The charge is
-then clipped at the full-well capacity.
+then clipped at the full-well capacity. The draws are counter-based
+(:mod:`cmosnoise.engine.samplers`): a pixel's count depends on its own mean
+and nothing else, so a scene changed at one pixel changes no other pixel.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ...engine.samplers import Stream
+
 
 def collect(
     noisy_mean_e: np.ndarray | None,
     exact_mean_e: np.ndarray | None,
     full_well_e: float,
-    rng: np.random.Generator | None,
+    stream: Stream | None,
     gaussian_above_e: float | None = None,
+    index: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Collected charge in one frame (e-), float32.
+    """Collected charge in one frame (e-), float64, any shape.
 
     Parameters
     ----------
-    noisy_mean_e : (rows, cols) array or None
+    noisy_mean_e : array or None
         Mean charge whose shot noise is simulated (e-).
-    exact_mean_e : (rows, cols) array or None
+    exact_mean_e : array or None
         Mean charge that enters without shot noise (e-).
     full_well_e : float
         Full-well capacity (e-); the charge is clipped there.
-    rng : numpy.random.Generator or None
-        This frame's temporal stream for the stage (needed with ``noisy_mean_e``).
+    stream : cmosnoise.engine.samplers.Stream or None
+        This frame's shot-noise stream (needed with ``noisy_mean_e``).
     gaussian_above_e : float or None
         Speed option: where the mean exceeds this, draw ``Normal(mu, sqrt(mu))``
         rounded to whole electrons instead of Poisson (the paper used 1000).
+    index : array of pixel indices ``r * cols + c``, the shape of the means
+        (default: 0, 1, 2, ... in C order, the pixels of a whole frame).
     """
     if noisy_mean_e is None:
         if exact_mean_e is None:
             raise ValueError("collect needs a noisy or an exact mean charge")
-        n = np.array(exact_mean_e, dtype=np.float32)
-        return np.minimum(n, np.float32(full_well_e), out=n)
+        n = np.asarray(exact_mean_e, dtype=np.float64)
+        return np.minimum(n, full_well_e)
     lam = np.asarray(noisy_mean_e, dtype=np.float64)
+    if index is None:
+        index = np.arange(lam.size, dtype=np.uint64).reshape(lam.shape)
     if gaussian_above_e is None:
-        n = rng.poisson(lam).astype(np.float32)
+        n = stream.poisson(lam, index)
     else:
-        big = lam > gaussian_above_e
-        n = np.empty(lam.shape, dtype=np.float32)
-        n[~big] = rng.poisson(lam[~big])
-        lb = lam[big]
-        n[big] = np.maximum(np.rint(lb + np.sqrt(lb) * rng.standard_normal(lb.shape)), 0)
+        n = stream.poisson_or_normal(lam, index, gaussian_above_e)
     if exact_mean_e is not None:
-        n += exact_mean_e
-    return np.minimum(n, np.float32(full_well_e), out=n)
+        n = n + np.asarray(exact_mean_e, dtype=np.float64)
+    return np.minimum(n, full_well_e)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
+from ...engine.samplers import Stream
 from ..heavy_tail import HeavyTail, variates
 
 
@@ -32,17 +33,21 @@ def flicker_sigma_map(model: HeavyTail, shape: tuple[int, int], rng: np.random.G
     return model.values(*variates(shape, rng)).astype(np.float32)
 
 
-def noise(shape: tuple[int, int], thermal_sigma_e: float, flicker_sigma: np.ndarray | None,
-          rng: np.random.Generator) -> np.ndarray:
-    """One frame of source-follower noise (e-), float32: thermal + per-pixel flicker.
+def total_sigma(thermal_sigma_e: float, flicker_sigma: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
+    """Each pixel's fixed source-follower sigma, ``sqrt(thermal**2 + flicker_i**2)`` (e-), float32 (rows, cols).
 
-    Both are zero-mean normal, so they are drawn as one normal with the
-    per-pixel standard deviation ``sqrt(thermal**2 + flicker_i**2)``.
+    Thermal and flicker noise are both zero-mean normal in each frame, so
+    they are drawn as one normal with this sigma. Computed once per sensor.
     """
     if flicker_sigma is None:
-        sigma = np.float32(thermal_sigma_e)
-    else:
-        sigma = np.sqrt(np.float32(thermal_sigma_e) ** 2 + flicker_sigma * flicker_sigma)
-    out = rng.standard_normal(shape, dtype=np.float32)
-    out *= sigma
-    return out
+        return np.full(shape, thermal_sigma_e, np.float32)
+    return np.sqrt(np.float32(thermal_sigma_e) ** 2 + flicker_sigma * flicker_sigma)
+
+
+def noise(sigma_e: np.ndarray, stream: Stream, index: np.ndarray) -> np.ndarray:
+    """One frame of source-follower noise (e-), float64: ``sigma_i * Normal(0, 1)`` per pixel.
+
+    ``sigma_e`` from :func:`total_sigma`; ``index`` the pixels' indices
+    ``r * cols + c``, same shape.
+    """
+    return np.asarray(sigma_e, np.float64) * stream.normal(index)

@@ -1,0 +1,228 @@
+"""The fused frame kernel: one pass from mean charge to raw codes, compiled by numba.
+
+For each pixel of a frame (or of a region of it): the Poisson draw of photo
+plus dark charge (or its mean where shot noise is off), the full-well clip,
+one normal with the pixel's fixed source-follower sigma, the row term, the
+column gain and column term, and the ADC, in one loop, parallel over rows.
+The arithmetic is that of :mod:`.samplers` and the stage modules, in the same
+order, so the result equals the NumPy implementation bit for bit; the
+helpers of :mod:`.fdmath` and :mod:`.samplers` are compiled from their own
+source (see :func:`_compiled`), not copied. Where numba is not installed,
+:func:`render` falls back to the NumPy implementation (slower, same bits).
+
+numba's own ``np.random`` keeps per-thread state inside a parallel loop, so
+its results would depend on the thread count: hence the counter-based
+generator. ``fastmath`` is off: no fused multiply-add, no reordering.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+import types
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import fdmath, philox, samplers
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised where numba is missing
+    numba = None
+
+#: whether the compiled kernel can run here
+AVAILABLE = numba is not None
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """What a frame needs that does not change from frame to frame (per sensor and exposure).
+
+    Arrays are full-frame: ``noisy_e``/``exact_e``/``sf_sigma_e`` (rows, cols)
+    float32, e-; ``row_offset_e`` (rows,), ``col_sigma_e``, ``col_offset_e``,
+    ``col_gain`` (cols,) float64. ``keys`` holds the two key words of the
+    shot-noise, source-follower, row and column streams, (4, 2) uint64.
+    A ``None`` switches that term off.
+    """
+
+    shape: tuple[int, int]
+    keys: np.ndarray
+    sequence: int
+    full_well_e: float
+    noisy_e: np.ndarray | None = None
+    exact_e: np.ndarray | None = None
+    normal_above_e: float = math.inf
+    sf_sigma_e: np.ndarray | None = None
+    row_sigma_e: float | None = None
+    row_offset_e: np.ndarray | None = None
+    col_sigma_e: np.ndarray | None = None
+    col_offset_e: np.ndarray | None = None
+    col_gain: np.ndarray | None = None
+    adc: tuple[float, float, int] | None = None  #: (K DN/e-, black level DN, top code); None: float32 e-
+
+
+# ------------------------------------------------------------------ compiled helpers
+def _compiled():
+    """The helpers of fdmath, philox and samplers compiled by numba from their own source.
+
+    Each function is re-created with its module's globals, where the exact
+    array helpers (``frexp``, ``ldexp``, ``where``) are replaced by their
+    scalar forms and every callee by its compiled version.
+    """
+    jit = numba.njit(inline="always", fastmath=False, error_model="numpy")
+    space: dict = {}
+
+    def where(c, a, b):
+        return a if c else b
+
+    def ldexp(y, k):
+        return math.ldexp(y, int(k))
+
+    scalar = {"frexp": math.frexp, "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor}
+    plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
+            (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
+            (samplers, ["normal_from", "ptrs_constants", "ptrs_try"])]
+    for module, names in plan:
+        g = dict(module.__dict__)
+        g.update(scalar)
+        g.update(space)
+        for name in names:
+            f = getattr(module, name)
+            space[name] = jit(types.FunctionType(f.__code__, g, name, f.__defaults__))
+            g[name] = space[name]
+    return space
+
+
+if numba is not None:
+    _h = _compiled()
+    _uniform_pair, _normal_from, _exp = _h["uniform_pair"], _h["normal_from"], _h["exp"]
+    _ptrs_constants, _ptrs_try = _h["ptrs_constants"], _h["ptrs_try"]
+    _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
+
+    @numba.njit(inline="always", fastmath=False, error_model="numpy")
+    def _normal(index, frame, seq, k0, k1):
+        u1, u2 = _uniform_pair(np.uint64(index), frame, seq, np.uint64(0), k0, k1)
+        return _normal_from(u1, u2)
+
+    @numba.njit(inline="always", fastmath=False, error_model="numpy")
+    def _poisson(lam, index, frame, seq, k0, k1):
+        if lam < _PTRS_FROM:
+            u, _ = _uniform_pair(index, frame, seq, np.uint64(0), k0, k1)
+            p = _exp(-lam)
+            total = p
+            k = 0.0
+            while u > total and k < _INV_MAX:
+                k = k + 1.0
+                p = p * lam / k
+                total = total + p
+            return k
+        loglam, a, b, invalpha, vr = _ptrs_constants(lam)
+        attempt = np.uint64(0)
+        while True:
+            u1, u2 = _uniform_pair(index, frame, seq, attempt, k0, k1)
+            k, ok = _ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2)
+            if ok:
+                return k
+            attempt += np.uint64(1)
+
+    @numba.njit(parallel=True, cache=True, fastmath=False, error_model="numpy", nogil=True)
+    def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
+                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, out_dn, out_e):
+        has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
+            flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
+        fr = np.uint64(frame)
+        sq = np.uint64(seq)
+        w = c1 - c0
+        colterm = np.zeros(w)
+        if has_col:
+            for j in range(w):
+                c = c0 + j
+                colterm[j] = col_offset[c] + col_sigma[c] * _normal(c, fr, sq, keys[3, 0], keys[3, 1])
+        for i in numba.prange(r1 - r0):
+            r = r0 + i
+            rowval = 0.0
+            if has_row:
+                rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
+            for j in range(w):
+                c = c0 + j
+                idx = np.uint64(r * cols + c)
+                n = 0.0
+                if has_noisy:
+                    lam = np.float64(noisy[r, c])
+                    if lam > normal_above:
+                        z = _normal(idx, fr, sq, keys[0, 0], keys[0, 1])
+                        n = max(np.rint(lam + np.sqrt(lam) * z), 0.0)
+                    else:
+                        n = _poisson(lam, idx, fr, sq, keys[0, 0], keys[0, 1])
+                if has_exact:
+                    n = n + np.float64(exact[r, c])
+                n = min(n, full_well)
+                if has_sf:
+                    n = n + np.float64(sf[r, c]) * _normal(idx, fr, sq, keys[1, 0], keys[1, 1])
+                if has_row:
+                    n = n + rowval
+                if has_col:
+                    n = n * col_gain[c] + colterm[j]
+                if want_e:
+                    out_e[i, j] = n
+                if adc_on:
+                    v = np.rint(n * k_adc + black)
+                    out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+
+
+_DUMMY2 = np.zeros((1, 1), np.float32)
+_DUMMY1 = np.zeros(1)
+
+
+def _announce_compile() -> bool:
+    """Whether the kernel still has to be compiled (first run after install); says so on stderr."""
+    if numba is None or _render.signatures:
+        return False
+    try:
+        cached = _render._cache._cache_file._load_index()  # numba's on-disk cache of this kernel
+    except Exception:
+        cached = None
+    if cached:
+        return False
+    print("cmosnoise: compiling the frame kernel for this machine (once; about 20 s) ...", file=sys.stderr, flush=True)
+    return True
+
+
+def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
+    """Frame ``frame`` of ``plan``: (raw, electrons or None).
+
+    ``region = (row0, row1, col0, col1)`` renders that rectangle alone
+    (bit-identical to the same crop of the whole frame). ``raw`` is uint16 DN,
+    or float32 e- with the ADC off; ``electrons`` (float32 e- at the ADC
+    input) only when asked for.
+    """
+    rows, cols = plan.shape
+    r0, r1, c0, c1 = region if region is not None else (0, rows, 0, cols)
+    if not (0 <= r0 < r1 <= rows and 0 <= c0 < c1 <= cols):
+        raise ValueError(f"region {region} is not inside the frame (0..{rows}, 0..{cols})")
+    if numba is None:  # pragma: no cover
+        raise RuntimeError("numba is not installed: use the NumPy implementation (the model does so by itself)")
+    h, w = r1 - r0, c1 - c0
+    adc_on = plan.adc is not None
+    out_dn = np.empty((h, w) if adc_on else (1, 1), np.uint16)
+    out_e = np.empty((h, w) if (electrons or not adc_on) else (1, 1), np.float32)
+    flags = np.array([plan.noisy_e is not None, plan.exact_e is not None, plan.sf_sigma_e is not None,
+                      plan.row_sigma_e is not None, plan.col_gain is not None, adc_on, electrons or not adc_on])
+    k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
+    compiling = _announce_compile()
+    t0 = time.perf_counter()
+    _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
+            plan.exact_e if plan.exact_e is not None else _DUMMY2, flags, float(plan.normal_above_e),
+            float(plan.full_well_e), plan.sf_sigma_e if plan.sf_sigma_e is not None else _DUMMY2,
+            float(plan.row_sigma_e or 0.0), plan.row_offset_e if plan.row_offset_e is not None else _DUMMY1,
+            plan.col_sigma_e if plan.col_sigma_e is not None else _DUMMY1,
+            plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
+            plan.col_gain if plan.col_gain is not None else _DUMMY1,
+            plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, float(k_adc), float(black), float(top),
+            out_dn, out_e)
+    if compiling:
+        print(f"cmosnoise: compiled in {time.perf_counter() - t0:.0f} s; later runs reuse it", file=sys.stderr, flush=True)
+    raw = out_dn if adc_on else out_e
+    return raw, (out_e if electrons or not adc_on else None)
