@@ -111,7 +111,11 @@ def cos_turn(u):
 
 
 def loggam(x):
-    """ln Gamma(x) for x >= 1 (numpy's ``random_loggam``, Stirling series, recursion below 7)."""
+    """ln Gamma(x) for whole x >= 1 (numpy's ``random_loggam``: Stirling series, recursion below 7).
+
+    The recursion's logs are taken as one log of their product (exact for
+    whole numbers), so the result differs from numpy's in the last bits only.
+    """
     n = where(x < 7.0, floor(7.0 - x), 0.0)
     x0 = x + n
     x2 = (1.0 / x0) * (1.0 / x0)
@@ -121,7 +125,10 @@ def loggam(x):
               8.333333333333333e-02):
         gl0 = gl0 * x2 + a
     gl = gl0 / x0 + 0.5 * 1.8378770664093453e00 + (x0 - 0.5) * log(x0) - x0
-    for i in range(1, 7):  # gl -= log(x0 - i) for i <= n
-        gl = where(n >= i, gl - log(where(n >= i, x0 - i, 2.0)), gl)
+    # numpy subtracts log(x0 - i) for i = 1..n; one log of the product (exact: whole numbers below 2**53)
+    prod = 1.0
+    for i in range(1, 7):
+        prod = where(n >= i, prod * (x0 - i), prod)
+    gl = gl - log(prod)
     gl = where(x == 1.0, 0.0, where(x == 2.0, 0.0, gl))
     return gl

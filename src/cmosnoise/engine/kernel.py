@@ -77,13 +77,19 @@ def _compiled():
     def where(c, a, b):
         return a if c else b
 
-    def ldexp(y, k):
-        return math.ldexp(y, int(k))
+    def ldexp(y, k):  # y * 2**k for |k| < 1023 and y in [0.5, 2): build 2**k from its bits
+        return y * np.uint64(np.uint64(int(k) + 1023) << np.uint64(52)).view(np.float64)
 
-    scalar = {"frexp": math.frexp, "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor}
+    def frexp(x):  # x = m 2**e, m in [0.5, 1), for positive normal x: read the bits, no libm call
+        bits = np.float64(x).view(np.uint64)
+        e = np.int64((bits >> np.uint64(52)) & np.uint64(0x7FF)) - 1022
+        m = np.uint64((bits & np.uint64(0x000FFFFFFFFFFFFF)) | np.uint64(0x3FE0000000000000)).view(np.float64)
+        return m, e
+
+    scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor}
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
             (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
-            (samplers, ["normal_from", "ptrs_constants", "ptrs_try"])]
+            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_accept"])]
     for module, names in plan:
         g = dict(module.__dict__)
         g.update(scalar)
@@ -98,7 +104,7 @@ def _compiled():
 if numba is not None:
     _h = _compiled()
     _uniform_pair, _normal_from, _exp = _h["uniform_pair"], _h["normal_from"], _h["exp"]
-    _ptrs_constants, _ptrs_try = _h["ptrs_constants"], _h["ptrs_try"]
+    _ptrs_constants, _ptrs_candidate, _ptrs_log_accept = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_accept"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
 
     @numba.njit(inline="always", fastmath=False, error_model="numpy")
@@ -120,12 +126,16 @@ if numba is not None:
             return k
         loglam, a, b, invalpha, vr = _ptrs_constants(lam)
         attempt = np.uint64(0)
-        while True:
+        while True:  # samplers.ptrs_try, with numpy's early exits
             u1, u2 = _uniform_pair(index, frame, seq, attempt, k0, k1)
-            k, ok = _ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2)
-            if ok:
-                return k
             attempt += np.uint64(1)
+            k, us, V = _ptrs_candidate(lam, a, b, u1, u2)
+            if us >= 0.07 and V <= vr:
+                return k
+            if k < 0.0 or (us < 0.013 and V > us):
+                continue
+            if _ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
+                return k
 
     @numba.njit(parallel=True, cache=True, fastmath=False, error_model="numpy", nogil=True)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,

@@ -64,18 +64,29 @@ def ptrs_constants(lam):
     return loglam, a, b, invalpha, vr
 
 
-def ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2):
-    """One PTRS try from uniforms (u1, u2): (k, accepted), numpy's order of tests."""
+def ptrs_candidate(lam, a, b, u1, u2):
+    """A PTRS try's candidate from uniforms (u1, u2): (k, us, V), numpy's ``random_poisson_ptrs``."""
     U = u1 - 0.5
     V = u2
     us = 0.5 - np.abs(U)
     k = np.floor((2.0 * a / us + b) * U + lam + 0.43)
-    quick = (us >= 0.07) & (V <= vr)
-    reject = (k < 0.0) | ((us < 0.013) & (V > us))
+    return k, us, V
+
+
+def ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
+    """PTRS's final test (after the quick accept and the rejection of k < 0 and the corners)."""
     kk = np.maximum(k, 0.0)
     lhs = log(V) + log(invalpha) - log(a / (us * us) + b)
     rhs = -lam + kk * loglam - loggam(kk + 1.0)
-    return k, quick | (np.logical_not(reject) & (lhs <= rhs))
+    return lhs <= rhs
+
+
+def ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2):
+    """One PTRS try, vectorized: (k, accepted), numpy's order of tests."""
+    k, us, V = ptrs_candidate(lam, a, b, u1, u2)
+    quick = (us >= 0.07) & (V <= vr)
+    reject = (k < 0.0) | ((us < 0.013) & (V > us))
+    return k, quick | (~reject & ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V))
 
 
 @dataclass(frozen=True)
