@@ -36,7 +36,8 @@ def test_ideal_readout_when_adc_is_off():
     cfg = quiet_config(adc={"enabled": False}, sensor={"width": 8, "height": 8, "cfa": "none"},
                        exposure={"integration_time_s": 1, "peak_rate_e_per_s": 1234.4})
     raw = Sensor(cfg).capture(scene="flat:1.0")
-    assert (raw == 1234).all()
+    # MODEL.md stage 9: the ideal readout is the charge itself, float32 e-, unquantized
+    assert raw.dtype == np.float32 and (raw == np.float32(1234.4)).all()
 
 
 def test_all_stages_off_gives_the_perfect_image_quantized():

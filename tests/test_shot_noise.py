@@ -4,6 +4,7 @@ import numpy as np
 from scipy import stats
 
 from cmosnoise import Sensor
+from cmosnoise.engine.samplers import Stream
 from cmosnoise.model.stages.shot_noise import collect
 
 from conftest import assert_close, quiet_config
@@ -66,7 +67,7 @@ def test_temporal_mean_follows_post_crosstalk_mean():
 
 
 def test_full_well_clips_charge():
-    rng = np.random.default_rng(0)
+    rng = Stream((11, 12), 0)  # a counter-based stream (key, frame)
     n = collect(np.full((50, 50), 5000.0, np.float32), None, 4000.0, rng)
     assert n.max() == 4000.0 and (n == 4000.0).all()
     n = collect(np.full((200, 200), 3990.0, np.float32), None, 4000.0, rng)
@@ -84,7 +85,7 @@ def test_exact_mean_enters_without_noise_and_is_clipped():
 
 
 def test_gaussian_approximation_has_poisson_moments():
-    rng = np.random.default_rng(5)
+    rng = Stream((51, 52), 0)
     lam = np.full(200_000, 5000.0)
     n = collect(lam, None, 1e9, rng, gaussian_above_e=1000.0).astype(np.float64)
     assert_close(n.mean(), 5000.0, np.sqrt(5000 / n.size), "mean")
@@ -94,7 +95,7 @@ def test_gaussian_approximation_has_poisson_moments():
 
 def test_shot_noise_values_are_poisson_chi_square():
     """Low mean, where the normal approximation is poor: chi-square goodness of fit to Poisson(3)."""
-    rng = np.random.default_rng(9)
+    rng = Stream((91, 92), 0)
     n = collect(np.full(100_000, 3.0), None, 1e9, rng).astype(int)
     ks = np.arange(0, 10)
     observed = np.array([(n == k).sum() for k in ks[:-1]] + [(n >= ks[-1]).sum()])
