@@ -1,0 +1,221 @@
+"""The noise engine (MODEL.md section 1): Philox, the samplers, and frames that never change a bit."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from cmosnoise import Sensor, load_config
+from cmosnoise.engine import fdmath, kernel
+from cmosnoise.engine.philox import philox4x32
+from cmosnoise.engine.samplers import Stream, poisson_inversion, ptrs_constants
+from conftest import Z, assert_close
+
+U = np.uint64
+
+
+# ------------------------------------------------------------------ Philox
+@pytest.mark.parametrize("ctr,key,expected", [  # Random123 kat_vectors, philox4x32 10
+    ((0, 0, 0, 0), (0, 0), (0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8)),
+    ((0xFFFFFFFF,) * 4, (0xFFFFFFFF,) * 2, (0x408F276D, 0x41C83B0E, 0xA20BC7C6, 0x6D5451FD)),
+    ((0x243F6A88, 0x85A308D3, 0x13198A2E, 0x03707344), (0xA4093822, 0x299F31D0),
+     (0xD16CFE09, 0x94FDCCEB, 0x5001E420, 0x24126EA1)),
+])
+def test_philox_known_answer_vectors(ctr, key, expected):
+    words = philox4x32(*(np.array([c], U) for c in ctr), *(np.array([k], U) for k in key))
+    assert tuple(int(w[0]) for w in words) == expected
+
+
+def test_uniforms_are_open_and_uniform():
+    u1, u2 = Stream((1, 2), 0).uniforms(np.arange(200_000, dtype=U))
+    u = np.concatenate([u1, u2])
+    assert 0 < u.min() and u.max() < 1
+    assert stats.kstest(u, "uniform").pvalue > 1e-6
+
+
+# ------------------------------------------------------------------ own math
+def test_own_log_exp_cos_loggam_match_the_correctly_rounded_functions():
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.uniform(2.0**-53, 1, 50_000), rng.uniform(1, 1e7, 50_000)])
+    ref = np.array([math.log(v) for v in x])
+    assert np.max(np.abs(fdmath.log(x) - ref) / np.spacing(np.abs(ref))) <= 1.0  # within 1 ulp
+    x = rng.uniform(-12, 0, 50_000)
+    ref = np.array([math.exp(v) for v in x])
+    assert np.max(np.abs(fdmath.exp(x) - ref) / np.spacing(ref)) <= 1.0
+    u = rng.uniform(0, 1, 50_000)
+    assert np.max(np.abs(fdmath.cos_turn(u) - np.cos(2 * np.pi * u))) < 2e-15
+    k = np.arange(1.0, 400.0)
+    np.testing.assert_allclose(fdmath.loggam(k), [math.lgamma(v) for v in k], rtol=1e-13, atol=1e-13)
+
+
+# ------------------------------------------------------------------ Poisson
+def test_inversion_below_10_equals_scipy_ppf_on_the_same_uniforms():
+    idx = np.arange(100_000, dtype=U)
+    for lam in (0.5, 5.0, 9.9):
+        u, _ = Stream((7, 8), 3).uniforms(idx)
+        k = poisson_inversion(np.full(u.shape, lam), u)
+        np.testing.assert_array_equal(k, stats.poisson.ppf(u, lam))
+
+
+def _numpy_ptrs(lam, uniforms):
+    """A plain port of numpy's random_poisson_ptrs (distributions.c), its loggam included."""
+    def loggam(x):
+        a = [8.333333333333333e-02, -2.777777777777778e-03, 7.936507936507937e-04, -5.952380952380952e-04,
+             8.417508417508418e-04, -1.917526917526918e-03, 6.410256410256410e-03, -2.955065359477124e-02,
+             1.796443723688307e-01, -1.39243221690590e+00]
+        if x in (1.0, 2.0):
+            return 0.0
+        n = int(7 - x) if x < 7.0 else 0
+        x0 = x + n
+        x2 = (1.0 / x0) * (1.0 / x0)
+        gl0 = a[9]
+        for k in range(8, -1, -1):
+            gl0 = gl0 * x2 + a[k]
+        gl = gl0 / x0 + 0.5 * 1.8378770664093453 + (x0 - 0.5) * math.log(x0) - x0
+        for _ in range(n):
+            gl -= math.log(x0 - 1.0)
+            x0 -= 1.0
+        return gl
+
+    slam, loglam = math.sqrt(lam), math.log(lam)
+    b = 0.931 + 2.53 * slam
+    a = -0.059 + 0.02483 * b
+    invalpha = 1.1239 + 1.1328 / (b - 3.4)
+    vr = 0.9277 - 3.6224 / (b - 2)
+    for u1, u2 in uniforms:
+        U_, V = u1 - 0.5, u2
+        us = 0.5 - abs(U_)
+        k = math.floor((2 * a / us + b) * U_ + lam + 0.43)
+        if us >= 0.07 and V <= vr:
+            return k
+        if k < 0 or (us < 0.013 and V > us):
+            continue
+        if math.log(V) + math.log(invalpha) - math.log(a / (us * us) + b) <= -lam + k * loglam - loggam(k + 1):
+            return k
+
+
+@pytest.mark.parametrize("lam", [10.0, 50.0, 1000.0, 5000.0])
+def test_ptrs_equals_a_port_of_numpys_algorithm_on_the_same_uniforms(lam):
+    s = Stream((21, 22), 5)
+    idx = np.arange(3000, dtype=U)
+    ours = s.poisson(np.full(idx.shape, lam), idx)
+    tries = [s.uniforms(idx, t) for t in range(12)]
+    theirs = [_numpy_ptrs(lam, ((tries[t][0][i], tries[t][1][i]) for t in range(12))) for i in range(idx.size)]
+    np.testing.assert_array_equal(ours, theirs)
+
+
+@pytest.mark.parametrize("lam", [0.5, 5.0, 9.9, 10.0, 50.0, 1000.0, 5000.0])
+def test_poisson_moments_and_chi_square(lam):
+    n = 200_000
+    k = Stream((31, 32), 1).poisson(np.full(n, lam), np.arange(n, dtype=U))
+    assert_close(k.mean(), lam, math.sqrt(lam / n), f"mean at {lam}")
+    assert_close(k.var(ddof=1), lam, math.sqrt((lam + 2 * lam**2) / n), f"variance at {lam}")
+    lo, hi = stats.poisson.ppf([1e-4, 1 - 1e-4], lam)
+    edges = np.arange(lo, hi + 2) - 0.5
+    observed = np.histogram(k, np.concatenate([[-np.inf], edges[1:-1], [np.inf]]))[0]
+    expected = n * np.diff(np.concatenate([[0.0], stats.poisson.cdf(edges[1:-1] - 0.5, lam), [1.0]]))
+    keep = expected >= 5
+    chi2 = np.sum((observed[keep] - expected[keep]) ** 2 / expected[keep])
+    assert stats.chi2.sf(chi2, keep.sum() - 1) > 1e-6  # about 5 sigma
+
+
+def test_normals_are_standard_normal():
+    z = Stream((41, 42), 0).normal(np.arange(200_000, dtype=U))
+    assert_close(z.mean(), 0.0, 1 / math.sqrt(z.size), "mean")
+    assert_close(z.var(ddof=1), 1.0, math.sqrt(2 / z.size), "variance")
+    assert stats.kstest(z, "norm").pvalue > 1e-6
+
+
+def test_ptrs_constants_are_numpys():
+    loglam, a, b, invalpha, vr = ptrs_constants(np.array([50.0]))
+    assert b[0] == pytest.approx(0.931 + 2.53 * math.sqrt(50)) and loglam[0] == pytest.approx(math.log(50))
+
+
+# ------------------------------------------------------------------ frames never change a bit
+def _full_chain(**extra):
+    over = ["sensor.width=61", "sensor.height=37", "column_noise.gain_sigma_pct=1", "row_noise.fixed_sigma_e=0.5"]
+    return Sensor(load_config(overrides=over, extra=extra or None), seed=11)
+
+
+needs_numba = pytest.mark.skipif(not kernel.AVAILABLE, reason="numba not installed")
+
+
+@needs_numba
+@pytest.mark.parametrize("extra", [{}, {"shot_noise": {"gaussian_above_e": 50.0}}, {"adc": {"enabled": False}}],
+                         ids=["default", "normal-approx", "adc-off"])
+def test_kernel_equals_the_numpy_implementation_on_any_threads_and_tiling(extra):
+    import numba
+
+    shot = _full_chain(**extra).expose("photo")
+    reference = shot.frame(3, detail=True)  # the NumPy implementation, stage by stage
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = shot.frame(3)
+    finally:
+        numba.set_num_threads(threads)
+    full = shot.frame(3)
+    np.testing.assert_array_equal(full, reference.raw)
+    np.testing.assert_array_equal(one, full)
+    rows, cols = full.shape
+    for tile in [(7, 5), (16, 16), (37, 61)]:
+        tiled = np.block([[shot.frame(3, region=(r, min(r + tile[0], rows), c, min(c + tile[1], cols)))
+                           for c in range(0, cols, tile[1])] for r in range(0, rows, tile[0])])
+        np.testing.assert_array_equal(tiled, full)
+    # a crop through the NumPy path equals the kernel's crop
+    crop = shot.frame(3, detail=True, region=(4, 20, 9, 50))
+    np.testing.assert_array_equal(crop.raw, full[4:20, 9:50])
+
+
+def test_frame_k_alone_equals_frame_k_of_a_run():
+    shot = _full_chain().expose("ramp")
+    run = [shot.frame(k) for k in range(5)]
+    np.testing.assert_array_equal(shot.frame(3), run[3])
+    assert not np.array_equal(run[2], run[3])
+
+
+def test_a_scene_changed_at_one_pixel_changes_no_other_pixel():
+    sensor = Sensor(load_config(overrides=["sensor.width=64", "sensor.height=48", "crosstalk.enabled=false"]), seed=2)
+    scene = np.full((48, 64), 0.002)  # 200 e- at the default exposure
+    a = sensor.expose(scene).frame(0)
+    scene[0, 0] = 0.0
+    b = sensor.expose(scene).frame(0)
+    changed = a != b
+    assert changed[0, 0] and changed.sum() == 1
+
+
+def test_a_row_noise_change_changes_only_the_row_term():
+    over = ["sensor.width=64", "sensor.height=48"]
+    a = Sensor(load_config(overrides=over), seed=4).expose("photo").frame(1, detail=True)
+    b = Sensor(load_config(overrides=over + ["row_noise.sigma_e=3"]), seed=4).expose("photo").frame(1, detail=True)
+    for stage, part in a.contributions.items():
+        if stage not in ("row_noise", "quantization"):
+            np.testing.assert_array_equal(part, b.contributions[stage], err_msg=stage)
+    ratio = b.contributions["row_noise"][:, 0] / a.contributions["row_noise"][:, 0]
+    np.testing.assert_allclose(ratio, 3 / 0.4, rtol=1e-6)  # the same normals, rescaled
+
+
+def test_adc_off_reads_electrons_unclipped_and_unbiased():
+    cfg = load_config(overrides=["sensor.width=200", "sensor.height=150", "adc.enabled=false", "prnu.enabled=false",
+                                 "dark_current.enabled=false", "row_noise.enabled=false", "column_noise.enabled=false",
+                                 "source_follower.flicker.enabled=false", "source_follower.thermal_sigma_e=2"])
+    raw = Sensor(cfg, seed=0).expose("flat:0").frame(0)
+    assert raw.dtype == np.float32 and raw.min() < 0
+    assert_close(float(raw.mean()), 0.0, 2 / math.sqrt(raw.size), "mean")
+    assert_close(float(raw.std(ddof=1)), 2.0, 2 / math.sqrt(2 * (raw.size - 1)), "std")
+
+
+@pytest.mark.parametrize("bad", [1.7, -1, "x"])
+def test_a_frame_number_must_be_a_whole_number(bad):
+    from cmosnoise import CmosnoiseError
+
+    with pytest.raises(CmosnoiseError, match="frame"):
+        _full_chain().expose("flat:0.1").frame(bad)
+
+
+def test_a_region_outside_the_frame_is_refused():
+    from cmosnoise import CmosnoiseError
+
+    with pytest.raises(CmosnoiseError, match="region"):
+        _full_chain().expose("flat:0.1").frame(0, region=(0, 100, 0, 10))
