@@ -41,7 +41,8 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
         out["row"] = c.row_noise.sigma_e**2 * g2
     if fp.column_sigma is not None:
         out["column"] = float(np.mean(fp.column_sigma.astype(np.float64) ** 2))
-    out["quantization"] = 1.0 / (12.0 * t.gain_dn_per_e**2)
+    if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
+        out["quantization"] = 1.0 / (12.0 * t.gain_dn_per_e**2)
     return out
 
 

@@ -25,6 +25,7 @@ from .._version import __version__
 from ..analysis import noise_budget, white_pixels
 from ..analysis.run_stats import RunStats
 from ..config import Config, ProcessingSection, build_config
+from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
 from ..io.output import OutputFolder, write_json
@@ -49,6 +50,8 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
     source = config.scene.source
     if Path(source).is_file():  # record a file scene by its absolute path: config.yaml reruns from anywhere
         config = with_updates(config, {"scene": {"source": str(Path(source).resolve())}})
+    if config.run.dng and not config.adc.enabled:
+        raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     folder = OutputFolder(out)  # fails early if out cannot be written
     with folder as tmp:
         t_start = time.perf_counter()
@@ -98,12 +101,14 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
             sensor.cfa, transfer.black_level_dn, transfer.bits, transfer.gain_dn_per_e,
             first_frame=first, seed=config.seed, cmosnoise_version=__version__,
             scene_white_dn=info.white_dn, channel_responsivity=list(info.responsivity),
-            crosstalk_kernel_pct=info.crosstalk_kernel_pct,
+            crosstalk_kernel_pct=info.crosstalk_kernel_pct, generator=generator_info(),
+            units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)",
         )
         cm = progress(n) if progress else contextlib.nullcontext(lambda: None)
         try:
             with cm as advance:
-                write_raw_tiff(tmp / "raw.tiff", frames(advance), n, sensor.shape, meta)
+                write_raw_tiff(tmp / "raw.tiff", frames(advance), n, sensor.shape, meta,
+                               "uint16" if config.adc.enabled else "float32")
         finally:
             if video is not None:
                 video.close()
@@ -183,6 +188,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
     predicted = noise_budget.budget(sensor, float(shot.photo_mean_e.mean()))
     return {
         "cmosnoise_version": __version__,
+        "generator": generator_info(),
         "seed": c.seed,
         "scene": c.scene.source,
         "frames": n,

@@ -182,6 +182,18 @@ if numba is not None:
                     out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
 
 
+def generator_info() -> dict:
+    """What made the random numbers, for every output's metadata (MODEL.md section 1)."""
+    return {
+        "scheme": "philox4x32-10; counter (index, frame, sequence, try); Box-Muller normals; "
+                  "Poisson by inversion below 10, PTRS from 10",
+        "scheme_version": samplers.SCHEME_VERSION,
+        "numpy": np.__version__,
+        "numba": numba.__version__ if numba is not None else None,
+        "frame_kernel": "numba" if AVAILABLE else "numpy",
+    }
+
+
 _DUMMY2 = np.zeros((1, 1), np.float32)
 _DUMMY1 = np.zeros(1)
 

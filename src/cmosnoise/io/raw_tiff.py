@@ -38,8 +38,11 @@ def raw_metadata(cfa: str, black_level_dn: float, bits: int, gain_dn_per_e: floa
     }
 
 
-def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape: tuple[int, int], metadata: dict) -> None:
-    """Write ``n`` uint16 frames of ``shape`` as one (n, rows, cols) TIFF series, frame by frame.
+def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape: tuple[int, int], metadata: dict,
+                   dtype: str = "uint16") -> None:
+    """Write ``n`` frames of ``shape`` as one (n, rows, cols) TIFF series, frame by frame.
+
+    ``dtype`` is uint16 for raw codes, float32 for the ideal readout (e-, ADC off).
 
     The CFA pattern also goes into the TIFF/EP ``CFARepeatPatternDim`` and
     ``CFAPattern`` tags so that raw tools can read it.
@@ -47,9 +50,10 @@ def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape
     import tifffile
 
     extratags = cfa_tags(metadata.get("cfa", "none"))
-    with tifffile.TiffWriter(path, bigtiff=n * shape[0] * shape[1] * 2 > 2**31) as tw:
+    size = n * shape[0] * shape[1] * np.dtype(dtype).itemsize
+    with tifffile.TiffWriter(path, bigtiff=size > 2**31) as tw:
         tw.write(
-            frames, shape=(n, *shape), dtype="uint16", photometric="minisblack",
+            frames, shape=(n, *shape), dtype=dtype, photometric="minisblack",
             metadata=metadata, extratags=extratags,
         )
 
@@ -62,7 +66,7 @@ def write_float_tiff(path: str | Path, image: np.ndarray, metadata: dict) -> Non
 
 
 def read_raw_tiff(path: str | Path) -> tuple[np.ndarray, dict]:
-    """Read raw frames written by :func:`write_raw_tiff`: (frames, rows, cols) uint16 and metadata."""
+    """Read raw frames written by :func:`write_raw_tiff`: (frames, rows, cols) and metadata."""
     import tifffile
 
     try:
