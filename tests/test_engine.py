@@ -10,7 +10,7 @@ from cmosnoise import Sensor, load_config
 from cmosnoise.engine import fdmath, kernel
 from cmosnoise.engine.philox import philox4x32
 from cmosnoise.engine.samplers import Stream, poisson_inversion, ptrs_constants
-from conftest import Z, assert_close
+from conftest import assert_close
 
 U = np.uint64
 
