@@ -9,7 +9,7 @@ from scipy import stats
 from cmosnoise import Sensor, load_config
 from cmosnoise.engine import fdmath, kernel
 from cmosnoise.engine.philox import philox4x32
-from cmosnoise.engine.samplers import Stream, poisson_inversion, ptrs_constants
+from cmosnoise.engine.samplers import Stream, poisson_inversion
 from conftest import assert_close
 
 U = np.uint64
@@ -125,11 +125,6 @@ def test_normals_are_standard_normal():
     assert_close(z.mean(), 0.0, 1 / math.sqrt(z.size), "mean")
     assert_close(z.var(ddof=1), 1.0, math.sqrt(2 / z.size), "variance")
     assert stats.kstest(z, "norm").pvalue > 1e-6
-
-
-def test_ptrs_constants_are_numpys():
-    loglam, a, b, invalpha, vr = ptrs_constants(np.array([50.0]))
-    assert b[0] == pytest.approx(0.931 + 2.53 * math.sqrt(50)) and loglam[0] == pytest.approx(math.log(50))
 
 
 # ------------------------------------------------------------------ frames never change a bit

@@ -94,7 +94,7 @@ def test_summary_has_the_reports_key_figures(report_run):
 
 
 @pytest.fixture(scope="module")
-def gallery(tmp_path_factory):
+def gallery():
     from cmosnoise.app.figures import FIGURES
 
     return {f.__name__: f(seed=0) for f in FIGURES}
