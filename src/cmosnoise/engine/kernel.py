@@ -112,6 +112,21 @@ if numba is not None:
         u1, u2 = _uniform_pair(np.uint64(index), frame, seq, np.uint64(0), k0, k1)
         return _normal_from(u1, u2)
 
+    @numba.njit(fastmath=False, error_model="numpy")
+    def _ptrs_from(lam, index, frame, seq, k0, k1, attempt):
+        """PTRS from try ``attempt`` on (samplers.Stream.poisson's loop, numpy's early exits)."""
+        loglam, a, b, invalpha, vr = _ptrs_constants(lam)
+        while True:
+            u1, u2 = _uniform_pair(index, frame, seq, attempt, k0, k1)
+            attempt += np.uint64(1)
+            k, us, V = _ptrs_candidate(lam, a, b, u1, u2)
+            if us >= 0.07 and V <= vr:
+                return k
+            if k < 0.0 or (us < 0.013 and V > us):
+                continue
+            if _ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
+                return k
+
     @numba.njit(inline="always", fastmath=False, error_model="numpy")
     def _poisson(lam, index, frame, seq, k0, k1):
         if lam < _PTRS_FROM:
@@ -137,49 +152,191 @@ if numba is not None:
             if _ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
                 return k
 
-    @numba.njit(parallel=True, cache=True, fastmath=False, error_model="numpy", nogil=True)
+    _JIT = dict(fastmath=False, error_model="numpy")
+    _ROWS_PER_BLOCK = 8
+
+    @numba.njit(inline="always", **_JIT)
+    def _ptrs_test(m, u1, u2):
+        """One whole PTRS try, branch-free: the count if accepted, else -1 (samplers.ptrs_try)."""
+        loglam, a, b, invalpha, vr = _ptrs_constants(m)
+        k, us, V = _ptrs_candidate(m, a, b, u1, u2)
+        quick = (us >= 0.07) & (V <= vr)
+        reject = (k < 0.0) | ((us < 0.013) & (V > us))
+        ok = quick | (~reject & _ptrs_log_accept(m, loglam, a, b, invalpha, k, us, V))
+        return k if ok else -1.0
+
+    @numba.njit(inline="always", **_JIT)
+    def _shot_row(lam, u1, u2, res, small, big, normal_above):
+        """Shot noise of one row, first pass: every pixel's first PTRS quick test, branch-free (SIMD).
+
+        Leaves the count in ``res`` where the quick test accepts (or the normal
+        approximation applies), -1 elsewhere; the positions left go to
+        ``small`` (mean below 10: inversion) and ``big`` (PTRS retries).
+        Returns how many of each.
+        """
+        w = lam.size
+        for j in range(w):
+            m = lam[j]
+            loglam, a, b, invalpha, vr = _ptrs_constants(m)
+            k, us, V = _ptrs_candidate(m, a, b, u1[j], u2[j])
+            quick = (us >= 0.07) & (V <= vr) & (m >= _PTRS_FROM)
+            res[j] = k if quick else -1.0
+        if normal_above < np.inf:
+            for j in range(w):
+                m = lam[j]
+                z = _normal_from(u1[j], u2[j])
+                approx = max(np.rint(m + np.sqrt(m) * z), 0.0)
+                res[j] = approx if m > normal_above else res[j]
+        ns = 0
+        nb = 0
+        for j in range(w):
+            if res[j] < 0.0:
+                if lam[j] < _PTRS_FROM:
+                    small[ns] = j
+                    ns += 1
+                else:
+                    big[nb] = j
+                    nb += 1
+        return ns, nb
+
+    _LANES = 16
+
+    @numba.njit(inline="always", **_JIT)
+    def _inversion_lanes(m, u, out):
+        """Poisson by inversion (samplers.poisson_inversion) for _LANES pixels at once, until all are done."""
+        p = np.empty(_LANES)
+        total = np.empty(_LANES)
+        for q in range(_LANES):
+            p[q] = _exp(-m[q])
+            total[q] = p[q]
+            out[q] = 0.0
+        kk = 0.0
+        while kk < _INV_MAX:
+            kk = kk + 1.0
+            busy = False
+            for q in range(_LANES):
+                on = u[q] > total[q]
+                pn = p[q] * m[q] / kk
+                tn = total[q] + pn
+                p[q] = pn if on else p[q]
+                total[q] = tn if on else total[q]
+                out[q] = kk if on else out[q]
+                busy = busy | on
+            if not busy:
+                break
+
+    @numba.njit(inline="always", **_JIT)
+    def _shot_rest(lam, u1, u2, res, small, ns, big, nb, bl, bu1, bu2, bk, base, frame, seq, k0, k1):
+        """The pixels the first pass left: inversion below 10 in SIMD lanes; PTRS: all of try 0, try 1, then further tries.
+
+        Pixels are copied into the contiguous buffers ``bl``, ``bu1``,
+        ``bu2``, ``bk`` before each branch-free pass: LLVM vectorizes a pass
+        over contiguous memory, not one through an index list.
+        """
+        m = np.empty(_LANES)
+        u = np.empty(_LANES)
+        got = np.empty(_LANES)
+        for t0 in range(0, ns, _LANES):  # inversion, _LANES pixels at a time (the last lanes padded)
+            for q in range(_LANES):
+                t = min(t0 + q, ns - 1)
+                m[q] = lam[small[t]]
+                u[q] = u1[small[t]]
+            _inversion_lanes(m, u, got)
+            for q in range(min(_LANES, ns - t0)):
+                res[small[t0 + q]] = got[q]
+        for t in range(nb):
+            j = big[t]
+            bl[t] = lam[j]
+            bu1[t] = u1[j]
+            bu2[t] = u2[j]
+        for t in range(nb):  # PTRS: the whole of try 0 where the quick test did not accept
+            bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
+        nf = 0
+        for t in range(nb):
+            if bk[t] < 0.0:
+                big[nf] = big[t]
+                bl[nf] = bl[t]
+                nf += 1
+            else:
+                res[big[t]] = bk[t]
+        one = np.uint64(1)
+        for t in range(nf):  # try 1, branch-free
+            bu1[t], bu2[t] = _uniform_pair(base + np.uint64(big[t]), frame, seq, one, k0, k1)
+        for t in range(nf):
+            bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
+        for t in range(nf):  # further tries, one pixel at a time (about 2 % of pixels)
+            k = bk[t]
+            if k < 0.0:
+                k = _ptrs_from(bl[t], base + np.uint64(big[t]), frame, seq, k0, k1, np.uint64(2))
+            res[big[t]] = k
+
+    @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
                 col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, out_dn, out_e):
         has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
             flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
         fr = np.uint64(frame)
         sq = np.uint64(seq)
+        zero = np.uint64(0)
         w = c1 - c0
+        h = r1 - r0
         colterm = np.zeros(w)
+        gain = np.ones(w)
         if has_col:
             for j in range(w):
                 c = c0 + j
                 colterm[j] = col_offset[c] + col_sigma[c] * _normal(c, fr, sq, keys[3, 0], keys[3, 1])
-        for i in numba.prange(r1 - r0):
-            r = r0 + i
-            rowval = 0.0
-            if has_row:
-                rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
-            for j in range(w):
-                c = c0 + j
-                idx = np.uint64(r * cols + c)
-                n = 0.0
+                gain[j] = col_gain[c]
+        s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
+        nblocks = (h + _ROWS_PER_BLOCK - 1) // _ROWS_PER_BLOCK
+        for blk in numba.prange(nblocks):
+            lam = np.empty(w)
+            u1 = np.empty(w)
+            u2 = np.empty(w)
+            small = np.empty(w, np.int64)
+            big = np.empty(w, np.int64)
+            bl = np.empty(w)
+            bu1 = np.empty(w)
+            bu2 = np.empty(w)
+            bk = np.empty(w)
+            n = np.zeros(w)
+            noise = np.empty(w)
+            for i in range(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK)):
+                r = r0 + i
+                base = np.uint64(r * cols + c0)
                 if has_noisy:
-                    lam = np.float64(noisy[r, c])
-                    if lam > normal_above:
-                        z = _normal(idx, fr, sq, keys[0, 0], keys[0, 1])
-                        n = max(np.rint(lam + np.sqrt(lam) * z), 0.0)
-                    else:
-                        n = _poisson(lam, idx, fr, sq, keys[0, 0], keys[0, 1])
+                    for j in range(w):
+                        lam[j] = np.float64(noisy[r, c0 + j])
+                        u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, s0, s1)
+                    ns, nb = _shot_row(lam, u1, u2, n, small, big, normal_above)
+                    _shot_rest(lam, u1, u2, n, small, ns, big, nb, bl, bu1, bu2, bk, base, fr, sq, s0, s1)
                 if has_exact:
-                    n = n + np.float64(exact[r, c])
-                n = min(n, full_well)
+                    for j in range(w):
+                        n[j] = n[j] + np.float64(exact[r, c0 + j])
+                for j in range(w):
+                    n[j] = min(n[j], full_well)
                 if has_sf:
-                    n = n + np.float64(sf[r, c]) * _normal(idx, fr, sq, keys[1, 0], keys[1, 1])
+                    for j in range(w):
+                        v1, v2 = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
+                        noise[j] = np.float64(sf[r, c0 + j]) * _normal_from(v1, v2)
+                    for j in range(w):
+                        n[j] = n[j] + noise[j]
                 if has_row:
-                    n = n + rowval
+                    rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
+                    for j in range(w):
+                        n[j] = n[j] + rowval
                 if has_col:
-                    n = n * col_gain[c] + colterm[j]
+                    for j in range(w):
+                        n[j] = n[j] * gain[j] + colterm[j]
                 if want_e:
-                    out_e[i, j] = n
+                    for j in range(w):
+                        out_e[i, j] = n[j]
                 if adc_on:
-                    v = np.rint(n * k_adc + black)
-                    out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+                    for j in range(w):
+                        v = np.rint(n[j] * k_adc + black)
+                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+                if not has_noisy:
+                    n[:] = 0.0
 
 
 def generator_info() -> dict:
