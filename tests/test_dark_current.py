@@ -215,6 +215,13 @@ def test_couplets_are_same_colour_neighbours():
     assert pairs.tolist() == [[[2, 2], [3, 3]]]
 
 
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG", "none"])
+def test_neighbour_pairs_closed_form_counts_every_pair(pattern):
+    """The closed form equals the couplets of an all-white array, odd and even sizes, down to 1 x 1."""
+    for shape in [(1, 1), (1, 6), (2, 2), (3, 3), (4, 7), (7, 4), (9, 10), (37, 51)]:
+        assert white_pixels.neighbour_pairs(shape, pattern) == white_pixels.count_couplets(np.ones(shape, bool), pattern)
+
+
 @pytest.mark.parametrize("pattern", ["RGGB", "GBRG", "none"])
 def test_expected_couplets_for_random_placement(pattern):
     rng = np.random.default_rng(7)

@@ -50,6 +50,18 @@ def test_noise_free_raw_processes_back_to_the_scene(pattern, method):
         assert err.max() <= bound, f"largest patch error {err.max():.2f} codes (bound {bound:.2f})"
 
 
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
+def test_bilinear_demosaicing_is_colour_demosaicings(pattern):
+    """The in-house bilinear (for a fast start) gives colour-demosaicing's result, edges included."""
+    import colour_demosaicing as cd
+
+    from cmosnoise.isp.reconstruction import bilinear
+
+    img = np.random.default_rng(3).uniform(0, 4095, (37, 50))
+    expected = cd.demosaicing_CFA_Bayer_bilinear(img, pattern)
+    np.testing.assert_allclose(bilinear(img, pattern), expected, rtol=1e-6, atol=1e-3)
+
+
 def _delta_e(rgb8_a, rgb8_b):
     import colour
 

@@ -20,9 +20,16 @@ import numpy as np
 
 
 def temporal_variance(a: np.ndarray, b: np.ndarray) -> float:
-    """Temporal variance (DN^2) from two frames of the same scene."""
-    d = a.astype(np.float64) - b.astype(np.float64)
-    return float(np.var(d) / 2)
+    """Temporal variance (DN^2) from two frames of the same scene: ``var(a - b) / 2``.
+
+    The difference is taken in float64 (exact for integer frames), in one
+    temporary array, with the variance in place. (Not ``np.dot``: BLAS's
+    threads keep spinning after the call and slow the next frame's kernel.)
+    """
+    d = np.subtract(a, b, dtype=np.float64)
+    d -= d.mean()
+    np.square(d, out=d)
+    return float(d.mean() / 2)
 
 
 def temporal_variance_stack(stack: np.ndarray) -> float:

@@ -35,39 +35,62 @@ def _shifted_pairs(a: np.ndarray, b_mask: np.ndarray, dr: int, dc: int):
     return out
 
 
+def _pair_starts(mask: np.ndarray, pattern: str) -> list[tuple[tuple[int, int], np.ndarray]]:
+    """For each neighbour offset (each pair counted once), the pixels a pair may start from."""
+    all_offsets, green_offsets = _pair_offsets(pattern)
+    if cfa_mod.is_mono(pattern):
+        return [(o, mask) for o in all_offsets]
+    green = cfa_mod.channel_map(pattern, mask.shape) == 1
+    return ([(o, mask) for o in all_offsets] + [(o, mask & green) for o in green_offsets]
+            + [(o, mask & ~green) for o in [(2, 2), (2, -2)]])
+
+
 def couplet_pairs(mask: np.ndarray, pattern: str) -> np.ndarray:
     """Coordinates of every couplet: array (n, 2, 2) of ((r1, c1), (r2, c2))."""
     mask = np.asarray(mask, dtype=bool)
-    all_offsets, green_offsets = _pair_offsets(pattern)
     pairs = []
-    if not cfa_mod.is_mono(pattern):
-        cmap = cfa_mod.channel_map(pattern, mask.shape)
-        green = cmap == 1
-        rb = ~green
-        offsets = [(o, mask) for o in all_offsets] + [(o, mask & green) for o in green_offsets]
-        offsets += [(o, mask & rb) for o in [(2, 2), (2, -2)]]
-    else:
-        offsets = [(o, mask) for o in all_offsets]
-    for (dr, dc), start in offsets:
-        hit = _shifted_pairs(start, mask, dr, dc)
-        r, c = np.nonzero(hit)
+    for (dr, dc), start in _pair_starts(mask, pattern):
+        r, c = np.nonzero(_shifted_pairs(start, mask, dr, dc))
         pairs.append(np.stack([np.stack([r, c], -1), np.stack([r + dr, c + dc], -1)], 1))
     return np.concatenate(pairs) if pairs else np.zeros((0, 2, 2), int)
 
 
 def count_couplets(mask: np.ndarray, pattern: str) -> int:
     """Number of couplets (pairs of same-colour neighbouring white pixels)."""
-    return int(len(couplet_pairs(mask, pattern)))
+    mask = np.asarray(mask, dtype=bool)
+    return sum(int(np.count_nonzero(_shifted_pairs(start, mask, dr, dc))) for (dr, dc), start in _pair_starts(mask, pattern))
+
+
+def neighbour_pairs(shape: tuple[int, int], pattern: str) -> int:
+    """How many same-colour neighbour pairs an array of this shape has (every place a couplet could be)."""
+    rows, cols = shape
+    n = 0
+    for (dr, dc), start in _pair_starts(np.ones((min(rows, 4), min(cols, 4)), bool), pattern):
+        # pairs start in rows [0, rows - dr) and columns [max(0, -dc), cols - max(0, dc));
+        # the CFA repeats every 2 pixels, so count the starting pixels of one 2 x 2 cell and scale
+        r_n, c_lo, c_hi = rows - dr, max(0, -dc), cols - max(0, dc)
+        if r_n <= 0 or c_hi <= c_lo:
+            continue
+        for pr in range(min(2, start.shape[0])):
+            for pc in range(min(2, start.shape[1])):
+                if start[pr, pc]:
+                    n += _count_in(0, r_n, pr) * _count_in(c_lo, c_hi, pc)
+    return n
+
+
+def _count_in(lo: int, hi: int, parity: int) -> int:
+    """How many whole numbers in [lo, hi) have this parity (0 or 1)."""
+    first = lo + ((parity - lo) % 2)
+    return max(0, (hi - first + 1) // 2)
 
 
 def expected_couplets(shape: tuple[int, int], pattern: str, white_fraction: float) -> float:
     """Couplets expected if white pixels were placed at random with this density.
 
-    Each of the array's same-colour neighbour pairs is a couplet with
-    probability ``white_fraction**2``.
+    Each of the array's same-colour neighbour pairs (:func:`neighbour_pairs`,
+    a closed form) is a couplet with probability ``white_fraction**2``.
     """
-    n_pairs = count_couplets(np.ones(shape, dtype=bool), pattern)
-    return n_pairs * white_fraction**2
+    return neighbour_pairs(shape, pattern) * white_fraction**2
 
 
 def report(values: np.ndarray, threshold: float, pattern: str) -> dict:

@@ -28,7 +28,7 @@ from ..config import Config, ProcessingSection, build_config
 from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
-from ..io.output import OutputFolder, write_json
+from ..io.output import OutputFolder, write_json, write_png
 from ..io.raw_tiff import raw_metadata, read_raw_tiff, write_float_tiff, write_raw_tiff
 from ..io.video import VideoWriter
 from ..isp import calibration
@@ -45,7 +45,6 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
     ``progress``, if given, is called with the frame count and returns a
     context manager whose value is called once per frame (``advance()``).
     """
-    import imageio.v3 as iio
 
     source = config.scene.source
     if Path(source).is_file():  # record a file scene by its absolute path: config.yaml reruns from anywhere
@@ -115,14 +114,14 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         t_frames = time.perf_counter() - t_start
 
         pre_view = processor.render(frame0[0], pre=True)
-        iio.imwrite(tmp / "preview.png", pre_view)
+        write_png(tmp / "preview.png", pre_view)
         processed = rendered0[0] if rendered0 else None
         if processed is None and (proc_cfg.enabled or config.run.report):
             tp = time.perf_counter()
             processed = processor.render(frame0[0])
             t_process += time.perf_counter() - tp
         if proc_cfg.enabled:
-            iio.imwrite(tmp / "processed.png", processed)
+            write_png(tmp / "processed.png", processed)
         (tmp / "config.yaml").write_text(config.to_yaml())
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
         summary["processing"] = processing_summary(processor, t_dark, t_process)
@@ -236,7 +235,6 @@ def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, ove
     """Process a raw TIFF into ``out``: processed.png (frame 0), processed.mp4 (several frames), summary.json."""
     import time
 
-    import imageio.v3 as iio
 
 
     folder = OutputFolder(out)
@@ -258,8 +256,8 @@ def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, ove
     processor.check_shape(data.shape[1:])
     with folder as tmp:
         t0 = time.perf_counter()
-        iio.imwrite(tmp / "processed.png", processor.render(data[0]))
-        iio.imwrite(tmp / "preview.png", processor.render(data[0], pre=True))
+        write_png(tmp / "processed.png", processor.render(data[0]))
+        write_png(tmp / "preview.png", processor.render(data[0], pre=True))
         if len(data) > 1:
             with VideoWriter(tmp / "processed.mp4", settings.video_fps) as video:
                 for frame in data:

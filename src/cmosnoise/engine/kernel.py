@@ -189,17 +189,17 @@ if numba is not None:
                 res[j] = approx if m > normal_above else res[j]
         ns = 0
         nb = 0
-        for j in range(w):
-            if res[j] < 0.0:
-                if lam[j] < _PTRS_FROM:
-                    small[ns] = j
-                    ns += 1
-                else:
-                    big[nb] = j
-                    nb += 1
+        for j in range(w):  # branch-free compaction: write always, advance where it belongs
+            left = res[j] < 0.0
+            low = lam[j] < _PTRS_FROM
+            small[ns] = j
+            big[nb] = j
+            ns += 1 if (left & low) else 0
+            nb += 1 if (left & ~low) else 0
         return ns, nb
 
     _LANES = 16
+    _VECTOR_TRIES = np.uint64(3)  # PTRS tries made in SIMD passes over the pixels left; then one by one
 
     @numba.njit(inline="always", **_JIT)
     def _inversion_lanes(m, u, out):
@@ -227,7 +227,7 @@ if numba is not None:
 
     @numba.njit(inline="always", **_JIT)
     def _shot_rest(lam, u1, u2, res, small, ns, big, nb, bl, bu1, bu2, bk, base, frame, seq, k0, k1):
-        """The pixels the first pass left: inversion below 10 in SIMD lanes; PTRS: all of try 0, try 1, then further tries.
+        """The pixels the first pass left: inversion below 10 in SIMD lanes; PTRS: all of try 0, tries 1 and 2, then one by one.
 
         Pixels are copied into the contiguous buffers ``bl``, ``bu1``,
         ``bu2``, ``bk`` before each branch-free pass: LLVM vectorizes a pass
@@ -251,24 +251,25 @@ if numba is not None:
             bu2[t] = u2[j]
         for t in range(nb):  # PTRS: the whole of try 0 where the quick test did not accept
             bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
-        nf = 0
-        for t in range(nb):
-            if bk[t] < 0.0:
-                big[nf] = big[t]
+        attempt = np.uint64(1)
+        while nb:
+            nf = 0
+            for t in range(nb):  # keep the pixels still without a count (branch-free compaction)
+                j = big[t]
+                res[j] = bk[t]
+                big[nf] = j
                 bl[nf] = bl[t]
-                nf += 1
-            else:
-                res[big[t]] = bk[t]
-        one = np.uint64(1)
-        for t in range(nf):  # try 1, branch-free
-            bu1[t], bu2[t] = _uniform_pair(base + np.uint64(big[t]), frame, seq, one, k0, k1)
-        for t in range(nf):
-            bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
-        for t in range(nf):  # further tries, one pixel at a time (about 2 % of pixels)
-            k = bk[t]
-            if k < 0.0:
-                k = _ptrs_from(bl[t], base + np.uint64(big[t]), frame, seq, k0, k1, np.uint64(2))
-            res[big[t]] = k
+                nf += 1 if bk[t] < 0.0 else 0
+            nb = nf
+            if attempt == _VECTOR_TRIES:
+                break
+            for t in range(nb):  # the next try, branch-free
+                bu1[t], bu2[t] = _uniform_pair(base + np.uint64(big[t]), frame, seq, attempt, k0, k1)
+            for t in range(nb):
+                bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
+            attempt += np.uint64(1)
+        for t in range(nb):  # further tries, one pixel at a time (a few in 10 000)
+            res[big[t]] = _ptrs_from(bl[t], base + np.uint64(big[t]), frame, seq, k0, k1, attempt)
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,

@@ -1,7 +1,10 @@
 """Colour reconstruction: demosaicing, crosstalk compensation, white balance, sRGB.
 
-- Demosaicing with ``colour-demosaicing``: bilinear, Malvar et al. 2004, or
-  Menon et al. 2007 (DDFAPD).
+- Demosaicing: Malvar et al. 2004 and Menon et al. 2007 (DDFAPD) with
+  ``colour-demosaicing``; bilinear by the same two 3 x 3 convolutions as
+  ``colour-demosaicing``'s (a test checks they agree), written here because
+  importing ``colour-demosaicing`` takes about a second (it imports
+  ``colour`` and matplotlib), longer than a whole quick-look preview.
 - Crosstalk colour mixing (MODEL.md section 5): the kernel and the CFA induce
   a 3 x 3 matrix M between the true and the measured R, G, B channel means
   (:func:`cmosnoise.crosstalk.channel_mixing_matrix`); its inverse is applied
@@ -15,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model import cfa as cfa_mod
 from ..model.scene import linear_to_srgb
 
 DEMOSAIC_METHODS = ("bilinear", "malvar2004", "menon2007")
@@ -22,16 +26,37 @@ DEMOSAIC_METHODS = ("bilinear", "malvar2004", "menon2007")
 
 def demosaic(cfa_img: np.ndarray, pattern: str, method: str = "bilinear") -> np.ndarray:
     """CFA image (rows, cols) to RGB (rows, cols, 3), float32."""
+    if method == "bilinear":
+        return bilinear(cfa_img, pattern)
     import colour_demosaicing as cd
 
     funcs = {
-        "bilinear": cd.demosaicing_CFA_Bayer_bilinear,
         "malvar2004": cd.demosaicing_CFA_Bayer_Malvar2004,
         "menon2007": cd.demosaicing_CFA_Bayer_Menon2007,
     }
     if method not in funcs:
         raise ValueError(f"unknown demosaicing method {method!r}; use one of {DEMOSAIC_METHODS}")
     return np.asarray(funcs[method](cfa_img.astype(np.float64), pattern), dtype=np.float32)
+
+
+_H_G = np.array([[0, 1, 0], [1, 4, 1], [0, 1, 0]]) / 4
+_H_RB = np.array([[1, 2, 1], [2, 4, 2], [1, 2, 1]]) / 4
+
+
+def bilinear(cfa_img: np.ndarray, pattern: str) -> np.ndarray:
+    """Bilinear demosaicing, (rows, cols) -> (rows, cols, 3) float32: each channel's samples, convolved.
+
+    The kernels and edge mode (``reflect``) of ``colour-demosaicing``'s
+    ``demosaicing_CFA_Bayer_bilinear``.
+    """
+    from scipy.ndimage import convolve
+
+    img = np.asarray(cfa_img, dtype=np.float64)
+    cmap = cfa_mod.channel_map(pattern, img.shape)
+    out = np.empty((*img.shape, 3), np.float32)
+    for ch, kern in ((0, _H_RB), (1, _H_G), (2, _H_RB)):
+        out[..., ch] = convolve(np.where(cmap == ch, img, 0.0), kern)
+    return out
 
 
 def apply_matrix(rgb: np.ndarray, matrix: np.ndarray) -> np.ndarray:
