@@ -11,7 +11,9 @@ It prints, per frame: the fused frame kernel on 1 and 2 threads, the NumPy
 implementation of the same scheme (the fallback without numba, and what
 ``detail=True`` runs), the reference, and ``cmosnoise simulate`` end to end
 (a separate process, TIFF writing and run statistics included, compile
-cache warm), each with its ratio to the reference.
+cache warm: wall clock per frame, start-up of about 1.5 s included, and the
+run's own per-frame time from summary.json: sensor set-up, frames, TIFF,
+statistics), each with its ratio to the reference.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--scene", default="photo")
     ap.add_argument("--cli-frames", type=int, default=50)
+    ap.add_argument("--json", help="also write the results here (docs/numbers/speed.json feeds the README)")
     args = ap.parse_args()
 
     cfg = load_config(extra={"sensor": {"width": 1920, "height": 1080, "cfa": "RGGB"}})
@@ -76,11 +79,17 @@ def main() -> None:
     rows.append(("NumPy implementation (no numba)", best_fps(lambda k: shot.frame(k, detail=True), 2, 1)))
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", str(args.cli_frames), "--no-progress",
-               "--set", "sensor.width=1920", "--set", "sensor.height=1080", "--scene", args.scene, "--out", f"{tmp}/o"]
-        subprocess.run(cmd, check=True, capture_output=True)  # warm the compile cache
+               "--set", "sensor.width=1920", "--set", "sensor.height=1080", "--scene", args.scene]
+        subprocess.run(cmd + ["--out", f"{tmp}/warm"], check=True, capture_output=True)  # warm the compile cache
         t0 = time.perf_counter()
-        subprocess.run(cmd, check=True, capture_output=True, env={**os.environ})
-        rows.append((f"cmosnoise simulate --frames {args.cli_frames}", args.cli_frames / (time.perf_counter() - t0)))
+        subprocess.run(cmd + ["--out", f"{tmp}/o"], check=True, capture_output=True, env={**os.environ})
+        wall = time.perf_counter() - t0
+        import json
+
+        loop = json.load(open(f"{tmp}/o/summary.json"))["timings_s"]["per_frame"]
+        rows.append((f"cmosnoise simulate --frames {args.cli_frames}", args.cli_frames / wall))
+        rows.append(("  its frame loop (summary.json)", 1 / loop))
+    nthreads = threads
     rows.append(("NumPy reference (Poisson+Gauss+q)", fps_ref))
 
     print(f"cmosnoise full chain, 1920 x 1080 {cfg.sensor.cfa}, stages on: {', '.join(on)}")
@@ -94,6 +103,7 @@ def main() -> None:
     from cmosnoise.config import ProcessingSection
     from cmosnoise.isp.process import Processor
 
+    processing = []
     raw = shot.frame(0)
     master = calibration.master_dark(sensor.dark_frames(4))
     print("  processing one 1920 x 1080 frame into an 8-bit picture (best of --repeats, after a warm-up):")
@@ -109,6 +119,24 @@ def main() -> None:
         proc.render(raw, pre=pre)
         fps = best_fps(lambda _k, proc=proc, pre=pre: proc.render(raw, pre=pre), 3, args.repeats)
         print(f"  {label:32s} {1000 / fps:10.1f} ms")
+        processing.append({"label": label, "ms": 1000 / fps})
+
+    if args.json:
+        import json
+        import platform
+
+        command = "python benchmarks/bench_chain.py " + " ".join(
+            f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("json",))
+        data = {
+            "machine": f"{os.cpu_count()} cores, {platform.processor() or platform.machine()}, numba threads {nthreads}",
+            "command": command,
+            "fixed_ms": t_fixed * 1000, "expose_ms": t_expose * 1000,
+            "rows": [{"label": label.strip(), "fps": fps, "ms": 1000 / fps, "ratio": fps_ref / fps} for label, fps in rows],
+            "processing": processing,
+        }
+        with open(args.json, "w") as f:
+            json.dump(data, f, indent=2)
+            f.write("\n")
 
 
 if __name__ == "__main__":

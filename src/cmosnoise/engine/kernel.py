@@ -166,7 +166,7 @@ if numba is not None:
         return k if ok else -1.0
 
     @numba.njit(inline="always", **_JIT)
-    def _shot_row(lam, u1, u2, res, small, big, normal_above):
+    def _shot_row(noisy_row, base, frame, seq, k0, k1, lam, u1, u2, res, small, big, normal_above):
         """Shot noise of one row, first pass: every pixel's first PTRS quick test, branch-free (SIMD).
 
         Leaves the count in ``res`` where the quick test accepts (or the normal
@@ -175,10 +175,15 @@ if numba is not None:
         Returns how many of each.
         """
         w = lam.size
+        zero = np.uint64(0)
         for j in range(w):
-            m = lam[j]
+            m = np.float64(noisy_row[j])
+            v1, v2 = _uniform_pair(base + np.uint64(j), frame, seq, zero, k0, k1)
+            lam[j] = m
+            u1[j] = v1
+            u2[j] = v2
             loglam, a, b, invalpha, vr = _ptrs_constants(m)
-            k, us, V = _ptrs_candidate(m, a, b, u1[j], u2[j])
+            k, us, V = _ptrs_candidate(m, a, b, v1, v2)
             quick = (us >= 0.07) & (V <= vr) & (m >= _PTRS_FROM)
             res[j] = k if quick else -1.0
         if normal_above < np.inf:
@@ -306,10 +311,7 @@ if numba is not None:
                 r = r0 + i
                 base = np.uint64(r * cols + c0)
                 if has_noisy:
-                    for j in range(w):
-                        lam[j] = np.float64(noisy[r, c0 + j])
-                        u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, s0, s1)
-                    ns, nb = _shot_row(lam, u1, u2, n, small, big, normal_above)
+                    ns, nb = _shot_row(noisy[r, c0:c1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
                     _shot_rest(lam, u1, u2, n, small, ns, big, nb, bl, bu1, bu2, bk, base, fr, sq, s0, s1)
                 if has_exact:
                     for j in range(w):

@@ -1,0 +1,57 @@
+"""The README's numbers come from docs/readme_numbers.py: the blocks match their data, and the data match the code."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+_spec = importlib.util.spec_from_file_location("readme_numbers", ROOT / "docs" / "readme_numbers.py")
+numbers = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(numbers)
+
+
+def test_every_block_is_in_the_readme_and_rendered_from_its_data():
+    text = (ROOT / "README.md").read_text()
+    blocks = numbers.readme_blocks(text)
+    assert set(blocks) == set(numbers.SECTIONS), "a numbers block is missing from the README"
+    fresh = numbers.readme_blocks(numbers.rendered(text))
+    for name in numbers.SECTIONS:
+        assert blocks[name] == fresh[name], f"README block {name!r} is stale: run python docs/readme_numbers.py render"
+
+
+def test_check_command_fails_on_a_hand_edited_number(tmp_path, monkeypatch):
+    text = (ROOT / "README.md").read_text()
+    edited = tmp_path / "README.md"
+    edited.write_text(text.replace("| `paper-fig9-vga` | 307 200 |", "| `paper-fig9-vga` | 307 201 |"))
+    assert edited.read_text() != text
+    monkeypatch.setattr(numbers, "README", edited)
+    assert numbers.main(["check"]) == 1
+    monkeypatch.setattr(numbers, "README", ROOT / "README.md")
+    assert numbers.main(["check"]) == 0
+
+
+@pytest.mark.parametrize("name", [n for n, (compute, _) in numbers.SECTIONS.items() if compute is not None])
+def test_stored_numbers_are_what_the_code_gives_now(name):
+    """Deterministic (fixed seeds): measuring again gives the stored data to 9 digits."""
+    stored = numbers.load(name)
+    again = json.loads(json.dumps(numbers.SECTIONS[name][0]()))
+    assert again == pytest.approx(stored, rel=1e-9) if not isinstance(stored, dict) else _close(again, stored)
+
+
+def _close(a, b):
+    if isinstance(b, dict):
+        assert a.keys() == b.keys()
+        return all(_close(a[k], b[k]) for k in b)
+    if isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-9, abs=1e-12)
+        return True
+    assert a == b
+    return True
+
+
+def test_speed_data_has_every_row_the_issue_asks_for():
+    rows = [r["label"] for r in numbers.load("speed")["rows"]]
+    assert any("1 thread" in r for r in rows) and any("2 thread" in r for r in rows)
+    assert any(r.startswith("cmosnoise simulate") for r in rows) and any("reference" in r for r in rows)
