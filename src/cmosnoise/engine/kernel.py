@@ -127,31 +127,6 @@ if numba is not None:
             if _ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
                 return k
 
-    @numba.njit(inline="always", fastmath=False, error_model="numpy")
-    def _poisson(lam, index, frame, seq, k0, k1):
-        if lam < _PTRS_FROM:
-            u, _ = _uniform_pair(index, frame, seq, np.uint64(0), k0, k1)
-            p = _exp(-lam)
-            total = p
-            k = 0.0
-            while u > total and k < _INV_MAX:
-                k = k + 1.0
-                p = p * lam / k
-                total = total + p
-            return k
-        loglam, a, b, invalpha, vr = _ptrs_constants(lam)
-        attempt = np.uint64(0)
-        while True:  # samplers.ptrs_try, with numpy's early exits
-            u1, u2 = _uniform_pair(index, frame, seq, attempt, k0, k1)
-            attempt += np.uint64(1)
-            k, us, V = _ptrs_candidate(lam, a, b, u1, u2)
-            if us >= 0.07 and V <= vr:
-                return k
-            if k < 0.0 or (us < 0.013 and V > us):
-                continue
-            if _ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
-                return k
-
     _JIT = dict(fastmath=False, error_model="numpy")
     _ROWS_PER_BLOCK = 8
 
@@ -254,10 +229,14 @@ if numba is not None:
             bl[t] = lam[j]
             bu1[t] = u1[j]
             bu2[t] = u2[j]
-        for t in range(nb):  # PTRS: the whole of try 0 where the quick test did not accept
-            bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
-        attempt = np.uint64(1)
-        while nb:
+        attempt = np.uint64(0)
+        while nb:  # PTRS: the whole of try 0 where the quick test did not accept, then tries 1 and 2
+            if attempt > 0:
+                for t in range(nb):
+                    bu1[t], bu2[t] = _uniform_pair(base + np.uint64(big[t]), frame, seq, attempt, k0, k1)
+            for t in range(nb):  # one whole try, branch-free
+                bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
+            attempt += np.uint64(1)
             nf = 0
             for t in range(nb):  # keep the pixels still without a count (branch-free compaction)
                 j = big[t]
@@ -268,11 +247,6 @@ if numba is not None:
             nb = nf
             if attempt == _VECTOR_TRIES:
                 break
-            for t in range(nb):  # the next try, branch-free
-                bu1[t], bu2[t] = _uniform_pair(base + np.uint64(big[t]), frame, seq, attempt, k0, k1)
-            for t in range(nb):
-                bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
-            attempt += np.uint64(1)
         for t in range(nb):  # further tries, one pixel at a time (a few in 10 000)
             res[big[t]] = _ptrs_from(bl[t], base + np.uint64(big[t]), frame, seq, k0, k1, attempt)
 
@@ -367,7 +341,7 @@ def _needs_compile() -> bool:
     except Exception:  # numba's internals moved: say it after the fact instead (see render)
         return True
     if not cached:
-        print("cmosnoise: compiling the frame kernel for this machine (once; about 20 s) ...", file=sys.stderr, flush=True)
+        print("cmosnoise: compiling the frame kernel for this machine (once; 30 to 60 s) ...", file=sys.stderr, flush=True)
     return True
 
 
