@@ -33,7 +33,10 @@ from ..io.raw_tiff import raw_metadata, read_raw_tiff, write_float_tiff, write_r
 from ..io.video import VideoWriter
 from ..isp import calibration
 from ..isp.process import Processor, read_dark, validate_raw
-from ..model.physics import with_updates
+from ..model.heavy_tail import variates
+from ..model.physics import dark_points, with_updates
+from ..model.seeds import fixed_rng
+from ..model.stages import dark_current
 from ..model.raw_info import RawInfo
 from ..model.sensor import Sensor
 from ..model.units import e_per_s_to_aa
@@ -166,7 +169,14 @@ def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict |
         "map_mean_e_per_s": float(rate.mean()),
         "map_median_e_per_s": float(np.median(rate)),
         "mean_dark_e_per_frame": float(rate.mean() * t_int),
+        "interpolation": (f"per-pixel exponential between the points at {state.temperature_c:g} C (weight {state.w:.3f})"
+                          if state.between else "at a characterization point, or scaled from the nearest one"),
     }
+    cooling = dark_current.cooling_fraction(dark_points(c), variates(sensor.shape, fixed_rng(c.seed, "dark_current")))
+    out["cooling_fraction"] = cooling
+    if cooling > 0:
+        out["warning"] = (f"{100 * cooling:.3g} % of pixels cool while the sensor warms between two of the "
+                          "dark_current.points: a warmer point's quantiles lie below a colder one's")
     if state.threshold is not None:
         thr = state.threshold
         out["threshold_e_per_s"] = thr

@@ -6,11 +6,16 @@ sensor is characterized at one or more temperatures (the paper: logistic at
 25 C, inverse Gaussian at 45 C, lognormal at 65 C). At an operating
 temperature ``T``:
 
-- between two points: ln(mean), ln(std), ln(tail max) and the tail fraction
-  are interpolated linearly in ``T``; the body family is the nearer point's;
-- outside them (or with one point): the body is scaled by
-  ``2**((T - Tc) / doubling_c)`` and the tail by ``2**((T - Tc) / tail_doubling_c)``
-  (very leaky pixels have a lower temperature coefficient).
+- between two points T_lo < T < T_hi: **each pixel follows its own
+  exponential law** between its rates at the two points,
+  ``ln r = (1 - w) ln r_lo + w ln r_hi`` with ``w = (T - T_lo) / (T_hi - T_lo)``
+  (rates floored at 1e-6 of the point's body mean first), so every pixel's
+  rate, and every quantile of the map, is continuous in ``T``, and the
+  map's shape morphs from one family to the next;
+- outside them (or with one point): the body part is scaled by
+  ``2**((T - Tc) / doubling_c)`` and the tail part by
+  ``2**((T - Tc) / tail_doubling_c)`` (very leaky pixels have a lower
+  temperature coefficient).
 
 Every pixel has fixed uniform variates (body quantile, tail membership, tail
 magnitude) drawn once from the sensor's seed, so a pixel keeps its rank and a
@@ -25,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..distributions import body as body_dist
+from ..distributions import tabulated_ppf
 from ..heavy_tail import HeavyTail, variates
 
 
@@ -48,9 +54,22 @@ class Point:
         return HeavyTail.from_ppm(b, self.ppm_above, self.threshold, self.tail_max)
 
 
+#: rates are floored at this fraction of the point's body mean before the log
+RATE_FLOOR = 1e-6
+
+
 @dataclass(frozen=True)
 class DarkState:
-    """The DCNU at one temperature."""
+    """The DCNU at one temperature.
+
+    At a point or outside the points, the map is one heavy-tailed model
+    (``lo``) with its body scaled by ``body_scale`` and its tail by
+    ``tail_scale``. Between two points it is the per-pixel exponential
+    interpolation between ``lo`` and ``hi`` with weight ``w``; ``family``
+    then names both, and ``mean``, ``std``, ``tail_fraction`` and
+    ``tail_max`` are the log-interpolated parameters, a description (the
+    map's own statistics are in the run summary).
+    """
 
     temperature_c: float
     family: str
@@ -59,14 +78,68 @@ class DarkState:
     tail_fraction: float
     tail_max: float  #: e-/s
     threshold: float | None  #: the nearest point's white-pixel threshold, e-/s
+    lo: HeavyTail | None = None
+    hi: HeavyTail | None = None
+    w: float = 0.0
+    body_scale: float = 1.0
+    tail_scale: float = 1.0
+
+    @property
+    def between(self) -> bool:
+        return self.hi is not None
 
     @property
     def model(self) -> HeavyTail:
+        """The heavy-tailed model at this temperature (at or outside the points only)."""
+        if self.between:
+            raise ValueError("between two characterization points the DCNU is a per-pixel interpolation, not one model")
         return HeavyTail(body_dist(self.family, self.mean, self.std), self.tail_fraction, self.tail_max)
 
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray) -> np.ndarray:
+        """Rates (e-/s, float64) of pixels with these fixed uniform variates."""
+        if not self.between:
+            body = np.maximum(tabulated_ppf(self.lo.body, u_body), 0.0) * self.body_scale
+            if self.lo.tail_fraction > 0 and self.lo.tail_max > 0:
+                body += np.where(u_member < self.lo.tail_fraction, u_tail * self.lo.tail_max * self.tail_scale, 0.0)
+            return body
+        r_lo = self.lo.values(u_body, u_member, u_tail)
+        r_hi = self.hi.values(u_body, u_member, u_tail)
+        r_lo = np.maximum(r_lo, RATE_FLOOR * float(self.lo.body.mean()))
+        r_hi = np.maximum(r_hi, RATE_FLOOR * float(self.hi.body.mean()))
+        return np.exp((1.0 - self.w) * np.log(r_lo) + self.w * np.log(r_hi))
+
     def expected_ppm_above(self, threshold: float | None = None) -> float | None:
+        """Expected ppm of pixels above ``threshold`` (default: the state's own), e-/s.
+
+        At or outside the points, the model's survival function; between
+        them, the probability over the fixed variates, by quadrature: a
+        pixel's rate rises with its body quantile and tail magnitude, so
+        for each tail-membership case the exceedance is the area of a
+        monotone region of the unit square (grid of 2048 x 2048 midpoints,
+        error below 1e-3 of the value).
+        """
         thr = self.threshold if threshold is None else threshold
-        return None if thr is None else self.model.ppm_above(thr)
+        if thr is None:
+            return None
+        if not self.between:
+            return self.model.ppm_above(thr)
+        n = 2048
+        u = (np.arange(n) + 0.5) / n
+        fl, fh = self.lo.tail_fraction, self.hi.tail_fraction
+        cases = [(min(fl, fh), 0.0, 0.0),  # in both tails (u_member below both fractions)
+                 (abs(fl - fh), 0.5 * (fl + fh) if fl != fh else 0.0, 0.0),
+                 (1.0 - max(fl, fh), 1.0, 0.0)]  # in neither
+        total = 0.0
+        for weight, member, _ in cases:
+            if weight <= 0:
+                continue
+            if member == 1.0:  # no tail: one dimension suffices
+                total += weight * float(np.mean(self.values(u, np.ones(n), np.zeros(n)) > thr))
+                continue
+            ub, ut = np.meshgrid(u, u, indexing="ij")
+            um = np.full(ub.shape, member if member else 0.0)
+            total += weight * float(np.mean(self.values(ub, um, ut) > thr))
+        return total * 1e6
 
 
 def _log_lerp(a: float, b: float, w: float) -> float:
@@ -81,31 +154,67 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     models = [p.model() for p in pts]
     t = temperature_c
     nearest = min(range(len(pts)), key=lambda i: (abs(pts[i].temperature_c - t), -pts[i].temperature_c))
-    if t <= pts[0].temperature_c or t >= pts[-1].temperature_c:
-        i = 0 if t <= pts[0].temperature_c else len(pts) - 1
+    at_point = [k for k, p in enumerate(pts) if p.temperature_c == t]
+    if at_point or t <= pts[0].temperature_c or t >= pts[-1].temperature_c:
+        i = at_point[0] if at_point else (0 if t <= pts[0].temperature_c else len(pts) - 1)
         p, m = pts[i], models[i]
         sb = 2.0 ** ((t - p.temperature_c) / doubling_c)
         st = 2.0 ** ((t - p.temperature_c) / tail_doubling_c)
-        return DarkState(t, p.family, p.mean * sb, p.std * sb, m.tail_fraction, m.tail_max * st, p.threshold)
+        return DarkState(t, p.family, p.mean * sb, p.std * sb, m.tail_fraction, m.tail_max * st, p.threshold,
+                         lo=m, body_scale=sb, tail_scale=st)
     j = next(k for k in range(1, len(pts)) if pts[k].temperature_c >= t)
     a, b = pts[j - 1], pts[j]
     w = (t - a.temperature_c) / (b.temperature_c - a.temperature_c)
     ma, mb = models[j - 1], models[j]
     near = pts[nearest]
+    family = a.family if a.family == b.family else f"{a.family} to {b.family}"
     return DarkState(
         t,
-        near.family,
+        family,
         _log_lerp(a.mean, b.mean, w),
         _log_lerp(a.std, b.std, w),
         (1 - w) * ma.tail_fraction + w * mb.tail_fraction,
         _log_lerp(ma.tail_max, mb.tail_max, w),
         near.threshold,
+        lo=ma, hi=mb, w=w,
     )
 
 
 def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
     """Fixed dark-current map at ``state``'s temperature, e-/s per pixel, float32 (>= 0)."""
-    return state.model.values(*variates(shape, rng)).astype(np.float32)
+    return state.values(*variates(shape, rng)).astype(np.float32)
+
+
+def cooling_fraction(points: list[Point], u: np.ndarray) -> float:
+    """Fraction of pixels (fixed variates ``u``, shape (3, ...)) whose rate drops from one point to the next warmer one.
+
+    Zero when every quantile of each warmer point lies above the colder
+    point's; a user's points can break that, and the run summary says so.
+    """
+    pts = sorted(points, key=lambda p: p.temperature_c)
+    if len(pts) < 2:
+        return 0.0
+    models = [p.model() for p in pts]
+    if all(_dominates(b, a) for a, b in zip(models[:-1], models[1:])):
+        return 0.0  # no pixel can cool: skip the per-pixel comparison (seconds at 5 MP)
+    rates = [m.values(*u) for m in models]
+    cools = np.zeros(u.shape[1:], bool)
+    for lo, hi in zip(rates[:-1], rates[1:]):
+        cools |= hi < lo
+    return float(cools.mean())
+
+
+def _dominates(hot: HeavyTail, cold: HeavyTail) -> bool:
+    """Whether every pixel's rate under ``hot`` is at least its rate under ``cold``, whatever its variates.
+
+    True when the body quantile functions are ordered on a fine grid (the
+    same grid the maps are tabulated on) and the tail is no smaller in
+    fraction or magnitude (tail sets are nested in ``u_member``).
+    """
+    q = np.linspace(1e-9, 1 - 1e-9, 4097)
+    body_ok = np.all(tabulated_ppf(hot.body, q) >= tabulated_ppf(cold.body, q))
+    tail_ok = hot.tail_fraction >= cold.tail_fraction and hot.tail_max >= cold.tail_max or cold.tail_fraction == 0
+    return bool(body_ok and tail_ok)
 
 
 def mean_charge(rate_e_per_s: np.ndarray, integration_time_s: float) -> np.ndarray:
