@@ -137,7 +137,7 @@ needs_numba = pytest.mark.skipif(not kernel.AVAILABLE, reason="numba not install
 
 
 @needs_numba
-@pytest.mark.parametrize("extra", [{}, {"shot_noise": {"gaussian_above_e": 50.0}}, {"adc": {"enabled": False}}],
+@pytest.mark.parametrize("extra", [{}, {"shot_noise": {"gaussian_above_e": 100.0}}, {"adc": {"enabled": False}}],
                          ids=["default", "normal-approx", "adc-off"])
 def test_kernel_equals_the_numpy_implementation_on_any_threads_and_tiling(extra):
     import numba
