@@ -140,3 +140,67 @@ def test_a_file_scene_is_recorded_by_absolute_path(tmp_path):
     r = run("simulate", "--config", tmp_path / "o" / "config.yaml", "--out", tmp_path / "o2", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     np.testing.assert_array_equal(tifffile.imread(tmp_path / "o2" / "raw.tiff"), tifffile.imread(tmp_path / "o" / "raw.tiff"))
+
+
+# ------------------------------------------------------------------ discoverability
+SMALL = ["--set", "sensor.width=64", "--set", "sensor.height=48"]
+
+
+def _leaf_keys(d, prefix=""):
+    for k, v in d.items():
+        if isinstance(v, dict) and v:
+            yield from _leaf_keys(v, f"{prefix}{k}.")
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                yield from _leaf_keys(item, f"{prefix}{k}.N.")
+        else:
+            yield f"{prefix}{k}"
+
+
+def test_config_prints_every_key_and_explain_describes_each(tmp_path):
+    text = run("config").stdout
+    data = yaml.safe_load(text)
+    assert data["scene"]["scale"] is None and "mean_aA" in data["dark_current"]["points"][0]  # nulls are shown
+    explain = run("config", "--explain").stdout
+    described = {line.split("  (")[0] for line in explain.splitlines() if not line.startswith(" ")}
+    missing = set(_leaf_keys(data)) - described
+    assert not missing, f"keys without an explanation: {sorted(missing)}"
+    blocks = explain.split("\n")
+    keys = [i for i, line in enumerate(blocks) if line and not line.startswith(" ")]
+    assert all(blocks[i + 1].startswith("    ") for i in keys if i + 1 < len(blocks) and "section" not in blocks[i])
+    assert "shot_noise.gaussian_above_e  (float | null; default null; >= 100)" in explain
+    (tmp_path / "c.yaml").write_text(text)
+    assert run("config", "--config", tmp_path / "c.yaml").stdout == text  # prints back as it reads
+
+
+def test_set_reaches_list_items_and_says_what_is_wrong():
+    r = run("config", "--set", "dark_current.points.1.mean_e_per_s=5", "--set", "sensor.channel_responsivity.2=0.7")
+    data = yaml.safe_load(r.stdout)
+    assert data["dark_current"]["points"][1]["mean_e_per_s"] == 5
+    assert data["dark_current"]["points"][0]["mean_e_per_s"] == 8  # the others kept
+    assert data["sensor"]["channel_responsivity"] == [1.0, 1.0, 0.7]
+    r = run("config", "--set", "dark_current.points.7.mean_e_per_s=5")
+    assert r.returncode == 2 and "has 3 item(s)" in r.stderr
+    r = run("config", "--set", "dark_current.points.first.mean_e_per_s=5")
+    assert r.returncode == 2 and "index it with a number" in r.stderr
+
+
+def test_version_quiet_verbose_and_any_case_cfa(tmp_path):
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.startswith("cmosnoise ") and "scheme" in r.stdout
+    r = run("-q", "simulate", *SMALL, "--out", tmp_path / "q")
+    assert r.returncode == 0 and r.stdout == "" and (tmp_path / "q" / "raw.tiff").exists()
+    r = run("-v", "simulate", *SMALL, "--out", tmp_path / "v")
+    assert "files: config.yaml, preview.png, raw.tiff, summary.json" in r.stdout and "time: total" in r.stdout
+    r = run("simulate", *SMALL, "--set", "sensor.cfa=gbrg", "--out", tmp_path / "g")
+    assert r.returncode == 0 and yaml.safe_load((tmp_path / "g" / "config.yaml").read_text())["sensor"]["cfa"] == "GBRG"
+    raw = tifffile.imread(tmp_path / "g" / "raw.tiff")
+    tifffile.imwrite(tmp_path / "cam.tiff", raw)  # a camera's raw: no metadata
+    r = run("process", tmp_path / "cam.tiff", "--cfa", "gbrg", "--black-level", "64", "--bits", "12", "--out", tmp_path / "p")
+    assert r.returncode == 0, r.stderr
+    assert "GBRG" in r.stdout
+
+
+def test_flat_without_a_level_is_an_error(tmp_path):
+    r = run("simulate", *SMALL, "--scene", "flat", "--out", tmp_path / "f")
+    assert r.returncode == 2 and "flat:LEVEL" in r.stderr and not (tmp_path / "f").exists()

@@ -24,6 +24,42 @@ app = typer.Typer(
 err_console = Console(stderr=True)
 
 
+def _version(value: bool):
+    if value:
+        from .._version import __version__
+        from ..engine.kernel import generator_info
+
+        g = generator_info()
+        typer.echo(f"cmosnoise {__version__} (random-number scheme {g['scheme_version']}, numpy {g['numpy']}, "
+                   f"numba {g['numba']}, frame kernel: {g['frame_kernel']})")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    ctx: typer.Context,
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="print the version and exit"),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="print nothing but errors (no summary line, no progress bars)"),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="also print the output files and where the time went"),
+):
+    """Simulate CMOS image-sensor noise (Gow et al. model) and see what it does to pictures."""
+    ctx.obj = {"verbosity": -1 if quiet else (1 if verbose else 0)}
+
+
+def _level(ctx: typer.Context | None) -> int:
+    while ctx is not None:
+        if isinstance(ctx.obj, dict) and "verbosity" in ctx.obj:
+            return ctx.obj["verbosity"]
+        ctx = ctx.parent
+    return 0
+
+
+def _say(ctx: typer.Context, text: str, level: int = 0) -> None:
+    """Print ``text`` if the verbosity (-q: -1, default 0, -v: 1) reaches ``level``."""
+    if _level(ctx) >= level:
+        typer.echo(text)
+
+
 def _run_overrides(scene, frames, first_frame, seed, process=None, dark_frames=None, formats=None, report=False) -> dict:
     extra: dict = {}
     if report:
@@ -77,6 +113,7 @@ SetOpt = typer.Option(None, "--set", "-s", help="override one key, e.g. --set pr
 
 @app.command()
 def simulate(
+    ctx: typer.Context,
     config: Optional[Path] = ConfigOpt,
     preset: Optional[str] = PresetOpt,
     scene: Optional[str] = typer.Option(None, "--scene", help="photo, flat:LEVEL, ramp, colorchecker, zoneplate, siemens, or an image path"),
@@ -95,17 +132,29 @@ def simulate(
     from .run import simulate as run_simulate
 
     cfg = load_config(config, preset, set_, extra=_run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
+    if _level(ctx) < 0:
+        progress = False
     summary = run_simulate(cfg, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height))
     sig, tn = summary["signal"], summary["temporal_noise"]
     noise = f", temporal noise {tn['rms_e']:.2f} e- ({tn['rms_dn']:.2f} DN)" if tn["rms_e"] is not None else ""
-    typer.echo(
+    _say(
+        ctx,
         f"wrote {summary['frames']} frame(s) {cfg.sensor.height}x{cfg.sensor.width} {cfg.sensor.cfa} to {out}/ "
         f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {summary['timings_s']['per_frame'] * 1000:.1f} ms/frame)"
     )
+    for warning in summary.get("warnings", []):
+        _say(ctx, f"warning: {warning}")
+    if _level(ctx) >= 1:
+        _say(ctx, "files: " + ", ".join(sorted(p.name for p in out.iterdir())))
+        t = summary["timings_s"]
+        stages = ", ".join(f"{k} {v:.3f} s" for k, v in t["stages"].items())
+        _say(ctx, f"time: total {t['total']:.3f} s ({stages}); processing {summary['processing']['processing_s']:.3f} s")
+        _say(ctx, f"random numbers: {summary['generator']['scheme']} (version {summary['generator']['scheme_version']})")
 
 
 @app.command()
 def process(
+    ctx: typer.Context,
     raw: Path = typer.Argument(..., help="raw frames: a TIFF (frames, rows, cols) or (rows, cols) of uint16 codes"),
     dark: Optional[Path] = typer.Option(None, "--dark", help="dark frames (averaged into a master dark) or a master dark"),
     config: Optional[Path] = ConfigOpt,
@@ -119,14 +168,17 @@ def process(
     from .run import process_file
 
     cfg = load_config(config, None, set_)
+    if cfa is not None:
+        cfa = "none" if cfa.lower() == "none" else cfa.upper()
     overrides = {k: v for k, v in {"cfa": cfa, "black_level_dn": black_level, "bits": bits}.items() if v is not None}
     result = process_file(raw, cfg.processing, out, dark, overrides)
-    typer.echo(f"processed {result['frames']} frame(s) {result['rows']}x{result['cols']} {result['cfa']} into {out}/ "
+    _say(ctx, f"processed {result['frames']} frame(s) {result['rows']}x{result['cols']} {result['cfa']} into {out}/ "
                f"({result['ms_per_frame']:.0f} ms/frame)")
 
 
 @app.command()
 def characterize(
+    ctx: typer.Context,
     config: Optional[Path] = ConfigOpt,
     preset: Optional[str] = PresetOpt,
     set_: Optional[List[str]] = SetOpt,
@@ -155,7 +207,7 @@ def characterize(
     else:
         sensor = Sensor(load_config(config, preset, set_, extra={"seed": seed} if seed is not None else None))
         with Progress(TextColumn("[bold]measuring"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                      console=err_console, disable=not err_console.is_terminal) as p:
+                      console=err_console, disable=not err_console.is_terminal or _level(ctx) < 0) as p:
             task = p.add_task("series", total=steps + 1)
             m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=lambda: p.advance(task))
         model = ch.model_values(sensor, m.stack_texp_s)
@@ -182,13 +234,15 @@ def characterize(
     for (key, _, _, fmt), row in zip(ch.TABLE_ROWS, ch.table(results, model)):
         ref = [fmt.format(reference[key]) if reference and key in reference else ""] if reference else []
         tab.add_row(*row, *ref)
-    Console().print(tab)
-    typer.echo(f"wrote characterization.json, photon_transfer.png, snr.png to {out}/"
+    if _level(ctx) >= 0:
+        Console().print(tab)
+    _say(ctx, f"wrote characterization.json, photon_transfer.png, snr.png to {out}/"
                + (f"; EMVA 1288 data set to {emva_export}/" if emva_export else ""))
 
 
 @app.command()
 def figures(
+    ctx: typer.Context,
     out: Path = typer.Option(Path("cmosnoise-figures"), "--out", "-o", help="output folder"),
     seed: int = typer.Option(0, "--seed", help="sensor instance seed"),
 ):
@@ -198,10 +252,10 @@ def figures(
 
     with OutputFolder(out) as tmp:
         with Progress(TextColumn("[bold]figure"), TextColumn("{task.description}"), console=err_console,
-                      disable=not err_console.is_terminal) as p:
+                      disable=not err_console.is_terminal or _level(ctx) < 0) as p:
             task = p.add_task("", total=None)
             items = write_gallery(tmp, seed, progress=lambda name: p.update(task, description=name))
-    typer.echo(f"wrote {len(items)} figures and index.html to {out}/")
+    _say(ctx, f"wrote {len(items)} figures and index.html to {out}/")
 
 
 @app.command()
@@ -217,8 +271,14 @@ def config_cmd(
     config: Optional[Path] = ConfigOpt,
     preset: Optional[str] = PresetOpt,
     set_: Optional[List[str]] = SetOpt,
+    explain: bool = typer.Option(False, "--explain", help="list every key with its type, default, limits and description instead"),
 ):
-    """Print the fully resolved configuration as YAML (edit it, then use --config)."""
+    """Print the fully resolved configuration as YAML, every key (edit it, then use --config)."""
+    if explain:
+        from ..config.explain import text
+
+        typer.echo(text(), nl=False)
+        return
     typer.echo(load_config(config, preset, set_).to_yaml(), nl=False)
 
 

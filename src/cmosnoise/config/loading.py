@@ -47,19 +47,53 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return key.split("."), value
 
 
-def apply_overrides(data: dict, overrides: list[str]) -> dict:
+def apply_overrides(data: dict, overrides: list[str], defaults: dict | None = None) -> dict:
+    """``data`` with each ``a.b.c=value`` applied; a number in the path indexes a list (``points.0.mean_e_per_s=5``).
+
+    A list the data do not hold yet is taken from ``defaults`` (the schema's
+    defaults) first, so ``--set dark_current.points.1.std_e_per_s=3`` edits
+    the second default point. An index may also be the list's length, which
+    appends an item.
+    """
     out = copy.deepcopy(data)
     for text in overrides:
         path, value = parse_override(text)
-        node = out
-        for p in path[:-1]:
-            nxt = node.get(p)
-            if not isinstance(nxt, dict):
-                nxt = {}
-                node[p] = nxt
+        node, default = out, defaults
+        for i, p in enumerate(path):
+            last = i == len(path) - 1
+            key = _index(node, p, text, path[: i + 1]) if isinstance(node, list) else p
+            if default is not None:
+                try:
+                    default = default[key]
+                except (KeyError, IndexError, TypeError):
+                    default = None
+            if last:
+                if isinstance(node, list) and key == len(node):
+                    node.append(value)
+                else:
+                    node[key] = value
+                break
+            nxt = node[key] if (isinstance(node, dict) and key in node) or (isinstance(node, list) and key < len(node)) else None
+            if not isinstance(nxt, (dict, list)):
+                nxt = copy.deepcopy(default) if isinstance(default, (dict, list)) else {}
+                if isinstance(node, list) and key == len(node):
+                    node.append(nxt)
+                else:
+                    node[key] = nxt
             node = nxt
-        node[path[-1]] = value
     return out
+
+
+def _index(node: list, part: str, text: str, path: list[str]) -> int:
+    try:
+        k = int(part)
+    except ValueError:
+        raise CmosnoiseError(f"--set {text!r}: {'.'.join(path[:-1])} is a list; index it with a number, e.g. "
+                             f"{'.'.join(path[:-1])}.0") from None
+    if not 0 <= k <= len(node):
+        raise CmosnoiseError(f"--set {text!r}: {'.'.join(path[:-1])} has {len(node)} item(s); "
+                             f"use an index from 0 to {len(node) - 1} (or {len(node)} to append)")
+    return k
 
 
 # ----------------------------------------------------------------- presets
@@ -133,7 +167,7 @@ def resolve_config(
     if extra:
         data = deep_merge(data, extra)
     if overrides:
-        data = apply_overrides(data, overrides)
+        data = apply_overrides(data, overrides, Config().model_dump(mode="json"))
     return build_config(data)
 
 

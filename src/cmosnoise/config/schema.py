@@ -31,7 +31,7 @@ class SceneSection(Section):
     ``colorchecker``, ``zoneplate``, ``siemens``) or a path to an image.
     """
 
-    source: str = "photo"
+    source: str = Field("photo", description="photo, flat:LEVEL (0..1), ramp, colorchecker, zoneplate, siemens, or an image path")
     scale: Optional[float] = Field(
         None, gt=0, description="linear files (16-bit, float, .npy): value that maps to 1.0; null: the file's own maximum"
     )
@@ -77,22 +77,27 @@ class ProcessingSection(Section):
     defects: DefectsSection = Field(default_factory=DefectsSection)
     crosstalk_compensation: bool = Field(True, description="undo crosstalk's colour mixing with the inverse 3 x 3 matrix")
     white_balance: WhiteBalanceSection = Field(default_factory=WhiteBalanceSection)
-    demosaic: Literal["bilinear", "malvar2004", "menon2007"] = "bilinear"
+    demosaic: Literal["bilinear", "malvar2004", "menon2007"] = Field("bilinear", description="demosaicing method")
     white_dn: Optional[float] = Field(None, gt=0, description="raw code shown as white; null: the scene's white (simulation) or the white level (files)")
-    video_fps: float = Field(10.0, gt=0, le=240)
+    video_fps: float = Field(10.0, gt=0, le=240, description="frame rate of processed.mp4, frames/s")
 
 
 # ------------------------------------------------------------------------ sensor
 class SensorSection(Section):
     width: int = Field(640, ge=2, le=30000, description="columns, pixels")
     height: int = Field(480, ge=2, le=30000, description="rows, pixels")
-    cfa: Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"] = "RGGB"
+    cfa: Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"] = Field("RGGB", description="Bayer pattern of the top-left 2 x 2 pixels, or none (monochrome)")
     channel_responsivity: tuple[float, float, float] = Field(
         (1.0, 1.0, 1.0), description="relative R, G, B responsivity of the colour filters"
     )
     full_well_e: float = Field(10000.0, gt=0, le=1e7, description="full-well capacity, e-")
     temperature_c: float = Field(25.0, ge=-60, le=150, description="operating temperature, degrees C")
     pixel_pitch_um: float = Field(2.2, gt=0, le=100, description="pixel pitch, um")
+
+    @field_validator("cfa", mode="before")
+    @classmethod
+    def _cfa_any_case(cls, v):
+        return ("none" if v.lower() == "none" else v.upper()) if isinstance(v, str) else v
 
     @field_validator("channel_responsivity")
     @classmethod
@@ -139,7 +144,9 @@ class CrosstalkSection(Section):
 
     enabled: bool = True
     kernel_pct: Union[Kernel, dict[Literal["R", "G", "B"], Kernel]] = Field(
-        default_factory=lambda: [[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]]
+        default_factory=lambda: [[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]],
+        description="3 x 3 kernel, % of a pixel's photo-charge landing in itself and each neighbour (sum <= 100), "
+                    "or one kernel per colour {R: ..., G: ..., B: ...}",
     )
 
     @field_validator("kernel_pct")
@@ -180,12 +187,12 @@ class DarkTail(Section):
     """White-pixel tail: ``ppm_above`` ppm of pixels above a threshold, tail values up to a maximum."""
 
     ppm_above: float = Field(ge=0, le=1e6, description="parts per million of pixels above the threshold")
-    threshold_e_per_s: Optional[float] = Field(None, ge=0)
-    threshold_aA: Optional[float] = Field(None, ge=0)
-    threshold_nA_per_cm2: Optional[float] = Field(None, ge=0)
+    threshold_e_per_s: Optional[float] = Field(None, ge=0, description="white-pixel threshold, e-/s per pixel")
+    threshold_aA: Optional[float] = Field(None, ge=0, description="white-pixel threshold, aA per pixel")
+    threshold_nA_per_cm2: Optional[float] = Field(None, ge=0, description="white-pixel threshold, nA/cm^2")
     max_e_per_s: Optional[float] = Field(None, gt=0, description="largest extra dark current of a tail pixel")
-    max_aA: Optional[float] = Field(None, gt=0)
-    max_nA_per_cm2: Optional[float] = Field(None, gt=0)
+    max_aA: Optional[float] = Field(None, gt=0, description="largest extra dark current of a tail pixel, aA")
+    max_nA_per_cm2: Optional[float] = Field(None, gt=0, description="largest extra dark current of a tail pixel, nA/cm^2")
 
     @model_validator(mode="after")
     def _units(self):
@@ -197,15 +204,15 @@ class DarkTail(Section):
 class DarkPoint(Section):
     """A characterization point: the DCNU body (family, mean, std) and tail at one temperature."""
 
-    temperature_c: float = Field(ge=-60, le=150)
-    distribution: Literal["logistic", "inverse_gaussian", "lognormal", "normal", "gamma"]
-    mean_e_per_s: Optional[float] = Field(None, ge=0)
-    mean_aA: Optional[float] = Field(None, ge=0)
-    mean_nA_per_cm2: Optional[float] = Field(None, ge=0)
-    std_e_per_s: Optional[float] = Field(None, gt=0)
-    std_aA: Optional[float] = Field(None, gt=0)
-    std_nA_per_cm2: Optional[float] = Field(None, gt=0)
-    tail: Optional[DarkTail] = None
+    temperature_c: float = Field(ge=-60, le=150, description="temperature of this characterization, degrees C")
+    distribution: Literal["logistic", "inverse_gaussian", "lognormal", "normal", "gamma"] = Field(description="family of the DCNU body at this temperature")
+    mean_e_per_s: Optional[float] = Field(None, ge=0, description="body mean, e-/s per pixel (give one of the three units)")
+    mean_aA: Optional[float] = Field(None, ge=0, description="body mean, aA per pixel (1 aA = 6.2415 e-/s)")
+    mean_nA_per_cm2: Optional[float] = Field(None, ge=0, description="body mean, nA/cm^2 (needs sensor.pixel_pitch_um)")
+    std_e_per_s: Optional[float] = Field(None, gt=0, description="body standard deviation, e-/s per pixel")
+    std_aA: Optional[float] = Field(None, gt=0, description="body standard deviation, aA per pixel")
+    std_nA_per_cm2: Optional[float] = Field(None, gt=0, description="body standard deviation, nA/cm^2")
+    tail: Optional[DarkTail] = Field(None, description="white-pixel tail (ppm above a threshold); null: no tail")
 
     @model_validator(mode="after")
     def _units(self):
@@ -234,7 +241,8 @@ class DarkCurrentSection(Section):
     shot_noise: bool = Field(True, description="dark shot noise (Poisson); off: dark charge enters as its mean")
     doubling_c: float = Field(7.0, gt=0, le=100, description="the body doubles every doubling_c degrees C")
     tail_doubling_c: float = Field(10.0, gt=0, le=100, description="the white-pixel tail doubles every tail_doubling_c C")
-    points: list[DarkPoint] = Field(default_factory=lambda: [DarkPoint(**p) for p in _default_dark_points()], min_length=1)
+    points: list[DarkPoint] = Field(default_factory=lambda: [DarkPoint(**p) for p in _default_dark_points()], min_length=1,
+                                    description="characterization points (one or more temperatures)")
 
     @field_validator("points")
     @classmethod
@@ -249,7 +257,7 @@ class DarkCurrentSection(Section):
 class FlickerTail(Section):
     """Very noisy pixels: ``ppm_above`` ppm of pixels with a flicker sigma above ``threshold_e``."""
 
-    ppm_above: float = Field(ge=0, le=1e6)
+    ppm_above: float = Field(ge=0, le=1e6, description="parts per million of pixels whose flicker sigma exceeds threshold_e")
     threshold_e: float = Field(gt=0, description="flicker sigma threshold, e- rms")
     max_e: float = Field(gt=0, description="largest extra sigma of a tail pixel, e- rms")
 
@@ -260,7 +268,8 @@ class FlickerSection(Section):
     enabled: bool = True
     gumbel_loc_e: float = Field(0.8, ge=-1000, le=1000, description="location of the gumbel_r body, e- rms")
     gumbel_scale_e: float = Field(0.25, gt=0, le=1000, description="scale of the gumbel_r body, e- rms")
-    tail: Optional[FlickerTail] = Field(default_factory=lambda: FlickerTail(ppm_above=100, threshold_e=4.0, max_e=12.0))
+    tail: Optional[FlickerTail] = Field(default_factory=lambda: FlickerTail(ppm_above=100, threshold_e=4.0, max_e=12.0),
+                                        description="RTS tail of very noisy pixels; null: no tail")
 
 
 class SourceFollowerSection(Section):
@@ -292,7 +301,7 @@ class ColumnNoiseSection(Section):
 
 class AdcSection(Section):
     enabled: bool = Field(True, description="off: ideal readout, 1 DN per e-, no black level, 16-bit range")
-    bits: int = Field(12, ge=8, le=16)
+    bits: int = Field(12, ge=8, le=16, description="ADC resolution, bits")
     black_level_dn: float = Field(64.0, ge=0, description="offset added before quantization, DN")
     full_scale_e: Optional[float] = Field(None, gt=0, description="charge mapped to the top code, e-; null: the full well")
 
@@ -301,8 +310,8 @@ class AdcSection(Section):
 class Config(Section):
     """A complete, resolved cmosnoise configuration."""
 
-    description: str = ""
-    seed: int = Field(0, ge=0, le=2**63 - 1)
+    description: str = Field("", description="free text: what this configuration is for")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="sensor instance: the same seed gives the same fixed pattern and noise")
     scene: SceneSection = Field(default_factory=SceneSection)
     run: RunSection = Field(default_factory=RunSection)
     sensor: SensorSection = Field(default_factory=SensorSection)
@@ -339,6 +348,7 @@ class Config(Section):
         return self.model_dump(mode="json", exclude_none=True)
 
     def to_yaml(self) -> str:
-        return yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None, width=100)
+        """Every key, those that are null included (they read back as null)."""
+        return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False, default_flow_style=None, width=100)
 
 

@@ -286,7 +286,10 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
     name = source.strip()
     low = name.lower()
     if low.startswith("flat:") or low == "flat":
-        text = name.partition(":")[2] or "0.5"
+        text = name.partition(":")[2]
+        if not text.strip():
+            raise CmosnoiseError(f"scene {name!r}: give the level, flat:LEVEL with LEVEL in [0, 1] (fraction of the peak rate), "
+                                 "e.g. flat:0.5")
         try:
             level = float(text)
         except ValueError:

@@ -1,0 +1,85 @@
+"""``cmosnoise config --explain``: every key with its type, default, limits and description, from the schema."""
+
+from __future__ import annotations
+
+import typing
+from typing import Any
+
+from pydantic import BaseModel
+
+from .schema import Config
+
+
+_DEFAULT_TEXT = {"enabled": "switch this stage (or part) on or off"}
+
+
+def _limits(info) -> str:
+    parts = []
+    for m in info.metadata:
+        for attr, sym in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
+            v = getattr(m, attr, None)
+            if v is not None:
+                parts.append(f"{sym} {v:g}" if isinstance(v, (int, float)) else f"{sym} {v}")
+    return ", ".join(parts)
+
+
+def _type_name(ann) -> str:
+    origin = typing.get_origin(ann)
+    args = typing.get_args(ann)
+    if origin is typing.Literal:
+        return " | ".join(map(str, args))
+    if origin is typing.Union:
+        names = [_type_name(a) for a in args if a is not type(None)]
+        return " | ".join(names) + (" | null" if type(None) in args else "")
+    if origin in (list, tuple):
+        return f"list of {_type_name(args[0])}" if args else "list"
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return "section"
+    return getattr(ann, "__name__", str(ann))
+
+
+def _submodel(ann) -> type[BaseModel] | None:
+    """The section class a field holds (directly, optionally, or as list items), if any."""
+    for a in (ann, *typing.get_args(ann)):
+        if isinstance(a, type) and issubclass(a, BaseModel):
+            return a
+        for b in typing.get_args(a):
+            if isinstance(b, type) and issubclass(b, BaseModel):
+                return b
+    return None
+
+
+def rows(model: type[BaseModel] = Config, prefix: str = "") -> list[dict[str, Any]]:
+    """One row per key: ``key``, ``type``, ``default``, ``limits``, ``description`` (lists of sections as ``key.N.sub``)."""
+    out = []
+    for name, info in model.model_fields.items():
+        key = f"{prefix}{name}"
+        sub = _submodel(info.annotation)
+        is_list = typing.get_origin(info.annotation) is list or any(
+            typing.get_origin(a) is list for a in typing.get_args(info.annotation))
+        if sub is not None and not is_list and typing.get_origin(info.annotation) is not typing.Union:
+            out.extend(rows(sub, key + "."))
+            continue
+        default = "required" if info.is_required() else info.get_default(call_default_factory=True)
+        if isinstance(default, BaseModel):
+            default = default.model_dump(mode="json", exclude_none=True)
+        elif isinstance(default, list) and default and isinstance(default[0], BaseModel):
+            default = f"{len(default)} item(s); see `cmosnoise config`"
+        out.append({"key": key, "type": _type_name(info.annotation), "default": default,
+                    "limits": _limits(info), "description": info.description or _DEFAULT_TEXT.get(name, "")})
+        if sub is not None:  # a list of sections, or an optional one: its keys too
+            out.extend(rows(sub, key + (".N." if is_list else ".")))
+    return out
+
+
+def text(model: type[BaseModel] = Config) -> str:
+    """The rows as plain text, one block per key."""
+    lines = []
+    for r in rows(model):
+        default = "null" if r["default"] is None else ('""' if r["default"] == "" else r["default"])
+        head = f"{r['key']}  ({r['type']}; default {default}"
+        head += f"; {r['limits']})" if r["limits"] else ")"
+        lines.append(head)
+        if r["description"]:
+            lines.append(f"    {r['description']}")
+    return "\n".join(lines) + "\n"
