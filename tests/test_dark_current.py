@@ -328,3 +328,21 @@ def test_summary_reports_dark_current_figures(tmp_path):
     for key in ["white_pixels", "couplets", "couplets_expected_random"]:
         assert key in d["frame0"] and key in d["map"]
     assert d["map_median_e_per_s"] < d["map_mean_e_per_s"]  # the tail pulls the mean up
+
+
+def test_readme_white_pixel_snippet_runs_on_what_tifffile_reads(tmp_path):
+    """The README's Python snippet, on a real run's raw.tiff (a (frames, rows, cols) stack)."""
+    import tifffile
+
+    out = tmp_path / "dark"
+    r = cli("simulate", "--scene", "flat:0", "--frames", "4", "--set", "exposure.integration_time_s=0.25",
+            "--set", "sensor.width=64", "--set", "sensor.height=48", "--out", out)
+    assert r.returncode == 0, r.stderr
+    raw = tifffile.imread(out / "raw.tiff")
+    assert raw.shape == (4, 48, 64)
+    rate = white_pixels.dark_rate_from_raw(raw, black_level_dn=64, gain_dn_per_e=0.4031, integration_time_s=0.25)
+    rep = white_pixels.report(rate, threshold=1560.4, pattern="RGGB")
+    assert rate.shape == (48, 64) and rep["white_pixels"] == int((rate > 1560.4).sum())
+    assert white_pixels.couplet_pairs(rate > 1560.4, "RGGB").shape[1:] == (2, 2)
+    with pytest.raises(CmosnoiseError, match="one \\(rows, cols\\) map"):
+        white_pixels.report(raw, 10.0, "RGGB")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
 
 
@@ -98,7 +99,11 @@ def report(values: np.ndarray, threshold: float, pattern: str) -> dict:
 
     ``values`` and ``threshold`` are in the same unit (e.g. e-/s, or DN).
     """
-    mask = np.asarray(values) > threshold
+    values = np.asarray(values)
+    if values.ndim != 2:
+        raise CmosnoiseError(f"white_pixels.report: values of shape {values.shape}; give one (rows, cols) map or frame "
+                             "(for a stack of dark frames, dark_rate_from_raw averages them)")
+    mask = values > threshold
     n = int(mask.sum())
     frac = n / mask.size
     return {
@@ -111,5 +116,15 @@ def report(values: np.ndarray, threshold: float, pattern: str) -> dict:
 
 
 def dark_rate_from_raw(raw: np.ndarray, black_level_dn: float, gain_dn_per_e: float, integration_time_s: float) -> np.ndarray:
-    """Dark-current estimate from a dark raw frame: ``(DN - black) / K / t_int`` (e-/s)."""
-    return (np.asarray(raw, dtype=np.float64) - black_level_dn) / gain_dn_per_e / integration_time_s
+    """Dark-current estimate from a dark raw frame: ``(DN - black) / K / t_int`` (e-/s), (rows, cols).
+
+    ``raw`` is one frame (rows, cols) or a stack (frames, rows, cols), as
+    ``tifffile.imread`` returns ``raw.tiff``; a stack is averaged over its
+    frames first, which lowers the temporal noise in the estimate.
+    """
+    raw = np.asarray(raw, dtype=np.float64)
+    if raw.ndim == 3:
+        raw = raw.mean(axis=0)
+    if raw.ndim != 2:
+        raise CmosnoiseError(f"dark_rate_from_raw: raw of shape {raw.shape}; give (rows, cols) or (frames, rows, cols)")
+    return (raw - black_level_dn) / gain_dn_per_e / integration_time_s
