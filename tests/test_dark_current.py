@@ -346,3 +346,19 @@ def test_readme_white_pixel_snippet_runs_on_what_tifffile_reads(tmp_path):
     assert white_pixels.couplet_pairs(rate > 1560.4, "RGGB").shape[1:] == (2, 2)
     with pytest.raises(CmosnoiseError, match="one \\(rows, cols\\) map"):
         white_pixels.report(raw, 10.0, "RGGB")
+
+
+def test_frame0_white_pixels_do_not_count_photon_shot_noise(tmp_path):
+    """The lit default run once reported 125 374 white pixels in frame 0 (408 118 ppm): photon shot noise."""
+    args = ["--set", "sensor.width=320", "--set", "sensor.height=240", "--seed", "3"]
+    assert cli("simulate", *args, "--out", tmp_path / "lit").returncode == 0
+    assert cli("simulate", *args, "--scene", "flat:0", "--out", tmp_path / "dark").returncode == 0
+    lit = json.loads((tmp_path / "lit" / "summary.json").read_text())["dark_current"]
+    dark = json.loads((tmp_path / "dark" / "summary.json").read_text())["dark_current"]
+    assert lit["frame0"]["method"].startswith("lit frame") and dark["frame0"]["method"].startswith("dark frame")
+    n_map = lit["map"]["white_pixels"]
+    assert n_map > 0
+    # lit: a lower bound of the map's count (5-sigma margin: false positives ~ 3e-7 per pixel)
+    assert lit["frame0"]["white_pixels"] <= n_map + 2
+    # dark: the map's white pixels plus or minus those near the threshold that dark shot noise moves
+    assert abs(dark["frame0"]["white_pixels"] - n_map) <= max(3, 0.5 * n_map)

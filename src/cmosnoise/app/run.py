@@ -183,10 +183,34 @@ def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict |
         out["threshold_aA"] = e_per_s_to_aa(thr)
         out["ppm_expected"] = state.expected_ppm_above()
         out["map"] = white_pixels.report(rate, thr, sensor.cfa)
-        # frame 0: charge above the expected photo-charge, as a rate
-        excess = (electrons0 - shot.photo_mean_e) / t_int
-        out["frame0"] = white_pixels.report(excess, thr, sensor.cfa)
+        out["frame0"] = frame0_white_pixels(sensor, shot, electrons0, thr)
     return out
+
+
+def frame0_white_pixels(sensor: Sensor, shot, electrons0: np.ndarray, threshold_e_per_s: float) -> dict:
+    """White pixels seen in frame 0, counted only where the count means something, and saying how.
+
+    A dark frame (no photo-charge): its charge as a rate, above the
+    threshold. A lit frame: its charge minus the expected photo-charge must
+    exceed the threshold's charge by 5 sigma of that pixel's temporal noise
+    (photon shot noise plus the read noise), so that shot noise is not
+    counted as dark current: in a bright area a white pixel hides in the shot
+    noise, and the count is a lower bound.
+    """
+    t_int = sensor.config.exposure.integration_time_s
+    photo = shot.photo_mean_e
+    read_var = noise_budget.budget(sensor, 0.0)["temporal_total_e"] ** 2
+    if float(photo.max()) <= 0:
+        rep = white_pixels.report(electrons0 / t_int, threshold_e_per_s, sensor.cfa)
+        rep["method"] = "dark frame: frame 0's charge / integration time, above the threshold"
+        return rep
+    sigma = np.sqrt(photo.astype(np.float64) + read_var)
+    excess_e = electrons0 - photo - 5.0 * sigma  # charge beyond the photo-charge and 5 sigma of the temporal noise
+    rep = white_pixels.report(excess_e / t_int, threshold_e_per_s, sensor.cfa)
+    rep["method"] = ("lit frame: (charge - expected photo-charge - 5 sigma of photon shot and read noise) / "
+                     "integration time, above the threshold; white pixels in bright areas hide in the shot noise, "
+                     "so this is a lower bound")
+    return rep
 
 
 def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, electrons0: np.ndarray) -> dict:
