@@ -8,7 +8,19 @@ column sigmas, column gains, dark-current map)::
 
 with ``d`` the mean dark charge (its shot noise), ``g_c`` the column gains
 and the last term quantization (1/12 DN^2, in e-). Fixed pattern noise is
-listed apart: DSNU (dark-current map, row and column offsets) and PRNU.
+listed apart: DSNU (dark-current map, row and column offsets) and PRNU, the
+PRNU as the photo-charge shows it, after crosstalk has averaged neighbouring
+gains (:attr:`Sensor.flat_response`).
+
+**Clipping.** Near saturation a pixel's charge is clipped at the full well
+and its code at the ADC's top: clipped pixels have less temporal noise.
+:func:`clipping` follows each pixel through both clips (its mean from the
+scene or a flat field through the PRNU and crosstalk maps, plus its dark
+charge; shot noise as a normal, then the read noise, then the ADC's top),
+with the moments of a clipped normal, and gives the temporal and spatial
+variance and the fraction of clipped pixels that frames will show. The
+totals in :func:`budget` include it; the per-source lines are the unclipped
+contributions.
 """
 
 from __future__ import annotations
@@ -57,26 +69,124 @@ def fixed_pattern_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, 
         out["row_fixed"] = float(np.var(fp.row_offset.astype(np.float64)))
     if fp.vfpn is not None:
         out["vfpn"] = float(np.var(fp.vfpn.astype(np.float64)))
-    if fp.prnu_gain is not None:
-        out["prnu"] = float(np.var(fp.prnu_gain.astype(np.float64))) * signal_e**2
+    if fp.prnu_gain is not None or c.crosstalk.enabled:
+        out["prnu"] = float(np.var(sensor.flat_response)) * signal_e**2  # after crosstalk, as frames show it
     if fp.column_gain is not None:
         out["column_gain"] = float(np.var(fp.column_gain.astype(np.float64))) * signal_e**2
     return out
+
+
+def _clipped_normal(m: np.ndarray, v: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean, variance and P(X > top) of ``min(X, top)`` for X ~ Normal(m, v), elementwise."""
+    from scipy.special import ndtr
+
+    if math.isinf(top):
+        return m, v, np.zeros(np.shape(m))
+    s = np.sqrt(np.maximum(v, 1e-300))
+    a = (top - m) / s
+    cdf = ndtr(a)
+    pdf = np.exp(-0.5 * a * a) / math.sqrt(2 * math.pi)
+    mean = m * cdf - s * pdf + top * (1 - cdf)
+    second = (m * m + v) * cdf - s * (m + top) * pdf + top * top * (1 - cdf)
+    return mean, np.maximum(second - mean * mean, 0.0), 1 - cdf
+
+
+def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
+    """Temporal and spatial variance (e-^2) with the full-well and ADC clips, and the fraction of pixels clipped.
+
+    ``photo_e`` is the mean photo-charge per pixel (a scene); without it, a
+    flat field of mean ``signal_e`` through the sensor's PRNU and crosstalk.
+    Column gain mismatch is left out here (it is a fraction of a per cent).
+    """
+    c = sensor.config
+    fp = sensor.fixed_pattern
+    t = sensor.transfer
+    if photo_e is None:
+        photo = signal_e * sensor.flat_response
+    else:
+        photo = np.asarray(photo_e, np.float64)
+    dark = (fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0)
+    mean_n = photo + dark
+    shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
+    fw = c.sensor.full_well_e
+    # the top code's charge (values within half a code of it round to it)
+    top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
+    sd_max = math.sqrt(float(np.max(shot)) + (c.source_follower.thermal_sigma_e + 20) ** 2) if np.size(shot) else 0.0
+    if float(np.max(mean_n)) + 10 * sd_max + 100 < min(fw, top):  # nothing comes near a clip: skip the per-pixel moments
+        return {"full_well_fraction": 0.0, "top_code_fraction": 0.0, "clipped_fraction": 0.0,
+                "temporal_var_e2": math.nan, "spatial_var_e2": math.nan}
+    mean_n = np.broadcast_to(mean_n, sensor.shape)
+    shot = np.broadcast_to(np.asarray(shot, np.float64), sensor.shape)
+    read = np.zeros(sensor.shape)
+    offset = np.zeros(sensor.shape)
+    if c.source_follower.enabled:
+        read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
+    if c.row_noise.enabled:
+        read = read + c.row_noise.sigma_e**2
+    if fp.column_sigma is not None:
+        read = read + fp.column_sigma.astype(np.float64) ** 2
+    if fp.row_offset is not None:
+        offset = offset + fp.row_offset.astype(np.float64)
+    if fp.vfpn is not None:
+        offset = offset + fp.vfpn.astype(np.float64)
+    # the charge: N ~ Normal(mean_n, shot), clipped at the full well with probability p_fw
+    p_fw = 1.0 - _cdf((fw - mean_n) / np.sqrt(np.maximum(shot, 1e-300)))
+    m_below, v_below = _truncated_below(mean_n, shot, fw)  # N given N < FW
+    # the readout adds read noise and offsets, then the ADC clips at its top: a mixture of the two cases
+    m_c, v_c, q_c = _clipped_normal(fw + offset, read, top)  # clipped at the full well
+    m_u, v_u, q_u = _clipped_normal(m_below + offset, v_below + read, top)  # not clipped there
+    mean = p_fw * m_c + (1 - p_fw) * m_u
+    second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
+    var = np.maximum(second - mean**2, 0.0)
+    at_top = p_fw * q_c + (1 - p_fw) * q_u
+    return {"full_well_fraction": float(np.mean(p_fw)), "top_code_fraction": float(np.mean(at_top)),
+            "clipped_fraction": float(np.mean(np.maximum(p_fw, at_top))),
+            "temporal_var_e2": float(np.mean(var)), "spatial_var_e2": float(np.var(mean))}
+
+
+def _cdf(a):
+    from scipy.special import ndtr
+
+    return ndtr(a)
+
+
+def _truncated_below(m: np.ndarray, v: np.ndarray, c: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and variance of X ~ Normal(m, v) given X < c (where that is almost sure: X itself)."""
+    s = np.sqrt(np.maximum(v, 1e-300))
+    a = (c - m) / s
+    cdf = np.maximum(_cdf(a), 1e-300)
+    ratio = np.exp(-0.5 * a * a) / math.sqrt(2 * math.pi) / cdf
+    mean = m - s * ratio
+    var = v * np.clip(1 - a * ratio - ratio**2, 0.0, 1.0)
+    return mean, var
 
 
 def _rms(variances: dict[str, float]) -> dict[str, float]:
     return {k: math.sqrt(max(v, 0.0)) for k, v in variances.items()}
 
 
-def budget(sensor: Sensor, signal_e: float = 0.0) -> dict:
-    """Noise budget at ``signal_e``: rms per source (e-), totals in e- and DN, and the dominant source."""
+def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
+    """Noise budget at ``signal_e`` (or over a scene's ``photo_e`` map, e-): rms per source (e-), totals in e- and DN.
+
+    The totals include clipping at the full well and the ADC's top where more
+    than 1e-6 of the pixels clip (``clipped_fraction``); the per-source lines
+    are the unclipped contributions.
+    """
+    if photo_e is not None:
+        signal_e = float(np.mean(photo_e))
     tv = temporal_variances(sensor, signal_e)
     fv = fixed_pattern_variances(sensor, signal_e)
     k = sensor.transfer.gain_dn_per_e
     total_t = sum(tv.values())
     total_f = sum(fv.values())
+    clip = clipping(sensor, signal_e, photo_e)
+    if clip["clipped_fraction"] > 1e-6:
+        q = tv.get("quantization", 0.0)
+        total_t = clip["temporal_var_e2"] + q
+        total_f = clip["spatial_var_e2"] if photo_e is None else total_f
     return {
         "signal_e": signal_e,
+        "clipped_fraction": clip["clipped_fraction"],
         "temporal_rms_e": _rms(tv),
         "temporal_total_e": math.sqrt(total_t),
         "temporal_total_dn": math.sqrt(total_t) * k,

@@ -214,12 +214,23 @@ def frame0_white_pixels(sensor: Sensor, shot, electrons0: np.ndarray, threshold_
     return rep
 
 
+def run_warnings(sensor: Sensor, measured: dict, predicted: dict) -> list[str]:
+    """What a user should know before trusting the figures: clipping, cooling pixels."""
+    out = []
+    sat = measured.get("saturated_fraction") or 0.0
+    if max(sat, predicted.get("clipped_fraction", 0.0)) > 1e-3:
+        out.append(f"{100 * sat:.3g} % of pixels sit at the top code in the frames ({100 * predicted['clipped_fraction']:.3g} % "
+                   "predicted to clip at the full well or the ADC's top): their noise is lower than unclipped pixels' "
+                   "(the predicted totals include it)")
+    return out
+
+
 def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, electrons0: np.ndarray) -> dict:
     c = sensor.config
     t = sensor.transfer
     measured = stats.result()
     timings = {k: round(v, 6) for k, v in sensor.timings.items()}
-    predicted = noise_budget.budget(sensor, float(shot.photo_mean_e.mean()))
+    predicted = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)  # this scene, pixel by pixel: clipping included
     return {
         "cmosnoise_version": __version__,
         "generator": generator_info(),
@@ -257,7 +268,8 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "scene_mean": predicted,
         },
         "key_figures": noise_budget.key_figures(sensor),
-        "dark_current": dark_current_summary(sensor, shot, electrons0),
+        "dark_current": (dark := dark_current_summary(sensor, shot, electrons0)),
+        "warnings": run_warnings(sensor, measured, predicted) + ([dark["warning"]] if dark and "warning" in dark else []),
         "timings_s": {
             "total": round(wall_s, 6),
             "per_frame": round(wall_s / max(n, 1), 6),

@@ -85,6 +85,7 @@ class Sensor:
         t0 = time.perf_counter()
         self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern()
         self._sf_sigma: np.ndarray | None = None
+        self._flat: np.ndarray | None = None
         self.timings["fixed_pattern"] += time.perf_counter() - t0
 
     def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
@@ -126,6 +127,23 @@ class Sensor:
                 self.config.source_follower.thermal_sigma_e, self._fixed.flicker_sigma, self.shape
             )
         return self._sf_sigma
+
+    @property
+    def flat_response(self) -> np.ndarray:
+        """Each pixel's photo-charge under a flat field, relative to the array's mean: PRNU after crosstalk, (rows, cols) float64.
+
+        Crosstalk averages neighbouring gains, so the PRNU a user measures is
+        this map's standard deviation, not ``prnu.sigma_pct`` (about 0.79
+        times it with the default kernel). All ones when both stages are off.
+        """
+        if self._flat is None:
+            c = self.config
+            g = (self._fixed.prnu_gain.astype(np.float64) if self._fixed.prnu_gain is not None
+                 else np.ones(self.shape))
+            if c.crosstalk.enabled:
+                g = crosstalk.apply(g, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
+            self._flat = g / g.mean()
+        return self._flat
 
     @property
     def flicker_model(self):
