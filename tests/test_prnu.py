@@ -6,7 +6,9 @@ from scipy import stats
 from cmosnoise import Sensor, load_config
 from cmosnoise.model.stages.prnu import gain_map
 
-from conftest import assert_close
+import pytest
+
+from conftest import Z, assert_close, quiet_config
 
 
 def test_gain_map_is_normal_with_configured_sigma():
@@ -49,3 +51,21 @@ def test_prnu_is_fixed_across_frames_and_same_for_same_seed():
     assert np.array_equal(a, b)
     assert np.array_equal(a[0], a[2])  # shot noise off: PRNU alone, fixed
     assert not np.array_equal(a[0], c[0])
+
+
+def test_data_sheet_prnu_solves_the_gain_map_sigma_and_frames_show_it():
+    """prnu.measured_pct is the PRNU after crosstalk: a flat field's relative spread equals it."""
+    from cmosnoise import CmosnoiseError
+
+    cfg = quiet_config(prnu={"enabled": True, "measured_pct": 1.5}, crosstalk={"enabled": True},
+                       sensor={"width": 400, "height": 300, "cfa": "RGGB"}, exposure={"integration_time_s": 0.05})
+    assert cfg.prnu.sigma_pct == pytest.approx(1.5 / 0.7893541663917409, rel=1e-6)
+    shot = Sensor(cfg, seed=4).expose("flat:1")
+    inner = shot.photo_mean_e[2:-2, 2:-2].astype(np.float64)
+    seen = 100 * inner.std() / inner.mean()
+    se = seen / np.sqrt(2 * inner.size) * 3  # neighbours share gains through the kernel
+    assert abs(seen - 1.5) <= Z * se, seen
+    with pytest.raises(CmosnoiseError, match="give one of them"):
+        load_config(overrides=["prnu.measured_pct=0.79", "prnu.sigma_pct=2"])
+    off = quiet_config(prnu={"enabled": True, "measured_pct": 1.5}, sensor={"width": 8, "height": 8})
+    assert off.prnu.sigma_pct == pytest.approx(1.5)  # no crosstalk: what is measured is the gain map

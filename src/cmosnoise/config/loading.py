@@ -75,7 +75,7 @@ def apply_overrides(data: dict, overrides: list[str], defaults: dict | None = No
                 break
             nxt = node[key] if (isinstance(node, dict) and key in node) or (isinstance(node, list) and key < len(node)) else None
             if not isinstance(nxt, (dict, list)):
-                nxt = copy.deepcopy(default) if isinstance(default, (dict, list)) else {}
+                nxt = copy.deepcopy(default) if isinstance(default, list) else {}  # only lists: a dict stays sparse
                 if isinstance(node, list) and key == len(node):
                     node.append(nxt)
                 else:

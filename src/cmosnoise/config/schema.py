@@ -117,7 +117,12 @@ class ExposureSection(Section):
 # ------------------------------------------------------------------------ stages
 class PrnuSection(Section):
     enabled: bool = True
-    sigma_pct: float = Field(1.0, ge=0, le=100, description="PRNU, % of the signal (std of the gain map)")
+    sigma_pct: float = Field(1.0, ge=0, le=100, description="PRNU, % of the signal: the std of the gain map, before crosstalk")
+    measured_pct: Optional[float] = Field(
+        None, ge=0, le=100,
+        description="PRNU as a data sheet or an EMVA 1288 measurement gives it (after crosstalk), %; "
+                    "when set, sigma_pct is solved from it (crosstalk averages neighbouring gains: about 0.79 with the default kernel)",
+    )
 
 
 Kernel = list[list[float]]

@@ -74,8 +74,56 @@ def dark_points(config: Config) -> list[Point]:
     return out
 
 
+def prnu_seen_per_sigma(config: Config) -> float:
+    """The PRNU frames show per unit of gain-map sigma: crosstalk averages neighbouring gains.
+
+    For each pixel of the CFA's 2 x 2 cell, its charge under a flat field is
+    a weighted sum of its neighbours' gains; with independent gains the
+    relative std is ``sigma * sqrt(sum w^2) / sum w``. The weights are read by
+    spreading a single pixel's charge with the configured kernel(s); the
+    result is the root mean square over the cell. 1 without crosstalk.
+    """
+    import numpy as np
+
+    from .stages import crosstalk
+
+    if not config.crosstalk.enabled:
+        return 1.0
+    kernel = crosstalk.kernel_fractions(config.crosstalk.kernel_pct)
+    n = 8
+    ratios = []
+    for pr, pc in [(4, 4), (4, 5), (5, 4), (5, 5)]:
+        w = []
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                delta = np.zeros((n, n))
+                delta[pr + dr, pc + dc] = 1.0
+                w.append(crosstalk.apply(delta, kernel, config.sensor.cfa)[pr, pc])
+        w = np.array(w)
+        ratios.append(float(np.sum(w**2) / np.sum(w) ** 2))
+    return float(np.sqrt(np.mean(ratios)))
+
+
+def resolve_prnu(config: Config) -> Config:
+    """``config`` with ``prnu.sigma_pct`` solved from ``prnu.measured_pct`` when that is given."""
+    p = config.prnu
+    if p.measured_pct is None:
+        return config
+    sigma = p.measured_pct / prnu_seen_per_sigma(config)
+    if "sigma_pct" in p.model_fields_set and abs(p.sigma_pct - sigma) > 1e-6 * max(sigma, 1e-9):
+        raise CmosnoiseError(
+            f"prnu.sigma_pct = {p.sigma_pct:g} and prnu.measured_pct = {p.measured_pct:g} disagree (through this "
+            f"crosstalk {p.measured_pct:g} % measured means a gain-map sigma of {sigma:.6g} %): give one of them"
+        )
+    if sigma > 100:
+        raise CmosnoiseError(f"prnu.measured_pct = {p.measured_pct:g}: needs a gain-map sigma of {sigma:.4g} %, above 100 %")
+    return config.model_copy(update={"prnu": p.model_copy(update={"sigma_pct": float(round(sigma, 9))})})
+
+
 def check(config: Config) -> Config:
-    """``config`` itself, once its dark-current points and flicker tail are known to be reachable."""
+    """``config`` with what it implies resolved (PRNU from its measured value), once its dark-current points
+    and flicker tail are known to be reachable."""
+    config = resolve_prnu(config)
     dark_points(config)
     flicker_model(config)
     return config
