@@ -185,7 +185,7 @@ def fig9_couplets(seed: int = 0):
             ax.set_title(f"{'VGA' if 'vga' in name else '5 MP'} {label}: {len(cp)} couplet(s)")
             ax.set_xticks([])
             ax.set_yticks([])
-    fig.suptitle("500 e- peak after 0.25 s; 65 C, dark mean 500 e-/s, tail to 80000 e-/s, 4000 ppm > 250 aA; dark cal on")
+    fig.suptitle("500 e- peak after 0.25 s; 65 C, dark body mean 500 e-/s, tail adding up to 80000 e-/s, 4000 ppm > 250 aA; dark cal on")
     return Figure("fig9_couplets.png", plots.to_png_bytes(fig), (
         "Fig. 9: the same part of the scene on a VGA and a 5 MP sensor with the paper's worst-case dark current "
         "(presets paper-fig9-vga and paper-fig9-5m). Left: before processing, couplets of white pixels circled; right: "
