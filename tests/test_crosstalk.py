@@ -58,14 +58,32 @@ def test_charge_is_conserved_up_to_the_kernel_sum():
     assert out.sum() == pytest.approx(mu.sum() * k.sum(), rel=1e-5)
 
 
-def test_edges_reflect():
+@pytest.mark.parametrize("lit", [(0, 2), (4, 2), (2, 0), (2, 4), (0, 0), (4, 4)])
+def test_edges_reflect_the_charge_that_would_leave(lit):
+    """A lit pixel on the border with a lopsided kernel: what would leave the array comes back into it.
+
+    Every other edge rule gives something else here (zero padding or a
+    mirrored-source convolution keeps 80 or 64 e- at a corner, wrapping moves it across).
+    """
     mu = np.zeros((5, 5), np.float32)
-    mu[0, 2] = 100.0
-    k = np.zeros((3, 3)); k[0, 1] = 0.2; k[1, 1] = 0.8  # 20 % goes one row up
+    mu[lit] = 100.0
+    k = np.zeros((3, 3)); k[0, 1] = 0.2; k[1, 2] = 0.1; k[1, 1] = 0.7  # 20 % one row up, 10 % one column right
     out = crosstalk.apply(mu, k)
-    # the charge a reflected border sends up comes back into row 0
-    assert out[0, 2] == pytest.approx(80.0)
-    assert out[1, 2] == 0.0
+    r, c = lit
+    up_stays = r == 0
+    right_stays = c == 4
+    assert out[lit] == pytest.approx(70.0 + 20.0 * up_stays + 10.0 * right_stays)
+    if not up_stays:
+        assert out[r - 1, c] == pytest.approx(20.0)
+    if not right_stays:
+        assert out[r, c + 1] == pytest.approx(10.0)
+    assert out.sum() == pytest.approx(100.0)
+
+
+def test_lopsided_kernel_conserves_the_charge_it_keeps():
+    mu = np.random.default_rng(1).uniform(0, 1000, (37, 41)).astype(np.float64)
+    k = np.array([[0.05, 0.2, 0.0], [0.0, 0.6, 0.1], [0.0, 0.0, 0.02]])
+    assert crosstalk.apply(mu, k).sum() == pytest.approx(mu.sum() * k.sum(), rel=1e-12)
 
 
 def test_mixing_matrix_of_uniform_kernel():

@@ -292,14 +292,22 @@ def test_expected_couplets_for_random_placement(pattern):
 
 
 def test_more_couplets_at_5mp_than_vga_on_the_same_scene():
-    counts = {}
+    counts, pairs = {}, {}
     for preset in ["paper-fig9-vga", "paper-fig9-5m"]:
         sensor = Sensor(load_config(preset=preset), seed=8)
         r = white_pixels.report(sensor.fixed_pattern.dark_rate, sensor.fixed_pattern.dark_state.threshold, sensor.cfa)
         counts[preset] = r["couplets"]
+        pairs[preset] = white_pixels.neighbour_pairs(sensor.shape, sensor.cfa)
         # the count is what random placement at the realised density predicts (Poisson error)
         assert abs(r["couplets"] - r["couplets_expected_random"]) <= Z * np.sqrt(r["couplets_expected_random"])
-    assert counts["paper-fig9-5m"] > 5 * counts["paper-fig9-vga"]
+    # at the same ppm the expected count scales with the number of neighbour pairs: 16.46 times more at 5 MP.
+    # both counts are near-Poisson, so C5 - r Cv has variance about C5 + r^2 Cv
+    ratio = pairs["paper-fig9-5m"] / pairs["paper-fig9-vga"]
+    assert ratio == pytest.approx(16.46, abs=0.01)
+    c5, cv = counts["paper-fig9-5m"], counts["paper-fig9-vga"]
+    sd = np.sqrt(c5 + ratio**2 * cv)  # plug-in Poisson variances
+    assert abs(c5 - ratio * cv) <= Z * sd, (c5, cv, ratio)
+    assert c5 > 5 * cv  # the paper's point, and far inside the bound above
 
 
 def test_report_from_a_dark_raw_frame_finds_the_maps_white_pixels():

@@ -31,8 +31,22 @@ def kernel_fractions(kernel_pct) -> np.ndarray | dict[str, np.ndarray]:
 
 
 def spread(mean_e: np.ndarray, kernel) -> np.ndarray:
-    """Spread charge with one kernel: ``out[p] = sum_d mean_e[p - d] * k[d]`` (e-)."""
-    return ndimage.convolve(mean_e, np.asarray(kernel, dtype=mean_e.dtype), mode="reflect")
+    """Spread charge with one kernel: pixel q sends ``mean_e[q] * k[d]`` to pixel q + d (e-).
+
+    Edges reflect (MODEL.md stage 3): charge that would diffuse off the
+    array is sent back into the edge pixel it left, so the array keeps all
+    the charge the kernel keeps, whatever the kernel's symmetry. (A
+    convolution with ``mode="reflect"`` mirrors the sources instead, which
+    loses charge at one edge and creates it at the other for a lopsided
+    kernel.)
+    """
+    k = np.asarray(kernel, dtype=mean_e.dtype)
+    out = ndimage.convolve(np.pad(mean_e, 1), k, mode="constant")  # into a one-pixel frame around the array
+    out[1, :] += out[0, :]
+    out[-2, :] += out[-1, :]
+    out[:, 1] += out[:, 0]
+    out[:, -2] += out[:, -1]
+    return out[1:-1, 1:-1]
 
 
 def apply(mean_e: np.ndarray, kernel, pattern: str = "none") -> np.ndarray:
