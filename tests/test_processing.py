@@ -221,3 +221,17 @@ def test_validate_raw_accepts_2d_and_3d_codes():
     assert validate_raw(np.zeros((3, 4, 6), np.uint8), "x").dtype == np.uint16
     with pytest.raises(CmosnoiseError):
         validate_raw(np.zeros((4, 6, 3), np.float64), "x")
+
+
+@pytest.mark.parametrize("method", ["bilinear", "malvar2004", "menon2007"])
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG"])
+def test_demosaicing_leaves_no_colour_fringe_on_the_border(pattern, method):
+    """A grey flat field demosaics to grey everywhere, the outermost rows and columns included."""
+    from cmosnoise.isp.reconstruction import demosaic
+
+    from cmosnoise.model import cfa
+
+    levels = np.array([0.3, 0.6, 0.45])  # a neutral grey seen through channels of different responsivity
+    img = levels[cfa.channel_map(pattern, (24, 30))]
+    rgb = demosaic(img, pattern, method)
+    np.testing.assert_allclose(rgb, np.broadcast_to(levels, rgb.shape), atol=1e-6)

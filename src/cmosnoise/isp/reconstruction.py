@@ -24,19 +24,31 @@ from ..model.scene import linear_to_srgb
 DEMOSAIC_METHODS = ("bilinear", "malvar2004", "menon2007")
 
 
-def demosaic(cfa_img: np.ndarray, pattern: str, method: str = "bilinear") -> np.ndarray:
-    """CFA image (rows, cols) to RGB (rows, cols, 3), float32."""
-    if method == "bilinear":
-        return bilinear(cfa_img, pattern)
-    import colour_demosaicing as cd
+#: the CFA is extended by this many pixels on each side before demosaicing (even: the pattern's phase is kept)
+_EDGE_PAD = 4
 
-    funcs = {
-        "malvar2004": cd.demosaicing_CFA_Bayer_Malvar2004,
-        "menon2007": cd.demosaicing_CFA_Bayer_Menon2007,
-    }
-    if method not in funcs:
+
+def demosaic(cfa_img: np.ndarray, pattern: str, method: str = "bilinear") -> np.ndarray:
+    """CFA image (rows, cols) to RGB (rows, cols, 3), float32.
+
+    The mosaic is first extended by mirroring (``numpy.pad(mode="reflect")``
+    by an even number of pixels keeps every pixel's colour), so border pixels
+    are interpolated from real neighbours of their own colour: without it
+    the methods' own edge handling leaves a one-pixel colour fringe.
+    """
+    if method not in DEMOSAIC_METHODS:
         raise ValueError(f"unknown demosaicing method {method!r}; use one of {DEMOSAIC_METHODS}")
-    return np.asarray(funcs[method](cfa_img.astype(np.float64), pattern), dtype=np.float32)
+    img = np.asarray(cfa_img)
+    p = _EDGE_PAD if min(img.shape) > _EDGE_PAD else 0
+    padded = np.pad(img, p, mode="reflect") if p else img
+    if method == "bilinear":
+        rgb = bilinear(padded, pattern)
+    else:
+        import colour_demosaicing as cd
+
+        func = {"malvar2004": cd.demosaicing_CFA_Bayer_Malvar2004, "menon2007": cd.demosaicing_CFA_Bayer_Menon2007}[method]
+        rgb = np.asarray(func(padded.astype(np.float64), pattern), dtype=np.float32)
+    return np.ascontiguousarray(rgb[p:p + img.shape[0], p:p + img.shape[1]]) if p else rgb
 
 
 _H_G = np.array([[0, 1, 0], [1, 4, 1], [0, 1, 0]]) / 4
