@@ -2,6 +2,7 @@
 
 import base64
 import io
+import json
 import shutil
 import subprocess
 from html.parser import HTMLParser
@@ -168,3 +169,20 @@ def test_plots_have_labels_units_titles_and_legends():
         assert ax.get_legend() is not None
     assert all(ax.get_ylabel() for ax in axes[:2])
     plots.to_png_bytes(fig)
+
+
+def test_report_of_a_wide_sensor_is_reduced_with_1_to_1_crops_and_counts_couplets_honestly(tmp_path):
+    """A 5 MP report was 40.8 MB; the zoom said '0 couplet(s) circled' when the map had 2."""
+    from conftest import cli
+
+    out = tmp_path / "wide"
+    r = cli("simulate", "--preset", "paper-fig9-vga", "--set", "sensor.width=1920", "--set", "sensor.height=400",
+            "--set", "processing.dark_frames=0", "--report", "--out", out)
+    assert r.returncode == 0, r.stderr
+    text = (out / "report.html").read_text()
+    summary = json.loads((out / "summary.json").read_text())
+    n_couplets = summary["dark_current"]["map"]["couplets"]
+    assert n_couplets > 0
+    assert ", 1:2" in text and "centre at 1:1" in text
+    assert f"of the map&#x27;s {n_couplets} couplet(s)" in text
+    assert len(text) < 4e6, len(text)  # the full-size pictures alone would be about 9 MB of base64

@@ -144,6 +144,8 @@ def simulate(
     )
     for warning in summary.get("warnings", []):
         _say(ctx, f"warning: {warning}")
+    if "note" in summary["processing"]:
+        _say(ctx, f"note: {summary['processing']['note']}")
     if _level(ctx) >= 1:
         _say(ctx, "files: " + ", ".join(sorted(p.name for p in out.iterdir())))
         t = summary["timings_s"]

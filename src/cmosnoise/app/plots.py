@@ -53,20 +53,33 @@ def log_histogram_axes(ax, xlabel: str, title: str, ylabel: str = "pixels per bi
 
 
 def dark_current_histogram(ax, rate: np.ndarray, state, title: str = "") -> None:
-    """Dark-current map on a log count axis, body and tail told apart, threshold marked (paper Figs. 5, 6)."""
+    """Dark-current map on log rate and log count axes, body and tail told apart, threshold marked (paper Figs. 5, 6).
+
+    The rate axis is logarithmic so that the body (a few e-/s) and the tail
+    (up to tens of thousands) both show; pixels at exactly 0 (a body clipped
+    at 0) are counted in the legend.
+    """
     r = rate.ravel().astype(np.float64)
+    pos = r[r > 0]
     top = max(float(r.max()), 1.0)
-    bins = np.linspace(0, top * 1.02, 200)
-    ax.hist(r, bins=bins, color="C0", alpha=0.8, label=f"map ({r.size} pixels)")
+    low = max(float(pos.min()) if pos.size else 1e-3, top * 1e-6)
+    bins = np.geomspace(low, top * 1.02, 200)
+    zeros = int(r.size - pos.size)
+    ax.hist(pos, bins=bins, color="C0", alpha=0.8,
+            label=f"map ({r.size} pixels" + (f"; {zeros} at 0 e-/s not shown" if zeros else "") + ")")
     if state is not None and state.tail_fraction > 0:
-        body_top = float(state.model.body.ppf(1 - 1e-7))
+        if state.between:  # a per-pixel interpolation: the body's top from the map itself
+            body_top = float(np.quantile(r, 1 - state.tail_fraction))
+        else:
+            body_top = float(state.model.body.ppf(1 - 1e-7))
         ax.axvspan(body_top, top * 1.02, color="C3", alpha=0.08,
                    label=f"white-pixel tail: {100 * state.tail_fraction:.3g} % of pixels up to {state.tail_max:.0f} e-/s")
     if state is not None and state.threshold is not None:
         above = 1e6 * float((r > state.threshold).mean())
         ax.axvline(state.threshold, color="C3", ls="--",
                    label=f"threshold {state.threshold:.0f} e-/s: {above:.0f} ppm above")
-    log_histogram_axes(ax, "dark current [e-/s per pixel]", title or "Dark-current non-uniformity")
+    log_histogram_axes(ax, "dark current [e-/s per pixel, log]", title or "Dark-current non-uniformity")
+    ax.set_xscale("log")
 
 
 def temporal_noise_histogram(ax, sigma: np.ndarray, model=None, threshold: float | None = None, title: str = "",

@@ -12,6 +12,7 @@ from __future__ import annotations
 import datetime
 import html
 import json
+import math
 
 import numpy as np
 
@@ -31,9 +32,11 @@ img.pix{image-rendering:pixelated}.params{display:flex;flex-wrap:wrap;gap:1.2em;
 """
 
 
-def _fmt(v) -> str:
+def _fmt(v, digits: int = 6) -> str:
     if isinstance(v, float):
-        return f"{v:.6g}"
+        if math.isfinite(v) and 1e9 > abs(v) >= 10 ** (digits - 1):
+            return f"{v:.0f}"  # large values as whole numbers, not 1e+04
+        return f"{v:.{digits}g}"
     if isinstance(v, (list, tuple, dict)):
         return html.escape(json.dumps(v))
     return html.escape(str(v))
@@ -50,10 +53,12 @@ def _flatten(d: dict, prefix: str = "") -> list[tuple[str, object]]:
     return out
 
 
-def _table(rows, header=None, cls="") -> str:
+def _table(rows, header=None, cls="", digits: int = 6) -> str:
+    """An HTML table; floats to ``digits`` significant figures (4 for measured figures, 6 for parameters)."""
     h = "".join(f"<th>{html.escape(str(c))}</th>" for c in header) if header else ""
     body = "".join(
-        "<tr>" + "".join(f'<td class="num">{_fmt(c)}</td>' if isinstance(c, (int, float)) else f"<td>{_fmt(c)}</td>" for c in r) + "</tr>"
+        "<tr>" + "".join(f'<td class="num">{_fmt(c, digits)}</td>' if isinstance(c, (int, float)) else f"<td>{_fmt(c, digits)}</td>"
+                         for c in r) + "</tr>"
         for r in rows
     )
     return f'<table class="{cls}">' + (f"<tr>{h}</tr>" if h else "") + body + "</table>"
@@ -67,6 +72,24 @@ def _img(png: bytes, alt: str, width: int | None = None, pixelated: bool = False
 
 def _figure(png: bytes, caption: str, width: int | None = 380, pixelated: bool = False) -> str:
     return f"<figure>{_img(png, caption, width, pixelated)}<figcaption>{html.escape(caption)}</figcaption></figure>"
+
+
+#: pictures wider than this are shown reduced (block means), with 1:1 crops of the centre beside them
+OVERVIEW_MAX_WIDTH = 960
+
+
+def _overview_step(shape: tuple[int, int]) -> int:
+    return max(1, -(-shape[1] // OVERVIEW_MAX_WIDTH))
+
+
+def _overview(img: np.ndarray, step: int) -> np.ndarray:
+    """The picture reduced by whole blocks of ``step`` x ``step`` pixels (their mean), uint8."""
+    if step == 1 or img is None:
+        return img
+    h, w = (img.shape[0] // step) * step, (img.shape[1] // step) * step
+    x = img[:h, :w].astype(np.float32)
+    x = x.reshape(h // step, step, w // step, step, *img.shape[2:]).mean(axis=(1, 3))
+    return np.clip(np.rint(x), 0, 255).astype(np.uint8)
 
 
 def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarray, processed: np.ndarray) -> str:
@@ -101,7 +124,7 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
             ("white pixels (frame 0) / couplets / expected at random",
              f"{dc['frame0']['white_pixels']} / {dc['frame0']['couplets']} / {dc['frame0']['couplets_expected_random']:.1f}", ""),
         ]
-    parts.append("<h2>Key figures</h2>" + _table(rows, ["quantity", "value", "unit"], "keyfigures"))
+    parts.append("<h2>Key figures</h2>" + _table(rows, ["quantity", "value", "unit"], "keyfigures", digits=4))
 
     # ---- images
     t = sensor.transfer
@@ -109,11 +132,20 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
     perfect_rgb = scene_mod.render(c.scene.source, sensor.shape, c.scene.scale, c.scene.fit)
     raw_view = encode_srgb8((raw0.astype(np.float32) - t.black_level_dn) / white)
     perfect = encode_srgb8(perfect_rgb if not processor.mono else perfect_rgb @ scene_mod.LUMINANCE)
-    imgs = [_figure(plots.image_png_bytes(perfect), "perfect image (the scene at the sensor's resolution)")]
-    imgs.append(_figure(plots.image_png_bytes(raw_view), "raw frame 0 (CFA samples as grey, black level removed)"))
-    imgs.append(_figure(plots.image_png_bytes(pre_view), "pre-processing view (preview.png)"))
-    imgs.append(_figure(plots.image_png_bytes(processed), "through the processing chain (processed.png)"))
+    step = _overview_step(sensor.shape)
+    note = f", 1:{step}" if step > 1 else ""
+    views = [(perfect, "perfect image (the scene at the sensor's resolution)"),
+             (raw_view, "raw frame 0 (CFA samples as grey, black level removed)"),
+             (pre_view, "pre-processing view (preview.png)"),
+             (processed, "through the processing chain (processed.png)" if processed is not None
+              else "through the processing chain: no step beyond the preview's is on")]
+    imgs = [_figure(plots.image_png_bytes(_overview(img, step)), cap + note) for img, cap in views]
     parts.append("<h2>Images</h2><div class='row'>" + "".join(imgs) + "</div>")
+    if step > 1:  # the whole picture is shrunk: show the noise at 1:1 as well
+        r0, c0, size = sensor.shape[0] // 2 - 128, sensor.shape[1] // 2 - 128, 256
+        crops = [_figure(plots.image_png_bytes(img[r0:r0 + size, c0:c0 + size]), f"{cap.split(' (')[0]}, centre at 1:1", 300,
+                         pixelated=True) for img, cap in views]
+        parts.append("<div class='row'>" + "".join(crops) + "</div>")
 
     # ---- noise budget
     nb = summary["noise_budget"]
@@ -125,7 +157,8 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
     fig, ax = plots.figure(figsize=(6.4, 3.6))
     plots.noise_budget_bars(ax, nb["dark"], nb["scene_mean"])
     parts.append("<h2>Noise budget</h2><div class='row'>"
-                 + _table(rows, ["source", "at dark [e- rms]", f"at the scene mean, {nb['scene_mean']['signal_e']:.0f} e- [e- rms]"], "budget")
+                 + _table(rows, ["source", "at dark [e- rms]", f"at the scene mean, {nb['scene_mean']['signal_e']:.0f} e- [e- rms]"], "budget",
+                          digits=4)
                  + _figure(plots.to_png_bytes(fig), f"dominant temporal source at the scene mean: {nb['scene_mean']['dominant_temporal']}", 520)
                  + "</div>")
 
@@ -157,15 +190,18 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
                 target[all_pairs[:, 0, 0], all_pairs[:, 0, 1]] = True
             r0, c0 = plots.densest_window(target, (h, w))
             crop = pre_view[r0 : r0 + h, c0 : c0 + w]
-            scale = 8
             fig, ax = plots.figure(figsize=(6.4, 6.4 * h / w))
-            ax.imshow(crop, interpolation="nearest", extent=(0, w * scale, h * scale, 0))
-            pairs = white_pixels.couplet_pairs(mask[r0 : r0 + h, c0 : c0 + w], sensor.cfa)
-            plots.circle_couplets(ax, pairs + 0.5, scale=scale, radius=2.2 * scale)
-            ax.set_title(f"Densest white pixels: rows {r0}-{r0 + h - 1}, cols {c0}-{c0 + w - 1}; {len(pairs)} couplet(s) circled")
-            ax.set_xlabel("column (x8 zoom)")
-            ax.set_ylabel("row (x8 zoom)")
-            parts.append("<h2>White pixels and couplets</h2>" + _figure(plots.to_png_bytes(fig), "pre-processing view, zoomed; circles: couplets (paper Fig. 9)", 640))
+            # sensor coordinates on the axes: pixel (r, c) covers [c, c + 1) x [r, r + 1)
+            ax.imshow(crop, interpolation="nearest", extent=(c0, c0 + w, r0 + h, r0))
+            inside = ((all_pairs[:, :, 0] >= r0) & (all_pairs[:, :, 0] < r0 + h)
+                      & (all_pairs[:, :, 1] >= c0) & (all_pairs[:, :, 1] < c0 + w)).all(axis=1) if len(all_pairs) else []
+            pairs = all_pairs[inside] if len(all_pairs) else all_pairs
+            plots.circle_couplets(ax, pairs + 0.5, scale=1.0, radius=2.2)
+            ax.set_title(f"Densest white pixels, rows {r0}-{r0 + h - 1}, cols {c0}-{c0 + w - 1}: "
+                         f"{len(pairs)} of the map's {len(all_pairs)} couplet(s) circled", fontsize=9)
+            ax.set_xlabel("sensor column")
+            ax.set_ylabel("sensor row")
+            parts.append("<h2>White pixels and couplets</h2>" + _figure(plots.to_png_bytes(fig), f"pre-processing view, zoomed; circled: {len(pairs)} of the map's {len(all_pairs)} couplet(s) (paper Fig. 9)", 640))
 
     # ---- parameters
     cfg = c.to_dict()

@@ -152,6 +152,9 @@ def processing_summary(processor: Processor, t_dark: float, t_process: float) ->
         out["crosstalk_mixing_matrix"] = processor.mixing.round(6).tolist()
     if processor.defect_map is not None:
         out["defect_map_pixels"] = int(processor.defect_map.sum())
+    if s.enabled and s.dark_frames == 0 and s.defects.method == "off":
+        out["note"] = ("processed.png equals preview.png: no step beyond the preview's is on "
+                       "(add --dark-frames N or set processing.defects.method)")
     return out
 
 
