@@ -7,6 +7,7 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py compute [NAME ...]   # measure again, write the JSON
     python docs/readme_numbers.py render               # rewrite the README's blocks from the JSON
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
+    python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
 ``speed`` is measured by ``benchmarks/bench_chain.py --json docs/numbers/speed.json``
 (machine-dependent, never recomputed by tests). The tests check that every
@@ -234,6 +235,32 @@ def rendered(text: str) -> str:
     return text
 
 
+#: README picture <- `cmosnoise figures` output (seed 0); the VFPN picture as JPEG (a photograph: 6 times smaller)
+IMAGES = {"fig5_dark_temperatures.png": "fig5_dark_temperatures.png", "fig7_temporal_noise.png": "fig7_temporal_noise.png",
+          "fig9_couplets.png": "fig9_couplets.png", "fig10_vfpn.jpg": "fig10_vfpn.png"}
+
+
+def images() -> None:
+    """Regenerate docs/img from `cmosnoise figures --seed 0` and `cmosnoise characterize --seed 0`."""
+    import shutil
+    import tempfile
+
+    import imageio.v3 as iio
+
+    from cmosnoise.app import cli
+
+    out = ROOT / "docs" / "img"
+    with tempfile.TemporaryDirectory() as tmp:
+        assert cli.run(["-q", "figures", "--seed", "0", "--out", f"{tmp}/f"]) == 0
+        assert cli.run(["-q", "characterize", "--seed", "0", "--out", f"{tmp}/c"]) == 0
+        for name, src in IMAGES.items():
+            if name.endswith(".jpg"):
+                iio.imwrite(out / name, iio.imread(f"{tmp}/f/{src}")[..., :3], extension=".jpg", quality=75)
+            else:
+                shutil.copyfile(f"{tmp}/f/{src}", out / name)
+        shutil.copyfile(f"{tmp}/c/photon_transfer.png", out / "photon_transfer.png")
+
+
 def main(argv: list[str]) -> int:
     cmd, names = (argv[0] if argv else "check"), argv[1:]
     if cmd == "compute":
@@ -245,6 +272,9 @@ def main(argv: list[str]) -> int:
             else:
                 save(name, compute())
             print(f"measured {name}")
+        return 0
+    if cmd == "images":
+        images()
         return 0
     text = README.read_text()
     new = rendered(text)

@@ -34,9 +34,11 @@ def fig3_prnu(seed: int = 0):
     cfg = load_config(preset="paper-fig3-prnu")
     sensor = Sensor(cfg, seed=seed)
     e = sensor.transfer.to_electrons(sensor.capture()[0])
-    fig, (a, b) = plots.figure(1, 2, figsize=(10, 4.2))
+    fig, (a, b) = plots.figure(1, 2, figsize=(10.5, 4.2), layout="constrained")  # keeps the colour bar's label clear
     im = a.imshow(e, cmap="gray", interpolation="nearest")
-    fig.colorbar(im, ax=a, label="signal [e-]")
+    fig.colorbar(im, ax=a, label="signal [e-]", fraction=0.046, pad=0.03)
+    a.set_xticks(range(0, e.shape[1], 2))
+    a.set_yticks(range(0, e.shape[0], 2))
     a.set_title("14 x 14 flat field, 10 % PRNU")
     a.set_xlabel("column")
     a.set_ylabel("row")
