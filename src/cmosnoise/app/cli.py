@@ -134,7 +134,23 @@ def simulate(
     cfg = load_config(config, preset, set_, extra=_run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
     if _level(ctx) < 0:
         progress = False
-    summary = run_simulate(cfg, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height))
+    show = progress if progress is not None else (err_console.is_terminal
+                                                  and cfg.run.frames * cfg.sensor.width * cfg.sensor.height >= 5_000_000)
+    status = err_console.status("") if show else None
+    texts = {"preview": "writing preview.png", "summary": "measuring the summary (noise budget, white pixels)",
+             "report": "writing report.html"}
+
+    def phase(name: str) -> None:  # a spinner for what comes after the frames' progress bar
+        if status is not None:
+            status.update(f"[bold]{texts.get(name, name)}")
+            status.start()
+
+    try:
+        summary = run_simulate(cfg, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height),
+                               phase=phase)
+    finally:
+        if status is not None:
+            status.stop()
     sig, tn = summary["signal"], summary["temporal_noise"]
     noise = f", temporal noise {tn['rms_e']:.2f} e- ({tn['rms_dn']:.2f} DN)" if tn["rms_e"] is not None else ""
     _say(

@@ -42,12 +42,16 @@ from ..model.sensor import Sensor
 from ..model.units import e_per_s_to_aa
 
 
-def simulate(config: Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None) -> dict:
+def simulate(config: Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
+             phase: Callable[[str], None] | None = None) -> dict:
     """Run the simulation of ``config`` and write the results into ``out``; returns the summary.
 
     ``progress``, if given, is called with the frame count and returns a
     context manager whose value is called once per frame (``advance()``).
+    ``phase``, if given, is told what the run does after the frames (it can
+    take seconds at 5 MP): ``"preview"``, ``"summary"``, ``"report"``.
     """
+    phase = phase or (lambda _name: None)
 
     source = config.scene.source
     if Path(source).is_file():  # record a file scene by its absolute path: config.yaml reruns from anywhere
@@ -116,6 +120,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
                 video.close()
         t_frames = time.perf_counter() - t_start
 
+        phase("preview")
         pre_view = processor.render(frame0[0], pre=True)
         write_png(tmp / "preview.png", pre_view)
         processed = rendered0[0] if rendered0 else None
@@ -126,12 +131,14 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         if proc_cfg.enabled:
             write_png(tmp / "processed.png", processed)
         (tmp / "config.yaml").write_text(config.to_yaml())
+        phase("summary")
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
         summary["processing"] = processing_summary(processor, t_dark, t_process)
         write_json(tmp / "summary.json", summary)
         if config.run.report:
             from . import report
 
+            phase("report")
             (tmp / "report.html").write_text(report.build(sensor, summary, frame0[0], processor, pre_view, processed))
     return summary
 
