@@ -224,8 +224,8 @@ def frame0_white_pixels(sensor: Sensor, shot, electrons0: np.ndarray, threshold_
     return rep
 
 
-def run_warnings(sensor: Sensor, measured: dict, predicted: dict) -> list[str]:
-    """What a user should know before trusting the figures: clipping, cooling pixels."""
+def run_warnings(measured: dict, predicted: dict) -> list[str]:
+    """What a user should know before trusting the figures: pixels that clip."""
     out = []
     sat = measured.get("saturated_fraction") or 0.0
     if max(sat, predicted.get("clipped_fraction", 0.0)) > 1e-3:
@@ -279,7 +279,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
         },
         "key_figures": noise_budget.key_figures(sensor),
         "dark_current": (dark := dark_current_summary(sensor, shot, electrons0)),
-        "warnings": run_warnings(sensor, measured, predicted) + ([dark["warning"]] if dark and "warning" in dark else []),
+        "warnings": run_warnings(measured, predicted) + ([dark["warning"]] if dark and "warning" in dark else []),
         "timings_s": {
             "total": round(wall_s, 6),
             "per_frame": round(wall_s / max(n, 1), 6),

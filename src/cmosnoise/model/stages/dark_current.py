@@ -126,19 +126,17 @@ class DarkState:
         n = 2048
         u = (np.arange(n) + 0.5) / n
         fl, fh = self.lo.tail_fraction, self.hi.tail_fraction
-        cases = [(min(fl, fh), 0.0, 0.0),  # in both tails (u_member below both fractions)
-                 (abs(fl - fh), 0.5 * (fl + fh) if fl != fh else 0.0, 0.0),
-                 (1.0 - max(fl, fh), 1.0, 0.0)]  # in neither
+        # (weight, u_member): in both tails, in the larger tail only, in neither
+        cases = [(min(fl, fh), 0.0), (abs(fl - fh), 0.5 * (fl + fh)), (1.0 - max(fl, fh), 1.0)]
         total = 0.0
-        for weight, member, _ in cases:
+        for weight, member in cases:
             if weight <= 0:
                 continue
             if member == 1.0:  # no tail: one dimension suffices
                 total += weight * float(np.mean(self.values(u, np.ones(n), np.zeros(n)) > thr))
                 continue
             ub, ut = np.meshgrid(u, u, indexing="ij")
-            um = np.full(ub.shape, member if member else 0.0)
-            total += weight * float(np.mean(self.values(ub, um, ut) > thr))
+            total += weight * float(np.mean(self.values(ub, np.full(ub.shape, member), ut) > thr))
         return total * 1e6
 
 
