@@ -19,6 +19,7 @@ statistics), each with its ratio to the reference.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -38,6 +39,12 @@ def best_fps(fn, frames: int, repeats: int) -> float:
             fn(k)
         best = min(best, time.perf_counter() - t0)
     return frames / best
+
+
+def _run(cmd: list[str]) -> None:
+    r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ})
+    if r.returncode:
+        sys.exit(f"{' '.join(cmd)} failed ({r.returncode}):\n{r.stderr}")
 
 
 def main() -> None:
@@ -80,12 +87,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", str(args.cli_frames), "--no-progress",
                "--set", "sensor.width=1920", "--set", "sensor.height=1080", "--scene", args.scene]
-        subprocess.run(cmd + ["--out", f"{tmp}/warm"], check=True, capture_output=True)  # warm the compile cache
+        _run(cmd + ["--out", f"{tmp}/warm"])  # warm the compile cache
         t0 = time.perf_counter()
-        subprocess.run(cmd + ["--out", f"{tmp}/o"], check=True, capture_output=True, env={**os.environ})
+        _run(cmd + ["--out", f"{tmp}/o"])
         wall = time.perf_counter() - t0
-        import json
-
         loop = json.load(open(f"{tmp}/o/summary.json"))["timings_s"]["per_frame"]
         rows.append((f"cmosnoise simulate --frames {args.cli_frames}", args.cli_frames / wall))
         rows.append(("  its frame loop (summary.json)", 1 / loop))
@@ -122,7 +127,6 @@ def main() -> None:
         processing.append({"label": label, "ms": 1000 / fps})
 
     if args.json:
-        import json
         import platform
 
         command = "python benchmarks/bench_chain.py " + " ".join(

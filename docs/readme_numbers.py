@@ -119,16 +119,14 @@ def compute_characterize() -> dict:
 
 
 def render_characterize(d: dict) -> str:
-    from cmosnoise.analysis.characterize import table
+    from cmosnoise.analysis.characterize import TABLE_ROWS, table
 
-    rows = table(d["measured"], d["model"])
-    labels = {key: label for key, label, _, _ in __import__("cmosnoise.analysis.characterize", fromlist=["x"]).TABLE_ROWS}
-    keep = [labels[k] for k in README_CHARACTERIZE_ROWS]
+    labels = {key: label for key, label, _, _ in TABLE_ROWS}
+    keep = {labels[k] for k in README_CHARACTERIZE_ROWS}
     out = ["| quantity | unit | measured | model | deviation % |", "|---|---|---|---|---|"]
-    for label, unit, mv, xv, dev in rows:
+    for label, unit, mv, xv, dev in table(d["measured"], d["model"]):
         if label in keep:
-            label = label.replace(" mu_e.sat", "")
-            out.append(f"| {label.strip() if not label.startswith('  ') else 'of which column (VFPN)'} | {unit} | {mv} | {xv} | {dev} |")
+            out.append(f"| {label.strip().replace(' mu_e.sat', '')} | {unit} | {mv} | {xv} | {dev} |")
     return "\n".join(out)
 
 

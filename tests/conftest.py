@@ -46,6 +46,20 @@ def rng():
     return np.random.default_rng(12345)
 
 
+def smoothed_std_se(std: float, n: int, kernel) -> float:
+    """Standard error of a sample standard deviation over ``n`` pixels of white noise smoothed by ``kernel``.
+
+    For a stationary Gaussian field Var(s^2) = (2 sigma^4 / n) sum_d rho(d)^2, with rho the kernel's
+    normalised autocorrelation; so se(s) = s sqrt(sum_d rho(d)^2 / (2 n)).
+    """
+    from scipy.signal import correlate2d
+
+    k = np.asarray(kernel, dtype=np.float64)
+    auto = correlate2d(k, k)
+    rho = auto / auto.max()
+    return std * np.sqrt(np.sum(rho**2) / (2 * n))
+
+
 def temporal_variance_se(sensor, dof: float, signal_e=0.0) -> float:
     """Standard error (DN^2) of a pooled temporal variance with ``dof`` degrees of freedom per pixel.
 

@@ -8,7 +8,7 @@ from cmosnoise.model.stages.prnu import gain_map
 
 import pytest
 
-from conftest import Z, assert_close, quiet_config
+from conftest import Z, assert_close, quiet_config, smoothed_std_se
 
 
 def test_gain_map_is_normal_with_configured_sigma():
@@ -63,7 +63,8 @@ def test_data_sheet_prnu_solves_the_gain_map_sigma_and_frames_show_it():
     shot = Sensor(cfg, seed=4).expose("flat:1")
     inner = shot.photo_mean_e[2:-2, 2:-2].astype(np.float64)
     seen = 100 * inner.std() / inner.mean()
-    se = seen / np.sqrt(2 * inner.size) * 3  # neighbours share gains through the kernel
+    # neighbours share gains through the kernel: the standard error of a smoothed field's spread
+    se = smoothed_std_se(seen, inner.size, np.array(cfg.crosstalk.kernel_pct) / 100)
     assert abs(seen - 1.5) <= Z * se, seen
     with pytest.raises(CmosnoiseError, match="give one of them"):
         load_config(overrides=["prnu.measured_pct=0.79", "prnu.sigma_pct=2"])

@@ -46,12 +46,9 @@ def _options(
     ctx.obj = {"verbosity": -1 if quiet else (1 if verbose else 0)}
 
 
-def _level(ctx: typer.Context | None) -> int:
-    while ctx is not None:
-        if isinstance(ctx.obj, dict) and "verbosity" in ctx.obj:
-            return ctx.obj["verbosity"]
-        ctx = ctx.parent
-    return 0
+def _level(ctx: typer.Context) -> int:
+    """-1 (-q), 0 or 1 (-v): set by the app's options; a command's context inherits ``obj`` from it."""
+    return ctx.obj.get("verbosity", 0) if isinstance(ctx.obj, dict) else 0
 
 
 def _say(ctx: typer.Context, text: str, level: int = 0) -> None:

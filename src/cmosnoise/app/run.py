@@ -33,10 +33,7 @@ from ..io.raw_tiff import raw_metadata, read_raw_tiff, write_float_tiff, write_r
 from ..io.video import VideoWriter
 from ..isp import calibration
 from ..isp.process import Processor, read_dark, validate_raw
-from ..model.heavy_tail import variates
-from ..model.physics import dark_points, with_updates
-from ..model.seeds import fixed_rng
-from ..model.stages import dark_current
+from ..model.physics import with_updates
 from ..model.raw_info import RawInfo
 from ..model.sensor import Sensor
 from ..model.units import e_per_s_to_aa
@@ -165,7 +162,7 @@ def processing_summary(processor: Processor, t_dark: float, t_process: float) ->
     return out
 
 
-def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict | None:
+def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray, read_var_e2: float) -> dict | None:
     """Dark-current figures: the map's statistics, white pixels and couplets (map and frame 0)."""
     state, rate = sensor.dark_state, sensor.dark_rate
     if state is None:
@@ -182,7 +179,7 @@ def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict |
         "interpolation": (f"per-pixel exponential between the points at {state.temperature_c:g} C (weight {state.w:.3f})"
                           if state.between else "at a characterization point, or scaled from the nearest one"),
     }
-    cooling = dark_current.cooling_fraction(dark_points(c), variates(sensor.shape, fixed_rng(c.seed, "dark_current")))
+    cooling = sensor.dark_cooling_fraction
     out["cooling_fraction"] = cooling
     if cooling > 0:
         out["warning"] = (f"{100 * cooling:.3g} % of pixels cool while the sensor warms between two of the "
@@ -193,11 +190,11 @@ def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray) -> dict |
         out["threshold_aA"] = e_per_s_to_aa(thr)
         out["ppm_expected"] = state.expected_ppm_above()
         out["map"] = white_pixels.report(rate, thr, sensor.cfa)
-        out["frame0"] = frame0_white_pixels(sensor, shot, electrons0, thr)
+        out["frame0"] = frame0_white_pixels(sensor, shot, electrons0, thr, read_var_e2)
     return out
 
 
-def frame0_white_pixels(sensor: Sensor, shot, electrons0: np.ndarray, threshold_e_per_s: float) -> dict:
+def frame0_white_pixels(sensor: Sensor, shot, electrons0: np.ndarray, threshold_e_per_s: float, read_var_e2: float) -> dict:
     """White pixels seen in frame 0, counted so that temporal noise is not taken for dark current.
 
     A pixel counts when its charge, less the expected photo-charge, exceeds
@@ -208,19 +205,11 @@ def frame0_white_pixels(sensor: Sensor, shot, electrons0: np.ndarray, threshold_
     """
     t_int = sensor.config.exposure.integration_time_s
     photo = shot.photo_mean_e.astype(np.float64)
-    read_var = noise_budget.budget(sensor, 0.0)["temporal_total_e"] ** 2
-    excess_e = electrons0 - photo - 5.0 * np.sqrt(photo + read_var)
+    excess_e = electrons0 - photo - 5.0 * np.sqrt(photo + read_var_e2)  # read_var_e2: the budget's dark variance (e-^2)
     rep = white_pixels.report(excess_e / t_int, threshold_e_per_s, sensor.cfa)
     kind = "dark frame" if float(photo.max()) <= 0 else "lit frame"
     rep["method"] = (f"{kind}: (charge - expected photo-charge - 5 sigma of photon shot and read noise) / integration "
                      "time, above the threshold; a lower bound of the map's count (white pixels can hide in the noise)")
-    return rep
-    sigma = np.sqrt(photo.astype(np.float64) + read_var)
-    excess_e = electrons0 - photo - 5.0 * sigma  # charge beyond the photo-charge and 5 sigma of the temporal noise
-    rep = white_pixels.report(excess_e / t_int, threshold_e_per_s, sensor.cfa)
-    rep["method"] = ("lit frame: (charge - expected photo-charge - 5 sigma of photon shot and read noise) / "
-                     "integration time, above the threshold; white pixels in bright areas hide in the shot noise, "
-                     "so this is a lower bound")
     return rep
 
 
@@ -241,6 +230,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
     measured = stats.result()
     timings = {k: round(v, 6) for k, v in sensor.timings.items()}
     predicted = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)  # this scene, pixel by pixel: clipping included
+    at_dark = noise_budget.budget(sensor, 0.0)
     return {
         "cmosnoise_version": __version__,
         "generator": generator_info(),
@@ -274,11 +264,11 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "predicted_rms_dn": predicted["temporal_total_dn"],
         },
         "noise_budget": {
-            "dark": noise_budget.budget(sensor, 0.0),
+            "dark": at_dark,
             "scene_mean": predicted,
         },
         "key_figures": noise_budget.key_figures(sensor),
-        "dark_current": (dark := dark_current_summary(sensor, shot, electrons0)),
+        "dark_current": (dark := dark_current_summary(sensor, shot, electrons0, at_dark["temporal_total_e"] ** 2)),
         "warnings": run_warnings(measured, predicted) + ([dark["warning"]] if dark and "warning" in dark else []),
         "timings_s": {
             "total": round(wall_s, 6),

@@ -28,6 +28,7 @@ from ..config import Config, ExposureSection, build_section
 from ..engine import kernel
 from ..errors import CmosnoiseError
 from . import scene as scene_mod
+from .heavy_tail import variates
 from .physics import dark_points, flicker_model, load_config, with_updates
 from .raw_info import RawInfo
 from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, stream_key, temporal_stream
@@ -144,6 +145,14 @@ class Sensor:
                 g = crosstalk.apply(g, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
             self._flat = g / g.mean()
         return self._flat
+
+    @property
+    def dark_cooling_fraction(self) -> float:
+        """Fraction of this sensor's pixels whose dark current drops between two warmer characterization points (0 when they are ordered)."""
+        c = self.config
+        if not c.dark_current.enabled:
+            return 0.0
+        return dark_current.cooling_fraction(dark_points(c), lambda: variates(self.shape, fixed_rng(c.seed, "dark_current")))
 
     @property
     def flicker_model(self):

@@ -183,18 +183,22 @@ def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator)
     return state.values(*variates(shape, rng)).astype(np.float32)
 
 
-def cooling_fraction(points: list[Point], u: np.ndarray) -> float:
-    """Fraction of pixels (fixed variates ``u``, shape (3, ...)) whose rate drops from one point to the next warmer one.
+def cooling_fraction(points: list[Point], draw_variates) -> float:
+    """Fraction of pixels whose rate drops from one characterization point to the next warmer one.
 
-    Zero when every quantile of each warmer point lies above the colder
-    point's; a user's points can break that, and the run summary says so.
+    ``draw_variates()`` returns the pixels' fixed uniforms, shape (3, ...);
+    it is called only when some pixel can cool, since with ordered points
+    (every quantile of each warmer point above the colder one's, tails no
+    smaller) the answer is 0 without looking at pixels. A user's points can
+    break that, and the run summary says so.
     """
     pts = sorted(points, key=lambda p: p.temperature_c)
     if len(pts) < 2:
         return 0.0
     models = [p.model() for p in pts]
     if all(_dominates(b, a) for a, b in zip(models[:-1], models[1:])):
-        return 0.0  # no pixel can cool: skip the per-pixel comparison (seconds at 5 MP)
+        return 0.0
+    u = draw_variates()
     rates = [m.values(*u) for m in models]
     cools = np.zeros(u.shape[1:], bool)
     for lo, hi in zip(rates[:-1], rates[1:]):
