@@ -141,6 +141,10 @@ def test_map_is_continuous_in_temperature_at_every_point_and_midpoint(t):
     assert np.all(np.abs(rb - ra) <= 0.01 * np.maximum(ra, 1e-3 * pts[0].mean))
 
 
+def _no_draw():
+    raise AssertionError("the pixels' variates were drawn although no pixel can cool")
+
+
 def test_every_pixel_warms_with_the_default_points():
     pts = _default_points()
     u = variates((200, 300), np.random.default_rng(3))
@@ -148,7 +152,7 @@ def test_every_pixel_warms_with_the_default_points():
     step = np.diff(rates, axis=0)
     assert np.all(step >= 0)
     assert np.all(step[rates[:-1] > 0] > 0)  # strictly, except pixels the logistic body clips at 0 below 25 C
-    assert dark_current.cooling_fraction(pts, u) == 0.0
+    assert dark_current.cooling_fraction(pts, _no_draw) == 0.0  # ordered points: decided without drawing pixels
 
 
 def test_expected_ppm_between_points_matches_the_map():
@@ -167,9 +171,9 @@ def test_points_that_cross_are_reported_as_cooling_pixels(tmp_path):
         {"temperature_c": 45, "distribution": "normal", "mean_e_per_s": 40, "std_e_per_s": 1},
     ]
     u = variates((100, 100), np.random.default_rng(5))
-    assert dark_current.cooling_fraction(dark_points(dark_cfg(points)), u) == 0.0  # 10 + 5 z > 40 + z: z > 7.5
+    assert dark_current.cooling_fraction(dark_points(dark_cfg(points)), _no_draw) == 0.0  # 10 + 5 z > 40 + z: z > 7.5
     points[0]["std_e_per_s"] = 20
-    frac = dark_current.cooling_fraction(dark_points(dark_cfg(points)), u)
+    frac = dark_current.cooling_fraction(dark_points(dark_cfg(points)), lambda: u)
     expected = float(stats.norm.sf(30 / 19))  # 10 + 20 z > 40 + z where z > 30 / 19
     assert abs(frac - expected) <= Z * np.sqrt(expected * (1 - expected) / u[0].size)
     cfg = dark_cfg(points, shape=(48, 64), temperature=35.0)
