@@ -16,6 +16,7 @@ Each returns a frozen :mod:`scipy.stats` distribution, so ``pdf``, ``cdf``,
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -26,8 +27,13 @@ FAMILIES = ("logistic", "inverse_gaussian", "lognormal", "normal", "gamma")
 POSITIVE_FAMILIES = ("inverse_gaussian", "lognormal", "gamma")
 
 
+@functools.lru_cache(maxsize=256)
 def body(family: str, mean: float, std: float):
-    """Frozen scipy distribution of ``family`` with the given mean and std."""
+    """Frozen scipy distribution of ``family`` with the given mean and std.
+
+    The same arguments give the same (read-only) object, so its quantile
+    table (:func:`tabulated_ppf`) is made once per process.
+    """
     if std <= 0:
         raise ValueError(f"std must be > 0, got {std}")
     if family in POSITIVE_FAMILIES and mean <= 0:
@@ -58,7 +64,10 @@ def tabulated_ppf(dist, q: np.ndarray) -> np.ndarray:
     logit space; relative error below 1e-6 for these families. Some scipy
     ppfs (the inverse Gaussian's) take seconds per million values.
     """
-    xg = dist.ppf(special.expit(_LOGIT_GRID))
+    xg = getattr(dist, "_cmosnoise_ppf_table", None)
+    if xg is None:
+        xg = dist.ppf(special.expit(_LOGIT_GRID))
+        dist._cmosnoise_ppf_table = xg  # the distribution is frozen: its table never changes
     # the grid is uniform in logit(q): find the cell by arithmetic, not search
     t0, step = _LOGIT_GRID[0], _LOGIT_GRID[1] - _LOGIT_GRID[0]
     pos = np.clip((special.logit(q) - t0) / step, 0.0, len(_LOGIT_GRID) - 1.0)

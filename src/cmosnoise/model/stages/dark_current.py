@@ -24,6 +24,7 @@ white pixel stays white when the sensor warms up. Rates are e-/s per pixel.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -48,10 +49,16 @@ class Point:
 
     def model(self) -> HeavyTail:
         """The heavy-tailed DCNU at this point's own temperature (tail fraction solved from the ppm)."""
-        b = body_dist(self.family, self.mean, self.std)
-        if self.threshold is None or self.tail_max <= 0:
-            return HeavyTail(b, 0.0, 0.0)
-        return HeavyTail.from_ppm(b, self.ppm_above, self.threshold, self.tail_max)
+        return _point_model(self)
+
+
+@functools.lru_cache(maxsize=256)
+def _point_model(p: Point) -> HeavyTail:
+    """Point.model, solved once per process for each point (the solve integrates numerically)."""
+    b = body_dist(p.family, p.mean, p.std)
+    if p.threshold is None or p.tail_max <= 0:
+        return HeavyTail(b, 0.0, 0.0)
+    return HeavyTail.from_ppm(b, p.ppm_above, p.threshold, p.tail_max)
 
 
 #: rates are floored at this fraction of the point's body mean before the log
