@@ -61,3 +61,23 @@ def test_full_well_clips_before_the_adc():
                        exposure={"integration_time_s": 1, "peak_rate_e_per_s": 3000})
     raw = Sensor(cfg).capture(scene="flat:1.0")
     assert (raw == 1000).all()  # 1 DN/e-, charge stopped at the full well, not at the ADC top
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.02, 0.1, 0.3, 0.6, 1.5])
+def test_expected_code_is_the_mean_of_the_rounded_noisy_value(sigma):
+    """E[round(mu + sigma Z)] against a Monte Carlo mean, within 5 standard errors of that mean."""
+    from cmosnoise.model.stages.adc import expected_code
+
+    rng = np.random.default_rng(7)
+    mu = np.linspace(10.0, 11.0, 41)  # every position between two codes, the half-codes included
+    n = 100_000
+    x = np.round(mu[:, None] + sigma * rng.standard_normal((mu.size, n)))
+    mc = x.mean(axis=1)
+    se = np.sqrt(np.maximum(x.var(axis=1), 1.0 / n) / n)  # floor: a rare code (p ~ 1/n) may not be drawn at all
+    got = expected_code(mu, np.full(mu.size, sigma))
+    if sigma == 0.0:
+        assert np.array_equal(got, np.rint(mu))  # as the ADC rounds: half codes to even
+    else:
+        assert np.all(np.abs(got - mc) <= 5 * se + 1e-12)
+    if sigma >= 1.0:  # dithered: the quantizer adds no bias
+        assert np.allclose(got, mu, atol=1e-8)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from cmosnoise import Sensor, load_config, noise_budget
+from cmosnoise import Sensor, load_config, noise_budget, preset_names
 from cmosnoise import characterize as ch
 from cmosnoise.analysis.emva_reference import reference_results
 
@@ -131,3 +131,129 @@ def test_characterize_command_end_to_end(tmp_path):
     r = cli("characterize", "--frames-from", tmp_path / "nowhere",
                         "--out", tmp_path / "c3")
     assert r.returncode == 2 and "cannot be read" in r.stderr and "Traceback" not in r.stderr
+
+
+# ------------------------------------------------------------------ every shipped preset
+def _line_fit_se(t, var_y):
+    """Standard errors of (slope, intercept) of an OLS line through points with variances var_y."""
+    c_slope, c_icpt = _ols_coefficients(np.asarray(t))
+    return math.sqrt(np.sum(c_slope**2 * var_y)), math.sqrt(np.sum(c_icpt**2 * var_y))
+
+
+def _fixed_pattern_se(o: np.ndarray, tau: np.ndarray, frames: int) -> float:
+    """Standard error of var(mean of L frames) - mean(tau) / L as an estimate of var(o).
+
+    The frame mean is o + e with e of variance tau / L per pixel (its own tau, so heavy-tailed
+    white pixels weigh as they should): the cross term gives 4 sum((o - mean o)^2 tau / L) / n^2,
+    the noise's own variance 2 sum((tau / L)^2) / n^2.
+    """
+    n = o.size
+    d = o - o.mean()
+    # where the noise is well below a DN the quantizer is not dithered: its error is the same in every
+    # frame (a fixed uniform of variance 1/12), so it does not average out over the L frames
+    left = tau / frames + np.where(tau < 1 / 12 + 0.25, 1 / 12, 0.0)
+    return float(math.sqrt(np.sum(4 * d**2 * left + 2 * left**2)) / n)
+
+
+def _expected_dn(sensor, texp, photo_e=None):
+    """Per-pixel expected raw value and temporal variance (DN, DN^2) at exposure ``texp`` (clips included)."""
+    s = sensor.with_exposure(texp)
+    k = s.transfer.gain_dn_per_e
+    mo = noise_budget.clipped_moments(s, 0.0, photo_e=photo_e)
+    return mo["mean"] * k, mo["var"] * k**2 + 1 / 12
+
+
+#: what each preset's frames cannot give (shot noise off: no photon transfer, so no K and nothing in e-)
+NO_K = {"paper-fig3-prnu", "paper-fig4-crosstalk"}
+
+
+@pytest.mark.parametrize("preset", preset_names())
+def test_characterize_agrees_with_the_model_on_every_preset(preset):
+    """Measured against the model within Z standard errors (sampling theory), or n/a with a reason.
+
+    Heavy-tailed presets (paper-fig9-*, paper-fig11-full) saturate white pixels in the longer dark
+    exposures and in the stacks: the dark series is fitted where nothing nears saturation, DSNU is
+    compared with the clipped expected image, PRNU leaves out the defect pixels.
+    """
+    sensor = Sensor(load_config(preset=preset), seed=3)
+    big = sensor.shape[0] * sensor.shape[1] > 1_000_000
+    m = ch.measure(sensor, steps=40, stack_frames=4 if big else 16)
+    res = ch.evaluate(m)
+    model = ch.model_values(sensor, m.stack_texp_s)
+    k = model["system_gain_K_dn_per_e"]
+    n = m.stack_dark[0].size
+    L = m.stack_dark.shape[0]
+    failures = []
+
+    def check(key, meas, expect, se):
+        if not abs(meas - expect) <= Z * se:
+            failures.append(f"{key}: measured {meas:.6g}, model {expect:.6g}, {Z} se = {Z * se:.3g}")
+
+    # PRNU (a ratio of DN, needs no K): the response map of the pixels kept, bright and dark stacks
+    photo = sensor.with_exposure(m.stack_texp_s, sensor.saturation_e).expose("flat:1.0").photo_mean_e
+    ob, tb = _expected_dn(sensor, m.stack_texp_s, photo_e=photo)
+    od, td = _expected_dn(sensor, m.stack_texp_s)
+    keep = ~ch.emva.defect_pixels(m.stack_bright, m.stack_dark, float(np.max(m.mu_y)))
+    signal = ob - od
+    p_b = model["prnu_pct"] / 100 * float(signal[keep].mean())
+    se_p = _fixed_pattern_se(ob[keep], tb[keep], L) + _fixed_pattern_se(od[keep], td[keep], L)
+    # sqrt of a variance near 0 is biased up by about its se: compare variances, in DN^2
+    meas_v = (res["prnu_pct"] / 100 * (res["stack_mean_bright_dn"] - res["stack_mean_dark_dn"])) ** 2
+    check("prnu (DN^2)", meas_v, p_b**2, se_p + 1e-12)
+    assert res["prnu_excluded_pixels"] <= 0.02 * n
+
+    if preset in NO_K:
+        assert res["system_gain_K_dn_per_e"] is None and "system_gain_K_dn_per_e" in res["unavailable"]
+        assert "shot noise" in res["unavailable"]["dsnu_e"]
+        assert not failures, failures
+        return
+    assert not res["unavailable"], res["unavailable"]
+    # K from the photon-transfer line, as in the default test
+    y = m.mu_y - m.mu_ydark
+    i_sat = res["saturation_index"]
+    lin = np.nonzero((y <= 0.7 * y[i_sat]) & (np.arange(len(y)) < i_sat))[0]
+    var_v = np.array([temporal_variance_se(sensor.with_exposure(m.texp_s[i]), 1, y[i] / k) ** 2
+                      + temporal_variance_se(sensor.with_exposure(m.texp_s[i]), 1) ** 2 for i in lin])
+    se_k = math.sqrt(np.sum(y[lin] ** 2 * var_v)) / np.sum(y[lin] ** 2)
+    check("K", res["system_gain_K_dn_per_e"], k, se_k)
+    # the dark series over the exposure times the evaluation used
+    ok = np.arange(res["dark_fit_points"])
+    assert np.all(m.max_ydark[ok] < m.mu_ydark[0] + 0.9 * (np.max(m.mu_y) - m.mu_ydark[0]))
+    t = m.texp_s[ok]
+    var_s2 = np.array([temporal_variance_se(sensor.with_exposure(ti), 1) ** 2 for ti in t])
+    se_slope_v, se_icpt = _line_fit_se(t, var_s2)
+    tv0 = noise_budget.temporal_variances(sensor, 0.0)
+    s0_model = sum(v for name, v in tv0.items() if name not in ("dark_shot", "photon_shot", "quantization")) * k**2 + 1 / 12
+    undithered = s0_model < 0.25  # no temporal noise to dither the quantization: a dark frame's variance is 0, not 1/12
+    check("sigma_d^2 (DN^2)", res["temporal_dark_noise_dn"] ** 2, s0_model, se_icpt + (1 / 12 if undithered else 0))
+    rows, cols = sensor.shape
+
+    def var_of_dark_mean(ti):
+        tv = noise_budget.temporal_variances(sensor.with_exposure(ti), 0.0)
+        pixel = sum(v for name, v in tv.items() if name not in ("row", "column"))
+        return (pixel / n + tv.get("row", 0) / rows + tv.get("column", 0) / cols) * k**2 / 2
+
+    se_slope_m, _ = _line_fit_se(t, np.array([var_of_dark_mean(ti) for ti in t]))
+    rel_k = se_k / k  # the e- values divide by the measured K
+    dc = model["dark_current_mean_e_per_s"]
+    check("dark current (mean)", res["dark_current_mean_e_per_s"], dc, math.hypot(se_slope_m / k, dc * rel_k) + 1e-9)
+    dv = model["dark_current_var_e_per_s"]
+    check("dark current (variance)", res["dark_current_var_e_per_s"], dv,
+          math.hypot(se_slope_v / k**2, dv * 2 * rel_k) + 1e-9)
+    # DSNU against the clipped expected dark image, in DN^2 (a variance near 0 is compared as a variance)
+    se_d = _fixed_pattern_se(od, td, L)
+    check("dsnu^2 (DN^2)", (res["dsnu_e"] * res["system_gain_K_dn_per_e"]) ** 2, (model["dsnu_e"] * k) ** 2,
+          math.hypot(se_d, (model["dsnu_e"] * k) ** 2 * 2 * rel_k) + 1e-12)
+    # its column part: the column means of the expected image, noise of the column means per column
+    oc = od.mean(axis=0)
+    tau_c = np.full(cols, float(np.mean(td)) / rows)
+    if sensor.fixed_pattern.column_sigma is not None:
+        tau_c = tau_c + (sensor.fixed_pattern.column_sigma.ravel().astype(np.float64) * k) ** 2
+    se_c = _fixed_pattern_se(oc, tau_c, L) + se_d / rows
+    check("dsnu column^2 (DN^2)", (res["dsnu_column_e"] * res["system_gain_K_dn_per_e"]) ** 2,
+          (model["dsnu_column_e"] * k) ** 2, se_c + 1e-12)
+    # saturation, SNR max and dynamic range follow EMVA's definition of saturation: named, and below the model's
+    for key in ("saturation_capacity_e", "snr_max", "dynamic_range_db"):
+        assert key in ch.DEFINITION_NOTES
+    assert 0.8 * model["saturation_capacity_e"] < res["saturation_capacity_e"] <= model["saturation_capacity_e"] * (1 + 5 * rel_k)
+    assert not failures, failures

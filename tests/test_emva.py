@@ -106,3 +106,24 @@ def test_fig10_vfpn_is_plain_at_low_light_and_hard_to_see_at_high_light():
     # relative contrast of the stripes: ~8 % in the darkest band (plain to see), ~0.1 % in the brightest
     assert contrast[0] > 0.04 and contrast[-1] < 0.003
     assert all(a > b for a, b in zip(contrast, contrast[1:]))
+
+
+def test_spatial_column_part_is_not_fooled_by_temporal_column_noise():
+    """A column noise that changes from frame to frame is temporal: the column part is the fixed pattern only.
+
+    EMVA 1288's correction (pixel noise / (L rows)) leaves sigma_ct^2 / L of temporal column noise in the
+    column part; the stack's own column-mean variance removes it. Fixed column pattern of variance 4 DN^2,
+    temporal column noise 9 DN^2, white noise 1 DN^2, L = 4 frames of 200 x 300.
+    """
+    rng = np.random.default_rng(11)
+    L, rows, cols = 4, 200, 300
+    fixed = 2.0 * rng.standard_normal(cols)
+    stack = (100 + fixed[None, None, :] + 3.0 * rng.standard_normal((L, 1, cols))
+             + rng.standard_normal((L, rows, cols)))
+    v = emva.spatial_variances(stack)
+    truth = float(np.var(fixed, ddof=1))
+    # se: the column means' temporal residual (9 + 1/rows) / L per column, crossed with the pattern
+    tau = (9.0 + 1.0 / rows) / L
+    se = np.sqrt(4 * truth * tau / cols + 2 * tau**2 / cols)
+    assert abs(v["column"] - truth) <= 5 * se
+    assert v["column"] - truth > -5 * se and abs(v["column"] + 9.0 / L - truth) > 5 * se  # the old bias would show

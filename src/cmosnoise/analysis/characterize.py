@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..model.stages import adc
 from ..model.seeds import SEQ_EMVA_BRIGHT, SEQ_EMVA_DARK, SEQ_EMVA_STACK_BRIGHT, SEQ_EMVA_STACK_DARK
 from . import emva, noise_budget
 
@@ -54,6 +55,7 @@ class Measurement:
     stack_mu_p: float
     stack_bright: np.ndarray  #: (L, rows, cols)
     stack_dark: np.ndarray
+    max_ydark: np.ndarray  #: brightest pixel of the two dark frames at each step, DN (to see white pixels saturate)
     frames: dict = field(default_factory=dict)  #: for export: name -> list of frames
 
 
@@ -71,7 +73,7 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
     t = sensor.transfer
     rate = sensor.saturation_e / 1.0  # photo-electrons per second per pixel at scene value 1
     texp = np.linspace(1.3 / steps, 1.3, steps)
-    mu_y, mu_yd, s2_y, s2_yd = (np.zeros(steps) for _ in range(4))
+    mu_y, mu_yd, s2_y, s2_yd, max_yd = (np.zeros(steps) for _ in range(5))
     frames: dict = {}
     for i, ti in enumerate(texp):
         s = sensor.with_exposure(ti, rate)
@@ -81,6 +83,7 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
         da, db = dark.frame(2 * i), dark.frame(2 * i + 1)
         mu_y[i], s2_y[i] = _pair_stats(a, b)
         mu_yd[i], s2_yd[i] = _pair_stats(da, db)
+        max_yd[i] = max(float(da.max()), float(db.max()))
         if keep_frames:
             frames[f"b_{i:03d}"] = [a, b]
             frames[f"d_{i:03d}"] = [da, db]
@@ -96,7 +99,7 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
         progress()
     return Measurement(
         t.bits, sensor.shape, texp, rate * texp, mu_y, mu_yd, s2_y, s2_yd, t50, rate * t50,
-        stack_bright, stack_dark, frames,
+        stack_bright, stack_dark, max_yd, frames,
     )
 
 
@@ -109,22 +112,72 @@ def _saturation_index(s2_y: np.ndarray) -> int:
     return int(np.argmax(s2_y))
 
 
+#: a fit needs this many exposure times
+MIN_FIT_POINTS = 3
+#: the dark series is fitted where no dark pixel is above this fraction of the way to saturation
+DARK_FIT_LIMIT = 0.9
+
+#: what needs the system gain K (e- values), for when the series cannot give it
+_NEEDS_K = ("system_gain_K_dn_per_e", "inverse_gain_e_per_dn", "quantum_efficiency", "temporal_dark_noise_e",
+            "saturation_capacity_e", "snr_max", "snr_max_db", "absolute_sensitivity_threshold_photons",
+            "dynamic_range", "dynamic_range_db", "dark_current_mean_e_per_s", "dark_current_var_e_per_s",
+            "dsnu_e", "dsnu_column_e", "dsnu_row_e", "dsnu_pixel_e")
+
+
 def evaluate(m: Measurement) -> dict:
-    """EMVA 1288 results from a :class:`Measurement`, frames only (DN, e-, photons)."""
+    """EMVA 1288 results from a :class:`Measurement`, frames only (DN, e-, photons).
+
+    Quantities the frames cannot give are ``None``, with the reason in
+    ``unavailable`` (quantity -> why): the system gain K when the temporal
+    variance does not grow with the signal (no shot noise), the dark
+    series when white pixels near saturation in all but a few exposure
+    times. The dark series is fitted only over exposure times where no dark
+    pixel is near saturation (``dark_fit_points``), and the PRNU leaves out
+    the defect pixels (``prnu_excluded_pixels``, :func:`emva.defect_pixels`).
+    """
+    unavailable: dict[str, str] = {}
     y = m.mu_y - m.mu_ydark
     v = m.s2_y - m.s2_ydark
     i_sat = _saturation_index(m.s2_y)
     lin = np.nonzero(y <= 0.7 * y[i_sat])[0]
     lin = lin[lin < i_sat]
-    if len(lin) < 3:
-        raise CmosnoiseError("the photon-transfer series has fewer than 3 points below 70 % of saturation")
+    if len(lin) < MIN_FIT_POINTS:
+        # no variance maximum to speak of (no shot noise: the variance is flat): saturation from the mean instead,
+        # where it reaches 98 % of its top (the K test below then says that K cannot be measured)
+        i_sat = int(np.argmax(y >= 0.98 * float(np.max(y))))
+        lin = np.nonzero(y <= 0.7 * y[i_sat])[0]
+        lin = lin[lin < i_sat]
+    if len(lin) < MIN_FIT_POINTS:
+        raise CmosnoiseError(f"the photon-transfer series has {len(lin)} exposure times below 70 % of saturation, "
+                             f"a fit needs {MIN_FIT_POINTS}: use more --steps")
     k = _fit_through_origin(y[lin], v[lin])  # DN/e-
+    resid = v[lin] - k * y[lin]
+    se_k = math.sqrt(float(np.sum(resid**2)) / (len(lin) - 1) / float(np.sum(y[lin] ** 2)))
+    if not k > 5.0 * se_k:
+        k = math.nan
+        why = (f"needs the system gain K, and the photon-transfer series cannot give it: the temporal variance does "
+               f"not grow with the signal (slope {_fit_through_origin(y[lin], v[lin]):.3g} +- {se_k:.2g} DN/e-; "
+               "is shot noise off?)")
+        unavailable.update({key: why for key in _NEEDS_K})
     r = _fit_through_origin(m.mu_p[lin], y[lin])  # DN/photon
     qe = r / k
-    # dark variance and mean against exposure time: intercept = sigma_y.dark^2, slopes = dark current
-    slope_v, s2_ydark0 = np.polyfit(m.texp_s, m.s2_ydark, 1)
-    slope_m, _ = np.polyfit(m.texp_s, m.mu_ydark, 1)
-    s2_ydark0 = max(s2_ydark0, 1 / 12 + 1e-12)
+    # dark variance and mean against exposure time, where no dark pixel nears saturation:
+    # intercept = sigma_y.dark^2, slopes = dark current
+    limit = m.mu_ydark[0] + DARK_FIT_LIMIT * (float(np.max(m.mu_y)) - m.mu_ydark[0])
+    dark_ok = np.nonzero(m.max_ydark < limit)[0]
+    if len(dark_ok) >= MIN_FIT_POINTS:
+        slope_v, s2_ydark0 = np.polyfit(m.texp_s[dark_ok], m.s2_ydark[dark_ok], 1)
+        slope_m, _ = np.polyfit(m.texp_s[dark_ok], m.mu_ydark[dark_ok], 1)
+    else:
+        slope_v = slope_m = s2_ydark0 = math.nan
+        why = (f"white pixels come within {100 * (1 - DARK_FIT_LIMIT):.0f} % of saturation in the dark in all but "
+               f"{len(dark_ok)} of the {len(m.texp_s)} exposure times (a fit needs {MIN_FIT_POINTS}): "
+               "use more --steps (shorter first exposures)")
+        for key in ("temporal_dark_noise_e", "temporal_dark_noise_dn", "dark_current_mean_e_per_s",
+                    "dark_current_var_e_per_s", "absolute_sensitivity_threshold_photons", "dynamic_range",
+                    "dynamic_range_db"):
+            unavailable.setdefault(key, why)
+    s2_ydark0 = max(s2_ydark0, 1 / 12 + 1e-12) if math.isfinite(s2_ydark0) else math.nan
     sigma_y_dark = math.sqrt(s2_ydark0)
     sigma_d = math.sqrt(s2_ydark0 - 1 / 12) / k
     u_e_sat = y[i_sat] / k
@@ -133,8 +186,9 @@ def evaluate(m: Measurement) -> dict:
     sp_b = emva.spatial_variances(m.stack_bright)
     sp_d = emva.spatial_variances(m.stack_dark)
     dsnu = emva.dsnu(m.stack_dark)
-    prnu = emva.prnu(m.stack_bright, m.stack_dark)
-    return {
+    defects = emva.defect_pixels(m.stack_bright, m.stack_dark, float(np.max(m.mu_y)))
+    prnu = emva.prnu(m.stack_bright, m.stack_dark, exclude=defects)
+    out = {
         "system_gain_K_dn_per_e": k,
         "inverse_gain_e_per_dn": 1 / k,
         "quantum_efficiency": qe,
@@ -144,26 +198,40 @@ def evaluate(m: Measurement) -> dict:
         "saturation_capacity_e": u_e_sat,
         "saturation_capacity_photons": u_p_sat,
         "snr_max": math.sqrt(u_e_sat),
-        "snr_max_db": 20 * math.log10(math.sqrt(u_e_sat)),
+        "snr_max_db": 20 * math.log10(math.sqrt(u_e_sat)) if u_e_sat > 0 else math.nan,
         "absolute_sensitivity_threshold_photons": u_p_min,
         "dynamic_range": u_p_sat / u_p_min,
-        "dynamic_range_db": 20 * math.log10(u_p_sat / u_p_min),
+        "dynamic_range_db": 20 * math.log10(u_p_sat / u_p_min) if u_p_sat / u_p_min > 0 else math.nan,
         "dark_current_mean_e_per_s": slope_m / k,
-        "dark_current_var_e_per_s": slope_v / k**2 if slope_v > 0 else float("nan"),
+        "dark_current_var_e_per_s": slope_v / k**2,
         "dsnu_e": dsnu["total"] / k,
         "dsnu_column_e": dsnu["column"] / k,
         "dsnu_row_e": dsnu["row"] / k,
         "dsnu_pixel_e": dsnu["pixel"] / k,
+        "dsnu_dn": dsnu["total"],
+        "dsnu_column_dn": dsnu["column"],
         "prnu_pct": 100 * prnu,
+        "prnu_excluded_pixels": int(defects.sum()),
         "stack_mean_bright_dn": sp_b["mean"],
         "stack_mean_dark_dn": sp_d["mean"],
         "saturation_index": i_sat,
         "linear_fit_points": int(len(lin)),
+        "dark_fit_points": int(len(dark_ok)),
+        "series_points": int(len(m.texp_s)),
     }
+    out = {key: (None if isinstance(val, float) and not math.isfinite(val) else val) for key, val in out.items()}
+    out["unavailable"] = unavailable
+    return out
 
 
 def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
-    """The same quantities as the simulated sensor instance implies them (its configuration and maps)."""
+    """The same quantities as the simulated sensor instance implies them (its configuration and maps).
+
+    DSNU: the EMVA estimator applied to the expected dark image at the
+    stack's exposure time, with the full-well and ADC clips (white pixels
+    that saturate count at the saturation level, as in the frames). PRNU:
+    the photo-response map (PRNU gain, crosstalk, column gain) of every pixel.
+    """
     c = sensor.config
     t = sensor.transfer
     fp = sensor.fixed_pattern
@@ -178,11 +246,12 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
         signal = signal * fp.column_gain
     qe = float(signal.mean())  # photo-electrons collected per photon
     dark = np.zeros(sensor.shape) if fp.dark_rate is None else fp.dark_rate.astype(np.float64)
-    dsnu_var = float(np.var(dark * stack_texp_s))
-    if fp.vfpn is not None:
-        dsnu_var += float(np.var(fp.vfpn.astype(np.float64)))
-    if fp.row_offset is not None:
-        dsnu_var += float(np.var(fp.row_offset.astype(np.float64)))
+    mo = noise_budget.clipped_moments(sensor.with_exposure(stack_texp_s), 0.0)
+    expected_dark = mo["mean"]
+    if c.adc.enabled:  # the quantizer: undithered where the temporal noise is well below a DN (adds its pattern)
+        dn = adc.expected_code(mo["mean"] * k + t.black_level_dn, np.sqrt(mo["var"]) * k)
+        expected_dark = (dn - t.black_level_dn) / k
+    sp = emva.spatial_variances(expected_dark[None])
     sigma_y_dark = math.sqrt(read_var * k**2 + 1 / 12)
     u_p_min = (sigma_y_dark / k + 0.5) / qe
     return {
@@ -195,9 +264,9 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
         "dynamic_range_db": 20 * math.log10(sat_e / qe / u_p_min),
         "dark_current_mean_e_per_s": float(dark.mean()),
         "dark_current_var_e_per_s": float(dark.mean()) if c.dark_current.shot_noise else 0.0,
-        "dsnu_e": math.sqrt(dsnu_var),
-        "dsnu_column_e": float(np.std(fp.vfpn, ddof=1)) if fp.vfpn is not None else 0.0,
-        "prnu_pct": 100 * float(signal.std() / signal.mean()),
+        "dsnu_e": math.sqrt(max(sp["total"], 0.0)),
+        "dsnu_column_e": math.sqrt(max(sp["column"], 0.0)),
+        "prnu_pct": 100 * float(signal.std(ddof=1) / signal.mean()),  # ddof=1 as the EMVA estimator (matters on tiny sensors)
     }
 
 
@@ -206,6 +275,8 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
 #: spreads the pixels' clipping points
 DEFINITION_NOTES = {
     "saturation_capacity_e": "EMVA: mean at the variance maximum; the model gives the full well (or ADC full scale)",
+    "snr_max": "from the saturation capacity: sqrt(mu_e.sat), so below the model's as mu_e.sat is",
+    "dynamic_range_db": "from the saturation capacity: follows mu_e.sat's definition",
 }
 
 TABLE_ROWS = [
@@ -224,16 +295,38 @@ TABLE_ROWS = [
 
 
 def table(measured: dict, model: dict | None) -> list[tuple[str, str, str, str, str]]:
-    """Rows (quantity, unit, measured, model, deviation %) for printing."""
+    """Rows (quantity, unit, measured, model, deviation %) for printing; "n/a" where the frames cannot give it."""
     rows = []
     for key, label, unit, fmt in TABLE_ROWS:
         mv = measured.get(key)
         xv = (model or {}).get(key)
         dev = ""
-        if xv not in (None, 0) and mv is not None and np.isfinite(mv):
+        if xv is not None and float(fmt.format(xv)) != 0 and mv is not None and np.isfinite(mv):  # no % of a 0
             dev = f"{100 * (mv - xv) / xv:+.2f}"
-        rows.append((label, unit, fmt.format(mv) if mv is not None else "", fmt.format(xv) if xv is not None else "", dev))
+        rows.append((label, unit, fmt.format(mv) if mv is not None else "n/a", fmt.format(xv) if xv is not None else "", dev))
     return rows
+
+
+def footnotes(measured: dict) -> list[str]:
+    """Why a quantity is n/a, what was left out, and the quantities that agree only up to a definition."""
+    labels = {key: label.strip() for key, label, _, _ in TABLE_ROWS}
+    out = []
+    reasons: dict[str, list[str]] = {}
+    for key, why in measured.get("unavailable", {}).items():
+        if key in labels:
+            reasons.setdefault(why, []).append(labels[key])
+    for why, names in reasons.items():
+        out.append(f"n/a: {', '.join(names)}: {why}")
+    fit, steps = measured.get("dark_fit_points"), measured.get("series_points")
+    if fit is not None and steps is not None and MIN_FIT_POINTS <= fit < steps:
+        out.append(f"dark current and sigma_d: fitted over the {fit} shortest of {steps} exposure times (in the longer "
+                   "ones white pixels near saturation in the dark)")
+    if measured.get("prnu_excluded_pixels"):
+        out.append(f"PRNU1288 leaves out {measured['prnu_excluded_pixels']} defect pixel(s) (dark outliers beyond 5 "
+                   "robust sigma, or near saturation in the bright stack)")
+    for key, note in DEFINITION_NOTES.items():
+        out.append(f"{labels[key]}: {note}")
+    return out
 
 
 # ------------------------------------------------------------------ plots
@@ -251,7 +344,11 @@ def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
     fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=110)
     ax.plot(y, v, "o", ms=4, label="measured")
     xs = np.linspace(0, y[res["saturation_index"]], 50)
-    ax.plot(xs, k * xs, "-", label=f"fit: K = {k:.4f} DN/e-")
+    if k is not None:
+        ax.plot(xs, k * xs, "-", label=f"fit: K = {k:.4f} DN/e-")
+    else:
+        ax.text(0.03, 0.95, "K cannot be measured: the variance does not grow with the signal",
+                transform=ax.transAxes, va="top", fontsize=8)
     ax.axvline(y[res["saturation_index"]], color="grey", ls=":", label="saturation (variance max)")
     ax.set_xlabel("mean signal above dark, mu_y - mu_y.dark [DN]")
     ax.set_ylabel("temporal variance above dark, s2_y - s2_y.dark [DN^2]")
@@ -269,9 +366,11 @@ def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
     ax.loglog(m.mu_p[ok], snr[ok], "o", ms=4, label="measured")
     mp = np.logspace(np.log10(max(m.mu_p[ok].min() / 10, 0.1)), np.log10(res["saturation_capacity_photons"]), 100)
     eta, sd = res["quantum_efficiency"], res["temporal_dark_noise_e"]
-    model = eta * mp / np.sqrt(sd**2 + 1 / (12 * k**2) + eta * mp)
-    ax.loglog(mp, model, "-", label="EMVA model from the fitted eta, sigma_d, K")
-    ax.loglog(mp, np.sqrt(eta * mp), ":", label="ideal (shot noise only)")
+    if None not in (k, eta, sd):
+        model = eta * mp / np.sqrt(sd**2 + 1 / (12 * k**2) + eta * mp)
+        ax.loglog(mp, model, "-", label="EMVA model from the fitted eta, sigma_d, K")
+    eta = eta if eta is not None else 1.0
+    ax.loglog(mp, np.sqrt(eta * mp), ":", label="ideal (shot noise only)" + ("" if res["quantum_efficiency"] else ", eta = 1"))
     ax.set_xlabel("irradiation mu_p [photons per pixel]")
     ax.set_ylabel("SNR (temporal)")
     ax.set_title("SNR curve (EMVA 1288)")
@@ -363,7 +462,7 @@ def load(descriptor: Path) -> Measurement:
     stacks_d = [e for e in entries if e[0] == "d" and len(e[3]) > 2]
     if len(bright_pairs) < 3 or not stacks_b or not stacks_d:
         raise CmosnoiseError("an EMVA descriptor needs at least 3 bright pairs with dark pairs, and a bright and a dark stack")
-    texp, mu_p, mu_y, mu_yd, s2_y, s2_yd = [], [], [], [], [], []
+    texp, mu_p, mu_y, mu_yd, s2_y, s2_yd, max_yd = [], [], [], [], [], [], []
     for _, t, p, paths in bright_pairs:
         d = dark_pairs.get(round(t, 12))
         if d is None:
@@ -373,8 +472,9 @@ def load(descriptor: Path) -> Measurement:
         my, sy = _pair_stats(a, b)
         md, sd = _pair_stats(da, db)
         texp.append(t); mu_p.append(p); mu_y.append(my); s2_y.append(sy); mu_yd.append(md); s2_yd.append(sd)
+        max_yd.append(max(float(da.max()), float(db.max())))
     sb, sdk = stacks_b[0], stacks_d[0]
     return Measurement(
         bits, shape, *map(np.array, (texp, mu_p, mu_y, mu_yd, s2_y, s2_yd)), sb[1], sb[2],
-        np.stack(read(sb[3])), np.stack(read(sdk[3])),
+        np.stack(read(sb[3])), np.stack(read(sdk[3])), np.array(max_yd),
     )

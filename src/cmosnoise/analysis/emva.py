@@ -40,27 +40,33 @@ def temporal_variance_stack(stack: np.ndarray) -> float:
 def spatial_variances(stack: np.ndarray) -> dict[str, float]:
     """Spatial variance of the frame average (DN^2), total and its column, row and pixel parts.
 
-    The part of the temporal noise that survives averaging L frames is
-    removed (``sigma_t^2 / L``, from the pixel part, where it lives).
+    The temporal noise that survives averaging L frames is removed from
+    each part as measured in the stack itself: the pixels' temporal
+    variance / L from the total, and the temporal variance of the column
+    (row) means / L from the column (row) means' variance. EMVA 1288 takes
+    the latter as the pixel noise / (L rows), which holds for white noise
+    only: temporal column and row noise (a noise of the whole column in one
+    frame) would otherwise count as fixed pattern.
     """
     stack = stack.astype(np.float64)
     n_frames, rows, cols = stack.shape
     mean = stack.mean(axis=0)
-    residual = temporal_variance_stack(stack) / n_frames if n_frames > 1 else 0.0
-    total = float(np.var(mean, ddof=1))
-    col_means = mean.mean(axis=0)
-    row_means = mean.mean(axis=1)
-    s_col = float(np.var(col_means, ddof=1))
-    s_row = float(np.var(row_means, ddof=1))
-    # E[total] = P + C + R, E[s_col] = C + P/rows, E[s_row] = R + P/cols  (P: pixel part)
+    if n_frames > 1:
+        residual = temporal_variance_stack(stack) / n_frames
+        res_col = float(np.mean(np.var(stack.mean(axis=1), axis=0, ddof=1))) / n_frames
+        res_row = float(np.mean(np.var(stack.mean(axis=2), axis=0, ddof=1))) / n_frames
+    else:
+        residual = res_col = res_row = 0.0
+    total = float(np.var(mean, ddof=1)) - residual
+    s_col = float(np.var(mean.mean(axis=0), ddof=1)) - res_col
+    s_row = float(np.var(mean.mean(axis=1), ddof=1)) - res_row
+    # E[total] = P + C + R, E[s_col] = C + P/rows, E[s_row] = R + P/cols  (P: pixel part), all fixed pattern
     pixel = (total - s_col - s_row) / (1 - 1 / rows - 1 / cols)
-    column = s_col - pixel / rows
-    row = s_row - pixel / cols
     return {
-        "total": total - residual,
-        "column": column - residual / rows,
-        "row": row - residual / cols,
-        "pixel": pixel - residual,
+        "total": total,
+        "column": s_col - pixel / rows,
+        "row": s_row - pixel / cols,
+        "pixel": pixel,
         "mean": float(mean.mean()),
     }
 
@@ -71,8 +77,46 @@ def dsnu(dark_stack: np.ndarray) -> dict[str, float]:
     return {k: math.sqrt(max(v[k], 0.0)) for k in ("total", "column", "row", "pixel")}
 
 
-def prnu(bright_stack: np.ndarray, dark_stack: np.ndarray) -> float:
-    """PRNU (fraction of the signal) from stacks of bright (~50 % saturation) and dark frames."""
-    b = spatial_variances(bright_stack)
-    d = spatial_variances(dark_stack)
-    return math.sqrt(max(b["total"] - d["total"], 0.0)) / (b["mean"] - d["mean"])
+def defect_pixels(bright_stack: np.ndarray, dark_stack: np.ndarray, saturation_dn: float) -> np.ndarray:
+    """Pixels to leave out of the PRNU: outliers of the dark image and pixels near saturation, (rows, cols) bool.
+
+    A pixel is a defect when its dark-stack mean lies more than 5 robust
+    standard deviations (1.4826 x the median absolute deviation, at least
+    the averaged temporal noise and 1 DN) from the median dark level - white
+    and dark pixels, as EMVA 1288 sets them apart - or when its bright-stack
+    mean is above 90 % of the way from the dark level to ``saturation_dn``
+    (it clips, and its variance is no longer the gain's). Selecting by the
+    dark signal is independent of the gain map, so the PRNU of the pixels
+    left is an unbiased estimate of the whole map's.
+    """
+    dark = dark_stack.astype(np.float64).mean(axis=0)
+    bright = bright_stack.mean(axis=0, dtype=np.float64)
+    med = float(np.median(dark))
+    mad = float(np.median(np.abs(dark - med)))
+    floor = math.sqrt(temporal_variance_stack(dark_stack) / dark_stack.shape[0]) if dark_stack.shape[0] > 1 else 0.0
+    sigma = max(1.4826 * mad, floor, 1.0)
+    return (np.abs(dark - med) > 5.0 * sigma) | (bright > med + 0.9 * (saturation_dn - med))
+
+
+def prnu(bright_stack: np.ndarray, dark_stack: np.ndarray, exclude: np.ndarray | None = None) -> float:
+    """PRNU (fraction of the signal) from stacks of bright (~50 % saturation) and dark frames.
+
+    ``exclude`` (rows, cols) bool leaves those pixels out (see
+    :func:`defect_pixels`); the spatial variances are then totals over the
+    pixels kept, each corrected for the temporal variance left in the mean.
+    """
+    if exclude is None or not exclude.any():
+        b = spatial_variances(bright_stack)
+        d = spatial_variances(dark_stack)
+        bt, dt, bm, dm = b["total"], d["total"], b["mean"], d["mean"]
+    else:
+        keep = ~exclude
+
+        def total(stack):
+            s = stack.astype(np.float64)
+            mean = s.mean(axis=0)[keep]
+            residual = float(np.mean(np.var(s, axis=0, ddof=1)[keep])) / s.shape[0] if s.shape[0] > 1 else 0.0
+            return float(np.var(mean, ddof=1)) - residual, float(mean.mean())
+
+        (bt, bm), (dt, dm) = total(bright_stack), total(dark_stack)
+    return math.sqrt(max(bt - dt, 0.0)) / (bm - dm)

@@ -91,12 +91,20 @@ def _clipped_normal(m: np.ndarray, v: np.ndarray, top: float) -> tuple[np.ndarra
     return mean, np.maximum(second - mean * mean, 0.0), 1 - cdf
 
 
-def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
-    """Temporal and spatial variance (e-^2) with the full-well and ADC clips, and the fraction of pixels clipped.
+def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
+    """Per-pixel expected value and temporal variance at the ADC input (e-), with the full-well and ADC clips.
 
     ``photo_e`` is the mean photo-charge per pixel (a scene); without it, a
     flat field of mean ``signal_e`` through the sensor's PRNU and crosstalk.
-    Column gain mismatch is left out here (it is a fraction of a per cent).
+    Returns ``mean`` and ``var`` (rows, cols) float64 e-, and ``p_full_well``
+    and ``p_top`` (the probability that the pixel clips at the full well or
+    at the ADC's top code), or ``None`` for these two when no pixel comes
+    within 10 sigma of a clip (then ``mean`` and ``var`` are the unclipped
+    moments). As the frame kernel does it: the charge (a normal
+    approximation of the Poisson count) is clipped at the full well; the
+    source follower's and the row's noise and offset are added; the column
+    gain multiplies, the column's offset (VFPN) and noise are added; the ADC
+    clips at its top.
     """
     c = sensor.config
     fp = sensor.fixed_pattern
@@ -106,42 +114,61 @@ def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None =
     else:
         photo = np.asarray(photo_e, np.float64)
     dark = (fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0)
-    mean_n = photo + dark
-    shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
+    mean_n = np.broadcast_to(photo + dark, sensor.shape)
+    shot = np.broadcast_to(np.asarray((photo if c.shot_noise.enabled else 0.0)
+                                      + (dark if c.dark_current.shot_noise else 0.0), np.float64), sensor.shape)
     fw = c.sensor.full_well_e
     # the top code's charge (values within half a code of it round to it)
     top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
-    sd_max = math.sqrt(float(np.max(shot)) + (c.source_follower.thermal_sigma_e + 20) ** 2) if np.size(shot) else 0.0
-    if float(np.max(mean_n)) + 10 * sd_max + 100 < min(fw, top):  # nothing comes near a clip: skip the per-pixel moments
-        return {"full_well_fraction": 0.0, "top_code_fraction": 0.0, "clipped_fraction": 0.0,
-                "temporal_var_e2": math.nan, "spatial_var_e2": math.nan}
-    mean_n = np.broadcast_to(mean_n, sensor.shape)
-    shot = np.broadcast_to(np.asarray(shot, np.float64), sensor.shape)
-    read = np.zeros(sensor.shape)
-    offset = np.zeros(sensor.shape)
+    read = np.zeros(sensor.shape)  # before the column gain: source follower and row noise, e-^2
+    col_read = np.zeros(sensor.shape)  # after it: column noise
+    row_off = np.zeros(sensor.shape)
+    col_off = np.zeros(sensor.shape)
+    gain = np.ones(sensor.shape)
     if c.source_follower.enabled:
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
     if c.row_noise.enabled:
         read = read + c.row_noise.sigma_e**2
     if fp.column_sigma is not None:
-        read = read + fp.column_sigma.astype(np.float64) ** 2
+        col_read = col_read + fp.column_sigma.astype(np.float64) ** 2
     if fp.row_offset is not None:
-        offset = offset + fp.row_offset.astype(np.float64)
+        row_off = row_off + fp.row_offset.astype(np.float64)
     if fp.vfpn is not None:
-        offset = offset + fp.vfpn.astype(np.float64)
+        col_off = col_off + fp.vfpn.astype(np.float64)
+    if fp.column_gain is not None:
+        gain = gain * fp.column_gain.astype(np.float64)
+    g2 = gain * gain
+    sd_max = math.sqrt(float(np.max(shot * g2)) + float(np.max(read * g2 + col_read)))
+    unclipped_mean = (mean_n + row_off) * gain + col_off
+    if float(np.max(unclipped_mean)) + 10 * sd_max + 1 < min(fw, top):
+        return {"mean": unclipped_mean, "var": (shot + read) * g2 + col_read, "p_full_well": None, "p_top": None}
     # the charge: N ~ Normal(mean_n, shot), clipped at the full well with probability p_fw
     p_fw = 1.0 - _cdf((fw - mean_n) / np.sqrt(np.maximum(shot, 1e-300)))
     m_below, v_below = _truncated_below(mean_n, shot, fw)  # N given N < FW
-    # the readout adds read noise and offsets, then the ADC clips at its top: a mixture of the two cases
-    m_c, v_c, q_c = _clipped_normal(fw + offset, read, top)  # clipped at the full well
-    m_u, v_u, q_u = _clipped_normal(m_below + offset, v_below + read, top)  # not clipped there
+    # the readout adds noise, offsets and the column gain, then the ADC clips at its top: a mixture of the two cases
+    m_c, v_c, q_c = _clipped_normal((fw + row_off) * gain + col_off, read * g2 + col_read, top)  # clipped at the full well
+    m_u, v_u, q_u = _clipped_normal((m_below + row_off) * gain + col_off, (v_below + read) * g2 + col_read, top)
     mean = p_fw * m_c + (1 - p_fw) * m_u
     second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
-    var = np.maximum(second - mean**2, 0.0)
-    at_top = p_fw * q_c + (1 - p_fw) * q_u
+    return {"mean": mean, "var": np.maximum(second - mean**2, 0.0), "p_full_well": p_fw,
+            "p_top": p_fw * q_c + (1 - p_fw) * q_u}
+
+
+def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
+    """Temporal and spatial variance (e-^2) with the full-well and ADC clips, and the fraction of pixels clipped.
+
+    Averages of :func:`clipped_moments` over the pixels; where nothing comes
+    near a clip, the fractions are 0 and the variances NaN (the unclipped
+    budget holds).
+    """
+    mo = clipped_moments(sensor, signal_e, photo_e)
+    if mo["p_full_well"] is None:
+        return {"full_well_fraction": 0.0, "top_code_fraction": 0.0, "clipped_fraction": 0.0,
+                "temporal_var_e2": math.nan, "spatial_var_e2": math.nan}
+    p_fw, at_top = mo["p_full_well"], mo["p_top"]
     return {"full_well_fraction": float(np.mean(p_fw)), "top_code_fraction": float(np.mean(at_top)),
             "clipped_fraction": float(np.mean(np.maximum(p_fw, at_top))),
-            "temporal_var_e2": float(np.mean(var)), "spatial_var_e2": float(np.var(mean))}
+            "temporal_var_e2": float(np.mean(mo["var"])), "spatial_var_e2": float(np.var(mo["mean"]))}
 
 
 def _cdf(a):

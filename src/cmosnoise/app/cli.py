@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 from pathlib import Path
 from typing import List, Optional
@@ -230,7 +231,7 @@ def characterize(
     with folder as tmp:
         ch.plot_curves(m, results, tmp)
         write_json(tmp / "characterization.json", {
-            "measured": results, "model": model, "notes": ch.DEFINITION_NOTES,
+            "measured": results, "model": model, "notes": ch.footnotes(results),
             "series": {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
                        "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark},
         })
@@ -251,6 +252,13 @@ def characterize(
         tab.add_row(*row, *ref)
     if _level(ctx) >= 0:
         Console().print(tab)
+        for line in ch.footnotes(results):
+            typer.echo(f"  {line}")
+        if reference:
+            missing = [label.strip() for key, label, _, _ in ch.TABLE_ROWS
+                       if key in reference and not math.isfinite(reference[key])]
+            if missing:
+                typer.echo(f"  emva1288 gave no value (nan) for: {', '.join(missing)}")
     _say(ctx, f"wrote characterization.json, photon_transfer.png, snr.png to {out}/"
                + (f"; EMVA 1288 data set to {emva_export}/" if emva_export else ""))
 
