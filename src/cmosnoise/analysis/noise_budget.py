@@ -114,44 +114,48 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     else:
         photo = np.asarray(photo_e, np.float64)
     dark = (fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0)
-    mean_n = np.broadcast_to(photo + dark, sensor.shape)
-    shot = np.broadcast_to(np.asarray((photo if c.shot_noise.enabled else 0.0)
-                                      + (dark if c.dark_current.shot_noise else 0.0), np.float64), sensor.shape)
+    shape = sensor.shape
+    mean_n = np.broadcast_to(photo + dark, shape)
+    shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
     fw = c.sensor.full_well_e
     # the top code's charge (values within half a code of it round to it)
     top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
-    read = np.zeros(sensor.shape)  # before the column gain: source follower and row noise, e-^2
-    col_read = np.zeros(sensor.shape)  # after it: column noise
-    row_off = np.zeros(sensor.shape)
-    col_off = np.zeros(sensor.shape)
-    gain = np.ones(sensor.shape)
+    # the other terms as they come: per pixel, (rows, 1) or (1, cols); broadcast, never expanded
+    read = c.row_noise.sigma_e**2 if c.row_noise.enabled else 0.0  # before the column gain, e-^2
     if c.source_follower.enabled:
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
-    if c.row_noise.enabled:
-        read = read + c.row_noise.sigma_e**2
-    if fp.column_sigma is not None:
-        col_read = col_read + fp.column_sigma.astype(np.float64) ** 2
-    if fp.row_offset is not None:
-        row_off = row_off + fp.row_offset.astype(np.float64)
-    if fp.vfpn is not None:
-        col_off = col_off + fp.vfpn.astype(np.float64)
-    if fp.column_gain is not None:
-        gain = gain * fp.column_gain.astype(np.float64)
+    col_read = fp.column_sigma.astype(np.float64) ** 2 if fp.column_sigma is not None else 0.0  # after it
+    row_off = fp.row_offset.astype(np.float64) if fp.row_offset is not None else 0.0
+    col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
+    gain = fp.column_gain.astype(np.float64) if fp.column_gain is not None else 1.0
     g2 = gain * gain
-    sd_max = math.sqrt(float(np.max(shot * g2)) + float(np.max(read * g2 + col_read)))
-    unclipped_mean = (mean_n + row_off) * gain + col_off
-    if float(np.max(unclipped_mean)) + 10 * sd_max + 1 < min(fw, top):
-        return {"mean": unclipped_mean, "var": (shot + read) * g2 + col_read, "p_full_well": None, "p_top": None}
-    # the charge: N ~ Normal(mean_n, shot), clipped at the full well with probability p_fw
-    p_fw = 1.0 - _cdf((fw - mean_n) / np.sqrt(np.maximum(shot, 1e-300)))
-    m_below, v_below = _truncated_below(mean_n, shot, fw)  # N given N < FW
+    mean = np.broadcast_to((mean_n + row_off) * gain + col_off, shape).copy()
+    var = np.broadcast_to((shot + read) * g2 + col_read, shape).copy()
+    # only pixels within 10 sigma of a clip need the clipped moments (a few, unless the scene is near saturation)
+    near = (mean_n + 10 * np.sqrt(shot) + 1 >= fw) | (mean + 10 * np.sqrt(var) + 1 >= top)
+    if not near.any():
+        return {"mean": mean, "var": var, "p_full_well": None, "p_top": None}
+    idx = np.nonzero(near)
+
+    def at(a):
+        return np.broadcast_to(np.asarray(a, np.float64), shape)[idx]
+
+    mn, sh, rd, cr, ro, co, g = (at(a) for a in (mean_n, shot, read, col_read, row_off, col_off, gain))
+    # the charge: N ~ Normal(mn, sh), clipped at the full well with probability p_fw
+    p_fw = 1.0 - _cdf((fw - mn) / np.sqrt(np.maximum(sh, 1e-300)))
+    m_below, v_below = _truncated_below(mn, sh, fw)  # N given N < FW
     # the readout adds noise, offsets and the column gain, then the ADC clips at its top: a mixture of the two cases
-    m_c, v_c, q_c = _clipped_normal((fw + row_off) * gain + col_off, read * g2 + col_read, top)  # clipped at the full well
-    m_u, v_u, q_u = _clipped_normal((m_below + row_off) * gain + col_off, (v_below + read) * g2 + col_read, top)
-    mean = p_fw * m_c + (1 - p_fw) * m_u
+    m_c, v_c, q_c = _clipped_normal((fw + ro) * g + co, rd * g * g + cr, top)  # clipped at the full well
+    m_u, v_u, q_u = _clipped_normal((m_below + ro) * g + co, (v_below + rd) * g * g + cr, top)
+    m = p_fw * m_c + (1 - p_fw) * m_u
     second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
-    return {"mean": mean, "var": np.maximum(second - mean**2, 0.0), "p_full_well": p_fw,
-            "p_top": p_fw * q_c + (1 - p_fw) * q_u}
+    mean[idx] = m
+    var[idx] = np.maximum(second - m**2, 0.0)
+    p_full = np.zeros(shape)
+    p_full[idx] = p_fw
+    p_top = np.zeros(shape)
+    p_top[idx] = p_fw * q_c + (1 - p_fw) * q_u
+    return {"mean": mean, "var": var, "p_full_well": p_full, "p_top": p_top}
 
 
 def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:

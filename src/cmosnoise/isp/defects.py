@@ -30,19 +30,24 @@ def _offsets(pattern: str) -> tuple[np.ndarray, np.ndarray | None]:
     return np.array(cfa_mod.RB_NEIGHBOURS), np.array(cfa_mod.G_NEIGHBOURS)
 
 
-def neighbours(img: np.ndarray, pattern: str) -> np.ndarray:
-    """The 8 same-colour neighbours of every pixel: array (8, rows, cols)."""
+def _neighbour_views(img: np.ndarray, pattern: str, step: int = 1):
+    """The 8 same-colour neighbours of every ``step``-th row, one (rows', cols) array at a time."""
     rows, cols = img.shape
     pad = np.pad(img, 2, mode="reflect")
-
-    def shifted(offsets):
-        return np.stack([pad[2 + dr : 2 + dr + rows, 2 + dc : 2 + dc + cols] for dr, dc in offsets])
-
     rb, g = _offsets(pattern)
-    if g is None:
-        return shifted(rb)
-    green = cfa_mod.channel_map(pattern, img.shape) == 1
-    return np.where(green[None], shifted(g), shifted(rb))
+    green = None if g is None else (cfa_mod.channel_map(pattern, img.shape) == 1)[::step]
+    for q in range(8):
+        view_rb = pad[2 + rb[q, 0]: 2 + rb[q, 0] + rows: step, 2 + rb[q, 1]: 2 + rb[q, 1] + cols]
+        if green is None:
+            yield view_rb
+        else:
+            view_g = pad[2 + g[q, 0]: 2 + g[q, 0] + rows: step, 2 + g[q, 1]: 2 + g[q, 1] + cols]
+            yield np.where(green, view_g, view_rb)
+
+
+def neighbours(img: np.ndarray, pattern: str) -> np.ndarray:
+    """The 8 same-colour neighbours of every pixel: array (8, rows, cols)."""
+    return np.stack(list(_neighbour_views(img, pattern)))
 
 
 def neighbours_at(img: np.ndarray, pattern: str, r: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -69,14 +74,18 @@ def correct_isolated(img: np.ndarray, pattern: str, threshold_sigma: float = 6.0
     times the robust spread of (pixel - neighbour median), estimated on
     every 4th row. Returns (corrected image, mask of replaced pixels).
     """
-    nb = neighbours(img, pattern)
     if threshold_dn is None:
-        sample = img[::4] - np.median(nb[:, ::4], axis=0)
+        sample = img[::4] - np.median(np.stack(list(_neighbour_views(img, pattern, step=4))), axis=0)
         threshold_dn = threshold_sigma * robust_sigma(sample)
-    mask = (img > nb.max(axis=0) + threshold_dn) | (img < nb.min(axis=0) - threshold_dn)
+    hi = lo = None
+    for v in _neighbour_views(img, pattern):  # running max and min: one frame-sized array at a time, not eight
+        hi = v.copy() if hi is None else np.maximum(hi, v, out=hi)
+        lo = v.copy() if lo is None else np.minimum(lo, v, out=lo)
+    mask = (img > hi + threshold_dn) | (img < lo - threshold_dn)
+    del hi, lo
     out = img.copy()
     r, c = np.nonzero(mask)
-    out[r, c] = np.median(nb[:, r, c], axis=0)
+    out[r, c] = np.median(neighbours_at(img, pattern, r, c), axis=0)
     return out, mask
 
 
