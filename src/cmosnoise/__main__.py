@@ -1,5 +1,5 @@
 """``python -m cmosnoise``: the command line."""
 
-from .app.cli import main
+from .app.entry import main
 
 main()

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import math
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import List, Optional
 
@@ -13,7 +15,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from ..config import preset_data, preset_names
-from ..errors import CmosnoiseError
+from ..errors import CmosnoiseError, Terminated
 from ..model.physics import load_config
 
 app = typer.Typer(
@@ -107,6 +109,7 @@ def _progress_factory(enabled: Optional[bool], pixels: int):
 ConfigOpt = typer.Option(None, "--config", "-c", help="YAML configuration file")
 PresetOpt = typer.Option(None, "--preset", "-p", help="start from a preset (see `cmosnoise presets`)")
 SetOpt = typer.Option(None, "--set", "-s", help="override one key, e.g. --set prnu.sigma_pct=2 (repeatable)")
+OverwriteOpt = typer.Option(False, "--overwrite", help="replace an existing non-empty output folder as a whole (else refused)")
 
 
 @app.command()
@@ -125,6 +128,7 @@ def simulate(
     format_: Optional[List[str]] = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
     report: bool = typer.Option(False, "--report", help="also write report.html (self-contained run report)"),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
+    overwrite: bool = OverwriteOpt,
 ):
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
     from .run import simulate as run_simulate
@@ -145,7 +149,7 @@ def simulate(
 
     try:
         summary = run_simulate(cfg, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height),
-                               phase=phase)
+                               phase=phase, overwrite=overwrite)
     finally:
         if status is not None:
             status.stop()
@@ -179,6 +183,7 @@ def process(
     black_level: Optional[float] = typer.Option(None, "--black-level", help="black level, DN (default: from the metadata)"),
     bits: Optional[int] = typer.Option(None, "--bits", help="bit depth (default: from the metadata)"),
     out: Path = typer.Option(Path("cmosnoise-processed"), "--out", "-o", help="output folder"),
+    overwrite: bool = OverwriteOpt,
 ):
     """Process raw frames that already exist (from cmosnoise or a real camera) into pictures."""
     from .run import process_file
@@ -187,7 +192,7 @@ def process(
     if cfa is not None:
         cfa = "none" if cfa.lower() == "none" else cfa.upper()
     overrides = {k: v for k, v in {"cfa": cfa, "black_level_dn": black_level, "bits": bits}.items() if v is not None}
-    result = process_file(raw, cfg.processing, out, dark, overrides)
+    result = process_file(raw, cfg.processing, out, dark, overrides, overwrite)
     _say(ctx, f"processed {result['frames']} frame(s) {result['rows']}x{result['cols']} {result['cfa']} into {out}/ "
                f"({result['ms_per_frame']:.0f} ms/frame)")
 
@@ -204,6 +209,7 @@ def characterize(
     emva_export: Optional[Path] = typer.Option(None, "--emva-export", help="also write the frames and an EMVA 1288 descriptor here"),
     frames_from: Optional[Path] = typer.Option(None, "--frames-from", help="characterize frames from an EMVA 1288 descriptor (folder or file) instead"),
     out: Path = typer.Option(Path("cmosnoise-characterization"), "--out", "-o", help="output folder"),
+    overwrite: bool = OverwriteOpt,
 ):
     """EMVA 1288 characterization: measured values next to the values the configuration implies."""
     from rich.table import Table
@@ -213,8 +219,8 @@ def characterize(
     from ..io.output import OutputFolder, write_json
     from ..model.sensor import Sensor
 
-    folder = OutputFolder(out)
-    export_folder = OutputFolder(emva_export) if emva_export is not None else None
+    folder = OutputFolder(out, overwrite)
+    export_folder = OutputFolder(emva_export, overwrite, "--emva-export") if emva_export is not None else None
     model = None
     if frames_from is not None:
         m = ch.load(frames_from)
@@ -268,12 +274,13 @@ def figures(
     ctx: typer.Context,
     out: Path = typer.Option(Path("cmosnoise-figures"), "--out", "-o", help="output folder"),
     seed: int = typer.Option(0, "--seed", help="sensor instance seed"),
+    overwrite: bool = OverwriteOpt,
 ):
     """Regenerate the paper's figures (3, 5, 6, 7, 9, 10, 11) as PNGs with an index.html gallery."""
     from .figures import write_gallery
     from ..io.output import OutputFolder
 
-    with OutputFolder(out) as tmp:
+    with OutputFolder(out, overwrite) as tmp:
         with Progress(TextColumn("[bold]figure"), TextColumn("{task.description}"), console=err_console,
                       disable=not err_console.is_terminal or _level(ctx) < 0) as p:
             task = p.add_task("", total=None)
@@ -311,6 +318,7 @@ def run(argv: list[str] | None = None) -> int:
     A :class:`CmosnoiseError` becomes one line on stderr and status 2, a
     usage error click's message and status 2, Ctrl-C status 130.
     """
+    previous = _catch_termination()
     try:
         result = app(args=argv, prog_name="cmosnoise", standalone_mode=False)
         return result if isinstance(result, int) else 0
@@ -323,9 +331,33 @@ def run(argv: list[str] | None = None) -> int:
         message = " ".join(str(exc).split())  # one line, whatever a library put in it
         print(f"cmosnoise: error: {message}", file=sys.stderr)
         return 2
+    except Terminated as exc:
+        name = "Ctrl-C" if exc.signum == signal.SIGINT else signal.Signals(exc.signum).name
+        print(f"cmosnoise: interrupted ({name}); nothing was written", file=sys.stderr)
+        return 128 + exc.signum
     except (KeyboardInterrupt, typer.Abort):
-        print("cmosnoise: interrupted", file=sys.stderr)
+        print("cmosnoise: interrupted; nothing was written", file=sys.stderr)
         return 130
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _raise_terminated(signum, _frame):
+    raise Terminated(signum)
+
+
+def _catch_termination() -> dict:
+    """SIGINT, SIGTERM and SIGHUP raise :class:`Terminated`: output folders clean up on the way out.
+
+    Returns the handlers it replaced (restored when the command ends). Only
+    the main thread can set handlers; elsewhere nothing changes.
+    """
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            previous[signum] = signal.signal(signum, _raise_terminated)
+    return previous
 
 
 def main() -> None:

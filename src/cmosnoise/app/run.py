@@ -40,13 +40,15 @@ from ..model.units import e_per_s_to_aa
 
 
 def simulate(config: Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
-             phase: Callable[[str], None] | None = None) -> dict:
+             phase: Callable[[str], None] | None = None, overwrite: bool = False) -> dict:
     """Run the simulation of ``config`` and write the results into ``out``; returns the summary.
 
     ``progress``, if given, is called with the frame count and returns a
     context manager whose value is called once per frame (``advance()``).
     ``phase``, if given, is told what the run does after the frames (it can
     take seconds at 5 MP): ``"preview"``, ``"summary"``, ``"report"``.
+    An existing non-empty ``out`` is replaced as a whole with ``overwrite``,
+    else refused (:class:`~cmosnoise.io.output.OutputFolder`).
     """
     phase = phase or (lambda _name: None)
 
@@ -55,7 +57,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         config = with_updates(config, {"scene": {"source": str(Path(source).resolve())}})
     if config.run.dng and not config.adc.enabled:
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
-    folder = OutputFolder(out)  # fails early if out cannot be written
+    folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
     with folder as tmp:
         t_start = time.perf_counter()
         sensor = Sensor(config)
@@ -278,13 +280,14 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
     }
 
 
-def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, overrides: dict | None = None) -> dict:
+def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, overrides: dict | None = None,
+                 overwrite: bool = False) -> dict:
     """Process a raw TIFF into ``out``: processed.png (frame 0), processed.mp4 (several frames), summary.json."""
     import time
 
 
 
-    folder = OutputFolder(out)
+    folder = OutputFolder(out, overwrite)
     name = str(raw_path)
     data, meta = read_raw_tiff(raw_path)
     data = validate_raw(data, name)

@@ -1,0 +1,34 @@
+"""The ``cmosnoise`` console script: the command line, quiet when interrupted while it starts.
+
+Importing the command line takes about a second (SciPy, numba). A Ctrl-C,
+SIGTERM or SIGHUP in that second ends the process with status 130 (or
+128 + the signal) and one line, not a traceback. Nothing has been written yet.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+
+def _stop(signum, _frame):
+    raise KeyboardInterrupt(signum)
+
+
+def main() -> None:
+    handlers = {s: signal.signal(s, _stop) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        from .cli import run
+    except KeyboardInterrupt as exc:
+        signum = exc.args[0] if exc.args and isinstance(exc.args[0], int) else signal.SIGINT
+        print("cmosnoise: interrupted while starting; nothing was written", file=sys.stderr, flush=True)
+        os._exit(128 + int(signum))  # at once: nothing to clean up yet, and no interpreter exit that re-raises SIGINT
+    finally:
+        for s, h in handlers.items():
+            signal.signal(s, h)
+    sys.exit(run())
+
+
+if __name__ == "__main__":
+    main()
