@@ -29,6 +29,7 @@ from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
 from ..io.output import OutputFolder, write_json, write_png
+from ..model import footprint
 from ..io.raw_tiff import raw_metadata, read_raw_tiff, write_float_tiff, write_raw_tiff
 from ..io.video import VideoWriter
 from ..isp import calibration
@@ -57,6 +58,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         config = with_updates(config, {"scene": {"source": str(Path(source).resolve())}})
     if config.run.dng and not config.adc.enabled:
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
+    footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
     with folder as tmp:
         t_start = time.perf_counter()

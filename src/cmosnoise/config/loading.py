@@ -9,6 +9,8 @@ merged last. Everything here is about data: the result is a validated
 from __future__ import annotations
 
 import copy
+import os
+import stat
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -41,7 +43,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     if not key or any(not p for p in key.split(".")):
         raise CmosnoiseError(f"--set {text!r}: the key must be a dotted path such as prnu.sigma_pct")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else None
+        value = load_yaml_text(raw) if raw.strip() else None
     except yaml.YAMLError:
         value = raw
     return key.split("."), value
@@ -112,18 +114,57 @@ def preset_data(name: str) -> dict:
     return yaml.safe_load(path.read_text()) or {}
 
 
+#: a configuration file is at most this large (bytes) and this deeply nested
+MAX_CONFIG_BYTES = 1_000_000
+MAX_NESTING = 32
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """Safe YAML without aliases (no "billion laughs") and at most MAX_NESTING levels deep."""
+
+    _depth = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            raise yaml.composer.ComposerError(None, None, "aliases (*name) are not accepted in a configuration",
+                                              self.peek_event().start_mark)
+        self._depth += 1
+        try:
+            if self._depth > MAX_NESTING:
+                raise yaml.composer.ComposerError(None, None, f"nested more than {MAX_NESTING} levels deep",
+                                                  self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def load_yaml_text(text: str):
+    """YAML text to data with :class:`_StrictLoader` (the same rules for files and ``--set`` values)."""
+    return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+
+
 def read_yaml(path: str | Path) -> dict:
+    """A configuration file: a regular file of at most MAX_CONFIG_BYTES, strict YAML, a mapping."""
     p = Path(path)
     try:
-        text = p.read_text()
+        with open(p, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                raise CmosnoiseError(f"config file {str(p)!r} is not a regular file")
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
+        if len(raw) > MAX_CONFIG_BYTES:
+            raise CmosnoiseError(f"config file {str(p)!r} is larger than {MAX_CONFIG_BYTES // 1000} kB; "
+                                 "a configuration is a few kB")
+        text = raw.decode("utf-8")
     except FileNotFoundError:
         raise CmosnoiseError(f"config file {str(p)!r} does not exist") from None
+    except IsADirectoryError:
+        raise CmosnoiseError(f"config file {str(p)!r} is a folder, not a file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise CmosnoiseError(f"config file {str(p)!r} cannot be read: {exc}") from None
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml_text(text)
     except yaml.YAMLError as exc:
-        raise CmosnoiseError(f"config file {str(p)!r} is not valid YAML: {exc}") from None
+        raise CmosnoiseError(f"config file {str(p)!r} is not valid YAML: {' '.join(str(exc).split())[:300]}") from None
     if data is None:
         return {}
     if not isinstance(data, dict):

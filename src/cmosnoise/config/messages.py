@@ -21,7 +21,8 @@ def format_validation_error(err: ValidationError) -> str:
     """One line per problem: ``key = value: what is allowed``."""
     lines = []
     seen = set()
-    for e in err.errors():
+    errors = err.errors()
+    for e in errors[:MAX_PROBLEMS]:
         key = _format_loc(e.get("loc", ()))
         msg = e.get("msg", "invalid")
         msg = msg.removeprefix("Value error, ")
@@ -29,12 +30,23 @@ def format_validation_error(err: ValidationError) -> str:
             parent = key.rsplit(".", 1)[0] if "." in key else ""
             line = f"unknown key '{key}'" + (f" in section '{parent}'" if parent else "")
         elif "input" in e and not isinstance(e["input"], dict) and key:
-            line = f"{key} = {e['input']!r}: {msg}"
+            line = f"{key} = {_short(repr(e['input']))}: {msg}"
         else:
             line = f"{key}: {msg}" if key else msg
         if line not in seen:
             seen.add(line)
             lines.append(line)
+    if len(errors) > MAX_PROBLEMS:
+        lines.append(f"and {len(errors) - MAX_PROBLEMS} more")
     return "invalid configuration: " + "; ".join(lines)
+
+
+#: an error message lists at most this many problems, each value cut to MAX_VALUE characters
+MAX_PROBLEMS = 5
+MAX_VALUE = 60
+
+
+def _short(text: str) -> str:
+    return text if len(text) <= MAX_VALUE else text[: MAX_VALUE - 3] + "..."
 
 

@@ -18,9 +18,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 
 class Section(BaseModel):
-    """Base of every section: unknown keys are errors, values are re-validated on assignment."""
+    """Base of every section: unknown keys are errors, values are re-validated on assignment, inf and NaN refused."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 # --------------------------------------------------------------------------- run
@@ -33,7 +33,7 @@ class SceneSection(Section):
 
     source: str = Field("photo", description="photo, flat:LEVEL (0..1), ramp, colorchecker, zoneplate, siemens, or an image path")
     scale: Optional[float] = Field(
-        None, gt=0, description="linear files (16-bit, float, .npy): value that maps to 1.0; null: the file's own maximum"
+        None, ge=1e-9, le=1e12, description="linear files (16-bit, float, .npy): value that maps to 1.0; null: the file's own maximum"
     )
     fit: Literal["crop", "stretch"] = Field(
         "crop", description="aspect mismatch: crop the scene's centre to the sensor's aspect, or stretch it"
@@ -78,7 +78,7 @@ class ProcessingSection(Section):
     crosstalk_compensation: bool = Field(True, description="undo crosstalk's colour mixing with the inverse 3 x 3 matrix")
     white_balance: WhiteBalanceSection = Field(default_factory=WhiteBalanceSection)
     demosaic: Literal["bilinear", "malvar2004", "menon2007"] = Field("bilinear", description="demosaicing method")
-    white_dn: Optional[float] = Field(None, gt=0, description="raw code shown as white; null: the scene's white (simulation) or the white level (files)")
+    white_dn: Optional[float] = Field(None, gt=0, le=1e6, description="raw code shown as white; null: the scene's white (simulation) or the white level (files)")
     video_fps: float = Field(10.0, gt=0, le=240, description="frame rate of processed.mp4, frames/s")
 
 
@@ -90,7 +90,7 @@ class SensorSection(Section):
     channel_responsivity: tuple[float, float, float] = Field(
         (1.0, 1.0, 1.0), description="relative R, G, B responsivity of the colour filters"
     )
-    full_well_e: float = Field(10000.0, gt=0, le=1e7, description="full-well capacity, e-")
+    full_well_e: float = Field(10000.0, ge=1, le=1e7, description="full-well capacity, e-")
     temperature_c: float = Field(25.0, ge=-60, le=150, description="operating temperature, degrees C")
     pixel_pitch_um: float = Field(2.2, gt=0, le=100, description="pixel pitch, um")
 
@@ -102,15 +102,15 @@ class SensorSection(Section):
     @field_validator("channel_responsivity")
     @classmethod
     def _non_negative(cls, v):
-        if any(x < 0 or not math.isfinite(x) for x in v):
-            raise ValueError("each relative responsivity must be a finite number >= 0")
+        if any(x < 0 or x > 100 or not math.isfinite(x) for x in v):
+            raise ValueError("each relative responsivity must be a number from 0 to 100")
         return v
 
 
 class ExposureSection(Section):
     integration_time_s: float = Field(0.03, gt=0, le=3600, description="integration (exposure) time, s")
     peak_rate_e_per_s: float = Field(
-        100000.0, ge=0, description="photo-electron rate of a scene value of 1.0, e-/s per pixel"
+        100000.0, ge=0, le=1e10, description="photo-electron rate of a scene value of 1.0, e-/s per pixel"
     )
 
 
@@ -135,6 +135,9 @@ def _check_kernel(k: Kernel, name: str) -> Kernel:
     if any(x < 0 or not math.isfinite(x) for x in flat):
         raise ValueError(f"{name} entries must be finite and >= 0 (percent)")
     total = sum(flat)
+    if flat[4] <= 0:
+        raise ValueError(f"{name}'s centre is {flat[4]:g} %: a pixel must keep some of its own charge (> 0 %), "
+                         "else the colour mixing cannot be undone")
     if total > 100.0 + 1e-9:
         raise ValueError(f"{name} sums to {total:g} %; it must sum to at most 100 % (charge is not created)")
     return [[float(x) for x in row] for row in k]
@@ -192,12 +195,12 @@ class DarkTail(Section):
     """White-pixel tail: ``ppm_above`` ppm of pixels above a threshold, tail values up to a maximum."""
 
     ppm_above: float = Field(ge=0, le=1e6, description="parts per million of pixels above the threshold")
-    threshold_e_per_s: Optional[float] = Field(None, ge=0, description="white-pixel threshold, e-/s per pixel")
-    threshold_aA: Optional[float] = Field(None, ge=0, description="white-pixel threshold, aA per pixel")
-    threshold_nA_per_cm2: Optional[float] = Field(None, ge=0, description="white-pixel threshold, nA/cm^2")
-    max_e_per_s: Optional[float] = Field(None, gt=0, description="largest extra dark current of a tail pixel")
-    max_aA: Optional[float] = Field(None, gt=0, description="largest extra dark current of a tail pixel, aA")
-    max_nA_per_cm2: Optional[float] = Field(None, gt=0, description="largest extra dark current of a tail pixel, nA/cm^2")
+    threshold_e_per_s: Optional[float] = Field(None, ge=0, le=1e9, description="white-pixel threshold, e-/s per pixel")
+    threshold_aA: Optional[float] = Field(None, ge=0, le=1e8, description="white-pixel threshold, aA per pixel")
+    threshold_nA_per_cm2: Optional[float] = Field(None, ge=0, le=1e9, description="white-pixel threshold, nA/cm^2")
+    max_e_per_s: Optional[float] = Field(None, gt=0, le=1e9, description="largest extra dark current of a tail pixel")
+    max_aA: Optional[float] = Field(None, gt=0, le=1e8, description="largest extra dark current of a tail pixel, aA")
+    max_nA_per_cm2: Optional[float] = Field(None, gt=0, le=1e9, description="largest extra dark current of a tail pixel, nA/cm^2")
 
     @model_validator(mode="after")
     def _units(self):
@@ -211,12 +214,12 @@ class DarkPoint(Section):
 
     temperature_c: float = Field(ge=-60, le=150, description="temperature of this characterization, degrees C")
     distribution: Literal["logistic", "inverse_gaussian", "lognormal", "normal", "gamma"] = Field(description="family of the DCNU body at this temperature")
-    mean_e_per_s: Optional[float] = Field(None, ge=0, description="body mean, e-/s per pixel (give one of the three units)")
-    mean_aA: Optional[float] = Field(None, ge=0, description="body mean, aA per pixel (1 aA = 6.2415 e-/s)")
-    mean_nA_per_cm2: Optional[float] = Field(None, ge=0, description="body mean, nA/cm^2 (needs sensor.pixel_pitch_um)")
-    std_e_per_s: Optional[float] = Field(None, gt=0, description="body standard deviation, e-/s per pixel")
-    std_aA: Optional[float] = Field(None, gt=0, description="body standard deviation, aA per pixel")
-    std_nA_per_cm2: Optional[float] = Field(None, gt=0, description="body standard deviation, nA/cm^2")
+    mean_e_per_s: Optional[float] = Field(None, ge=0, le=1e8, description="body mean, e-/s per pixel (give one of the three units)")
+    mean_aA: Optional[float] = Field(None, ge=0, le=1e7, description="body mean, aA per pixel (1 aA = 6.2415 e-/s)")
+    mean_nA_per_cm2: Optional[float] = Field(None, ge=0, le=1e8, description="body mean, nA/cm^2 (needs sensor.pixel_pitch_um)")
+    std_e_per_s: Optional[float] = Field(None, gt=0, le=1e8, description="body standard deviation, e-/s per pixel")
+    std_aA: Optional[float] = Field(None, gt=0, le=1e7, description="body standard deviation, aA per pixel")
+    std_nA_per_cm2: Optional[float] = Field(None, gt=0, le=1e8, description="body standard deviation, nA/cm^2")
     tail: Optional[DarkTail] = Field(None, description="white-pixel tail (ppm above a threshold); null: no tail")
 
     @model_validator(mode="after")
@@ -263,8 +266,8 @@ class FlickerTail(Section):
     """Very noisy pixels: ``ppm_above`` ppm of pixels with a flicker sigma above ``threshold_e``."""
 
     ppm_above: float = Field(ge=0, le=1e6, description="parts per million of pixels whose flicker sigma exceeds threshold_e")
-    threshold_e: float = Field(gt=0, description="flicker sigma threshold, e- rms")
-    max_e: float = Field(gt=0, description="largest extra sigma of a tail pixel, e- rms")
+    threshold_e: float = Field(gt=0, le=1e4, description="flicker sigma threshold, e- rms")
+    max_e: float = Field(gt=0, le=1e4, description="largest extra sigma of a tail pixel, e- rms")
 
 
 class FlickerSection(Section):
@@ -307,8 +310,8 @@ class ColumnNoiseSection(Section):
 class AdcSection(Section):
     enabled: bool = Field(True, description="off: ideal readout, 1 DN per e-, no black level, 16-bit range")
     bits: int = Field(12, ge=8, le=16, description="ADC resolution, bits")
-    black_level_dn: float = Field(64.0, ge=0, description="offset added before quantization, DN")
-    full_scale_e: Optional[float] = Field(None, gt=0, description="charge mapped to the top code, e-; null: the full well")
+    black_level_dn: float = Field(64.0, ge=0, le=65535, description="offset added before quantization, DN")
+    full_scale_e: Optional[float] = Field(None, ge=1, le=1e9, description="charge mapped to the top code, e-; null: the full well")
 
 
 # ------------------------------------------------------------------------- root

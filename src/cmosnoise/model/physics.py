@@ -50,6 +50,10 @@ def flicker_model(config: Config) -> HeavyTail:
         raise _invalid(f"source_follower.flicker.tail.ppm_above = {f.tail.ppm_above:g}: {exc}") from None
 
 
+#: a dark-current body's std, relative to its mean (to 1 e-/s for the families that allow 0 or below)
+MIN_CV, MAX_CV = 1e-6, 1e3
+
+
 def dark_points(config: Config) -> list[Point]:
     """The dark-current characterization points in e-/s; raises on an invalid body or unreachable ppm."""
     pitch = config.sensor.pixel_pitch_um
@@ -66,10 +70,17 @@ def dark_points(config: Config) -> list[Point]:
         )
         if point.family in ("inverse_gaussian", "lognormal", "gamma") and point.mean <= 0:
             raise _invalid(f"{where}: a {point.family} body needs a mean > 0, got {point.mean:g} e-/s")
+        scale = point.mean if point.family in ("inverse_gaussian", "lognormal", "gamma") else max(abs(point.mean), 1.0)
+        if not MIN_CV <= point.std / scale <= MAX_CV:
+            raise _invalid(f"{where}: std {point.std:g} e-/s with mean {point.mean:g} e-/s: the std must be "
+                           f"{MIN_CV:g} to {MAX_CV:g} times the mean (the distribution cannot be computed beyond)")
         try:
             point.model()
         except UnreachablePpm as exc:
             raise _invalid(f"{where}.tail.ppm_above = {tail.ppm_above:g}: {exc}") from None
+        except (ValueError, ArithmeticError) as exc:  # what SciPy could not compute for these parameters
+            raise _invalid(f"{where}: the {point.family} body with mean {point.mean:g} and std {point.std:g} e-/s "
+                           f"cannot be computed ({type(exc).__name__}: {str(exc)[:80]})") from None
         out.append(point)
     return out
 

@@ -28,6 +28,7 @@ sensor takes the luminance.
 
 from __future__ import annotations
 
+import warnings
 from importlib import resources
 from pathlib import Path
 
@@ -187,6 +188,43 @@ def _decode_array(a: np.ndarray, name: str, scale: float | None) -> np.ndarray:
     return a / denom
 
 
+#: scene files larger than this many bytes or pixels are refused before decoding
+MAX_SCENE_BYTES = 2_000_000_000
+MAX_SCENE_PIXELS = 64_000_000
+
+
+def _stored_size(p: Path, suffix: str) -> tuple[int, int]:
+    """(rows, cols) from the file's header, without decoding the pixels."""
+    if suffix == ".npy":
+        shape = np.load(p, mmap_mode="r", allow_pickle=False).shape
+    elif suffix in (".tif", ".tiff"):
+        import tifffile
+
+        with tifffile.TiffFile(p) as tf:
+            shape = tf.series[0].shape if tf.series else (0, 0)
+    else:
+        from PIL import Image
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # the limit below says it better
+                with Image.open(p) as im:
+                    return im.size[1], im.size[0]
+        except Image.DecompressionBombError:
+            return 10**6, 10**6  # beyond any limit
+        except Exception:  # a format Pillow does not know: imageio's own header reader
+            import imageio.v3 as iio
+
+            shape = iio.improps(p).shape
+    shape = tuple(int(x) for x in shape)
+    if len(shape) < 2:
+        return (shape[0] if shape else 0), 1
+    # (rows, cols), (rows, cols, channels) or (frames, rows, cols[, channels]): the largest plane
+    if len(shape) >= 3 and shape[-1] <= 4:
+        shape = shape[:-1]
+    return shape[-2], shape[-1]
+
+
 def load_file(path: str | Path, scale: float | None = None) -> np.ndarray:
     """Read an image file as linear RGB in [0, 1] (see module docstring)."""
     p = Path(path)
@@ -195,7 +233,22 @@ def load_file(path: str | Path, scale: float | None = None) -> np.ndarray:
         raise CmosnoiseError(f"scene {name!r}: no such file (built-in scenes: {', '.join(BUILTINS)})")
     if p.is_dir():
         raise CmosnoiseError(f"scene {name!r} is a folder, not an image file")
+    if not p.is_file():
+        raise CmosnoiseError(f"scene {name!r} is not a regular file (a device or a pipe cannot be an image)")
+    if p.stat().st_size > MAX_SCENE_BYTES:
+        raise CmosnoiseError(f"scene {name!r} is {p.stat().st_size / 1e9:.1f} GB; images up to "
+                             f"{MAX_SCENE_BYTES / 1e9:g} GB are read")
     suffix = p.suffix.lower()
+    try:
+        rows, cols = _stored_size(p, suffix)
+    except CmosnoiseError:
+        raise
+    except Exception as exc:
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {first}") from None
+    if rows * cols > MAX_SCENE_PIXELS:
+        raise CmosnoiseError(f"scene {name!r} is {cols} x {rows} pixels; at most {MAX_SCENE_PIXELS / 1e6:g} megapixels "
+                             "are decoded (a scene is resampled to the sensor anyway: scale it down first)")
     try:
         if suffix == ".npy":
             a = np.load(p, allow_pickle=False)

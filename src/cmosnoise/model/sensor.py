@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterator
 
 import numpy as np
@@ -27,6 +28,7 @@ import numpy as np
 from ..config import Config, ExposureSection, build_section
 from ..engine import kernel
 from ..errors import CmosnoiseError
+from . import footprint
 from . import scene as scene_mod
 from .heavy_tail import variates
 from .physics import dark_points, flicker_model, load_config, with_updates
@@ -77,10 +79,15 @@ class Sensor:
         Overrides ``config.seed``.
     """
 
-    def __init__(self, config: Config | None = None, seed: int | None = None, *, fixed_pattern: FixedPattern | None = None):
-        config = config or load_config()
-        if seed is not None and seed != config.seed:
-            config = with_updates(config, {"seed": int(seed)})
+    def __init__(self, config: Config | dict | str | Path | None = None, seed: int | None = None, *,
+                 fixed_pattern: FixedPattern | None = None):
+        config = _as_config(config)
+        if seed is not None:
+            seed = _whole(seed, "seed")
+            if seed != config.seed:
+                config = with_updates(config, {"seed": seed})
+        if fixed_pattern is None:
+            footprint.check_fits(config, run=False)
         self.config = config
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
@@ -264,11 +271,21 @@ class Sensor:
         if isinstance(scene, str):
             rgb = scene_mod.render(scene, self.shape, c.scene.scale, c.scene.fit)
         else:
-            rgb = np.asarray(scene, dtype=np.float64)
-            if rgb.shape[:2] != self.shape or rgb.ndim not in (2, 3):
-                raise ValueError(f"scene array must be {self.shape} or {self.shape + (3,)}, got {rgb.shape}")
+            try:
+                rgb = np.asarray(scene, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise CmosnoiseError(f"scene: expected a name, a path or an array of numbers, got {type(scene).__name__}") from None
+            if rgb.ndim not in (2, 3) or rgb.shape[:2] != self.shape or (rgb.ndim == 3 and rgb.shape[2] not in (1, 3)):
+                raise CmosnoiseError(f"scene array has shape {rgb.shape}; expected the sensor's {self.shape} (CFA signal), "
+                                     f"{self.shape + (1,)} (grey) or {self.shape + (3,)} (linear RGB)")
+            bad = ~np.isfinite(rgb)
+            if bad.any() or (rgb < 0).any():
+                what = f"{int(bad.sum())} NaN or infinite" if bad.any() else f"{int((rgb < 0).sum())} negative"
+                raise CmosnoiseError(f"scene array has {what} values; a scene is finite light levels >= 0")
             if rgb.ndim == 2:
                 return rgb
+            if rgb.shape[2] == 1:
+                rgb = np.repeat(rgb, 3, axis=2)
         return scene_mod.to_cfa(rgb, self.cfa, c.sensor.channel_responsivity)
 
     def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> "Exposure":
@@ -281,10 +298,13 @@ class Sensor:
 
     def dark_frames(self, n: int) -> "Iterator[np.ndarray]":
         """``n`` dark frames (no light) for dark calibration, from their own noise sequence."""
+        n = _whole(n, "n", minimum=1)
         return self.expose("flat:0", sequence=SEQ_DARK_CALIBRATION).frames(n)
 
     def capture(self, scene=None, frames: int = 1, first_frame: int = 0) -> np.ndarray:
         """Raw frames ``first_frame .. first_frame + frames - 1``, (frames, rows, cols) uint16."""
+        frames = _whole(frames, "frames", minimum=1)
+        first_frame = _whole(first_frame, "first_frame")
         shot = self.expose(scene)
         return np.stack(list(shot.frames(frames, first_frame)))
 
@@ -475,6 +495,30 @@ class Exposure:
         """(raw, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
         for k in range(first, first + n):
             yield self._render(k)
+
+
+def _as_config(config) -> Config:
+    """A configuration from what a user means by it: None (defaults), a Config, a dict (merged over the defaults) or a YAML path."""
+    if config is None:
+        return load_config()
+    if isinstance(config, Config):
+        return config
+    if isinstance(config, dict):
+        return load_config(extra=config)
+    if isinstance(config, (str, Path)):
+        return load_config(Path(config))
+    raise CmosnoiseError(f"config: expected a Config, a dict or a YAML file's path, got {type(config).__name__}")
+
+
+def _whole(value, name: str, minimum: int = 0) -> int:
+    """A whole number >= ``minimum`` (1.0 is accepted, 1.5 and True are not)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float, np.floating)) \
+            or (isinstance(value, (float, np.floating)) and not float(value).is_integer()):
+        raise CmosnoiseError(f"{name} = {value!r}: expected a whole number >= {minimum}")
+    value = int(value)
+    if value < minimum:
+        raise CmosnoiseError(f"{name} = {value}: expected a whole number >= {minimum}")
+    return value
 
 
 def _frame_index(k) -> int:
