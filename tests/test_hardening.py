@@ -170,3 +170,191 @@ def test_ctrl_c_while_starting_exits_130_without_a_traceback(tmp_path):
         _stop(proc)
     assert code == 130 and "Traceback" not in err, err
     assert not (tmp_path / "run").exists() and _leftovers(tmp_path) == []
+
+
+# ------------------------------------------------------------------ values the schema took but the physics could not
+@pytest.mark.parametrize("setting, needle", [
+    ("exposure.peak_rate_e_per_s=1.0e30", "exposure.peak_rate_e_per_s"),
+    ("sensor.channel_responsivity=[1.0e308, 1, 1]", "sensor.channel_responsivity"),
+    ("scene.scale=1.0e-300", "scene.scale"),
+    ("adc.full_scale_e=.inf", "adc.full_scale_e"),
+    ("sensor.full_well_e=1.0e-300", "sensor.full_well_e"),
+    ("dark_current.points=[{temperature_c: 25, distribution: gamma, mean_e_per_s: 5, std_e_per_s: 1.0e-300}]", "std"),
+    ("dark_current.points=[{temperature_c: 25, distribution: lognormal, mean_e_per_s: .inf, std_e_per_s: 1}]", "mean_e_per_s"),
+    ("dark_current.points=[{temperature_c: 25, distribution: lognormal, mean_e_per_s: 1.0e300, std_e_per_s: 1}]", "mean_e_per_s"),
+    ("dark_current.points.0.tail.max_e_per_s=.inf", "max_e_per_s"),
+    ("crosstalk.kernel_pct=[[1, 1, 1], [1, 0, 1], [1, 1, 1]]", "centre"),
+    ("crosstalk.kernel_pct=[[0, 0, 0], [0, 0, 0], [0, 0, 0]]", "centre"),
+    ("prnu.sigma_pct=.nan", "prnu.sigma_pct"),
+])
+def test_values_beyond_physics_are_one_line_errors(tmp_path, setting, needle):
+    for command in (["simulate", *SMALL, "--out", tmp_path / "run"], ["config"]):
+        r = cli(*command, "--set", setting)
+        assert r.returncode == 2 and needle in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_hostile_files_are_refused_before_they_are_read(tmp_path):
+    (tmp_path / "laughs.yaml").write_text('a: &a ["x", "x"]\nb: &b [*a, *a]\nc: &c [*b, *b]\nd: [*c, *c]\n')
+    (tmp_path / "deep.yaml").write_text("a: " + "[" * 3000 + "]" * 3000 + "\n")
+    (tmp_path / "keys.yaml").write_text("".join(f"k{i}: 1\n" for i in range(20000)))
+    (tmp_path / "huge.yaml").write_text("a: 1\n" + "#" * 1_100_000 + "\n")
+    for name, needle in [("laughs.yaml", "aliases"), ("deep.yaml", "nested more than"), ("huge.yaml", "larger than"),
+                         ("keys.yaml", "and 19995 more")]:
+        r = cli("config", "--config", tmp_path / name)
+        assert r.returncode == 2 and needle in r.stderr, (name, r.stderr)
+        assert len(r.stderr) < 800, (name, len(r.stderr))  # one short line, not the expanded value or 20000 keys
+    for path in ["/dev/zero", str(tmp_path)]:
+        assert cli("config", "--config", path).returncode == 2
+        r = cli("simulate", *SMALL[:4], "--scene", path, "--out", tmp_path / "o")
+        assert r.returncode == 2 and "Traceback" not in r.stderr
+
+
+def test_a_decompression_bomb_scene_is_refused_from_its_header(tmp_path):
+    import numpy as np
+    from PIL import Image
+
+    Image.fromarray(np.zeros((9000, 8000), np.uint8)).save(tmp_path / "bomb.png")  # 72 MP, a few hundred kB
+    assert (tmp_path / "bomb.png").stat().st_size < 1_000_000
+    t0 = time.monotonic()
+    r = cli("simulate", *SMALL[:4], "--scene", tmp_path / "bomb.png", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "8000 x 9000 pixels" in r.stderr and "megapixels" in r.stderr
+    assert time.monotonic() - t0 < 10 and not (tmp_path / "o").exists()
+
+
+def test_a_run_that_cannot_fit_in_memory_is_refused_with_the_estimate(tmp_path):
+    t0 = time.monotonic()
+    r = cli("simulate", "--set", "sensor.width=30000", "--set", "sensor.height=30000", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "needs about" in r.stderr and "GB available" in r.stderr
+    assert time.monotonic() - t0 < 10 and list(tmp_path.iterdir()) == []
+    from cmosnoise.model import footprint
+    from cmosnoise import load_config, CmosnoiseError
+
+    cfg = load_config(extra={"sensor": {"width": 1920, "height": 1080}})
+    need = footprint.estimate_bytes(cfg)
+    footprint.check_fits(cfg, available=need)
+    with pytest.raises(CmosnoiseError, match="needs about"):
+        footprint.check_fits(cfg, available=need - 1)
+
+
+# ------------------------------------------------------------------ process and characterize inputs
+def _raw_file(path, meta_over=None, shape=(3, 32, 48), photometric="minisblack"):
+    import numpy as np
+
+    meta = {"cfa": "RGGB", "black_level_dn": 64, "bits": 12, **(meta_over or {})}
+    data = (np.arange(np.prod(shape)) % 900 + 64).astype(np.uint16).reshape(shape)
+    tifffile.imwrite(path, data, photometric=photometric, metadata=meta)
+    return path
+
+
+@pytest.mark.parametrize("meta, needle", [
+    ({"crosstalk_kernel_pct": "garbage"}, "crosstalk.kernel_pct"),
+    ({"crosstalk_kernel_pct": [[0, 0, 0], [0, 0, 0], [0, 0, 0]]}, "centre"),
+    ({"crosstalk_kernel_pct": [[100, 100, 100], [100, 100, 100], [100, 100, 100]]}, "sums to 900"),
+    ({"channel_responsivity": "abc"}, "channel_responsivity"),
+    ({"bits": 999999}, "adc.bits"),
+    ({"cfa": "XYZW"}, "sensor.cfa"),
+])
+def test_process_validates_the_raw_files_metadata(tmp_path, meta, needle):
+    r = cli("process", _raw_file(tmp_path / "raw.tif", meta), "--out", tmp_path / "p")
+    assert r.returncode == 2 and needle in r.stderr and "metadata is not valid" in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["raw.tif"]
+
+
+def test_process_refuses_an_rgb_picture_and_a_master_dark_out_of_range(tmp_path):
+    import numpy as np
+
+    rgb = tmp_path / "rgb.tif"
+    tifffile.imwrite(rgb, np.zeros((64, 64, 3), np.uint8), photometric="rgb", metadata={"cfa": "RGGB", "black_level_dn": 0, "bits": 8})
+    r = cli("process", rgb, "--out", tmp_path / "p")
+    assert r.returncode == 2 and "RGB" in r.stderr and "one CFA sample per pixel" in r.stderr
+    raw = _raw_file(tmp_path / "raw.tif")
+    tifffile.imwrite(tmp_path / "dark.tif", np.full((32, 48), -1e30, np.float32))
+    r = cli("process", raw, "--dark", tmp_path / "dark.tif", "--out", tmp_path / "p")
+    assert r.returncode == 2 and "are not raw codes of 12 bits" in r.stderr
+    assert not (tmp_path / "p").exists()
+
+
+def test_process_streams_the_frames(tmp_path):
+    """A stack is read frame by frame: Python's peak allocation stays near one frame's processing, not the stack."""
+    import tracemalloc
+
+    raw = _raw_file(tmp_path / "raw.tif", shape=(120, 96, 128))  # 2.9 MB of codes
+    stack_bytes = 120 * 96 * 128 * 2
+    tracemalloc.start()
+    try:
+        r = cli("process", raw, "--out", tmp_path / "p")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "p" / "summary.json").read_text())["frames"] == 120
+    assert peak < stack_bytes / 2, (peak, stack_bytes)
+
+
+def test_characterize_inputs_are_checked(tmp_path):
+    import numpy as np
+
+    (tmp_path / "bin.txt").write_bytes(b"\x00\xff\xfe binary")
+    r = cli("characterize", "--frames-from", tmp_path / "bin.txt", "--out", tmp_path / "c")
+    assert r.returncode == 2 and "not a text file" in r.stderr
+    (tmp_path / "e").mkdir()
+    img = np.zeros((8, 8), np.uint16)
+    lines = ["n 12 8 8"]
+    for j, t in enumerate([0, 0, 0]):
+        for kind in "bd":
+            for q in range(2):
+                tifffile.imwrite(tmp_path / "e" / f"{kind}{j}{q}.tif", img)
+            lines += [f"{kind} {t} 10" if kind == "b" else f"{kind} {t}", f"i {kind}{j}0.tif", f"i {kind}{j}1.tif"]
+    for kind in "bd":
+        for q in range(3):
+            tifffile.imwrite(tmp_path / "e" / f"s{kind}{q}.tif", img)
+        lines += [f"{kind} 5 10" if kind == "b" else f"{kind} 5"] + [f"i s{kind}{q}.tif" for q in range(3)]
+    (tmp_path / "e" / "EMVA1288_descriptor.txt").write_text("\n".join(lines) + "\n")
+    r = cli("characterize", "--frames-from", tmp_path / "e", "--out", tmp_path / "c")
+    assert r.returncode == 2 and "distinct exposure time" in r.stderr, r.stderr
+    desc = tmp_path / "e" / "EMVA1288_descriptor.txt"
+    desc.write_text(desc.read_text().replace("b 0 10", "b 1 10", 1).replace("d 0", "d 1", 1)
+                    .replace("b 0 10", "b 2 10", 1).replace("d 0", "d 2", 1))  # 3 distinct times: 1, 2, 0
+    tifffile.imwrite(tmp_path / "e" / "b00.tif", np.zeros((8, 9), np.uint16))
+    r = cli("characterize", "--frames-from", tmp_path / "e", "--out", tmp_path / "c")
+    assert r.returncode == 2 and "the descriptor says 8 x 8" in r.stderr, r.stderr
+    (tmp_path / "e" / "EMVA1288_descriptor.txt").write_text("n 999999 8 8\n")
+    r = cli("characterize", "--frames-from", tmp_path / "e", "--out", tmp_path / "c")
+    assert r.returncode == 2 and "1 to 16 bits" in r.stderr
+    r = cli("characterize", "--set", "sensor.width=32", "--set", "sensor.height=32", "--steps", "8",
+            "--stack-frames", "2", "--out", tmp_path / "c")
+    assert r.returncode == 0, r.stderr  # the smallest series allowed works on a small sensor
+    assert cli("characterize", "--steps", "7", "--out", tmp_path / "c2").returncode == 2
+    assert not (tmp_path / "c2").exists() and _leftovers(tmp_path) == []
+
+
+# ------------------------------------------------------------------ the Python API
+def test_the_api_raises_cmosnoise_errors_that_name_the_argument():
+    import numpy as np
+    from cmosnoise import CmosnoiseError, Sensor
+
+    small = {"sensor": {"width": 16, "height": 12}}
+    s = Sensor(small)  # a dict is a configuration
+    assert s.shape == (12, 16)
+    cases = [
+        (lambda: Sensor(seed=1.5), "seed = 1.5"),
+        (lambda: Sensor(3), "config: expected"),
+        (lambda: Sensor("nowhere.yaml"), "does not exist"),
+        (lambda: s.capture(frames=0), "frames = 0"),
+        (lambda: s.frame if False else s.expose("flat:0.5").frame(1.7), "1.7"),
+        (lambda: list(s.dark_frames(-1)), "n = -1"),
+        (lambda: s.expose(np.full((12, 16), np.nan)), "NaN"),
+        (lambda: s.expose(-np.ones((12, 16, 3))), "negative"),
+        (lambda: s.expose(np.ones((12, 16, 4))), "(12, 16, 4)"),
+        (lambda: s.expose(np.ones((5, 5))), "(5, 5)"),
+    ]
+    for call, needle in cases:
+        with pytest.raises(CmosnoiseError, match=None) as info:
+            call()
+        assert needle in str(info.value), (needle, str(info.value))
+        assert isinstance(info.value, ValueError)
+    grey = s.expose(np.full((12, 16, 1), 0.5)).frame(0)  # (rows, cols, 1) is a grey scene
+    assert np.array_equal(grey, s.expose(np.full((12, 16, 3), 0.5)).frame(0))
+    assert Sensor(s.config, seed=2.0).config.seed == 2

@@ -39,6 +39,10 @@ if TYPE_CHECKING:
     from ..model.sensor import Sensor
 
 
+#: fewest exposure times of a photon-transfer series: 3 of them below 70 % of saturation
+MIN_STEPS = 8
+
+
 @dataclass
 class Measurement:
     """Frames reduced to what EMVA 1288 needs, plus (optionally) the frames themselves."""
@@ -68,8 +72,13 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
     """Run the EMVA 1288 measurement series on ``sensor`` (a :class:`cmosnoise.Sensor`).
 
     The irradiation is set so that saturation is reached at 1 s; exposure
-    times run from 1/steps to 1.3 s.
+    times run from 1/steps to 1.3 s. ``steps`` >= MIN_STEPS puts at least
+    3 exposure times below 70 % of saturation, where K is fitted.
     """
+    if not isinstance(steps, (int, np.integer)) or steps < MIN_STEPS:
+        raise CmosnoiseError(f"steps = {steps!r}: the photon-transfer series needs at least {MIN_STEPS} exposure times")
+    if not isinstance(stack_frames, (int, np.integer)) or stack_frames < 2:
+        raise CmosnoiseError(f"stack_frames = {stack_frames!r}: a stack needs at least 2 frames")
     t = sensor.transfer
     rate = sensor.saturation_e / 1.0  # photo-electrons per second per pixel at scene value 1
     texp = np.linspace(1.3 / steps, 1.3, steps)
@@ -421,9 +430,14 @@ def load(descriptor: Path) -> Measurement:
     if descriptor.is_dir():
         descriptor = descriptor / DESCRIPTOR
     try:
+        if descriptor.stat().st_size > 10_000_000:
+            raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} is larger than 10 MB: not a descriptor file")
         raw_lines = descriptor.read_text().splitlines()
     except OSError as exc:
         raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} is not a text file (an EMVA 1288 descriptor is text: "
+                             "lines 'n bits width height', 'b time photons', 'd time', 'i path')") from None
     base = descriptor.parent
     bits = shape = None
     entries: list[tuple[str, float, float | None, list[Path]]] = []
@@ -437,6 +451,8 @@ def load(descriptor: Path) -> Measurement:
                 continue
             if tag == "n":
                 bits, shape = int(parts[1]), (int(parts[3]), int(parts[2]))
+                if not 1 <= bits <= 16 or min(shape) < 2:
+                    raise ValueError("expected 1 to 16 bits and at least 2 x 2 pixels")
             elif tag == "b":
                 entries.append(("b", float(parts[1].replace(",", ".")) * 1e-9, float(parts[2].replace(",", ".")), []))
             elif tag == "d":
@@ -451,10 +467,18 @@ def load(descriptor: Path) -> Measurement:
         raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} has no 'n bits width height' line")
 
     def read(paths):
-        try:
-            return [tifffile.imread(p) for p in paths]
-        except Exception as exc:
-            raise CmosnoiseError(f"EMVA image cannot be read: {exc}") from None
+        out = []
+        for p in paths:
+            try:
+                img = tifffile.imread(p)
+            except Exception as exc:
+                raise CmosnoiseError(f"EMVA image cannot be read: {' '.join(str(exc).split())[:200]}") from None
+            if img.shape != shape:
+                raise CmosnoiseError(f"EMVA image {str(p)!r} is {img.shape[-1] if img.ndim else 0} x "
+                                     f"{img.shape[0] if img.ndim else 0} (shape {img.shape}); the descriptor says "
+                                     f"{shape[1]} x {shape[0]}")
+            out.append(img)
+        return out
 
     bright_pairs = sorted((e for e in entries if e[0] == "b" and len(e[3]) == 2), key=lambda e: e[1])
     dark_pairs = {round(e[1], 12): e for e in entries if e[0] == "d" and len(e[3]) == 2}
@@ -462,6 +486,11 @@ def load(descriptor: Path) -> Measurement:
     stacks_d = [e for e in entries if e[0] == "d" and len(e[3]) > 2]
     if len(bright_pairs) < 3 or not stacks_b or not stacks_d:
         raise CmosnoiseError("an EMVA descriptor needs at least 3 bright pairs with dark pairs, and a bright and a dark stack")
+    times = sorted({round(e[1], 12) for e in bright_pairs})
+    if len(times) < 3 or times[0] < 0:
+        raise CmosnoiseError(f"EMVA descriptor: the bright pairs have {len(times)} distinct exposure time(s) "
+                             f"({', '.join(f'{t * 1e9:g}' for t in times[:5])} ns); the series needs at least 3 "
+                             "distinct times >= 0")
     texp, mu_p, mu_y, mu_yd, s2_y, s2_yd, max_yd = [], [], [], [], [], [], []
     for _, t, p, paths in bright_pairs:
         d = dark_pairs.get(round(t, 12))

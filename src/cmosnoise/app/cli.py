@@ -204,7 +204,7 @@ def characterize(
     preset: Optional[str] = PresetOpt,
     set_: Optional[List[str]] = SetOpt,
     seed: Optional[int] = typer.Option(None, "--seed", help="sensor instance seed"),
-    steps: int = typer.Option(40, "--steps", min=5, max=1000, help="exposure times in the photon-transfer series"),
+    steps: int = typer.Option(40, "--steps", min=8, max=1000, help="exposure times in the photon-transfer series"),
     stack_frames: int = typer.Option(16, "--stack-frames", min=2, max=10000, help="frames per stack for DSNU and PRNU"),
     emva_export: Optional[Path] = typer.Option(None, "--emva-export", help="also write the frames and an EMVA 1288 descriptor here"),
     frames_from: Optional[Path] = typer.Option(None, "--frames-from", help="characterize frames from an EMVA 1288 descriptor (folder or file) instead"),

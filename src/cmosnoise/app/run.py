@@ -29,11 +29,11 @@ from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
 from ..io.output import OutputFolder, write_json, write_png
-from ..model import footprint
-from ..io.raw_tiff import raw_metadata, read_raw_tiff, write_float_tiff, write_raw_tiff
+from ..io.raw_tiff import RawTiffReader, raw_metadata, write_float_tiff, write_raw_tiff
 from ..io.video import VideoWriter
 from ..isp import calibration
-from ..isp.process import Processor, read_dark, validate_raw
+from ..isp.process import Processor, read_dark
+from ..model import footprint
 from ..model.physics import with_updates
 from ..model.raw_info import RawInfo
 from ..model.sensor import Sensor
@@ -284,43 +284,75 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
 
 def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, overrides: dict | None = None,
                  overwrite: bool = False) -> dict:
-    """Process a raw TIFF into ``out``: processed.png (frame 0), processed.mp4 (several frames), summary.json."""
+    """Process a raw TIFF into ``out``: processed.png (frame 0), processed.mp4 (several frames), summary.json.
+
+    The frames are read one at a time (a stack of any length fits in
+    memory); the file's metadata is validated with the configuration's
+    schema; a master dark must be finite codes within the raw's range.
+    """
     import time
 
-
-
-    folder = OutputFolder(out, overwrite)
     name = str(raw_path)
-    data, meta = read_raw_tiff(raw_path)
-    data = validate_raw(data, name)
-    meta = {**meta, **(overrides or {})}
+    with RawTiffReader(raw_path) as reader:
+        meta = {**reader.meta, **(overrides or {})}
+        info = _raw_info(meta, name)
+        master = read_dark(dark_path) if dark_path is not None else None
+        if master is not None and (float(master.min()) < 0 or float(master.max()) > info.white_level_dn):
+            raise CmosnoiseError(f"dark file {str(dark_path)!r}: values from {float(master.min()):g} to {float(master.max()):g} DN "
+                                 f"are not raw codes of {info.bits} bits (0 to {info.white_level_dn})")
+        processor = Processor(settings, info, master)
+        processor.check_shape(reader.shape)
+        folder = OutputFolder(out, overwrite)
+        with folder as tmp:
+            t0 = time.perf_counter()
+            video = VideoWriter(tmp / "processed.mp4", settings.video_fps) if len(reader) > 1 else None
+            try:
+                for k, frame in enumerate(reader):
+                    if int(frame.max()) > info.white_level_dn:
+                        raise CmosnoiseError(f"raw file {name!r}, frame {k}: codes up to {int(frame.max())} do not fit "
+                                             f"{info.bits} bits; give --bits")
+                    picture = processor.render(frame)
+                    if k == 0:
+                        write_png(tmp / "processed.png", picture)
+                        write_png(tmp / "preview.png", processor.render(frame, pre=True))
+                    if video is not None:
+                        video.append(picture)
+            finally:
+                if video is not None:
+                    video.close()
+            elapsed = time.perf_counter() - t0
+            result = {
+                "raw": name, "frames": len(reader), "rows": int(reader.shape[0]), "cols": int(reader.shape[1]),
+                "cfa": info.cfa, "black_level_dn": info.black_level_dn, "bits": info.bits,
+                "dark": None if dark_path is None else str(dark_path),
+                "settings": settings.model_dump(mode="json"),
+                "ms_per_frame": 1000 * elapsed / (len(reader) + 1),
+            }
+            write_json(tmp / "summary.json", result)
+    return result
+
+
+def _raw_info(meta: dict, name: str) -> RawInfo:
+    """The processing's view of a raw file's metadata, validated with the configuration's schema."""
     missing = [k for k in ("cfa", "black_level_dn", "bits") if k not in meta]
     if missing:
         flags = {"cfa": "--cfa", "black_level_dn": "--black-level", "bits": "--bits"}
         raise CmosnoiseError(f"raw file {name!r} does not record {', '.join(missing)}; give {', '.join(flags[m] for m in missing)}")
-    # the sensor description is validated like a configuration
-    build_config({"sensor": {"cfa": meta["cfa"]}, "adc": {"bits": meta["bits"], "black_level_dn": meta["black_level_dn"]}})
-    info = RawInfo.from_metadata(meta)
-    if data.max() > info.white_level_dn:
-        raise CmosnoiseError(f"raw file {name!r}: codes up to {int(data.max())} do not fit {info.bits} bits; give --bits")
-    master = read_dark(dark_path) if dark_path is not None else None
-    processor = Processor(settings, info, master)
-    processor.check_shape(data.shape[1:])
-    with folder as tmp:
-        t0 = time.perf_counter()
-        write_png(tmp / "processed.png", processor.render(data[0]))
-        write_png(tmp / "preview.png", processor.render(data[0], pre=True))
-        if len(data) > 1:
-            with VideoWriter(tmp / "processed.mp4", settings.video_fps) as video:
-                for frame in data:
-                    video.append(processor.render(frame))
-        elapsed = time.perf_counter() - t0
-        result = {
-            "raw": name, "frames": int(len(data)), "rows": int(data.shape[1]), "cols": int(data.shape[2]),
-            "cfa": info.cfa, "black_level_dn": info.black_level_dn, "bits": info.bits,
-            "dark": None if dark_path is None else str(dark_path),
-            "settings": settings.model_dump(mode="json"),
-            "ms_per_frame": 1000 * elapsed / (len(data) + 1),
-        }
-        write_json(tmp / "summary.json", result)
-    return result
+    sensor = {"cfa": meta["cfa"]}
+    if "channel_responsivity" in meta:
+        sensor["channel_responsivity"] = meta["channel_responsivity"]
+    data = {"sensor": sensor, "adc": {"bits": meta["bits"], "black_level_dn": meta["black_level_dn"]}}
+    if meta.get("crosstalk_kernel_pct") is not None:
+        data["crosstalk"] = {"kernel_pct": meta["crosstalk_kernel_pct"]}
+    if meta.get("scene_white_dn") is not None:
+        data["processing"] = {"white_dn": meta["scene_white_dn"]}
+    try:
+        cfg = build_config(data)
+    except CmosnoiseError as exc:
+        raise CmosnoiseError(f"raw file {name!r}: its metadata is not valid: "
+                             f"{str(exc).removeprefix('invalid configuration: ')}") from None
+    return RawInfo.from_metadata({
+        "cfa": cfg.sensor.cfa, "black_level_dn": cfg.adc.black_level_dn, "bits": cfg.adc.bits,
+        "scene_white_dn": cfg.processing.white_dn, "channel_responsivity": cfg.sensor.channel_responsivity,
+        "crosstalk_kernel_pct": cfg.crosstalk.kernel_pct if "crosstalk" in data else None,
+    })

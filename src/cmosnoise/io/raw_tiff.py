@@ -81,3 +81,84 @@ def read_raw_tiff(path: str | Path) -> tuple[np.ndarray, dict]:
     if data.ndim == 2:
         data = data[None]
     return data, meta
+
+
+class RawTiffReader:
+    """Raw frames of a TIFF, one at a time: ``len(reader)`` frames of ``reader.shape`` (rows, cols), ``reader.meta``.
+
+    For files of any size (``cmosnoise process`` streams them): only the
+    header is read on opening. The first series must be (rows, cols) or
+    (frames, rows, cols) of one sample per pixel; an RGB picture is refused.
+    Use as a context manager.
+    """
+
+    def __init__(self, path: str | Path):
+        import tifffile
+
+        self.name = str(path)
+        try:
+            self._tf = tifffile.TiffFile(path)
+        except FileNotFoundError:
+            raise CmosnoiseError(f"raw file {self.name!r} does not exist") from None
+        except IsADirectoryError:
+            raise CmosnoiseError(f"raw file {self.name!r} is a folder, not a TIFF file") from None
+        except Exception as exc:
+            raise CmosnoiseError(f"raw file {self.name!r} cannot be read as TIFF: {' '.join(str(exc).split())[:200]}") from None
+        try:
+            self._check()
+        except BaseException:
+            self._tf.close()
+            raise
+
+    def _check(self) -> None:
+        tf = self._tf
+        if not tf.series:
+            raise CmosnoiseError(f"raw file {self.name!r} holds no image")
+        series = tf.series[0]
+        page = tf.pages[0]
+        if getattr(page, "samplesperpixel", 1) != 1:
+            raise CmosnoiseError(f"raw file {self.name!r} is a {page.samplesperpixel}-sample (RGB) picture of shape "
+                                 f"{series.shape}; raw frames have one CFA sample per pixel")
+        shape = tuple(int(x) for x in series.shape)
+        if len(shape) == 2:
+            shape = (1, *shape)
+        if len(shape) != 3 or shape[1] < 2 or shape[2] < 2:
+            raise CmosnoiseError(f"raw file {self.name!r}: shape {series.shape} is not raw frames; expected (rows, cols) "
+                                 "or (frames, rows, cols)")
+        self.dtype = np.dtype(series.dtype)
+        if self.dtype not in (np.uint8, np.uint16):
+            raise CmosnoiseError(f"raw file {self.name!r}: pixel type {self.dtype} is not raw data; expected uint8 or "
+                                 "uint16 codes")
+        self.frames, self.shape = shape[0], shape[1:]
+        self._pages = len(tf.pages)
+        meta = dict(tf.shaped_metadata[0]) if tf.shaped_metadata else {}
+        meta.pop("shape", None)
+        self.meta = meta
+
+    def __len__(self) -> int:
+        return self.frames
+
+    def frame(self, k: int) -> np.ndarray:
+        """Frame ``k`` as uint16 (rows, cols)."""
+        try:
+            if self._pages >= self.frames:  # one page per frame (as cmosnoise writes them)
+                data = self._tf.pages[k].asarray()
+            else:  # one page holding every frame
+                data = self._tf.series[0].asarray()[k]
+        except Exception as exc:
+            raise CmosnoiseError(f"raw file {self.name!r}, frame {k}, cannot be read: {' '.join(str(exc).split())[:200]}") from None
+        return np.asarray(data).reshape(self.shape).astype(np.uint16, copy=False)
+
+    def __iter__(self):
+        for k in range(self.frames):
+            yield self.frame(k)
+
+    def close(self) -> None:
+        self._tf.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
