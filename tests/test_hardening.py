@@ -186,6 +186,7 @@ def test_ctrl_c_while_starting_exits_130_without_a_traceback(tmp_path):
     ("crosstalk.kernel_pct=[[1, 1, 1], [1, 0, 1], [1, 1, 1]]", "centre"),
     ("crosstalk.kernel_pct=[[0, 0, 0], [0, 0, 0], [0, 0, 0]]", "centre"),
     ("prnu.sigma_pct=.nan", "prnu.sigma_pct"),
+    ("run.first_frame=4294967296", "run.first_frame"),  # frame 2**32 would share frame 0's noise (a 32-bit counter)
 ])
 def test_values_beyond_physics_are_one_line_errors(tmp_path, setting, needle):
     for command in (["simulate", *SMALL, "--out", tmp_path / "run"], ["config"]):

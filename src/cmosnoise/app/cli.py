@@ -7,6 +7,7 @@ import math
 import signal
 import sys
 import threading
+import warnings
 from pathlib import Path
 from typing import List, Optional
 
@@ -320,7 +321,11 @@ def run(argv: list[str] | None = None) -> int:
     """
     previous = _catch_termination()
     try:
-        result = app(args=argv, prog_name="cmosnoise", standalone_mode=False)
+        with warnings.catch_warnings():
+            # numerical warnings of NumPy and SciPy (an overflow in a tail far beyond any pixel) are not the
+            # user's to read: every result is checked to be finite, and bad input is refused with a message
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"(numpy|scipy)(\.|$)")
+            result = app(args=argv, prog_name="cmosnoise", standalone_mode=False)
         return result if isinstance(result, int) else 0
     except typer.Exit as exc:
         return exc.exit_code

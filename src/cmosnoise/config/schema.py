@@ -40,11 +40,23 @@ class SceneSection(Section):
     )
 
 
+#: the last frame number: the frame is one 32-bit word of the random numbers' counter (MODEL.md section 1)
+LAST_FRAME = 2**32 - 1
+
+
 class RunSection(Section):
     frames: int = Field(1, ge=1, le=1_000_000, description="number of frames to produce")
-    first_frame: int = Field(0, ge=0, description="index of the first frame (frame k's temporal noise depends only on seed and k)")
+    first_frame: int = Field(0, ge=0, le=LAST_FRAME,
+                             description="index of the first frame (frame k's temporal noise depends only on seed and k)")
     dng: bool = Field(False, description="also write every raw frame as a DNG (dng/frame_NNNNNN.dng)")
     report: bool = Field(False, description="also write report.html, a self-contained run report")
+
+    @model_validator(mode="after")
+    def _frames_fit_the_counter(self):
+        if self.first_frame + self.frames - 1 > LAST_FRAME:
+            raise ValueError(f"frames {self.first_frame} to {self.first_frame + self.frames - 1}: frame numbers go up to "
+                             f"{LAST_FRAME} (the random numbers' frame counter is a 32-bit word)")
+        return self
 
 
 class DefectsSection(Section):

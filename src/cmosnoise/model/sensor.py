@@ -26,6 +26,7 @@ from typing import Iterator
 import numpy as np
 
 from ..config import Config, ExposureSection, build_section
+from ..config.schema import LAST_FRAME
 from ..engine import kernel
 from ..errors import CmosnoiseError
 from . import footprint
@@ -528,6 +529,6 @@ def _frame_index(k) -> int:
             k = int(k)
         else:
             raise CmosnoiseError(f"frame = {k!r}: a frame number must be a whole number >= 0")
-    if k < 0:
-        raise CmosnoiseError(f"frame = {k}: a frame number must be >= 0")
+    if k < 0 or k > LAST_FRAME:
+        raise CmosnoiseError(f"frame = {k}: a frame number must be 0 to {LAST_FRAME} (a 32-bit counter word)")
     return int(k)
