@@ -131,3 +131,14 @@ def cli_subprocess(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
     """Run ``python -m cmosnoise ARGS`` as a separate process: for exit codes, signals, the real entry point."""
     return subprocess.run([sys.executable, "-m", "cmosnoise", *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, timeout=timeout)
+
+
+# ------------------------------------------------------------------ the browser (pytest-playwright)
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    """The system Chromium (Debian's `chromium`; .ci/run installs it): Playwright's own download is not used."""
+    import shutil
+
+    path = shutil.which("chromium") or shutil.which("chromium-browser")
+    assert path, "the browser tests need the system Chromium: apt-get install chromium (.ci/run does)"
+    return {**browser_type_launch_args, "executable_path": path, "args": ["--no-sandbox"]}

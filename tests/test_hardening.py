@@ -14,7 +14,7 @@ import time
 import pytest
 import tifffile
 import yaml
-from conftest import cli, cli_subprocess
+from conftest import cli
 
 SMALL = ["--set", "sensor.width=64", "--set", "sensor.height=48", "--scene", "flat:0.5"]
 

@@ -290,6 +290,32 @@ def figures(
 
 
 @app.command()
+def explore(
+    config: Optional[Path] = ConfigOpt,
+    preset: Optional[str] = PresetOpt,
+    set_: Optional[List[str]] = SetOpt,
+    scene: Optional[str] = typer.Option(None, "--scene", help="start scene: a built-in name or an image file"),
+    port: int = typer.Option(8765, "--port", min=1, max=65535, help="TCP port"),
+    host: str = typer.Option("127.0.0.1", "--host", help="address to listen on (default loopback only; another is reachable by others)"),
+    no_browser: bool = typer.Option(False, "--no-browser", help="do not open the page in a browser"),
+):
+    """A local web page: two sensors side by side, every parameter, the picture follows at once."""
+    import socket
+
+    from .explore import serve
+
+    cfg = load_config(config, preset, set_)
+    try:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.bind((host, port))
+    except OSError as exc:
+        raise CmosnoiseError(f"--host {host} --port {port} cannot be used: {exc.strerror or exc} (another server on it? "
+                             "give --port)") from None
+    serve(cfg, scene, host, port, not no_browser, say=lambda m: typer.echo(m, err=True))
+
+
+@app.command()
 def presets():
     """List the presets, one line each."""
     for name in preset_names():

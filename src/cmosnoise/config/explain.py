@@ -83,3 +83,50 @@ def text(model: type[BaseModel] = Config) -> str:
         if r["description"]:
             lines.append(f"    {r['description']}")
     return "\n".join(lines) + "\n"
+
+
+def fields(model: type[BaseModel] = Config, prefix: str = "") -> list[dict[str, Any]]:
+    """The rows of :func:`rows` with what a form needs: ``kind`` (number, integer, bool, enum, text, json),
+    ``choices`` (enum), ``min`` and ``max`` (numbers, from the schema's limits; None where open)."""
+    out = []
+    for r in rows(model, prefix):
+        info = _field_info(model, r["key"])
+        kind, choices, lo, hi = "json", None, None, None
+        if info is not None:
+            ann = info.annotation
+            args = [a for a in typing.get_args(ann) if a is not type(None)] if typing.get_origin(ann) is typing.Union else [ann]
+            base = args[0] if len(args) == 1 else ann
+            if typing.get_origin(base) is typing.Literal:
+                kind, choices = "enum", list(typing.get_args(base))
+            elif base is bool:
+                kind = "bool"
+            elif base is int:
+                kind = "integer"
+            elif base is float:
+                kind = "number"
+            elif base is str:
+                kind = "text"
+            for m in info.metadata:
+                lo = getattr(m, "ge", None) if getattr(m, "ge", None) is not None else (getattr(m, "gt", None) if lo is None else lo)
+                hi = getattr(m, "le", None) if getattr(m, "le", None) is not None else (getattr(m, "lt", None) if hi is None else hi)
+        out.append({**r, "kind": kind, "choices": choices, "min": lo, "max": hi,
+                    "nullable": info is not None and not info.is_required() and info.get_default() is None})
+    return out
+
+
+def _field_info(model: type[BaseModel], key: str):
+    """The pydantic FieldInfo of a dotted key (list items as N)."""
+    node = model
+    parts = key.split(".")
+    for i, part in enumerate(parts):
+        if part == "N":
+            continue
+        info = node.model_fields.get(part)
+        if info is None:
+            return None
+        if i == len(parts) - 1:
+            return info
+        node = _submodel(info.annotation)
+        if node is None:
+            return None
+    return None

@@ -87,12 +87,22 @@ class Processor:
         return img
 
     # ------------------------------------------------------------ colour
-    def linear_rgb(self, cfa_img: np.ndarray) -> np.ndarray:
-        """Steps 4 to 6: linear light with scene white at 1; (rows, cols, 3), or (rows, cols) for mono."""
+    def linear_rgb(self, cfa_img: np.ndarray, half: bool = False) -> np.ndarray:
+        """Steps 4 to 6: linear light with scene white at 1; (rows, cols, 3), or (rows, cols) for mono.
+
+        ``half``: demosaic at half resolution (:func:`reconstruction.superpixel`, one pixel per
+        2 x 2 cell, for previews; a mono image is averaged over 2 x 2 instead).
+        """
         x = cfa_img / np.float32(self.white_above_black)
         if self.mono:
+            if half:
+                r, c = x.shape[0] // 2 * 2, x.shape[1] // 2 * 2
+                x = x[:r, :c].reshape(r // 2, 2, c // 2, 2).mean(axis=(1, 3))
             return x
-        rgb = reconstruction.demosaic(x, self.info.cfa, self.settings.demosaic)
+        if half:
+            rgb = reconstruction.superpixel(x, self.info.cfa)
+        else:
+            rgb = reconstruction.demosaic(x, self.info.cfa, self.settings.demosaic)
         if self._compensation is not None:
             rgb = reconstruction.apply_matrix(rgb, self._compensation)
         return rgb * self.white_balance_gains(rgb)
@@ -110,9 +120,9 @@ class Processor:
             self._wb_gains = reconstruction.grey_world_gains(rgb)
         return self._wb_gains
 
-    def render(self, raw: np.ndarray, pre: bool = False) -> np.ndarray:
-        """A raw frame as an 8-bit sRGB picture (the full chain, or the pre-processing view)."""
-        return reconstruction.encode_srgb8(self.linear_rgb(self.cfa_image(raw, pre)))
+    def render(self, raw: np.ndarray, pre: bool = False, half: bool = False) -> np.ndarray:
+        """A raw frame as an 8-bit sRGB picture (the full chain, or the pre-processing view); ``half``: at half size."""
+        return reconstruction.encode_srgb8(self.linear_rgb(self.cfa_image(raw, pre), half))
 
 
 # ------------------------------------------------------------------ reading

@@ -17,6 +17,7 @@ This module contains no physics: each stage is a function in its own module.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections import defaultdict
 from dataclasses import dataclass
@@ -345,6 +346,20 @@ class Exposure:
         self._exact_e = sum(exact[1:], exact[0]) if exact else None
         self._plan: kernel.FramePlan | None = None
         timings["expose"] += time.perf_counter() - t0
+
+    def rebind(self, sensor: "Sensor") -> "Exposure":
+        """This exposure on ``sensor``, which differs only in temporal or readout parameters.
+
+        ``sensor`` must share this one's fixed pattern and have the same scene
+        response, exposure, crosstalk and shot-noise switches (the mean charge
+        is reused as it is); its source follower, row and column noise and ADC
+        may differ. Only the frame plan is rebuilt. For interactive use, where
+        a slider moves a temporal parameter.
+        """
+        other = copy.copy(self)
+        other.sensor = sensor
+        other._plan = None
+        return other
 
     @property
     def mean_charge_e(self) -> np.ndarray:

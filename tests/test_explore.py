@@ -1,0 +1,278 @@
+"""`cmosnoise explore` in the system Chromium (pytest-playwright), against a real server process.
+
+The server is started as `python -m cmosnoise explore --no-browser` on a free loopback port and
+stopped by its process id. Every request the page makes that does not go to that server is aborted
+and fails the test.
+"""
+
+import hashlib
+import io
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+import tifffile
+from conftest import cli
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def server():
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "cmosnoise", "explore", "--no-browser", "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    url = f"http://127.0.0.1:{port}/"
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if proc.poll() is not None:
+                raise RuntimeError(f"explore exited: {proc.stderr.read()}")
+            try:
+                urllib.request.urlopen(url + "api/meta", timeout=2).read()
+                break
+            except OSError:
+                time.sleep(0.2)
+        yield url
+    finally:
+        os.kill(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+@pytest.fixture
+def app_page(page, server):
+    """The page loaded, with every off-server request aborted and recorded, and console errors collected."""
+    foreign, errors = [], []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def gate(route):
+        if route.request.url.startswith(server) or route.request.url.startswith("data:") or route.request.url.startswith("blob:"):
+            route.continue_()
+        else:
+            foreign.append(route.request.url)
+            route.abort()
+
+    page.route("**/*", gate)
+    page.set_viewport_size({"width": 1700, "height": 1000})
+    page.goto(server)
+    _wait_rendered(page, "A")
+    _wait_rendered(page, "B")
+    yield page
+    assert foreign == [], f"the page asked other origins: {foreign}"
+    # a value the test made invalid on purpose is answered 422, which Chromium logs as a failed load
+    errors = [e for e in errors if "status of 422" not in e]
+    assert errors == [], f"console errors: {errors}"
+
+
+def _wait(page, expr: str, timeout_s: float = 60):
+    """Poll a JavaScript expression until it is true (page.wait_for_function evaluates strings with eval,
+    which the page's Content-Security-Policy forbids, as it should)."""
+    deadline = time.monotonic() + timeout_s
+    while not page.evaluate(f"() => !!({expr})"):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {expr}")
+        page.wait_for_timeout(50)
+
+
+def _settle(page):
+    """Every scheduled render has run and its picture is shown (renders start 15 ms after a change)."""
+    page.wait_for_timeout(120)
+    _wait(page, "S.shown.A === S.seq.A && S.shown.B === S.seq.B && !S.busy.A && !S.busy.B")
+    page.wait_for_timeout(50)
+
+
+def _wait_rendered(page, pane, after=-1):
+    _wait(page, f"S.shown['{pane}'] > {after} && S.shown['{pane}'] === S.seq['{pane}']")
+
+
+def _pixels(page, canvas):
+    """A digest of the canvas's pixels (its lossless PNG encoding)."""
+    data = page.evaluate(f"() => document.getElementById('{canvas}').toDataURL('image/png')")
+    return hashlib.sha1(data.encode()).hexdigest()
+
+
+def _set(page, key, value, kind="range"):
+    """Move a control as a user does: set its value and send the event it sends."""
+    event = "input" if kind == "range" else "change"
+    sel = f'#fields input[type={kind}][data-key="{key}"]'
+    page.eval_on_selector(sel, f"(e, v) => {{ e.value = v; e.dispatchEvent(new Event('{event}')); }}", str(value))
+
+
+def _post(url, body: bytes, headers=None):
+    req = urllib.request.Request(url, data=body, headers=headers or {}, method="POST")
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return r.status, r.read(), dict(r.headers)
+    except urllib.error.HTTPError as e:
+        return e.code, e.read(), dict(e.headers)
+
+
+def test_page_loads_offline_with_a_csp_and_identical_panes(app_page, server):
+    # A and B start as the same sensor: the same picture, bit for bit
+    assert _pixels(app_page, "canvasA") == _pixels(app_page, "canvasB")
+    with urllib.request.urlopen(server) as r:
+        csp = r.headers["Content-Security-Policy"]
+    assert "default-src 'self'" in csp and "script-src 'self'" in csp
+
+
+def test_a_slider_changes_the_picture_and_an_invalid_value_keeps_it(app_page):
+    page = app_page
+    before = _pixels(page, "canvasA")
+    seq = page.evaluate("S.seq.A")
+    _set(page, "source_follower.thermal_sigma_e", 400)  # the slider's top end
+    _wait_rendered(page, "A", seq)
+    moved = _pixels(page, "canvasA")
+    assert moved != before
+    assert _pixels(page, "canvasB") == before  # only A's parameter moved
+    seq = page.evaluate("S.seq.A")
+    _set(page, "prnu.sigma_pct", -5, kind="number")
+    _wait(page, f"S.seq.A > {seq} && !S.busy.A")
+    _wait(page, "document.querySelector('.field .err[data-key=\"prnu.sigma_pct\"]').textContent.length > 0")
+    msg = page.text_content('.field .err[data-key="prnu.sigma_pct"]')
+    assert page.is_visible('.field .err[data-key="prnu.sigma_pct"]')  # its section opened to show it
+    assert "greater than or equal to 0" in msg
+    assert "invalid" in page.inner_text("#statusA")
+    assert _pixels(page, "canvasA") == moved  # the last valid picture stays
+
+
+def test_zoom_and_pan_stay_locked_and_the_url_keeps_the_view(app_page, server):
+    page = app_page
+    fit = _pixels(page, "canvasA")
+    seq_a, seq_b = page.evaluate("S.seq.A"), page.evaluate("S.seq.B")
+    page.click("#zoom1")
+    page.click("#zoomIn")
+    box = page.locator("#canvasA").bounding_box()
+    page.mouse.move(box["x"] + 300, box["y"] + 200)
+    page.mouse.down()
+    page.mouse.move(box["x"] + 200, box["y"] + 150, steps=5)
+    page.mouse.up()
+    _wait(page, f"S.seq.A > {seq_a + 1} && S.seq.B > {seq_b + 1}")
+    _settle(page)
+    a, b = _pixels(page, "canvasA"), _pixels(page, "canvasB")
+    assert a == b and a != fit  # the same region of two identical sensors, at 2:1
+    assert page.evaluate("S.zoom") == pytest.approx(2.0)
+    url = page.url
+    again = page.context.new_page()
+    again.route("**/*", lambda route: route.continue_() if route.request.url.startswith(server) else route.abort())
+    again.set_viewport_size({"width": 1700, "height": 1000})
+    again.goto(url)
+    _wait_rendered(again, "A")
+    _settle(again)
+    assert again.evaluate("[S.zoom, S.cx, S.cy]") == page.evaluate("[S.zoom, S.cx, S.cy]")
+    assert _pixels(again, "canvasA") == a
+    again.close()
+
+
+def test_difference_view_shows_only_the_changed_parameter(app_page, server):
+    """Row noise changed in B: B - A is one offset per row, nothing else (common random numbers)."""
+    page = app_page
+    page.click("#editB")
+    _set(page, "row_noise.sigma_e", 30, kind="number")
+    page.select_option("#mode", "diff")
+    _settle(page)
+    grey = page.evaluate("""() => { const c = document.getElementById('canvasDiff');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data; let n = 0;
+        for (let i = 0; i < d.length; i += 4) if (Math.abs(d[i] - 128) > 2 && d[i] !== 17) n++; return n; }""")
+    assert grey > 1000  # the difference view shows the rows
+    raws = []
+    for pane in "AB":
+        body = page.evaluate(f"JSON.stringify({{config: S.panes.{pane}.config, scene: S.panes.{pane}.scene, frame: 0}})")
+        status, data, _ = _post(server + "api/raw", body.encode(), {"Content-Type": "application/json"})
+        assert status == 200
+        raws.append(np.load(io.BytesIO(data)).astype(np.int64))
+    a, b = raws
+    d = b - a
+    ok = (a > 0) & (a < 4095) & (b > 0) & (b < 4095)
+    spread = [np.ptp(row[m]) for row, m in zip(d, ok) if m.sum() > 10]
+    assert max(spread) <= 1  # within a row: the same offset, up to the quantizer's rounding
+    assert np.std(np.median(d, axis=1)) > 5  # between rows: the row noise (30 e- at 0.4 DN/e-)
+
+
+def test_exported_config_reproduces_the_panes_raw_frame(app_page, server, tmp_path):
+    page = app_page
+    seq = page.evaluate("S.seq.A")
+    _set(page, "sensor.temperature_c", 45, kind="number")
+    _wait_rendered(page, "A", seq)
+    with page.expect_download() as dl:
+        page.click("#export")
+    path = tmp_path / "config-A.yaml"
+    dl.value.save_as(path)
+    body = page.evaluate("JSON.stringify({config: S.panes.A.config, scene: S.panes.A.scene, frame: 0})")
+    status, data, _ = _post(server + "api/raw", body.encode(), {"Content-Type": "application/json"})
+    assert status == 200
+    pane_raw = np.load(io.BytesIO(data))
+    r = cli("simulate", "--config", path, "--out", tmp_path / "run")
+    assert r.returncode == 0, r.stderr
+    assert np.array_equal(tifffile.imread(tmp_path / "run" / "raw.tiff").reshape(pane_raw.shape), pane_raw)
+
+
+def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
+    # a request naming another host (DNS rebinding): refused
+    req = urllib.request.Request(server + "api/meta", headers={"Host": "attacker.example"})
+    with pytest.raises(urllib.error.HTTPError) as info:
+        urllib.request.urlopen(req, timeout=10)
+    assert info.value.code == 400
+    # an oversized upload: refused from its declared length, before the body is read
+    import http.client
+
+    conn = http.client.HTTPConnection("127.0.0.1", int(server.rsplit(":", 1)[1].strip("/")), timeout=30)
+    conn.putrequest("POST", "/api/upload")
+    conn.putheader("Content-Length", str(51 * 10**6))
+    conn.putheader("X-Filename", "big.png")
+    conn.endheaders()
+    conn.send(b"x" * 1000)
+    resp = conn.getresponse()
+    assert resp.status == 413 and "at most 50 MB" in json.loads(resp.read())["error"]
+    conn.close()
+    # a decompression bomb: a small PNG of 9000 x 8000 pixels, refused from its header
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.zeros((9000, 8000), np.uint8)).save(buf, format="PNG")
+    status, body, _ = _post(server + "api/upload", buf.getvalue(), {"X-Filename": "bomb.png"})
+    assert status == 413 and "8000 x 9000 pixels" in json.loads(body)["error"]
+    # a path instead of a scene, bad JSON, an invalid value, a too large picture: 4xx with one line
+    cfg = json.loads(urllib.request.urlopen(server + "api/meta").read())["base"]
+    for payload, code, needle in [
+        ({"config": cfg, "scene": "/etc/passwd"}, 400, "built-in"),
+        ({"config": {**cfg, "prnu": {**cfg["prnu"], "sigma_pct": "abc"}}}, 422, "prnu.sigma_pct"),
+        ({"config": cfg, "region": [0, 480, 0, 640], "step": 0}, 400, "step"),
+        ({"config": {**cfg, "sensor": {**cfg["sensor"], "width": 30000, "height": 30000}}}, 422, "50 MP"),
+    ]:
+        status, body, _ = _post(server + "api/render", json.dumps(payload).encode(), {"Content-Type": "application/json"})
+        assert status == code and needle in json.loads(body)["error"], (payload.get("scene"), status, body[:200])
+    status, body, _ = _post(server + "api/render", b"{not json", {"Content-Type": "application/json"})
+    assert status == 400
+    # a request made stale by a newer one of the same pane is dropped, not queued
+    newer = {"config": cfg, "pane": "A", "client": "t", "seq": 10}
+    assert _post(server + "api/render", json.dumps(newer).encode())[0] == 200
+    status, body, _ = _post(server + "api/render", json.dumps({**newer, "seq": 9}).encode())
+    assert status == 409
+    # still serving
+    assert urllib.request.urlopen(server + "api/meta", timeout=10).status == 200
+
+
+def test_explore_refuses_a_port_in_use():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        r = cli("explore", "--no-browser", "--port", str(port))
+    assert r.returncode == 2 and "cannot be used" in r.stderr
