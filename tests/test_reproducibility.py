@@ -3,6 +3,7 @@
 import tracemalloc
 
 import numpy as np
+import pytest
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.io.raw_tiff import write_raw_tiff
@@ -80,3 +81,32 @@ def test_switching_one_stage_off_leaves_every_other_stages_noise_unchanged():
     with pytest.raises(AssertionError):  # the comparison can fail: a different seed changes the noise
         other = Sensor(load_config(extra=base), seed=12).expose("ramp").frame(2, detail=True).contributions
         np.testing.assert_array_equal(other["source_follower"], full["source_follower"])
+
+
+@pytest.mark.parametrize("change", [
+    {"prnu": {"sigma_pct": 2.5}},
+    {"sensor": {"temperature_c": 41.0}},
+    {"dark_current": {"doubling_c": 6.0}},
+    {"source_follower": {"flicker": {"gumbel_scale_e": 0.2}}},
+    {"source_follower": {"thermal_sigma_e": 7.0}},
+    {"column_noise": {"vfpn_sigma_e": 3.0}},
+    {"row_noise": {"fixed_sigma_e": 1.0}},
+    {"seed": 9},
+])
+def test_a_sensor_reusing_anothers_unchanged_maps_is_the_sensor_drawn_afresh(change):
+    """Sensor(config, reuse=other) (the explorer's path) keeps only maps whose inputs did not change."""
+    from dataclasses import fields
+
+    from cmosnoise import Sensor, load_config
+
+    base = {"sensor": {"width": 64, "height": 48}}
+    first = Sensor(load_config(extra=base))
+    cfg = load_config(extra={**base, **change} if "sensor" not in change
+                      else {"sensor": {**base["sensor"], **change["sensor"]}})
+    reused, fresh = Sensor(cfg, reuse=first).fixed_pattern, Sensor(cfg).fixed_pattern
+    for f in fields(fresh):
+        a, b = getattr(reused, f.name), getattr(fresh, f.name)
+        if isinstance(b, np.ndarray):
+            assert np.array_equal(a, b), f.name
+        else:
+            assert a == b, f.name

@@ -122,19 +122,24 @@ def exposure_key(cfg: Config, scene: str) -> str:
                  "exposure": d["exposure"], "crosstalk": d["crosstalk"], "shot": d["shot_noise"]["enabled"]})
 
 
-class _Lru(OrderedDict):
+class _Lru:
+    """A small least-recently-used cache, safe across threads (the value is made outside its lock)."""
+
     def __init__(self, size: int):
-        super().__init__()
         self.size = size
+        self._items: OrderedDict = OrderedDict()
+        self._lock = threading.Lock()
 
     def get_or(self, key, make):
-        if key in self:
-            self.move_to_end(key)
-            return self[key]
+        with self._lock:
+            if key in self._items:
+                self._items.move_to_end(key)
+                return self._items[key]
         value = make()
-        self[key] = value
-        while len(self) > self.size:
-            self.popitem(last=False)
+        with self._lock:
+            self._items[key] = value
+            while len(self._items) > self.size:
+                self._items.popitem(last=False)
         return value
 
 
@@ -152,7 +157,9 @@ class Workbench:
         self._exposures = _Lru(6)
         self._masters = _Lru(4)
         self._figures = _Lru(8)
-        self.lock = threading.Lock()
+        self._last: Sensor | None = None  # the last sensor made: its maps are reused where their inputs did not change
+        self.lock = threading.Lock()  # pictures, one at a time (the kernel uses every core)
+        self.figures_lock = threading.Lock()  # figures beside them: never in a picture's way
         self.latest: dict[str, int] = {}
 
     # scenes: built-in names, or uploads stored here; never a path from the page
@@ -193,7 +200,12 @@ class Workbench:
         return {"id": uid, "scene": f"upload:{uid}", "name": self.uploads[uid]["name"]}
 
     def sensor(self, cfg: Config) -> Sensor:
-        base = self._sensors.get_or(fixed_key(cfg), lambda: Sensor(cfg))
+        """A sensor of ``cfg``: its fixed pattern from the cache, or drawn reusing the last sensor's unchanged maps."""
+        def make():
+            return Sensor(cfg, reuse=self._last)
+
+        base = self._sensors.get_or(fixed_key(cfg), make)
+        self._last = base
         return base if base.config == cfg else Sensor(cfg, fixed_pattern=base.fixed_pattern)
 
     def exposure(self, cfg: Config, scene: str) -> Exposure:
@@ -313,12 +325,6 @@ def _bin(img: np.ndarray, f: int) -> np.ndarray:
     return (img[:r, :c].reshape(shape).mean(axis=(1, 3)) + 0.5).astype(np.uint8)
 
 
-def png_bytes(img: np.ndarray) -> bytes:
-    import imageio.v3 as iio
-
-    return iio.imwrite("<bytes>", img, extension=".png", compress_level=1)
-
-
 # ------------------------------------------------------------------ the web application
 def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     """The Starlette application serving the page and its API around ``bench``."""
@@ -375,14 +381,14 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
                 return secured(JSONResponse({"error": " ".join(str(exc).split())[:400], "errors": {}}, status_code=422))
         return wrapped
 
-    def run_locked(func, *args):
-        with bench.lock:
+    def run_locked(lock, func, *args):
+        with lock:
             return func(*args)
 
-    async def in_thread(func, *args):
+    async def in_thread(func, *args, lock=None):
         from starlette.concurrency import run_in_threadpool
 
-        return await run_in_threadpool(run_locked, func, *args)
+        return await run_in_threadpool(run_locked, lock or bench.lock, func, *args)
 
     @errors
     async def meta(request: Request):
@@ -433,20 +439,22 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
             info["ms"] = round(1000 * (time.perf_counter() - t0), 1)
             if data.get("couplets"):
                 info["couplets"] = bench.couplets(cfg, (r0, r1, c0, c1))
-            return png_bytes(img), info
+            return img, info
 
         result = await in_thread(work)
         if result is None:
             return JSONResponse({"error": "dropped: a newer request of this pane came in", "errors": {}}, status_code=409)
-        png, info = result
-        return Response(png, media_type="image/png", headers={"X-Render": json.dumps(info)})
+        img, info = result
+        info["shape"] = list(img.shape)
+        # raw 8-bit pixels: encoding a PNG would cost more than the picture (75 ms at 960 x 540); this is loopback
+        return Response(img.tobytes(), media_type="application/octet-stream", headers={"X-Render": json.dumps(info)})
 
     @errors
     async def figures_route(request: Request):
         data = await json_body(request)
         cfg = validate(data.get("config"))
         scene = data.get("scene") or bench.scene
-        return JSONResponse(await in_thread(bench.figures, cfg, scene))
+        return JSONResponse(await in_thread(bench.figures, cfg, scene, lock=bench.figures_lock))
 
     @errors
     async def raw_route(request: Request):

@@ -82,7 +82,7 @@ class Sensor:
     """
 
     def __init__(self, config: Config | dict | str | Path | None = None, seed: int | None = None, *,
-                 fixed_pattern: FixedPattern | None = None):
+                 fixed_pattern: FixedPattern | None = None, reuse: "Sensor | None" = None):
         config = _as_config(config)
         if seed is not None:
             seed = _whole(seed, "seed")
@@ -93,7 +93,7 @@ class Sensor:
         self.config = config
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
-        self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern()
+        self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern(reuse)
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
         self.timings["fixed_pattern"] += time.perf_counter() - t0
@@ -229,22 +229,45 @@ class Sensor:
         }
 
     # ------------------------------------------------------------ fixed pattern
-    def _draw_fixed_pattern(self) -> FixedPattern:
+    def _draw_fixed_pattern(self, reuse: "Sensor | None" = None) -> FixedPattern:
+        """Every fixed-pattern map; with ``reuse`` (the same seed and size), its maps whose inputs did not change.
+
+        A map is a pure function of the seed, the size and its own section's
+        parameters, so a reused map is the one this sensor would draw (the
+        explorer moves one slider at a time).
+        """
         c = self.config
+        old = reuse.config if reuse is not None and reuse.shape == self.shape and reuse.config.seed == c.seed else None
+        prev = reuse.fixed_pattern if old is not None else None
+
+        def kept(name, *parts):
+            """The previous sensor's map ``name`` when every input part is unchanged, else None."""
+            if prev is None or getattr(prev, name) is None or any(part(old) != part(c) for part in parts):
+                return None
+            return getattr(prev, name)
+
         maps: dict = {}
         if c.prnu.enabled:
-            maps["prnu_gain"] = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
+            maps["prnu_gain"] = kept("prnu_gain", lambda x: x.prnu)
+            if maps["prnu_gain"] is None:
+                maps["prnu_gain"] = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
         if c.dark_current.enabled:
             d = c.dark_current
-            state = dark_current.at_temperature(dark_points(c), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c)
-            maps["dark_state"] = state
-            maps["dark_rate"] = dark_current.rate_map(state, self.shape, fixed_rng(c.seed, "dark_current"))
+            dark_inputs = (lambda x: x.dark_current, lambda x: x.sensor.temperature_c, lambda x: x.sensor.pixel_pitch_um)
+            if kept("dark_rate", *dark_inputs) is not None:
+                maps["dark_state"], maps["dark_rate"] = prev.dark_state, prev.dark_rate
+            else:
+                state = dark_current.at_temperature(dark_points(c), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c)
+                maps["dark_state"] = state
+                maps["dark_rate"] = dark_current.rate_map(state, self.shape, fixed_rng(c.seed, "dark_current"))
         rows, cols = self.shape
         sf = c.source_follower
         if sf.enabled and sf.flicker.enabled:
-            maps["flicker_sigma"] = source_follower.flicker_sigma_map(
-                flicker_model(c), self.shape, fixed_rng(c.seed, "source_follower")
-            )
+            maps["flicker_sigma"] = kept("flicker_sigma", lambda x: x.source_follower.flicker)
+            if maps["flicker_sigma"] is None:
+                maps["flicker_sigma"] = source_follower.flicker_sigma_map(
+                    flicker_model(c), self.shape, fixed_rng(c.seed, "source_follower")
+                )
         if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
             maps["row_offset"] = row_noise.fixed_offsets(rows, c.row_noise.fixed_sigma_e, fixed_rng(c.seed, "row_noise"))
         cn = c.column_noise

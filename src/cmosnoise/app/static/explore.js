@@ -269,7 +269,7 @@ async function render(p) {
     return;
   }
   const info = JSON.parse(resp.headers.get("X-Render") || "{}");
-  const bitmap = await createImageBitmap(await resp.blob());
+  const bitmap = await toBitmap(new Uint8Array(await resp.arrayBuffer()), info.shape);
   if (seq !== S.seq[p]) return;
   S.images[p] = { bitmap, region: info.region, step: info.step, couplets: info.couplets || [] };
   S.shown[p] = seq;
@@ -279,6 +279,15 @@ async function render(p) {
   draw(p);
   if (S.mode === "diff") drawDiff();
   figures(p);
+}
+
+async function toBitmap(px, shape) {    // raw 8-bit pixels (rows, cols[, 3]) to a bitmap
+  const [h, w] = shape, ch = shape.length > 2 ? shape[2] : 1;
+  const rgba = new Uint8ClampedArray(w * h * 4);
+  for (let i = 0, j = 0; i < w * h; i++, j += ch) {
+    rgba[4 * i] = px[j]; rgba[4 * i + 1] = px[j + (ch > 1 ? 1 : 0)]; rgba[4 * i + 2] = px[j + (ch > 1 ? 2 : 0)]; rgba[4 * i + 3] = 255;
+  }
+  return createImageBitmap(new ImageData(rgba, w, h));
 }
 
 function drawImage(ctx, img, c) {
@@ -328,7 +337,7 @@ function figures(p) {
       body: JSON.stringify({ config: pane.config, scene: pane.scene }) }).catch(() => null);
     if (!resp || !resp.ok) return;
     showFigures(p, await resp.json());
-  }, 250);
+  }, 500);   // once the slider rests: the figures never take the CPU from the next picture
 }
 const fmt = (v, d = 3) => (v == null ? "-" : typeof v === "number" ? Number(v.toPrecision(d)).toLocaleString("en") : String(v));
 function showFigures(p, d) {

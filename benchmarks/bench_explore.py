@@ -1,0 +1,121 @@
+"""Latency of `cmosnoise explore`: from a slider change to the new pixels on the canvas, in headless Chromium.
+
+A 1920 x 1080 sensor shown whole in a 960 x 540 viewport (pane A). For a
+temporal parameter (source follower thermal noise) and for fixed-pattern
+ones (PRNU sigma, the dark-current temperature), it moves the slider, then
+waits until the page has drawn the answer to that very request. Median and
+worst of --repeats moves each, the server's own render time beside them.
+
+    python benchmarks/bench_explore.py [--repeats 15] [--json docs/numbers/explore.json]
+
+Needs the system Chromium (`chromium` on the PATH), as the browser tests do.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import time
+import urllib.request
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--json", help="also write the results here")
+    ap.add_argument("--screenshot", help="also save a screenshot of the page here (PNG)")
+    args = ap.parse_args()
+
+    from playwright.sync_api import sync_playwright
+
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "cmosnoise", "explore", "--no-browser", "--port", str(port),
+                             "--set", "sensor.width=1920", "--set", "sensor.height=1080"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    url = f"http://127.0.0.1:{port}/"
+    rows = []
+    try:
+        for _ in range(600):
+            try:
+                urllib.request.urlopen(url + "api/meta", timeout=2).read()
+                break
+            except OSError:
+                time.sleep(0.2)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 2000, "height": 1100})
+            page.goto(url)
+            while not page.evaluate("() => typeof S !== 'undefined' && S.panes.A !== null && S.seq.A > 0"):
+                page.wait_for_timeout(20)
+            page.evaluate("""() => { for (const id of ['canvasA', 'canvasB']) {
+                const c = document.getElementById(id); c.width = 960; c.height = 540; }
+                S.zoom = null; geometry(); redraw(); scheduleAll(); }""")
+
+            def settled():
+                while not page.evaluate("() => S.shown.A === S.seq.A && S.shown.B === S.seq.B && !S.busy.A && !S.busy.B"):
+                    page.wait_for_timeout(10)
+
+            page.wait_for_timeout(300)
+            settled()
+            # every move sets a new value: nothing comes from a cache of an earlier answer
+            cases = [("temporal: source_follower.thermal_sigma_e", "source_follower.thermal_sigma_e", 2.0, 0.05),
+                     ("fixed pattern: prnu.sigma_pct", "prnu.sigma_pct", 1.0, 0.05),
+                     ("fixed pattern: sensor.temperature_c", "sensor.temperature_c", 25.0, 0.5)]
+            for label, key, start, inc in cases:
+                times, server = [], []
+                for i in range(args.repeats + 1):
+                    value = round(start + inc * (i + 1), 4)
+                    seq = page.evaluate("S.seq.A")
+                    t = page.evaluate("""([key, value]) => { const t0 = performance.now();
+                        const e = document.querySelector(`#fields input[type=number][data-key="${key}"]`);
+                        e.value = value; e.dispatchEvent(new Event('change')); return t0; }""", [key, str(value)])
+                    while not page.evaluate(f"() => S.shown.A > {seq} && S.shown.A === S.seq.A"):
+                        page.wait_for_timeout(2)
+                    done = page.evaluate("performance.now()")
+                    ms_server = float(page.inner_text("#statusA").split(",")[1].split("ms")[0])
+                    settled()
+                    if i:  # the first move of each case warms its caches
+                        times.append(done - t)
+                        server.append(ms_server)
+                rows.append({"label": label, "median_ms": statistics.median(times), "max_ms": max(times),
+                             "server_median_ms": statistics.median(server)})
+            if args.screenshot:
+                page.evaluate("""() => { for (const id of ['canvasA', 'canvasB']) {
+                    const c = document.getElementById(id); c.width = 640; c.height = 420; }
+                    S.zoom = null; geometry(); redraw(); scheduleAll(); }""")
+                page.set_viewport_size({"width": 1700, "height": 1000})
+                page.wait_for_timeout(500)
+                settled()
+                page.wait_for_timeout(800)
+                page.screenshot(path=args.screenshot)
+            browser.close()
+    finally:
+        os.kill(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=30)
+    print("cmosnoise explore: slider change to new pixels, 1920 x 1080 sensor in a 960 x 540 viewport, headless Chromium")
+    print(f"  {'parameter':46s} {'median ms':>10s} {'worst ms':>9s} {'server ms':>10s}")
+    for r in rows:
+        print(f"  {r['label']:46s} {r['median_ms']:10.0f} {r['max_ms']:9.0f} {r['server_median_ms']:10.0f}")
+    if args.json:
+        data = {"machine": f"{os.cpu_count()} cores", "command": f"python benchmarks/bench_explore.py --repeats {args.repeats}",
+                "rows": rows}
+        with open(args.json, "w") as fh:
+            json.dump(data, fh, indent=2)
+            fh.write("\n")
+
+
+if __name__ == "__main__":
+    main()
