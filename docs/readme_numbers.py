@@ -231,6 +231,16 @@ def render_colour(d: dict) -> str:
             "visibly desaturated.")
 
 
+def render_explore(d: dict) -> str:
+    lines = [f"Measured with `{d['command']}` ({d['machine']}); the median and the worst of the moves, and the",
+             "server's own share:", "",
+             "| parameter moved | slider to pixels, median | worst | on the server | target |", "|---|---|---|---|---|"]
+    for r in d["rows"]:
+        target = "150 ms" if r["label"].startswith("temporal") else "400 ms"
+        lines.append(f"| {r['label']} | {r['median_ms']:.0f} ms | {r['max_ms']:.0f} ms | {r['server_median_ms']:.0f} ms | {target} |")
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -239,6 +249,7 @@ SECTIONS = {
     "fig9_map": (compute_fig9_map, render_fig9_map),
     "dark_budget": (compute_dark_budget, render_dark_budget),
     "speed": (None, render_speed),
+    "explore": (None, render_explore),
 }
 
 

@@ -73,7 +73,10 @@ function loadUrl() {
 
 // ------------------------------------------------------------------ the parameter panel
 const SKIP = /^(description|run\.)/;
-function unitOf(desc) { const m = /,\s*([^,]*(e-|DN|s|C|%|um|aA|nA\/cm\^2|ppm)[^,]*)$/.exec(desc || ""); return m ? m[1] : ""; }
+// the keys carry their units in their names (MODEL.md's convention): sigma_e is e-, integration_time_s is s, ...
+const UNITS = [["_e_per_s", "e-/s"], ["_nA_per_cm2", "nA/cm2"], ["_aA", "aA"], ["_pct", "%"], ["_um", "um"], ["_dn", "DN"],
+  ["_fps", "1/s"], ["_c", "C"], ["_s", "s"], ["_e", "e-"]];
+function unitOf(key) { const last = key.split(".").pop(); const u = UNITS.find(([s]) => last.endsWith(s)); return u ? u[1] : ""; }
 
 function buildPanel() {
   const box = $("fields");
@@ -124,7 +127,8 @@ function fieldRow(f, key, cfg) {
   row.dataset.key = key;
   const name = document.createElement("span");
   name.className = "name";
-  name.textContent = key.split(".").slice(-2).join(".").replace(/^\d+\./, "");
+  const unit = unitOf(key);
+  name.textContent = key.split(".").slice(-2).join(".").replace(/^\d+\./, "") + (unit ? ` [${unit}]` : "");
   name.title = `${key}: ${f.description}${f.limits ? " (" + f.limits + ")" : ""}; default ${JSON.stringify(f.default)}`;
   row.appendChild(name);
   const value = getPath(cfg, key);
