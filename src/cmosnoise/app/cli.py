@@ -316,6 +316,60 @@ def explore(
 
 
 @app.command()
+def sweep(
+    ctx: typer.Context,
+    config: Optional[Path] = ConfigOpt,
+    preset: Optional[str] = PresetOpt,
+    set_: Optional[List[str]] = SetOpt,
+    scene: Optional[str] = typer.Option(None, "--scene", help="scene of every instance (default: the configuration's)"),
+    vary: Optional[List[str]] = typer.Option(None, "--vary", help="KEY=v1,v2 | KEY=start:stop:count | K1,K2=a1xb1,a2xb2 (repeatable: the grid is their product)"),
+    instances: int = typer.Option(20, "--instances", min=1, max=1_000_000, help="sensor instances (dies) per point"),
+    frames: int = typer.Option(2, "--frames", min=1, max=100, help="frames per instance (2: temporal noise from their difference)"),
+    spec: Optional[List[str]] = typer.Option(None, "--spec", help="pass/fail per instance, e.g. couplets_after_correction<=0 (repeatable: all must hold)"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a LocalCluster here)"),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="LocalCluster worker processes (default: the core count)"),
+    resume: bool = typer.Option(False, "--resume", help="continue the sweep in --out: skip the rows results.csv already holds"),
+    overwrite: bool = OverwriteOpt,
+    from_: Optional[Path] = typer.Option(None, "--from", help="rerun a sweep.yaml (its base configuration, grid, instances and spec)"),
+    out: Path = typer.Option(Path("cmosnoise-sweep"), "--out", "-o", help="output folder"),
+):
+    """Parameter studies and yield over many sensor instances, on Dask (a LocalCluster, or --scheduler)."""
+    from . import sweep as sw
+
+    if from_ is not None:
+        try:
+            opts = sw.sweep_from_yaml(from_)
+        except (OSError, KeyError, TypeError, ValueError) as exc:
+            raise CmosnoiseError(f"--from {str(from_)!r} is not a sweep.yaml: {exc}") from None
+        base = _build_checked(opts["base"])
+        vary, instances, frames, scene, spec = opts["vary"], opts["instances"], opts["frames"], opts["scene"], opts["specs"]
+    else:
+        base = load_config(config, preset, set_)
+    show = err_console.is_terminal and _level(ctx) >= 0
+    with Progress(TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  console=err_console, disable=not show) as bar:
+        task = bar.add_task("instances", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        df = sw.run(base, vary or [], instances, out, frames, scene, spec, scheduler, workers, resume, overwrite,
+                    progress=progress, say=lambda m: _say(ctx, m))
+    points = df["point"].nunique()
+    msg = f"wrote {len(df)} row(s) ({points} point(s) x {instances} instance(s)) to {out}/results.csv, summary.csv, plots, index.html"
+    if "pass" in df:
+        msg += f"; overall yield {df['pass'].mean():.3f}"
+    _say(ctx, msg)
+
+
+def _build_checked(data: dict):
+    from ..config.loading import build_config
+    from ..model.physics import check
+
+    return check(build_config(data))
+
+
+@app.command()
 def presets():
     """List the presets, one line each."""
     for name in preset_names():

@@ -1,0 +1,565 @@
+"""``cmosnoise sweep``: parameter studies and yield over many sensor instances (dies), on Dask.
+
+The grid is the product of the ``--vary`` axes; each point runs ``instances``
+sensor instances. Instance i of every point has the seed
+``SeedSequence(root_seed, spawn_key=(i,))``, so a row of ``results.csv``
+depends on nothing but its point and its instance: not on the number of
+workers, the order in which tasks finish, or the machine.
+
+A task (:func:`run_instance`) gets a configuration as plain data and a seed,
+and returns a small record of metrics, never arrays. Tasks go to a Dask
+``distributed`` cluster in bounded batches: a ``LocalCluster`` of processes
+by default, or an existing scheduler (``--scheduler tcp://host:8786``). Rows
+are appended to ``results.csv`` as tasks finish; ``--resume`` skips the rows
+already there.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..config.loading import load_yaml_text
+from ..errors import CmosnoiseError
+
+#: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
+DEFECT_TOLERANCE_E = 150.0
+#: tasks in flight at once: the scheduler's memory does not grow with the sweep
+BATCH_PER_WORKER = 4
+SPEC_RE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(<=|>=|==|!=|<|>)\s*([-+0-9.eE]+|inf|-inf)\s*$")
+
+
+# ------------------------------------------------------------------ the grid
+@dataclass(frozen=True)
+class Axis:
+    """Keys that move together and their values (one tuple of values per step)."""
+
+    keys: tuple[str, ...]
+    values: tuple[tuple, ...]
+
+
+def _scalar(text: str, where: str):
+    try:
+        return load_yaml_text(text)
+    except Exception:
+        raise CmosnoiseError(f"{where}: {text!r} is not a value") from None
+
+
+def parse_vary(text: str) -> Axis:
+    """``KEY=v1,v2,...``, ``KEY=start:stop:count`` or ``KEY1,KEY2=a1xb1,a2xb2`` (keys that move together)."""
+    where = f"--vary {text!r}"
+    if "=" not in text:
+        raise CmosnoiseError(f"{where}: expected KEY=VALUES, e.g. sensor.temperature_c=25,45,65")
+    left, _, right = text.partition("=")
+    keys = tuple(k.strip() for k in left.split(","))
+    if not all(keys) or any(not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z0-9_]+)*", k) for k in keys):
+        raise CmosnoiseError(f"{where}: keys must be dotted names such as prnu.sigma_pct")
+    right = right.strip()
+    if not right:
+        raise CmosnoiseError(f"{where}: no values")
+    if len(keys) == 1 and right.count(":") == 2 and "," not in right:
+        parts = right.split(":")
+        try:
+            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+        except ValueError:
+            raise CmosnoiseError(f"{where}: a range is start:stop:count, e.g. 0.5:2.0:4") from None
+        if count < 1 or count > 10000 or not (math.isfinite(start) and math.isfinite(stop)):
+            raise CmosnoiseError(f"{where}: a range needs finite ends and a count from 1 to 10000")
+        values = tuple((float(v),) for v in np.linspace(start, stop, count))
+    else:
+        steps = [s.strip() for s in right.split(",")]
+        if any(not s for s in steps):
+            raise CmosnoiseError(f"{where}: an empty value in the list")
+        values = []
+        for s in steps:
+            parts = s.split("x") if len(keys) > 1 else [s]
+            if len(parts) != len(keys):
+                raise CmosnoiseError(f"{where}: {s!r} gives {len(parts)} value(s) for {len(keys)} keys "
+                                     "(keys that move together take values like 640x480)")
+            values.append(tuple(_scalar(p, where) for p in parts))
+        values = tuple(values)
+    return Axis(keys, values)
+
+
+def grid(axes: list[Axis]) -> list[dict]:
+    """Every point of the sweep: {key: value} for the product of the axes, in a fixed order."""
+    points = []
+    for combo in itertools.product(*(a.values for a in axes)):
+        point = {}
+        for axis, vals in zip(axes, combo):
+            point.update(dict(zip(axis.keys, vals)))
+        points.append(point)
+    return points
+
+
+def _nested(point: dict) -> dict:
+    out: dict = {}
+    for key, value in point.items():
+        node = out
+        parts = key.split(".")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = value
+    return out
+
+
+def point_config(base, point: dict):
+    """The base configuration with a point's values, validated (physics included)."""
+    from ..config.loading import merge_updates
+    from ..model.physics import check
+
+    if any(re.search(r"\.\d+(\.|$)", k) for k in point):
+        raise CmosnoiseError("--vary: list items (points.0...) cannot be varied; vary a whole section instead")
+    try:
+        return check(merge_updates(base, _nested(point)))
+    except CmosnoiseError as exc:
+        shown = ", ".join(f"{k}={v}" for k, v in point.items())
+        raise CmosnoiseError(f"sweep point {shown}: {str(exc)}") from None
+
+
+def instance_seed(root_seed: int, instance: int) -> int:
+    """Instance i's seed: ``SeedSequence(root_seed, spawn_key=(i,))``, as a 63-bit integer."""
+    state = np.random.SeedSequence(root_seed, spawn_key=(instance,)).generate_state(2, np.uint32)
+    return (int(state[0]) << 31) ^ int(state[1])
+
+
+@dataclass(frozen=True)
+class Spec:
+    metric: str
+    op: str
+    value: float
+
+    def passes(self, record: dict) -> bool:
+        v = record.get(self.metric)
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            return False
+        return {"<=": v <= self.value, ">=": v >= self.value, "<": v < self.value, ">": v > self.value,
+                "==": v == self.value, "!=": v != self.value}[self.op]
+
+
+def parse_spec(text: str) -> Spec:
+    m = SPEC_RE.match(text)
+    if not m:
+        raise CmosnoiseError(f"--spec {text!r}: expected METRIC OP NUMBER, e.g. couplets_after_correction<=0 "
+                             f"(metrics: {', '.join(METRICS)})")
+    if m.group(1) not in METRICS:
+        raise CmosnoiseError(f"--spec {text!r}: unknown metric {m.group(1)!r}; use one of {', '.join(METRICS)}")
+    return Spec(m.group(1), m.group(2), float(m.group(3)))
+
+
+# ------------------------------------------------------------------ one task: one sensor instance
+METRICS = ("mean_e", "temporal_noise_e", "temporal_noise_predicted_e", "snr_db_at_100e", "snr_db_at_1000e",
+           "dynamic_range_db", "dark_mean_e_per_s", "ppm_above_threshold", "white_pixels", "couplets",
+           "couplets_expected_random", "residual_defects", "couplets_after_correction")
+
+
+def run_instance(config_data: dict, scene: str, frames: int, seed: int) -> dict:
+    """The metrics of one sensor instance: a dict of numbers (what a Dask task returns)."""
+    from ..analysis import noise_budget, white_pixels
+    from ..config import Config, ProcessingSection
+    from ..isp import calibration
+    from ..isp.process import Processor
+    from ..model.sensor import Sensor
+
+    cfg = Config.model_validate(config_data)
+    sensor = Sensor(cfg, seed=seed)
+    shot = sensor.expose(scene)
+    t = sensor.transfer
+    k = t.gain_dn_per_e
+    raws = [shot.frame(i).astype(np.float64) for i in range(max(frames, 1))]
+    out = {"mean_e": float((raws[0].mean() - t.black_level_dn) / k)}
+    if len(raws) >= 2:
+        d = raws[1] - raws[0]
+        out["temporal_noise_e"] = float(math.sqrt(max(np.var(d) / 2 - 1 / 12, 0.0)) / k)
+    else:
+        out["temporal_noise_e"] = math.nan
+    b = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)
+    out["temporal_noise_predicted_e"] = float(b["temporal_total_e"])
+    kf = noise_budget.key_figures(sensor, levels_e=(100.0, 1000.0))
+    snr = kf.get("snr_total_db_at_signal_e", {})
+    out["snr_db_at_100e"] = float(snr.get("100", math.nan))  # key_figures names its levels as text, in e-
+    out["snr_db_at_1000e"] = float(snr.get("1000", math.nan))
+    out["dynamic_range_db"] = float(kf["dynamic_range_db"])
+    state, rate = sensor.dark_state, sensor.dark_rate
+    nan_dark = {"dark_mean_e_per_s": math.nan, "ppm_above_threshold": math.nan, "white_pixels": math.nan,
+                "couplets": math.nan, "couplets_expected_random": math.nan}
+    if state is None:
+        out.update(nan_dark)
+    else:
+        out["dark_mean_e_per_s"] = float(rate.mean())
+        if state.threshold is not None:
+            rep = white_pixels.report(rate, state.threshold, sensor.cfa)
+            out.update({"ppm_above_threshold": rep["ppm"], "white_pixels": rep["white_pixels"],
+                        "couplets": rep["couplets"], "couplets_expected_random": rep["couplets_expected_random"]})
+        else:
+            out.update({k2: v for k2, v in nan_dark.items() if k2 != "dark_mean_e_per_s"})
+    # what survives dark calibration and the chosen defect corrector (median when none is chosen)
+    n_dark = cfg.processing.dark_frames or 8
+    method = cfg.processing.defects.method if cfg.processing.defects.method != "off" else "median"
+    master = calibration.master_dark(sensor.dark_frames(n_dark))
+    proc = Processor(ProcessingSection(dark_frames=n_dark, defects={"method": method}), sensor.raw_info(), master)
+    bad = np.abs(proc.cfa_image(raws[0].astype(np.uint16)) - shot.photo_mean_e * k) > DEFECT_TOLERANCE_E * k
+    out["residual_defects"] = int(bad.sum())
+    out["couplets_after_correction"] = white_pixels.count_couplets(bad, sensor.cfa)
+    return {m: out.get(m, math.nan) for m in METRICS}
+
+
+def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int) -> dict:
+    """What a worker runs: one instance, tagged with its point and instance."""
+    return {"point": point, "instance": instance, "seed": seed, **run_instance(config_data, scene, frames, seed)}
+
+
+# ------------------------------------------------------------------ the sweep
+@dataclass
+class Plan:
+    base: object  # Config
+    axes: list[Axis]
+    points: list[dict]
+    configs: list[dict]
+    instances: int
+    frames: int
+    scene: str
+    specs: list[Spec]
+
+    @property
+    def keys(self) -> list[str]:
+        return [k for a in self.axes for k in a.keys]
+
+    def columns(self) -> list[str]:
+        return ["point", *self.keys, "instance", "seed", *METRICS] + (["pass"] if self.specs else [])
+
+    def to_yaml_data(self) -> dict:
+        return {"base": self.base.model_dump(mode="json"), "scene": self.scene, "instances": self.instances,
+                "frames": self.frames, "vary": [{"keys": list(a.keys), "values": [list(v) for v in a.values]} for a in self.axes],
+                "spec": [f"{s.metric}{s.op}{s.value:g}" for s in self.specs]}
+
+
+def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | None = None,
+         specs: list[str] | None = None) -> Plan:
+    """Check everything a sweep needs before any task runs; returns the plan."""
+    if not isinstance(instances, int) or not 1 <= instances <= 1_000_000:
+        raise CmosnoiseError(f"--instances {instances!r}: give 1 to 1000000")
+    if not isinstance(frames, int) or not 1 <= frames <= 100:
+        raise CmosnoiseError(f"--frames {frames!r}: give 1 to 100")
+    axes = [parse_vary(v) for v in vary or []]
+    seen = [k for a in axes for k in a.keys]
+    if len(set(seen)) != len(seen):
+        raise CmosnoiseError(f"--vary: a key is varied twice ({', '.join(sorted({k for k in seen if seen.count(k) > 1}))})")
+    points = grid(axes) if axes else [{}]
+    configs = [point_config(base, p).model_dump(mode="json") for p in points]
+    scene = scene or base.scene.source
+    from ..model import scene as scene_mod
+
+    if scene.split(":", 1)[0] not in scene_mod.BUILTINS and not Path(scene).is_file():
+        raise CmosnoiseError(f"--scene {scene!r}: no such built-in or file")
+    if Path(scene).is_file():
+        scene = str(Path(scene).resolve())
+    return Plan(base, axes, points, configs, instances, frames, scene, [parse_spec(s) for s in specs or []])
+
+
+def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval (95 %) of a proportion k / n."""
+    if n == 0:
+        return (math.nan, math.nan)
+    p = k / n
+    den = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def connect(scheduler: str | None, workers: int | None, say: Callable[[str], None] = lambda m: None):
+    """A Dask client: an existing scheduler's, or a LocalCluster of processes on this machine (loopback)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="10s"), None
+        except (OSError, TimeoutError) as exc:
+            raise CmosnoiseError(f"--scheduler {scheduler}: cannot connect ({exc.__class__.__name__}: "
+                                 f"{' '.join(str(exc).split())[:160]})") from None
+        except ValueError as exc:
+            raise CmosnoiseError(f"--scheduler {scheduler!r}: {exc}") from None
+    n = workers or os.cpu_count() or 1
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address="127.0.0.1:0", env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+    client = Client(cluster)
+    say(f"Dask: a LocalCluster of {n} worker process(es); dashboard {client.dashboard_link}")
+    return client, cluster
+
+
+def _done_rows(path: Path, columns: list[str]) -> set[tuple[int, int]]:
+    if not path.exists():
+        return set()
+    with open(path, newline="") as fh:
+        reader = csv.reader(fh)
+        head = next(reader, None)
+        if head != columns:
+            raise CmosnoiseError(f"--resume: {str(path)!r} has other columns than this sweep's; it is a different sweep")
+        return {(int(r[0]), int(r[columns.index("instance")])) for r in reader if len(r) == len(columns)}
+
+
+def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable[[int, int], None] | None = None) -> Path:
+    """Run every (point, instance) not yet in ``out/results.csv`` on ``client``; rows are appended as tasks finish."""
+    from distributed import as_completed
+
+    results = out / "results.csv"
+    columns = p.columns()
+    done = _done_rows(results, columns) if resume else set()
+    todo = [(i, j) for i in range(len(p.points)) for j in range(p.instances) if (i, j) not in done]
+    total = len(p.points) * p.instances
+    if progress:
+        progress(len(done), total)
+    new = not results.exists() or not resume
+    fh = open(results, "w" if new else "a", newline="")
+    writer = csv.writer(fh)
+    if new:
+        writer.writerow(columns)
+        fh.flush()
+    try:
+        nworkers = max(1, len(client.scheduler_info().get("workers", {})) or 1)
+        window = BATCH_PER_WORKER * nworkers
+        seeds = {}
+
+        def submit(item):
+            i, j = item
+            seed = instance_seed(p.base.seed, j)
+            seeds[(i, j)] = seed
+            return client.submit(_task, p.configs[i], p.scene, p.frames, i, j, seed, pure=False, retries=2)
+
+        queue = iter(todo)
+        running = as_completed([submit(x) for x in itertools.islice(queue, window)])
+        finished = len(done)
+        for future in running:
+            rec = future.result()
+            future.release()
+            row = [rec["point"], *[_cell(p.points[rec["point"]][k]) for k in p.keys], rec["instance"], rec["seed"],
+                   *[_cell(rec[m]) for m in METRICS]]
+            if p.specs:
+                row.append(int(all(s.passes(rec) for s in p.specs)))
+            writer.writerow(row)
+            fh.flush()
+            finished += 1
+            if progress:
+                progress(finished, total)
+            nxt = next(queue, None)
+            if nxt is not None:
+                running.add(submit(nxt))
+    finally:
+        fh.close()
+    return results
+
+
+def _cell(v):
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
+    return v
+
+
+def summarize(p: Plan, out: Path):
+    """summary.csv, a plot per metric (percentile bands), the yield plot, and index.html, from results.csv."""
+    import pandas as pd
+
+    df = pd.read_csv(out / "results.csv").sort_values(["point", "instance"])
+    rows = []
+    for i, point in enumerate(p.points):
+        sub = df[df["point"] == i]
+        row = {"point": i, **point, "instances": len(sub)}
+        for m in METRICS:
+            v = sub[m].astype(float)
+            v = v[np.isfinite(v)]
+            if len(v):
+                row.update({f"{m}_mean": v.mean(), f"{m}_std": v.std(ddof=1) if len(v) > 1 else math.nan,
+                            f"{m}_p5": v.quantile(0.05), f"{m}_p50": v.quantile(0.5), f"{m}_p95": v.quantile(0.95)})
+        if p.specs:
+            k = int(sub["pass"].sum())
+            lo, hi = wilson(k, len(sub))
+            row.update({"yield": k / len(sub) if len(sub) else math.nan, "yield_lo": lo, "yield_hi": hi})
+        rows.append(row)
+    summary = pd.DataFrame(rows)
+    summary.to_csv(out / "summary.csv", index=False)
+    plots = _plots(p, summary, out)
+    _index(p, summary, plots, out)
+    return summary
+
+
+def _plots(p: Plan, summary, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not p.axes:
+        return []
+    x_axis = p.axes[0]
+    xkey = x_axis.keys[0]
+    others = p.axes[1:]
+    groups = list(itertools.product(*(a.values for a in others))) if others else [()]
+    names = []
+    metrics = [m for m in METRICS if f"{m}_mean" in summary] + (["yield"] if p.specs else [])
+    for m in metrics:
+        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+        for g in groups:
+            sel = np.ones(len(summary), bool)
+            label = []
+            for axis, vals in zip(others, g):
+                for key, val in zip(axis.keys, vals):
+                    sel &= (summary[key] == val).to_numpy()
+                label.append(", ".join(f"{key.split('.')[-1]}={val}" for key, val in zip(axis.keys, vals)))
+            s = summary[sel]
+            xs = s[xkey].to_numpy()
+            lab = "; ".join(label) or None
+            if m == "yield":
+                err = [np.clip(s["yield"] - s["yield_lo"], 0, None), np.clip(s["yield_hi"] - s["yield"], 0, None)]
+                ax.errorbar(xs, s["yield"], yerr=err, marker="o", capsize=3, label=lab)
+                ax.set_ylim(-0.02, 1.02)
+            else:
+                line, = ax.plot(xs, s[f"{m}_mean"], marker="o", label=lab)
+                ax.fill_between(xs, s[f"{m}_p5"], s[f"{m}_p95"], alpha=0.2, color=line.get_color())
+                if m == "couplets" and "couplets_expected_random_mean" in s:
+                    ax.plot(xs, s["couplets_expected_random_mean"], ls=":", color=line.get_color())
+        ax.set_xlabel(xkey)
+        ax.set_ylabel(m + (" (Wilson 95 % interval)" if m == "yield" else " (mean; band: 5th to 95th percentile)"))
+        title = f"{m} over {p.instances} instance(s) per point"
+        if m == "couplets":
+            title += "\n(dotted: expected at random)"
+        if m == "yield":
+            title = "yield: " + " and ".join(f"{s.metric} {s.op} {s.value:g}" for s in p.specs)
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+        if any(lab for lab in ax.get_legend_handles_labels()[1]):
+            ax.legend(fontsize=8)
+        fig.tight_layout()
+        name = f"{m}.png"
+        fig.savefig(out / name)
+        plt.close(fig)
+        names.append(name)
+    return names
+
+
+def _index(p: Plan, summary, plots: list[str], out: Path) -> None:
+    import html
+
+    varied = ", ".join(" & ".join(a.keys) for a in p.axes) or "nothing (one point)"
+    table = summary[[c for c in summary.columns if c in ("point", *p.keys, "instances", "yield", "yield_lo", "yield_hi")
+                     or c.endswith("_mean")]].to_html(index=False, float_format=lambda v: f"{v:.4g}", border=0)
+    imgs = "\n".join(f'<figure><img src="{html.escape(n)}" alt="{html.escape(n)}"></figure>' for n in plots)
+    (out / "index.html").write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>cmosnoise sweep</title>
+<style>body{{font:14px system-ui,sans-serif;margin:20px}}figure{{display:inline-block;margin:6px}}
+table{{border-collapse:collapse}}td,th{{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right}}</style></head><body>
+<h1>cmosnoise sweep</h1><p>Varied: {html.escape(varied)}; {p.instances} instance(s) per point; scene {html.escape(p.scene)}.
+Rows: results.csv; per point: summary.csv; the sweep itself: sweep.yaml.</p>
+{table}
+{imgs}
+</body></html>
+""")
+
+
+def run(base, vary: list[str], instances: int, out: str | Path | None = None, frames: int = 2, scene: str | None = None,
+        specs: list[str] | None = None, scheduler: str | None = None, workers: int | None = None, resume: bool = False,
+        overwrite: bool = False, progress=None, say: Callable[[str], None] = lambda m: None):
+    """The Python API: run a sweep and return ``results.csv`` as a pandas DataFrame (sorted by point and instance).
+
+    ``base`` is a Config (or anything :class:`~cmosnoise.Sensor` takes as a
+    configuration); ``vary`` holds ``--vary`` texts. Without ``out`` the
+    files go to a temporary folder that is removed afterwards.
+    """
+    import tempfile
+
+    import pandas as pd
+
+    from ..model.sensor import _as_config
+
+    base = _as_config(base)
+    p = plan(base, vary, instances, frames, scene, specs)
+    tmp = None
+    if out is None:
+        tmp = tempfile.TemporaryDirectory(prefix="cmosnoise-sweep-")
+        out = tmp.name
+    out = Path(out)
+    fresh = _prepare(out, p, resume, overwrite, create=False)  # every check before the cluster starts
+    client, cluster = connect(scheduler, workers, say)
+    try:
+        _prepare(out, p, resume, overwrite, create=True)
+        try:
+            execute(p, out, client, resume, progress)
+        except BaseException:
+            if fresh and not (out / "results.csv").exists():
+                import shutil
+
+                shutil.rmtree(out, ignore_errors=True)
+            raise
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    summarize(p, out)
+    df = pd.read_csv(out / "results.csv").sort_values(["point", "instance"]).reset_index(drop=True)
+    if tmp is not None:
+        tmp.cleanup()
+    return df
+
+
+def _prepare(out: Path, p: Plan, resume: bool, overwrite: bool, create: bool) -> bool:
+    """The output folder: new (or --overwrite), or the same sweep's folder with --resume (its sweep.yaml must match).
+
+    With ``create=False`` only checks; returns whether the folder is (to be) made new.
+    """
+    import shutil
+
+    import yaml
+
+    text = yaml.safe_dump(p.to_yaml_data(), sort_keys=False, default_flow_style=None, width=100)
+    if str(out).strip() in ("", ".") or out.resolve() == Path.cwd().resolve() or out.resolve() in Path.cwd().resolve().parents:
+        raise CmosnoiseError(f"--out {str(out)!r}: give a new folder's name; the current folder is never written into")
+    if out.exists() and not out.is_dir():
+        raise CmosnoiseError(f"--out {str(out)!r} is a file")
+    if out.is_dir() and any(out.iterdir()):
+        if resume:
+            old = (out / "sweep.yaml").read_text() if (out / "sweep.yaml").exists() else None
+            if old != text:
+                raise CmosnoiseError(f"--resume: {str(out)!r} holds another sweep (its sweep.yaml differs); "
+                                     "resume with the same options")
+            return False
+        if not overwrite:
+            raise CmosnoiseError(f"--out {str(out)!r} already exists and is not empty; give --resume to continue that "
+                                 "sweep, --overwrite to start again, or another folder")
+        if create:
+            shutil.rmtree(out)
+    anchor = out.resolve().parent
+    while not anchor.exists():
+        anchor = anchor.parent
+    if not os.access(anchor, os.W_OK) or not anchor.is_dir():
+        raise CmosnoiseError(f"--out {str(out)!r} cannot be written: no permission to create anything in {str(anchor)!r}")
+    if not create:
+        return True
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        tmpfile = out / ".sweep.yaml.tmp"
+        tmpfile.write_text(text)
+        os.replace(tmpfile, out / "sweep.yaml")
+    except OSError as exc:
+        raise CmosnoiseError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from None
+    return True
+
+
+def sweep_from_yaml(path: Path) -> dict:
+    """The options of a ``sweep.yaml`` (to rerun a sweep: ``cmosnoise sweep --from out/sweep.yaml``)."""
+    import yaml
+
+    data = yaml.safe_load(Path(path).read_text())
+    vary = []
+    for a in data.get("vary", []):
+        vals = ",".join("x".join(json.dumps(v) if isinstance(v, str) else repr(v) for v in step) for step in a["values"])
+        vary.append(f"{','.join(a['keys'])}={vals}")
+    return {"base": data["base"], "scene": data["scene"], "instances": data["instances"], "frames": data["frames"],
+            "vary": vary, "specs": data.get("spec", [])}
