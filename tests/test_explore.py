@@ -252,6 +252,7 @@ def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
     cfg = json.loads(urllib.request.urlopen(server + "api/meta").read())["base"]
     for payload, code, needle in [
         ({"config": cfg, "scene": "/etc/passwd"}, 400, "built-in"),
+        ({"config": cfg, "scene": "flatland"}, 400, "built-in"),
         ({"config": {**cfg, "prnu": {**cfg["prnu"], "sigma_pct": "abc"}}}, 422, "prnu.sigma_pct"),
         ({"config": cfg, "region": [0, 480, 0, 640], "step": 0}, 400, "step"),
         ({"config": {**cfg, "sensor": {**cfg["sensor"], "width": 30000, "height": 30000}}}, 422, "50 MP"),
@@ -265,6 +266,10 @@ def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
     assert _post(server + "api/render", json.dumps(newer).encode())[0] == 200
     status, body, _ = _post(server + "api/render", json.dumps({**newer, "seq": 9}).encode())
     assert status == 409
+    # every built-in scene the page offers is taken
+    for scene in ("flat:0.5", "steps:8", "ramp", "spot"):
+        status, body, _ = _post(server + "api/render", json.dumps({"config": cfg, "scene": scene, "step": 4}).encode())
+        assert status == 200, (scene, body[:200])
     # still serving
     assert urllib.request.urlopen(server + "api/meta", timeout=10).status == 200
 

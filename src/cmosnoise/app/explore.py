@@ -171,8 +171,7 @@ class Workbench:
             if item is None:
                 raise BadRequest(f"no uploaded scene {scene[7:]!r} (uploads last as long as the server)", 404)
             return str(item["path"])
-        name = scene.split(":", 1)[0]
-        if name not in scene_mod.BUILTINS:
+        if not scene_mod.is_builtin(scene):
             raise BadRequest(f"scene {scene!r}: use a built-in ({', '.join(scene_mod.BUILTINS)}) or upload an image")
         return scene
 

@@ -48,6 +48,8 @@ class Axis:
 
 
 def _scalar(text: str, where: str):
+    if re.fullmatch(r"\s*[-+]?\d+(:\d+)+\s*", text):  # YAML 1.1 would read 1:2 as 62 (base 60)
+        raise CmosnoiseError(f"{where}: {text.strip()!r}: a range is start:stop:count, e.g. 0.5:2.0:4")
     try:
         return load_yaml_text(text)
     except Exception:
@@ -259,7 +261,7 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
     scene = scene or base.scene.source
     from ..model import scene as scene_mod
 
-    if scene.split(":", 1)[0] not in scene_mod.BUILTINS and not Path(scene).is_file():
+    if not scene_mod.is_builtin(scene) and not Path(scene).is_file():
         raise CmosnoiseError(f"--scene {scene!r}: no such built-in or file")
     if Path(scene).is_file():
         scene = str(Path(scene).resolve())

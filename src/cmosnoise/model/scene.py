@@ -332,6 +332,13 @@ def crop_to_aspect(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ public
+def is_builtin(source: str) -> bool:
+    """Whether ``source`` names a built-in scene (``flat:0.5``, ``steps:8``, ``photo``, ...) rather than a file."""
+    low = str(source).strip().lower()
+    head = low.partition(":")[0]
+    return head in ("flat", "steps") or (low == head and low in ("photo", "ramp", "colorchecker", "zoneplate", "siemens", "spot"))
+
+
 def render(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
     """The scene ``source`` as linear RGB at the sensor's ``shape``, (rows, cols, 3), float64."""
     if not isinstance(source, str) or not source:

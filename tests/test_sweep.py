@@ -1,0 +1,148 @@
+"""`cmosnoise sweep` on Dask: real LocalClusters, and a separately started `dask scheduler` and `dask worker`.
+
+Every process a test starts is stopped by its id.
+"""
+
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import pytest
+from conftest import cli
+
+from cmosnoise import CmosnoiseError, load_config
+from cmosnoise.app import sweep as sw
+
+SMALL = ["--set", "sensor.width=64", "--set", "sensor.height=48", "--scene", "flat:0.3"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _sorted(path):
+    return pd.read_csv(path).sort_values(["point", "instance"]).reset_index(drop=True)
+
+
+def test_vary_grammar():
+    a = sw.parse_vary("sensor.temperature_c=25,45,65")
+    assert a.keys == ("sensor.temperature_c",) and a.values == ((25,), (45,), (65,))
+    b = sw.parse_vary("sensor.width,sensor.height=640x480,2592x1944")
+    assert b.keys == ("sensor.width", "sensor.height") and b.values == ((640, 480), (2592, 1944))
+    c = sw.parse_vary("prnu.sigma_pct=0.5:2.0:4")
+    assert c.values == ((0.5,), (1.0,), (1.5,), (2.0,))
+    assert len(sw.grid([a, b, c])) == 3 * 2 * 4
+    for bad, needle in [("prnu.sigma_pct", "KEY=VALUES"), ("prnu.sigma_pct=1:2:x", "start:stop:count"),
+                        ("sensor.width,sensor.height=640", "for 2 keys"), ("=1,2", "dotted"), ("a.b=1,,2", "empty")]:
+        with pytest.raises(CmosnoiseError, match=needle):
+            sw.parse_vary(bad)
+
+
+def test_wilson_interval_and_instance_seeds():
+    lo, hi = sw.wilson(8, 10)
+    assert lo == pytest.approx(0.4902, abs=1e-3) and hi == pytest.approx(0.9433, abs=1e-3)  # the textbook values
+    assert sw.wilson(0, 20)[0] == 0.0 and sw.wilson(20, 20)[1] == pytest.approx(1.0)
+    import numpy as np
+
+    s = [sw.instance_seed(7, i) for i in range(4)]
+    assert len(set(s)) == 4 and all(0 <= x < 2**63 for x in s)
+    assert s[2] == sw.instance_seed(7, 2) and s[0] != sw.instance_seed(8, 0)
+    state = np.random.SeedSequence(7, spawn_key=(3,)).generate_state(2, np.uint32)
+    assert s[3] == (int(state[0]) << 31) ^ int(state[1])
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--vary", "sensor.nonsense=1,2"], "unknown key"),
+    (["--vary", "prnu.sigma_pct=1,-3"], "prnu.sigma_pct"),
+    (["--vary", "prnu.sigma_pct=1:2"], "start:stop:count"),
+    (["--vary", "prnu.sigma_pct=1:2:0"], "count from 1"),
+    (["--vary", "prnu.sigma_pct=1,2", "--spec", "couplets<<3"], "METRIC OP NUMBER"),
+    (["--vary", "prnu.sigma_pct=1,2", "--spec", "nonsense<=3"], "unknown metric"),
+    (["--scheduler", "tcp://127.0.0.1:1"], "cannot connect"),
+])
+def test_bad_input_is_one_line_before_any_task(tmp_path, args, needle):
+    r = cli("sweep", *SMALL, "--instances", "2", *args, "--out", tmp_path / "s")
+    assert r.returncode == 2 and needle in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not (tmp_path / "s").exists()
+
+
+def test_results_do_not_depend_on_the_workers_or_the_cluster(tmp_path):
+    base = ["sweep", *SMALL, "--vary", "sensor.temperature_c=25,65", "--vary", "prnu.sigma_pct=0.5,2",
+            "--instances", "3", "--spec", "couplets<=0"]
+    assert cli(*base, "--workers", "1", "--out", tmp_path / "w1").returncode == 0
+    r = cli(*base, "--workers", "2", "--out", tmp_path / "w2")
+    assert r.returncode == 0, r.stderr
+    one, two = _sorted(tmp_path / "w1" / "results.csv"), _sorted(tmp_path / "w2" / "results.csv")
+    assert len(one) == 4 * 3
+    pd.testing.assert_frame_equal(one, two)
+    # a cluster made of a separately started scheduler and worker, on the loopback address
+    port = _free_port()
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    sched = subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address",
+                              "127.0.0.1:0", "--no-show"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    worker = None
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "the scheduler did not start"
+                time.sleep(0.2)
+        worker = subprocess.Popen(["dask", "worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1", "--nthreads", "1",
+                                   "--nworkers", "1", "--no-dashboard"], stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL, env=env)
+        r = cli(*base, "--scheduler", f"tcp://127.0.0.1:{port}", "--out", tmp_path / "sched")
+        assert r.returncode == 0, r.stderr
+        pd.testing.assert_frame_equal(one, _sorted(tmp_path / "sched" / "results.csv"))
+    finally:
+        for proc in (worker, sched):
+            if proc is not None:
+                os.kill(proc.pid, signal.SIGTERM)
+                try:
+                    proc.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    os.kill(proc.pid, signal.SIGKILL)
+                    proc.wait()
+    # the outputs: summary with yield intervals, a plot per metric, the index, sweep.yaml that reruns it
+    summary = pd.read_csv(tmp_path / "w1" / "summary.csv")
+    assert len(summary) == 4 and {"yield", "yield_lo", "yield_hi", "couplets_mean", "couplets_p95"} <= set(summary)
+    assert all(summary["yield_lo"] <= summary["yield"]) and all(summary["yield"] <= summary["yield_hi"])
+    names = {p.name for p in (tmp_path / "w1").iterdir()}
+    assert {"results.csv", "summary.csv", "sweep.yaml", "index.html", "yield.png", "couplets.png"} <= names
+    r = cli("sweep", "--from", tmp_path / "w1" / "sweep.yaml", "--workers", "1", "--out", tmp_path / "again")
+    assert r.returncode == 0, r.stderr
+    pd.testing.assert_frame_equal(one, _sorted(tmp_path / "again" / "results.csv"))
+
+
+def test_resume_finishes_an_interrupted_sweep_with_the_same_rows(tmp_path):
+    args = ["sweep", *SMALL, "--vary", "sensor.temperature_c=25,65", "--instances", "3", "--workers", "1"]
+    assert cli(*args, "--out", tmp_path / "full").returncode == 0
+    full = _sorted(tmp_path / "full" / "results.csv")
+    assert cli(*args, "--out", tmp_path / "part").returncode == 0
+    lines = (tmp_path / "part" / "results.csv").read_text().splitlines()
+    (tmp_path / "part" / "results.csv").write_text("\n".join(lines[:3]) + "\n")  # as if stopped after 2 rows
+    r = cli(*args, "--out", tmp_path / "part")
+    assert r.returncode == 2 and "--resume" in r.stderr  # not silently overwritten
+    r = cli(*args, "--resume", "--out", tmp_path / "part")
+    assert r.returncode == 0, r.stderr
+    pd.testing.assert_frame_equal(full, _sorted(tmp_path / "part" / "results.csv"))
+    r = cli(*args[:-4], "--instances", "4", "--workers", "1", "--resume", "--out", tmp_path / "part")
+    assert r.returncode == 2 and "another sweep" in r.stderr
+
+
+def test_python_api_returns_a_dataframe():
+    cfg = load_config(extra={"sensor": {"width": 64, "height": 48}})
+    df = sw.run(cfg, ["prnu.sigma_pct=1,2"], instances=2, scene="flat:0.5", workers=1)
+    assert list(df["point"]) == [0, 0, 1, 1] and list(df["instance"]) == [0, 1, 0, 1]
+    assert set(sw.METRICS) <= set(df.columns) and df["prnu.sigma_pct"].tolist() == [1, 1, 2, 2]
+    assert all(math.isfinite(v) for v in df["temporal_noise_e"])
