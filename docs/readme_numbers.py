@@ -9,8 +9,9 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
     python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
-``speed`` is measured by ``benchmarks/bench_chain.py --json docs/numbers/speed.json``
-(machine-dependent, never recomputed by tests). The tests check that every
+``speed``, ``explore`` and ``sweep_speed`` are measured by the scripts in ``benchmarks/``
+(``BENCHMARKS``; machine-dependent, never recomputed by tests); ``sweep_fig9`` is
+deterministic but takes minutes, so the tests check its stored data instead. The tests check that every
 README block is the rendering of its JSON, and recompute the deterministic
 sections (``tests/test_readme_numbers.py``), so the README cannot drift.
 """
@@ -241,6 +242,56 @@ def render_explore(d: dict) -> str:
     return "\n".join(lines)
 
 
+SWEEP_FIG9 = {"preset": "paper-fig9-vga", "instances": 12,
+              "vary": ["sensor.temperature_c=25,45,65", "sensor.width,sensor.height=640x480,2592x1944"],
+              "spec": ["couplets_after_correction<=0"]}
+
+
+def compute_sweep_fig9() -> dict:
+    """`cmosnoise sweep` of the Fig. 9 sensor at VGA and 5 MP over temperature: couplets against random placement,
+    and the yield of "no couplet left after dark calibration and the median corrector". Writes the plots to docs/img."""
+    import shutil
+    import tempfile
+
+    from cmosnoise import load_config
+    from cmosnoise.app import sweep as sw
+
+    d = SWEEP_FIG9
+    with tempfile.TemporaryDirectory() as tmp:
+        df = sw.run(load_config(preset=d["preset"]), d["vary"], d["instances"], Path(tmp) / "s", specs=d["spec"], workers=2)
+        for name, target in (("couplets.png", "sweep_couplets.png"), ("yield.png", "sweep_yield.png")):
+            shutil.copy(Path(tmp) / "s" / name, ROOT / "docs" / "img" / target)
+    points = []
+    for (w, t), g in df.groupby(["sensor.width", "sensor.temperature_c"], sort=True):
+        k, n = int(g["pass"].sum()), len(g)
+        lo, hi = sw.wilson(k, n)
+        points.append({"width": int(w), "temperature_c": float(t), "instances": n,
+                       "couplets_mean": float(g["couplets"].mean()), "couplets_std": float(g["couplets"].std(ddof=1)),
+                       "expected_mean": float(g["couplets_expected_random"].mean()),
+                       "after_correction_mean": float(g["couplets_after_correction"].mean()),
+                       "yield": k / n, "yield_lo": lo, "yield_hi": hi})
+    return {"command": "python docs/readme_numbers.py compute sweep_fig9", **d, "points": points}
+
+
+def render_sweep_fig9(d: dict) -> str:
+    lines = ["| sensor | temperature | couplets (mean +- se) | expected at random | left after correction | "
+             "yield, 95 % interval |", "|---|---|---|---|---|---|"]
+    for p in d["points"]:
+        size = "VGA" if p["width"] == 640 else "5 MP"
+        se = p["couplets_std"] / p["instances"] ** 0.5
+        lines.append(f"| {size} | {p['temperature_c']:g} C | {p['couplets_mean']:.1f} +- {se:.1f} | {p['expected_mean']:.1f} | "
+                     f"{p['after_correction_mean']:.2f} | {p['yield']:.2f} ({p['yield_lo']:.2f} to {p['yield_hi']:.2f}) |")
+    return "\n".join(lines)
+
+
+def render_sweep_speed(d: dict) -> str:
+    lines = [f"Measured with `{d['command']}` ({d['machine']}):", "",
+             "| how | instances / s | against the plain loop |", "|---|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| {r['label']} | {r['per_s']:.2f} | {r['per_s'] / d['rows'][0]['per_s']:.2f} |")
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -250,7 +301,15 @@ SECTIONS = {
     "dark_budget": (compute_dark_budget, render_dark_budget),
     "speed": (None, render_speed),
     "explore": (None, render_explore),
+    "sweep_fig9": (compute_sweep_fig9, render_sweep_fig9),
+    "sweep_speed": (None, render_sweep_speed),
 }
+
+#: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
+BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
+              "explore": ["bench_explore.py", "--repeats", "10", "--json", "explore.json", "--screenshot", "../img/explore.png"],
+              "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"]}
+SLOW = {"sweep_fig9"}
 
 
 # ---------------------------------------------------------------- plumbing
@@ -315,8 +374,9 @@ def main(argv: list[str]) -> int:
         for name in names or [n for n, (c, _) in SECTIONS.items() if c]:
             compute = SECTIONS[name][0]
             if compute is None:
-                subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_chain.py"),
-                                "--json", str(DATA / "speed.json")], check=True)
+                script, *rest = BENCHMARKS[name]
+                rest = [str(DATA / a) if a.endswith((".json", ".png")) else a for a in rest]
+                subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *rest], check=True)
             else:
                 save(name, compute())
             print(f"measured {name}")

@@ -43,7 +43,7 @@ _MODULES = {
     "process": "isp.process",
     "noise_budget": "analysis.noise_budget", "emva": "analysis.emva", "characterize": "analysis.characterize",
     "white_pixels": "analysis.white_pixels",
-    "plots": "app.plots",
+    "plots": "app.plots", "sweep": "app.sweep",
 }
 
 __all__ = ["CmosnoiseError", "__version__", *_NAMES, *_MODULES]
