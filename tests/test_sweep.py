@@ -8,6 +8,7 @@ import os
 import signal
 import socket
 import subprocess
+import sys
 import time
 
 import pandas as pd
@@ -65,6 +66,7 @@ def test_wilson_interval_and_instance_seeds():
     (["--vary", "prnu.sigma_pct=1,2", "--spec", "couplets<<3"], "METRIC OP NUMBER"),
     (["--vary", "prnu.sigma_pct=1,2", "--spec", "nonsense<=3"], "unknown metric"),
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot connect"),
+    (["--metric", "nonsense"], "--metric"),
 ])
 def test_bad_input_is_one_line_before_any_task(tmp_path, args, needle):
     r = cli("sweep", *SMALL, "--instances", "2", *args, "--out", tmp_path / "s")
@@ -145,3 +147,46 @@ def test_python_api_returns_a_dataframe():
     assert list(df["point"]) == [0, 0, 1, 1] and list(df["instance"]) == [0, 1, 0, 1]
     assert set(sw.METRICS) <= set(df.columns) and df["prnu.sigma_pct"].tolist() == [1, 1, 2, 2]
     assert all(math.isfinite(v) for v in df["temporal_noise_e"])
+
+
+def test_a_worker_that_dies_mid_sweep_changes_nothing(tmp_path):
+    """Two separately started workers; one is killed (SIGKILL) while tasks run: its tasks run again elsewhere."""
+    args = [*SMALL, "--vary", "prnu.sigma_pct=0.5,1,2", "--instances", "6"]
+    assert cli("sweep", *args, "--workers", "1", "--out", tmp_path / "ref").returncode == 0
+    port = _free_port()
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address",
+                               "127.0.0.1:0", "--no-show"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
+        for _ in range(2):  # --no-nanny: the worker is the process we kill, nothing restarts it
+            procs.append(subprocess.Popen(["dask", "worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1",
+                                           "--nthreads", "1", "--no-nanny", "--no-dashboard"],
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
+        sweep = subprocess.Popen([sys.executable, "-m", "cmosnoise", "sweep", *args, "--scheduler", f"tcp://127.0.0.1:{port}",
+                                  "--out", str(tmp_path / "killed")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        procs.append(sweep)
+        results = tmp_path / "killed" / "results.csv"
+        deadline = time.monotonic() + 120
+        while not (results.exists() and len(results.read_text().splitlines()) >= 4):  # a few rows written
+            assert sweep.poll() is None and time.monotonic() < deadline, sweep.stderr.read() if sweep.poll() else "slow"
+            time.sleep(0.05)
+        os.kill(procs[1].pid, signal.SIGKILL)
+        assert sweep.wait(timeout=300) == 0, sweep.stderr.read()
+    finally:
+        for proc in reversed(procs):
+            if proc.poll() is None:
+                os.kill(proc.pid, signal.SIGTERM)
+                try:
+                    proc.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    os.kill(proc.pid, signal.SIGKILL)
+                    proc.wait()
+    pd.testing.assert_frame_equal(_sorted(tmp_path / "ref" / "results.csv"), _sorted(results))

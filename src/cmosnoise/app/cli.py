@@ -326,6 +326,7 @@ def sweep(
     instances: int = typer.Option(20, "--instances", min=1, max=1_000_000, help="sensor instances (dies) per point"),
     frames: int = typer.Option(2, "--frames", min=1, max=100, help="frames per instance (2: temporal noise from their difference)"),
     spec: Optional[List[str]] = typer.Option(None, "--spec", help="pass/fail per instance, e.g. couplets_after_correction<=0 (repeatable: all must hold)"),
+    metric: Optional[List[str]] = typer.Option(None, "--metric", help="plot only these metrics (repeatable; every metric is in results.csv)"),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a LocalCluster here)"),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="LocalCluster worker processes (default: the core count)"),
     resume: bool = typer.Option(False, "--resume", help="continue the sweep in --out: skip the rows results.csv already holds"),
@@ -354,7 +355,7 @@ def sweep(
             bar.update(task, completed=done, total=total)
 
         df = sw.run(base, vary or [], instances, out, frames, scene, spec, scheduler, workers, resume, overwrite,
-                    progress=progress, say=lambda m: _say(ctx, m))
+                    progress=progress, say=lambda m: _say(ctx, m), metrics=metric)
     points = df["point"].nunique()
     msg = f"wrote {len(df)} row(s) ({points} point(s) x {instances} instance(s)) to {out}/results.csv, summary.csv, plots, index.html"
     if "pass" in df:

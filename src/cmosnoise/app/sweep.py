@@ -231,6 +231,7 @@ class Plan:
     frames: int
     scene: str
     specs: list[Spec]
+    plot_metrics: tuple[str, ...] = METRICS
 
     @property
     def keys(self) -> list[str]:
@@ -246,8 +247,11 @@ class Plan:
 
 
 def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | None = None,
-         specs: list[str] | None = None) -> Plan:
-    """Check everything a sweep needs before any task runs; returns the plan."""
+         specs: list[str] | None = None, metrics: list[str] | None = None) -> Plan:
+    """Check everything a sweep needs before any task runs; returns the plan (``metrics``: those to plot)."""
+    unknown = [m for m in metrics or [] if m not in METRICS]
+    if unknown:
+        raise CmosnoiseError(f"--metric {unknown[0]!r}: use one of {', '.join(METRICS)}")
     if not isinstance(instances, int) or not 1 <= instances <= 1_000_000:
         raise CmosnoiseError(f"--instances {instances!r}: give 1 to 1000000")
     if not isinstance(frames, int) or not 1 <= frames <= 100:
@@ -265,7 +269,8 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
         raise CmosnoiseError(f"--scene {scene!r}: no such built-in or file")
     if Path(scene).is_file():
         scene = str(Path(scene).resolve())
-    return Plan(base, axes, points, configs, instances, frames, scene, [parse_spec(s) for s in specs or []])
+    return Plan(base, axes, points, configs, instances, frames, scene, [parse_spec(s) for s in specs or []],
+                tuple(metrics) if metrics else METRICS)
 
 
 def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -407,7 +412,7 @@ def _plots(p: Plan, summary, out: Path) -> list[str]:
     others = p.axes[1:]
     groups = list(itertools.product(*(a.values for a in others))) if others else [()]
     names = []
-    metrics = [m for m in METRICS if f"{m}_mean" in summary] + (["yield"] if p.specs else [])
+    metrics = [m for m in p.plot_metrics if f"{m}_mean" in summary] + (["yield"] if p.specs else [])
     for m in metrics:
         fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
         for g in groups:
@@ -468,7 +473,8 @@ Rows: results.csv; per point: summary.csv; the sweep itself: sweep.yaml.</p>
 
 def run(base, vary: list[str], instances: int, out: str | Path | None = None, frames: int = 2, scene: str | None = None,
         specs: list[str] | None = None, scheduler: str | None = None, workers: int | None = None, resume: bool = False,
-        overwrite: bool = False, progress=None, say: Callable[[str], None] = lambda m: None):
+        overwrite: bool = False, progress=None, say: Callable[[str], None] = lambda m: None,
+        metrics: list[str] | None = None):
     """The Python API: run a sweep and return ``results.csv`` as a pandas DataFrame (sorted by point and instance).
 
     ``base`` is a Config (or anything :class:`~cmosnoise.Sensor` takes as a
@@ -482,7 +488,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     from ..model.sensor import _as_config
 
     base = _as_config(base)
-    p = plan(base, vary, instances, frames, scene, specs)
+    p = plan(base, vary, instances, frames, scene, specs, metrics)
     tmp = None
     if out is None:
         tmp = tempfile.TemporaryDirectory(prefix="cmosnoise-sweep-")
