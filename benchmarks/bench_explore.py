@@ -86,6 +86,8 @@ def main() -> None:
                         page.wait_for_timeout(2)
                     done = page.evaluate("performance.now()")
                     ms_server = float(page.inner_text("#statusA").split(",")[1].split("ms")[0])
+                    if os.environ.get("BENCH_VERBOSE"):
+                        print(label, value, round(done - t), page.evaluate("S.lastInfo && JSON.stringify(S.lastInfo.ms_parts)"))
                     settled()
                     if i:  # the first move of each case warms its caches
                         times.append(done - t)

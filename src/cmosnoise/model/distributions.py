@@ -56,21 +56,28 @@ def body(family: str, mean: float, std: float):
 _LOGIT_GRID = np.linspace(-30.0, 30.0, 8193)
 
 
-def tabulated_ppf(dist, q: np.ndarray) -> np.ndarray:
+def ppf_cells(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each ``q`` falls in the logit grid of :func:`tabulated_ppf`: (cell index, weight), the same for
+    every distribution, so several distributions at the same quantiles share one computation."""
+    # the grid is uniform in logit(q): find the cell by arithmetic, not search
+    t0, step = _LOGIT_GRID[0], _LOGIT_GRID[1] - _LOGIT_GRID[0]
+    pos = np.clip((special.logit(q) - t0) / step, 0.0, len(_LOGIT_GRID) - 1.0)
+    i = np.minimum(pos.astype(np.intp), len(_LOGIT_GRID) - 2)
+    return i, pos - i
+
+
+def tabulated_ppf(dist, q: np.ndarray, cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """``dist.ppf(q)`` for many ``q`` at once, fast and monotone in ``q``.
 
     The exact ppf is evaluated on 8193 quantiles evenly spaced in
     ``logit(q)`` (from 1e-13 to 1 - 1e-13) and interpolated linearly in
     logit space; relative error below 1e-6 for these families. Some scipy
     ppfs (the inverse Gaussian's) take seconds per million values.
+    ``cells`` is ``ppf_cells(q)`` when already known.
     """
     xg = getattr(dist, "_cmosnoise_ppf_table", None)
     if xg is None:
         xg = dist.ppf(special.expit(_LOGIT_GRID))
         dist._cmosnoise_ppf_table = xg  # the distribution is frozen: its table never changes
-    # the grid is uniform in logit(q): find the cell by arithmetic, not search
-    t0, step = _LOGIT_GRID[0], _LOGIT_GRID[1] - _LOGIT_GRID[0]
-    pos = np.clip((special.logit(q) - t0) / step, 0.0, len(_LOGIT_GRID) - 1.0)
-    i = np.minimum(pos.astype(np.intp), len(_LOGIT_GRID) - 2)
-    w = pos - i
+    i, w = cells if cells is not None else ppf_cells(q)
     return xg[i] * (1.0 - w) + xg[i + 1] * w

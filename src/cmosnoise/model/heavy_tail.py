@@ -117,15 +117,16 @@ class HeavyTail:
         """Expected parts per million above ``threshold``."""
         return float(self.sf(threshold)) * 1e6
 
-    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray) -> np.ndarray:
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None) -> np.ndarray:
         """Values from fixed uniform variates (one triple per pixel), float64.
 
         ``u_body`` is the pixel's body quantile, ``u_member < tail_fraction``
         puts it in the tail, ``u_tail`` is where in the tail. The same
         variates under other parameters give the same ranks in the body and
         nested tail sets (a larger fraction adds pixels, never removes them).
+        ``cells`` is ``distributions.ppf_cells(u_body)`` when already known.
         """
-        v = np.maximum(tabulated_ppf(self.body, u_body), 0.0)
+        v = np.maximum(tabulated_ppf(self.body, u_body, cells), 0.0)
         if self.tail_fraction > 0 and self.tail_max > 0:
             v += np.where(u_member < self.tail_fraction, u_tail * self.tail_max, 0.0)
         return v

@@ -242,8 +242,13 @@ function geometry() {
   return { region: [r0, r1, c0, c1], step, z };
 }
 
-const timers = {};
-function schedule(p) { clearTimeout(timers[p]); timers[p] = setTimeout(() => render(p), 15); }
+// changes made in one task (one event) are sent once: the render starts in a microtask, not after a timer
+const pending = {};
+function schedule(p) {
+  if (pending[p]) return;
+  pending[p] = true;
+  queueMicrotask(() => { pending[p] = false; render(p); });
+}
 function scheduleAll() { schedule("A"); schedule("B"); }
 
 const controllers = {};
@@ -273,6 +278,7 @@ async function render(p) {
     return;
   }
   const info = JSON.parse(resp.headers.get("X-Render") || "{}");
+  S.lastInfo = info;
   const bitmap = await toBitmap(new Uint8Array(await resp.arrayBuffer()), info.shape);
   if (seq !== S.seq[p]) return;
   S.images[p] = { bitmap, region: info.region, step: info.step, couplets: info.couplets || [] };

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..distributions import body as body_dist
-from ..distributions import tabulated_ppf
+from ..distributions import ppf_cells, tabulated_ppf
 from ..heavy_tail import HeavyTail, variates
 
 
@@ -109,8 +109,9 @@ class DarkState:
             if self.lo.tail_fraction > 0 and self.lo.tail_max > 0:
                 body += np.where(u_member < self.lo.tail_fraction, u_tail * self.lo.tail_max * self.tail_scale, 0.0)
             return body
-        r_lo = self.lo.values(u_body, u_member, u_tail)
-        r_hi = self.hi.values(u_body, u_member, u_tail)
+        cells = ppf_cells(u_body)  # the same quantiles under both points' bodies: located once
+        r_lo = self.lo.values(u_body, u_member, u_tail, cells)
+        r_hi = self.hi.values(u_body, u_member, u_tail, cells)
         r_lo = np.maximum(r_lo, RATE_FLOOR * float(self.lo.body.mean()))
         r_hi = np.maximum(r_hi, RATE_FLOOR * float(self.hi.body.mean()))
         return np.exp((1.0 - self.w) * np.log(r_lo) + self.w * np.log(r_hi))

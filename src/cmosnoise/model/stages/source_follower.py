@@ -12,6 +12,8 @@ the per-pixel noise is Gaussian in time, only its size varies over the array.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import stats
 
@@ -19,9 +21,14 @@ from ...engine.samplers import Stream
 from ..heavy_tail import HeavyTail, variates
 
 
+@functools.lru_cache(maxsize=64)
 def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float | None = None,
                   threshold_e: float | None = None, max_e: float = 0.0) -> HeavyTail:
-    """Distribution of the per-pixel flicker sigma over the array (e-)."""
+    """Distribution of the per-pixel flicker sigma over the array (e-).
+
+    Made once per process for each set of parameters (the tail solve integrates numerically; the result is
+    a frozen, read-only model).
+    """
     b = stats.gumbel_r(loc=gumbel_loc_e, scale=gumbel_scale_e)
     if ppm_above is None or threshold_e is None or max_e <= 0:
         return HeavyTail(b, 0.0, 0.0)
