@@ -87,7 +87,7 @@ def main() -> None:
                     done = page.evaluate("performance.now()")
                     ms_server = float(page.inner_text("#statusA").split(",")[1].split("ms")[0])
                     if os.environ.get("BENCH_VERBOSE"):
-                        print(label, value, round(done - t), page.evaluate("S.lastInfo && JSON.stringify(S.lastInfo.ms_parts)"))
+                        print(label, value, round(done - t), page.evaluate("S.lastInfo && JSON.stringify([S.lastInfo.ms, S.lastInfo.ms_handler, S.lastInfo.ms_parts])"))
                     settled()
                     if i:  # the first move of each case warms its caches
                         times.append(done - t)

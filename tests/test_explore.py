@@ -264,8 +264,8 @@ def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
     # a request made stale by a newer one of the same pane is dropped, not queued
     newer = {"config": cfg, "pane": "A", "client": "t", "seq": 10}
     assert _post(server + "api/render", json.dumps(newer).encode())[0] == 200
-    status, body, _ = _post(server + "api/render", json.dumps({**newer, "seq": 9}).encode())
-    assert status == 409
+    status, body, headers = _post(server + "api/render", json.dumps({**newer, "seq": 9}).encode())
+    assert status == 204 and body == b"" and "newer request" in {k.lower(): v for k, v in headers.items()}.get("x-dropped", "")
     # every built-in scene the page offers is taken
     for scene in ("flat:0.5", "steps:8", "ramp", "spot"):
         status, body, _ = _post(server + "api/render", json.dumps({"config": cfg, "scene": scene, "step": 4}).encode())

@@ -93,18 +93,21 @@ def test_switching_one_stage_off_leaves_every_other_stages_noise_unchanged():
     {"row_noise": {"fixed_sigma_e": 1.0}},
     {"seed": 9},
 ])
-def test_a_sensor_reusing_anothers_unchanged_maps_is_the_sensor_drawn_afresh(change):
-    """Sensor(config, reuse=other) (the explorer's path) keeps only maps whose inputs did not change."""
+@pytest.mark.parametrize("keep", [False, True])
+def test_a_sensor_reusing_anothers_unchanged_maps_is_the_sensor_drawn_afresh(change, keep):
+    """Sensor(config, reuse=other) (the explorer's path, which also keeps the dark map's draws) keeps only maps
+    whose inputs did not change, and redraws the others bit for bit."""
     from dataclasses import fields
 
     from cmosnoise import Sensor, load_config
 
     base = {"sensor": {"width": 64, "height": 48}}
-    first = Sensor(load_config(extra=base))
+    first = Sensor(load_config(extra=base), keep_draws=keep)
     cfg = load_config(extra={**base, **change} if "sensor" not in change
                       else {"sensor": {**base["sensor"], **change["sensor"]}})
-    reused, fresh = Sensor(cfg, reuse=first).fixed_pattern, Sensor(cfg).fixed_pattern
-    for f in fields(fresh):
+    reused, fresh = Sensor(cfg, reuse=first, keep_draws=keep).fixed_pattern, Sensor(cfg).fixed_pattern
+    assert (reused.dark_draws is not None) == keep
+    for f in [f for f in fields(fresh) if f.name != "dark_draws"]:
         a, b = getattr(reused, f.name), getattr(fresh, f.name)
         if isinstance(b, np.ndarray):
             assert np.array_equal(a, b), f.name

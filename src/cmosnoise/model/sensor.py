@@ -68,6 +68,9 @@ class FixedPattern:
     column_sigma: np.ndarray | None = None  #: per-column temporal sigma, e- rms, (1, cols)
     vfpn: np.ndarray | None = None  #: fixed column offsets, e-, (1, cols)
     column_gain: np.ndarray | None = None  #: fixed column gains, (1, cols)
+    #: the dark map's variates and quantile cells (dark_current.draws), kept only with Sensor(keep_draws=True):
+    #: interactive use redraws the map at another temperature from them (40 bytes per pixel)
+    dark_draws: tuple | None = None
 
 
 class Sensor:
@@ -82,7 +85,7 @@ class Sensor:
     """
 
     def __init__(self, config: Config | dict | str | Path | None = None, seed: int | None = None, *,
-                 fixed_pattern: FixedPattern | None = None, reuse: "Sensor | None" = None):
+                 fixed_pattern: FixedPattern | None = None, reuse: "Sensor | None" = None, keep_draws: bool = False):
         config = _as_config(config)
         if seed is not None:
             seed = _whole(seed, "seed")
@@ -93,6 +96,7 @@ class Sensor:
         self.config = config
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
+        self._keep_draws = keep_draws
         self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern(reuse)
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
@@ -256,10 +260,17 @@ class Sensor:
             dark_inputs = (lambda x: x.dark_current, lambda x: x.sensor.temperature_c, lambda x: x.sensor.pixel_pitch_um)
             if kept("dark_rate", *dark_inputs) is not None:
                 maps["dark_state"], maps["dark_rate"] = prev.dark_state, prev.dark_rate
+                if self._keep_draws:
+                    maps["dark_draws"] = prev.dark_draws or dark_current.draws(self.shape, fixed_rng(c.seed, "dark_current"))
             else:
                 state = dark_current.at_temperature(dark_points(c), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c)
                 maps["dark_state"] = state
-                maps["dark_rate"] = dark_current.rate_map(state, self.shape, fixed_rng(c.seed, "dark_current"))
+                draws = prev.dark_draws if prev is not None else None  # the same seed and size: the same draws
+                if draws is None and self._keep_draws:
+                    draws = dark_current.draws(self.shape, fixed_rng(c.seed, "dark_current"))
+                maps["dark_rate"] = dark_current.rate_map(state, self.shape, fixed_rng(c.seed, "dark_current"), draws)
+                if self._keep_draws:
+                    maps["dark_draws"] = draws
         rows, cols = self.shape
         sf = c.source_follower
         if sf.enabled and sf.flicker.enabled:

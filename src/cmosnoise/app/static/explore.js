@@ -269,7 +269,7 @@ async function render(p) {
   } catch (e) { if (seq === S.seq[p]) S.busy[p] = false; return; }
   if (seq !== S.seq[p]) return;                            // stale
   S.busy[p] = false;
-  if (resp.status === 409) return;
+  if (resp.status === 204) return;                        // dropped by the server: a newer request is on its way
   if (!resp.ok) {
     const j = await resp.json().catch(() => ({ error: resp.statusText, errors: {} }));
     $("status" + p).textContent = "invalid: " + j.error + " (the last valid picture stays)";
@@ -291,13 +291,9 @@ async function render(p) {
   figures(p);
 }
 
-async function toBitmap(px, shape) {    // raw 8-bit pixels (rows, cols[, 3]) to a bitmap
-  const [h, w] = shape, ch = shape.length > 2 ? shape[2] : 1;
-  const rgba = new Uint8ClampedArray(w * h * 4);
-  for (let i = 0, j = 0; i < w * h; i++, j += ch) {
-    rgba[4 * i] = px[j]; rgba[4 * i + 1] = px[j + (ch > 1 ? 1 : 0)]; rgba[4 * i + 2] = px[j + (ch > 1 ? 2 : 0)]; rgba[4 * i + 3] = 255;
-  }
-  return createImageBitmap(new ImageData(rgba, w, h));
+function toBitmap(px, shape) {          // the server's raw 8-bit RGBA (rows, cols, 4) to a bitmap, no copy
+  const [h, w] = shape;
+  return createImageBitmap(new ImageData(new Uint8ClampedArray(px.buffer, px.byteOffset, w * h * 4), w, h));
 }
 
 function drawImage(ctx, img, c) {

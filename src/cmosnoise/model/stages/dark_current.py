@@ -102,14 +102,14 @@ class DarkState:
             raise ValueError("between two characterization points the DCNU is a per-pixel interpolation, not one model")
         return HeavyTail(body_dist(self.family, self.mean, self.std), self.tail_fraction, self.tail_max)
 
-    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray) -> np.ndarray:
-        """Rates (e-/s, float64) of pixels with these fixed uniform variates."""
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None) -> np.ndarray:
+        """Rates (e-/s, float64) of pixels with these fixed uniform variates (``cells``: ``ppf_cells(u_body)`` if known)."""
         if not self.between:
-            body = np.maximum(tabulated_ppf(self.lo.body, u_body), 0.0) * self.body_scale
+            body = np.maximum(tabulated_ppf(self.lo.body, u_body, cells), 0.0) * self.body_scale
             if self.lo.tail_fraction > 0 and self.lo.tail_max > 0:
                 body += np.where(u_member < self.lo.tail_fraction, u_tail * self.lo.tail_max * self.tail_scale, 0.0)
             return body
-        cells = ppf_cells(u_body)  # the same quantiles under both points' bodies: located once
+        cells = cells if cells is not None else ppf_cells(u_body)  # both points' bodies at the same quantiles
         r_lo = self.lo.values(u_body, u_member, u_tail, cells)
         r_hi = self.hi.values(u_body, u_member, u_tail, cells)
         r_lo = np.maximum(r_lo, RATE_FLOOR * float(self.lo.body.mean()))
@@ -186,9 +186,25 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     )
 
 
-def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
-    """Fixed dark-current map at ``state``'s temperature, e-/s per pixel, float32 (>= 0)."""
-    return state.values(*variates(shape, rng)).astype(np.float32)
+def draws(shape: tuple[int, int], rng: np.random.Generator) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The map's fixed variates and where their body quantiles fall in the quantile tables: (u, cells).
+
+    They depend on the seed and the size only, not on the temperature or the
+    points: interactive use keeps them to redraw the map at another
+    temperature without drawing or locating them again.
+    """
+    u = variates(shape, rng)
+    return u, ppf_cells(u[0])
+
+
+def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator | None = None,
+             kept: tuple | None = None) -> np.ndarray:
+    """Fixed dark-current map at ``state``'s temperature, e-/s per pixel, float32 (>= 0).
+
+    ``kept`` is :func:`draws` of this sensor (then ``rng`` is not used): the same map, bit for bit.
+    """
+    u, cells = kept if kept is not None else (variates(shape, rng), None)
+    return state.values(*u, cells=cells).astype(np.float32)
 
 
 def cooling_fraction(points: list[Point], draw_variates) -> float:
