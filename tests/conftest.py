@@ -142,3 +142,43 @@ def browser_type_launch_args(browser_type_launch_args):
     path = shutil.which("chromium") or shutil.which("chromium-browser")
     assert path, "the browser tests need the system Chromium: apt-get install chromium (.ci/run does)"
     return {**browser_type_launch_args, "executable_path": path, "args": ["--no-sandbox"]}
+
+
+# ------------------------------------------------------------------ processes the tests start (stopped by their id)
+def free_port() -> int:
+    """A free TCP port on the loopback address."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for_port(port: int, proc=None, timeout_s: float = 60) -> None:
+    """Until something listens on 127.0.0.1:``port`` (fails early if ``proc`` exits)."""
+    import socket
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return
+        except OSError:
+            assert proc is None or proc.poll() is None, f"the process exited ({proc.returncode}) before listening"
+            assert time.monotonic() < deadline, f"nothing listens on port {port} after {timeout_s} s"
+            time.sleep(0.2)
+
+
+def stop_process(proc, timeout_s: float = 30) -> None:
+    """SIGTERM by its id, then SIGKILL if it does not end in time."""
+    import signal
+
+    if proc is None or proc.poll() is not None:
+        return
+    os.kill(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()

@@ -6,14 +6,13 @@ Every process a test starts is stopped by its id.
 import math
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
 
 import pandas as pd
 import pytest
-from conftest import cli
+from conftest import cli, free_port, stop_process, wait_for_port
 
 from cmosnoise import CmosnoiseError, load_config
 from cmosnoise.app import sweep as sw
@@ -21,10 +20,16 @@ from cmosnoise.app import sweep as sw
 SMALL = ["--set", "sensor.width=64", "--set", "sensor.height=48", "--scene", "flat:0.3"]
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def _dask(*args, env):
+    return subprocess.Popen(["dask", *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+
+
+def _scheduler(port, env):
+    """A `dask scheduler` on the loopback address, listening when this returns."""
+    proc = _dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address", "127.0.0.1:0",
+                 "--no-show", env=env)
+    wait_for_port(port, proc)
+    return proc
 
 
 def _sorted(path):
@@ -85,35 +90,18 @@ def test_results_do_not_depend_on_the_workers_or_the_cluster(tmp_path):
     assert len(one) == 4 * 3
     pd.testing.assert_frame_equal(one, two)
     # a cluster made of a separately started scheduler and worker, on the loopback address
-    port = _free_port()
+    port = free_port()
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    sched = subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address",
-                              "127.0.0.1:0", "--no-show"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
-    worker = None
+    procs = [_scheduler(port, env)]
     try:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                assert time.monotonic() < deadline, "the scheduler did not start"
-                time.sleep(0.2)
-        worker = subprocess.Popen(["dask", "worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1", "--nthreads", "1",
-                                   "--nworkers", "1", "--no-dashboard"], stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL, env=env)
+        procs.append(_dask("worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1", "--nthreads", "1",
+                           "--nworkers", "1", "--no-dashboard", env=env))
         r = cli(*base, "--scheduler", f"tcp://127.0.0.1:{port}", "--out", tmp_path / "sched")
         assert r.returncode == 0, r.stderr
         pd.testing.assert_frame_equal(one, _sorted(tmp_path / "sched" / "results.csv"))
     finally:
-        for proc in (worker, sched):
-            if proc is not None:
-                os.kill(proc.pid, signal.SIGTERM)
-                try:
-                    proc.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    os.kill(proc.pid, signal.SIGKILL)
-                    proc.wait()
+        for proc in reversed(procs):
+            stop_process(proc)
     # the outputs: summary with yield intervals, a plot per metric, the index, sweep.yaml that reruns it
     summary = pd.read_csv(tmp_path / "w1" / "summary.csv")
     assert len(summary) == 4 and {"yield", "yield_lo", "yield_hi", "couplets_mean", "couplets_p95"} <= set(summary)
@@ -153,23 +141,13 @@ def test_a_worker_that_dies_mid_sweep_changes_nothing(tmp_path):
     """Two separately started workers; one is killed (SIGKILL) while tasks run: its tasks run again elsewhere."""
     args = [*SMALL, "--vary", "prnu.sigma_pct=0.5,1,2", "--instances", "6"]
     assert cli("sweep", *args, "--workers", "1", "--out", tmp_path / "ref").returncode == 0
-    port = _free_port()
+    port = free_port()
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address",
-                               "127.0.0.1:0", "--no-show"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
+    procs = [_scheduler(port, env)]
     try:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                assert time.monotonic() < deadline
-                time.sleep(0.2)
         for _ in range(2):  # --no-nanny: the worker is the process we kill, nothing restarts it
-            procs.append(subprocess.Popen(["dask", "worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1",
-                                           "--nthreads", "1", "--no-nanny", "--no-dashboard"],
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
+            procs.append(_dask("worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1", "--nthreads", "1",
+                               "--no-nanny", "--no-dashboard", env=env))
         sweep = subprocess.Popen([sys.executable, "-m", "cmosnoise", "sweep", *args, "--scheduler", f"tcp://127.0.0.1:{port}",
                                   "--out", str(tmp_path / "killed")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         procs.append(sweep)
@@ -182,11 +160,5 @@ def test_a_worker_that_dies_mid_sweep_changes_nothing(tmp_path):
         assert sweep.wait(timeout=300) == 0, sweep.stderr.read()
     finally:
         for proc in reversed(procs):
-            if proc.poll() is None:
-                os.kill(proc.pid, signal.SIGTERM)
-                try:
-                    proc.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    os.kill(proc.pid, signal.SIGKILL)
-                    proc.wait()
+            stop_process(proc)
     pd.testing.assert_frame_equal(_sorted(tmp_path / "ref" / "results.csv"), _sorted(results))
