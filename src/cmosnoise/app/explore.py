@@ -185,16 +185,12 @@ class Workbench:
         uid = secrets.token_hex(8)
         path = self.folder / f"upload-{uid}{suffix}"
         path.write_bytes(data)
-        old = scene_mod.MAX_SCENE_PIXELS
-        try:
-            scene_mod.MAX_SCENE_PIXELS = min(old, MAX_UPLOAD_PIXELS)
-            scene_mod.load_file(path)  # refuses bombs from the header, then decodes once to check
+        try:  # refuses bombs from the header, then decodes once to check
+            scene_mod.load_file(path, max_pixels=min(scene_mod.MAX_SCENE_PIXELS, MAX_UPLOAD_PIXELS))
         except CmosnoiseError as exc:
             path.unlink(missing_ok=True)
             msg = str(exc).replace(str(path), filename or "upload")
             raise BadRequest(msg, 413 if "megapixels" in msg else 400) from None
-        finally:
-            scene_mod.MAX_SCENE_PIXELS = old
         self.uploads[uid] = {"path": path, "name": Path(filename or "image").name}
         return {"id": uid, "scene": f"upload:{uid}", "name": self.uploads[uid]["name"]}
 

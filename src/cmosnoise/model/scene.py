@@ -225,8 +225,8 @@ def _stored_size(p: Path, suffix: str) -> tuple[int, int]:
     return shape[-2], shape[-1]
 
 
-def load_file(path: str | Path, scale: float | None = None) -> np.ndarray:
-    """Read an image file as linear RGB in [0, 1] (see module docstring)."""
+def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MAX_SCENE_PIXELS) -> np.ndarray:
+    """Read an image file as linear RGB in [0, 1] (see module docstring); larger than ``max_pixels``: refused unread."""
     p = Path(path)
     name = str(path)
     if not p.exists():
@@ -246,8 +246,8 @@ def load_file(path: str | Path, scale: float | None = None) -> np.ndarray:
     except Exception as exc:
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {first}") from None
-    if rows * cols > MAX_SCENE_PIXELS:
-        raise CmosnoiseError(f"scene {name!r} is {cols} x {rows} pixels; at most {MAX_SCENE_PIXELS / 1e6:g} megapixels "
+    if rows * cols > max_pixels:
+        raise CmosnoiseError(f"scene {name!r} is {cols} x {rows} pixels; at most {max_pixels / 1e6:g} megapixels "
                              "are decoded (a scene is resampled to the sensor anyway: scale it down first)")
     try:
         if suffix == ".npy":

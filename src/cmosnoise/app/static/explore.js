@@ -272,6 +272,7 @@ async function render(p) {
   if (resp.status === 204) return;                        // dropped by the server: a newer request is on its way
   if (!resp.ok) {
     const j = await resp.json().catch(() => ({ error: resp.statusText, errors: {} }));
+    if (seq !== S.seq[p]) return;
     $("status" + p).textContent = "invalid: " + j.error + " (the last valid picture stays)";
     $("status" + p).classList.add("bad");
     showErrors(Object.keys(j.errors || {}).length ? j.errors : { config: j.error }, p);
@@ -279,7 +280,13 @@ async function render(p) {
   }
   const info = JSON.parse(resp.headers.get("X-Render") || "{}");
   S.lastInfo = info;
-  const bitmap = await toBitmap(new Uint8Array(await resp.arrayBuffer()), info.shape);
+  let bitmap;
+  try {
+    bitmap = await toBitmap(new Uint8Array(await resp.arrayBuffer()), info.shape);
+  } catch (e) {                                            // aborted while the body arrived: a newer request took over
+    if (e.name === "AbortError" || seq !== S.seq[p]) return;
+    throw e;
+  }
   if (seq !== S.seq[p]) return;
   S.images[p] = { bitmap, region: info.region, step: info.step, couplets: info.couplets || [] };
   S.shown[p] = seq;
