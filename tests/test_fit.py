@@ -81,3 +81,46 @@ def test_rate_map_from_dark_stacks_is_unbiased_with_the_predicted_noise():
     assert abs(np.var(err) - predicted) <= Z * se, (np.var(err), predicted, se)
     with pytest.raises(Exception, match="two or more distinct"):
         fit.rate_map_from_stacks(means[:1], times[:1], k)
+
+
+def test_fit_command_round_trip_from_an_emva_data_set(tmp_path):
+    """Frames of simulated sensors, exported as EMVA 1288 data sets and fitted back (5 seeds): each 95 % interval
+    holds the configured K, black level, dark mean and std in at least 4 of the 5 (P(3 or fewer) = 2 % for a true
+    95 % interval); the family is the configured one every time; simulate runs the fitted configuration."""
+    import json
+
+    import yaml
+    from conftest import cli
+
+    size = ["--set", "sensor.width=192", "--set", "sensor.height=144", "--set", "sensor.cfa=none"]
+    truth = load_config()
+    k = Sensor(load_config(extra={"sensor": {"cfa": "none"}})).transfer.gain_dn_per_e
+    expected = {"system_gain_K_dn_per_e": k, "black_level_dn": truth.adc.black_level_dn,
+                "dark_current.mean_e_per_s": 8.0, "dark_current.std_e_per_s": 2.5}
+    covered = {name: 0 for name in expected}
+    for seed in range(1, 6):
+        r = cli("-q", "characterize", *size, "--seed", str(seed), "--out", tmp_path / f"c{seed}",
+                "--emva-export", tmp_path / f"emva{seed}")
+        assert r.returncode == 0, r.stderr
+        r = cli("fit", "--frames-from", tmp_path / f"emva{seed}", "--temperature", "25", "--cfa", "none",
+                "--out", tmp_path / f"f{seed}")
+        assert r.returncode == 0, r.stderr
+        assert "not fitted" in r.stdout + r.stderr  # what the data cannot give is said, never silently kept
+        p = json.loads((tmp_path / f"f{seed}" / "fit.json").read_text())["parameters"]
+        # what a dark frame's mean holds at zero exposure: the black level plus the mean fixed offsets (VFPN, rows)
+        fp = Sensor(load_config(extra={"sensor": {"width": 192, "height": 144, "cfa": "none"}}), seed=seed).fixed_pattern
+        offsets = sum(float(np.mean(m)) for m in (fp.vfpn, fp.row_offset) if m is not None)
+        expected["black_level_dn"] = truth.adc.black_level_dn + k * offsets
+        for name, value in expected.items():
+            lo, hi = p[name]["ci95"]
+            covered[name] += lo <= value <= hi
+        assert p["dark_current.family"]["value"] == "logistic"
+        assert p["full_well_e"]["value"] == pytest.approx(truth.sensor.full_well_e, rel=0.01)
+    assert all(n >= 4 for n in covered.values()), covered
+    cfg = yaml.safe_load((tmp_path / "f1" / "config.yaml").read_text())
+    assert cfg["dark_current"]["points"][0]["distribution"] == "logistic" and cfg["sensor"]["width"] == 192
+    r = cli("simulate", "--config", tmp_path / "f1" / "config.yaml", "--out", tmp_path / "s")
+    assert r.returncode == 0, r.stderr
+    (tmp_path / "bad.txt").write_text("not a descriptor\n")
+    r = cli("fit", "--frames-from", tmp_path / "bad.txt", "--out", tmp_path / "g")
+    assert r.returncode == 2 and "Traceback" not in r.stderr and not (tmp_path / "g").exists()

@@ -371,6 +371,42 @@ def _build_checked(data: dict):
 
 
 @app.command()
+def fit(
+    ctx: typer.Context,
+    frames_from: Path = typer.Option(..., "--frames-from", help="an EMVA 1288 descriptor (file or folder) and its images"),
+    temperature: float = typer.Option(25.0, "--temperature", min=-60, max=150, help="the sensor's temperature during the measurement, C"),
+    threshold: Optional[float] = typer.Option(None, "--threshold-e-per-s", min=0, help="white-pixel threshold (default: 8 robust sigma above the median rate)"),
+    config: Optional[Path] = ConfigOpt,
+    preset: Optional[str] = PresetOpt,
+    cfa: Optional[str] = typer.Option(None, "--cfa", help="CFA of the frames (default: the base configuration's)"),
+    out: Path = typer.Option(Path("cmosnoise-fit"), "--out", "-o", help="output folder"),
+    overwrite: bool = OverwriteOpt,
+):
+    """Fit a sensor model to measured frames (so far: ADC, photon transfer and dark current from an EMVA 1288 data set)."""
+    from ..analysis import characterize as ch
+    from ..analysis import fit as fitting
+    from ..io.output import OutputFolder, write_json
+
+    base = load_config(config, preset, None, extra={"sensor": {"cfa": cfa}} if cfa else None)
+    folder = OutputFolder(out, overwrite)
+    m = ch.load(frames_from, keep_dark_means=True)
+    result = fitting.from_emva(m, temperature, threshold)
+    cfg = fitting.fitted_config(base, result, m.bits, m.shape)
+    with folder as tmp:
+        (tmp / "config.yaml").write_text(cfg.to_yaml())
+        write_json(tmp / "fit.json", {k: v for k, v in result.items()} | {"source": str(frames_from)})
+    for name, p in result["parameters"].items():
+        if name.startswith("_"):
+            continue
+        ci = f" (95 % CI {p['ci95'][0]:.4g} to {p['ci95'][1]:.4g})" if p["ci95"] else ""
+        value = f"{p['value']:.5g}" if isinstance(p["value"], float) else p["value"]
+        _say(ctx, f"{name} = {value}{ci}: {p['method']}")
+    for name, why in result["not_fitted"].items():
+        _say(ctx, f"not fitted, kept from the base configuration: {name}: {why}")
+    _say(ctx, f"wrote config.yaml and fit.json to {out}/")
+
+
+@app.command()
 def presets():
     """List the presets, one line each."""
     for name in preset_names():
