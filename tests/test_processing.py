@@ -8,7 +8,7 @@ import tifffile
 from cmosnoise import CmosnoiseError, Sensor, calibration, load_config, noise_budget, scene, white_pixels
 from cmosnoise.config import ProcessingSection
 from cmosnoise.io.dng import write_dng
-from cmosnoise.isp.process import Processor, validate_raw
+from cmosnoise.isp.process import Processor
 
 from conftest import assert_close, quiet_config, temporal_variance_se, cli
 
@@ -216,11 +216,21 @@ def test_process_bad_input_is_one_clear_line(tmp_path, case, needle):
     assert not (tmp_path / "out").exists()
 
 
-def test_validate_raw_accepts_2d_and_3d_codes():
-    assert validate_raw(np.zeros((4, 6), np.uint16), "x").shape == (1, 4, 6)
-    assert validate_raw(np.zeros((3, 4, 6), np.uint8), "x").dtype == np.uint16
-    with pytest.raises(CmosnoiseError):
-        validate_raw(np.zeros((4, 6, 3), np.float64), "x")
+def test_raw_reader_takes_2d_and_3d_codes_and_refuses_other_data(tmp_path):
+    import tifffile
+
+    from cmosnoise.io.raw_tiff import RawTiffReader
+
+    tifffile.imwrite(tmp_path / "one.tif", np.zeros((4, 6), np.uint16))
+    tifffile.imwrite(tmp_path / "three.tif", np.arange(72, dtype=np.uint8).reshape(3, 4, 6), photometric="minisblack")
+    tifffile.imwrite(tmp_path / "float.tif", np.zeros((5, 4, 6), np.float64))
+    with RawTiffReader(tmp_path / "one.tif") as r:
+        assert len(r) == 1 and r.shape == (4, 6)
+    with RawTiffReader(tmp_path / "three.tif") as r:
+        frames = list(r)
+        assert len(frames) == 3 and frames[2].dtype == np.uint16 and frames[2][0, 0] == 48
+    with pytest.raises(CmosnoiseError, match="not raw data"):
+        RawTiffReader(tmp_path / "float.tif")
 
 
 @pytest.mark.parametrize("method", ["bilinear", "malvar2004", "menon2007"])

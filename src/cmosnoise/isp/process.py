@@ -126,20 +126,6 @@ class Processor:
 
 
 # ------------------------------------------------------------------ reading
-def validate_raw(data: np.ndarray, name: str) -> np.ndarray:
-    """Raw frames as (frames, rows, cols) uint16, or a clear error."""
-    if data.dtype not in (np.uint8, np.uint16):
-        raise CmosnoiseError(f"raw file {name!r}: pixel type {data.dtype} is not raw data; expected uint8 or uint16 codes")
-    if data.ndim == 2:
-        data = data[None]
-    if data.ndim != 3 or data.shape[1] < 2 or data.shape[2] < 2:
-        raise CmosnoiseError(
-            f"raw file {name!r}: shape {data.shape} is not raw frames; expected (rows, cols) or (frames, rows, cols) "
-            "with one CFA sample per pixel"
-        )
-    return data.astype(np.uint16, copy=False)
-
-
 def read_dark(path) -> np.ndarray:
     """A master dark from a file: the mean of a dark-frame stack, or an already averaged frame."""
     from ..io.raw_tiff import read_raw_tiff
