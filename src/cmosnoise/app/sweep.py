@@ -335,13 +335,11 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
     try:
         nworkers = max(1, len(client.scheduler_info().get("workers", {})) or 1)
         window = BATCH_PER_WORKER * nworkers
-        seeds = {}
 
         def submit(item):
             i, j = item
-            seed = instance_seed(p.base.seed, j)
-            seeds[(i, j)] = seed
-            return client.submit(_task, p.configs[i], p.scene, p.frames, i, j, seed, pure=False, retries=2)
+            return client.submit(_task, p.configs[i], p.scene, p.frames, i, j, instance_seed(p.base.seed, j),
+                                 pure=False, retries=2)
 
         queue = iter(todo)
         running = as_completed([submit(x) for x in itertools.islice(queue, window)])
