@@ -342,7 +342,7 @@ def sweep(
             opts = sw.sweep_from_yaml(from_)
         except (OSError, KeyError, TypeError, ValueError) as exc:
             raise CmosnoiseError(f"--from {str(from_)!r} is not a sweep.yaml: {exc}") from None
-        base = _build_checked(opts["base"])
+        base = load_config(extra=opts["base"])  # a full configuration, merged over the defaults and checked
         vary, instances, frames, scene, spec = opts["vary"], opts["instances"], opts["frames"], opts["scene"], opts["specs"]
     else:
         base = load_config(config, preset, set_)
@@ -361,13 +361,6 @@ def sweep(
     if "pass" in df:
         msg += f"; overall yield {df['pass'].mean():.3f}"
     _say(ctx, msg)
-
-
-def _build_checked(data: dict):
-    from ..config.loading import build_config
-    from ..model.physics import check
-
-    return check(build_config(data))
 
 
 @app.command()

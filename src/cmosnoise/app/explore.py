@@ -84,15 +84,19 @@ def validate(data) -> Config:
     from ..config.loading import build_config
 
     try:
-        Config.model_validate(data)
-    except ValidationError as exc:
-        errors = {}
-        for e in exc.errors():
-            key = ".".join(str(p) for p in e.get("loc", ()))
-            errors.setdefault(key or "config", e.get("msg", "invalid").removeprefix("Value error, "))
-        raise BadRequest(format_validation_error(exc), 422, errors) from None
+        cfg = build_config(data)
+    except CmosnoiseError as exc:
+        try:  # only on the error path: pydantic's own errors, to show each next to its field
+            Config.model_validate(data)
+        except ValidationError as verr:
+            errors = {}
+            for e in verr.errors():
+                key = ".".join(str(p) for p in e.get("loc", ()))
+                errors.setdefault(key or "config", e.get("msg", "invalid").removeprefix("Value error, "))
+            raise BadRequest(format_validation_error(verr), 422, errors) from None
+        raise BadRequest(str(exc), 422, {"config": str(exc)}) from None
     try:
-        cfg = physics.check(build_config(data))
+        cfg = physics.check(cfg)
     except CmosnoiseError as exc:
         raise BadRequest(str(exc), 422, {"config": str(exc)}) from None
     if cfg.sensor.width * cfg.sensor.height > MAX_SENSOR_PIXELS:

@@ -524,11 +524,12 @@ def _prepare(out: Path, p: Plan, resume: bool, overwrite: bool, create: bool) ->
 
     import yaml
 
+    from ..io.output import OutputFolder
+
     text = yaml.safe_dump(p.to_yaml_data(), sort_keys=False, default_flow_style=None, width=100)
-    if str(out).strip() in ("", ".") or out.resolve() == Path.cwd().resolve() or out.resolve() in Path.cwd().resolve().parents:
-        raise CmosnoiseError(f"--out {str(out)!r}: give a new folder's name; the current folder is never written into")
-    if out.exists() and not out.is_dir():
-        raise CmosnoiseError(f"--out {str(out)!r} is a file")
+    # the output folder's own checks (not the current folder, not a file, a writable place); it creates nothing.
+    # A sweep writes into the folder as it goes (rows appended, --resume), so not through a temporary one.
+    OutputFolder(out, overwrite=True)
     if out.is_dir() and any(out.iterdir()):
         if resume:
             old = (out / "sweep.yaml").read_text() if (out / "sweep.yaml").exists() else None
@@ -541,11 +542,6 @@ def _prepare(out: Path, p: Plan, resume: bool, overwrite: bool, create: bool) ->
                                  "sweep, --overwrite to start again, or another folder")
         if create:
             shutil.rmtree(out)
-    anchor = out.resolve().parent
-    while not anchor.exists():
-        anchor = anchor.parent
-    if not os.access(anchor, os.W_OK) or not anchor.is_dir():
-        raise CmosnoiseError(f"--out {str(out)!r} cannot be written: no permission to create anything in {str(anchor)!r}")
     if not create:
         return True
     try:

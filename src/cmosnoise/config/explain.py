@@ -106,9 +106,11 @@ def fields(model: type[BaseModel] = Config, prefix: str = "") -> list[dict[str, 
                 kind = "number"
             elif base is str:
                 kind = "text"
-            for m in info.metadata:
-                lo = getattr(m, "ge", None) if getattr(m, "ge", None) is not None else (getattr(m, "gt", None) if lo is None else lo)
-                hi = getattr(m, "le", None) if getattr(m, "le", None) is not None else (getattr(m, "lt", None) if hi is None else hi)
+            for m in info.metadata:  # a bound is inclusive (ge, le) or not (gt, lt): either way, the slider's end
+                for attr in ("ge", "gt"):
+                    lo = getattr(m, attr, None) if getattr(m, attr, None) is not None else lo
+                for attr in ("le", "lt"):
+                    hi = getattr(m, attr, None) if getattr(m, attr, None) is not None else hi
         out.append({**r, "kind": kind, "choices": choices, "min": lo, "max": hi,
                     "nullable": info is not None and not info.is_required() and info.get_default() is None})
     return out
