@@ -47,7 +47,7 @@ from ..isp.process import Processor
 from ..model import physics
 from ..model import scene as scene_mod
 from ..model.seeds import SEQ_DARK_CALIBRATION
-from ..model.sensor import Exposure, Sensor
+from ..model.sensor import Exposure, Sensor, fixed_pattern_inputs
 
 #: limits: request bodies, uploads, decoded upload size, sensor size, picture sent per request
 MAX_BODY = 1_000_000
@@ -110,13 +110,17 @@ def _key(obj) -> str:
 
 
 def fixed_key(cfg: Config) -> str:
-    """What draws the fixed pattern (Sensor._draw_fixed_pattern reads these and nothing else)."""
-    d = cfg.model_dump(mode="json")
-    return _key({"seed": d["seed"], "size": [d["sensor"]["width"], d["sensor"]["height"]],
-                 "temperature": d["sensor"]["temperature_c"], "pitch": d["sensor"]["pixel_pitch_um"],
-                 "prnu": d["prnu"], "dark": d["dark_current"],
-                 "sf": [d["source_follower"]["enabled"], d["source_follower"]["flicker"]],
-                 "row": [d["row_noise"]["enabled"], d["row_noise"]["fixed_sigma_e"]], "col": d["column_noise"]})
+    """What draws the fixed pattern: the seed, the size and each map's inputs (sensor.fixed_pattern_inputs)."""
+    inputs = {name: _dump(v) for name, v in fixed_pattern_inputs(cfg).items()}
+    return _key({"seed": cfg.seed, "size": [cfg.sensor.width, cfg.sensor.height], **inputs})
+
+
+def _dump(value):
+    if hasattr(value, "model_dump"):
+        return value.model_dump(mode="json")
+    if isinstance(value, tuple):
+        return [_dump(v) for v in value]
+    return value
 
 
 def exposure_key(cfg: Config, scene: str) -> str:

@@ -244,21 +244,22 @@ class Sensor:
         old = reuse.config if reuse is not None and reuse.shape == self.shape and reuse.config.seed == c.seed else None
         prev = reuse.fixed_pattern if old is not None else None
 
-        def kept(name, *parts):
-            """The previous sensor's map ``name`` when every input part is unchanged, else None."""
-            if prev is None or getattr(prev, name) is None or any(part(old) != part(c) for part in parts):
+        inputs, old_inputs = fixed_pattern_inputs(c), (fixed_pattern_inputs(old) if old is not None else None)
+
+        def kept(name):
+            """The previous sensor's map ``name`` when its inputs are unchanged, else None."""
+            if prev is None or getattr(prev, name) is None or old_inputs[name] != inputs[name]:
                 return None
             return getattr(prev, name)
 
         maps: dict = {}
         if c.prnu.enabled:
-            maps["prnu_gain"] = kept("prnu_gain", lambda x: x.prnu)
+            maps["prnu_gain"] = kept("prnu_gain")
             if maps["prnu_gain"] is None:
                 maps["prnu_gain"] = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
         if c.dark_current.enabled:
             d = c.dark_current
-            dark_inputs = (lambda x: x.dark_current, lambda x: x.sensor.temperature_c, lambda x: x.sensor.pixel_pitch_um)
-            if kept("dark_rate", *dark_inputs) is not None:
+            if kept("dark_rate") is not None:
                 maps["dark_state"], maps["dark_rate"] = prev.dark_state, prev.dark_rate
                 if self._keep_draws:
                     maps["dark_draws"] = prev.dark_draws or dark_current.draws(self.shape, fixed_rng(c.seed, "dark_current"))
@@ -274,7 +275,7 @@ class Sensor:
         rows, cols = self.shape
         sf = c.source_follower
         if sf.enabled and sf.flicker.enabled:
-            maps["flicker_sigma"] = kept("flicker_sigma", lambda x: x.source_follower.flicker)
+            maps["flicker_sigma"] = kept("flicker_sigma")
             if maps["flicker_sigma"] is None:
                 maps["flicker_sigma"] = source_follower.flicker_sigma_map(
                     flicker_model(c), self.shape, fixed_rng(c.seed, "source_follower")
@@ -545,6 +546,20 @@ class Exposure:
         """(raw, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
         for k in range(first, first + n):
             yield self._render(k)
+
+
+def fixed_pattern_inputs(c: Config) -> dict:
+    """What draws each fixed-pattern map, besides the seed and the size: map name -> the configuration's parts.
+
+    The one place that knows it: :meth:`Sensor._draw_fixed_pattern` reuses a
+    map whose inputs are unchanged, and the explorer keys its sensors by them.
+    """
+    sf, rn = c.source_follower, c.row_noise
+    return {"prnu_gain": c.prnu,
+            "dark_rate": (c.dark_current, c.sensor.temperature_c, c.sensor.pixel_pitch_um),
+            "flicker_sigma": (sf.enabled, sf.flicker),
+            "row_offset": (rn.enabled, rn.fixed_sigma_e),
+            "column": c.column_noise}
 
 
 def _as_config(config) -> Config:
