@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..io.stacks import DESCRIPTOR  # the file name export writes and load reads
 from ..model.stages import adc
 from ..model.seeds import SEQ_EMVA_BRIGHT, SEQ_EMVA_DARK, SEQ_EMVA_STACK_BRIGHT, SEQ_EMVA_STACK_DARK
 from . import emva, noise_budget
@@ -393,7 +394,6 @@ def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
 
 
 # ------------------------------------------------------------------ descriptor files
-DESCRIPTOR = "EMVA1288_descriptor.txt"
 
 
 def export(m: Measurement, folder: Path) -> Path:
@@ -430,45 +430,9 @@ def load(descriptor: Path, keep_dark_means: bool = False) -> Measurement:
     """
     import tifffile
 
-    descriptor = Path(descriptor)
-    if descriptor.is_dir():
-        descriptor = descriptor / DESCRIPTOR
-    try:
-        if descriptor.stat().st_size > 10_000_000:
-            raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} is larger than 10 MB: not a descriptor file")
-        raw_lines = descriptor.read_text().splitlines()
-    except OSError as exc:
-        raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} cannot be read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} is not a text file (an EMVA 1288 descriptor is text: "
-                             "lines 'n bits width height', 'b time photons', 'd time', 'i path')") from None
-    base = descriptor.parent
-    bits = shape = None
-    entries: list[tuple[str, float, float | None, list[Path]]] = []
-    for n, line in enumerate(raw_lines, 1):
-        parts = line.split()
-        if not parts or parts[0].startswith("#"):
-            continue
-        tag = parts[0]
-        try:
-            if tag == "v":
-                continue
-            if tag == "n":
-                bits, shape = int(parts[1]), (int(parts[3]), int(parts[2]))
-                if not 1 <= bits <= 16 or min(shape) < 2:
-                    raise ValueError("expected 1 to 16 bits and at least 2 x 2 pixels")
-            elif tag == "b":
-                entries.append(("b", float(parts[1].replace(",", ".")) * 1e-9, float(parts[2].replace(",", ".")), []))
-            elif tag == "d":
-                entries.append(("d", float(parts[1].replace(",", ".")) * 1e-9, None, []))
-            elif tag == "i":
-                entries[-1][3].append(base.joinpath(*parts[1].replace("\\", "/").split("/")))
-            else:
-                raise ValueError(f"unknown line type {tag!r}")
-        except (IndexError, ValueError) as exc:
-            raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r}, line {n}: {line.strip()!r}: {exc}") from None
-    if bits is None:
-        raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} has no 'n bits width height' line")
+    from ..io.stacks import descriptor_path, parse_descriptor
+
+    bits, shape, entries = parse_descriptor(descriptor_path(Path(descriptor)))
 
     def read(paths):
         out = []

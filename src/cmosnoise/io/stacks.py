@@ -1,0 +1,369 @@
+"""Measured frame stacks for ``cmosnoise fit``: read from a manifest or an EMVA 1288 descriptor, reduced as read.
+
+A lab's measurement is a list of **stacks**: frames of one kind (``dark``
+or ``flat``) at one exposure time and temperature. Two ways to describe
+them:
+
+- an EMVA 1288 descriptor (``n bits width height``, ``b time_ns photons``,
+  ``d time_ns``, ``i path``), as ``characterize --emva-export`` writes it
+  and the standard's reference implementation reads it: every ``b`` or
+  ``d`` entry is one stack;
+- a manifest YAML::
+
+      cfa: RGGB            # where the files' metadata lack them
+      black_level_dn: 64
+      bits: 12
+      stacks:
+        - {kind: dark, exposure_s: 0.01, temperature_c: 25, files: [dark_10ms.tif]}
+        - {kind: flat, exposure_s: 0.01, temperature_c: 25, level: 0.4, files: ["flat_04/*.dng"]}
+
+  Files are multi-page TIFF, ``.npy`` (2-D, or 3-D with frames first) or
+  DNG (one frame each, read by LibRaw through rawpy; its CFA, black level
+  and white level are taken from the file). Paths are relative to the
+  manifest; a glob expands in sorted order.
+
+Each stack is reduced frame by frame (:class:`StackStats`) so a 100-frame
+5 MP stack never sits in memory: per-pixel temporal mean, the per-pixel
+temporal variance after each frame's row and column means are removed
+(what is left is the pixel's own noise), and every frame's row and column
+means (the row and column noise).
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator, Literal, Optional
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from ..errors import CmosnoiseError
+
+#: an EMVA 1288 descriptor's default file name inside a folder
+DESCRIPTOR = "EMVA1288_descriptor.txt"
+#: largest manifest or descriptor accepted (they list files; they are small)
+MAX_TEXT_BYTES = 10_000_000
+SUFFIXES = (".tif", ".tiff", ".npy", ".dng")
+
+
+# ------------------------------------------------------------------ manifest schema
+class StackEntry(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["dark", "flat"] = Field(description="dark (no light) or flat (uniform illumination)")
+    exposure_s: float = Field(ge=0, le=3600, description="exposure time, s")
+    temperature_c: Optional[float] = Field(None, ge=-60, le=150, description="sensor temperature, C")
+    level: Optional[float] = Field(None, ge=0, le=1e9, description="relative illumination (any unit; flats)")
+    photons: Optional[float] = Field(None, ge=0, le=1e12, description="photons per pixel during the exposure (flats)")
+    files: list[str] = Field(min_length=1, description="files or globs, relative to the manifest")
+
+
+class Manifest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    cfa: Optional[Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"]] = None
+    black_level_dn: Optional[float] = Field(None, ge=0, le=65535)
+    bits: Optional[int] = Field(None, ge=8, le=16)
+    temperature_c: Optional[float] = Field(None, ge=-60, le=150, description="default for stacks that give none")
+    stacks: list[StackEntry] = Field(min_length=1)
+
+
+# ------------------------------------------------------------------ reduced stacks
+@dataclass
+class StackStats:
+    """One stack reduced to what the fits need (DN)."""
+
+    kind: str
+    exposure_s: float
+    temperature_c: Optional[float]
+    level: Optional[float]
+    photons: Optional[float]
+    n: int  #: frames
+    mean: np.ndarray  #: (rows, cols) float64, per-pixel temporal mean
+    pixel_var: np.ndarray  #: (rows, cols) float64, per-pixel temporal variance (ddof 1) of the frames less their row and column means
+    temporal_var: float  #: mean over pixels of the plain per-pixel temporal variance (EMVA's sigma_y^2)
+    row_means: np.ndarray  #: (n, rows) float64
+    col_means: np.ndarray  #: (n, cols) float64
+    max_dn: float
+    files: list[str] = field(default_factory=list)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.mean.shape
+
+
+def reduce_stack(frames: Iterator[np.ndarray], **info) -> StackStats:
+    """Reduce frames (each (rows, cols)) to a :class:`StackStats`, one frame at a time."""
+    s1 = s2 = c1 = c2 = None
+    rows_, cols_, top = [], [], -math.inf
+    n = 0
+    for f in frames:
+        x = np.asarray(f, np.float64)
+        if s1 is None:
+            s1, s2, c1, c2 = (np.zeros(x.shape) for _ in range(4))
+        elif x.shape != s1.shape:
+            raise CmosnoiseError(f"stack {info.get('name', '')}: frame {n} is {x.shape[1]} x {x.shape[0]}, "
+                                 f"the first was {s1.shape[1]} x {s1.shape[0]}: a stack's frames must have one size")
+        rm, cm = x.mean(axis=1), x.mean(axis=0)
+        g = rm.mean()
+        y = x - rm[:, None] - cm[None, :] + g
+        s1 += x; s2 += x * x; c1 += y; c2 += y * y  # noqa: E702
+        rows_.append(rm); cols_.append(cm)  # noqa: E702
+        top = max(top, float(x.max()))
+        n += 1
+    name = info.pop("name", "")
+    if n < 2:
+        raise CmosnoiseError(f"stack {name}: {n} frame(s); a stack needs at least 2 (temporal noise is a difference of frames)")
+    mean = s1 / n
+    var = np.maximum(s2 - s1 * mean, 0) / (n - 1)
+    cvar = np.maximum(c2 - c1 * c1 / n, 0) / (n - 1)
+    return StackStats(mean=mean, pixel_var=cvar, temporal_var=float(var.mean()), row_means=np.array(rows_),
+                      col_means=np.array(cols_), max_dn=top, n=n, **info)
+
+
+@dataclass
+class Dataset:
+    """A measurement: its stacks and what the files' metadata (or the manifest) say about the sensor."""
+
+    stacks: list[StackStats]
+    shape: tuple[int, int]
+    bits: Optional[int]
+    cfa: Optional[str]
+    black_level_dn: Optional[float]
+    source: str
+    kind: str  #: "emva" or "manifest"
+    descriptor: Optional[Path] = None  #: the EMVA descriptor, when that was the input
+
+    def of_kind(self, kind: str, temperature_c: float | None = None) -> list[StackStats]:
+        return [s for s in self.stacks if s.kind == kind and (temperature_c is None or s.temperature_c == temperature_c)]
+
+    @property
+    def temperatures(self) -> list[float]:
+        return sorted({s.temperature_c for s in self.stacks if s.temperature_c is not None})
+
+
+# ------------------------------------------------------------------ files
+@dataclass
+class _Meta:
+    cfa: Optional[str] = None
+    black: Optional[float] = None
+    white: Optional[int] = None
+
+
+def _dng_frames(path: Path, meta: _Meta) -> Iterator[np.ndarray]:
+    try:
+        import rawpy
+    except ImportError:  # pragma: no cover - a declared dependency
+        raise CmosnoiseError("reading DNG needs rawpy: pip install rawpy") from None
+    try:
+        with rawpy.imread(str(path)) as r:
+            img = np.array(r.raw_image_visible, copy=True)
+            desc = r.color_desc.decode()
+            pattern = r.raw_pattern
+            if r.num_colors >= 3 and pattern is not None and pattern.shape == (2, 2):
+                meta.cfa = "".join(desc[i] for i in pattern.ravel()).replace("G2", "G")
+                meta.cfa = meta.cfa if meta.cfa in ("RGGB", "BGGR", "GRBG", "GBRG") else None
+            else:
+                meta.cfa = "none"
+            levels = list(r.black_level_per_channel)
+            meta.black = float(np.mean(levels)) if levels else None
+            meta.white = int(r.white_level)
+    except CmosnoiseError:
+        raise
+    except Exception as exc:
+        raise CmosnoiseError(f"{str(path)!r} cannot be read as a DNG (LibRaw): {' '.join(str(exc).split())[:160]}") from None
+    yield img
+
+
+def _frames_of(path: Path, meta: _Meta) -> Iterator[np.ndarray]:
+    """The frames of one file, each (rows, cols)."""
+    suffix = path.suffix.lower()
+    if not path.is_file():
+        raise CmosnoiseError(f"{str(path)!r}: no such file")
+    if suffix == ".dng":
+        yield from _dng_frames(path, meta)
+        return
+    try:
+        if suffix in (".tif", ".tiff"):
+            import tifffile
+
+            with tifffile.TiffFile(path) as tif:
+                for page in tif.pages:
+                    a = page.asarray()
+                    if a.ndim == 3:  # one page holding a whole (n, rows, cols) series
+                        yield from a
+                    else:
+                        yield a
+            return
+        if suffix == ".npy":
+            a = np.load(path, mmap_mode="r", allow_pickle=False)
+            if a.ndim == 2:
+                yield np.asarray(a)
+            elif a.ndim == 3:
+                for f in a:
+                    yield np.asarray(f)
+            else:
+                raise CmosnoiseError(f"{str(path)!r}: an array of shape {a.shape}; expected (rows, cols) or (frames, rows, cols)")
+            return
+    except CmosnoiseError:
+        raise
+    except Exception as exc:
+        raise CmosnoiseError(f"{str(path)!r} cannot be read: {' '.join(str(exc).split())[:160]}") from None
+    raise CmosnoiseError(f"{str(path)!r}: unknown file type {suffix!r}; frames are read from {', '.join(SUFFIXES)}")
+
+
+def _checked(frames: Iterator[np.ndarray], path: Path) -> Iterator[np.ndarray]:
+    for f in frames:
+        if f.ndim != 2 or min(f.shape) < 2:
+            raise CmosnoiseError(f"{str(path)!r}: a frame of shape {f.shape}; expected (rows, cols)")
+        if f.dtype.kind not in "uif":
+            raise CmosnoiseError(f"{str(path)!r}: frames of type {f.dtype}; expected integer or float codes")
+        if f.dtype.kind == "f" and not np.all(np.isfinite(f)):
+            raise CmosnoiseError(f"{str(path)!r}: frames hold NaN or infinite values")
+        yield f
+
+
+def _stack(paths: list[Path], meta: _Meta, **info) -> StackStats:
+    def frames():
+        for p in paths:
+            yield from _checked(_frames_of(p, meta), p)
+    return reduce_stack(frames(), files=[str(p) for p in paths], **info)
+
+
+def _read_text(path: Path, what: str) -> str:
+    try:
+        if path.stat().st_size > MAX_TEXT_BYTES:
+            raise CmosnoiseError(f"{what} {str(path)!r} is larger than 10 MB: not a {what}")
+        return path.read_text()
+    except OSError as exc:
+        raise CmosnoiseError(f"{what} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise CmosnoiseError(f"{what} {str(path)!r} is not a text file") from None
+
+
+# ------------------------------------------------------------------ EMVA 1288 descriptor
+def parse_descriptor(descriptor: Path) -> tuple[int, tuple[int, int], list[tuple[str, float, float | None, list[Path]]]]:
+    """An EMVA 1288 descriptor's bits, shape (rows, cols) and entries ``(kind 'b'|'d', exposure s, photons, paths)``."""
+    text = _read_text(descriptor, "EMVA descriptor")
+    base = descriptor.parent
+    bits = shape = None
+    entries: list[tuple[str, float, float | None, list[Path]]] = []
+    for n, line in enumerate(text.splitlines(), 1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        tag = parts[0]
+        try:
+            if tag == "v":
+                continue
+            if tag == "n":
+                bits, shape = int(parts[1]), (int(parts[3]), int(parts[2]))
+                if not 1 <= bits <= 16 or min(shape) < 2:
+                    raise ValueError("expected 1 to 16 bits and at least 2 x 2 pixels")
+            elif tag == "b":
+                entries.append(("b", float(parts[1].replace(",", ".")) * 1e-9, float(parts[2].replace(",", ".")), []))
+            elif tag == "d":
+                entries.append(("d", float(parts[1].replace(",", ".")) * 1e-9, None, []))
+            elif tag == "i":
+                if not entries:
+                    raise ValueError("an image line before any 'b' or 'd' line")
+                entries[-1][3].append(base.joinpath(*parts[1].replace("\\", "/").split("/")))
+            else:
+                raise ValueError(f"unknown line type {tag!r}")
+        except (IndexError, ValueError) as exc:
+            raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r}, line {n}: {line.strip()!r}: {exc}") from None
+    if bits is None:
+        raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} has no 'n bits width height' line")
+    missing = [p for e in entries for p in e[3] if not p.is_file()]
+    if missing:
+        more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+        raise CmosnoiseError(f"EMVA descriptor {str(descriptor)!r} names missing file {str(missing[0])!r}{more}")
+    return bits, shape, entries
+
+
+def descriptor_path(path: Path) -> Path:
+    return path / DESCRIPTOR if path.is_dir() else path
+
+
+def _from_descriptor(path: Path, temperature_c: float | None) -> Dataset:
+    bits, shape, entries = parse_descriptor(path)
+    stacks = []
+    for i, (tag, t, photons, paths) in enumerate(entries):
+        name = f"{'flat' if tag == 'b' else 'dark'} at {t * 1e9:g} ns (entry {i + 1})"
+        s = _stack(paths, _Meta(), name=name, kind="flat" if tag == "b" else "dark", exposure_s=t,
+                   temperature_c=temperature_c, level=None, photons=photons)
+        if s.shape != shape:
+            raise CmosnoiseError(f"EMVA descriptor {str(path)!r}: the {name} frames are {s.shape[1]} x {s.shape[0]}; "
+                                 f"the descriptor says {shape[1]} x {shape[0]}")
+        stacks.append(s)
+    return Dataset(stacks, shape, bits, None, None, str(path), "emva", descriptor=path)
+
+
+# ------------------------------------------------------------------ manifest
+def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
+    import yaml
+
+    from ..config.loading import load_yaml_text
+
+    text = _read_text(path, "manifest")
+    try:
+        data = load_yaml_text(text)
+        if not isinstance(data, dict):
+            raise CmosnoiseError(f"manifest {str(path)!r} must hold a mapping with 'stacks', not {type(data).__name__}")
+        m = Manifest.model_validate(data)
+    except ValidationError as exc:
+        e = exc.errors()[0]
+        where = ".".join(str(x) for x in e["loc"])
+        raise CmosnoiseError(f"manifest {str(path)!r}: {where}: {e['msg']} (got {e.get('input')!r})"
+                             + (f"; and {len(exc.errors()) - 1} more problem(s)" if len(exc.errors()) > 1 else "")) from None
+    except yaml.YAMLError as exc:
+        raise CmosnoiseError(f"manifest {str(path)!r} is not valid YAML: {' '.join(str(exc).split())[:160]}") from None
+    base = path.parent
+    stacks, meta = [], _Meta()
+    for i, e in enumerate(m.stacks):
+        paths: list[Path] = []
+        for pattern in e.files:
+            p = base / pattern
+            if any(ch in pattern for ch in "*?["):
+                hits = sorted(Path(h) for h in glob.glob(str(p)))
+                if not hits:
+                    raise CmosnoiseError(f"manifest {str(path)!r}: stacks.{i}.files: {pattern!r} matches no file")
+                paths += hits
+            else:
+                paths.append(p)
+        temp = e.temperature_c if e.temperature_c is not None else m.temperature_c
+        if temp is None:
+            temp = temperature_c
+        name = f"stacks.{i} ({e.kind}, {e.exposure_s:g} s)"
+        stacks.append(_stack(paths, meta, name=name, kind=e.kind, exposure_s=e.exposure_s, temperature_c=temp,
+                             level=e.level, photons=e.photons))
+    shapes = sorted({s.shape for s in stacks})
+    if len(shapes) > 1:
+        raise CmosnoiseError(f"manifest {str(path)!r}: the stacks have different frame sizes "
+                             f"({', '.join(f'{c} x {r}' for r, c in shapes)}); one sensor's frames have one size")
+    bits = m.bits
+    if bits is None and meta.white is not None:
+        bits = max(8, min(16, int(math.ceil(math.log2(meta.white + 1)))))
+    cfa = meta.cfa or m.cfa
+    black = meta.black if meta.black is not None else m.black_level_dn
+    return Dataset(stacks, shapes[0], bits, cfa, black, str(path), "manifest")
+
+
+def load(path: str | Path, temperature_c: float | None = None) -> Dataset:
+    """A :class:`Dataset` from a manifest (``.yaml``/``.yml``) or an EMVA 1288 descriptor (file or folder).
+
+    ``temperature_c`` is the temperature of stacks that do not give one.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise CmosnoiseError(f"--frames-from {str(path)!r}: no such file or folder")
+    if path.is_dir() and not (path / DESCRIPTOR).is_file():
+        manifests = sorted(path.glob("*.yaml")) + sorted(path.glob("*.yml"))
+        if len(manifests) != 1:
+            raise CmosnoiseError(f"--frames-from {str(path)!r}: a folder holding {DESCRIPTOR} or one manifest .yaml "
+                                 f"(found {len(manifests)} .yaml files)")
+        path = manifests[0]
+    if path.suffix.lower() in (".yaml", ".yml"):
+        return _from_manifest(path, temperature_c)
+    return _from_descriptor(descriptor_path(path), temperature_c)
