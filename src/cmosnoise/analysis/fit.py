@@ -1,225 +1,337 @@
-"""Fitting the model to measured data: the dark-current map's body family and its white-pixel tail.
+"""``cmosnoise fit``: every stage MODEL.md describes, fitted to a measured data set (:class:`~cmosnoise.io.stacks.Dataset`).
 
-The paper chose each temperature's dark-current distribution by fitting
-candidate families to the measured histogram and ranking them by
-log-likelihood. Here every family of MODEL.md section 3 is fitted by maximum
-likelihood to the pixels below the white-pixel threshold, the likelihood
-truncated there (the tail is a separate population): each candidate gets
-its mean, std, log-likelihood and AIC, and the lowest AIC is chosen. The
-tail is the fraction of pixels above the threshold (ppm) and its largest
-excess over the body.
+What is fitted from what (the README's "Fit" section says the same for a lab):
 
-This is the first part of ``cmosnoise fit`` (issue 14): the dark-current
-stage from a rate map. A rate map from frames is the per-pixel slope of the
-dark signal over exposure time (:func:`rate_map_from_stacks`).
+=========================================  ===================================================================
+parameter                                  needs
+=========================================  ===================================================================
+system gain K, full well                   flat stacks (>= 2 frames) at >= 8 levels up to beyond saturation,
+                                           each with a dark stack at its exposure time
+black level                                dark stacks at >= 2 exposure times
+dark current (family, mean, std, tail)     dark stacks at >= 2 exposure times per temperature
+doubling temperatures (body, tail)         the above at >= 2 temperatures
+source follower, row noise, column noise,  one long dark stack (>= 4 frames; 50 to 100 recommended), the
+VFPN, fixed row offsets                    shortest exposure time is best
+PRNU, column gain mismatch                 a flat stack (>= 2 frames; 16+ recommended) near half saturation
+                                           and a dark stack at its exposure time
+crosstalk                                  not fitted (needs a spot or edge measurement): the base's value
+=========================================  ===================================================================
+
+Every parameter is reported as ``{value, ci95, method}``; one that the data
+cannot give is listed in ``not_fitted`` with what it needs and keeps the
+base configuration's value.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import CmosnoiseError
-from ..model.distributions import FAMILIES, POSITIVE_FAMILIES, body
+from ..model import physics
+from . import fit_dark, fit_photo, fit_readout, white_pixels
+from .fit_readout import Z95, centred_series, sigma_from_variance
 
-#: pixels used for the family fits (a fixed random subset: the ranking is clear long before all 300 000)
-FIT_PIXELS = 50_000
-
-
-@dataclass(frozen=True)
-class FamilyFit:
-    """One candidate family's maximum-likelihood fit to the body (e-/s)."""
-
-    family: str
-    mean: float
-    std: float
-    loglik: float
-    aic: float
-    n: int
+#: a dark stack is used for the dark current only if its brightest pixel is below this fraction of the way to saturation
+DARK_FIT_LIMIT = 0.9
+#: the shortest long dark stack the readout fits accept
+MIN_READOUT_FRAMES = 4
 
 
-def _truncated_loglik(family: str, mean: float, std: float, x: np.ndarray, threshold: float) -> float:
-    try:
-        d = body(family, mean, std)
-    except ValueError:
-        return -math.inf
-    with np.errstate(all="ignore"):
-        ll = float(np.sum(d.logpdf(x)))
-        norm = float(d.logcdf(threshold)) if math.isfinite(threshold) else 0.0
-    value = ll - x.size * norm
-    return value if math.isfinite(value) else -math.inf
+def _p(value, ci95=None, method: str = "", **extra) -> dict:
+    out = {"value": value, "ci95": None if ci95 is None else [float(c) for c in ci95], "method": method}
+    out.update(extra)
+    return out
 
 
-def fit_family(family: str, x: np.ndarray, threshold: float = math.inf) -> FamilyFit:
-    """Maximum-likelihood mean and std of ``family`` for the values ``x`` (all below ``threshold``, the truncation)."""
-    from scipy import optimize
-
-    x = np.asarray(x, np.float64)
-    m0, s0 = float(x.mean()), float(x.std()) or 1.0
-    if family in POSITIVE_FAMILIES and m0 <= 0:
-        return FamilyFit(family, math.nan, math.nan, -math.inf, math.inf, x.size)
-
-    def neg(theta):
-        mean, std = theta[0], math.exp(theta[1])
-        if family in POSITIVE_FAMILIES and mean <= 0:
-            return 1e300
-        v = _truncated_loglik(family, mean, std, x, threshold)
-        return -v if math.isfinite(v) else 1e300
-
-    res = optimize.minimize(neg, [m0, math.log(s0)], method="Nelder-Mead",
-                            options={"xatol": 1e-6 * max(abs(m0), 1.0), "fatol": 1e-3, "maxiter": 600})
-    mean, std = float(res.x[0]), math.exp(float(res.x[1]))
-    ll = -float(res.fun) if res.fun < 1e299 else -math.inf
-    return FamilyFit(family, mean, std, ll, 2 * 2 - 2 * ll, x.size)
+def _same(a: float, b: float) -> bool:
+    return abs(a - b) <= 1e-9 * max(abs(a), abs(b), 1e-12)
 
 
-def select_family(rates: np.ndarray, threshold: float | None = None, seed: int = 0) -> list[FamilyFit]:
-    """Every family of MODEL.md fitted to the body of a dark-rate map (e-/s), best (lowest AIC) first.
+def _dark_at(ds, stack):
+    """The dark stack at the same exposure and temperature as ``stack`` (the one with most frames), or None."""
+    cands = [d for d in ds.of_kind("dark") if _same(d.exposure_s, stack.exposure_s) and d.temperature_c == stack.temperature_c]
+    return max(cands, key=lambda d: d.n) if cands else None
 
-    Pixels at or above ``threshold`` (the white-pixel tail) are left out and
-    the likelihood is truncated there; without a threshold every pixel is
-    the body. At most FIT_PIXELS pixels, a fixed random subset, are used.
+
+def _intercept(times: np.ndarray, means: np.ndarray, var_means: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares line of ``means`` over ``times``: intercept, its standard error, slope."""
+    A = np.stack([np.ones_like(times), times], axis=1)
+    coef, *_ = np.linalg.lstsq(A, means, rcond=None)
+    C = np.linalg.pinv(A.T @ A) @ A.T  # coefficients as linear combinations of the means
+    se = math.sqrt(float(np.sum(C[0] ** 2 * var_means)))
+    if times.size > 3:  # the residual scatter, when it says more than the noise
+        resid = means - A @ coef
+        s2 = float(np.sum(resid**2)) / (times.size - 2)
+        se = max(se, math.sqrt(s2 * float(np.linalg.pinv(A.T @ A)[0, 0])))
+    return float(coef[0]), se, float(coef[1])
+
+
+def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s: float | None = None,
+                seed: int = 0) -> dict:
+    """Fit ``ds`` (a :class:`~cmosnoise.io.stacks.Dataset`); ``base`` (a Config) gives what is not fitted.
+
+    Returns ``{"parameters": {...}, "not_fitted": {...}, "dark": {T: {...}}, "plots": {...}, "meta": {...}}``.
     """
-    x = np.asarray(rates, np.float64).ravel()
-    x = x[np.isfinite(x)]
-    thr = math.inf if threshold is None else float(threshold)
-    x = x[x < thr]
-    if x.size < 100:
-        raise CmosnoiseError(f"dark-current family: {x.size} pixels below the threshold; a fit needs at least 100")
-    if x.size > FIT_PIXELS:
-        x = np.random.default_rng(seed).choice(x, FIT_PIXELS, replace=False)
-    fits = [fit_family(f, x, thr) for f in FAMILIES]
-    return sorted(fits, key=lambda f: f.aic)
+    P: dict = {}
+    not_fitted: dict = {}
+    plots: dict = {}
+    rows, cols = ds.shape
+    pattern = ds.cfa or base.sensor.cfa
+    bits = ds.bits
+    if bits is None:
+        top = max(s.max_dn for s in ds.stacks)
+        bits = next(b for b in range(8, 17) if top < 2**b)
+    sat_dn = 2**bits - 1
+    temps = ds.temperatures
+    t_ref = temperature_c if temperature_c is not None else (temps[-1] if temps else base.sensor.temperature_c)
 
+    # ---------------------------------------------------------------- photon transfer
+    flats = ds.of_kind("flat")
+    pts = []
+    for f in flats:
+        d = _dark_at(ds, f)
+        if d is not None:
+            pts.append((float(f.mean.mean() - d.mean.mean()), f.temporal_var - d.temporal_var, f, d))
+    if len(pts) < 3:
+        raise CmosnoiseError(f"system gain K: {len(pts)} flat stack(s) with a dark stack at the same exposure time and "
+                             "temperature; the photon transfer needs at least 3 (recommended: 8 to 50 levels up to "
+                             "beyond saturation). Everything in electrons depends on K")
+    ptc = fit_photo.photon_transfer([p[0] for p in pts], [p[1] for p in pts])
+    k = ptc["K"]
+    P["system_gain_K_dn_per_e"] = _p(k, ptc["ci95"], f"photon transfer (EMVA 1288): slope through the origin of "
+                                     f"{ptc['fit_points']} levels below 70 % of saturation")
+    plots["ptc"] = {"mu": ptc["mu"].tolist(), "v": ptc["v"].tolist(), "linear": ptc["linear"].tolist(), "K": k,
+                    "saturation_index": ptc["saturation_index"]}
 
-def tail(rates: np.ndarray, threshold: float, body_fit: FamilyFit) -> dict:
-    """The white-pixel tail: ppm of pixels above ``threshold`` and the largest excess over the body's mean (e-/s)."""
-    x = np.asarray(rates, np.float64).ravel()
-    above = x > threshold
-    return {"ppm_above": float(above.mean() * 1e6), "threshold_e_per_s": float(threshold),
-            "max_e_per_s": float(max(x.max() - body_fit.mean, 0.0)) if above.any() else 0.0,
-            "pixels_above": int(above.sum())}
-
-
-def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], gain_dn_per_e: float) -> np.ndarray:
-    """Per-pixel dark current (e-/s): the least-squares slope of the mean dark signal over exposure time.
-
-    ``means_dn`` are per-pixel means of dark stacks (DN) at ``exposures_s``
-    (at least two distinct times); the black level and any fixed offset fall
-    into the intercept.
-    """
-    t = np.asarray(exposures_s, np.float64)
-    if len(means_dn) != t.size or len(set(np.round(t, 12))) < 2:
-        raise CmosnoiseError("dark current: needs dark stacks at two or more distinct exposure times")
-    shapes = {m.shape for m in means_dn}
-    if len(shapes) != 1:
-        raise CmosnoiseError(f"dark current: the dark stacks have different sizes {sorted(shapes)}")
-    tc = t - t.mean()
-    slope = sum(w * np.asarray(m, np.float64) for w, m in zip(tc / np.sum(tc * tc), means_dn))
-    return slope / gain_dn_per_e
-
-
-# ------------------------------------------------------------------ from an EMVA 1288 data set
-def from_emva(m, temperature_c: float, threshold_e_per_s: float | None = None) -> dict:
-    """Fit what an EMVA 1288 data set gives (a :class:`~cmosnoise.analysis.characterize.Measurement` loaded with
-    ``keep_dark_means=True``): the ADC's gain, black level and full well, and the dark current at ``temperature_c``.
-
-    Returns ``{"parameters": {name: {value, ci95, method}}, "dark_families": [...], "not_fitted": {...}}``.
-    The dark map is the per-pixel slope over the exposure times where no dark
-    pixel nears saturation; its body's std is corrected for the slope's
-    temporal noise (estimated from the dark pairs' own temporal variance).
-    """
-    from . import characterize as ch
-
-    res = ch.evaluate(m)
-    if res["system_gain_K_dn_per_e"] is None:
-        raise CmosnoiseError("fit: " + res["unavailable"]["system_gain_K_dn_per_e"])
-    k = res["system_gain_K_dn_per_e"]
-    z = 1.959964
-    out: dict = {}
-    # K: slope through the origin of the photon-transfer points below 70 % of saturation; its se from the residuals
-    y, v = m.mu_y - m.mu_ydark, m.s2_y - m.s2_ydark
-    i_sat = res["saturation_index"]
-    lin = np.nonzero((y <= 0.7 * y[i_sat]) & (np.arange(len(y)) < i_sat))[0]
-    se_k = math.sqrt(float(np.sum((v[lin] - k * y[lin]) ** 2)) / (len(lin) - 1) / float(np.sum(y[lin] ** 2)))
-    out["system_gain_K_dn_per_e"] = {"value": k, "ci95": [k - z * se_k, k + z * se_k],
-                                     "method": "EMVA 1288 photon transfer, least squares through the origin"}
-    # black level: the dark mean's intercept at zero exposure
-    ok = np.arange(res["dark_fit_points"]) if res["dark_fit_points"] >= 3 else np.arange(len(m.texp_s))
-    t = m.texp_s[ok]
-    coef, cov = np.polyfit(t, m.mu_ydark[ok], 1, cov=True)
-    black, se_black = float(coef[1]), math.sqrt(float(cov[1, 1]))
-    out["black_level_dn"] = {"value": black, "ci95": [black - z * se_black, black + z * se_black],
-                             "method": "intercept of the dark mean over exposure time"}
-    full = float(np.max(m.mu_y) - black) / k
-    out["full_well_e"] = {"value": full, "ci95": None,
-                          "method": "the brightest step's mean above black / K (most pixels saturated at 1.3 x saturation)"}
-    means = m.frames.get("dark_means")
-    families = []
-    if means is None or len(ok) < 2:
-        not_fitted = {"dark_current": "needs per-pixel dark means at two or more exposure times without saturation"}
+    # ---------------------------------------------------------------- black level (reference temperature)
+    darks_ref = [d for d in ds.of_kind("dark") if d.temperature_c == t_ref] or ds.of_kind("dark")
+    usable = [d for d in darks_ref if d.max_dn < DARK_FIT_LIMIT * sat_dn]
+    times = np.array([d.exposure_s for d in usable])
+    if len(set(np.round(times, 12))) >= 2:
+        var_m = np.array([float(np.var(d.row_means.mean(axis=1), ddof=1)) / d.n for d in usable])
+        b, se_b, _ = _intercept(times, np.array([float(d.mean.mean()) for d in usable]), var_m)
+        P["black_level_dn"] = _p(b, [b - Z95 * se_b, b + Z95 * se_b],
+                                 f"intercept of the dark mean over {len(usable)} dark stacks' exposure times "
+                                 "(the black level plus the mean fixed offsets)")
+    elif usable:
+        d = min(usable, key=lambda d: d.exposure_s)
+        b = float(d.mean.mean())
+        P["black_level_dn"] = _p(b, None, f"mean of the only dark exposure time ({d.exposure_s:g} s): includes its dark signal")
     else:
-        rates = rate_map_from_stacks([means[i] for i in ok], list(t), k)
+        raise CmosnoiseError("black level: no dark stack below saturation; the fit needs dark stacks")
+    black = P["black_level_dn"]["value"]
+    if ds.black_level_dn is not None:
+        P["black_level_dn"]["metadata_dn"] = ds.black_level_dn
+
+    i_sat = ptc["saturation_index"]
+    if i_sat < len(ptc["mu"]) - 1:
+        brightest = max(pts, key=lambda p: p[0])
+        full = (float(brightest[2].mean.mean()) - black) / k
+        P["full_well_e"] = _p(full, None, "the brightest flat's mean above black / K (beyond the saturation point)")
+    else:
+        not_fitted["full_well_e"] = "the flat levels do not reach saturation (the variance never turns down); add brighter flats"
+
+    # ---------------------------------------------------------------- dark current at each temperature
+    dark_maps: dict[float, np.ndarray] = {}
+    dark_fits: dict[float, dict] = {}
+    for T in temps or [t_ref]:
+        ds_T = [d for d in ds.of_kind("dark") if d.temperature_c == T or (not temps)]
+        ok = [d for d in ds_T if d.max_dn < black + DARK_FIT_LIMIT * (sat_dn - black)]
+        t = np.array([d.exposure_s for d in ok])
+        if len(set(np.round(t, 12))) < 2:
+            not_fitted[f"dark_current at {T:g} C"] = (f"needs dark stacks at 2 or more exposure times below saturation "
+                                                      f"at {T:g} C (has {len(set(np.round(t, 12)))})")
+            continue
+        rates = fit_dark.rate_map_from_stacks([d.mean for d in ok], list(t), k)
         tc = t - t.mean()
-        # the slope's temporal noise per pixel: a pair mean's variance is s2_ydark / 2 (DN^2), propagated
-        noise_var = float(np.sum((tc / np.sum(tc * tc)) ** 2 * m.s2_ydark[ok] / 2)) / k**2
+        w = tc / np.sum(tc * tc)
+        noise_var = float(np.sum(w**2 * np.array([d.temporal_var / d.n for d in ok]))) / k**2
         thr = threshold_e_per_s
-        if thr is None:  # a default from the body: 8 robust standard deviations above the median
-            med = float(np.median(rates))
-            thr = med + 8 * 1.4826 * float(np.median(np.abs(rates - med)))
-        fits = select_family(rates, thr)
-        best = fits[0]
-        body_std = math.sqrt(max(best.std**2 - noise_var, 1e-12))
-        n = best.n
-        x = rates[rates < thr].astype(np.float64)
-        kurt = float(np.mean((x - x.mean()) ** 4) / np.var(x) ** 2)
-        se_mean, se_std = best.std / math.sqrt(n), best.std * math.sqrt((kurt - 1) / (4 * n))
-        tl = tail(rates, thr, best)
-        p = tl["ppm_above"] * 1e-6
-        se_ppm = math.sqrt(p * (1 - p) / rates.size) * 1e6
-        out["dark_current.family"] = {"value": best.family, "ci95": None,
-                                      "method": "truncated maximum likelihood of MODEL.md's five families, lowest AIC"}
-        out["dark_current.mean_e_per_s"] = {"value": best.mean, "ci95": [best.mean - z * se_mean, best.mean + z * se_mean],
-                                            "method": "per-pixel slope over exposure time, body fit"}
-        out["dark_current.std_e_per_s"] = {"value": body_std, "ci95": [max(body_std - z * se_std, 0.0), body_std + z * se_std],
-                                           "method": f"body fit, less the slope's temporal noise ({math.sqrt(noise_var):.3g} e-/s rms)"}
-        out["dark_current.tail.ppm_above"] = {"value": tl["ppm_above"], "ci95": [max(tl["ppm_above"] - z * se_ppm, 0.0),
-                                                                                  tl["ppm_above"] + z * se_ppm],
-                                              "method": f"pixels above {thr:.4g} e-/s"}
-        out["dark_current.tail.max_e_per_s"] = {"value": max(tl["max_e_per_s"], 1.0), "ci95": None,
-                                                "method": "largest rate above the body's mean"}
-        families = [{"family": f.family, "mean": f.mean, "std": f.std, "loglik": f.loglik, "aic": f.aic} for f in fits]
-        not_fitted = {}
-        out["_threshold"] = thr
-        out["_temperature"] = temperature_c
-    not_fitted.update({
-        "prnu, crosstalk": "needs flat-field stacks (an EMVA data set's bright stack is used only for K here; next)",
-        "source_follower, row_noise, column_noise": "needs a long dark stack (per-pixel variances; next)",
-        "dark_current doubling": "needs dark data at two or more temperatures",
-    })
-    return {"parameters": out, "dark_families": families, "not_fitted": not_fitted}
+        points = physics.dark_points(base)
+        if thr is None and points:  # the base's white-pixel threshold at its nearest point, when it has one
+            thr = min(points, key=lambda p: abs(p.temperature_c - T)).threshold
+        res = fit_dark.fit_point(rates, noise_var, thr)
+        wp = white_pixels.report(rates, res["threshold"], pattern)
+        from scipy import stats
+
+        wp["couplets_p_value_random"] = float(stats.poisson.sf(wp["couplets"] - 1, wp["couplets_expected_random"])) \
+            if wp["couplets"] > 0 else 1.0
+        res["white_pixels"] = wp
+        res["exposures_s"] = sorted(set(float(x) for x in t))
+        dark_maps[T], dark_fits[T] = rates, res
+        for name, p in res["parameters"].items():
+            P[f"dark_current[{T:g} C].{name}"] = p
+    if len(dark_fits) >= 2:
+        Ts = sorted(dark_fits)
+        means = [dark_fits[T]["parameters"]["mean_e_per_s"] for T in Ts]
+        dbl = fit_dark.doubling(Ts, [m["value"] for m in means], [(m["ci95"][1] - m["ci95"][0]) / (2 * Z95) for m in means])
+        P["dark_current.doubling_c"] = _p(dbl["value"], dbl["ci95"], f"log2 of the body mean over {len(Ts)} temperatures")
+        hot = Ts[-1]
+        td = fit_dark.tail_doubling(dark_maps, {T: dark_fits[T]["parameters"]["mean_e_per_s"]["value"] for T in Ts},
+                                    dark_fits[hot]["parameters"]["std_e_per_s"]["value"], seed)
+        if td is None:
+            not_fitted["dark_current.tail_doubling_c"] = "fewer than 10 tail pixels at the hottest temperature"
+        else:
+            P["dark_current.tail_doubling_c"] = _p(td["value"], td["ci95"], f"median excess of the {td['pixels']} "
+                                                   "strongest tail pixels over temperature (bootstrap interval)")
+    else:
+        not_fitted["dark_current.doubling_c, tail_doubling_c"] = "needs dark current at 2 or more temperatures"
+
+    # ---------------------------------------------------------------- readout: the longest dark stack
+    longs = [d for d in ds.of_kind("dark") if d.n >= MIN_READOUT_FRAMES]
+    if not longs:
+        n_max = max((d.n for d in ds.of_kind("dark")), default=0)
+        not_fitted["source_follower, row_noise, column_noise (temporal, vfpn)"] = (
+            f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
+    else:
+        st = max(longs, key=lambda d: (d.n, -d.exposure_s))
+        _readout(st, k, black, dark_maps.get(st.temperature_c), P, plots, base, seed)
+
+    # ---------------------------------------------------------------- PRNU and column gain
+    cands = [(f, _dark_at(ds, f)) for f in flats]
+    cands = [(f, d) for f, d in cands if d is not None and 0.1 * sat_dn < f.mean.mean() < 0.8 * sat_dn]
+    if not cands:
+        not_fitted["prnu, column_noise.gain_sigma_pct"] = ("needs a flat stack between 10 % and 80 % of saturation "
+                                                           "with a dark stack at its exposure time")
+    else:
+        target = black + 0.5 * (sat_dn - black)
+        f, d = max(cands, key=lambda fd: (min(fd[0].n, fd[1].n), -abs(fd[0].mean.mean() - target)))
+        pg = fit_photo.prnu_and_column_gain(f, d, pattern, sat_dn)
+        seen = physics.prnu_seen_per_sigma(base)
+        m = pg["prnu_pct"]
+        P["prnu.measured_pct"] = _p(m["value"], m["ci95"], f"pixel residual of a {f.n}-frame flat at "
+                                    f"{pg['signal_dn']:.0f} DN less its dark, rows and columns removed, "
+                                    f"{pg['excluded_pixels']} defect pixels out")
+        P["prnu.sigma_pct"] = _p(m["value"] / seen, [c / seen for c in m["ci95"]],
+                                 f"the gain map's sigma: measured / {seen:.4f} (the base's crosstalk averages neighbours)")
+        g = pg["column_gain_pct"]
+        P["column_noise.gain_sigma_pct"] = _p(g["value"], g["ci95"], "the flat's column means, less the pixel and "
+                                              "temporal shares")
+        plots["prnu"] = {"residual": pg["relative_residual"]}
+    not_fitted["crosstalk"] = "needs a spot or edge measurement; kept at the base configuration's kernel"
+    return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
+            "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
+                     "temperatures": temps, "source": ds.source, "input": ds.kind},
+            "_maps": dark_maps}
 
 
-def fitted_config(base, result: dict, bits: int, shape: tuple[int, int]):
-    """``base`` (a Config) with the fitted values: what ``cmosnoise simulate --config`` runs."""
+def _readout(st, k: float, black: float, rate_map, P: dict, plots: dict, base, seed: int) -> None:
+    """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``."""
+    rows, cols = st.shape
+    n = st.n
+    corr = 1 - 2 / cols - 2 / rows
+    s2 = st.pixel_var / k**2 / corr
+    vbar = float(s2.mean())
+    if rate_map is not None:
+        dark_var = np.maximum(rate_map, 0) * st.exposure_s
+        how = "dark shot noise from the fitted rate map"
+    else:
+        dark_var = np.maximum((st.mean - black) / k, 0)
+        how = "dark shot noise from the stack's mean above black (no rate map at this temperature)"
+    known = dark_var + 1 / (12 * k * k) + vbar * (1 / cols + 1 / rows) / corr
+    tail = base.source_follower.flicker.tail
+    thr = tail.threshold_e if tail is not None else 4 * base.source_follower.flicker.gumbel_loc_e
+    r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed)
+    f = r["fit"]
+    where = (f"{n} frames at {st.exposure_s:g} s: per-pixel variances (chi-square, {n - 1} dof), marginal maximum "
+             f"likelihood over {f.n_used} of {r['pixels']} pixels, sandwich interval; {how}")
+    for name, key in [("thermal_sigma_e", "source_follower.thermal_sigma_e"),
+                      ("gumbel_loc_e", "source_follower.flicker.gumbel_loc_e"),
+                      ("gumbel_scale_e", "source_follower.flicker.gumbel_scale_e"),
+                      ("tail_ppm_above", "source_follower.flicker.tail.ppm_above"),
+                      ("tail_max_e", "source_follower.flicker.tail.max_e")]:
+        v, ci = f.interval(name)
+        if v is None:
+            P[key] = _p(None, None, "no flicker tail seen (fewer than 3 tail pixels): not fitted, none in the configuration")
+        else:
+            P[key] = _p(float(v), ci, where)
+    P["source_follower.flicker.tail.ppm_above"]["threshold_e"] = thr
+    if r.get("no_tail"):
+        P["source_follower.flicker.tail.ppm_above"]["method"] = ("the body's own share above the threshold; no tail "
+                                                                  "pixels seen, the interval's top is 3 pixels' worth")
+    plots["source_follower"] = {"s2": s2.ravel(), "known": known.ravel(), "frames": n,
+                                "params": [float(x) for x in f.value]}
+    # rows: temporal then fixed
+    rs = centred_series(st.row_means) / k
+    cs = centred_series(st.col_means) / k
+    v_row = float(rs.var(ddof=1)) * rows / (rows - 1)
+    dof = (n - 1) * (rows - 1)
+    se = v_row * math.sqrt(2 / dof)
+    P["row_noise.sigma_e"] = _p(**sigma_from_variance(v_row - vbar / cols, se),
+                                method=f"variance of the rows' means over {n} frames, less the pixels' share")
+    s2_cols = cs.var(axis=0, ddof=1)
+    cfit = fit_readout.fit_column_sigma(s2_cols, vbar / rows, n)
+    for name in cfit.names:
+        v, ci = cfit.interval(name)
+        P[f"column_noise.temporal.{name}"] = _p(float(v), ci, f"each column's mean over {n} frames: chi-square "
+                                                f"likelihood of {cols} column variances, sandwich interval")
+    plots["columns"] = {"s2": s2_cols, "known": vbar / rows, "frames": n, "params": [float(x) for x in cfit.value]}
+    # fixed: a two-way analysis of the stack's mean image (e-), white pixels masked
+    img = (st.mean - black) / k
+    keep = fit_readout.robust_mask(img)
+    tw = fit_readout.two_way(img, keep)
+    for axis, name, units, series, count in [("col", "column_noise.vfpn_sigma_e", cols, s2_cols, tw["n_per_col"]),
+                                             ("row", "row_noise.fixed_sigma_e", rows, rs.var(axis=0, ddof=1), tw["n_per_row"])]:
+        eff = tw[axis]
+        var = float(np.var(eff, ddof=1))
+        est = var - tw["resid_var"] / count - (float(np.mean(series)) - vbar / count) / n
+        se = var * math.sqrt(2 / (units - 1))
+        P[name] = _p(**sigma_from_variance(est, se), method=f"{'column' if axis == 'col' else 'row'} means of the "
+                     f"{n}-frame mean image, less the pixel and temporal shares ({int((~keep).sum())} outliers out)")
+
+
+def fitted_config(base, result: dict):
+    """``base`` (a Config) with every fitted value: what ``cmosnoise simulate --config`` runs."""
     from ..config.loading import merge_updates
-    from ..model.physics import check
 
-    p = result["parameters"]
-    k, black = p["system_gain_K_dn_per_e"]["value"], p["black_level_dn"]["value"]
+    P, meta = result["parameters"], result["meta"]
+
+    def v(name, default=None):
+        return P[name]["value"] if name in P else default
+
+    k, black, bits = v("system_gain_K_dn_per_e"), v("black_level_dn"), meta["bits"]
     black = min(max(round(black, 3), 0.0), 2**bits - 2)
-    updates = {
-        "sensor": {"width": shape[1], "height": shape[0], "full_well_e": round(p["full_well_e"]["value"], 1)},
+    full = v("full_well_e", base.sensor.full_well_e)
+    u: dict = {
+        "sensor": {"width": meta["shape"][1], "height": meta["shape"][0], "cfa": meta["cfa"],
+                   "full_well_e": round(float(full), 1), "temperature_c": meta["temperature_c"]},
         "adc": {"enabled": True, "bits": bits, "black_level_dn": black, "full_scale_e": (2**bits - 1 - black) / k},
     }
-    if "dark_current.family" in p:
-        updates["sensor"]["temperature_c"] = p["_temperature"]
-        point = {"temperature_c": p["_temperature"], "distribution": p["dark_current.family"]["value"],
-                 "mean_e_per_s": p["dark_current.mean_e_per_s"]["value"], "std_e_per_s": p["dark_current.std_e_per_s"]["value"]}
-        if p["dark_current.tail.ppm_above"]["value"] > 0:
-            point["tail"] = {"ppm_above": p["dark_current.tail.ppm_above"]["value"], "threshold_e_per_s": p["_threshold"],
-                             "max_e_per_s": p["dark_current.tail.max_e_per_s"]["value"]}
-        updates["dark_current"] = {"enabled": True, "points": [point]}
-    return check(merge_updates(base, updates))
+    points = []
+    for T, res in sorted(result["dark"].items()):
+        p = res["parameters"]
+        point = {"temperature_c": T, "distribution": p["family"]["value"], "mean_e_per_s": p["mean_e_per_s"]["value"],
+                 "std_e_per_s": p["std_e_per_s"]["value"], "tail": None}
+        if p["tail.ppm_above"]["value"] > 0:
+            point["tail"] = {"ppm_above": p["tail.ppm_above"]["value"], "threshold_e_per_s": res["threshold"],
+                             "max_e_per_s": p["tail.max_e_per_s"]["value"]}
+        points.append(point)
+    if points:
+        u["dark_current"] = {"enabled": True, "points": points}
+        for name in ("doubling_c", "tail_doubling_c"):
+            val = v(f"dark_current.{name}")
+            if val is not None and math.isfinite(val) and 0 < val <= 100:
+                u["dark_current"][name] = val
+    if "source_follower.thermal_sigma_e" in P:
+        loc, scale = v("source_follower.flicker.gumbel_loc_e"), v("source_follower.flicker.gumbel_scale_e")
+        ppm, mx = v("source_follower.flicker.tail.ppm_above"), v("source_follower.flicker.tail.max_e")
+        thr = P["source_follower.flicker.tail.ppm_above"]["threshold_e"]
+        tail = None
+        base_ppm = fit_readout.ppm_above(thr, loc, scale, 0.0, 0.0)
+        if mx is not None and ppm > base_ppm * 1.001 and mx > 0:
+            tail = {"ppm_above": ppm, "threshold_e": thr, "max_e": mx}
+        u["source_follower"] = {"enabled": True, "thermal_sigma_e": v("source_follower.thermal_sigma_e"),
+                                "flicker": {"enabled": True, "gumbel_loc_e": loc, "gumbel_scale_e": scale, "tail": tail}}
+        u["row_noise"] = {"enabled": True, "sigma_e": v("row_noise.sigma_e"), "fixed_sigma_e": v("row_noise.fixed_sigma_e")}
+        u["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
+                             "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
+                                          "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+    if "prnu.sigma_pct" in P:
+        u["prnu"] = {"enabled": True, "sigma_pct": min(v("prnu.sigma_pct"), 100.0), "measured_pct": None}
+        u.setdefault("column_noise", {})["gain_sigma_pct"] = min(v("column_noise.gain_sigma_pct"), 50.0)
+    try:
+        return physics.check(merge_updates(base, u))
+    except CmosnoiseError as exc:
+        raise CmosnoiseError(f"the fitted configuration is not valid: {exc}") from None

@@ -366,37 +366,35 @@ def sweep(
 @app.command()
 def fit(
     ctx: typer.Context,
-    frames_from: Path = typer.Option(..., "--frames-from", help="an EMVA 1288 descriptor (file or folder) and its images"),
-    temperature: float = typer.Option(25.0, "--temperature", min=-60, max=150, help="the sensor's temperature during the measurement, C"),
-    threshold: Optional[float] = typer.Option(None, "--threshold-e-per-s", min=0, help="white-pixel threshold (default: 8 robust sigma above the median rate)"),
+    frames_from: Path = typer.Option(..., "--frames-from", help="a manifest .yaml of stacks, or an EMVA 1288 descriptor (file or folder)"),
+    temperature: Optional[float] = typer.Option(None, "--temperature", min=-60, max=150, help="temperature of stacks that give none, and the fitted sensor's, C (default: the hottest measured)"),
+    threshold: Optional[float] = typer.Option(None, "--threshold-e-per-s", min=0, help="white-pixel threshold (default: the base's, else 8 robust sigma above the median rate)"),
+    cfa: Optional[str] = typer.Option(None, "--cfa", help="CFA of the frames where their metadata lack it: RGGB, BGGR, GRBG, GBRG or none"),
+    black_level: Optional[float] = typer.Option(None, "--black-level", min=0, max=65535, help="black level, DN (reported beside the fitted one)"),
+    bits: Optional[int] = typer.Option(None, "--bits", min=8, max=16, help="ADC bits where the metadata lack them (default: from the largest code)"),
     config: Optional[Path] = ConfigOpt,
     preset: Optional[str] = PresetOpt,
-    cfa: Optional[str] = typer.Option(None, "--cfa", help="CFA of the frames (default: the base configuration's)"),
+    round_trip: bool = typer.Option(True, "--round-trip/--no-round-trip", help="simulate the measurement again from the fit and compare"),
     out: Path = typer.Option(Path("cmosnoise-fit"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
-    """Fit a sensor model to measured frames (so far: ADC, photon transfer and dark current from an EMVA 1288 data set)."""
-    from ..analysis import characterize as ch
-    from ..analysis import fit as fitting
-    from ..io.output import OutputFolder, write_json
+    """Fit a sensor model to measured frames: config.yaml, fit.json (values, 95 % intervals, methods), fit_report.html."""
+    from . import fitting
 
+    if cfa is not None and cfa not in ("RGGB", "BGGR", "GRBG", "GBRG", "none"):
+        raise CmosnoiseError(f"--cfa {cfa!r}: expected RGGB, BGGR, GRBG, GBRG or none")
     base = load_config(config, preset, None, extra={"sensor": {"cfa": cfa}} if cfa else None)
-    folder = OutputFolder(out, overwrite)
-    m = ch.load(frames_from, keep_dark_means=True)
-    result = fitting.from_emva(m, temperature, threshold)
-    cfg = fitting.fitted_config(base, result, m.bits, m.shape)
-    with folder as tmp:
-        (tmp / "config.yaml").write_text(cfg.to_yaml())
-        write_json(tmp / "fit.json", {k: v for k, v in result.items()} | {"source": str(frames_from)})
-    for name, p in result["parameters"].items():
-        if name.startswith("_"):
-            continue
-        ci = f" (95 % CI {p['ci95'][0]:.4g} to {p['ci95'][1]:.4g})" if p["ci95"] else ""
-        value = f"{p['value']:.5g}" if isinstance(p["value"], float) else p["value"]
-        _say(ctx, f"{name} = {value}{ci}: {p['method']}")
-    for name, why in result["not_fitted"].items():
+    doc = fitting.run(frames_from, base, out, overwrite, temperature, threshold, cfa, black_level, bits,
+                      with_round_trip=round_trip, say=lambda m: _say(ctx, m))
+    for name, p in doc["parameters"].items():
+        _say(ctx, f"{name} = {fitting.describe(p)}")
+    for name, why in doc["not_fitted"].items():
         _say(ctx, f"not fitted, kept from the base configuration: {name}: {why}")
-    _say(ctx, f"wrote config.yaml and fit.json to {out}/")
+    if doc.get("round_trip"):
+        bad = [r["parameter"] for r in doc["round_trip"] if r["agree"] is False]
+        _say(ctx, f"round trip: {len(doc['round_trip']) - len(bad)} of {len(doc['round_trip'])} parameters agree"
+             + (f"; differ: {', '.join(bad)}" if bad else ""))
+    _say(ctx, f"wrote config.yaml, fit.json and fit_report.html to {out}/")
 
 
 @app.command()

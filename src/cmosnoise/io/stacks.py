@@ -74,11 +74,6 @@ class Manifest(BaseModel):
 class StackStats:
     """One stack reduced to what the fits need (DN)."""
 
-    kind: str
-    exposure_s: float
-    temperature_c: Optional[float]
-    level: Optional[float]
-    photons: Optional[float]
     n: int  #: frames
     mean: np.ndarray  #: (rows, cols) float64, per-pixel temporal mean
     pixel_var: np.ndarray  #: (rows, cols) float64, per-pixel temporal variance (ddof 1) of the frames less their row and column means
@@ -86,6 +81,11 @@ class StackStats:
     row_means: np.ndarray  #: (n, rows) float64
     col_means: np.ndarray  #: (n, cols) float64
     max_dn: float
+    kind: str = "dark"
+    exposure_s: float = 0.0
+    temperature_c: Optional[float] = None
+    level: Optional[float] = None
+    photons: Optional[float] = None
     files: list[str] = field(default_factory=list)
 
     @property

@@ -1,0 +1,98 @@
+"""Fitting the light-dependent stages to flat fields: photon transfer (K, full well), PRNU and column gain.
+
+**Photon transfer** (EMVA 1288's method). For every flat stack, the mean
+signal above its dark reference ``mu = mean(flat) - mean(dark)`` and the
+temporal variance ``v = var(flat) - var(dark)`` (DN, DN^2). Shot noise makes
+``v = K mu`` until the pixels clip; saturation is the point of largest
+variance, and K the least-squares slope through the origin of the points
+below 70 % of it.
+
+**PRNU and column gain.** A flat stack's mean image less its dark
+stack's (same exposure) is the signal; each colour channel is divided by
+its mean. A two-way analysis splits it into column means (the column gain
+mismatch, after the pixel part's and the temporal noise's share is taken
+off) and a pixel residual (PRNU, after the temporal noise's share).
+Defect pixels (5 robust sigma) are left out.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import CmosnoiseError
+from ..model import cfa as cfa_mod
+from .fit_readout import Z95, centred_series, robust_mask, two_way
+
+
+def photon_transfer(mu: np.ndarray, v: np.ndarray) -> dict:
+    """K (DN/e-) from the photon-transfer points ``mu`` (DN above dark) and ``v`` (DN^2, less the dark's).
+
+    Returns K, its 95 % interval (from the residuals of the through-origin
+    fit), the saturation index and the indices used.
+    """
+    mu, v = np.asarray(mu, np.float64), np.asarray(v, np.float64)
+    order = np.argsort(mu)
+    mu, v = mu[order], v[order]
+    i_sat = int(np.argmax(v))
+    lin = np.nonzero((mu <= 0.7 * mu[i_sat]) & (np.arange(mu.size) < i_sat) & (mu > 0))[0]
+    if lin.size < 3:
+        raise CmosnoiseError(f"system gain K: {lin.size} flat level(s) below 70 % of saturation; the photon transfer "
+                             "needs at least 3 (EMVA 1288 recommends 50 levels from dark to beyond saturation)")
+    k = float(np.sum(mu[lin] * v[lin]) / np.sum(mu[lin] ** 2))
+    se = math.sqrt(float(np.sum((v[lin] - k * mu[lin]) ** 2)) / (lin.size - 1) / float(np.sum(mu[lin] ** 2)))
+    return {"K": k, "ci95": [k - Z95 * se, k + Z95 * se], "saturation_index": i_sat, "fit_points": int(lin.size),
+            "mu": mu, "v": v, "linear": lin}
+
+
+def channel_normalised(signal: np.ndarray, pattern: str, mask: np.ndarray) -> np.ndarray:
+    """``signal`` divided, colour channel by colour channel, by the channel's mean over the kept pixels."""
+    out = np.empty_like(signal, dtype=np.float64)
+    for m in cfa_mod.masks(pattern, signal.shape):
+        sel = m.astype(bool)
+        out[sel] = signal[sel] / float(np.mean(signal[sel & mask]))
+    return out
+
+
+def prnu_and_column_gain(flat, dark, pattern: str, saturation_dn: float) -> dict:
+    """PRNU (%) and column gain mismatch (%) from a flat stack and a dark stack at its exposure (:class:`StackStats`).
+
+    Returns ``{"prnu_pct": {value, ci95}, "column_gain_pct": {value, ci95}, "excluded_pixels", "signal_dn"}``.
+    """
+    if flat.shape != dark.shape:
+        raise CmosnoiseError("PRNU: the flat and dark stacks differ in size")
+    signal = flat.mean - dark.mean
+    rows, cols = signal.shape
+    keep = robust_mask(dark.mean) & (flat.mean < 0.95 * saturation_dn)
+    for m in cfa_mod.masks(pattern, signal.shape):  # defects of the signal, per channel
+        sel = m.astype(bool)
+        keep[sel] &= robust_mask(signal[sel])
+    mean_s = float(np.mean(signal[keep]))
+    if mean_s <= 0:
+        raise CmosnoiseError("PRNU: the flat stack is not brighter than its dark stack")
+    rel = channel_normalised(signal, pattern, keep)
+    tw = two_way(rel, keep)
+    corr = 1 - 2 / cols - 2 / rows
+    # per-pixel temporal variance of the two means, relative to the signal
+    v_f = float(np.mean(flat.pixel_var)) / corr / flat.n / mean_s**2
+    v_d = float(np.mean(dark.pixel_var)) / corr / dark.n / mean_s**2
+    resid = tw["resid_var"]
+    x = (rel - np.mean(rel[keep]))[keep]
+    kurt = float(np.mean(x**4) / np.var(x) ** 2)
+    prnu2 = resid - v_f - v_d
+    se = resid * math.sqrt((kurt - 1) / x.size)
+    prnu = {"value": 100 * math.sqrt(max(prnu2, 0.0)),
+            "ci95": [100 * math.sqrt(max(prnu2 - Z95 * se, 0.0)), 100 * math.sqrt(max(prnu2 + Z95 * se, 0.0))]}
+    # column means: the gain mismatch, plus the pixel residual's share and the column means' temporal noise
+    col = tw["col"]
+    var_c = float(np.var(col, ddof=1))
+    s2c_f = float(np.mean(centred_series(flat.col_means).var(axis=0, ddof=1))) / flat.n / mean_s**2
+    s2c_d = float(np.mean(centred_series(dark.col_means).var(axis=0, ddof=1))) / dark.n / mean_s**2
+    n_c = tw["n_per_col"]
+    g2 = var_c - resid / n_c - (s2c_f - v_f / n_c) - (s2c_d - v_d / n_c)
+    se_g = var_c * math.sqrt(2 / (cols - 1))
+    gain = {"value": 100 * math.sqrt(max(g2, 0.0)),
+            "ci95": [100 * math.sqrt(max(g2 - Z95 * se_g, 0.0)), 100 * math.sqrt(max(g2 + Z95 * se_g, 0.0))]}
+    return {"prnu_pct": prnu, "column_gain_pct": gain, "excluded_pixels": int((~keep).sum()), "signal_dn": mean_s,
+            "relative_residual": x}

@@ -1,0 +1,347 @@
+"""Fitting the readout stages to a long dark stack: source follower, row noise, column noise and VFPN.
+
+All in e- (the stack's DN divided by the system gain K).
+
+**Source follower** (MODEL.md stage 6). Each pixel's temporal variance over
+a stack of N frames, its own row and column means removed frame by frame,
+is a scaled chi-square with N - 1 degrees of freedom::
+
+    s2_i ~ v_i * chi2(N - 1) / (N - 1),   v_i = a_i + thermal^2 + sigma_i^2
+
+where ``a_i`` is what is known per pixel (dark shot noise ``rate_i * t``,
+the quantizer's 1/(12 K^2)) and ``sigma_i`` is the pixel's flicker sigma,
+``max(gumbel_r(loc, scale), 0)`` plus, for a fraction f of the pixels,
+``Uniform(0, tail_max)`` (MODEL.md section 4). The parameters (thermal,
+loc, scale, f, tail_max) maximise the marginal likelihood of the observed
+s2_i, the flicker sigma integrated out on a grid of v; the histogram of the
+noisy s2_i itself is never fitted. Confidence intervals: the sandwich
+(robust) covariance of the estimate, which stays honest for the pixel
+subsample used and for a model that is only approximately right.
+
+**Column noise** (stage 8). Each column's mean over rows, less the
+frame's mean, varies over frames with ``sigma_c^2 + v_pixel / rows``; the
+same machinery fits sigma_c's ``gumbel_r`` (no floor, no tail).
+**Row noise** (stage 7): the rows' means likewise give ``sigma_row^2``.
+**VFPN and fixed row offsets**: a two-way analysis of the stack's mean
+image, white pixels masked.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CmosnoiseError
+
+Z95 = 1.959963984540054
+#: pixels a likelihood uses at most: every candidate tail pixel (up to this many) plus a weighted body sample
+BODY_SAMPLE = 30_000
+TAIL_SAMPLE = 20_000
+GRID = 600  #: at most this many bins of the variance grid
+
+
+# ------------------------------------------------------------------ the flicker sigma's distribution
+def sigma_cdf(s: np.ndarray, loc: float, scale: float, f: float = 0.0, tail_max: float = 0.0) -> np.ndarray:
+    """CDF of ``S = max(gumbel_r(loc, scale), 0) + Bernoulli(f) * Uniform(0, tail_max)`` at ``s`` (e- rms).
+
+    The tail part is closed form: with ``F_B`` the clipped Gumbel CDF,
+    ``P(B + U <= s) = (J(s) - J(s - M)) / M``, ``J(x) = integral_0^x F_B``,
+    and ``integral exp(-exp(-z)) dz`` is an exponential integral.
+    """
+    from scipy.special import exp1
+
+    s = np.asarray(s, np.float64)
+
+    def fb(x):
+        return np.where(x >= 0, np.exp(-np.exp(-(x - loc) / scale)), 0.0)
+
+    out = fb(s)
+    if f > 0 and tail_max > 0:
+        t0 = math.exp(loc / scale)  # exp(-z(0))
+
+        def J(x):
+            xp = np.maximum(x, 0.0)
+            with np.errstate(over="ignore"):
+                t = np.exp(-(xp - loc) / scale)
+            e0 = exp1(t0) if t0 < 700 else 0.0
+            return np.where(x > 0, scale * (exp1(t) - e0), 0.0)
+
+        out = (1 - f) * out + f * (J(s) - J(s - tail_max)) / tail_max
+    return np.clip(out, 0.0, 1.0)
+
+
+def ppm_above(threshold: float, loc: float, scale: float, f: float, tail_max: float) -> float:
+    """Parts per million of flicker sigmas above ``threshold`` (MODEL.md section 4's ppm)."""
+    return float(1e6 * (1 - sigma_cdf(np.array([threshold]), loc, scale, f, tail_max)[0]))
+
+
+# ------------------------------------------------------------------ the marginal likelihood on a grid of v
+@dataclass
+class VarianceFit:
+    """Maximum-likelihood fit of per-unit sample variances (e-^2)."""
+
+    names: list[str]
+    value: np.ndarray
+    cov: np.ndarray
+    loglik: float
+    n_units: int
+    n_used: int
+    theta: np.ndarray | None = None  #: the optimizer's parameters (internal scale)
+    extra: dict | None = None  #: parameters whose value or interval is not the sandwich's (name -> value, ci95)
+
+    def interval(self, name: str) -> tuple[float | None, list[float] | None]:
+        """Value and 95 % interval of ``name``."""
+        if self.extra and name in self.extra:
+            return self.extra[name]["value"], self.extra[name]["ci95"]
+        v, se = float(self.value[self.names.index(name)]), self.se(name)
+        return v, [v - Z95 * se, v + Z95 * se]
+
+    def se(self, name: str) -> float:
+        i = self.names.index(name)
+        return math.sqrt(max(self.cov[i, i], 0.0))
+
+
+class _Grid:
+    """Per-unit likelihood of s2 on a grid of the unknown part c of the variance (precomputed once)."""
+
+    def __init__(self, s2: np.ndarray, a: np.ndarray, dof: int, weights: np.ndarray, c_max: float, c_min: float):
+        # bins a quarter of the chi-square's relative width apart: finer would only cost time
+        step = 0.25 * math.sqrt(2.0 / dof)
+        inner = np.geomspace(c_min, c_max, int(min(max(math.ceil(math.log(c_max / c_min) / step), 60), GRID)))
+        self.edges = np.concatenate([[0.0], inner])
+        mids = np.concatenate([[inner[0] / 2], np.sqrt(inner[:-1] * inner[1:]), [inner[-1] * 1.5]])
+        v = a[:, None] + mids[None, :]
+        ll = -0.5 * dof * np.log(v) - 0.5 * dof * s2[:, None] / v
+        L = np.exp(ll - ll.max(axis=1, keepdims=True))
+        L[L < 1e-9] = 0.0  # each unit's likelihood is a narrow band of the grid: keep it sparse
+        from scipy import sparse
+
+        self.L = sparse.csr_matrix(L)
+        self.weights = weights
+
+    def bin_mass(self, cdf_c) -> np.ndarray:
+        F = cdf_c(self.edges)
+        return np.diff(np.concatenate([F, [1.0]]))
+
+    def per_unit(self, cdf_c) -> np.ndarray:
+        return np.log(np.maximum(self.L @ self.bin_mass(cdf_c), 1e-300))
+
+
+def _fit(grid: _Grid, unpack, theta0: list[np.ndarray], names: list[str], natural) -> VarianceFit:
+    """Nelder-Mead on the weighted log-likelihood, from several starts; sandwich covariance of ``natural(theta)``."""
+    from scipy import optimize
+
+    def total(theta):
+        cdf = unpack(theta)
+        if cdf is None:
+            return 1e300
+        return -float(np.sum(grid.weights * grid.per_unit(cdf)))
+
+    best = None
+    for t0 in theta0:  # a rough search from each start, then the best one polished
+        res = optimize.minimize(total, t0, method="Nelder-Mead",
+                                options={"xatol": 1e-3, "fatol": 1e-1, "maxfev": 300 if len(theta0) > 1 else 4000})
+        if best is None or res.fun < best.fun:
+            best = res
+    if len(theta0) > 1:
+        best = optimize.minimize(total, best.x, method="Nelder-Mead",
+                                 options={"xatol": 1e-5, "fatol": 1e-4, "maxiter": 4000, "maxfev": 4000})
+    theta = best.x
+    k = theta.size
+    h = 1e-4 * np.maximum(1.0, np.abs(theta))
+    # per-unit scores and the Hessian of the total, by central differences
+    scores = np.empty((grid.weights.size, k))
+    for j in range(k):
+        e = np.zeros(k); e[j] = h[j]  # noqa: E702
+        up, dn = unpack(theta + e), unpack(theta - e)
+        scores[:, j] = (grid.per_unit(up) - grid.per_unit(dn)) / (2 * h[j])
+    H = np.empty((k, k))
+    f0 = total(theta)
+    for i in range(k):
+        for j in range(i, k):
+            ei = np.zeros(k); ei[i] = h[i]  # noqa: E702
+            ej = np.zeros(k); ej[j] = h[j]  # noqa: E702
+            H[i, j] = H[j, i] = (total(theta + ei + ej) - total(theta + ei - ej) - total(theta - ei + ej)
+                                 + total(theta - ei - ej)) / (4 * h[i] * h[j])
+    del f0
+    w = grid.weights[:, None]
+    B = (scores * w).T @ (scores * w)
+    try:
+        Hinv = np.linalg.pinv(H)
+    except np.linalg.LinAlgError:
+        Hinv = np.full((k, k), np.nan)
+    cov_theta = Hinv @ B @ Hinv
+    # the natural parameters and their covariance by the delta method
+    value = np.asarray(natural(theta), np.float64)
+    J = np.empty((value.size, k))
+    for j in range(k):
+        e = np.zeros(k); e[j] = h[j]  # noqa: E702
+        J[:, j] = (np.asarray(natural(theta + e)) - np.asarray(natural(theta - e))) / (2 * h[j])
+    return VarianceFit(names, value, J @ cov_theta @ J.T, -float(best.fun), int(round(grid.weights.sum())), grid.weights.size,
+                       theta=theta)
+
+
+def _select(c: np.ndarray, seed: int, with_tail: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Indices and weights: the top 0.5 % (tail candidates) all, a weighted random sample of the rest."""
+    n = c.size
+    rng = np.random.default_rng(seed)
+    if n <= BODY_SAMPLE + (TAIL_SAMPLE if with_tail else 0):
+        return np.arange(n), np.ones(n)
+    order = np.argsort(c)
+    n_top = min(int(math.ceil(0.005 * n)), TAIL_SAMPLE) if with_tail else 0
+    top, rest = order[n - n_top:], order[: n - n_top]
+    pick = rng.choice(rest, BODY_SAMPLE, replace=False)
+    idx = np.concatenate([top, pick])
+    w = np.concatenate([np.ones(top.size), np.full(pick.size, rest.size / pick.size)])
+    return idx, w
+
+
+def _clipped(theta: np.ndarray) -> np.ndarray:
+    """The parameter vector inside what exp can take (log scale, logit f, log max within +-14, +-30, +-14)."""
+    t = np.array(theta, np.float64)
+    lim = [math.inf, math.inf, 14.0, 30.0, 14.0][: t.size]
+    return np.clip(t, -np.array(lim), np.array(lim))
+
+
+def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshold_e: float | None, seed: int = 0,
+                        with_tail: bool = True) -> dict:
+    """Thermal floor and flicker sigma distribution from per-pixel variances (e-^2), see the module docstring.
+
+    ``s2``: per-pixel temporal variances (e-^2, ddof 1) over ``frames`` frames;
+    ``known``: the known part of each pixel's variance (e-^2), same shape.
+    ``threshold_e``: the flicker-tail threshold for the reported ppm.
+    Returns ``{name: (value, se)}`` for thermal_sigma_e, gumbel_loc_e,
+    gumbel_scale_e and (with the tail) tail_ppm_above, tail_max_e, plus
+    ``loglik`` and the pixel counts.
+    """
+    s2 = np.asarray(s2, np.float64).ravel()
+    a = np.asarray(known, np.float64).ravel()
+    if frames < 4:
+        raise CmosnoiseError(f"source follower: a dark stack of {frames} frames; per-pixel variances need at least 4 (50 to 100 recommended)")
+    c = s2 - a
+    idx, w = _select(c, seed, with_tail)
+    med = float(np.median(s2))
+    grid = _Grid(s2[idx], a[idx], frames - 1, w, c_max=max(float(c.max()) * 3, med * 4), c_min=1e-3 * med)
+    # starts: the floor from the low quantiles, the body from what is left
+    c_pos = np.maximum(c, 0)
+    starts = []
+    for frac in (0.9, 0.5, 0.1):
+        th2 = frac * float(np.quantile(c_pos, 0.02))
+        sig = np.sqrt(np.maximum(c_pos - th2, 0))
+        body = sig[sig <= np.quantile(sig, 0.995)]
+        scale = max(float(body.std()) * math.sqrt(6) / math.pi, 1e-3)
+        loc = float(np.median(body)) - 0.3665 * scale
+        t = [math.sqrt(th2), loc, math.log(scale)]
+        if with_tail:
+            t += [math.log(1e-4 / (1 - 1e-4)), math.log(max(4 * float(np.sqrt(c_pos.max())), 1e-3))]
+        starts.append(np.array(t))
+
+    def unpack(theta):
+        theta = _clipped(theta)
+        th, loc, scale = abs(theta[0]), theta[1], math.exp(theta[2])
+        f, M = (1 / (1 + math.exp(-theta[3])), math.exp(theta[4])) if with_tail else (0.0, 0.0)
+
+        def cdf_c(x):
+            d = x - th * th
+            return np.where(d >= 0, sigma_cdf(np.sqrt(np.maximum(d, 0)), loc, scale, f, M), 0.0)
+        return cdf_c
+
+    thr = threshold_e if threshold_e is not None else math.inf
+
+    def natural(theta):
+        theta = _clipped(theta)
+        th, loc, scale = abs(theta[0]), theta[1], math.exp(theta[2])
+        out = [th, loc, scale]
+        if with_tail:
+            f, M = 1 / (1 + math.exp(-theta[3])), math.exp(theta[4])
+            out += [ppm_above(thr, loc, scale, f, M) if math.isfinite(thr) else f * 1e6, M]
+        return out
+
+    names = ["thermal_sigma_e", "gumbel_loc_e", "gumbel_scale_e"] + (["tail_ppm_above", "tail_max_e"] if with_tail else [])
+    r = _fit(grid, unpack, starts, names, natural)
+    if with_tail and s2.size / (1 + math.exp(-float(_clipped(r.theta)[3]))) < 3:
+        # fewer than 3 tail pixels: no tail can be fitted; the body alone, the tail's ppm bounded from above
+        body = fit_source_follower(s2, known, frames, threshold_e, seed, with_tail=False)
+        b = body["fit"]
+        loc, scale = float(b.value[1]), float(b.value[2])
+        own = ppm_above(thr, loc, scale, 0.0, 0.0) if math.isfinite(thr) else 0.0
+        b.extra = {"tail_ppm_above": {"value": own, "ci95": [0.0, own + 3e6 / s2.size], "tail_pixels": 0},
+                   "tail_max_e": {"value": None, "ci95": None, "tail_pixels": 0}}
+        body["no_tail"] = True
+        return body
+    if with_tail:
+        # the tail's maximum is the end point of a uniform: its estimate sits near the largest of the n tail
+        # pixels' values, below the truth by about max / (n + 1); the interval is the order statistic's
+        # (the truth is below max * 0.025^(-1 / n) with 97.5 % probability) widened by the blur of the variances
+        i, j = names.index("tail_max_e"), names.index("tail_ppm_above")
+        n_tail = max(r.value[j] * 1e-6 * s2.size, 1.0)
+        m_hat, se = float(r.value[i]), r.se("tail_max_e")
+        r.extra = {"tail_max_e": {"value": m_hat * (n_tail + 1) / n_tail,
+                                  "ci95": [m_hat - Z95 * se, m_hat * 0.025 ** (-1 / n_tail) + Z95 * se],
+                                  "tail_pixels": n_tail}}
+    return {"fit": r, "pixels": int(s2.size), "pixels_used": r.n_used}
+
+
+def fit_column_sigma(s2: np.ndarray, known: float, frames: int) -> VarianceFit:
+    """The per-column temporal sigma's ``gumbel_r`` (clipped at 0) from each column's variance (e-^2) over frames."""
+    s2 = np.asarray(s2, np.float64).ravel()
+    a = np.full(s2.size, float(known))
+    c = np.maximum(s2 - a, 0)
+    med = float(np.median(s2))
+    grid = _Grid(s2, a, frames - 1, np.ones(s2.size), c_max=max(float(c.max()) * 3, med * 4), c_min=1e-3 * med)
+    sig = np.sqrt(c)
+    scale = max(float(sig.std()) * math.sqrt(6) / math.pi, 1e-3)
+    starts = [np.array([float(np.median(sig)) - 0.3665 * scale, math.log(scale)])]
+
+    def unpack(theta):
+        loc, scale = theta[0], math.exp(min(max(theta[1], -14.0), 14.0))
+        return lambda x: sigma_cdf(np.sqrt(x), loc, scale)
+
+    return _fit(grid, unpack, starts, ["gumbel_loc_e", "gumbel_scale_e"], lambda t: [t[0], math.exp(t[1])])
+
+
+# ------------------------------------------------------------------ row and column statistics of a stack
+def centred_series(means: np.ndarray) -> np.ndarray:
+    """A (frames, units) series of row or column means less each unit's temporal mean and each frame's mean."""
+    x = np.asarray(means, np.float64)
+    x = x - x.mean(axis=0, keepdims=True)
+    return x - x.mean(axis=1, keepdims=True)
+
+
+def variance_ci(var: float, dof: float) -> tuple[float, float]:
+    """Standard error of a sample variance (normal data) with ``dof`` degrees of freedom."""
+    return var * math.sqrt(2.0 / max(dof, 1.0)), dof
+
+
+def sigma_from_variance(var: float, se: float) -> dict:
+    """A sigma from a variance estimate and its standard error: value and 95 % interval (clipped at 0)."""
+    lo, hi = var - Z95 * se, var + Z95 * se
+    return {"value": math.sqrt(max(var, 0.0)), "ci95": [math.sqrt(max(lo, 0.0)), math.sqrt(max(hi, 0.0))]}
+
+
+def robust_mask(image: np.ndarray, k: float = 5.0) -> np.ndarray:
+    """Pixels within ``k`` robust standard deviations of the median (white and dead pixels out)."""
+    med = float(np.median(image))
+    mad = 1.4826 * float(np.median(np.abs(image - med))) or 1e-12
+    return np.abs(image - med) <= k * mad
+
+
+def two_way(image: np.ndarray, mask: np.ndarray) -> dict:
+    """Row and column effects of a (rows, cols) image, masked pixels left out.
+
+    Returns the row means, column means (of the kept pixels), the residual
+    variance (corrected for the fitted effects) and the kept counts per row and column.
+    """
+    m = mask.astype(np.float64)
+    x = np.where(mask, image, 0.0)
+    n_c, n_r = m.sum(axis=0), m.sum(axis=1)
+    col = x.sum(axis=0) / np.maximum(n_c, 1)
+    row = x.sum(axis=1) / np.maximum(n_r, 1)
+    g = float(x.sum() / m.sum())
+    resid = (image - row[:, None] - col[None, :] + g)[mask]
+    rows, cols = image.shape
+    res_var = float(np.var(resid)) * rows * cols / ((rows - 1) * (cols - 1))
+    return {"row": row - g, "col": col - g, "resid_var": res_var, "n_per_col": float(np.mean(n_c)),
+            "n_per_row": float(np.mean(n_r))}
