@@ -233,7 +233,8 @@ def _readout(st, k: float, black: float, rate_map, P: dict, plots: dict, base, s
     known = dark_var + 1 / (12 * k * k) + vbar * (1 / cols + 1 / rows) / corr
     tail = base.source_follower.flicker.tail
     thr = tail.threshold_e if tail is not None else 4 * base.source_follower.flicker.gumbel_loc_e
-    r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed)
+    q = 1 / (12 * k * k)  # the quantizer's variance, e-^2; its fourth cumulant -1.2 q^2, the dark charge's its mean
+    r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed, kappa4=dark_var - 1.2 * q * q)
     f = r["fit"]
     where = (f"{n} frames at {st.exposure_s:g} s: per-pixel variances (chi-square, {n - 1} dof), marginal maximum "
              f"likelihood over {f.n_used} of {r['pixels']} pixels, sandwich interval; {how}")
@@ -256,8 +257,8 @@ def _readout(st, k: float, black: float, rate_map, P: dict, plots: dict, base, s
     # rows: temporal then fixed
     rs = centred_series(st.row_means) / k
     cs = centred_series(st.col_means) / k
-    v_row = float(rs.var(ddof=1)) * rows / (rows - 1)
-    dof = (n - 1) * (rows - 1)
+    dof = (n - 1) * (rows - 1)  # each row's temporal mean and each frame's mean removed
+    v_row = float(np.sum(rs * rs)) / dof
     se = v_row * math.sqrt(2 / dof)
     P["row_noise.sigma_e"] = _p(**sigma_from_variance(v_row - vbar / cols, se),
                                 method=f"variance of the rows' means over {n} frames, less the pixels' share")
@@ -271,15 +272,14 @@ def _readout(st, k: float, black: float, rate_map, P: dict, plots: dict, base, s
     # fixed: a two-way analysis of the stack's mean image (e-), white pixels masked
     img = (st.mean - black) / k
     keep = fit_readout.robust_mask(img)
-    tw = fit_readout.two_way(img, keep)
-    for axis, name, units, series, count in [("col", "column_noise.vfpn_sigma_e", cols, s2_cols, tw["n_per_col"]),
-                                             ("row", "row_noise.fixed_sigma_e", rows, rs.var(axis=0, ddof=1), tw["n_per_row"])]:
-        eff = tw[axis]
-        var = float(np.var(eff, ddof=1))
-        est = var - tw["resid_var"] / count - (float(np.mean(series)) - vbar / count) / n
-        se = var * math.sqrt(2 / (units - 1))
-        P[name] = _p(**sigma_from_variance(est, se), method=f"{'column' if axis == 'col' else 'row'} means of the "
-                     f"{n}-frame mean image, less the pixel and temporal shares ({int((~keep).sum())} outliers out)")
+    for axis, name, series, count in [("col", "column_noise.vfpn_sigma_e", s2_cols, rows),
+                                      ("row", "row_noise.fixed_sigma_e", rs.var(axis=0, ddof=1), cols)]:
+        cov, se = fit_readout.split_half_covariance(img, keep, axis)
+        # the temporal column (row) noise averaged over the frames is common to both halves too
+        est = cov - (float(np.mean(series)) - vbar / count) / n
+        what = "column" if axis == "col" else "row"
+        P[name] = _p(**sigma_from_variance(est, se), method=f"covariance of each {what}'s mean over two halves of the "
+                     f"{n}-frame mean image, less the temporal {what} noise ({int((~keep).sum())} outliers out)")
 
 
 def fitted_config(base, result: dict):

@@ -138,14 +138,16 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
         threshold = med + 8 * 1.4826 * float(np.median(np.abs(rates - med)))
     fits = select_family(rates, threshold)
     best = fits[0]
-    body_std = math.sqrt(max(best.std**2 - slope_noise_var, 1e-12))
+    floor = 1e-3 * abs(best.mean)  # the least std the configuration can take (1e-6 of the mean), with room
+    body_std = math.sqrt(max(best.std**2 - slope_noise_var, floor**2))
     n = best.n
     x = rates[rates < threshold].astype(np.float64)
     kurt = float(np.mean((x - x.mean()) ** 4) / np.var(x) ** 2)
     se_mean, se_std = best.std / math.sqrt(n), best.std * math.sqrt((kurt - 1) / (4 * n))
     tl = tail(rates, threshold, best)
-    p = tl["ppm_above"] * 1e-6
-    se_ppm = math.sqrt(p * (1 - p) / rates.size) * 1e6
+    from scipy import stats
+
+    ci = stats.binomtest(tl["pixels_above"], rates.size).proportion_ci(0.95, method="exact")
     z = Z95
     params = {
         "family": {"value": best.family, "ci95": None,
@@ -153,9 +155,10 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
         "mean_e_per_s": {"value": best.mean, "ci95": [best.mean - z * se_mean, best.mean + z * se_mean],
                          "method": "per-pixel slope over exposure time, body fit"},
         "std_e_per_s": {"value": body_std, "ci95": [max(body_std - z * se_std, 0.0), body_std + z * se_std],
-                        "method": f"body fit, less the slope's temporal noise ({math.sqrt(slope_noise_var):.3g} e-/s rms)"},
-        "tail.ppm_above": {"value": tl["ppm_above"], "ci95": [max(tl["ppm_above"] - z * se_ppm, 0.0), tl["ppm_above"] + z * se_ppm],
-                           "method": f"pixels above {threshold:.4g} e-/s (binomial interval)"},
+                        "method": f"body fit, less the slope's temporal noise ({math.sqrt(slope_noise_var):.3g} e-/s rms)"
+                                  + (": not resolved above that noise (the value is a floor)" if body_std <= floor * 1.0001 else "")},
+        "tail.ppm_above": {"value": tl["ppm_above"], "ci95": [ci.low * 1e6, ci.high * 1e6],
+                           "method": f"pixels above {threshold:.4g} e-/s (exact binomial interval)"},
         "tail.max_e_per_s": {"value": max(tl["max_e_per_s"], 1.0), "ci95": None,
                              "method": "largest rate above the body's mean"},
     }

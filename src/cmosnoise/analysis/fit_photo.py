@@ -11,7 +11,8 @@ below 70 % of it.
 stack's (same exposure) is the signal; each colour channel is divided by
 its mean. A two-way analysis splits it into column means (the column gain
 mismatch, after the pixel part's and the temporal noise's share is taken
-off) and a pixel residual (PRNU, after the temporal noise's share).
+off: the covariance of two halves of each column) and a pixel residual
+(PRNU, after the temporal noise's share).
 Defect pixels (5 robust sigma) are left out.
 """
 
@@ -23,7 +24,7 @@ import numpy as np
 
 from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
-from .fit_readout import Z95, centred_series, robust_mask, two_way
+from .fit_readout import Z95, centred_series, robust_mask, split_half_covariance, two_way
 
 
 def photon_transfer(mu: np.ndarray, v: np.ndarray) -> dict:
@@ -84,14 +85,12 @@ def prnu_and_column_gain(flat, dark, pattern: str, saturation_dn: float) -> dict
     se = resid * math.sqrt((kurt - 1) / x.size)
     prnu = {"value": 100 * math.sqrt(max(prnu2, 0.0)),
             "ci95": [100 * math.sqrt(max(prnu2 - Z95 * se, 0.0)), 100 * math.sqrt(max(prnu2 + Z95 * se, 0.0))]}
-    # column means: the gain mismatch, plus the pixel residual's share and the column means' temporal noise
-    col = tw["col"]
-    var_c = float(np.var(col, ddof=1))
+    # column gain: what two halves of each column share (split_half_covariance), less the column means'
+    # temporal noise (common to both halves too); the pixels' share of that noise is not common
+    cov, se_g = split_half_covariance(rel, keep, "col")
     s2c_f = float(np.mean(centred_series(flat.col_means).var(axis=0, ddof=1))) / flat.n / mean_s**2
     s2c_d = float(np.mean(centred_series(dark.col_means).var(axis=0, ddof=1))) / dark.n / mean_s**2
-    n_c = tw["n_per_col"]
-    g2 = var_c - resid / n_c - (s2c_f - v_f / n_c) - (s2c_d - v_d / n_c)
-    se_g = var_c * math.sqrt(2 / (cols - 1))
+    g2 = cov - (s2c_f - v_f / rows) - (s2c_d - v_d / rows)
     gain = {"value": 100 * math.sqrt(max(g2, 0.0)),
             "ci95": [100 * math.sqrt(max(g2 - Z95 * se_g, 0.0)), 100 * math.sqrt(max(g2 + Z95 * se_g, 0.0))]}
     return {"prnu_pct": prnu, "column_gain_pct": gain, "excluded_pixels": int((~keep).sum()), "signal_dn": mean_s,

@@ -36,9 +36,8 @@ import numpy as np
 from ..errors import CmosnoiseError
 
 Z95 = 1.959963984540054
-#: pixels a likelihood uses at most: every candidate tail pixel (up to this many) plus a weighted body sample
-BODY_SAMPLE = 30_000
-TAIL_SAMPLE = 20_000
+#: pixels whose variances agree to this (relative) and whose known parts agree to a fraction of the median are one unit
+S2_STEP, KNOWN_STEP = 0.01, 0.005
 GRID = 600  #: at most this many bins of the variance grid
 
 
@@ -96,30 +95,46 @@ class VarianceFit:
         if self.extra and name in self.extra:
             return self.extra[name]["value"], self.extra[name]["ci95"]
         v, se = float(self.value[self.names.index(name)]), self.se(name)
-        return v, [v - Z95 * se, v + Z95 * se]
+        if not math.isfinite(se):
+            return v, None
+        return v, [max(v - Z95 * se, 0.0) if v >= 0 and not name.endswith("loc_e") else v - Z95 * se, v + Z95 * se]
 
     def se(self, name: str) -> float:
         i = self.names.index(name)
-        return math.sqrt(max(self.cov[i, i], 0.0))
+        c = self.cov[i, i]
+        return math.sqrt(max(c, 0.0)) if math.isfinite(c) else math.nan
 
 
 class _Grid:
     """Per-unit likelihood of s2 on a grid of the unknown part c of the variance (precomputed once)."""
 
-    def __init__(self, s2: np.ndarray, a: np.ndarray, dof: int, weights: np.ndarray, c_max: float, c_min: float):
+    def __init__(self, s2: np.ndarray, a: np.ndarray, dof: int, weights: np.ndarray, c_max: float, c_min: float,
+                 kappa4: np.ndarray | None = None):
         # bins a quarter of the chi-square's relative width apart: finer would only cost time
         step = 0.25 * math.sqrt(2.0 / dof)
         inner = np.geomspace(c_min, c_max, int(min(max(math.ceil(math.log(c_max / c_min) / step), 60), GRID)))
         self.edges = np.concatenate([[0.0], inner])
         mids = np.concatenate([[inner[0] / 2], np.sqrt(inner[:-1] * inner[1:]), [inner[-1] * 1.5]])
         v = a[:, None] + mids[None, :]
-        ll = -0.5 * dof * np.log(v) - 0.5 * dof * s2[:, None] / v
+        if kappa4 is None:
+            nu = float(dof)
+            ll = -0.5 * nu * np.log(v) - 0.5 * nu * s2[:, None] / v
+        else:
+            # noise that is not Gaussian (the quantizer's uniform error, Poisson dark charge) changes the spread
+            # of a sample variance: var(s2) = 2 v^2 / (N - 1) + kappa4 / N. A scaled chi-square with the
+            # degrees of freedom that give that spread keeps the likelihood right to second order.
+            frames = dof + 1
+            nu = 2 * v * v / np.maximum(2 * v * v / dof + kappa4[:, None] / frames, 1e-3 * v * v / dof)
+            x = nu * s2[:, None] / v
+            from scipy.special import gammaln
+
+            ll = np.log(nu / v) + (0.5 * nu - 1) * np.log(np.maximum(x, 1e-300)) - 0.5 * x - 0.5 * nu * math.log(2) - gammaln(0.5 * nu)
         L = np.exp(ll - ll.max(axis=1, keepdims=True))
         L[L < 1e-9] = 0.0  # each unit's likelihood is a narrow band of the grid: keep it sparse
         from scipy import sparse
 
         self.L = sparse.csr_matrix(L)
-        self.weights = weights
+        self.weights = weights  #: how many pixels each unit stands for
 
     def bin_mass(self, cdf_c) -> np.ndarray:
         F = cdf_c(self.edges)
@@ -166,10 +181,10 @@ def _fit(grid: _Grid, unpack, theta0: list[np.ndarray], names: list[str], natura
             H[i, j] = H[j, i] = (total(theta + ei + ej) - total(theta + ei - ej) - total(theta - ei + ej)
                                  + total(theta - ei - ej)) / (4 * h[i] * h[j])
     del f0
-    w = grid.weights[:, None]
-    B = (scores * w).T @ (scores * w)
-    try:
-        Hinv = np.linalg.pinv(H)
+    B = (scores * grid.weights[:, None]).T @ scores  # sum over pixels of score score^T (a unit's pixels share one)
+    try:  # a minimum has a positive definite Hessian; where the likelihood is flat, no interval can be given
+        np.linalg.cholesky(H)
+        Hinv = np.linalg.inv(H)
     except np.linalg.LinAlgError:
         Hinv = np.full((k, k), np.nan)
     cov_theta = Hinv @ B @ Hinv
@@ -183,19 +198,18 @@ def _fit(grid: _Grid, unpack, theta0: list[np.ndarray], names: list[str], natura
                        theta=theta)
 
 
-def _select(c: np.ndarray, seed: int, with_tail: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Indices and weights: the top 0.5 % (tail candidates) all, a weighted random sample of the rest."""
-    n = c.size
-    rng = np.random.default_rng(seed)
-    if n <= BODY_SAMPLE + (TAIL_SAMPLE if with_tail else 0):
-        return np.arange(n), np.ones(n)
-    order = np.argsort(c)
-    n_top = min(int(math.ceil(0.005 * n)), TAIL_SAMPLE) if with_tail else 0
-    top, rest = order[n - n_top:], order[: n - n_top]
-    pick = rng.choice(rest, BODY_SAMPLE, replace=False)
-    idx = np.concatenate([top, pick])
-    w = np.concatenate([np.ones(top.size), np.full(pick.size, rest.size / pick.size)])
-    return idx, w
+def _aggregate(s2: np.ndarray, a: np.ndarray, scale: float, k4: np.ndarray | None = None):
+    """Pixels with (nearly) the same variance and known part as one unit: its mean values and its pixel count.
+
+    Variances that agree to S2_STEP (relative) and known parts to KNOWN_STEP x ``scale``
+    give the same likelihood to well within the chi-square's own width, so
+    every pixel counts and the likelihood costs what a few thousand units cost.
+    """
+    keys = np.stack([np.round(np.log(np.maximum(s2, 1e-30)) / S2_STEP), np.round(a / (KNOWN_STEP * scale))], axis=1)
+    _, inv, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    k4u = None if k4 is None else np.bincount(inv, k4) / counts
+    return np.bincount(inv, s2) / counts, np.bincount(inv, a) / counts, counts.astype(np.float64), k4u
 
 
 def _clipped(theta: np.ndarray) -> np.ndarray:
@@ -206,11 +220,13 @@ def _clipped(theta: np.ndarray) -> np.ndarray:
 
 
 def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshold_e: float | None, seed: int = 0,
-                        with_tail: bool = True) -> dict:
+                        with_tail: bool = True, kappa4: np.ndarray | None = None) -> dict:
     """Thermal floor and flicker sigma distribution from per-pixel variances (e-^2), see the module docstring.
 
     ``s2``: per-pixel temporal variances (e-^2, ddof 1) over ``frames`` frames;
-    ``known``: the known part of each pixel's variance (e-^2), same shape.
+    ``known``: the known part of each pixel's variance (e-^2), same shape;
+    ``kappa4``: the known fourth cumulant of each pixel's noise (e-^4; the
+    quantizer's ``-1.2 q^2``, the dark charge's Poisson mean), or None for Gaussian noise.
     ``threshold_e``: the flicker-tail threshold for the reported ppm.
     Returns ``{name: (value, se)}`` for thermal_sigma_e, gumbel_loc_e,
     gumbel_scale_e and (with the tail) tail_ppm_above, tail_max_e, plus
@@ -221,9 +237,10 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
     if frames < 4:
         raise CmosnoiseError(f"source follower: a dark stack of {frames} frames; per-pixel variances need at least 4 (50 to 100 recommended)")
     c = s2 - a
-    idx, w = _select(c, seed, with_tail)
     med = float(np.median(s2))
-    grid = _Grid(s2[idx], a[idx], frames - 1, w, c_max=max(float(c.max()) * 3, med * 4), c_min=1e-3 * med)
+    k4 = None if kappa4 is None else np.broadcast_to(np.asarray(kappa4, np.float64).ravel(), s2.shape)
+    su, au, counts, k4u = _aggregate(s2, a, med, k4)
+    grid = _Grid(su, au, frames - 1, counts, c_max=max(float(c.max()) * 3, med * 4), c_min=1e-3 * med, kappa4=k4u)
     # starts: the floor from the low quantiles, the body from what is left
     c_pos = np.maximum(c, 0)
     starts = []
@@ -263,7 +280,7 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
     r = _fit(grid, unpack, starts, names, natural)
     if with_tail and s2.size / (1 + math.exp(-float(_clipped(r.theta)[3]))) < 3:
         # fewer than 3 tail pixels: no tail can be fitted; the body alone, the tail's ppm bounded from above
-        body = fit_source_follower(s2, known, frames, threshold_e, seed, with_tail=False)
+        body = fit_source_follower(s2, known, frames, threshold_e, seed, with_tail=False, kappa4=kappa4)
         b = body["fit"]
         loc, scale = float(b.value[1]), float(b.value[2])
         own = ppm_above(thr, loc, scale, 0.0, 0.0) if math.isfinite(thr) else 0.0
@@ -326,6 +343,29 @@ def robust_mask(image: np.ndarray, k: float = 5.0) -> np.ndarray:
     med = float(np.median(image))
     mad = 1.4826 * float(np.median(np.abs(image - med))) or 1e-12
     return np.abs(image - med) <= k * mad
+
+
+def split_half_covariance(image: np.ndarray, mask: np.ndarray, axis: str) -> tuple[float, float]:
+    """Variance of what is common to a column (``axis="col"``) or row, by the covariance of two halves' means.
+
+    Each column's mean over the top half of the rows and over the bottom
+    half: a column offset or gain is in both, a pixel's own deviation (even
+    when crosstalk makes neighbours alike) in only one, so their covariance
+    over the columns is the column part's variance alone. Returns the
+    covariance and its standard error.
+    """
+    img = image if axis == "col" else image.T
+    m = mask if axis == "col" else mask.T
+    h = img.shape[0] // 2
+
+    def means(a, k):
+        return np.where(k, a, 0).sum(axis=0) / np.maximum(k.sum(axis=0), 1)
+
+    x, y = means(img[:h], m[:h]), means(img[h:], m[h:])
+    n = x.size
+    c = float(np.cov(x, y)[0, 1])
+    se = math.sqrt((float(np.var(x, ddof=1)) * float(np.var(y, ddof=1)) + c * c) / (n - 1))
+    return c, se
 
 
 def two_way(image: np.ndarray, mask: np.ndarray) -> dict:

@@ -96,7 +96,7 @@ def _sigma_plot(d: dict, names: list[str], title: str, xlabel: str, with_thermal
     simu = np.sqrt(np.maximum(model - known, 0))
     fig, ax = plots.figure(figsize=(5.2, 3.6))
     hi = float(max(np.quantile(meas, 0.99999), np.quantile(simu, 0.99999)))
-    bins = np.linspace(0, hi * 1.02, 120)
+    bins = np.linspace(0, hi * 1.02, int(min(120, max(12, 2 * math.sqrt(s2.size)))))
     ax.hist(meas, bins=bins, histtype="stepfilled", alpha=0.5, label="measured")
     ax.hist(simu, bins=bins, histtype="step", color="C3", lw=1.2, label="fitted model, same estimator")
     plots.log_histogram_axes(ax, xlabel, title, "count per bin (log)")
@@ -145,12 +145,16 @@ def build(doc: dict, result: dict, cfg) -> str:
         figs.append(_figure(_ptc_plot(result["plots"]["ptc"]), "Photon transfer: variance over mean, K the slope"))
     parts.append("<h2>Photon transfer</h2><div class='row'>" + "".join(figs) + "</div>")
     for T, res in sorted(result["dark"].items()):
-        fam_rows = [(f["family"], f["mean"], f["std"], f["loglik"], f["aic"], f["delta_aic"]) for f in res["families"]]
+        n_neg = int((result["_maps"][T] <= 0).sum())
+        fam_rows = [(f["family"], f["mean"], f["std"], f["loglik"], f["aic"], f["delta_aic"]) if math.isfinite(f["loglik"])
+                    else (f["family"], "", "", f"not defined: {n_neg} pixels <= 0 e-/s (a noisy map; longer exposures)", "", "")
+                    for f in res["families"]]
+        ex = res["exposures_s"]
         wp = res["white_pixels"]
         parts.append(f"<h2>Dark current at {T:g} C</h2><div class='row'>"
                      + _figure(_dark_plot(result["_maps"][T], res, T), f"Rate map at {T:g} C, fitted body over it")
                      + "<div>" + _table(fam_rows, ["family", "mean e-/s", "std e-/s", "log-likelihood", "AIC", "delta AIC"], digits=6)
-                     + f"<p>Exposure times used: {', '.join(f'{t:g}' for t in res['exposures_s'])} s.</p>"
+                     + f"<p>From {len(ex)} exposure times, {ex[0]:g} to {ex[-1]:g} s.</p>"
                      + _table([("threshold, e-/s", wp["threshold"]), ("white pixels", wp["white_pixels"]),
                                ("ppm", wp["ppm"]), ("couplets", wp["couplets"]),
                                ("couplets expected at random", wp["couplets_expected_random"]),

@@ -283,7 +283,11 @@ def parse_descriptor(descriptor: Path) -> tuple[int, tuple[int, int], list[tuple
 
 
 def descriptor_path(path: Path) -> Path:
-    return path / DESCRIPTOR if path.is_dir() else path
+    """The descriptor file itself, or the one in folder ``path`` (ours, or another tool's ``*descriptor*.txt``)."""
+    if not path.is_dir():
+        return path
+    found = [path / DESCRIPTOR] if (path / DESCRIPTOR).is_file() else sorted(path.glob("*[Dd]escriptor*.txt"))
+    return found[0] if len(found) == 1 else path / DESCRIPTOR
 
 
 def _from_descriptor(path: Path, temperature_c: float | None) -> Dataset:
@@ -358,10 +362,11 @@ def load(path: str | Path, temperature_c: float | None = None) -> Dataset:
     path = Path(path)
     if not path.exists():
         raise CmosnoiseError(f"--frames-from {str(path)!r}: no such file or folder")
-    if path.is_dir() and not (path / DESCRIPTOR).is_file():
+    if path.is_dir() and not descriptor_path(path).is_file():
         manifests = sorted(path.glob("*.yaml")) + sorted(path.glob("*.yml"))
         if len(manifests) != 1:
-            raise CmosnoiseError(f"--frames-from {str(path)!r}: a folder holding {DESCRIPTOR} or one manifest .yaml "
+            raise CmosnoiseError(f"--frames-from {str(path)!r}: a folder holding an EMVA 1288 descriptor ({DESCRIPTOR}) "
+                                 "or one manifest .yaml "
                                  f"(found {len(manifests)} .yaml files)")
         path = manifests[0]
     if path.suffix.lower() in (".yaml", ".yml"):
