@@ -33,7 +33,7 @@ from ..model import physics
 from . import fit_dark, fit_photo, fit_readout, white_pixels
 from .fit_readout import Z95, centred_series, sigma_from_variance
 
-#: a dark stack is used for the dark current only if its brightest pixel is below this fraction of the way to saturation
+#: a dark pixel's mean counts for its dark current only below this fraction of the way from black to saturation
 DARK_FIT_LIMIT = 0.9
 #: the shortest long dark stack the readout fits accept
 MIN_READOUT_FRAMES = 4
@@ -107,11 +107,13 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
 
     # ---------------------------------------------------------------- black level (reference temperature)
     darks_ref = [d for d in ds.of_kind("dark") if d.temperature_c == t_ref] or ds.of_kind("dark")
-    usable = [d for d in darks_ref if d.max_dn < DARK_FIT_LIMIT * sat_dn]
+    usable = [d for d in darks_ref if float(np.mean(d.mean >= DARK_FIT_LIMIT * sat_dn)) < 0.01]
     times = np.array([d.exposure_s for d in usable])
     if len(set(np.round(times, 12))) >= 2:
+        # over the pixels that stay below the limit in every stack (white pixels that clip would bend the line)
+        below = np.logical_and.reduce([d.mean < DARK_FIT_LIMIT * sat_dn for d in usable])
         var_m = np.array([float(np.var(d.row_means.mean(axis=1), ddof=1)) / d.n for d in usable])
-        b, se_b, _ = _intercept(times, np.array([float(d.mean.mean()) for d in usable]), var_m)
+        b, se_b, _ = _intercept(times, np.array([float(d.mean[below].mean()) for d in usable]), var_m)
         P["black_level_dn"] = _p(b, [b - Z95 * se_b, b + Z95 * se_b],
                                  f"intercept of the dark mean over {len(usable)} dark stacks' exposure times "
                                  "(the black level plus the mean fixed offsets)")
@@ -135,19 +137,24 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
 
     # ---------------------------------------------------------------- dark current at each temperature
     dark_maps: dict[float, np.ndarray] = {}
+    slope_var: dict[float, np.ndarray] = {}
     dark_fits: dict[float, dict] = {}
     for T in temps or [t_ref]:
         ds_T = [d for d in ds.of_kind("dark") if d.temperature_c == T or (not temps)]
-        ok = [d for d in ds_T if d.max_dn < black + DARK_FIT_LIMIT * (sat_dn - black)]
+        limit = black + DARK_FIT_LIMIT * (sat_dn - black)
+        # a stack where most pixels clip says nothing; where a few white pixels clip, those pixels leave it out
+        ok = [d for d in ds_T if float(np.mean(d.mean >= limit)) < 0.01]
         t = np.array([d.exposure_s for d in ok])
         if len(set(np.round(t, 12))) < 2:
             not_fitted[f"dark_current at {T:g} C"] = (f"needs dark stacks at 2 or more exposure times below saturation "
                                                       f"at {T:g} C (has {len(set(np.round(t, 12)))})")
             continue
-        rates = fit_dark.rate_map_from_stacks([d.mean for d in ok], list(t), k)
+        rates = fit_dark.rate_map_from_stacks([d.mean for d in ok], list(t), k, limit_dn=limit)
         tc = t - t.mean()
         w = tc / np.sum(tc * tc)
         noise_var = float(np.sum(w**2 * np.array([d.temporal_var / d.n for d in ok]))) / k**2
+        # each pixel's slope variance, (e-/s)^2: what its dark shot noise at another exposure is uncertain by
+        slope_var[T] = sum(wi**2 * d.pixel_var / d.n for wi, d in zip(w, ok)) / k**2
         thr = threshold_e_per_s
         points = physics.dark_points(base)
         if thr is None and points:  # the base's white-pixel threshold at its nearest point, when it has one
@@ -187,7 +194,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
     else:
         st = max(longs, key=lambda d: (d.n, -d.exposure_s))
-        _readout(st, k, black, dark_maps.get(st.temperature_c), P, plots, base, seed)
+        _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed)
 
     # ---------------------------------------------------------------- PRNU and column gain
     cands = [(f, _dark_at(ds, f)) for f in flats]
@@ -217,7 +224,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             "_maps": dark_maps}
 
 
-def _readout(st, k: float, black: float, rate_map, P: dict, plots: dict, base, seed: int) -> None:
+def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int) -> None:
     """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``."""
     rows, cols = st.shape
     n = st.n
@@ -226,15 +233,17 @@ def _readout(st, k: float, black: float, rate_map, P: dict, plots: dict, base, s
     vbar = float(s2.mean())
     if rate_map is not None:
         dark_var = np.maximum(rate_map, 0) * st.exposure_s
-        how = "dark shot noise from the fitted rate map"
+        known_var = rate_var * st.exposure_s**2
+        how = "dark shot noise from the fitted rate map (and its uncertainty)"
     else:
         dark_var = np.maximum((st.mean - black) / k, 0)
+        known_var = None
         how = "dark shot noise from the stack's mean above black (no rate map at this temperature)"
     known = dark_var + 1 / (12 * k * k) + vbar * (1 / cols + 1 / rows) / corr
     tail = base.source_follower.flicker.tail
     thr = tail.threshold_e if tail is not None else 4 * base.source_follower.flicker.gumbel_loc_e
     q = 1 / (12 * k * k)  # the quantizer's variance, e-^2; its fourth cumulant -1.2 q^2, the dark charge's its mean
-    r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed, kappa4=dark_var - 1.2 * q * q)
+    r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed, kappa4=dark_var - 1.2 * q * q, known_var=known_var)
     f = r["fit"]
     where = (f"{n} frames at {st.exposure_s:g} s: per-pixel variances (chi-square, {n - 1} dof), marginal maximum "
              f"likelihood over {f.n_used} of {r['pixels']} pixels, sandwich interval; {how}")

@@ -104,12 +104,17 @@ def tail(rates: np.ndarray, threshold: float, body_fit: FamilyFit) -> dict:
             "pixels_above": int(above.sum())}
 
 
-def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], gain_dn_per_e: float) -> np.ndarray:
+def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], gain_dn_per_e: float,
+                         limit_dn: float | None = None) -> np.ndarray:
     """Per-pixel dark current (e-/s): the least-squares slope of the mean dark signal over exposure time.
 
     ``means_dn`` are per-pixel means of dark stacks (DN) at ``exposures_s``
     (at least two distinct times); the black level and any fixed offset fall
-    into the intercept.
+    into the intercept. With ``limit_dn``, each pixel's slope uses only the
+    exposure times where its mean is below that (a white pixel that clips at
+    the long exposures is measured on the short ones); a pixel below it at
+    fewer than two times gets the slope from its shortest time and the
+    intercept of the others (at least: it is that bright).
     """
     t = np.asarray(exposures_s, np.float64)
     if len(means_dn) != t.size or len(set(np.round(t, 12))) < 2:
@@ -117,8 +122,25 @@ def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], g
     shapes = {m.shape for m in means_dn}
     if len(shapes) != 1:
         raise CmosnoiseError(f"dark current: the dark stacks have different sizes {sorted(shapes)}")
-    tc = t - t.mean()
-    slope = sum(w * np.asarray(m, np.float64) for w, m in zip(tc / np.sum(tc * tc), means_dn))
+    if limit_dn is None:
+        tc = t - t.mean()
+        slope = sum(w * np.asarray(m, np.float64) for w, m in zip(tc / np.sum(tc * tc), means_dn))
+        return slope / gain_dn_per_e
+    # per-pixel weighted least squares, weight 1 where the pixel is below the limit
+    s0 = s1 = s2 = sy = sty = 0.0
+    for ti, m in zip(t, means_dn):
+        y = np.asarray(m, np.float64)
+        w = (y < limit_dn).astype(np.float64)
+        s0 = s0 + w; s1 = s1 + w * ti; s2 = s2 + w * ti * ti; sy = sy + w * y; sty = sty + w * ti * y  # noqa: E702
+    det = s0 * s2 - s1 * s1
+    ok = det > 1e-12 * np.max(t) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slope = np.where(ok, (s0 * sty - s1 * sy) / np.where(ok, det, 1.0), 0.0)
+    if not ok.all():  # clipped at all but one time: from the shortest, over the intercept of the rest
+        good = ok.astype(np.float64)
+        intercept = float(np.sum(np.where(ok, (sy - slope * s1) / np.where(ok, s0, 1.0), 0.0)) / max(good.sum(), 1.0))
+        i0 = int(np.argmin(t))
+        slope = np.where(ok, slope, (np.asarray(means_dn[i0], np.float64) - intercept) / max(t[i0], 1e-12))
     return slope / gain_dn_per_e
 
 

@@ -121,8 +121,9 @@ class _Grid:
             ll = -0.5 * nu * np.log(v) - 0.5 * nu * s2[:, None] / v
         else:
             # noise that is not Gaussian (the quantizer's uniform error, Poisson dark charge) changes the spread
-            # of a sample variance: var(s2) = 2 v^2 / (N - 1) + kappa4 / N. A scaled chi-square with the
-            # degrees of freedom that give that spread keeps the likelihood right to second order.
+            # of a sample variance: var(s2) = 2 v^2 / (N - 1) + kappa4 / N (+ the known part's own variance).
+            # A scaled chi-square with the degrees of freedom that give that spread keeps the likelihood right
+            # to second order.
             frames = dof + 1
             nu = 2 * v * v / np.maximum(2 * v * v / dof + kappa4[:, None] / frames, 1e-3 * v * v / dof)
             x = nu * s2[:, None] / v
@@ -220,25 +221,33 @@ def _clipped(theta: np.ndarray) -> np.ndarray:
 
 
 def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshold_e: float | None, seed: int = 0,
-                        with_tail: bool = True, kappa4: np.ndarray | None = None) -> dict:
+                        with_tail: bool = True, kappa4: np.ndarray | None = None,
+                        known_var: np.ndarray | None = None) -> dict:
     """Thermal floor and flicker sigma distribution from per-pixel variances (e-^2), see the module docstring.
 
     ``s2``: per-pixel temporal variances (e-^2, ddof 1) over ``frames`` frames;
     ``known``: the known part of each pixel's variance (e-^2), same shape;
     ``kappa4``: the known fourth cumulant of each pixel's noise (e-^4; the
-    quantizer's ``-1.2 q^2``, the dark charge's Poisson mean), or None for Gaussian noise.
+    quantizer's ``-1.2 q^2``, the dark charge's Poisson mean), or None for Gaussian noise;
+    ``known_var``: the variance of ``known``'s own estimate (e-^4; a dark shot
+    noise from a measured rate map is itself uncertain), or None.
     ``threshold_e``: the flicker-tail threshold for the reported ppm.
     Returns ``{name: (value, se)}`` for thermal_sigma_e, gumbel_loc_e,
     gumbel_scale_e and (with the tail) tail_ppm_above, tail_max_e, plus
     ``loglik`` and the pixel counts.
     """
     s2 = np.asarray(s2, np.float64).ravel()
-    a = np.asarray(known, np.float64).ravel()
+    a = np.broadcast_to(np.asarray(known, np.float64).ravel(), s2.shape) if np.size(known) in (1, s2.size) else None
+    if a is None:
+        raise CmosnoiseError(f"source follower: {np.size(known)} known variances for {s2.size} pixels")
     if frames < 4:
         raise CmosnoiseError(f"source follower: a dark stack of {frames} frames; per-pixel variances need at least 4 (50 to 100 recommended)")
     c = s2 - a
     med = float(np.median(s2))
     k4 = None if kappa4 is None else np.broadcast_to(np.asarray(kappa4, np.float64).ravel(), s2.shape)
+    if known_var is not None:
+        extra = frames * np.broadcast_to(np.asarray(known_var, np.float64).ravel(), s2.shape)
+        k4 = extra if k4 is None else k4 + extra
     su, au, counts, k4u = _aggregate(s2, a, med, k4)
     grid = _Grid(su, au, frames - 1, counts, c_max=max(float(c.max()) * 3, med * 4), c_min=1e-3 * med, kappa4=k4u)
     # starts: the floor from the low quantiles, the body from what is left
@@ -280,7 +289,8 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
     r = _fit(grid, unpack, starts, names, natural)
     if with_tail and s2.size / (1 + math.exp(-float(_clipped(r.theta)[3]))) < 3:
         # fewer than 3 tail pixels: no tail can be fitted; the body alone, the tail's ppm bounded from above
-        body = fit_source_follower(s2, known, frames, threshold_e, seed, with_tail=False, kappa4=kappa4)
+        body = fit_source_follower(s2, known, frames, threshold_e, seed, with_tail=False, kappa4=kappa4,
+                                   known_var=known_var)
         b = body["fit"]
         loc, scale = float(b.value[1]), float(b.value[2])
         own = ppm_above(thr, loc, scale, 0.0, 0.0) if math.isfinite(thr) else 0.0
