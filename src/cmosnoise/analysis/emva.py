@@ -111,6 +111,8 @@ def prnu(bright_stack: np.ndarray, dark_stack: np.ndarray, exclude: np.ndarray |
         bt, dt, bm, dm = b["total"], d["total"], b["mean"], d["mean"]
     else:
         keep = ~exclude
+        if keep.sum() < 2:  # every pixel a defect (e.g. a bright stack near saturation): no PRNU to give
+            return math.nan
 
         def total(stack):
             s = stack.astype(np.float64)

@@ -304,10 +304,18 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
         # (the truth is below max * 0.025^(-1 / n) with 97.5 % probability) widened by the blur of the variances
         i, j = names.index("tail_max_e"), names.index("tail_ppm_above")
         n_tail = max(r.value[j] * 1e-6 * s2.size, 1.0)
+        # a few tail pixels: the count's own (Poisson, Garwood) interval where it is wider than the sandwich's
+        from scipy import stats
+
+        ppm, ci = r.interval("tail_ppm_above")
+        lo, hi = ci if ci is not None else (math.inf, -math.inf)
+        g_lo = stats.chi2.ppf(0.025, 2 * n_tail) / 2 / s2.size * 1e6
+        g_hi = stats.chi2.ppf(0.975, 2 * n_tail + 2) / 2 / s2.size * 1e6
         m_hat, se = float(r.value[i]), r.se("tail_max_e")
         r.extra = {"tail_max_e": {"value": m_hat * (n_tail + 1) / n_tail,
                                   "ci95": [m_hat - Z95 * se, m_hat * 0.025 ** (-1 / n_tail) + Z95 * se],
-                                  "tail_pixels": n_tail}}
+                                  "tail_pixels": n_tail},
+                   "tail_ppm_above": {"value": ppm, "ci95": [min(lo, g_lo), max(hi, g_hi)], "tail_pixels": n_tail}}
     return {"fit": r, "pixels": int(s2.size), "pixels_used": r.n_used}
 
 

@@ -152,7 +152,7 @@ def build(doc: dict, result: dict, cfg) -> str:
         ex = res["exposures_s"]
         wp = res["white_pixels"]
         parts.append(f"<h2>Dark current at {T:g} C</h2><div class='row'>"
-                     + _figure(_dark_plot(result["_maps"][T], res, T), f"Rate map at {T:g} C, fitted body over it")
+                     + _figure(_dark_plot(result["_maps"][T], res, T), f"Rate map at {T:g} C, the fitted body over it (the paper's Figs. 5 and 6 from these frames)")
                      + "<div>" + _table(fam_rows, ["family", "mean e-/s", "std e-/s", "log-likelihood", "AIC", "delta AIC"], digits=6)
                      + f"<p>From {len(ex)} exposure times, {ex[0]:g} to {ex[-1]:g} s.</p>"
                      + _table([("threshold, e-/s", wp["threshold"]), ("white pixels", wp["white_pixels"]),
@@ -167,8 +167,9 @@ def build(doc: dict, result: dict, cfg) -> str:
         names = ["thermal_sigma_e", "gumbel_loc_e", "gumbel_scale_e", "tail_ppm_above", "tail_max_e"]
         figs = [_figure(_sigma_plot(d, names, "Per-pixel temporal noise (paper Fig. 7)",
                                     "sqrt(pixel variance less dark shot and quantizer), e- rms", True),
-                        "Each pixel's temporal noise over the long dark stack, and the same estimate under the fitted "
-                        "source follower (thermal floor, Gumbel flicker body, uniform tail)")]
+                        "Each pixel's temporal noise over the long dark stack (the paper's Fig. 7 from these frames), "
+                        "and the same estimate under the fitted source follower (thermal floor, Gumbel flicker body, "
+                        "uniform tail)")]
         c = pl["columns"]
         figs.append(_figure(_sigma_plot(dict(c), ["gumbel_loc_e", "gumbel_scale_e"], "Per-column temporal noise",
                                         "sqrt(column-mean variance less the pixels' share), e- rms", False),

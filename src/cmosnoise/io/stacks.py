@@ -214,7 +214,9 @@ def _frames_of(path: Path, meta: _Meta) -> Iterator[np.ndarray]:
 
 
 def _checked(frames: Iterator[np.ndarray], path: Path) -> Iterator[np.ndarray]:
+    n = 0
     for f in frames:
+        n += 1
         if f.ndim != 2 or min(f.shape) < 2:
             raise CmosnoiseError(f"{str(path)!r}: a frame of shape {f.shape}; expected (rows, cols)")
         if f.dtype.kind not in "uif":
@@ -222,6 +224,8 @@ def _checked(frames: Iterator[np.ndarray], path: Path) -> Iterator[np.ndarray]:
         if f.dtype.kind == "f" and not np.all(np.isfinite(f)):
             raise CmosnoiseError(f"{str(path)!r}: frames hold NaN or infinite values")
         yield f
+    if n == 0:
+        raise CmosnoiseError(f"{str(path)!r} holds no readable frame (a damaged or empty file?)")
 
 
 def _stack(paths: list[Path], meta: _Meta, **info) -> StackStats:

@@ -1,0 +1,247 @@
+"""Round trips of ``cmosnoise fit``'s stage fits on simulated sensors: each 95 % interval holds the configured value.
+
+For the default sensor, ``paper-fig11-full`` and ``paper-fig9-vga`` (each at
+one of 25, 45 and 65 C: the temperature changes only the dark current, and
+the dark shot noise the readout fits take off), 20 sensors each are
+measured (a 48-frame dark stack, two short dark stacks, nine flat levels) and
+fitted. A true 95 % interval holds the value in at least 18 of 20 with
+probability 92.5 % only, so with some forty (parameter, sensor) checks a
+few would fall below 18 by chance; each check asks for 16 of 20 (a true
+95 % interval falls below that with probability 0.3 %), and each stage's
+pooled misses must stay within 3 standard deviations of 5 %.
+Sensors are 256 x 192 to keep the suite fast; the intervals scale with the
+pixel count, the coverage does not.
+
+The dark current is tested on its own maps at all nine (sensor, temperature)
+pairs, and the doubling temperatures on sensors with one characterization
+point, where the body and the tail scale by ``2^(dT / doubling)``.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from cmosnoise import Sensor, load_config, noise_budget
+from cmosnoise.analysis import fit, fit_dark, fit_readout
+from cmosnoise.io.stacks import Dataset, reduce_stack
+from cmosnoise.model import physics
+
+SEEDS = 20
+#: a true 95 % interval misses 4 or more times in 20 with probability 1.6 %, 5 or more 0.3 %
+MIN_COVERED = 16
+SIZE = {"width": 256, "height": 192}
+COMBOS = [(None, 25.0), ("paper-fig11-full", 45.0), ("paper-fig9-vga", 65.0)]
+LEVELS = [0.1, 0.2, 0.3, 0.45, 0.55, 0.7, 0.9, 1.1, 1.3]
+
+
+def measure(cfg, seed: int) -> Dataset:
+    """The measurement a lab would make, on the simulator: darks (one long), flats up to beyond saturation."""
+    s = Sensor(cfg, seed=seed)
+    T = cfg.sensor.temperature_c
+    out, frame = [], 0
+
+    def stack(ex, n, **info):
+        nonlocal frame
+        st = reduce_stack((ex.frame(frame + i) for i in range(n)), temperature_c=T, **info)
+        frame += n  # each stack its own frames: stacks never share noise
+        return st
+
+    for t, n in [(0.005, 48), (0.1, 4), (0.2, 4)]:
+        out.append(stack(s.with_exposure(t).expose("flat:0"), n, kind="dark", exposure_s=t))
+    for lvl in LEVELS:
+        ex = s.with_exposure(0.005, s.saturation_e * lvl / 0.005).expose("flat:1.0")
+        out.append(stack(ex, 16 if lvl == 0.45 else 2, kind="flat", exposure_s=0.005, level=lvl))
+    return Dataset(out, s.shape, cfg.adc.bits, cfg.sensor.cfa, None, "simulated", "manifest")
+
+
+def truth(cfg, sensor) -> dict:
+    sf, rn, cn = cfg.source_follower, cfg.row_noise, cfg.column_noise
+    return {
+        "system_gain_K_dn_per_e": sensor.transfer.gain_dn_per_e,
+        "source_follower.thermal_sigma_e": sf.thermal_sigma_e,
+        "source_follower.flicker.gumbel_loc_e": sf.flicker.gumbel_loc_e,
+        "source_follower.flicker.gumbel_scale_e": sf.flicker.gumbel_scale_e,
+        "source_follower.flicker.tail.ppm_above": sf.flicker.tail.ppm_above,
+        "source_follower.flicker.tail.max_e": sf.flicker.tail.max_e,
+        "row_noise.sigma_e": rn.sigma_e,
+        "row_noise.fixed_sigma_e": rn.fixed_sigma_e,
+        "column_noise.temporal.gumbel_loc_e": cn.temporal.gumbel_loc_e,
+        "column_noise.temporal.gumbel_scale_e": cn.temporal.gumbel_scale_e,
+        "column_noise.vfpn_sigma_e": cn.vfpn_sigma_e,
+        "column_noise.gain_sigma_pct": cn.gain_sigma_pct,
+        "prnu.sigma_pct": cfg.prnu.sigma_pct,
+    }
+
+
+@pytest.fixture(scope="module")
+def fits():
+    """{combo: [(parameters, truth) per seed]}: 60 simulated measurements fitted."""
+    out = {}
+    for preset, T in COMBOS:
+        cfg = load_config(preset=preset, extra={"sensor": dict(SIZE, temperature_c=T)})
+        rows = []
+        for seed in range(SEEDS):
+            res = fit.fit_dataset(measure(cfg, seed), cfg, seed=seed)
+            rows.append((res["parameters"], truth(cfg, Sensor(cfg, seed=seed))))
+        out[preset or "default"] = rows
+    return out
+
+
+def coverage(rows, name: str) -> int:
+    hits = 0
+    for P, tr in rows:
+        p = P.get(name)
+        if p is not None and p["ci95"] is not None and p["ci95"][0] <= tr[name] <= p["ci95"][1]:
+            hits += 1
+    return hits
+
+
+STAGES = {
+    "photon_transfer": ["system_gain_K_dn_per_e"],
+    "source_follower": ["source_follower.thermal_sigma_e", "source_follower.flicker.gumbel_loc_e",
+                        "source_follower.flicker.gumbel_scale_e"],
+    "row_noise": ["row_noise.sigma_e", "row_noise.fixed_sigma_e"],
+    "column_noise": ["column_noise.temporal.gumbel_loc_e", "column_noise.temporal.gumbel_scale_e",
+                     "column_noise.vfpn_sigma_e", "column_noise.gain_sigma_pct"],
+    "prnu": ["prnu.sigma_pct"],
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stage", list(STAGES))
+def test_stage_intervals_cover_the_configured_values(fits, stage):
+    misses = {}
+    for combo, rows in fits.items():
+        for name in STAGES[stage]:
+            n = coverage(rows, name)
+            if n < MIN_COVERED:
+                misses[f"{combo}: {name}"] = f"{n} of {SEEDS}"
+    assert not misses, misses
+    trials = len(fits) * len(STAGES[stage]) * SEEDS
+    missed = sum(SEEDS - coverage(rows, name) for rows in fits.values() for name in STAGES[stage])
+    assert missed <= 0.05 * trials + 3 * math.sqrt(trials * 0.05 * 0.95), (missed, trials)
+
+
+@pytest.mark.slow
+def test_flicker_tail_intervals_cover_where_the_tail_is_seen(fits):
+    """The flicker tail (100 ppm on the default sensors: 5 pixels of 49 152; 2000 ppm on paper-fig11-full):
+    its ppm and maximum are covered where fitted; with fewer than 3 tail pixels it is said to be unseen."""
+    for combo, rows in fits.items():
+        for name in ("source_follower.flicker.tail.ppm_above", "source_follower.flicker.tail.max_e"):
+            fitted = [(P, tr) for P, tr in rows if P[name]["value"] is not None]
+            assert coverage(fitted, name) >= len(fitted) - 4, (combo, name, coverage(fitted, name), len(fitted))
+    assert all(P["source_follower.flicker.tail.max_e"]["value"] is not None for P, _ in fits["paper-fig11-full"])
+
+
+# ------------------------------------------------------------------ dark current
+def dark_measurement(cfg, seed, times=(0.25, 0.5, 1.0), frames=6):
+    s = Sensor(cfg, seed=seed)
+    k = s.transfer.gain_dn_per_e
+    means, frame = [], 0
+    for t in times:
+        ex = s.with_exposure(t).expose("flat:0")
+        means.append(np.mean([ex.frame(frame + i).astype(np.float64) for i in range(frames)], axis=0))
+        frame += frames
+    tc = np.array(times) - np.mean(times)
+    w = tc / np.sum(tc * tc)
+    limit = cfg.adc.black_level_dn + 0.9 * (2**cfg.adc.bits - 1 - cfg.adc.black_level_dn)
+    rates = fit_dark.rate_map_from_stacks(means, list(times), k, limit_dn=limit)
+    # the slope's temporal noise, from the model's read noise and each pixel's dark shot noise
+    tv = sum(v for name, v in noise_budget.temporal_variances(s, 0.0).items() if name != "dark_shot")
+    noise = float(np.sum(w**2 * (tv + np.mean(s.dark_rate) * np.array(times)) / frames))
+    return s, rates, noise
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", [None, "paper-fig9-vga", "paper-fig11-full"])
+def test_dark_current_intervals_cover_at_25_45_65(preset):
+    """Body mean and std and the tail's ppm at each temperature, 20 sensors of 160 x 120: the interval holds the
+    sensor's own body (MODEL.md section 3: each point's family, mean, std and ppm, or one point scaled)."""
+    misses = {}
+    for T in (25.0, 45.0, 65.0):
+        cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
+        hits = {"mean": 0, "std": 0, "ppm": 0}
+        for seed in range(SEEDS):
+            s, rates, noise = dark_measurement(cfg, seed)
+            st = s.dark_state
+            res = fit_dark.fit_point(rates, noise, st.threshold)
+            p = res["parameters"]
+            hits["mean"] += p["mean_e_per_s"]["ci95"][0] <= st.mean <= p["mean_e_per_s"]["ci95"][1]
+            hits["std"] += p["std_e_per_s"]["ci95"][0] <= st.std <= p["std_e_per_s"]["ci95"][1]
+            ppm = st.expected_ppm_above(res["threshold"]) or 0.0
+            hits["ppm"] += p["tail.ppm_above"]["ci95"][0] <= ppm <= p["tail.ppm_above"]["ci95"][1]
+        for name, n in hits.items():
+            if n < MIN_COVERED:
+                misses[f"{T:g} C {name}"] = n
+    assert not misses, misses
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", ["paper-fig9-vga", "paper-fig11-full"])
+def test_doubling_temperatures_cover_7_and_10_c(preset):
+    """One characterization point, measured at three temperatures: the body doubles every 7 C, the tail every 10 C."""
+    base = load_config(preset=preset)
+    point = base.dark_current.points[0].temperature_c
+    temps = [point - 20, point - 10, point]
+    hits = {"body": 0, "tail": 0}
+    for seed in range(SEEDS):
+        maps, means, ses, body_std = {}, [], [], None
+        for T in temps:
+            cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
+            s, rates, noise = dark_measurement(cfg, seed)
+            res = fit_dark.fit_point(rates, noise, s.dark_state.threshold)
+            m = res["parameters"]["mean_e_per_s"]
+            maps[T] = rates
+            means.append(m["value"])
+            ses.append((m["ci95"][1] - m["ci95"][0]) / (2 * fit_readout.Z95))
+            body_std = res["parameters"]["std_e_per_s"]["value"]
+        d = fit_dark.doubling(temps, means, ses)
+        hits["body"] += d["ci95"][0] <= base.dark_current.doubling_c <= d["ci95"][1]
+        td = fit_dark.tail_doubling(maps, dict(zip(temps, means)), body_std, seed)
+        hits["tail"] += td is not None and td["ci95"][0] <= base.dark_current.tail_doubling_c <= td["ci95"][1]
+    assert all(n >= MIN_COVERED for n in hits.values()), hits
+
+
+# ------------------------------------------------------------------ the flicker sigma's distribution
+def test_sigma_cdf_is_the_configured_heavy_tail():
+    """The closed-form CDF (exponential integrals) equals the heavy-tail model's numerical one, and samples of
+    the model pass a KS test against it."""
+    cfg = load_config(preset="paper-fig11-full")
+    model = physics.flicker_model(cfg)
+    fl = cfg.source_follower.flicker
+    x = np.linspace(0, 45, 400)
+    ours = fit_readout.sigma_cdf(x, fl.gumbel_loc_e, fl.gumbel_scale_e, model.tail_fraction, model.tail_max)
+    assert np.max(np.abs(ours - model.cdf(x))) < 1e-6
+    sample = model.rvs(200_000, np.random.default_rng(5))
+    ks = stats.kstest(sample, lambda v: fit_readout.sigma_cdf(v, fl.gumbel_loc_e, fl.gumbel_scale_e,
+                                                             model.tail_fraction, model.tail_max))
+    assert ks.pvalue > 1e-3
+    assert fit_readout.ppm_above(fl.tail.threshold_e, fl.gumbel_loc_e, fl.gumbel_scale_e, model.tail_fraction,
+                                 model.tail_max) == pytest.approx(fl.tail.ppm_above, rel=1e-6)
+
+
+def test_source_follower_fit_on_exact_chi_square_variances():
+    """Variances drawn exactly as the likelihood assumes (v chi2(N-1)/(N-1), v = known + thermal^2 + sigma_i^2):
+    over 20 draws each interval holds its parameter at least 17 times, and the mean z is within 3/sqrt(20)."""
+    cfg = load_config()
+    fl, thermal = cfg.source_follower.flicker, cfg.source_follower.thermal_sigma_e
+    model = physics.flicker_model(cfg)
+    n_pix, frames = 40_000, 64
+    z = {"thermal_sigma_e": [], "gumbel_loc_e": [], "gumbel_scale_e": []}
+    truth_ = {"thermal_sigma_e": thermal, "gumbel_loc_e": fl.gumbel_loc_e, "gumbel_scale_e": fl.gumbel_scale_e}
+    covered = dict.fromkeys(z, 0)
+    for seed in range(SEEDS):
+        rng = np.random.default_rng(100 + seed)
+        sig = model.rvs(n_pix, rng)
+        known = rng.uniform(0.1, 1.0, n_pix)
+        v = known + thermal**2 + sig**2
+        s2 = v * rng.chisquare(frames - 1, n_pix) / (frames - 1)
+        r = fit_readout.fit_source_follower(s2, known, frames, fl.tail.threshold_e)["fit"]
+        for name in z:
+            value, ci = r.interval(name)
+            z[name].append((value - truth_[name]) / r.se(name))
+            covered[name] += ci[0] <= truth_[name] <= ci[1]
+    assert all(n >= MIN_COVERED for n in covered.values()), covered
+    assert all(abs(np.mean(zs)) < 3 / math.sqrt(SEEDS) for zs in z.values()), {k: np.mean(v) for k, v in z.items()}
