@@ -157,8 +157,11 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         slope_var[T] = sum(wi**2 * d.pixel_var / d.n for wi, d in zip(w, ok)) / k**2
         thr = threshold_e_per_s
         points = physics.dark_points(base)
-        if thr is None and points:  # the base's white-pixel threshold at its nearest point, when it has one
-            thr = min(points, key=lambda p: abs(p.temperature_c - T)).threshold
+        if thr is None and points:  # the base's white-pixel threshold at its nearest point, when above the body
+            cand = min(points, key=lambda p: abs(p.temperature_c - T)).threshold
+            med = float(np.median(rates))
+            if cand is not None and cand > med + 5 * 1.4826 * float(np.median(np.abs(rates - med))):
+                thr = cand
         res = fit_dark.fit_point(rates, noise_var, thr)
         wp = white_pixels.report(rates, res["threshold"], pattern)
         from scipy import stats
@@ -246,7 +249,7 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed, kappa4=dark_var - 1.2 * q * q, known_var=known_var)
     f = r["fit"]
     where = (f"{n} frames at {st.exposure_s:g} s: per-pixel variances (chi-square, {n - 1} dof), marginal maximum "
-             f"likelihood over {f.n_used} of {r['pixels']} pixels, sandwich interval; {how}")
+             f"likelihood over all {r['pixels']} pixels (in {f.n_used} classes of equal variance), sandwich interval; {how}")
     for name, key in [("thermal_sigma_e", "source_follower.thermal_sigma_e"),
                       ("gumbel_loc_e", "source_follower.flicker.gumbel_loc_e"),
                       ("gumbel_scale_e", "source_follower.flicker.gumbel_scale_e"),
@@ -313,7 +316,13 @@ def fitted_config(base, result: dict):
         p = res["parameters"]
         point = {"temperature_c": T, "distribution": p["family"]["value"], "mean_e_per_s": p["mean_e_per_s"]["value"],
                  "std_e_per_s": p["std_e_per_s"]["value"], "tail": None}
-        if p["tail.ppm_above"]["value"] > 0:
+        from ..model.distributions import body
+
+        try:  # the body's own share above the threshold: a tail adds to it; a ppm below it needs no tail
+            own = float(body(point["distribution"], point["mean_e_per_s"], point["std_e_per_s"]).sf(res["threshold"])) * 1e6
+        except ValueError:
+            own = 0.0
+        if p["tail.ppm_above"]["value"] > own * 1.001 and p["tail.ppm_above"]["value"] > 0:
             point["tail"] = {"ppm_above": p["tail.ppm_above"]["value"], "threshold_e_per_s": res["threshold"],
                              "max_e_per_s": p["tail.max_e_per_s"]["value"]}
         points.append(point)

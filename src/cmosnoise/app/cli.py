@@ -398,6 +398,39 @@ def fit(
 
 
 @app.command()
+def measure(
+    ctx: typer.Context,
+    config: Optional[Path] = ConfigOpt,
+    preset: Optional[str] = PresetOpt,
+    set_: Optional[List[str]] = SetOpt,
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="sensor instance (default: the configuration's)"),
+    temperatures: Optional[str] = typer.Option(None, "--temperatures", help="comma-separated, C (default: the sensor's)"),
+    levels: int = typer.Option(40, "--levels", min=8, max=400, help="flat-field pairs from dark to beyond saturation"),
+    long_frames: int = typer.Option(100, "--long-frames", min=4, max=10000, help="frames of the long dark stack at each temperature"),
+    out: Path = typer.Option(Path("cmosnoise-measurement"), "--out", "-o", help="output folder"),
+    overwrite: bool = OverwriteOpt,
+):
+    """Simulate a lab's measurement of a sensor (.npy stacks and a manifest) for `cmosnoise fit`: try a fit, check a round trip."""
+    from ..io.output import OutputFolder
+    from . import fitting
+
+    cfg = load_config(config, preset, set_, extra={"seed": seed} if seed is not None else None)
+    temps = None
+    if temperatures:
+        try:
+            temps = [float(x) for x in temperatures.split(",") if x.strip()]
+        except ValueError:
+            raise CmosnoiseError(f"--temperatures {temperatures!r}: expected numbers separated by commas, e.g. 25,45,65") from None
+        bad = [t for t in temps if not -60 <= t <= 150]
+        if bad or not temps:
+            raise CmosnoiseError(f"--temperatures {temperatures!r}: each must be -60 to 150 C")
+    folder = OutputFolder(out, overwrite)
+    with folder as tmp:
+        fitting.write_measurement(cfg, tmp, cfg.seed, temps, levels, long_frames, say=lambda m: _say(ctx, m))
+    _say(ctx, f"wrote {out}/manifest.yaml and its stacks; fit them with: cmosnoise fit --frames-from {out}/manifest.yaml")
+
+
+@app.command()
 def presets():
     """List the presets, one line each."""
     for name in preset_names():

@@ -134,3 +134,51 @@ def describe(p: dict) -> str:
     value = f"{v:.5g}" if isinstance(v, float) and math.isfinite(v) else str(v)
     ci = f" (95 % CI {p['ci95'][0]:.4g} to {p['ci95'][1]:.4g})" if p.get("ci95") else ""
     return f"{value}{ci}: {p['method']}"
+
+
+def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float] | None = None, levels: int = 40,
+                      long_frames: int = 100, dark_times: tuple[float, ...] = (0.25, 0.5, 1.0),
+                      say: Callable[[str], None] = lambda m: None) -> Path:
+    """A lab's measurement of the sensor ``cfg``, simulated, as ``.npy`` stacks and a manifest (what ``fit`` reads).
+
+    At each temperature: a ``long_frames`` dark stack at 5 ms (the readout
+    noise) and 8-frame dark stacks at ``dark_times`` (the dark current). At
+    the first temperature also: ``levels`` flat pairs at 5 ms from 2 % to
+    130 % of saturation, a 16-frame flat at half saturation (PRNU, column
+    gain). Every stack has frames of its own. Returns the manifest's path.
+    ``folder`` is written into as it is (``cmosnoise measure`` gives it an
+    output folder's temporary, so the result is whole or absent).
+    """
+    import yaml
+
+    temperatures = temperatures or [cfg.sensor.temperature_c]
+    folder.mkdir(parents=True, exist_ok=True)
+    stacks_: list[dict] = []
+    frame = 0
+
+    def save(name: str, ex, n: int, **entry) -> None:
+        nonlocal frame
+        arr = np.stack([ex.frame(frame + i) for i in range(n)])
+        frame += n
+        np.save(folder / name, arr)
+        stacks_.append(dict(entry, files=[name]))
+
+    t_flat = 0.005
+    for j, T in enumerate(temperatures):
+        s = Sensor(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"temperature_c": T})}), seed=seed)
+        save(f"dark_{T:g}C_{t_flat:g}s.npy", s.with_exposure(t_flat).expose("flat:0"), long_frames,
+             kind="dark", exposure_s=t_flat, temperature_c=T)
+        for t in dark_times:
+            save(f"dark_{T:g}C_{t:g}s.npy", s.with_exposure(t).expose("flat:0"), 8, kind="dark", exposure_s=t,
+                 temperature_c=T)
+        if j == 0:
+            for i, lvl in enumerate(np.linspace(0.02, 1.3, levels)):
+                ex = s.with_exposure(t_flat, s.saturation_e * float(lvl) / t_flat).expose("flat:1.0")
+                save(f"flat_{i:03d}.npy", ex, 2, kind="flat", exposure_s=t_flat, temperature_c=T, level=round(float(lvl), 4))
+            ex = s.with_exposure(t_flat, s.saturation_e * 0.5 / t_flat).expose("flat:1.0")
+            save("flat_half.npy", ex, 16, kind="flat", exposure_s=t_flat, temperature_c=T, level=0.5)
+        say(f"wrote the stacks at {T:g} C")
+    manifest = folder / "manifest.yaml"
+    doc = {"cfa": cfg.sensor.cfa, "bits": cfg.adc.bits, "black_level_dn": cfg.adc.black_level_dn, "stacks": stacks_}
+    manifest.write_text("# a simulated lab measurement (cmosnoise measure)\n" + yaml.safe_dump(doc, sort_keys=False))
+    return manifest
