@@ -9,7 +9,7 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
     python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
-``speed``, ``explore`` and ``sweep_speed`` are measured by the scripts in ``benchmarks/``
+``speed``, ``explore``, ``sweep_speed`` and ``fit_speed`` are measured by the scripts in ``benchmarks/``
 (``BENCHMARKS``; machine-dependent, never recomputed by tests); ``sweep_fig9`` is
 deterministic but takes minutes, so the tests check its stored data instead. The tests check that every
 README block is the rendering of its JSON, and recompute the deterministic
@@ -292,6 +292,14 @@ def render_sweep_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_fit_speed(d: dict) -> str:
+    lines = [f"Measured with `{d['command']}` ({d['machine']}; {d['data_set']}, {d['files']} files):", "",
+             "| run | seconds |", "|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| {r['label']} | {r['seconds']:.1f} |")
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -303,12 +311,14 @@ SECTIONS = {
     "explore": (None, render_explore),
     "sweep_fig9": (compute_sweep_fig9, render_sweep_fig9),
     "sweep_speed": (None, render_sweep_speed),
+    "fit_speed": (None, render_fit_speed),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
 BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "explore": ["bench_explore.py", "--repeats", "10", "--json", "explore.json", "--screenshot", "../img/explore.png"],
-              "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"]}
+              "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
+              "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"]}
 SLOW = {"sweep_fig9"}
 
 
@@ -375,7 +385,7 @@ def main(argv: list[str]) -> int:
             compute = SECTIONS[name][0]
             if compute is None:
                 script, *rest = BENCHMARKS[name]
-                rest = [str(DATA / a) if a.endswith((".json", ".png")) else a for a in rest]
+                rest = [str(DATA / a) if a.endswith((".json", ".png")) or a.startswith("../") else a for a in rest]
                 subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *rest], check=True)
             else:
                 save(name, compute())

@@ -248,7 +248,7 @@ def test_fit_reads_another_tools_emva_data_set(tmp_path):
         "    hasattr(np, n) or setattr(np, n, f)\n"
         "from emva1288.camera.dataset_generator import DatasetGenerator\n"
         "np.random.seed(1)\n"
-        "g = DatasetGenerator(steps=20, L=16, image_format='tiff', outdir=sys.argv[1], width=96, height=64, bit_depth=12)\n"
+        "g = DatasetGenerator(steps=20, L=16, image_format='tiff', outdir=sys.argv[1], width=96, height=64, bit_depth=12, seed=1)\n"
         "print(json.dumps({'K': g.cam.K}))\n"
     )
     proc = subprocess.run([sys.executable, "-c", code, str(tmp_path / "eg")], capture_output=True, text=True, timeout=300)

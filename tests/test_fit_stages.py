@@ -136,7 +136,7 @@ def test_flicker_tail_intervals_cover_where_the_tail_is_seen(fits):
 
 
 # ------------------------------------------------------------------ dark current
-def dark_measurement(cfg, seed, times=(0.25, 0.5, 1.0), frames=6):
+def dark_measurement(cfg, seed, times=(0.25, 0.5, 1.0), frames=6, clipped=False):
     s = Sensor(cfg, seed=seed)
     k = s.transfer.gain_dn_per_e
     means, frame = [], 0
@@ -151,16 +151,23 @@ def dark_measurement(cfg, seed, times=(0.25, 0.5, 1.0), frames=6):
     # the slope's temporal noise, from the model's read noise and each pixel's dark shot noise
     tv = sum(v for name, v in noise_budget.temporal_variances(s, 0.0).items() if name != "dark_shot")
     noise = float(np.sum(w**2 * (tv + np.mean(s.dark_rate) * np.array(times)) / frames))
+    if clipped:
+        return s, rates, noise, fit_dark.clipped_pixels(means, limit)
     return s, rates, noise
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("preset", [None, "paper-fig9-vga", "paper-fig11-full"])
-def test_dark_current_intervals_cover_at_25_45_65(preset):
-    """Body mean and std and the tail's ppm at each temperature, 20 sensors of 160 x 120: the interval holds the
-    sensor's own body (MODEL.md section 3: each point's family, mean, std and ppm, or one point scaled)."""
+@pytest.mark.parametrize("preset, temps", [(None, (25.0, 45.0, 65.0)), ("paper-fig9-vga", (65.0,)),
+                                           ("paper-fig11-full", (45.0,))])
+def test_dark_current_intervals_cover_at_the_characterization_points(preset, temps):
+    """Body mean and std and the tail's ppm, 20 sensors of 160 x 120, at each characterization point (the default
+    sensor's at 25, 45 and 65 C; the papers' one point each): the interval holds the configured value.
+
+    Away from a point the configured body is not what the map shows below the threshold: the tail pixels'
+    tail parts shrink faster than the threshold (10 C against 7 C doubling) and join the body, so there the
+    doubling temperatures are what the test checks (below)."""
     misses = {}
-    for T in (25.0, 45.0, 65.0):
+    for T in temps:
         cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
         hits = {"mean": 0, "std": 0, "ppm": 0}
         for seed in range(SEEDS):
@@ -187,10 +194,12 @@ def test_doubling_temperatures_cover_7_and_10_c(preset):
     temps = [point - 20, point - 10, point]
     hits = {"body": 0, "tail": 0}
     for seed in range(SEEDS):
-        maps, means, ses, body_std = {}, [], [], None
+        maps, means, ses, body_std, excluded = {}, [], [], None, None
         for T in temps:
             cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
-            s, rates, noise = dark_measurement(cfg, seed)
+            # exposures short enough that few white pixels clip (those that do are left out of the tail's fit)
+            s, rates, noise, clip = dark_measurement(cfg, seed, times=(0.025, 0.05, 0.1), clipped=True)
+            excluded = clip if excluded is None else excluded | clip
             res = fit_dark.fit_point(rates, noise, s.dark_state.threshold)
             m = res["parameters"]["mean_e_per_s"]
             maps[T] = rates
@@ -199,7 +208,7 @@ def test_doubling_temperatures_cover_7_and_10_c(preset):
             body_std = res["parameters"]["std_e_per_s"]["value"]
         d = fit_dark.doubling(temps, means, ses)
         hits["body"] += d["ci95"][0] <= base.dark_current.doubling_c <= d["ci95"][1]
-        td = fit_dark.tail_doubling(maps, dict(zip(temps, means)), body_std, seed)
+        td = fit_dark.tail_doubling(maps, body_std, seed, exclude=excluded)
         hits["tail"] += td is not None and td["ci95"][0] <= base.dark_current.tail_doubling_c <= td["ci95"][1]
     assert all(n >= MIN_COVERED for n in hits.values()), hits
 

@@ -138,6 +138,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     # ---------------------------------------------------------------- dark current at each temperature
     dark_maps: dict[float, np.ndarray] = {}
     slope_var: dict[float, np.ndarray] = {}
+    clipped: dict[float, np.ndarray] = {}
     dark_fits: dict[float, dict] = {}
     for T in temps or [t_ref]:
         ds_T = [d for d in ds.of_kind("dark") if d.temperature_c == T or (not temps)]
@@ -150,6 +151,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                                                       f"at {T:g} C (has {len(set(np.round(t, 12)))})")
             continue
         rates = fit_dark.rate_map_from_stacks([d.mean for d in ok], list(t), k, limit_dn=limit)
+        clipped[T] = fit_dark.clipped_pixels([d.mean for d in ok], limit)
         tc = t - t.mean()
         w = tc / np.sum(tc * tc)
         noise_var = float(np.sum(w**2 * np.array([d.temporal_var / d.n for d in ok]))) / k**2
@@ -179,8 +181,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         dbl = fit_dark.doubling(Ts, [m["value"] for m in means], [(m["ci95"][1] - m["ci95"][0]) / (2 * Z95) for m in means])
         P["dark_current.doubling_c"] = _p(dbl["value"], dbl["ci95"], f"log2 of the body mean over {len(Ts)} temperatures")
         hot = Ts[-1]
-        td = fit_dark.tail_doubling(dark_maps, {T: dark_fits[T]["parameters"]["mean_e_per_s"]["value"] for T in Ts},
-                                    dark_fits[hot]["parameters"]["std_e_per_s"]["value"], seed)
+        td = fit_dark.tail_doubling(dark_maps, dark_fits[hot]["parameters"]["std_e_per_s"]["value"], seed,
+                                    exclude=np.logical_or.reduce([clipped[T] for T in Ts]))
         if td is None:
             not_fitted["dark_current.tail_doubling_c"] = "fewer than 10 tail pixels at the hottest temperature"
         else:

@@ -147,6 +147,11 @@ def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], g
 Z95 = 1.959963984540054
 
 
+def clipped_pixels(means_dn: list[np.ndarray], limit_dn: float) -> np.ndarray:
+    """Pixels below ``limit_dn`` at fewer than two of the stacks: their rate is a lower bound (bool map)."""
+    return sum((np.asarray(m) < limit_dn).astype(np.int32) for m in means_dn) < 2
+
+
 def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None) -> dict:
     """One temperature's dark current from its rate map (e-/s): the body's family, mean and std, the tail.
 
@@ -160,12 +165,29 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
         threshold = med + 8 * 1.4826 * float(np.median(np.abs(rates - med)))
     fits = select_family(rates, threshold)
     best = fits[0]
-    floor = 1e-3 * abs(best.mean)  # the least std the configuration can take (1e-6 of the mean), with room
-    body_std = math.sqrt(max(best.std**2 - slope_noise_var, floor**2))
-    n = best.n
-    x = rates[rates < threshold].astype(np.float64)
-    kurt = float(np.mean((x - x.mean()) ** 4) / np.var(x) ** 2)
-    se_mean, se_std = best.std / math.sqrt(n), best.std * math.sqrt((kurt - 1) / (4 * n))
+    # mean and std by moments of the pixels below the threshold: the slope's noise blurs the map's shape (a
+    # family's maximum-likelihood std of a blurred map is not the body's), but it only adds to the variance
+    x = rates[rates < threshold].astype(np.float64).ravel()
+    n = x.size
+    mean, var = float(x.mean()), float(x.var(ddof=1))
+    # what the threshold cuts off the body's upper end, by the chosen family: added back to the moments
+    try:
+        d = body(best.family, best.mean, best.std)
+        p_in = float(d.cdf(threshold))
+        if 0.5 < p_in < 1.0:
+            m_in = float(d.expect(lambda v: v, ub=threshold, conditional=True))
+            v_in = float(d.expect(lambda v: (v - m_in) ** 2, ub=threshold, conditional=True))
+            mean += float(d.mean()) - m_in
+            var *= float(d.var()) / v_in if v_in > 0 else 1.0
+    except (ValueError, ZeroDivisionError):
+        pass
+    floor = 1e-3 * abs(mean)  # the least std the configuration can take (1e-6 of the mean), with room
+    body_std = math.sqrt(max(var - slope_noise_var, floor**2))
+    kurt = float(np.mean((x - mean) ** 4) / np.var(x) ** 2)
+    se_mean = math.sqrt(var / n)
+    se_var = var * math.sqrt((kurt - 1) / n)
+    lo_var, hi_var = var - slope_noise_var - Z95 * se_var, var - slope_noise_var + Z95 * se_var
+    blurred = math.sqrt(slope_noise_var) > 0.1 * body_std
     tl = tail(rates, threshold, best)
     from scipy import stats
 
@@ -173,11 +195,15 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
     z = Z95
     params = {
         "family": {"value": best.family, "ci95": None,
-                   "method": "truncated maximum likelihood of MODEL.md's five families, lowest AIC"},
-        "mean_e_per_s": {"value": best.mean, "ci95": [best.mean - z * se_mean, best.mean + z * se_mean],
-                         "method": "per-pixel slope over exposure time, body fit"},
-        "std_e_per_s": {"value": body_std, "ci95": [max(body_std - z * se_std, 0.0), body_std + z * se_std],
-                        "method": f"body fit, less the slope's temporal noise ({math.sqrt(slope_noise_var):.3g} e-/s rms)"
+                   "method": "truncated maximum likelihood of MODEL.md's five families, lowest AIC"
+                             + (f"; the slope noise is {math.sqrt(slope_noise_var) / max(body_std, 1e-12):.0%} of the body's "
+                                "std and blurs the shape: longer exposures or more frames make the choice surer"
+                                if blurred else "")},
+        "mean_e_per_s": {"value": mean, "ci95": [mean - z * se_mean, mean + z * se_mean],
+                         "method": f"per-pixel slope over exposure time: mean of the {n} pixels below the threshold"},
+        "std_e_per_s": {"value": body_std, "ci95": [math.sqrt(max(lo_var, 0.0)), math.sqrt(max(hi_var, floor**2))],
+                        "method": f"their standard deviation, less the slope's temporal noise "
+                                  f"({math.sqrt(slope_noise_var):.3g} e-/s rms)"
                                   + (": not resolved above that noise (the value is a floor)" if body_std <= floor * 1.0001 else "")},
         "tail.ppm_above": {"value": tl["ppm_above"], "ci95": [ci.low * 1e6, ci.high * 1e6],
                            "method": f"pixels above {threshold:.4g} e-/s (exact binomial interval)"},
@@ -211,21 +237,26 @@ def doubling(temperatures: list[float], means: list[float], ses: list[float]) ->
             "ci95": [1 / hi if hi > 0 else math.inf, 1 / lo if lo > 0 else math.inf], "slope_per_c": slope}
 
 
-def tail_doubling(rate_maps: dict[float, np.ndarray], body_means: dict[float, float], body_std_hot: float,
-                  seed: int = 0) -> dict | None:
-    """Doubling temperature of the white-pixel tail: the same tail pixels' excess over the body mean at each temperature.
+def tail_doubling(rate_maps: dict[float, np.ndarray], body_std_hot: float, seed: int = 0,
+                  exclude: np.ndarray | None = None) -> dict | None:
+    """Doubling temperature of the white-pixel tail: the same tail pixels' excess over the body at each temperature.
 
     The pixels are those whose rate at the hottest temperature exceeds the
-    body mean by more than 10 body standard deviations (their excess is then
-    their tail part); the median excess's log2 is regressed on temperature.
-    Interval: a bootstrap over the pixels (200 resamples).
+    map's median by more than 20 body standard deviations (their excess is
+    then nearly all tail); each one's excess over the map's median at every
+    temperature, the median excess's log2 regressed on temperature.
+    Interval: a bootstrap over the pixels (200 resamples). ``exclude``: pixels
+    whose rate is only a lower bound (clipped at all but one exposure time).
     """
     temps = sorted(rate_maps)
     hot = temps[-1]
-    sel = (rate_maps[hot] - body_means[hot]) > 10 * body_std_hot
+    med = {t: float(np.median(rate_maps[t])) for t in temps}
+    sel = (rate_maps[hot] - med[hot]) > 20 * body_std_hot
+    if exclude is not None:
+        sel &= ~exclude
     if sel.sum() < 10:
         return None
-    ex = np.stack([rate_maps[t][sel] - body_means[t] for t in temps])  # (temperatures, pixels)
+    ex = np.stack([rate_maps[t][sel] - med[t] for t in temps])  # (temperatures, pixels)
     t = np.asarray(temps)
 
     def slope(cols):

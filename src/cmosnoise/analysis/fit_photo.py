@@ -43,7 +43,10 @@ def photon_transfer(mu: np.ndarray, v: np.ndarray) -> dict:
                              "needs at least 3 (EMVA 1288 recommends 50 levels from dark to beyond saturation)")
     k = float(np.sum(mu[lin] * v[lin]) / np.sum(mu[lin] ** 2))
     se = math.sqrt(float(np.sum((v[lin] - k * mu[lin]) ** 2)) / (lin.size - 1) / float(np.sum(mu[lin] ** 2)))
-    return {"K": k, "ci95": [k - Z95 * se, k + Z95 * se], "saturation_index": i_sat, "fit_points": int(lin.size),
+    from scipy import stats
+
+    q = float(stats.t.ppf(0.975, lin.size - 1))  # the residuals' scatter is itself estimated from few levels
+    return {"K": k, "ci95": [k - q * se, k + q * se], "saturation_index": i_sat, "fit_points": int(lin.size),
             "mu": mu, "v": v, "linear": lin}
 
 

@@ -24,7 +24,7 @@ from . import plots
 from .report import CSS, _figure, _table
 
 
-def _ptc_plot(d: dict) -> bytes:
+def ptc_plot(d: dict) -> bytes:
     fig, ax = plots.figure(figsize=(5.2, 3.6))
     mu, v, lin = np.array(d["mu"]), np.array(d["v"]), d["linear"]
     ax.plot(mu, v, "o", ms=3, label="measured levels")
@@ -39,7 +39,7 @@ def _ptc_plot(d: dict) -> bytes:
     return plots.to_png_bytes(fig)
 
 
-def _dark_plot(rates: np.ndarray, res: dict, T: float) -> bytes:
+def dark_map_plot(rates: np.ndarray, res: dict, T: float) -> bytes:
     from ..model.distributions import body
 
     p = res["parameters"]
@@ -65,7 +65,7 @@ def _dark_plot(rates: np.ndarray, res: dict, T: float) -> bytes:
     return plots.to_png_bytes(fig)
 
 
-def _sigma_plot(d: dict, names: list[str], title: str, xlabel: str, with_thermal: bool, seed: int = 0) -> bytes:
+def sigma_plot(d: dict, names: list[str], title: str, xlabel: str, with_thermal: bool, seed: int = 0) -> bytes:
     """Measured per-unit sigma estimates and the same estimator under the fitted model (one simulated draw)."""
     s2, known, n = np.asarray(d["s2"]).ravel(), d["known"], d["frames"]
     known = np.broadcast_to(np.asarray(known, np.float64), s2.shape)
@@ -104,7 +104,7 @@ def _sigma_plot(d: dict, names: list[str], title: str, xlabel: str, with_thermal
     return plots.to_png_bytes(fig)
 
 
-def _prnu_plot(x: np.ndarray, pct: float) -> bytes:
+def prnu_plot(x: np.ndarray, pct: float) -> bytes:
     from scipy import stats
 
     fig, ax = plots.figure(figsize=(5.2, 3.6))
@@ -142,7 +142,7 @@ def build(doc: dict, result: dict, cfg) -> str:
                      + _table(list(doc["not_fitted"].items()), ["parameter", "why, and what it needs"]))
     figs = []
     if "ptc" in result["plots"]:
-        figs.append(_figure(_ptc_plot(result["plots"]["ptc"]), "Photon transfer: variance over mean, K the slope"))
+        figs.append(_figure(ptc_plot(result["plots"]["ptc"]), "Photon transfer: variance over mean, K the slope"))
     parts.append("<h2>Photon transfer</h2><div class='row'>" + "".join(figs) + "</div>")
     for T, res in sorted(result["dark"].items()):
         n_neg = int((result["_maps"][T] <= 0).sum())
@@ -152,7 +152,7 @@ def build(doc: dict, result: dict, cfg) -> str:
         ex = res["exposures_s"]
         wp = res["white_pixels"]
         parts.append(f"<h2>Dark current at {T:g} C</h2><div class='row'>"
-                     + _figure(_dark_plot(result["_maps"][T], res, T), f"Rate map at {T:g} C, the fitted body over it (the paper's Figs. 5 and 6 from these frames)")
+                     + _figure(dark_map_plot(result["_maps"][T], res, T), f"Rate map at {T:g} C, the fitted body over it (the paper's Figs. 5 and 6 from these frames)")
                      + "<div>" + _table(fam_rows, ["family", "mean e-/s", "std e-/s", "log-likelihood", "AIC", "delta AIC"], digits=6)
                      + f"<p>From {len(ex)} exposure times, {ex[0]:g} to {ex[-1]:g} s.</p>"
                      + _table([("threshold, e-/s", wp["threshold"]), ("white pixels", wp["white_pixels"]),
@@ -165,19 +165,19 @@ def build(doc: dict, result: dict, cfg) -> str:
     if "source_follower" in pl:
         d = dict(pl["source_follower"], threshold=P["source_follower.flicker.tail.ppm_above"].get("threshold_e", 4.0))
         names = ["thermal_sigma_e", "gumbel_loc_e", "gumbel_scale_e", "tail_ppm_above", "tail_max_e"]
-        figs = [_figure(_sigma_plot(d, names, "Per-pixel temporal noise (paper Fig. 7)",
+        figs = [_figure(sigma_plot(d, names, "Per-pixel temporal noise (paper Fig. 7)",
                                     "sqrt(pixel variance less dark shot and quantizer), e- rms", True),
                         "Each pixel's temporal noise over the long dark stack (the paper's Fig. 7 from these frames), "
                         "and the same estimate under the fitted source follower (thermal floor, Gumbel flicker body, "
                         "uniform tail)")]
         c = pl["columns"]
-        figs.append(_figure(_sigma_plot(dict(c), ["gumbel_loc_e", "gumbel_scale_e"], "Per-column temporal noise",
+        figs.append(_figure(sigma_plot(dict(c), ["gumbel_loc_e", "gumbel_scale_e"], "Per-column temporal noise",
                                         "sqrt(column-mean variance less the pixels' share), e- rms", False),
                             "Each column's temporal noise and the fitted Gumbel"))
         parts.append("<h2>Readout noise</h2><div class='row'>" + "".join(figs) + "</div>")
     if "prnu" in pl:
         parts.append("<h2>PRNU</h2><div class='row'>"
-                     + _figure(_prnu_plot(pl["prnu"]["residual"], P["prnu.measured_pct"]["value"]),
+                     + _figure(prnu_plot(pl["prnu"]["residual"], P["prnu.measured_pct"]["value"]),
                                "The flat's per-pixel response, rows and columns removed") + "</div>")
     if doc.get("round_trip"):
         rows = [(r["parameter"], r["measured"], r["simulated"],
