@@ -149,11 +149,15 @@ def dark_measurement(cfg, seed, times=(0.25, 0.5, 1.0), frames=6, clipped=False)
     limit = cfg.adc.black_level_dn + 0.9 * (2**cfg.adc.bits - 1 - cfg.adc.black_level_dn)
     rates = fit_dark.rate_map_from_stacks(means, list(times), k, limit_dn=limit)
     # the slope's temporal noise, from the model's read noise and each pixel's dark shot noise
-    tv = sum(v for name, v in noise_budget.temporal_variances(s, 0.0).items() if name != "dark_shot")
+    budget = noise_budget.temporal_variances(s, 0.0)
+    tv = sum(v for name, v in budget.items() if name != "dark_shot")
     noise = float(np.sum(w**2 * (tv + np.mean(s.dark_rate) * np.array(times)) / frames))
+    # the row and column noise every pixel's slope shares, averaged over the map
+    rows, cols = s.shape
+    common = float(np.sum(w**2) / frames * (budget.get("row", 0.0) / rows + budget.get("column", 0.0) / cols))
     if clipped:
-        return s, rates, noise, fit_dark.clipped_pixels(means, limit)
-    return s, rates, noise
+        return s, rates, noise, common, fit_dark.clipped_pixels(means, limit)
+    return s, rates, noise, common
 
 
 @pytest.mark.slow
@@ -171,9 +175,9 @@ def test_dark_current_intervals_cover_at_the_characterization_points(preset, tem
         cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
         hits = {"mean": 0, "std": 0, "ppm": 0}
         for seed in range(SEEDS):
-            s, rates, noise = dark_measurement(cfg, seed)
+            s, rates, noise, common = dark_measurement(cfg, seed)
             st = s.dark_state
-            res = fit_dark.fit_point(rates, noise, st.threshold)
+            res = fit_dark.fit_point(rates, noise, st.threshold, common)
             p = res["parameters"]
             hits["mean"] += p["mean_e_per_s"]["ci95"][0] <= st.mean <= p["mean_e_per_s"]["ci95"][1]
             hits["std"] += p["std_e_per_s"]["ci95"][0] <= st.std <= p["std_e_per_s"]["ci95"][1]
@@ -198,9 +202,9 @@ def test_doubling_temperatures_cover_7_and_10_c(preset):
         for T in temps:
             cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
             # exposures short enough that few white pixels clip (those that do are left out of the tail's fit)
-            s, rates, noise, clip = dark_measurement(cfg, seed, times=(0.025, 0.05, 0.1), clipped=True)
+            s, rates, noise, common, clip = dark_measurement(cfg, seed, times=(0.025, 0.05, 0.1), clipped=True)
             excluded = clip if excluded is None else excluded | clip
-            res = fit_dark.fit_point(rates, noise, s.dark_state.threshold)
+            res = fit_dark.fit_point(rates, noise, s.dark_state.threshold, common)
             m = res["parameters"]["mean_e_per_s"]
             maps[T] = rates
             means.append(m["value"])

@@ -86,6 +86,10 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     sat_dn = 2**bits - 1
     temps = ds.temperatures
     t_ref = temperature_c if temperature_c is not None else (temps[-1] if temps else base.sensor.temperature_c)
+    for st in ds.stacks:  # stacks measured at no stated temperature: at the reference one
+        if st.temperature_c is None:
+            st.temperature_c = t_ref
+    temps = ds.temperatures
 
     # ---------------------------------------------------------------- photon transfer
     flats = ds.of_kind("flat")
@@ -140,8 +144,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     slope_var: dict[float, np.ndarray] = {}
     clipped: dict[float, np.ndarray] = {}
     dark_fits: dict[float, dict] = {}
-    for T in temps or [t_ref]:
-        ds_T = [d for d in ds.of_kind("dark") if d.temperature_c == T or (not temps)]
+    for T in temps:
+        ds_T = [d for d in ds.of_kind("dark") if d.temperature_c == T]
         limit = black + DARK_FIT_LIMIT * (sat_dn - black)
         # a stack where most pixels clip says nothing; where a few white pixels clip, those pixels leave it out
         ok = [d for d in ds_T if float(np.mean(d.mean >= limit)) < 0.01]
@@ -164,7 +168,9 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             med = float(np.median(rates))
             if cand is not None and cand > med + 5 * 1.4826 * float(np.median(np.abs(rates - med))):
                 thr = cand
-        res = fit_dark.fit_point(rates, noise_var, thr)
+        # every pixel's slope shares the frames' whole-map mean noise (row and column noise, averaged)
+        common = float(np.sum(w**2 * np.array([np.var(d.row_means.mean(axis=1), ddof=1) / d.n for d in ok]))) / k**2
+        res = fit_dark.fit_point(rates, noise_var, thr, common)
         wp = white_pixels.report(rates, res["threshold"], pattern)
         from scipy import stats
 

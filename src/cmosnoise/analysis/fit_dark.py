@@ -152,11 +152,14 @@ def clipped_pixels(means_dn: list[np.ndarray], limit_dn: float) -> np.ndarray:
     return sum((np.asarray(m) < limit_dn).astype(np.int32) for m in means_dn) < 2
 
 
-def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None) -> dict:
+def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None, common_var: float = 0.0) -> dict:
     """One temperature's dark current from its rate map (e-/s): the body's family, mean and std, the tail.
 
     ``slope_noise_var`` is the variance (e-/s)^2 the per-pixel slope's temporal
-    noise adds to the map; the body's std is corrected for it. Without a
+    noise adds to the map; the body's std is corrected for it. ``common_var``
+    is the variance (e-/s)^2 of the noise every pixel's slope shares (the
+    frames' row and column noise averaged over the map): it adds to the mean's
+    uncertainty and to no pixel's spread. Without a
     threshold the default is 8 robust standard deviations above the median.
     Returns ``{"parameters": {name: {value, ci95, method}}, "families": [...], "threshold": thr}``.
     """
@@ -184,7 +187,7 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
     floor = 1e-3 * abs(mean)  # the least std the configuration can take (1e-6 of the mean), with room
     body_std = math.sqrt(max(var - slope_noise_var, floor**2))
     kurt = float(np.mean((x - mean) ** 4) / np.var(x) ** 2)
-    se_mean = math.sqrt(var / n)
+    se_mean = math.sqrt(var / n + common_var)
     se_var = var * math.sqrt((kurt - 1) / n)
     lo_var, hi_var = var - slope_noise_var - Z95 * se_var, var - slope_noise_var + Z95 * se_var
     blurred = math.sqrt(slope_noise_var) > 0.1 * body_std
