@@ -164,7 +164,7 @@ def dark_measurement(cfg, seed, times=(0.25, 0.5, 1.0), frames=6, clipped=False)
 @pytest.mark.parametrize("preset, temps", [(None, (25.0, 45.0, 65.0)), ("paper-fig9-vga", (65.0,)),
                                            ("paper-fig11-full", (45.0,))])
 def test_dark_current_intervals_cover_at_the_characterization_points(preset, temps):
-    """Body mean and std and the tail's ppm, 20 sensors of 160 x 120, at each characterization point (the default
+    """Body mean and std and the tail's ppm, 20 sensors of 128 x 96, at each characterization point (the default
     sensor's at 25, 45 and 65 C; the papers' one point each): the interval holds the configured value.
 
     Away from a point the configured body is not what the map shows below the threshold: the tail pixels'
@@ -172,7 +172,7 @@ def test_dark_current_intervals_cover_at_the_characterization_points(preset, tem
     doubling temperatures are what the test checks (below)."""
     misses = {}
     for T in temps:
-        cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
+        cfg = load_config(preset=preset, extra={"sensor": {"width": 128, "height": 96, "temperature_c": T}})
         hits = {"mean": 0, "std": 0, "ppm": 0}
         for seed in range(SEEDS):
             s, rates, noise, common = dark_measurement(cfg, seed)
@@ -200,7 +200,7 @@ def test_doubling_temperatures_cover_7_and_10_c(preset):
     for seed in range(SEEDS):
         maps, means, ses, body_std, excluded = {}, [], [], None, None
         for T in temps:
-            cfg = load_config(preset=preset, extra={"sensor": {"width": 160, "height": 120, "temperature_c": T}})
+            cfg = load_config(preset=preset, extra={"sensor": {"width": 128, "height": 96, "temperature_c": T}})
             # exposures short enough that few white pixels clip (those that do are left out of the tail's fit)
             s, rates, noise, common, clip = dark_measurement(cfg, seed, times=(0.025, 0.05, 0.1), clipped=True)
             excluded = clip if excluded is None else excluded | clip

@@ -265,7 +265,7 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
                       ("tail_max_e", "source_follower.flicker.tail.max_e")]:
         v, ci = f.interval(name)
         if v is None:
-            P[key] = _p(None, None, "no flicker tail seen (fewer than 3 tail pixels): not fitted, none in the configuration")
+            P[key] = _p(None, None, "no flicker tail seen (not one tail pixel): not fitted, none in the configuration")
         else:
             P[key] = _p(float(v), ci, where)
     P["source_follower.flicker.tail.ppm_above"]["threshold_e"] = thr

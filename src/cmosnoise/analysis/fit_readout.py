@@ -287,8 +287,8 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
 
     names = ["thermal_sigma_e", "gumbel_loc_e", "gumbel_scale_e"] + (["tail_ppm_above", "tail_max_e"] if with_tail else [])
     r = _fit(grid, unpack, starts, names, natural)
-    if with_tail and s2.size / (1 + math.exp(-float(_clipped(r.theta)[3]))) < 3:
-        # fewer than 3 tail pixels: no tail can be fitted; the body alone, the tail's ppm bounded from above
+    if with_tail and s2.size / (1 + math.exp(-float(_clipped(r.theta)[3]))) < 0.5:
+        # not one tail pixel: no tail can be fitted; the body alone, the tail's ppm bounded from above
         body = fit_source_follower(s2, known, frames, threshold_e, seed, with_tail=False, kappa4=kappa4,
                                    known_var=known_var)
         b = body["fit"]
