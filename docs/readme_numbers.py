@@ -293,7 +293,7 @@ def render_sweep_speed(d: dict) -> str:
 
 
 def render_fit_speed(d: dict) -> str:
-    lines = [f"Measured with `{d['command']}` ({d['machine']}; {d['data_set']}, {d['files']} files):", "",
+    lines = [f"Measured with `{d['command']}` ({d['machine']}; {d['data_set']}, {d['files']} .npy files read from disk):", "",
              "| run | seconds |", "|---|---|"]
     for r in d["rows"]:
         lines.append(f"| {r['label']} | {r['seconds']:.1f} |")
