@@ -422,12 +422,8 @@ def export(m: Measurement, folder: Path) -> Path:
     return path
 
 
-def load(descriptor: Path, keep_dark_means: bool = False) -> Measurement:
-    """A :class:`Measurement` from an EMVA 1288 descriptor file and its images (e.g. a real camera's).
-
-    ``keep_dark_means``: also keep each step's per-pixel dark-pair mean (float32, DN) in
-    ``frames["dark_means"]``, for a per-pixel dark-current map.
-    """
+def load(descriptor: Path) -> Measurement:
+    """A :class:`Measurement` from an EMVA 1288 descriptor file and its images (e.g. a real camera's)."""
     import tifffile
 
     from ..io.stacks import descriptor_path, parse_descriptor
@@ -460,7 +456,6 @@ def load(descriptor: Path, keep_dark_means: bool = False) -> Measurement:
                              f"({', '.join(f'{t * 1e9:g}' for t in times[:5])} ns); the series needs at least 3 "
                              "distinct times >= 0")
     texp, mu_p, mu_y, mu_yd, s2_y, s2_yd, max_yd = [], [], [], [], [], [], []
-    dark_means: list[np.ndarray] = []
     for _, t, p, paths in bright_pairs:
         d = dark_pairs.get(round(t, 12))
         if d is None:
@@ -471,11 +466,8 @@ def load(descriptor: Path, keep_dark_means: bool = False) -> Measurement:
         md, sd = _pair_stats(da, db)
         texp.append(t); mu_p.append(p); mu_y.append(my); s2_y.append(sy); mu_yd.append(md); s2_yd.append(sd)
         max_yd.append(max(float(da.max()), float(db.max())))
-        if keep_dark_means:
-            dark_means.append(((da.astype(np.float32) + db.astype(np.float32)) / 2))
     sb, sdk = stacks_b[0], stacks_d[0]
     return Measurement(
         bits, shape, *map(np.array, (texp, mu_p, mu_y, mu_yd, s2_y, s2_yd)), sb[1], sb[2],
         np.stack(read(sb[3])), np.stack(read(sdk[3])), np.array(max_yd),
-        {"dark_means": dark_means} if keep_dark_means else {},
     )
