@@ -14,7 +14,8 @@ source follower, row noise, column noise,  one long dark stack (>= 4 frames; 50 
 VFPN, fixed row offsets                    shortest exposure time is best
 PRNU, column gain mismatch                 a flat stack (>= 2 frames; 16+ recommended) near half saturation
                                            and a dark stack at its exposure time
-crosstalk                                  not fitted (needs a spot or edge measurement): the base's value
+crosstalk (per colour with a CFA)          a spot stack: single lit pixels, 3 or more apart, and a dark
+                                           stack at its exposure time
 =========================================  ===================================================================
 
 Every parameter is reported as ``{value, ci95, method}``; one that the data
@@ -207,6 +208,24 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         st = max(longs, key=lambda d: (d.n, -d.exposure_s))
         _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed)
 
+    # ---------------------------------------------------------------- crosstalk from spots
+    spots = [(sp, _dark_at(ds, sp)) for sp in ds.of_kind("spot")]
+    spots = [(sp, d) for sp, d in spots if d is not None]
+    if not spots:
+        not_fitted["crosstalk"] = ("needs a spot stack (single lit pixels, with a dark stack at its exposure time); "
+                                   "kept at the base configuration's kernel")
+    else:
+        sp, d = max(spots, key=lambda sd: sd[0].n)
+        from ..model.stages import crosstalk as xt
+
+        base_k = xt.kernel_fractions(base.crosstalk.kernel_pct)
+        ksum = float(np.mean([np.sum(v) for v in base_k.values()])) if isinstance(base_k, dict) else float(np.sum(base_k))
+        kt = fit_photo.crosstalk_from_spots(sp, d, pattern, ksum, sat_dn)
+        for name, r in kt.items():
+            key = "crosstalk.kernel_pct" + ("" if name == "all" else f".{name}")
+            P[key] = _p(r["kernel_pct"], None, f"3 x 3 charge around {r['spots']} isolated lit pixels, shared "
+                        f"out of the base's total {ksum * 100:.4g} % (a spot shows the sharing, not the loss)",
+                        ci95_pct=r["ci95_pct"])
     # ---------------------------------------------------------------- PRNU and column gain
     cands = [(f, _dark_at(ds, f)) for f in flats]
     cands = [(f, d) for f, d in cands if d is not None and 0.1 * sat_dn < f.mean.mean() < 0.8 * sat_dn]
@@ -217,22 +236,39 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         target = black + 0.5 * (sat_dn - black)
         f, d = max(cands, key=lambda fd: (min(fd[0].n, fd[1].n), -abs(fd[0].mean.mean() - target)))
         pg = fit_photo.prnu_and_column_gain(f, d, pattern, sat_dn)
-        seen = physics.prnu_seen_per_sigma(base)
+        seen = physics.prnu_seen_per_sigma(_with_crosstalk(base, P))
         m = pg["prnu_pct"]
         P["prnu.measured_pct"] = _p(m["value"], m["ci95"], f"pixel residual of a {f.n}-frame flat at "
                                     f"{pg['signal_dn']:.0f} DN less its dark, rows and columns removed, "
                                     f"{pg['excluded_pixels']} defect pixels out")
         P["prnu.sigma_pct"] = _p(m["value"] / seen, [c / seen for c in m["ci95"]],
-                                 f"the gain map's sigma: measured / {seen:.4f} (the base's crosstalk averages neighbours)")
+                                 f"the gain map's sigma: measured / {seen:.4f} (crosstalk averages neighbours: the "
+                                 f"{'fitted' if any(k.startswith('crosstalk.') for k in P) else 'base'} kernel)")
         g = pg["column_gain_pct"]
         P["column_noise.gain_sigma_pct"] = _p(g["value"], g["ci95"], "the flat's column means, less the pixel and "
                                               "temporal shares")
         plots["prnu"] = {"residual": pg["relative_residual"]}
-    not_fitted["crosstalk"] = "needs a spot or edge measurement; kept at the base configuration's kernel"
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
             "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
                      "temperatures": temps, "source": ds.source, "input": ds.kind},
             "_maps": dark_maps}
+
+
+def _crosstalk_update(P: dict) -> dict | None:
+    """The configuration's crosstalk section from the fitted kernels (one per colour when all three are there)."""
+    colours = [f"crosstalk.kernel_pct.{c}" for c in "RGB"]
+    if all(c in P for c in colours):
+        return {"enabled": True, "kernel_pct": {c[-1]: P[c]["value"] for c in colours}}
+    if "crosstalk.kernel_pct" in P:
+        return {"enabled": True, "kernel_pct": P["crosstalk.kernel_pct"]["value"]}
+    return None
+
+
+def _with_crosstalk(base, P: dict):
+    from ..config.loading import merge_updates
+
+    xt = _crosstalk_update(P)
+    return base if xt is None else merge_updates(base, {"crosstalk": xt})
 
 
 def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int) -> None:
@@ -354,6 +390,9 @@ def fitted_config(base, result: dict):
         u["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
                              "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
                                           "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+    xt = _crosstalk_update(P)
+    if xt is not None:
+        u["crosstalk"] = xt
     if "prnu.sigma_pct" in P:
         u["prnu"] = {"enabled": True, "sigma_pct": min(v("prnu.sigma_pct"), 100.0), "measured_pct": None}
         u.setdefault("column_noise", {})["gain_sigma_pct"] = min(v("column_noise.gain_sigma_pct"), 50.0)

@@ -98,3 +98,51 @@ def prnu_and_column_gain(flat, dark, pattern: str, saturation_dn: float) -> dict
             "ci95": [100 * math.sqrt(max(g2 - Z95 * se_g, 0.0)), 100 * math.sqrt(max(g2 + Z95 * se_g, 0.0))]}
     return {"prnu_pct": prnu, "column_gain_pct": gain, "excluded_pixels": int((~keep).sum()), "signal_dn": mean_s,
             "relative_residual": x}
+
+
+def crosstalk_from_spots(spot, dark, pattern: str, kernel_sum: float, saturation_dn: float) -> dict:
+    """The crosstalk kernel from a stack of frames lit on single, well separated pixels (:class:`StackStats`).
+
+    Each spot is a local maximum of (spot - dark) that stands clear of its
+    5 x 5 surroundings; the 3 x 3 charge around it, divided by its sum, is
+    the fraction of the lit pixel's charge in itself and each neighbour. A
+    spot measures how charge is shared, not how much is lost to the
+    substrate, so the kernel is scaled to ``kernel_sum`` (the base's). With a
+    CFA, one kernel per colour of the lit pixel. Returns ``{colour or "all":
+    {"kernel_pct", "ci95_pct", "spots"}}``; the interval of each entry is
+    the spots' spread (Student t).
+    """
+    from scipy import ndimage, stats
+
+    sig = spot.mean - dark.mean
+    rows, cols = sig.shape
+    noise = math.sqrt(max(float(np.median(spot.pixel_var)) / spot.n + float(np.median(dark.pixel_var)) / dark.n, 1e-12))
+    peak = (sig == ndimage.maximum_filter(sig, size=5)) & (sig > 50 * noise) & (spot.mean < 0.9 * saturation_dn)
+    peak[:2, :] = peak[-2:, :] = False
+    peak[:, :2] = peak[:, -2:] = False
+    r, c = np.nonzero(peak)
+    # the 5 x 5 ring outside the 3 x 3 must be dark: a spot, not an edge or a flat
+    ring_ok = []
+    for i, j in zip(r, c):
+        win = sig[i - 2:i + 3, j - 2:j + 3].copy()
+        win[1:4, 1:4] = 0
+        ring_ok.append(float(np.abs(win).max()) < 0.02 * sig[i, j] + 5 * noise)
+    r, c = r[np.array(ring_ok, bool)], c[np.array(ring_ok, bool)]
+    if r.size < 3:
+        raise CmosnoiseError(f"crosstalk: {r.size} isolated spot(s) found in the spot stack; the fit needs at least 3 "
+                             "single lit pixels, each at least 3 pixels from the next and from the edge")
+    k3 = np.stack([sig[i - 1:i + 2, j - 1:j + 2] / sig[i - 1:i + 2, j - 1:j + 2].sum() for i, j in zip(r, c)])
+    colour = cfa_mod.channel_map(pattern, sig.shape)[r, c] if not cfa_mod.is_mono(pattern) else np.zeros(r.size, int)
+    out = {}
+    groups = {"all": np.ones(r.size, bool)} if cfa_mod.is_mono(pattern) else {
+        name: colour == ch for ch, name in enumerate("RGB") if np.any(colour == ch)}
+    if not cfa_mod.is_mono(pattern):
+        groups["all"] = np.ones(r.size, bool)
+    for name, sel in groups.items():
+        k = k3[sel] * kernel_sum * 100
+        n = int(sel.sum())
+        mean = k.mean(axis=0)
+        half = (float(stats.t.ppf(0.975, n - 1)) * k.std(axis=0, ddof=1) / math.sqrt(n)) if n > 1 else np.full((3, 3), np.inf)
+        out[name] = {"kernel_pct": mean.tolist(), "ci95_pct": (np.stack([mean - half, mean + half], -1)).tolist(),
+                     "spots": n}
+    return out

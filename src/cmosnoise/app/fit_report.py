@@ -134,8 +134,7 @@ def build(doc: dict, result: dict, cfg) -> str:
              f"{html.escape(doc['source'])} ({html.escape(doc['input'])}), {meta['shape'][1]} x {meta['shape'][0]} "
              f"{html.escape(meta['cfa'])}, {meta['bits']} bits. <code>config.yaml</code> beside this report is the "
              "fitted sensor: <code>cmosnoise simulate --config config.yaml</code> runs it.</p>"]
-    rows = [(name, p["value"] if not isinstance(p["value"], float) else p["value"], _fmt_ci(p), p["method"])
-            for name, p in P.items()]
+    rows = [(name, p["value"], _fmt_ci(p), p["method"]) for name, p in P.items()]
     parts.append("<h2>Fitted parameters</h2>" + _table(rows, ["parameter", "value", "95 % interval", "method"]))
     if doc["not_fitted"]:
         parts.append("<h2>Not fitted (kept from the base configuration)</h2>"

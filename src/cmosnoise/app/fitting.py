@@ -40,6 +40,8 @@ def simulate_like(ds, cfg, k_measured: float, seed: int = 0) -> stacks.Dataset:
         t = max(st.exposure_s, 1e-9)
         if st.kind == "dark":
             ex = s.with_exposure(t).expose("flat:0")
+        elif st.kind == "spot":
+            ex = s.with_exposure(t, spot_rate(s, t)).expose(spot_scene(s.shape))
         else:
             # the same mean signal as measured: photo-electrons per second that give mean(flat - black) / K
             black = cfg.adc.black_level_dn
@@ -53,6 +55,18 @@ def simulate_like(ds, cfg, k_measured: float, seed: int = 0) -> stacks.Dataset:
     return stacks.Dataset(out, ds.shape, ds.bits, cfg.sensor.cfa, None, "simulated from the fitted configuration", ds.kind)
 
 
+def spot_scene(shape: tuple[int, int], spacing: int = 7) -> np.ndarray:
+    """Single lit pixels on a grid ``spacing`` apart (odd: the lit pixels fall on every CFA colour), CFA signal."""
+    scene = np.zeros(shape)
+    scene[3:-3:spacing, 3:-3:spacing] = 1.0
+    return scene
+
+
+def spot_rate(sensor, t: float) -> float:
+    """Photo-electrons per second that put half the full well in a lit pixel over ``t``."""
+    return 0.5 * sensor.saturation_e / t
+
+
 def round_trip(result: dict, again: dict) -> list[dict]:
     """Parameter by parameter: the measured data's fit, the simulated data's fit, and whether the intervals overlap."""
     rows = []
@@ -61,6 +75,11 @@ def round_trip(result: dict, again: dict) -> list[dict]:
         if q is None or p["value"] is None or q["value"] is None:
             rows.append({"parameter": name, "measured": p["value"], "simulated": None if q is None else q["value"],
                          "agree": None})
+            continue
+        if isinstance(p["value"], list):  # a kernel: every element's intervals overlap
+            a, b = np.asarray(p["ci95_pct"]), np.asarray(q.get("ci95_pct", p["ci95_pct"]))
+            rows.append({"parameter": name, "measured": p["value"], "simulated": q["value"],
+                         "agree": bool(np.all((a[..., 0] <= b[..., 1]) & (b[..., 0] <= a[..., 1])))})
             continue
         if isinstance(p["value"], str):
             if q is not None:
@@ -145,7 +164,8 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
     noise) and 8-frame dark stacks at ``dark_times`` (the dark current). At
     the first temperature also: ``levels`` flat pairs at 5 ms from 2 % to
     130 % of saturation, a 16-frame flat at half saturation (PRNU, column
-    gain). Every stack has frames of its own. Returns the manifest's path.
+    gain), an 8-frame stack of single lit pixels 7 apart (crosstalk). Every
+    stack has frames of its own. Returns the manifest's path.
     ``folder`` is written into as it is (``cmosnoise measure`` gives it an
     output folder's temporary, so the result is whole or absent).
     """
@@ -177,6 +197,8 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
                 save(f"flat_{i:03d}.npy", ex, 2, kind="flat", exposure_s=t_flat, temperature_c=T, level=round(float(lvl), 4))
             ex = s.with_exposure(t_flat, s.saturation_e * 0.5 / t_flat).expose("flat:1.0")
             save("flat_half.npy", ex, 16, kind="flat", exposure_s=t_flat, temperature_c=T, level=0.5)
+            ex = s.with_exposure(t_flat, spot_rate(s, t_flat)).expose(spot_scene(s.shape))
+            save("spots.npy", ex, 8, kind="spot", exposure_s=t_flat, temperature_c=T)
         say(f"wrote the stacks at {T:g} C")
     manifest = folder / "manifest.yaml"
     doc = {"cfa": cfg.sensor.cfa, "bits": cfg.adc.bits, "black_level_dn": cfg.adc.black_level_dn, "stacks": stacks_}

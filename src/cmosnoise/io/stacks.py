@@ -16,6 +16,7 @@ them:
       stacks:
         - {kind: dark, exposure_s: 0.01, temperature_c: 25, files: [dark_10ms.tif]}
         - {kind: flat, exposure_s: 0.01, temperature_c: 25, level: 0.4, files: ["flat_04/*.dng"]}
+        - {kind: spot, exposure_s: 0.01, temperature_c: 25, files: [spots.tif]}   # crosstalk
 
   Files are multi-page TIFF, ``.npy`` (2-D, or 3-D with frames first) or
   DNG (one frame each, read by LibRaw through rawpy; its CFA, black level
@@ -52,7 +53,8 @@ SUFFIXES = (".tif", ".tiff", ".npy", ".dng")
 # ------------------------------------------------------------------ manifest schema
 class StackEntry(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["dark", "flat"] = Field(description="dark (no light) or flat (uniform illumination)")
+    kind: Literal["dark", "flat", "spot"] = Field(
+        description="dark (no light), flat (uniform illumination) or spot (light on single, well separated pixels: crosstalk)")
     exposure_s: float = Field(ge=0, le=3600, description="exposure time, s")
     temperature_c: Optional[float] = Field(None, ge=-60, le=150, description="sensor temperature, C")
     level: Optional[float] = Field(None, ge=0, le=1e9, description="relative illumination (any unit; flats)")
