@@ -172,6 +172,35 @@ def test_ctrl_c_while_starting_exits_130_without_a_traceback(tmp_path):
     assert not (tmp_path / "run").exists() and _leftovers(tmp_path) == []
 
 
+def test_an_interrupt_a_library_swallows_still_stops_the_command(tmp_path, monkeypatch):
+    """A signal whose exception is raised inside a C callback (LLVM's, through ctypes, while numba loads the
+    kernel) cannot unwind: ctypes reports it as unraisable and carries on. The command must still end as
+    interrupted (130), with no output and no traceback. Seen with a Ctrl-C about a second into `simulate`."""
+    import signal as sig
+    import sys as _sys
+    import types
+
+    from conftest import cli
+
+    from cmosnoise import errors
+    from cmosnoise.app import run as run_mod
+
+    original = run_mod.simulate
+
+    def swallowing(*args, **kwargs):
+        try:  # what ctypes does with an exception in a callback
+            errors.signal_received(sig.SIGINT)
+        except errors.Terminated as exc:
+            _sys.unraisablehook(types.SimpleNamespace(exc_type=type(exc), exc_value=exc, exc_traceback=None,
+                                                      err_msg="on calling ctypes callback function", object=None))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(run_mod, "simulate", swallowing)
+    r = cli("simulate", *SMALL, "--out", tmp_path / "run")
+    assert r.returncode == 130 and "Traceback" not in r.stderr and "Terminated" not in r.stderr, (r.returncode, r.stderr)
+    assert not (tmp_path / "run").exists() and _leftovers(tmp_path) == []
+
+
 # ------------------------------------------------------------------ values the schema took but the physics could not
 @pytest.mark.parametrize("setting, needle", [
     ("exposure.peak_rate_e_per_s=1.0e30", "exposure.peak_rate_e_per_s"),

@@ -21,3 +21,25 @@ class Terminated(BaseException):
     def __init__(self, signum: int):
         super().__init__(signum)
         self.signum = signum
+
+
+#: signals this process's handler has raised :class:`Terminated` for, not yet acted on. Signals are the
+#: process's, so this is too: a library can catch the exception (LLVM's callbacks into Python do, through
+#: ctypes), and the record keeps the signal from being lost.
+_received: list[int] = []
+
+
+def signal_received(signum: int, _frame=None):
+    """The signal handler of a command: remember the signal, and unwind with :class:`Terminated`."""
+    _received.append(signum)
+    raise Terminated(signum)
+
+
+def check_terminated() -> None:
+    """Raise :class:`Terminated` if a signal arrived whose exception something swallowed (before committing output)."""
+    if _received:
+        raise Terminated(_received[0])
+
+
+def clear_terminated() -> None:
+    _received.clear()

@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from ..config import preset_data, preset_names
-from ..errors import CmosnoiseError, Terminated
+from ..errors import CmosnoiseError, Terminated, check_terminated, clear_terminated, signal_received
 from ..model.physics import load_config
 
 app = typer.Typer(
@@ -460,13 +460,17 @@ def run(argv: list[str] | None = None) -> int:
     A :class:`CmosnoiseError` becomes one line on stderr and status 2, a
     usage error click's message and status 2, Ctrl-C status 130.
     """
+    clear_terminated()
     previous = _catch_termination()
+    unraisable = sys.unraisablehook
+    sys.unraisablehook = _quiet_interrupts(unraisable)
     try:
         with warnings.catch_warnings():
             # numerical warnings of NumPy and SciPy (an overflow in a tail far beyond any pixel) are not the
             # user's to read: every result is checked to be finite, and bad input is refused with a message
             warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"(numpy|scipy)(\.|$)")
             result = app(args=argv, prog_name="cmosnoise", standalone_mode=False)
+        check_terminated()  # a signal whose exception a library swallowed: the command did not finish as asked
         return result if isinstance(result, int) else 0
     except typer.Exit as exc:
         return exc.exit_code
@@ -485,12 +489,18 @@ def run(argv: list[str] | None = None) -> int:
         print("cmosnoise: interrupted; nothing was written", file=sys.stderr)
         return 130
     finally:
+        sys.unraisablehook = unraisable
         for signum, handler in previous.items():
             signal.signal(signum, handler)
 
 
-def _raise_terminated(signum, _frame):
-    raise Terminated(signum)
+def _quiet_interrupts(hook):
+    """An unraisable-exception hook that keeps quiet about our own interrupts (raised inside a C callback,
+    e.g. LLVM's into numba, they cannot unwind; :func:`check_terminated` acts on them instead)."""
+    def quiet(info):
+        if not isinstance(info.exc_value, (Terminated, KeyboardInterrupt)):
+            hook(info)
+    return quiet
 
 
 def _catch_termination() -> dict:
@@ -502,7 +512,7 @@ def _catch_termination() -> dict:
     previous = {}
     if threading.current_thread() is threading.main_thread():
         for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            previous[signum] = signal.signal(signum, _raise_terminated)
+            previous[signum] = signal.signal(signum, signal_received)
     return previous
 
 

@@ -12,21 +12,28 @@ import signal
 import sys
 
 
-def _stop(signum, _frame):
-    raise KeyboardInterrupt(signum)
+def _interrupted(signum: int) -> None:
+    print("cmosnoise: interrupted while starting; nothing was written", file=sys.stderr, flush=True)
+    os._exit(128 + int(signum))  # at once: nothing to clean up yet, and no interpreter exit that re-raises SIGINT
 
 
 def main() -> None:
-    handlers = {s: signal.signal(s, _stop) for s in (signal.SIGTERM, signal.SIGHUP)}
+    received: list[int] = []
+
+    def stop(signum, _frame):
+        received.append(signum)
+        raise KeyboardInterrupt(signum)
+
+    handlers = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     try:
         from .cli import run
     except KeyboardInterrupt as exc:
-        signum = exc.args[0] if exc.args and isinstance(exc.args[0], int) else signal.SIGINT
-        print("cmosnoise: interrupted while starting; nothing was written", file=sys.stderr, flush=True)
-        os._exit(128 + int(signum))  # at once: nothing to clean up yet, and no interpreter exit that re-raises SIGINT
+        _interrupted(exc.args[0] if exc.args and isinstance(exc.args[0], int) else signal.SIGINT)
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)
+    if received:  # a library caught the KeyboardInterrupt while importing: the signal still counts
+        _interrupted(received[0])
     sys.exit(run())
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CmosnoiseError
+from ..errors import CmosnoiseError, Terminated, check_terminated
 
 #: names of the helpers beside an output folder: a run's temporary folder, the old folder being replaced, the lock
 _TMP, _OLD, _LOCK = ".cmosnoise-tmp-", ".cmosnoise-old-", ".cmosnoise-lock-"
@@ -159,6 +159,12 @@ class OutputFolder:
 
     def __exit__(self, exc_type, exc, tb):
         try:
+            if exc_type is None:
+                try:  # an interrupt whose exception a library swallowed still means: no output
+                    check_terminated()
+                except Terminated:
+                    shutil.rmtree(self.tmp, ignore_errors=True)
+                    raise
             if exc_type is not None:
                 shutil.rmtree(self.tmp, ignore_errors=True)
                 return False
