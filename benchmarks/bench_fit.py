@@ -52,7 +52,7 @@ def main() -> None:
             from cmosnoise.io import stacks
 
             res = fit.fit_dataset(stacks.load(manifest), load_config())
-            sf = dict(res["plots"]["source_follower"], threshold=4.0)
+            sf = res["plots"]["source_follower"]
             names = ["thermal_sigma_e", "gumbel_loc_e", "gumbel_scale_e", "tail_ppm_above", "tail_max_e"]
             out = Path(args.figures)
             (out / "fit_fig7.png").write_bytes(fit_report.sigma_plot(

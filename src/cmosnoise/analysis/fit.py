@@ -309,7 +309,8 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
         P["source_follower.flicker.tail.ppm_above"]["method"] = ("the body's own share above the threshold; no tail "
                                                                   "pixels seen, the interval's top is 3 pixels' worth")
     plots["source_follower"] = {"s2": s2.ravel(), "known": known.ravel(), "frames": n,
-                                "params": [float(x) for x in f.value]}
+                                "params": [float(x) for x in f.value], "tail_fraction": r["tail_fraction"],
+                                "tail_max": r["tail_max"]}
     # rows: temporal then fixed
     rs = centred_series(st.row_means) / k
     cs = centred_series(st.col_means) / k

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
-from .fit_readout import Z95, centred_series, robust_mask, split_half_covariance, two_way
+from .fit_readout import Z95, centred_series, residual_variance, robust_mask, split_half_covariance
 
 
 def photon_transfer(mu: np.ndarray, v: np.ndarray) -> dict:
@@ -76,12 +76,11 @@ def prnu_and_column_gain(flat, dark, pattern: str, saturation_dn: float) -> dict
     if mean_s <= 0:
         raise CmosnoiseError("PRNU: the flat stack is not brighter than its dark stack")
     rel = channel_normalised(signal, pattern, keep)
-    tw = two_way(rel, keep)
     corr = 1 - 2 / cols - 2 / rows
     # per-pixel temporal variance of the two means, relative to the signal
     v_f = float(np.mean(flat.pixel_var)) / corr / flat.n / mean_s**2
     v_d = float(np.mean(dark.pixel_var)) / corr / dark.n / mean_s**2
-    resid = tw["resid_var"]
+    resid = residual_variance(rel, keep)
     x = (rel - np.mean(rel[keep]))[keep]
     kurt = float(np.mean(x**4) / np.var(x) ** 2)
     prnu2 = resid - v_f - v_d

@@ -22,8 +22,8 @@ subsample used and for a model that is only approximately right.
 frame's mean, varies over frames with ``sigma_c^2 + v_pixel / rows``; the
 same machinery fits sigma_c's ``gumbel_r`` (no floor, no tail).
 **Row noise** (stage 7): the rows' means likewise give ``sigma_row^2``.
-**VFPN and fixed row offsets**: a two-way analysis of the stack's mean
-image, white pixels masked.
+**VFPN and fixed row offsets**: the covariance of each column's (row's)
+mean over two halves of the stack's mean image, white pixels masked.
 """
 
 from __future__ import annotations
@@ -174,14 +174,12 @@ def _fit(grid: _Grid, unpack, theta0: list[np.ndarray], names: list[str], natura
         up, dn = unpack(theta + e), unpack(theta - e)
         scores[:, j] = (grid.per_unit(up) - grid.per_unit(dn)) / (2 * h[j])
     H = np.empty((k, k))
-    f0 = total(theta)
     for i in range(k):
         for j in range(i, k):
             ei = np.zeros(k); ei[i] = h[i]  # noqa: E702
             ej = np.zeros(k); ej[j] = h[j]  # noqa: E702
             H[i, j] = H[j, i] = (total(theta + ei + ej) - total(theta + ei - ej) - total(theta - ei + ej)
                                  + total(theta - ei - ej)) / (4 * h[i] * h[j])
-    del f0
     B = (scores * grid.weights[:, None]).T @ scores  # sum over pixels of score score^T (a unit's pixels share one)
     try:  # a minimum has a positive definite Hessian; where the likelihood is flat, no interval can be given
         np.linalg.cholesky(H)
@@ -297,7 +295,7 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
         b.extra = {"tail_ppm_above": {"value": own, "ci95": [0.0, own + 3e6 / s2.size], "tail_pixels": 0},
                    "tail_max_e": {"value": None, "ci95": None, "tail_pixels": 0}}
         body["no_tail"] = True
-        return body
+        return body  # its tail_fraction is 0
     if with_tail:
         # the tail's maximum is the end point of a uniform: its estimate sits near the largest of the n tail
         # pixels' values, below the truth by about max / (n + 1); the interval is the order statistic's
@@ -316,7 +314,9 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
                                   "ci95": [m_hat - Z95 * se, m_hat * 0.025 ** (-1 / n_tail) + Z95 * se],
                                   "tail_pixels": n_tail},
                    "tail_ppm_above": {"value": ppm, "ci95": [min(lo, g_lo), max(hi, g_hi)], "tail_pixels": n_tail}}
-    return {"fit": r, "pixels": int(s2.size), "pixels_used": r.n_used}
+    t = _clipped(r.theta)
+    tail_f, tail_m = (1 / (1 + math.exp(-t[3])), math.exp(t[4])) if with_tail else (0.0, 0.0)
+    return {"fit": r, "pixels": int(s2.size), "pixels_used": r.n_used, "tail_fraction": tail_f, "tail_max": tail_m}
 
 
 def fit_column_sigma(s2: np.ndarray, known: float, frames: int) -> VarianceFit:
@@ -343,11 +343,6 @@ def centred_series(means: np.ndarray) -> np.ndarray:
     x = np.asarray(means, np.float64)
     x = x - x.mean(axis=0, keepdims=True)
     return x - x.mean(axis=1, keepdims=True)
-
-
-def variance_ci(var: float, dof: float) -> tuple[float, float]:
-    """Standard error of a sample variance (normal data) with ``dof`` degrees of freedom."""
-    return var * math.sqrt(2.0 / max(dof, 1.0)), dof
 
 
 def sigma_from_variance(var: float, se: float) -> dict:
@@ -386,20 +381,14 @@ def split_half_covariance(image: np.ndarray, mask: np.ndarray, axis: str) -> tup
     return c, se
 
 
-def two_way(image: np.ndarray, mask: np.ndarray) -> dict:
-    """Row and column effects of a (rows, cols) image, masked pixels left out.
-
-    Returns the row means, column means (of the kept pixels), the residual
-    variance (corrected for the fitted effects) and the kept counts per row and column.
-    """
+def residual_variance(image: np.ndarray, mask: np.ndarray) -> float:
+    """Variance of a (rows, cols) image's pixels about their row and column means (masked pixels left out),
+    corrected for the fitted means' degrees of freedom."""
     m = mask.astype(np.float64)
     x = np.where(mask, image, 0.0)
-    n_c, n_r = m.sum(axis=0), m.sum(axis=1)
-    col = x.sum(axis=0) / np.maximum(n_c, 1)
-    row = x.sum(axis=1) / np.maximum(n_r, 1)
+    col = x.sum(axis=0) / np.maximum(m.sum(axis=0), 1)
+    row = x.sum(axis=1) / np.maximum(m.sum(axis=1), 1)
     g = float(x.sum() / m.sum())
     resid = (image - row[:, None] - col[None, :] + g)[mask]
     rows, cols = image.shape
-    res_var = float(np.var(resid)) * rows * cols / ((rows - 1) * (cols - 1))
-    return {"row": row - g, "col": col - g, "resid_var": res_var, "n_per_col": float(np.mean(n_c)),
-            "n_per_row": float(np.mean(n_r))}
+    return float(np.var(resid)) * rows * cols / ((rows - 1) * (cols - 1))

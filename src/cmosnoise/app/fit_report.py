@@ -19,7 +19,6 @@ import math
 import numpy as np
 
 from .._version import __version__
-from ..analysis import fit_readout
 from . import plots
 from .report import CSS, _figure, _table
 
@@ -73,22 +72,12 @@ def sigma_plot(d: dict, names: list[str], title: str, xlabel: str, with_thermal:
     rng = np.random.default_rng(seed)
     from scipy import stats
 
-    u = rng.random(s2.size)
-    loc, scale = prm["gumbel_loc_e"], prm["gumbel_scale_e"]
-    sig = np.maximum(stats.gumbel_r(loc=loc, scale=scale).ppf(u), 0)
-    if "tail_ppm_above" in prm:
-        # the tail as fitted: its fraction solved back from the ppm by the model's own cdf
-        M = prm["tail_max_e"]
-        thr = d.get("threshold", 4.0)
-        f_lo, f_hi = 0.0, 1.0
-        for _ in range(50):
-            f = 0.5 * (f_lo + f_hi)
-            if fit_readout.ppm_above(thr, loc, scale, f, M) < prm["tail_ppm_above"]:
-                f_lo = f
-            else:
-                f_hi = f
-        member = rng.random(s2.size) < f
-        sig = sig + member * rng.random(s2.size) * M
+    from ..model.heavy_tail import HeavyTail
+
+    # the fitted distribution (MODEL.md section 4: a clipped Gumbel body, a uniform tail for a fraction of units)
+    model_sigma = HeavyTail(stats.gumbel_r(loc=prm["gumbel_loc_e"], scale=prm["gumbel_scale_e"]),
+                            d.get("tail_fraction", 0.0), d.get("tail_max", 0.0))
+    sig = model_sigma.rvs(s2.size, rng)
     th2 = prm.get("thermal_sigma_e", 0.0) ** 2 if with_thermal else 0.0
     v = known + th2 + sig**2
     model = v * rng.chisquare(n - 1, s2.size) / (n - 1)
@@ -162,7 +151,7 @@ def build(doc: dict, result: dict, cfg) -> str:
                      + "</div></div>")
     pl = result["plots"]
     if "source_follower" in pl:
-        d = dict(pl["source_follower"], threshold=P["source_follower.flicker.tail.ppm_above"].get("threshold_e", 4.0))
+        d = pl["source_follower"]
         names = ["thermal_sigma_e", "gumbel_loc_e", "gumbel_scale_e", "tail_ppm_above", "tail_max_e"]
         figs = [_figure(sigma_plot(d, names, "Per-pixel temporal noise (paper Fig. 7)",
                                     "sqrt(pixel variance less dark shot and quantizer), e- rms", True),
