@@ -85,7 +85,7 @@ def test_rate_map_from_dark_stacks_is_unbiased_with_the_predicted_noise():
 
 def test_fit_command_round_trip_from_an_emva_data_set(tmp_path):
     """Frames of simulated sensors, exported as EMVA 1288 data sets and fitted back (5 seeds): each 95 % interval
-    holds the configured K, black level, dark mean and std in at least 4 of the 5 (P(3 or fewer) = 2 % for a true
+    holds the configured K, black level, dark mean and std and the QE in at least 4 of the 5 (P(3 or fewer) = 2 % for a true
     95 % interval); the family is the configured one every time; simulate runs the fitted configuration."""
     import json
 
@@ -96,7 +96,8 @@ def test_fit_command_round_trip_from_an_emva_data_set(tmp_path):
     truth = load_config()
     k = Sensor(load_config(extra={"sensor": {"cfa": "none"}})).transfer.gain_dn_per_e
     expected = {"system_gain_K_dn_per_e": k, "black_level_dn": truth.adc.black_level_dn,
-                "dark_current[25 C].mean_e_per_s": 8.0, "dark_current[25 C].std_e_per_s": 2.5}
+                "dark_current[25 C].mean_e_per_s": 8.0, "dark_current[25 C].std_e_per_s": 2.5,
+                "quantum_efficiency": 1.0}  # characterize's photons are the photo-electrons: QE 1
     covered = {name: 0 for name in expected}
     for seed in range(1, 6):
         r = cli("-q", "characterize", *size, "--seed", str(seed), "--out", tmp_path / f"c{seed}",

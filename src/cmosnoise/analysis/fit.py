@@ -7,6 +7,7 @@ parameter                                  needs
 =========================================  ===================================================================
 system gain K, full well                   flat stacks (>= 2 frames) at >= 8 levels up to beyond saturation,
                                            each with a dark stack at its exposure time
+quantum efficiency (reported only)         the same, with photons per pixel for every flat
 black level                                dark stacks at >= 2 exposure times
 dark current (family, mean, std, tail)     dark stacks at >= 2 exposure times per temperature
 doubling temperatures (body, tail)         the above at >= 2 temperatures
@@ -107,6 +108,14 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     k = ptc["K"]
     P["system_gain_K_dn_per_e"] = _p(k, ptc["ci95"], f"photon transfer (EMVA 1288): slope through the origin of "
                                      f"{ptc['fit_points']} levels below 70 % of saturation")
+    photons = [p[2].photons for p in pts]
+    if all(ph is not None and ph > 0 for ph in photons):
+        qe = fit_photo.quantum_efficiency([p[0] for p in pts], photons, k, ptc["saturation_index"], ptc["rel_se"])
+        P["quantum_efficiency"] = _p(qe["value"], qe["ci95"], f"photo-electrons (signal / K) over photons per pixel, "
+                                     f"{qe['points']} levels below 70 % of saturation (reported; the configuration "
+                                     "gives light in e-/s, so it holds no QE)")
+    else:
+        not_fitted["quantum_efficiency"] = "needs the photons per pixel of every flat stack (EMVA 'b' lines, manifest 'photons')"
     plots["ptc"] = {"mu": ptc["mu"].tolist(), "v": ptc["v"].tolist(), "linear": ptc["linear"].tolist(), "K": k,
                     "saturation_index": ptc["saturation_index"]}
 

@@ -46,8 +46,28 @@ def photon_transfer(mu: np.ndarray, v: np.ndarray) -> dict:
     from scipy import stats
 
     q = float(stats.t.ppf(0.975, lin.size - 1))  # the residuals' scatter is itself estimated from few levels
-    return {"K": k, "ci95": [k - q * se, k + q * se], "saturation_index": i_sat, "fit_points": int(lin.size),
+    return {"K": k, "ci95": [k - q * se, k + q * se], "rel_se": q * se / Z95 / k, "saturation_index": i_sat, "fit_points": int(lin.size),
             "mu": mu, "v": v, "linear": lin}
+
+
+def quantum_efficiency(mu_dn, photons, k: float, saturation_index: int, k_rel_se: float = 0.0) -> dict:
+    """QE: the slope through the origin of photo-electrons (``mu_dn / k``) over photons per pixel, below 70 % of
+    saturation (EMVA 1288's responsivity divided by K). Its interval combines the slope's (Student t, from the
+    residuals) with K's relative standard error ``k_rel_se``: QE is only as sure as K."""
+    from scipy import stats
+
+    mu = np.asarray(mu_dn, np.float64) / k
+    ph = np.asarray(photons, np.float64)
+    order = np.argsort(mu)
+    mu, ph = mu[order], ph[order]
+    lin = np.nonzero((mu <= 0.7 * mu[saturation_index]) & (np.arange(mu.size) < saturation_index) & (mu > 0))[0]
+    if lin.size < 3:
+        raise CmosnoiseError(f"quantum efficiency: {lin.size} flat level(s) below 70 % of saturation; it needs at least 3")
+    q = float(np.sum(ph[lin] * mu[lin]) / np.sum(ph[lin] ** 2))
+    se = math.sqrt(float(np.sum((mu[lin] - q * ph[lin]) ** 2)) / (lin.size - 1) / float(np.sum(ph[lin] ** 2)))
+    t = float(stats.t.ppf(0.975, lin.size - 1))
+    half = q * math.hypot(t * se / q, Z95 * k_rel_se)
+    return {"value": q, "ci95": [q - half, q + half], "points": int(lin.size)}
 
 
 def channel_normalised(signal: np.ndarray, pattern: str, mask: np.ndarray) -> np.ndarray:
