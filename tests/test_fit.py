@@ -11,6 +11,25 @@ from cmosnoise.analysis import fit_dark as fit
 from conftest import Z
 
 
+@pytest.mark.parametrize("family", ["logistic", "inverse_gaussian", "lognormal", "normal", "gamma"])
+@pytest.mark.parametrize("threshold", [math.inf, 80.0])
+def test_truncated_likelihood_is_scipys_for_every_family(family, threshold):
+    """The fast likelihood (sufficient statistics) is scipy.stats' sum of logpdf minus n logcdf(threshold),
+    for data of ``family`` evaluated under every family, near and far from the data's own mean and std."""
+    from cmosnoise.model.distributions import FAMILIES, body
+
+    x = body(family, 50.0, 12.0).rvs(4000, random_state=np.random.default_rng(7))
+    x = x[(x < threshold) & (x > 0)]
+    like = fit.TruncatedLikelihood(x, threshold)
+    for other in FAMILIES:
+        for mean, std in [(50.0, 12.0), (44.0, 8.0), (61.0, 21.0), (30.0, 26.0)]:
+            d = body(other, mean, std)
+            ref = float(np.sum(d.logpdf(x)) - x.size * (d.logcdf(threshold) if math.isfinite(threshold) else 0.0))
+            assert like.loglik(other, mean, std) == pytest.approx(ref, rel=1e-10), (other, mean, std)
+    assert like.loglik("gamma", -1.0, 5.0) == -math.inf  # a positive family with a mean of 0 or less
+    assert fit.TruncatedLikelihood(np.array([-1.0, 2.0, 3.0])).loglik("lognormal", 2.0, 1.0) == -math.inf
+
+
 @pytest.mark.parametrize("temperature", [25, 45, 65])
 def test_family_selection_picks_the_configured_family_on_a_vga_map(temperature):
     """The default points: logistic at 25 C, inverse Gaussian at 45 C, lognormal at 65 C (VGA, seed 1)."""
