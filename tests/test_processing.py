@@ -61,6 +61,32 @@ def test_bilinear_demosaicing_is_colour_demosaicings(pattern):
     expected = cd.demosaicing_CFA_Bayer_bilinear(img, pattern)
     np.testing.assert_allclose(bilinear(img, pattern), expected, rtol=1e-6, atol=1e-3)
 
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
+def test_half_size_picture_in_one_pass_is_the_step_by_step_one(pattern):
+    """The compiled half-size picture (the page's, after every slider move) has the bits of black level,
+    superpixel, crosstalk compensation, white balance and sRGB done one by one, for raw codes (pre view)
+    and calibrated float images, with and without a matrix; Processor uses it in both views."""
+    from cmosnoise.isp import reconstruction as rc
+
+    rng = np.random.default_rng(11)
+    raw = rng.integers(0, 4096, (38, 52), dtype=np.uint16)  # codes below black and above white clip
+    cal = rng.normal(800, 900, (38, 52)).astype(np.float32)
+    mix = np.array([[1.3, -0.2, -0.1], [-0.15, 1.25, -0.1], [-0.05, -0.3, 1.35]])
+    gains = np.array([1.9, 1.0, 1.4])
+    for img, offset in ((raw, 64.0), (cal, 0.0)):
+        for matrix in (None, mix):
+            ref = rc.superpixel_srgb8_numpy(img, pattern, offset, 3000.0, matrix, gains)
+            assert ref.shape == (19, 26, 3) and len(np.unique(ref)) > 100
+            assert np.array_equal(rc.superpixel_srgb8(img, pattern, offset, 3000.0, matrix, gains), ref)
+    sensor = Sensor(load_config(extra={"sensor": {"width": 64, "height": 48, "cfa": pattern}}), seed=2)
+    frame = sensor.expose().frame(0)
+    master = frame.astype(np.float32) * 0 + 70  # a flat master dark: the full view's path too
+    for pre in (True, False):
+        proc = processor_for(sensor, master, dark_frames=4)
+        steps = rc.encode_srgb8(proc.linear_rgb(proc.cfa_image(frame, pre), half=True))
+        assert np.array_equal(proc.render(frame, pre=pre, half=True), steps)
+
+
 
 def _delta_e(rgb8_a, rgb8_b):
     import colour

@@ -121,7 +121,20 @@ class Processor:
         return self._wb_gains
 
     def render(self, raw: np.ndarray, pre: bool = False, half: bool = False) -> np.ndarray:
-        """A raw frame as an 8-bit sRGB picture (the full chain, or the pre-processing view); ``half``: at half size."""
+        """A raw frame as an 8-bit sRGB picture (the full chain, or the pre-processing view); ``half``: at half size.
+
+        At half size (Bayer) the steps after the CFA domain run as one pass
+        (:func:`reconstruction.superpixel_srgb8`, the same bits), once grey
+        world, if chosen, has its gains from the first frame.
+        """
+        if half and not self.mono and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None):
+            if pre:
+                self.check_shape(raw.shape)
+                img, offset = raw, self.info.black_level_dn
+            else:
+                img, offset = self.cfa_image(raw), 0.0
+            return reconstruction.superpixel_srgb8(img, self.info.cfa, offset, self.white_above_black,
+                                                   self._compensation, self.white_balance_gains(None))
         return reconstruction.encode_srgb8(self.linear_rgb(self.cfa_image(raw, pre), half))
 
 

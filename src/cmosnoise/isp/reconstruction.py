@@ -91,8 +91,19 @@ def superpixel(cfa_img: np.ndarray, pattern: str) -> np.ndarray:
 
 
 def apply_matrix(rgb: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """Per-pixel ``matrix @ rgb``."""
-    return np.einsum("ij,...j->...i", matrix.astype(np.float32), rgb, optimize=True)
+    """Per-pixel ``matrix @ rgb``: (..., 3) float32 -> (..., 3) float32.
+
+    Element-wise, not through BLAS: a BLAS call leaves its threads spinning
+    for a while afterwards, and on a small machine they take the cores the
+    next frame's kernel needs (it ran at half speed after each picture).
+    """
+    m = np.asarray(matrix, np.float32)
+    rgb = np.asarray(rgb, np.float32)
+    out = np.empty(rgb.shape[:-1] + (3,), np.float32)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    for i in range(3):
+        out[..., i] = m[i, 0] * r + m[i, 1] * g + m[i, 2] * b
+    return out
 
 
 def grey_world_gains(rgb: np.ndarray) -> np.ndarray:
@@ -115,3 +126,76 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
     """
     idx = np.clip(linear * np.float32(_LUT_SIZE - 1) + np.float32(0.5), 0, _LUT_SIZE - 1).astype(np.intp)
     return _SRGB8_LUT[idx]
+
+
+# ------------------------------------------------------------------ half-size pictures in one pass
+def superpixel_srgb8_numpy(cfa_img: np.ndarray, pattern: str, offset: float, white: float,
+                           matrix: np.ndarray | None, gains: np.ndarray) -> np.ndarray:
+    """A CFA image to an 8-bit half-size sRGB picture, (rows, cols) -> (rows // 2, cols // 2, 3) uint8.
+
+    ``(cfa_img - offset) / white`` (offset: the black level in DN, or 0 for
+    an image already above black; white: the DN of scene white above
+    black), :func:`superpixel`, ``matrix`` (crosstalk compensation, or
+    None), the white-balance ``gains`` and :func:`encode_srgb8`: what
+    :class:`~cmosnoise.isp.process.Processor` does at half size, step by
+    step. The reference for :func:`superpixel_srgb8`.
+    """
+    x = (np.asarray(cfa_img).astype(np.float32) - np.float32(offset)) / np.float32(white)
+    rgb = superpixel(x, pattern)
+    if matrix is not None:
+        rgb = apply_matrix(rgb, matrix)
+    return encode_srgb8(rgb * np.asarray(gains, np.float32))
+
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised where numba is missing
+    numba = None
+
+if numba is not None:
+    @numba.njit(parallel=True, cache=True, nogil=True, fastmath=False, error_model="numpy")
+    def _superpixel_srgb8(img, cell, offset, white, matrix, has_matrix, gains, lut):  # pragma: no cover - compiled
+        # float32 throughout, in the reference's order of operations: the same bits
+        rows, cols = img.shape[0] // 2, img.shape[1] // 2
+        out = np.empty((rows, cols, 3), np.uint8)
+        half = np.float32(0.5)
+        top = np.float32(lut.size - 1)
+        for r in numba.prange(rows):
+            px = np.zeros(3, np.float32)
+            for c in range(cols):
+                px[0] = np.float32(0.0)
+                px[1] = np.float32(0.0)
+                px[2] = np.float32(0.0)
+                for dr in range(2):
+                    for dc in range(2):
+                        ch = cell[dr, dc]
+                        v = (np.float32(img[2 * r + dr, 2 * c + dc]) - offset) / white
+                        px[ch] += v * half if ch == 1 else v
+                r_, g_, b_ = px[0], px[1], px[2]
+                for i in range(3):
+                    y = matrix[i, 0] * r_ + matrix[i, 1] * g_ + matrix[i, 2] * b_ if has_matrix else px[i]
+                    y = y * gains[i] * top + half
+                    if y < np.float32(0.0):
+                        y = np.float32(0.0)
+                    elif y > top:
+                        y = top
+                    out[r, c, i] = lut[np.intp(y)]
+        return out
+
+
+def superpixel_srgb8(cfa_img: np.ndarray, pattern: str, offset: float, white: float,
+                     matrix: np.ndarray | None, gains: np.ndarray) -> np.ndarray:
+    """:func:`superpixel_srgb8_numpy` in one compiled pass, bit-identical (a test holds them equal).
+
+    About ten times faster than the step-by-step reference at 1920 x 1080
+    (it is the page's picture after every slider move); the reference
+    where numba is not installed.
+    """
+    if numba is None:
+        return superpixel_srgb8_numpy(cfa_img, pattern, offset, white, matrix, gains)
+    img = np.asarray(cfa_img)
+    if img.dtype not in (np.uint16, np.float32):
+        img = img.astype(np.float32)
+    m = np.eye(3, dtype=np.float32) if matrix is None else np.asarray(matrix, np.float32)
+    return _superpixel_srgb8(img, cfa_mod.tile(pattern), np.float32(offset), np.float32(white), m, matrix is not None,
+                             np.asarray(gains, np.float32), _SRGB8_LUT)
