@@ -11,9 +11,10 @@ It prints, per frame: the fused frame kernel on 1 and 2 threads, the NumPy
 implementation of the same scheme (the fallback without numba, and what
 ``detail=True`` runs), the reference, and ``cmosnoise simulate`` end to end
 (a separate process, TIFF writing and run statistics included, compile
-cache warm: wall clock per frame, start-up of about 1.5 s included, and the
-run's own per-frame time from summary.json: sensor set-up, frames, TIFF,
-statistics), each with its ratio to the reference.
+cache warm: wall clock per frame with its start-up included; the run's own
+per-frame time from summary.json: sensor set-up, frames, TIFF, statistics;
+and what each further frame costs, from the same command run with twice the
+frames), each with its ratio to the reference.
 """
 
 from __future__ import annotations
@@ -92,8 +93,17 @@ def main() -> None:
         _run(cmd + ["--out", f"{tmp}/o"])
         wall = time.perf_counter() - t0
         loop = json.load(open(f"{tmp}/o/summary.json"))["timings_s"]["per_frame"]
+        # the same command with twice the frames: the difference is what each further frame costs, start-up
+        # (imports, fixed pattern, scene, summary, preview) taken out
+        double = [a if a != str(args.cli_frames) else str(2 * args.cli_frames) for a in cmd]
+        t0 = time.perf_counter()
+        _run(double + ["--out", f"{tmp}/o2"])
+        wall2 = time.perf_counter() - t0
         rows.append((f"cmosnoise simulate --frames {args.cli_frames}", args.cli_frames / wall))
         rows.append(("  its frame loop (summary.json)", 1 / loop))
+        rows.append((f"  each further frame ({2 * args.cli_frames} vs {args.cli_frames})",
+                     args.cli_frames / max(wall2 - wall, 1e-9)))
+        start_up = wall - (wall2 - wall)  # the 50-frame run less 50 further frames
     nthreads = threads
     rows.append(("NumPy reference (Poisson+Gauss+q)", fps_ref))
 
@@ -134,7 +144,7 @@ def main() -> None:
         data = {
             "machine": f"{os.cpu_count()} cores, {platform.processor() or platform.machine()}, numba threads {nthreads}",
             "command": command,
-            "fixed_ms": t_fixed * 1000, "expose_ms": t_expose * 1000,
+            "fixed_ms": t_fixed * 1000, "expose_ms": t_expose * 1000, "cli_start_up_s": start_up,
             "rows": [{"label": label.strip(), "fps": fps, "ms": 1000 / fps, "ratio": fps_ref / fps} for label, fps in rows],
             "processing": processing,
         }
