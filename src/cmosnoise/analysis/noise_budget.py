@@ -58,22 +58,32 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
     return out
 
 
-def fixed_pattern_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:
-    """Each fixed-pattern source's spatial variance (e-^2) at mean photo-signal ``signal_e``."""
+def _fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, float]]:
+    """The fixed-pattern variances that do not depend on the signal (e-^2), and those per signal^2 (e-^2 / e-^2)."""
     c = sensor.config
     fp = sensor.fixed_pattern
-    out: dict[str, float] = {}
+    const: dict[str, float] = {}
+    per_s2: dict[str, float] = {}
     if fp.dark_rate is not None:
-        out["dcnu"] = float(np.var(fp.dark_rate.astype(np.float64))) * c.exposure.integration_time_s**2
+        const["dcnu"] = float(np.var(fp.dark_rate.astype(np.float64))) * c.exposure.integration_time_s**2
     if fp.row_offset is not None:
-        out["row_fixed"] = float(np.var(fp.row_offset.astype(np.float64)))
+        const["row_fixed"] = float(np.var(fp.row_offset.astype(np.float64)))
     if fp.vfpn is not None:
-        out["vfpn"] = float(np.var(fp.vfpn.astype(np.float64)))
+        const["vfpn"] = float(np.var(fp.vfpn.astype(np.float64)))
     if fp.prnu_gain is not None or c.crosstalk.enabled:
-        out["prnu"] = float(np.var(sensor.flat_response)) * signal_e**2  # after crosstalk, as frames show it
+        per_s2["prnu"] = float(np.var(sensor.flat_response))  # after crosstalk, as frames show it
     if fp.column_gain is not None:
-        out["column_gain"] = float(np.var(fp.column_gain.astype(np.float64))) * signal_e**2
-    return out
+        per_s2["column_gain"] = float(np.var(fp.column_gain.astype(np.float64)))
+    return const, per_s2
+
+
+def fixed_pattern_variances(sensor: Sensor, signal_e: float = 0.0, _parts=None) -> dict[str, float]:
+    """Each fixed-pattern source's spatial variance (e-^2) at mean photo-signal ``signal_e``.
+
+    (``_parts``: :func:`_fixed_pattern_parts` of this sensor, when several levels are asked for.)
+    """
+    const, per_s2 = _parts or _fixed_pattern_parts(sensor)
+    return {**const, **{k: v * signal_e**2 for k, v in per_s2.items()}}
 
 
 def _clipped_normal(m: np.ndarray, v: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,14 +175,50 @@ def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None =
     near a clip, the fractions are 0 and the variances NaN (the unclipped
     budget holds).
     """
+    nothing = {"full_well_fraction": 0.0, "top_code_fraction": 0.0, "clipped_fraction": 0.0,
+               "temporal_var_e2": math.nan, "spatial_var_e2": math.nan}
+    if not _may_clip(sensor, signal_e, photo_e):
+        return nothing
     mo = clipped_moments(sensor, signal_e, photo_e)
     if mo["p_full_well"] is None:
-        return {"full_well_fraction": 0.0, "top_code_fraction": 0.0, "clipped_fraction": 0.0,
-                "temporal_var_e2": math.nan, "spatial_var_e2": math.nan}
+        return nothing
     p_fw, at_top = mo["p_full_well"], mo["p_top"]
     return {"full_well_fraction": float(np.mean(p_fw)), "top_code_fraction": float(np.mean(at_top)),
             "clipped_fraction": float(np.mean(np.maximum(p_fw, at_top))),
             "temporal_var_e2": float(np.mean(mo["var"])), "spatial_var_e2": float(np.var(mo["mean"]))}
+
+
+def _may_clip(sensor: Sensor, signal_e: float, photo_e: np.ndarray | None) -> bool:
+    """Whether any pixel can come within 10 sigma of a clip, from bounds on each term (a few maxima, no maps).
+
+    False means :func:`clipped_moments` would find no pixel near a clip (its test,
+    with every term at its largest); True only that it has to look.
+    """
+    c = sensor.config
+    fp = sensor.fixed_pattern
+    t = sensor.transfer
+
+    def top_of(a) -> float:
+        return float(np.max(a)) if a is not None else 0.0
+
+    photo = float(np.max(photo_e)) if photo_e is not None else signal_e * float(np.max(sensor.flat_response))
+    photo = max(photo, 0.0)
+    dark = max(top_of(fp.dark_rate) * c.exposure.integration_time_s, 0.0)
+    shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
+    if photo + dark + 10 * math.sqrt(shot) + 1 >= c.sensor.full_well_e:
+        return True
+    if not c.adc.enabled:
+        return False
+    top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e
+    read = (c.row_noise.sigma_e**2 if c.row_noise.enabled else 0.0) + (
+        top_of(sensor.source_follower_sigma) ** 2 if c.source_follower.enabled else 0.0)
+    g_hi = top_of(fp.column_gain) if fp.column_gain is not None else 1.0
+    g_lo = float(np.min(fp.column_gain)) if fp.column_gain is not None else 1.0
+    x = photo + dark + (top_of(fp.row_offset) if fp.row_offset is not None else 0.0)
+    mean = max(x * g_hi, x * g_lo) + (top_of(fp.vfpn) if fp.vfpn is not None else 0.0)
+    col_read = top_of(fp.column_sigma) ** 2 if fp.column_sigma is not None else 0.0
+    var = (shot + read) * max(g_hi * g_hi, g_lo * g_lo) + col_read
+    return mean + 10 * math.sqrt(var) + 1 >= top
 
 
 def _cdf(a):
@@ -196,7 +242,7 @@ def _rms(variances: dict[str, float]) -> dict[str, float]:
     return {k: math.sqrt(max(v, 0.0)) for k, v in variances.items()}
 
 
-def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
+def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None, _parts=None) -> dict:
     """Noise budget at ``signal_e`` (or over a scene's ``photo_e`` map, e-): rms per source (e-), totals in e- and DN.
 
     The totals include clipping at the full well and the ADC's top where more
@@ -206,7 +252,7 @@ def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = N
     if photo_e is not None:
         signal_e = float(np.mean(photo_e))
     tv = temporal_variances(sensor, signal_e)
-    fv = fixed_pattern_variances(sensor, signal_e)
+    fv = fixed_pattern_variances(sensor, signal_e, _parts)
     k = sensor.transfer.gain_dn_per_e
     total_t = sum(tv.values())
     total_f = sum(fv.values())
@@ -233,8 +279,9 @@ def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
     """SNR (temporal and fixed pattern) at several signal levels, and the dynamic range."""
     sat = sensor.saturation_e
     levels = sorted({*levels_e, round(sat / 2, 3)})
-    dark = budget(sensor, 0.0)["temporal_total_e"]
-    at = {f"{lvl:g}": budget(sensor, lvl) for lvl in levels if lvl < sat}
+    parts = _fixed_pattern_parts(sensor)  # once for every level
+    dark = budget(sensor, 0.0, _parts=parts)["temporal_total_e"]
+    at = {f"{lvl:g}": budget(sensor, lvl, _parts=parts) for lvl in levels if lvl < sat}
 
     def db(v):
         return 20 * math.log10(v) if v > 0 else None

@@ -1,5 +1,6 @@
 """The ``cmosnoise`` console script: the command line, quiet when interrupted while it starts.
 
+BLAS is kept to one thread (numba's threads do the parallel work).
 Importing the command line takes about a second (SciPy, numba). A Ctrl-C,
 SIGTERM or SIGHUP in that second ends the process with status 130 (or
 128 + the signal) and one line, not a traceback. Nothing has been written yet.
@@ -18,6 +19,11 @@ def _interrupted(signum: int) -> None:
 
 
 def main() -> None:
+    # numba's threads do the parallel work. BLAS threads would only compete with them: after a BLAS call they
+    # keep spinning for a while, and the next frame kernel ran at half speed. (Set before NumPy is imported;
+    # a value in the environment is kept.)
+    for var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
     received: list[int] = []
 
     def stop(signum, _frame):

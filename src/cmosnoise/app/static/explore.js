@@ -8,6 +8,7 @@ const S = {
   edit: "A", view: "pre", mode: "AB", frame: 0, fps: 5, playing: false, couplets: false,
   zoom: null, cx: 0, cy: 0,             // screen pixels per sensor pixel; the view's centre in sensor pixels
   seq: { A: 0, B: 0 }, shown: { A: -1, B: -1 }, busy: { A: false, B: false },
+  drawnAt: { A: 0, B: 0 },              // performance.now() when each pane's newest picture reached its canvas
   images: { A: null, B: null },         // last good picture of each pane: {bitmap, region, step, couplets}
   client: Math.random().toString(36).slice(2),
 };
@@ -295,6 +296,7 @@ async function render(p) {
   showErrors({}, p);
   draw(p);
   if (S.mode === "diff") drawDiff();
+  S.drawnAt[p] = performance.now();
   figures(p);
 }
 
