@@ -197,14 +197,25 @@ def _fit(grid: _Grid, unpack, theta0: list[np.ndarray], names: list[str], natura
                        theta=theta)
 
 
-def _aggregate(s2: np.ndarray, a: np.ndarray, scale: float, k4: np.ndarray | None = None):
+def _aggregate(s2: np.ndarray, a: np.ndarray, scale: float, k4: np.ndarray | None = None, dof: int | None = None):
     """Pixels with (nearly) the same variance and known part as one unit: its mean values and its pixel count.
 
-    Variances that agree to S2_STEP (relative) and known parts to KNOWN_STEP x ``scale``
-    give the same likelihood to well within the chi-square's own width, so
-    every pixel counts and the likelihood costs what a few thousand units cost.
+    Pixels whose variances, and whose known parts (plus a tenth of ``scale``),
+    agree to a tenth of the chi-square's relative width ``sqrt(2 / dof)``
+    (or to S2_STEP and KNOWN_STEP x ``scale`` without ``dof``) give the same
+    likelihood to well within that width: the error of using the unit's
+    means is of the order of (1/10)^2 / 12 of it, and it averages out. So
+    every pixel counts, and the likelihood costs what a few thousand units
+    cost, even where a large dark shot noise makes every pixel's known part
+    different.
     """
-    keys = np.stack([np.round(np.log(np.maximum(s2, 1e-30)) / S2_STEP), np.round(a / (KNOWN_STEP * scale))], axis=1)
+    if dof is None:
+        k_s2, k_a = np.log(np.maximum(s2, 1e-30)) / S2_STEP, a / (KNOWN_STEP * scale)
+    else:
+        step = 0.1 * math.sqrt(2.0 / dof)
+        k_s2 = np.log(np.maximum(s2, 1e-30)) / step
+        k_a = np.log(np.maximum(a, 0.0) + 0.1 * scale) / step
+    keys = np.stack([np.round(k_s2), np.round(k_a)], axis=1)
     _, inv, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     inv = inv.ravel()
     k4u = None if k4 is None else np.bincount(inv, k4) / counts
@@ -246,7 +257,7 @@ def fit_source_follower(s2: np.ndarray, known: np.ndarray, frames: int, threshol
     if known_var is not None:
         extra = frames * np.broadcast_to(np.asarray(known_var, np.float64).ravel(), s2.shape)
         k4 = extra if k4 is None else k4 + extra
-    su, au, counts, k4u = _aggregate(s2, a, med, k4)
+    su, au, counts, k4u = _aggregate(s2, a, med, k4, frames - 1)
     grid = _Grid(su, au, frames - 1, counts, c_max=max(float(c.max()) * 3, med * 4), c_min=1e-3 * med, kappa4=k4u)
     # starts: the floor from the low quantiles, the body from what is left
     c_pos = np.maximum(c, 0)
