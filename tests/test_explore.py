@@ -268,3 +268,35 @@ def test_explore_refuses_a_port_in_use():
         port = s.getsockname()[1]
         r = cli("explore", "--no-browser", "--port", str(port))
     assert r.returncode == 2 and "cannot be used" in r.stderr
+
+
+def test_another_host_is_served_only_when_asked_and_with_a_warning():
+    """Without --host the server answers only requests naming a loopback host; `--host 127.0.0.2` (another
+    address, still on the loopback interface: tests never listen on a network) binds there, warns on the
+    terminal that anyone who can reach the port can use it, and accepts that host."""
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "cmosnoise", "explore", "--no-browser", "--host", "127.0.0.2",
+                             "--port", str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        deadline = time.monotonic() + 120
+        while not any("Ctrl-C to stop" in line for line in lines):
+            assert time.monotonic() < deadline and proc.poll() is None, lines
+            lines.append(proc.stdout.readline())
+        text = "".join(lines)
+        assert "warning: serving on 127.0.0.2" in text and "anyone who can reach this port" in text
+        while True:  # the line comes as the server starts listening
+            try:
+                assert urllib.request.urlopen(f"http://127.0.0.2:{port}/api/meta", timeout=30).status == 200
+                break
+            except urllib.error.URLError:
+                assert time.monotonic() < deadline and proc.poll() is None
+                time.sleep(0.2)
+        with pytest.raises(OSError):  # not listening on 127.0.0.1
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/api/meta", timeout=5)
+        req = urllib.request.Request(f"http://127.0.0.2:{port}/api/meta", headers={"Host": "attacker.example"})
+        with pytest.raises(urllib.error.HTTPError) as info:
+            urllib.request.urlopen(req, timeout=10)
+        assert info.value.code == 400
+    finally:
+        stop_process(proc)
