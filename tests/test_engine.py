@@ -214,3 +214,23 @@ def test_a_region_outside_the_frame_is_refused():
 
     with pytest.raises(CmosnoiseError, match="region"):
         _full_chain().expose("flat:0.1").frame(0, region=(0, 100, 0, 10))
+
+
+@pytest.mark.slow
+def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path):
+    """With an empty compile cache (NUMBA_CACHE_DIR of its own) `simulate` says it is compiling the frame kernel,
+    once, and how long that took; a second run loads the cache and says nothing of it."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", "2", "--no-progress",
+           "--set", "sensor.width=64", "--set", "sensor.height=48"]
+    first = subprocess.run(cmd + ["--out", str(tmp_path / "a")], env=env, capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr
+    assert first.stderr.count("compiling the frame kernel") == 1, first.stderr
+    assert first.stderr.count("compiled the frame kernel in") == 1, first.stderr
+    second = subprocess.run(cmd + ["--out", str(tmp_path / "b")], env=env, capture_output=True, text=True, timeout=600)
+    assert second.returncode == 0, second.stderr
+    assert "compil" not in second.stderr, second.stderr
