@@ -36,8 +36,6 @@ import numpy as np
 from ..errors import CmosnoiseError
 
 Z95 = 1.959963984540054
-#: pixels whose variances agree to this (relative) and whose known parts agree to a fraction of the median are one unit
-S2_STEP, KNOWN_STEP = 0.01, 0.005
 GRID = 600  #: at most this many bins of the variance grid
 
 
@@ -210,24 +208,20 @@ def _fit(grid: _Grid, unpack, theta0: list[np.ndarray], names: list[str], natura
                        theta=theta)
 
 
-def _aggregate(s2: np.ndarray, a: np.ndarray, scale: float, k4: np.ndarray | None = None, dof: int | None = None):
+def _aggregate(s2: np.ndarray, a: np.ndarray, scale: float, k4: np.ndarray | None, dof: int):
     """Pixels with (nearly) the same variance and known part as one unit: its mean values and its pixel count.
 
     Pixels whose variances, and whose known parts (plus a tenth of ``scale``),
     agree to a tenth of the chi-square's relative width ``sqrt(2 / dof)``
-    (or to S2_STEP and KNOWN_STEP x ``scale`` without ``dof``) give the same
-    likelihood to well within that width: the error of using the unit's
-    means is of the order of (1/10)^2 / 12 of it, and it averages out. So
-    every pixel counts, and the likelihood costs what a few thousand units
-    cost, even where a large dark shot noise makes every pixel's known part
-    different.
+    give the same likelihood to well within that width: the error of using
+    the unit's means is of the order of (1/10)^2 / 12 of it, and it averages
+    out. So every pixel counts, and the likelihood costs what a few thousand
+    units cost, even where a large dark shot noise makes every pixel's known
+    part different.
     """
-    if dof is None:
-        k_s2, k_a = np.log(np.maximum(s2, 1e-30)) / S2_STEP, a / (KNOWN_STEP * scale)
-    else:
-        step = 0.1 * math.sqrt(2.0 / dof)
-        k_s2 = np.log(np.maximum(s2, 1e-30)) / step
-        k_a = np.log(np.maximum(a, 0.0) + 0.1 * scale) / step
+    step = 0.1 * math.sqrt(2.0 / dof)
+    k_s2 = np.log(np.maximum(s2, 1e-30)) / step
+    k_a = np.log(np.maximum(a, 0.0) + 0.1 * scale) / step
     keys = np.stack([np.round(k_s2), np.round(k_a)], axis=1)
     _, inv, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     inv = inv.ravel()

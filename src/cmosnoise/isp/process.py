@@ -123,11 +123,12 @@ class Processor:
     def render(self, raw: np.ndarray, pre: bool = False, half: bool = False) -> np.ndarray:
         """A raw frame as an 8-bit sRGB picture (the full chain, or the pre-processing view); ``half``: at half size.
 
-        At half size (Bayer) the steps after the CFA domain run as one pass
-        (:func:`reconstruction.superpixel_srgb8`, the same bits), once grey
-        world, if chosen, has its gains from the first frame.
+        At half size (Bayer, numba installed) the steps after the CFA domain
+        run as one pass (:func:`reconstruction.superpixel_srgb8`, the same
+        bits), once grey world, if chosen, has its gains from the first frame.
         """
-        if half and not self.mono and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None):
+        if (half and not self.mono and reconstruction.COMPILED
+                and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None)):
             if pre:
                 self.check_shape(raw.shape)
                 img, offset = raw, self.info.black_level_dn

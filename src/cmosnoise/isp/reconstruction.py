@@ -129,28 +129,13 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ half-size pictures in one pass
-def superpixel_srgb8_numpy(cfa_img: np.ndarray, pattern: str, offset: float, white: float,
-                           matrix: np.ndarray | None, gains: np.ndarray) -> np.ndarray:
-    """A CFA image to an 8-bit half-size sRGB picture, (rows, cols) -> (rows // 2, cols // 2, 3) uint8.
-
-    ``(cfa_img - offset) / white`` (offset: the black level in DN, or 0 for
-    an image already above black; white: the DN of scene white above
-    black), :func:`superpixel`, ``matrix`` (crosstalk compensation, or
-    None), the white-balance ``gains`` and :func:`encode_srgb8`: what
-    :class:`~cmosnoise.isp.process.Processor` does at half size, step by
-    step. The reference for :func:`superpixel_srgb8`.
-    """
-    x = (np.asarray(cfa_img).astype(np.float32) - np.float32(offset)) / np.float32(white)
-    rgb = superpixel(x, pattern)
-    if matrix is not None:
-        rgb = apply_matrix(rgb, matrix)
-    return encode_srgb8(rgb * np.asarray(gains, np.float32))
-
-
 try:
     import numba
 except ImportError:  # pragma: no cover - exercised where numba is missing
     numba = None
+
+#: whether :func:`superpixel_srgb8` can run here (without numba, Processor takes the steps one by one)
+COMPILED = numba is not None
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -185,14 +170,18 @@ if numba is not None:
 
 def superpixel_srgb8(cfa_img: np.ndarray, pattern: str, offset: float, white: float,
                      matrix: np.ndarray | None, gains: np.ndarray) -> np.ndarray:
-    """:func:`superpixel_srgb8_numpy` in one compiled pass, bit-identical (a test holds them equal).
+    """A CFA image to an 8-bit half-size sRGB picture in one compiled pass, (rows, cols) -> (rows // 2, cols // 2, 3).
 
-    About ten times faster than the step-by-step reference at 1920 x 1080
-    (it is the page's picture after every slider move); the reference
-    where numba is not installed.
+    ``(cfa_img - offset) / white`` (offset: the black level in DN, or 0 for
+    an image already above black; white: the DN of scene white above
+    black), :func:`superpixel`, ``matrix`` (crosstalk compensation, or
+    None), the white-balance ``gains`` and :func:`encode_srgb8`: the bits of
+    those steps taken one by one (a test holds them equal), about ten times
+    faster at 1920 x 1080 (it is the explore page's picture after every
+    slider move). Needs numba (:data:`COMPILED`).
     """
-    if numba is None:
-        return superpixel_srgb8_numpy(cfa_img, pattern, offset, white, matrix, gains)
+    if numba is None:  # pragma: no cover
+        raise RuntimeError("numba is not installed: take the steps one by one (Processor does so by itself)")
     img = np.asarray(cfa_img)
     if img.dtype not in (np.uint16, np.float32):
         img = img.astype(np.float32)
