@@ -91,6 +91,36 @@ def test_half_size_picture_in_one_pass_is_the_step_by_step_one(pattern):
         assert np.array_equal(proc.render(frame, pre=pre, half=True), steps)
 
 
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
+def test_full_size_picture_in_one_pass_is_the_step_by_step_one(pattern):
+    """The compiled full-size picture (every run's preview.png) has the bits of black level, bilinear
+    demosaicing with mirrored edges, crosstalk compensation, white balance and sRGB done one by one, on odd
+    and even sizes, for raw codes and calibrated float images; Processor uses it in both views."""
+    from cmosnoise.isp import reconstruction as rc
+
+    rng = np.random.default_rng(12)
+    raw = rng.integers(0, 4096, (256, 258), dtype=np.uint16)
+    cal = rng.normal(800, 900, (257, 131)).astype(np.float32)
+    mix = np.array([[1.3, -0.2, -0.1], [-0.15, 1.25, -0.1], [-0.05, -0.3, 1.35]])
+    gains = np.array([1.9, 1.0, 1.4])
+    for img, offset in ((raw, 64.0), (cal, 0.0)):
+        for matrix in (None, mix):
+            rgb = rc.demosaic((img.astype(np.float32) - np.float32(offset)) / np.float32(3000.0), pattern)
+            rgb = rc.apply_matrix(rgb, matrix) if matrix is not None else rgb
+            ref = rc.encode_srgb8(rgb * gains.astype(np.float32))
+            assert ref.shape == img.shape + (3,) and len(np.unique(ref)) > 200
+            assert np.array_equal(rc.bilinear_srgb8(img, pattern, offset, 3000.0, matrix, gains), ref)
+    with pytest.raises(ValueError, match="too small"):
+        rc.bilinear_srgb8(raw[:4], pattern, 64.0, 3000.0, None, gains)
+    sensor = Sensor(load_config(extra={"sensor": {"width": 64, "height": 48, "cfa": pattern}}), seed=2)
+    frame = sensor.expose().frame(0)
+    master = frame.astype(np.float32) * 0 + 70
+    for pre in (True, False):
+        proc = processor_for(sensor, master, dark_frames=4)
+        steps = rc.encode_srgb8(proc.linear_rgb(proc.cfa_image(frame, pre)))
+        assert np.array_equal(proc.render(frame, pre=pre), steps)
+
+
 
 def _delta_e(rgb8_a, rgb8_b):
     import colour

@@ -140,7 +140,7 @@ def simulate(
     show = progress if progress is not None else (err_console.is_terminal
                                                   and cfg.run.frames * cfg.sensor.width * cfg.sensor.height >= 5_000_000)
     status = err_console.status("") if show else None
-    texts = {"preview": "writing preview.png", "summary": "measuring the summary (noise budget, white pixels)",
+    texts = {"summary": "writing preview.png and measuring the summary (noise budget, white pixels)",
              "report": "writing report.html"}
 
     def phase(name: str) -> None:  # a spinner for what comes after the frames' progress bar

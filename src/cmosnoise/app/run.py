@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
@@ -25,6 +26,7 @@ from .._version import __version__
 from ..analysis import noise_budget, white_pixels
 from ..analysis.run_stats import RunStats
 from ..config import Config, ProcessingSection, build_config
+from ..engine import kernel
 from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
@@ -47,7 +49,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
     ``progress``, if given, is called with the frame count and returns a
     context manager whose value is called once per frame (``advance()``).
     ``phase``, if given, is told what the run does after the frames (it can
-    take seconds at 5 MP): ``"preview"``, ``"summary"``, ``"report"``.
+    take seconds at 5 MP): ``"summary"`` (with the pictures), ``"report"``.
     An existing non-empty ``out`` is replaced as a whole with ``overwrite``,
     else refused (:class:`~cmosnoise.io.output.OutputFolder`).
     """
@@ -60,8 +62,12 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
-    with folder as tmp:
+    # A second thread takes work nothing waits for: loading the compiled kernel while the fixed pattern is
+    # drawn, and frame 0's pictures while the summary is built (PNG encoding and most of NumPy's work release
+    # the GIL).
+    with folder as tmp, ThreadPoolExecutor(1, thread_name_prefix="cmosnoise-aside") as aside:
         t_start = time.perf_counter()
+        aside.submit(kernel.preload)
         sensor = Sensor(config)
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
@@ -84,6 +90,19 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         if config.run.dng:
             (tmp / "dng").mkdir()
         t_process = 0.0
+
+        def pictures():
+            """Frame 0's pictures, written as PNG: the preview, and the processed one when processing is on."""
+            pre_view = processor.render(frame0[0], pre=True)
+            write_png(tmp / "preview.png", pre_view)
+            processed, t = rendered0[0] if rendered0 else None, 0.0
+            if processed is None and (proc_cfg.enabled or config.run.report):
+                tp = time.perf_counter()
+                processed = processor.render(frame0[0])
+                t = time.perf_counter() - tp
+            if proc_cfg.enabled:
+                write_png(tmp / "processed.png", processed)
+            return pre_view, processed, t
 
         def frames(advance):
             nonlocal t_process
@@ -121,19 +140,13 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
                 video.close()
         t_frames = time.perf_counter() - t_start
 
-        phase("preview")
-        pre_view = processor.render(frame0[0], pre=True)
-        write_png(tmp / "preview.png", pre_view)
-        processed = rendered0[0] if rendered0 else None
-        if processed is None and (proc_cfg.enabled or config.run.report):
-            tp = time.perf_counter()
-            processed = processor.render(frame0[0])
-            t_process += time.perf_counter() - tp
-        if proc_cfg.enabled:
-            write_png(tmp / "processed.png", processed)
-        (tmp / "config.yaml").write_text(config.to_yaml())
+
         phase("summary")
+        job = aside.submit(pictures)  # while this thread builds the summary (not in the loop: it took the kernel's cores)
+        (tmp / "config.yaml").write_text(config.to_yaml())
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
+        pre_view, processed, t = job.result()
+        t_process += t
         summary["processing"] = processing_summary(processor, t_dark, t_process)
         write_json(tmp / "summary.json", summary)
         if config.run.report:

@@ -19,7 +19,6 @@ Edges reflect, which keeps the CFA phase.
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
 
 from ..model import cfa as cfa_mod
 
@@ -63,6 +62,8 @@ def neighbours_at(img: np.ndarray, pattern: str, r: np.ndarray, c: np.ndarray) -
 
 def robust_sigma(values: np.ndarray) -> float:
     """Standard deviation estimated from the median absolute deviation (finite values only)."""
+    from scipy import stats  # here: the default run does not need it, and it takes 0.6 s to import
+
     return float(stats.median_abs_deviation(values[np.isfinite(values)], axis=None, scale="normal"))
 
 

@@ -123,19 +123,23 @@ class Processor:
     def render(self, raw: np.ndarray, pre: bool = False, half: bool = False) -> np.ndarray:
         """A raw frame as an 8-bit sRGB picture (the full chain, or the pre-processing view); ``half``: at half size.
 
-        At half size (Bayer, numba installed) the steps after the CFA domain
-        run as one pass (:func:`reconstruction.superpixel_srgb8`, the same
-        bits), once grey world, if chosen, has its gains from the first frame.
+        With numba installed, a Bayer mosaic's steps after the CFA domain run
+        as one pass, with the same bits: at half size
+        (:func:`reconstruction.superpixel_srgb8`), and at full size with
+        bilinear demosaicing (:func:`reconstruction.bilinear_srgb8`); grey
+        world, if chosen, takes its gains from the first frame's steps.
         """
-        if (half and not self.mono and reconstruction.COMPILED
+        one_pass = (half or (self.settings.demosaic == "bilinear" and min(raw.shape) > reconstruction.EDGE_PAD))
+        if (one_pass and not self.mono and reconstruction.COMPILED
                 and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None)):
             if pre:
                 self.check_shape(raw.shape)
                 img, offset = raw, self.info.black_level_dn
             else:
                 img, offset = self.cfa_image(raw), 0.0
-            return reconstruction.superpixel_srgb8(img, self.info.cfa, offset, self.white_above_black,
-                                                   self._compensation, self.white_balance_gains(None))
+            picture = reconstruction.superpixel_srgb8 if half else reconstruction.bilinear_srgb8
+            return picture(img, self.info.cfa, offset, self.white_above_black, self._compensation,
+                           self.white_balance_gains(None))
         return reconstruction.encode_srgb8(self.linear_rgb(self.cfa_image(raw, pre), half))
 
 

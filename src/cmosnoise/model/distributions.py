@@ -1,7 +1,7 @@
 """Body distributions set by their mean and standard deviation (MODEL.md section 3).
 
-Each returns a frozen :mod:`scipy.stats` distribution, so ``pdf``, ``cdf``,
-``sf``, ``ppf``, ``rvs`` and ``fit`` all work as usual:
+Each is a frozen distribution with the interface of :mod:`scipy.stats`
+(``pdf``, ``cdf``, ``sf``, ``ppf``, ``rvs``, ``fit``, ...):
 
 =================  ====================================================
 ``logistic``       ``loc = mean``, ``scale = std * sqrt(3) / pi``
@@ -12,6 +12,16 @@ Each returns a frozen :mod:`scipy.stats` distribution, so ``pdf``, ``cdf``,
 ``normal``         ``loc = mean``, ``scale = std``
 ``gamma``          ``a = mean**2 / std**2``, ``scale = std**2 / mean``
 =================  ====================================================
+
+plus :func:`gumbel` (``gumbel_r``), the source-follower and column
+amplifiers' noise sigma over the array (MODEL.md stages 6 and 8).
+
+Why not :mod:`scipy.stats` itself: importing it takes about 0.6 s, a third
+of a whole ``cmosnoise simulate`` run's start-up, and making a sensor needs
+only quantiles, survival functions and moments. :class:`Frozen` computes those
+with :mod:`scipy.special` in exactly the operations scipy.stats uses (the
+same bits; a test holds them), and hands every other method to the
+equivalent frozen scipy.stats distribution, made on first use.
 """
 
 from __future__ import annotations
@@ -20,16 +30,151 @@ import functools
 import math
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 FAMILIES = ("logistic", "inverse_gaussian", "lognormal", "normal", "gamma")
 #: families defined only for positive values: their mean must be > 0
 POSITIVE_FAMILIES = ("inverse_gaussian", "lognormal", "gamma")
 
+_EULER = 0.577215664901532860606512090082402431042
+
+
+class Frozen:
+    """A frozen distribution: scipy.stats' ``name(*shapes, loc=loc, scale=scale)``.
+
+    ``ppf``, ``sf``, ``mean`` and ``std`` are computed here for the
+    standardized forms below (scipy's own formulas, so the same values);
+    any other attribute is the scipy.stats frozen distribution's.
+
+    Parameters
+    ----------
+    name : scipy.stats name: ``logistic``, ``norm``, ``lognorm``, ``gamma``, ``gumbel_r``, ``invgauss``
+    shapes : tuple of float, the shape parameters (``s`` of lognorm, ``a`` of gamma, ``mu`` of invgauss)
+    loc, scale : float
+    """
+
+    NAMES = ("logistic", "norm", "lognorm", "gamma", "gumbel_r", "invgauss")
+
+    def __init__(self, name: str, shapes: tuple = (), loc: float = 0.0, scale: float = 1.0):
+        if name not in self.NAMES:
+            raise ValueError(f"unknown distribution {name!r}; use one of {self.NAMES}")
+        # numpy floats, as scipy.stats has them (``x ** 3.0`` of a Python float can differ in the last bit)
+        self.name, self.shapes = name, tuple(np.float64(a) for a in shapes)
+        self.loc, self.scale = np.float64(loc), np.float64(scale)
+
+    def __repr__(self) -> str:
+        args = ", ".join([f"{a!r}" for a in self.shapes] + [f"loc={self.loc!r}", f"scale={self.scale!r}"])
+        return f"Frozen({self.name!r}: {args})"
+
+    @functools.cached_property
+    def scipy(self):
+        """The equivalent frozen :mod:`scipy.stats` distribution (imports scipy.stats)."""
+        from scipy import stats
+
+        return getattr(stats, self.name)(*self.shapes, loc=self.loc, scale=self.scale)
+
+    def __getattr__(self, attr):
+        if attr.startswith("_") or attr in ("name", "shapes", "loc", "scale"):
+            raise AttributeError(attr)
+        return getattr(self.scipy, attr)
+
+    # the standardized quantile, survival function, mean and variance, as scipy.stats computes them
+    def _ppf(self, q):
+        n = self.name
+        if n == "logistic":
+            return special.logit(q)
+        if n == "norm":
+            return special.ndtri(q)
+        if n == "lognorm":
+            return np.exp(self.shapes[0] * special.ndtri(q))
+        if n == "gamma":
+            return special.gammaincinv(self.shapes[0], q)
+        if n == "gumbel_r":
+            return -np.log(-np.log(q))
+        if n == "invgauss":  # scipy's: Boost's quantile, its complement's in the upper half
+            from scipy.special import _ufuncs
+
+            mu = self.shapes[0]
+            x = np.array(_ufuncs._invgauss_ppf(q, mu, 1), dtype=np.float64, ndmin=1)
+            upper = np.broadcast_to(q > 0.5, x.shape)
+            x[upper] = _ufuncs._invgauss_isf(1 - np.broadcast_to(q, x.shape)[upper], mu, 1)
+            if np.isnan(x).any():  # where Boost fails scipy.stats solves numerically
+                x[np.isnan(x)] = self.scipy.dist._ppf(np.broadcast_to(q, x.shape)[np.isnan(x)], mu)
+            return x.reshape(np.shape(q))
+        return None
+
+    def _sf(self, x):
+        n = self.name
+        if n == "logistic":
+            return special.expit(-x)
+        if n == "norm":
+            return special.ndtr(-x)
+        if n == "lognorm":
+            return special.ndtr(-(np.log(x) / self.shapes[0]))
+        if n == "gamma":
+            return special.gammaincc(self.shapes[0], x)
+        if n == "gumbel_r":
+            return -special.expm1(-np.exp(-x))
+        if n == "invgauss":
+            mu = self.shapes[0]
+            fac = 1 / np.sqrt(x)
+            a = special.log_ndtr(-(fac * (x / mu - 1)))
+            b = 2 / mu + special.log_ndtr(-fac * (x / mu + 1))
+            return np.exp(a + np.log1p(-np.exp(b - a)))
+        return None
+
+    def _lower(self) -> float:
+        """The standardized support's lower end."""
+        return 0.0 if self.name in ("lognorm", "gamma", "invgauss") else -np.inf
+
+    def _moments(self):
+        n, s = self.name, self.shapes
+        if n == "logistic":
+            return 0.0, np.pi * np.pi / 3.0
+        if n == "norm":
+            return 0.0, 1.0
+        if n == "lognorm":
+            p = np.exp(s[0] * s[0])
+            return np.sqrt(p), p * (p - 1)
+        if n == "gamma":
+            return s[0], s[0]
+        if n == "gumbel_r":
+            return _EULER, np.pi * np.pi / 6.0
+        if n == "invgauss":  # on a 1-element array, as scipy.stats: numpy's array power can differ from its scalar one
+            return s[0], float((np.array([s[0]]) ** 3.0)[0])
+        return None
+
+    def ppf(self, q):
+        """Quantile at ``q`` (scalar or array, in [0, 1]; nan outside)."""
+        q = np.asarray(q, dtype=np.float64)
+        inside = (q > 0) & (q < 1)
+        with np.errstate(all="ignore"):
+            x = self._ppf(np.where(inside, q, 0.5)) * self.scale + self.loc
+        x = np.where(inside, x, np.where(q == 0, self._lower() * self.scale + self.loc,
+                                         np.where(q == 1, np.inf, np.nan)))
+        return x[()] if x.ndim == 0 else x
+
+    def sf(self, x):
+        """P(X > x), scalar or array."""
+        z = np.asarray((np.asarray(x, dtype=np.float64) - self.loc) / self.scale, dtype=np.float64)
+        inside = z > self._lower()
+        with np.errstate(all="ignore"):
+            p = np.where(inside, self._sf(np.where(inside, z, 1.0)), 1.0)
+        p = np.where(np.isnan(z), np.nan, p)
+        return p[()] if p.ndim == 0 else p
+
+    def mean(self) -> float:
+        m = self._moments()
+        return np.float64(m[0] * self.scale + self.loc)
+
+    def std(self) -> float:
+        m = self._moments()
+        return np.float64(np.sqrt(m[1] * self.scale * self.scale))
+
 
 @functools.lru_cache(maxsize=256)
-def body(family: str, mean: float, std: float):
-    """Frozen scipy distribution of ``family`` with the given mean and std.
+def body(family: str, mean: float, std: float) -> Frozen:
+    """Frozen distribution of ``family`` with the given mean and std.
 
     The same arguments give the same (read-only) object, so its quantile
     table (:func:`tabulated_ppf`) is made once per process.
@@ -39,18 +184,23 @@ def body(family: str, mean: float, std: float):
     if family in POSITIVE_FAMILIES and mean <= 0:
         raise ValueError(f"{family} needs a mean > 0, got {mean}")
     if family == "logistic":
-        return stats.logistic(loc=mean, scale=std * math.sqrt(3) / math.pi)
+        return Frozen("logistic", loc=mean, scale=std * math.sqrt(3) / math.pi)
     if family == "inverse_gaussian":
         lam = mean**3 / std**2
-        return stats.invgauss(mean / lam, scale=lam)
+        return Frozen("invgauss", (mean / lam,), scale=lam)
     if family == "lognormal":
         s2 = math.log1p(std**2 / mean**2)
-        return stats.lognorm(math.sqrt(s2), scale=math.exp(math.log(mean) - s2 / 2))
+        return Frozen("lognorm", (math.sqrt(s2),), scale=math.exp(math.log(mean) - s2 / 2))
     if family == "normal":
-        return stats.norm(loc=mean, scale=std)
+        return Frozen("norm", loc=mean, scale=std)
     if family == "gamma":
-        return stats.gamma(mean**2 / std**2, scale=std**2 / mean)
+        return Frozen("gamma", (mean**2 / std**2,), scale=std**2 / mean)
     raise ValueError(f"unknown family {family!r}; use one of {FAMILIES}")
+
+
+def gumbel(loc: float, scale: float) -> Frozen:
+    """The Fisher-Tippett-Gumbel distribution of the maximum, scipy's ``gumbel_r(loc, scale)``."""
+    return Frozen("gumbel_r", loc=loc, scale=scale)
 
 
 _LOGIT_GRID = np.linspace(-30.0, 30.0, 8193)

@@ -20,9 +20,33 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import integrate
 
 from .distributions import tabulated_ppf
+
+# Gauss-Legendre nodes and weights on [0, 1] for the integrals of the body's sf (numpy's, not scipy.integrate:
+# making a sensor must not import scipy.integrate, a third of a second)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
+_GL_X, _GL_W = (_GL_X + 1.0) / 2.0, _GL_W / 2.0
+#: quantiles where the body's sf changes character: the integration pieces' ends
+_BREAK_Q = (1e-15, 1e-9, 1e-5, 1e-3, 0.02, 0.1, 0.3, 0.5, 0.7, 0.9, 0.98, 1 - 1e-3, 1 - 1e-5, 1 - 1e-9, 1 - 1e-15)
+
+
+def integral_of_sf(body, a: float, b: float) -> float:
+    """``integral_a^b body.sf(y) dy`` for a smooth body, ``a <= b``, to about 1e-12 relative.
+
+    Composite 12-point Gauss-Legendre: the interval is cut at the body's
+    quantiles 1e-15 ... 1 - 1e-15 (where its sf bends) and each piece into
+    16 equal parts. Beyond those quantiles the sf is within 1e-15 of 1 or 0,
+    and smooth. Tested against ``scipy.integrate.quad``.
+    """
+    if not b > a:
+        return 0.0
+    cuts = np.asarray(body.ppf(np.asarray(_BREAK_Q)), dtype=np.float64)
+    edges = np.unique(np.concatenate(([a, b], cuts[(cuts > a) & (cuts < b)])))
+    fine = (edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * np.linspace(0.0, 1.0, 17)[None, :])
+    lo, hi = fine[:, :-1].ravel(), fine[:, 1:].ravel()
+    y = lo[:, None] + (hi - lo)[:, None] * _GL_X[None, :]
+    return float(np.sum((hi - lo) * (body.sf(y) @ _GL_W)))
 
 
 class UnreachablePpm(ValueError):
@@ -44,7 +68,7 @@ def _sf_body_plus_uniform(body, x: float, tail_max: float) -> float:
         return 1.0
     # P(B + U > x) = (1/M) * integral_0^M sf_B(x - t) dt, with sf_B(y) = 1 for y < 0 (clipping)
     lo = max(x - tail_max, 0.0)
-    part, _ = integrate.quad(lambda y: body.sf(y), lo, x, limit=200)
+    part = integral_of_sf(body, lo, x)
     below = max(tail_max - x, 0.0)  # t > x: x - t < 0, the clipped body always exceeds
     return (part + below) / tail_max
 
@@ -101,7 +125,8 @@ class HeavyTail:
         m = self.tail_max
         top = float(max(np.max(x), 0.0)) + 1e-9
         grid = np.linspace(0.0, top, 40001)
-        cum = integrate.cumulative_trapezoid(self.body.sf(grid), grid, initial=0.0)
+        sf = self.body.sf(grid)
+        cum = np.concatenate(([0.0], np.cumsum(np.diff(grid) * (sf[1:] + sf[:-1]) / 2.0)))  # the trapezoid rule
 
         def integral(y):
             return np.interp(np.clip(y, 0.0, top), grid, cum)

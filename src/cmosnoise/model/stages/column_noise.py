@@ -12,14 +12,13 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
-
 from ...engine.samplers import Stream
+from ..distributions import gumbel
 
 
 def temporal_sigma_map(cols: int, gumbel_loc_e: float, gumbel_scale_e: float, rng: np.random.Generator) -> np.ndarray:
     """Fixed per-column temporal sigma (e-), shape (1, cols), float32, >= 0."""
-    s = stats.gumbel_r(loc=gumbel_loc_e, scale=gumbel_scale_e).ppf(rng.random(cols))
+    s = gumbel(gumbel_loc_e, gumbel_scale_e).ppf(rng.random(cols))
     return np.maximum(s, 0.0).astype(np.float32)[None, :]
 
 

@@ -15,9 +15,8 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy import stats
-
 from ...engine.samplers import Stream
+from ..distributions import gumbel
 from ..heavy_tail import HeavyTail, variates
 
 
@@ -29,7 +28,7 @@ def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float |
     Made once per process for each set of parameters (the tail solve integrates numerically; the result is
     a frozen, read-only model).
     """
-    b = stats.gumbel_r(loc=gumbel_loc_e, scale=gumbel_scale_e)
+    b = gumbel(gumbel_loc_e, gumbel_scale_e)
     if ppm_above is None or threshold_e is None or max_e <= 0:
         return HeavyTail(b, 0.0, 0.0)
     return HeavyTail.from_ppm(b, ppm_above, threshold_e, max_e)
