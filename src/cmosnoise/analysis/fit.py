@@ -302,7 +302,7 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed, kappa4=dark_var - 1.2 * q * q, known_var=known_var)
     f = r["fit"]
     where = (f"{n} frames at {st.exposure_s:g} s: per-pixel variances (chi-square, {n - 1} dof), marginal maximum "
-             f"likelihood over all {r['pixels']} pixels (in {f.n_used} classes of equal variance), sandwich interval; {how}")
+             f"likelihood over all {r['pixels']} pixels (in {f.n_used} classes of equal variance), interval from the scores; {how}")
     for name, key in [("thermal_sigma_e", "source_follower.thermal_sigma_e"),
                       ("gumbel_loc_e", "source_follower.flicker.gumbel_loc_e"),
                       ("gumbel_scale_e", "source_follower.flicker.gumbel_scale_e"),
@@ -333,7 +333,7 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     for name in cfit.names:
         v, ci = cfit.interval(name)
         P[f"column_noise.temporal.{name}"] = _p(float(v), ci, f"each column's mean over {n} frames: chi-square "
-                                                f"likelihood of {cols} column variances, sandwich interval")
+                                                f"likelihood of {cols} column variances, interval from the scores")
     plots["columns"] = {"s2": s2_cols, "known": vbar / rows, "frames": n, "params": [float(x) for x in cfit.value]}
     # fixed: a two-way analysis of the stack's mean image (e-), white pixels masked
     img = (st.mean - black) / k
