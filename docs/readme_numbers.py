@@ -9,8 +9,8 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
     python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
-``speed``, ``explore``, ``sweep_speed`` and ``fit_speed`` are measured by the scripts in ``benchmarks/``
-(``BENCHMARKS``; machine-dependent, never recomputed by tests); ``sweep_fig9`` is
+``speed``, ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by the scripts in
+``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes long, never recomputed by tests); ``sweep_fig9`` is
 deterministic but takes minutes, so the tests check its stored data instead. The tests check that every
 README block is the rendering of its JSON, and recompute the deterministic
 sections (``tests/test_readme_numbers.py``), so the README cannot drift.
@@ -312,6 +312,19 @@ def render_fit_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_fit_coverage(d: dict) -> str:
+    short = {"default": "default", "paper-fig11-full": "fig11-full", "paper-fig9-vga": "fig9-vga"}
+    heads = [f"{short[c.split('@')[0]]} {c.split('@')[1]} C" for c in d["combos"]]
+    lines = [f"Measured with `{d['command']}` ({d['seeds']} sensors of {d['size']['width']} x {d['size']['height']} "
+             f"per column; how many of the {d['seeds']} 95 % intervals hold the configured value):", "",
+             "| parameter | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
+    for name, row in d["hits"].items():
+        lines.append(f"| `{name}` | " + " | ".join(str(row[c]) for c in d["combos"]) + " |")
+    for name, row in d["mean_z"].items():
+        lines.append(f"| mean z, `{name.split('.')[-1]}` | " + " | ".join(f"{row[c]:+.2f}" for c in d["combos"]) + " |")
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -324,13 +337,15 @@ SECTIONS = {
     "sweep_fig9": (compute_sweep_fig9, render_sweep_fig9),
     "sweep_speed": (None, render_sweep_speed),
     "fit_speed": (None, render_fit_speed),
+    "fit_coverage": (None, render_fit_coverage),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
 BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "explore": ["bench_explore.py", "--repeats", "10", "--json", "explore.json", "--screenshot", "../img/explore.png"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
-              "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"]}
+              "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"],
+              "fit_coverage": ["fit_coverage.py", "--json", "fit_coverage.json"]}
 SLOW = {"sweep_fig9"}
 
 
