@@ -218,13 +218,23 @@ def test_a_region_outside_the_frame_is_refused():
 
 @pytest.mark.slow
 def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path):
-    """With an empty compile cache (NUMBA_CACHE_DIR of its own) `simulate` says it is compiling the frame kernel,
-    once, and how long that took; a second run loads the cache and says nothing of it."""
+    """With an empty compile cache `simulate` says it is compiling the frame kernel, once, and how long that
+    took; a second run loads the cache and says nothing of it. The cache is the session's when conftest.py
+    made one (it runs this test first, while that is empty), so the rest of the suite loads what this
+    compiled; else one of its own."""
     import os
     import subprocess
     import sys
 
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    from conftest import SESSION_CACHE
+
+    if SESSION_CACHE is not None:
+        compiled = [f for _, _, files in os.walk(SESSION_CACHE) for f in files]  # (importing makes empty folders)
+        assert os.environ["NUMBA_CACHE_DIR"] == SESSION_CACHE and not compiled, (
+            "the session's compile cache is not empty: this test must run first (conftest.py orders it)")
+        env = dict(os.environ)
+    else:
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", "2", "--no-progress",
            "--set", "sensor.width=64", "--set", "sensor.height=48"]
     first = subprocess.run(cmd + ["--out", str(tmp_path / "a")], env=env, capture_output=True, text=True, timeout=600)
