@@ -139,13 +139,28 @@ except ImportError:  # pragma: no cover - exercised where numba is missing
 COMPILED = numba is not None
 
 if numba is not None:
+    @numba.njit(inline="always", fastmath=False, error_model="numpy")
+    def _encode_pixel(px, out, r, c, matrix, has_matrix, gains, lut):  # pragma: no cover - compiled
+        # one linear RGB pixel (float32) through the compensation matrix, the gains and the sRGB table, in
+        # apply_matrix's and encode_srgb8's order of operations
+        half = np.float32(0.5)
+        top = np.float32(lut.size - 1)
+        r_, g_, b_ = px[0], px[1], px[2]
+        for i in range(3):
+            y = matrix[i, 0] * r_ + matrix[i, 1] * g_ + matrix[i, 2] * b_ if has_matrix else px[i]
+            y = y * gains[i] * top + half
+            if y < np.float32(0.0):
+                y = np.float32(0.0)
+            elif y > top:
+                y = top
+            out[r, c, i] = lut[np.intp(y)]
+
     @numba.njit(parallel=True, cache=True, nogil=True, fastmath=False, error_model="numpy")
     def _superpixel_srgb8(img, cell, offset, white, matrix, has_matrix, gains, lut):  # pragma: no cover - compiled
         # float32 throughout, in the reference's order of operations: the same bits
         rows, cols = img.shape[0] // 2, img.shape[1] // 2
         out = np.empty((rows, cols, 3), np.uint8)
         half = np.float32(0.5)
-        top = np.float32(lut.size - 1)
         for r in numba.prange(rows):
             px = np.zeros(3, np.float32)
             for c in range(cols):
@@ -157,15 +172,7 @@ if numba is not None:
                         ch = cell[dr, dc]
                         v = (np.float32(img[2 * r + dr, 2 * c + dc]) - offset) / white
                         px[ch] += v * half if ch == 1 else v
-                r_, g_, b_ = px[0], px[1], px[2]
-                for i in range(3):
-                    y = matrix[i, 0] * r_ + matrix[i, 1] * g_ + matrix[i, 2] * b_ if has_matrix else px[i]
-                    y = y * gains[i] * top + half
-                    if y < np.float32(0.0):
-                        y = np.float32(0.0)
-                    elif y > top:
-                        y = top
-                    out[r, c, i] = lut[np.intp(y)]
+                _encode_pixel(px, out, r, c, matrix, has_matrix, gains, lut)
         return out
 
 
@@ -182,8 +189,6 @@ if numba is not None:
         # to float32, then the float32 matrix, gains and table
         rows, cols = img.shape
         out = np.empty((rows, cols, 3), np.uint8)
-        half = np.float32(0.5)
-        top = np.float32(lut.size - 1)
         w_g = np.array([[0.0, 0.25, 0.0], [0.25, 1.0, 0.25], [0.0, 0.25, 0.0]])
         w_rb = np.array([[0.25, 0.5, 0.25], [0.5, 1.0, 0.5], [0.25, 0.5, 0.25]])
         for r in numba.prange(rows):
@@ -201,15 +206,7 @@ if numba is not None:
                                     x = (np.float32(img[rr, cc]) - offset) / white
                                     acc += np.float64(x) * w
                     px[ch] = np.float32(acc)
-                r_, g_, b_ = px[0], px[1], px[2]
-                for i in range(3):
-                    y = (matrix[i, 0] * r_ + matrix[i, 1] * g_ + matrix[i, 2] * b_) if has_matrix else px[i]
-                    y = y * gains[i] * top + half
-                    if y < np.float32(0.0):
-                        y = np.float32(0.0)
-                    elif y > top:
-                        y = top
-                    out[r, c, i] = lut[np.intp(y)]
+                _encode_pixel(px, out, r, c, matrix, has_matrix, gains, lut)
         return out
 
 
