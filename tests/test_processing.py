@@ -61,65 +61,42 @@ def test_bilinear_demosaicing_is_colour_demosaicings(pattern):
     expected = cd.demosaicing_CFA_Bayer_bilinear(img, pattern)
     np.testing.assert_allclose(bilinear(img, pattern), expected, rtol=1e-6, atol=1e-3)
 
+@pytest.mark.parametrize("half", [True, False], ids=["half-size", "full-size"])
 @pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
-def test_half_size_picture_in_one_pass_is_the_step_by_step_one(pattern):
-    """The compiled half-size picture (the page's, after every slider move) has the bits of black level,
-    superpixel, crosstalk compensation, white balance and sRGB done one by one, for raw codes (pre view)
-    and calibrated float images, with and without a matrix; Processor uses it in both views."""
+def test_picture_in_one_pass_is_the_step_by_step_one(pattern, half):
+    """The compiled pictures, half size (the page's, after every slider move: superpixel) and full size
+    (every run's preview.png: bilinear demosaicing, edges mirrored), have the bits of black level,
+    demosaicing, crosstalk compensation, white balance and sRGB done one by one, on even and odd sizes, for
+    raw codes (pre view) and calibrated float images, with and without a matrix; Processor uses them in
+    both views."""
     from cmosnoise.isp import reconstruction as rc
 
     rng = np.random.default_rng(11)
-    # 128 x 128 pictures: enough values that an operation done in another order (one ulp off) moves some
-    # 8-bit code across its lookup-table step, so the comparison sees it
+    # pictures of 128 x 129 pixels or more: enough values that an operation done in another order (one ulp
+    # off) moves some 8-bit code across its lookup-table step, so the comparison sees it
     raw = rng.integers(0, 4096, (256, 258), dtype=np.uint16)  # codes below black and above white clip
-    cal = rng.normal(800, 900, (256, 258)).astype(np.float32)
+    cal = rng.normal(800, 900, (257, 259)).astype(np.float32)
     mix = np.array([[1.3, -0.2, -0.1], [-0.15, 1.25, -0.1], [-0.05, -0.3, 1.35]])
     gains = np.array([1.9, 1.0, 1.4])
+    steps, one_pass = (rc.superpixel, rc.superpixel_srgb8) if half else (rc.demosaic, rc.bilinear_srgb8)
     for img, offset in ((raw, 64.0), (cal, 0.0)):
         for matrix in (None, mix):
-            rgb = rc.superpixel((img.astype(np.float32) - np.float32(offset)) / np.float32(3000.0), pattern)
+            rgb = steps((img.astype(np.float32) - np.float32(offset)) / np.float32(3000.0), pattern)
             rgb = rc.apply_matrix(rgb, matrix) if matrix is not None else rgb
             ref = rc.encode_srgb8(rgb * gains.astype(np.float32))
-            assert ref.shape == (128, 129, 3) and len(np.unique(ref)) > 200
-            assert np.array_equal(rc.superpixel_srgb8(img, pattern, offset, 3000.0, matrix, gains), ref)
+            shape = (img.shape[0] // 2, img.shape[1] // 2) if half else img.shape
+            assert ref.shape == shape + (3,) and len(np.unique(ref)) > 200
+            assert np.array_equal(one_pass(img, pattern, offset, 3000.0, matrix, gains), ref)
+    if not half:
+        with pytest.raises(ValueError, match="too small"):
+            rc.bilinear_srgb8(raw[:4], pattern, 64.0, 3000.0, None, gains)
     sensor = Sensor(load_config(extra={"sensor": {"width": 64, "height": 48, "cfa": pattern}}), seed=2)
     frame = sensor.expose().frame(0)
     master = frame.astype(np.float32) * 0 + 70  # a flat master dark: the full view's path too
     for pre in (True, False):
         proc = processor_for(sensor, master, dark_frames=4)
-        steps = rc.encode_srgb8(proc.linear_rgb(proc.cfa_image(frame, pre), half=True))
-        assert np.array_equal(proc.render(frame, pre=pre, half=True), steps)
-
-
-@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
-def test_full_size_picture_in_one_pass_is_the_step_by_step_one(pattern):
-    """The compiled full-size picture (every run's preview.png) has the bits of black level, bilinear
-    demosaicing with mirrored edges, crosstalk compensation, white balance and sRGB done one by one, on odd
-    and even sizes, for raw codes and calibrated float images; Processor uses it in both views."""
-    from cmosnoise.isp import reconstruction as rc
-
-    rng = np.random.default_rng(12)
-    raw = rng.integers(0, 4096, (256, 258), dtype=np.uint16)
-    cal = rng.normal(800, 900, (257, 131)).astype(np.float32)
-    mix = np.array([[1.3, -0.2, -0.1], [-0.15, 1.25, -0.1], [-0.05, -0.3, 1.35]])
-    gains = np.array([1.9, 1.0, 1.4])
-    for img, offset in ((raw, 64.0), (cal, 0.0)):
-        for matrix in (None, mix):
-            rgb = rc.demosaic((img.astype(np.float32) - np.float32(offset)) / np.float32(3000.0), pattern)
-            rgb = rc.apply_matrix(rgb, matrix) if matrix is not None else rgb
-            ref = rc.encode_srgb8(rgb * gains.astype(np.float32))
-            assert ref.shape == img.shape + (3,) and len(np.unique(ref)) > 200
-            assert np.array_equal(rc.bilinear_srgb8(img, pattern, offset, 3000.0, matrix, gains), ref)
-    with pytest.raises(ValueError, match="too small"):
-        rc.bilinear_srgb8(raw[:4], pattern, 64.0, 3000.0, None, gains)
-    sensor = Sensor(load_config(extra={"sensor": {"width": 64, "height": 48, "cfa": pattern}}), seed=2)
-    frame = sensor.expose().frame(0)
-    master = frame.astype(np.float32) * 0 + 70
-    for pre in (True, False):
-        proc = processor_for(sensor, master, dark_frames=4)
-        steps = rc.encode_srgb8(proc.linear_rgb(proc.cfa_image(frame, pre)))
-        assert np.array_equal(proc.render(frame, pre=pre), steps)
-
+        expected = rc.encode_srgb8(proc.linear_rgb(proc.cfa_image(frame, pre), half=half))
+        assert np.array_equal(proc.render(frame, pre=pre, half=half), expected)
 
 
 def _delta_e(rgb8_a, rgb8_b):

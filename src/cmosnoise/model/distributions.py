@@ -91,17 +91,16 @@ class Frozen:
             return special.gammaincinv(self.shapes[0], q)
         if n == "gumbel_r":
             return -np.log(-np.log(q))
-        if n == "invgauss":  # scipy's: Boost's quantile, its complement's in the upper half
-            from scipy.special import _ufuncs
+        # invgauss, as scipy has it: Boost's quantile, its complement's in the upper half
+        from scipy.special import _ufuncs
 
-            mu = self.shapes[0]
-            x = np.array(_ufuncs._invgauss_ppf(q, mu, 1), dtype=np.float64, ndmin=1)
-            upper = np.broadcast_to(q > 0.5, x.shape)
-            x[upper] = _ufuncs._invgauss_isf(1 - np.broadcast_to(q, x.shape)[upper], mu, 1)
-            if np.isnan(x).any():  # where Boost fails scipy.stats solves numerically
-                x[np.isnan(x)] = self.scipy.dist._ppf(np.broadcast_to(q, x.shape)[np.isnan(x)], mu)
-            return x.reshape(np.shape(q))
-        return None
+        mu = self.shapes[0]
+        x = np.array(_ufuncs._invgauss_ppf(q, mu, 1), dtype=np.float64, ndmin=1)
+        upper = np.broadcast_to(q > 0.5, x.shape)
+        x[upper] = _ufuncs._invgauss_isf(1 - np.broadcast_to(q, x.shape)[upper], mu, 1)
+        if np.isnan(x).any():  # where Boost fails scipy.stats solves numerically
+            x[np.isnan(x)] = self.scipy.dist._ppf(np.broadcast_to(q, x.shape)[np.isnan(x)], mu)
+        return x.reshape(np.shape(q))
 
     def _sf(self, x):
         n = self.name
@@ -115,13 +114,11 @@ class Frozen:
             return special.gammaincc(self.shapes[0], x)
         if n == "gumbel_r":
             return -special.expm1(-np.exp(-x))
-        if n == "invgauss":
-            mu = self.shapes[0]
-            fac = 1 / np.sqrt(x)
-            a = special.log_ndtr(-(fac * (x / mu - 1)))
-            b = 2 / mu + special.log_ndtr(-fac * (x / mu + 1))
-            return np.exp(a + np.log1p(-np.exp(b - a)))
-        return None
+        mu = self.shapes[0]  # invgauss
+        fac = 1 / np.sqrt(x)
+        a = special.log_ndtr(-(fac * (x / mu - 1)))
+        b = 2 / mu + special.log_ndtr(-fac * (x / mu + 1))
+        return np.exp(a + np.log1p(-np.exp(b - a)))
 
     def _lower(self) -> float:
         """The standardized support's lower end."""
@@ -140,9 +137,8 @@ class Frozen:
             return s[0], s[0]
         if n == "gumbel_r":
             return _EULER, np.pi * np.pi / 6.0
-        if n == "invgauss":  # on a 1-element array, as scipy.stats: numpy's array power can differ from its scalar one
-            return s[0], float((np.array([s[0]]) ** 3.0)[0])
-        return None
+        # invgauss; on a 1-element array, as scipy.stats: numpy's array power can differ from its scalar one
+        return s[0], float((np.array([s[0]]) ** 3.0)[0])
 
     def ppf(self, q):
         """Quantile at ``q`` (scalar or array, in [0, 1]; nan outside)."""
