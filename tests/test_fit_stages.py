@@ -288,3 +288,30 @@ def test_source_follower_fit_on_variances_drawn_as_the_likelihood_assumes(noise)
     assert all(abs(np.mean(zs)) < 3 / math.sqrt(SEEDS) for zs in z.values()), {k: np.mean(v) for k, v in z.items()}
     ratio = {k: float(np.std(est[k], ddof=1) / np.mean(se[k])) for k in z}
     assert all(1 / 1.6 < q < 1.6 for q in ratio.values()), ratio
+
+
+def test_column_sigma_fit_on_variances_drawn_as_the_likelihood_assumes():
+    """The per-column temporal sigma's Gumbel from 256 columns' variances over 48 frames, drawn exactly as the
+    likelihood assumes ((sigma_c^2 + pixels' share) chi2(47)/47, sigma_c = max(gumbel_r, 0)), 600 times: the
+    mean z is 0 within 5/sqrt(600), z's spread is 1 within 5 of its standard errors (1/sqrt(2 * 600)), and
+    each interval holds its parameter 95 % of the time within 5 binomial standard deviations. The scale's
+    interval is symmetric in log(scale); a symmetric one undercovers (93.8 % on 1000 fits)."""
+    cfg = load_config()
+    cn = cfg.column_noise.temporal
+    loc, scale, known, cols, frames, trials = cn.gumbel_loc_e, cn.gumbel_scale_e, 0.03, 256, 48, 600
+    rng = np.random.default_rng(256)
+    truth_ = {"gumbel_loc_e": loc, "gumbel_scale_e": scale}
+    z, covered = {k: [] for k in truth_}, dict.fromkeys(truth_, 0)
+    for _ in range(trials):
+        sig = np.maximum(stats.gumbel_r.rvs(loc, scale, size=cols, random_state=rng), 0)
+        s2 = (sig**2 + known) * rng.chisquare(frames - 1, cols) / (frames - 1)
+        r = fit_readout.fit_column_sigma(s2, known, frames)
+        for name, t in truth_.items():
+            value, ci = r.interval(name)
+            z[name].append((value - t) / r.se(name))
+            covered[name] += ci[0] <= t <= ci[1]
+    for name in truth_:
+        zs = np.array(z[name])
+        assert abs(zs.mean()) <= 5 / math.sqrt(trials), (name, zs.mean())
+        assert abs(zs.std() - 1) <= 5 / math.sqrt(2 * trials), (name, zs.std())
+        assert abs(covered[name] - 0.95 * trials) <= 5 * math.sqrt(trials * 0.05 * 0.95), (name, covered[name])

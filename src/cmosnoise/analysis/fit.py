@@ -47,6 +47,25 @@ def _p(value, ci95=None, method: str = "", **extra) -> dict:
     return out
 
 
+def _in_electrons(name: str) -> bool:
+    """Whether a fitted parameter is in e- or e-/s: measured in DN and divided by K."""
+    return name.endswith(("_e", "_e_per_s"))
+
+
+def _include_gain_uncertainty(P: dict, k_rel_se: float) -> None:
+    """Widen the interval of every parameter in e- or e-/s by K's relative standard error ``k_rel_se``, in
+    quadrature on each side: such a parameter is a DN figure over K, only as sure as K."""
+    for name, p in P.items():
+        if not _in_electrons(name) or p.get("ci95") is None or not isinstance(p.get("value"), (int, float)):
+            continue
+        v, (lo, hi) = float(p["value"]), p["ci95"]
+        g = Z95 * k_rel_se * abs(v)
+        p["ci95"] = [v - math.hypot(v - lo, g), v + math.hypot(hi - v, g)]
+        if lo >= 0 > v - math.hypot(v - lo, g):
+            p["ci95"][0] = 0.0  # a sigma or a rate is not negative
+        p["method"] += "; interval includes K's uncertainty"
+
+
 def _same(a: float, b: float) -> bool:
     return abs(a - b) <= 1e-9 * max(abs(a), abs(b), 1e-12)
 
@@ -104,10 +123,12 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         raise CmosnoiseError(f"system gain K: {len(pts)} flat stack(s) with a dark stack at the same exposure time and "
                              "temperature; the photon transfer needs at least 3 (recommended: 8 to 50 levels up to "
                              "beyond saturation). Everything in electrons depends on K")
-    ptc = fit_photo.photon_transfer([p[0] for p in pts], [p[1] for p in pts])
+    ptc = fit_photo.photon_transfer([p[0] for p in pts], [p[1] for p in pts], frames=[p[2].n for p in pts],
+                                    dark_var=[p[3].temporal_var for p in pts], dark_frames=[p[3].n for p in pts])
     k = ptc["K"]
     P["system_gain_K_dn_per_e"] = _p(k, ptc["ci95"], f"photon transfer (EMVA 1288): slope through the origin of "
-                                     f"{ptc['fit_points']} levels below 70 % of saturation")
+                                     f"{ptc['fit_points']} levels below 70 % of saturation, each weighted by the "
+                                     "inverse of its variance's sampling variance")
     photons = [p[2].photons for p in pts]
     if all(ph is not None and ph > 0 for ph in photons):
         qe = fit_photo.quantum_efficiency([p[0] for p in pts], photons, k, ptc["saturation_index"], ptc["rel_se"])
@@ -257,6 +278,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         P["column_noise.gain_sigma_pct"] = _p(g["value"], g["ci95"], "the flat's column means, less the pixel and "
                                               "temporal shares")
         plots["prnu"] = {"residual": pg["relative_residual"]}
+    _include_gain_uncertainty(P, ptc["rel_se"])
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
             "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
                      "temperatures": temps, "source": ds.source, "input": ds.kind},

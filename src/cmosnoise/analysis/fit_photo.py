@@ -4,8 +4,8 @@
 signal above its dark reference ``mu = mean(flat) - mean(dark)`` and the
 temporal variance ``v = var(flat) - var(dark)`` (DN, DN^2). Shot noise makes
 ``v = K mu`` until the pixels clip; saturation is the point of largest
-variance, and K the least-squares slope through the origin of the points
-below 70 % of it.
+variance, and K the slope through the origin of the points below 70 % of
+it, each weighted by the inverse of its sampling variance.
 
 **PRNU and column gain.** A flat stack's mean image less its dark
 stack's (same exposure) is the signal; each colour channel is divided by
@@ -27,25 +27,52 @@ from ..model import cfa as cfa_mod
 from .fit_readout import Z95, centred_series, residual_variance, robust_mask, split_half_covariance
 
 
-def photon_transfer(mu: np.ndarray, v: np.ndarray) -> dict:
+def photon_transfer(mu, v, frames=None, dark_var=None, dark_frames=None) -> dict:
     """K (DN/e-) from the photon-transfer points ``mu`` (DN above dark) and ``v`` (DN^2, less the dark's).
 
-    Returns K, its 95 % interval (from the residuals of the through-origin
-    fit), the saturation index and the indices used.
+    Parameters
+    ----------
+    mu, v : sequences of float, one per flat stack
+        Mean signal above the dark (DN) and temporal variance less the dark's (DN^2): EMVA 1288's
+        ``mu_y - mu_y.dark`` and ``sigma_y^2 - sigma_y.dark^2``.
+    frames : sequence of int, optional
+        Frames in each flat stack (default 2, EMVA's pairs).
+    dark_var, dark_frames : sequences, optional
+        Each point's dark temporal variance (DN^2, default 0) and the frames of its dark stack (default 2).
+
+    The slope through the origin of the points below 70 % of saturation (the point of largest
+    variance), weighted by the inverse of each point's sampling variance: a mean of per-pixel variances
+    over ``n`` frames has a variance proportional to ``sigma^4 / (n - 1)``, so a 2-frame level near
+    saturation is worth a sixtieth of a 16-frame level a quarter as bright. (An unweighted slope, which
+    EMVA 1288 draws, is more than twice as noisy on such a set.) The weights' scale is left to the data:
+    the interval is Student t on the weighted residuals, exact when the weights are right up to a
+    factor, and honest when the pixels share noise the weights do not know of.
+
+    Returns K, its 95 % interval, its relative standard error, the saturation index (into the points
+    sorted by ``mu``), the number of points fitted and the sorted points.
     """
     mu, v = np.asarray(mu, np.float64), np.asarray(v, np.float64)
+    m = mu.size
+    n = np.full(m, 2.0) if frames is None else np.asarray(frames, np.float64)
+    vd = np.zeros(m) if dark_var is None else np.asarray(dark_var, np.float64)
+    nd = np.full(m, 2.0) if dark_frames is None else np.asarray(dark_frames, np.float64)
     order = np.argsort(mu)
-    mu, v = mu[order], v[order]
+    mu, v, n, vd, nd = mu[order], v[order], n[order], vd[order], nd[order]
     i_sat = int(np.argmax(v))
     lin = np.nonzero((mu <= 0.7 * mu[i_sat]) & (np.arange(mu.size) < i_sat) & (mu > 0))[0]
     if lin.size < 3:
         raise CmosnoiseError(f"system gain K: {lin.size} flat level(s) below 70 % of saturation; the photon transfer "
                              "needs at least 3 (EMVA 1288 recommends 50 levels from dark to beyond saturation)")
-    k = float(np.sum(mu[lin] * v[lin]) / np.sum(mu[lin] ** 2))
-    se = math.sqrt(float(np.sum((v[lin] - k * mu[lin]) ** 2)) / (lin.size - 1) / float(np.sum(mu[lin] ** 2)))
+    x, y = mu[lin], v[lin]
+    k = float(np.sum(x * y) / np.sum(x * x))  # the unweighted slope: where the weights start
+    for _ in range(3):  # weights from the fitted line, never from the noisy variances themselves
+        w = 1.0 / ((k * x + vd[lin]) ** 2 / np.maximum(n[lin] - 1, 1) + vd[lin] ** 2 / np.maximum(nd[lin] - 1, 1))
+        k = float(np.sum(w * x * y) / np.sum(w * x * x))
+    dof = lin.size - 1
+    se = math.sqrt(float(np.sum(w * (y - k * x) ** 2)) / dof / float(np.sum(w * x * x)))
     from scipy import stats
 
-    q = float(stats.t.ppf(0.975, lin.size - 1))  # the residuals' scatter is itself estimated from few levels
+    q = float(stats.t.ppf(0.975, dof))  # the residuals' scale is itself estimated from few levels
     return {"K": k, "ci95": [k - q * se, k + q * se], "rel_se": q * se / Z95 / k, "saturation_index": i_sat, "fit_points": int(lin.size),
             "mu": mu, "v": v, "linear": lin}
 
