@@ -62,13 +62,13 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
-    # A second thread takes work nothing waits for: loading the compiled kernel while the fixed pattern is
-    # drawn, and frame 0's pictures while the summary is built (PNG encoding and most of NumPy's work release
-    # the GIL).
-    with folder as tmp, ThreadPoolExecutor(1, thread_name_prefix="cmosnoise-aside") as aside:
+    # Two more threads take work nothing waits for: loading the compiled kernel and drawing the dark-current
+    # map while this thread draws the other fixed-pattern maps, and frame 0's pictures while the summary is
+    # built (PNG encoding and most of NumPy's work release the GIL).
+    with folder as tmp, ThreadPoolExecutor(2, thread_name_prefix="cmosnoise-aside") as aside:
         t_start = time.perf_counter()
         aside.submit(kernel.preload)
-        sensor = Sensor(config)
+        sensor = Sensor(config, executor=aside)  # the dark-current map drawn aside too
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
         transfer = sensor.transfer

@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import time
 from collections import defaultdict
+from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -82,10 +83,14 @@ class Sensor:
         Resolved configuration (defaults if omitted).
     seed : int, optional
         Overrides ``config.seed``.
+    executor : concurrent.futures.Executor, optional
+        Where the dark-current map is drawn while this thread draws the others (the maps are independent,
+        each from its own stream, so the bits are the same; NumPy releases the GIL for most of the work).
     """
 
     def __init__(self, config: Config | dict | str | Path | None = None, seed: int | None = None, *,
-                 fixed_pattern: FixedPattern | None = None, reuse: "Sensor | None" = None, keep_draws: bool = False):
+                 fixed_pattern: FixedPattern | None = None, reuse: "Sensor | None" = None, keep_draws: bool = False,
+                 executor=None):
         config = _as_config(config)
         if seed is not None:
             seed = _whole(seed, "seed")
@@ -97,7 +102,7 @@ class Sensor:
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
         self._keep_draws = keep_draws
-        self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern(reuse)
+        self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern(reuse, executor)
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
         self.timings["fixed_pattern"] += time.perf_counter() - t0
@@ -233,7 +238,7 @@ class Sensor:
         }
 
     # ------------------------------------------------------------ fixed pattern
-    def _draw_fixed_pattern(self, reuse: "Sensor | None" = None) -> FixedPattern:
+    def _draw_fixed_pattern(self, reuse: "Sensor | None" = None, executor=None) -> FixedPattern:
         """Every fixed-pattern map; with ``reuse`` (the same seed and size), its maps whose inputs did not change.
 
         A map is a pure function of the seed, the size and its own section's
@@ -269,7 +274,9 @@ class Sensor:
                 draws = prev.dark_draws if prev is not None else None  # the same seed and size: the same draws
                 if draws is None and self._keep_draws:
                     draws = dark_current.draws(self.shape, fixed_rng(c.seed, "dark_current"))
-                maps["dark_rate"] = dark_current.rate_map(state, self.shape, fixed_rng(c.seed, "dark_current"), draws)
+                args = (state, self.shape, fixed_rng(c.seed, "dark_current"), draws)
+                maps["dark_rate"] = (executor.submit(dark_current.rate_map, *args) if executor is not None
+                                     else dark_current.rate_map(*args))
                 if self._keep_draws:
                     maps["dark_draws"] = draws
         rows, cols = self.shape
@@ -292,6 +299,8 @@ class Sensor:
                 maps["vfpn"] = column_noise.vfpn_offsets(cols, cn.vfpn_sigma_e, fixed_rng(c.seed, "column_noise", 1))
             if cn.gain_sigma_pct > 0:
                 maps["column_gain"] = column_noise.gain_map(cols, cn.gain_sigma_pct, fixed_rng(c.seed, "column_noise", 2))
+        if isinstance(maps.get("dark_rate"), Future):
+            maps["dark_rate"] = maps["dark_rate"].result()
         return FixedPattern(**maps)
 
     # ------------------------------------------------------------ scene

@@ -233,12 +233,22 @@ def cooling_fraction(points: list[Point], draw_variates) -> float:
 def _dominates(hot: HeavyTail, cold: HeavyTail) -> bool:
     """Whether every pixel's rate under ``hot`` is at least its rate under ``cold``, whatever its variates.
 
-    True when the body quantile functions are ordered on a fine grid (the
-    same grid the maps are tabulated on) and the tail is no smaller in
-    fraction or magnitude (tail sets are nested in ``u_member``).
+    True when the bodies are ordered (every quantile of ``hot`` at least
+    ``cold``'s, which is: ``hot``'s survival function at least ``cold``'s
+    everywhere) and the tail is no smaller in fraction or magnitude (tail
+    sets are nested in ``u_member``). The survival functions are compared on
+    8193 points spanning both bodies between their quantiles 1e-13 and
+    1 - 1e-13 (the maps' range), linearly and, for positive bodies, also
+    geometrically spaced, with a tolerance of 1e-13 in probability: a few
+    milliseconds, where tabulating the quantiles of an inverse Gaussian takes
+    a tenth of a second.
     """
-    q = np.linspace(1e-9, 1 - 1e-9, 4097)
-    body_ok = np.all(tabulated_ppf(hot.body, q) >= tabulated_ppf(cold.body, q))
+    ends = [d.ppf(np.array([1e-13, 1 - 1e-13])) for d in (hot.body, cold.body)]
+    lo, hi = min(e[0] for e in ends), max(e[1] for e in ends)
+    x = np.linspace(lo, hi, 8193)
+    if lo > 0:
+        x = np.concatenate([x, np.geomspace(lo, hi, 8193)])
+    body_ok = np.all(hot.body.sf(x) >= cold.body.sf(x) - 1e-13)
     tail_ok = hot.tail_fraction >= cold.tail_fraction and hot.tail_max >= cold.tail_max or cold.tail_fraction == 0
     return bool(body_ok and tail_ok)
 
