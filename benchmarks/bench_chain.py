@@ -15,7 +15,9 @@ cache warm: wall clock per frame with its start-up included; the run's own
 per-frame time from summary.json: sensor set-up, frames, TIFF, statistics;
 and what each further frame costs, from the same command run with twice the
 frames; each command the best of --cli-repeats runs), each with its ratio to
-the reference. The start-up is a one-frame run's wall clock less one further
+the reference. Each ratio is taken against the reference timed alternately
+with it (the column "reference"), so a slow spell of a shared machine falls
+on both sides. The start-up is a one-frame run's wall clock less one further
 frame.
 """
 
@@ -42,6 +44,25 @@ def best_fps(fn, frames: int, repeats: int) -> float:
             fn(k)
         best = min(best, time.perf_counter() - t0)
     return frames / best
+
+
+def per_frame(fn, frames: int) -> float:
+    """Seconds per frame of ``fn(k)`` over ``frames`` frames."""
+    t0 = time.perf_counter()
+    for k in range(frames):
+        fn(k)
+    return (time.perf_counter() - t0) / frames
+
+
+def against_reference(fn, frames: int, repeats: int, reference, ref_frames: int) -> tuple[float, float]:
+    """Seconds per frame of ``fn`` and of ``reference``, timed alternately (reference, fn, ..., reference) and
+    the best of each kept: two bests from the same minute, so a slow spell of a shared machine does not
+    fall on one side of the ratio only."""
+    t_fn = t_ref = float("inf")
+    for _ in range(repeats):
+        t_ref = min(t_ref, per_frame(reference, ref_frames))
+        t_fn = min(t_fn, per_frame(fn, frames))
+    return t_fn, min(t_ref, per_frame(reference, ref_frames))
 
 
 def _run(cmd: list[str]) -> None:
@@ -80,25 +101,28 @@ def main() -> None:
     import numba
 
     shot.frame(0)  # compile or load the kernel outside the timing
-    fps_ref = best_fps(reference, args.frames, args.repeats)
+    reference(0)
     threads = numba.get_num_threads()
-    rows = []
+    rows = []  # (label, seconds per frame, the reference's seconds per frame timed alongside)
     for n in sorted({1, threads}):
         numba.set_num_threads(n)
-        rows.append((f"frame kernel, {n} thread(s)", best_fps(shot.frame, args.frames, args.repeats)))
+        rows.append((f"frame kernel, {n} thread(s)",
+                     *against_reference(shot.frame, args.frames, args.repeats, reference, args.frames)))
     numba.set_num_threads(threads)
-    rows.append(("NumPy implementation (no numba)", best_fps(lambda k: shot.frame(k, detail=True), 2, 1)))
+    rows.append(("NumPy implementation (no numba)",
+                 *against_reference(lambda k: shot.frame(k, detail=True), 2, 1, reference, args.frames)))
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", str(args.cli_frames), "--no-progress",
                "--set", "sensor.width=1920", "--set", "sensor.height=1080", "--scene", args.scene]
         _run(cmd + ["--out", f"{tmp}/warm"])  # warm the compile cache
         # the same command with twice the frames: the difference is what each further frame costs, start-up
         # (imports, fixed pattern, scene, summary, preview) taken out. Each is timed --cli-repeats times,
-        # alternating, and the best kept: a shared machine's slow moments inflate single runs.
+        # alternating with the reference, and the best kept: a shared machine's slow moments inflate single runs.
         double = [a if a != str(args.cli_frames) else str(2 * args.cli_frames) for a in cmd]
         single = [a if a != str(args.cli_frames) else "1" for a in cmd]
-        wall = wall2 = wall1 = float("inf")
+        wall = wall2 = wall1 = ref_cli = float("inf")
         for i in range(args.cli_repeats):
+            ref_cli = min(ref_cli, per_frame(reference, args.frames))
             t0 = time.perf_counter()
             _run(cmd + ["--out", f"{tmp}/o{i}"])
             w = time.perf_counter() - t0
@@ -110,21 +134,23 @@ def main() -> None:
             t0 = time.perf_counter()
             _run(single + ["--out", f"{tmp}/s{i}"])
             wall1 = min(wall1, time.perf_counter() - t0)
-        rows.append((f"cmosnoise simulate --frames {args.cli_frames}", args.cli_frames / wall))
-        rows.append(("  its frame loop (summary.json)", 1 / loop))
+        ref_cli = min(ref_cli, per_frame(reference, args.frames))
+        rows.append((f"cmosnoise simulate --frames {args.cli_frames}", wall / args.cli_frames, ref_cli))
+        rows.append(("  its frame loop (summary.json)", loop, ref_cli))
         rows.append((f"  each further frame ({2 * args.cli_frames} vs {args.cli_frames})",
-                     args.cli_frames / max(wall2 - wall, 1e-9)))
+                     max(wall2 - wall, 1e-9) / args.cli_frames, ref_cli))
         # a one-frame run less one further frame: measured directly, not as the difference of two long runs
         start_up = wall1 - (wall2 - wall) / args.cli_frames
     nthreads = threads
-    rows.append(("NumPy reference (Poisson+Gauss+q)", fps_ref))
+    t_ref = min(r[2] for r in rows)
+    rows.append(("NumPy reference (Poisson+Gauss+q)", t_ref, t_ref))
 
     print(f"cmosnoise full chain, 1920 x 1080 {cfg.sensor.cfa}, stages on: {', '.join(on)}")
     print(f"  sensor set-up (fixed pattern)     {t_fixed * 1000:8.1f} ms (once per sensor)")
     print(f"  expose scene '{args.scene}'            {t_expose * 1000:8.1f} ms (once per scene)")
-    print(f"  {'':36s} {'frames/s':>10s} {'ms/frame':>10s} {'x reference':>12s}")
-    for label, fps in rows:
-        print(f"  {label:36s} {fps:10.1f} {1000 / fps:10.1f} {fps_ref / fps:12.2f}")
+    print(f"  {'':36s} {'frames/s':>10s} {'ms/frame':>10s} {'reference':>10s} {'x reference':>12s}")
+    for label, t, ref in rows:
+        print(f"  {label:36s} {1 / t:10.1f} {1000 * t:10.1f} {1000 * ref:10.1f} {t / ref:12.2f}")
 
     from cmosnoise import calibration
     from cmosnoise.config import ProcessingSection
@@ -157,7 +183,8 @@ def main() -> None:
             "machine": f"{os.cpu_count()} cores, {platform.processor() or platform.machine()}, numba threads {nthreads}",
             "command": command,
             "fixed_ms": t_fixed * 1000, "expose_ms": t_expose * 1000, "cli_start_up_s": start_up,
-            "rows": [{"label": label.strip(), "fps": fps, "ms": 1000 / fps, "ratio": fps_ref / fps} for label, fps in rows],
+            "rows": [{"label": label.strip(), "fps": 1 / t, "ms": 1000 * t, "ref_ms": 1000 * ref, "ratio": t / ref}
+                     for label, t, ref in rows],
             "processing": processing,
         }
         with open(args.json, "w") as f:

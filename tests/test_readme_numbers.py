@@ -56,6 +56,8 @@ def test_speed_data_has_every_row_the_issue_asks_for():
     rows = [r["label"] for r in numbers.load("speed")["rows"]]
     assert any("1 thread" in r for r in rows) and any("2 thread" in r for r in rows)
     assert any(r.startswith("cmosnoise simulate") for r in rows) and any("reference" in r for r in rows)
+    for r in numbers.load("speed")["rows"]:  # each ratio is to the reference timed alongside that row
+        assert abs(r["ratio"] - r["ms"] / r["ref_ms"]) <= 1e-9 * r["ratio"], r
 
 
 def test_the_fig9_sweep_shows_what_the_paper_shows():
