@@ -172,21 +172,24 @@ def dark_measurement(cfg, seed, times=(0.25, 0.5, 1.0), frames=6, clipped=False)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("preset, temps", [(None, (25.0, 45.0, 65.0)), ("paper-fig9-vga", (65.0,)),
-                                           ("paper-fig11-full", (45.0,))])
-def test_dark_current_intervals_cover_at_the_characterization_points(preset, temps):
-    """Body mean and std and the tail's ppm, 20 sensors of 128 x 96, at each characterization point (the default
-    sensor's at 25, 45 and 65 C; the papers' one point each): the interval holds the configured value.
+@pytest.mark.parametrize("preset", [None, "paper-fig9-vga", "paper-fig11-full"])
+def test_dark_current_intervals_cover_at_every_temperature(preset):
+    """Body mean and std and the tail's ppm, 20 sensors of 128 x 96 at 25, 45 and 65 C: the interval holds the
+    configured body (the characterization point's, or scaled from the nearest one by the doubling
+    temperature) and the ppm the model expects above the threshold.
 
-    Away from a point the configured body is not what the map shows below the threshold: the tail pixels'
-    tail parts shrink faster than the threshold (10 C against 7 C doubling) and join the body, so there the
-    doubling temperatures are what the test checks (below)."""
+    Away from a point the configured white-pixel threshold may lie far above the body (paper-fig9-vga's
+    1560 e-/s over a body of 9.5 e-/s at 25 C, where every tail pixel falls below it) or inside it
+    (paper-fig11-full's 1000 e-/s at 65 C): the body is fitted below its own cut, the ppm counted above the
+    threshold. The exposures are as a lab would choose them: the body's mean signal at least 200 e- at the
+    longest (0.25, 0.5 and 1 s, longer for a cool sensor), so the dark signal stands above the read noise."""
     misses = {}
-    for T in temps:
+    for T in (25.0, 45.0, 65.0):
         cfg = load_config(preset=preset, extra={"sensor": {"width": 128, "height": 96, "temperature_c": T}})
         hits = {"mean": 0, "std": 0, "ppm": 0}
+        scale = max(1.0, 200.0 / Sensor(cfg).dark_state.mean)  # the body's mean: the configuration's, any seed
         for seed in range(SEEDS):
-            s, rates, noise, common = dark_measurement(cfg, seed)
+            s, rates, noise, common = dark_measurement(cfg, seed, times=(0.25 * scale, 0.5 * scale, 1.0 * scale))
             st = s.dark_state
             res = fit_dark.fit_point(rates, noise, st.threshold, common)
             p = res["parameters"]

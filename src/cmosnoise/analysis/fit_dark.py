@@ -219,27 +219,40 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
     noise adds to the map; the body's std is corrected for it. ``common_var``
     is the variance (e-/s)^2 of the noise every pixel's slope shares (the
     frames' row and column noise averaged over the map): it adds to the mean's
-    uncertainty and to no pixel's spread. Without a
-    threshold the default is 8 robust standard deviations above the median.
-    Returns ``{"parameters": {name: {value, ci95, method}}, "families": [...], "threshold": thr}``.
+    uncertainty and to no pixel's spread.
+
+    ``threshold`` is where the tail's ppm is counted (the user's, or the
+    base configuration's); without one, 8 robust standard deviations above
+    the median. The body is fitted below its own cut: the threshold where it
+    lies between 5 and 8 robust standard deviations above the median, else
+    8. A threshold far above the body (a white-pixel threshold set for a
+    warmer sensor) would let the tail pixels that fall below it into the
+    body, and one inside the body would leave the body's fit to a
+    correction for the half it cuts off.
+    Returns ``{"parameters": {name: {value, ci95, method}}, "families": [...], "threshold": thr,
+    "body_cut": cut}``.
     """
+    med = float(np.median(rates))
+    robust = 1.4826 * float(np.median(np.abs(rates - med)))
+    cut = med + 8 * robust
     if threshold is None:
-        med = float(np.median(rates))
-        threshold = med + 8 * 1.4826 * float(np.median(np.abs(rates - med)))
-    fits = select_family(rates, threshold)
+        threshold = cut
+    elif med + 5 * robust <= threshold <= cut:
+        cut = float(threshold)
+    fits = select_family(rates, cut)
     best = fits[0]
-    # mean and std by moments of the pixels below the threshold: the slope's noise blurs the map's shape (a
+    # mean and std by moments of the pixels below the cut: the slope's noise blurs the map's shape (a
     # family's maximum-likelihood std of a blurred map is not the body's), but it only adds to the variance
-    x = rates[rates < threshold].astype(np.float64).ravel()
+    x = rates[rates < cut].astype(np.float64).ravel()
     n = x.size
     mean, var = float(x.mean()), float(x.var(ddof=1))
     # what the threshold cuts off the body's upper end, by the chosen family: added back to the moments
     try:
         d = body(best.family, best.mean, best.std)
-        p_in = float(d.cdf(threshold))
+        p_in = float(d.cdf(cut))
         if 0.5 < p_in < 1.0:
-            m_in = float(d.expect(lambda v: v, ub=threshold, conditional=True))
-            v_in = float(d.expect(lambda v: (v - m_in) ** 2, ub=threshold, conditional=True))
+            m_in = float(d.expect(lambda v: v, ub=cut, conditional=True))
+            v_in = float(d.expect(lambda v: (v - m_in) ** 2, ub=cut, conditional=True))
             mean += float(d.mean()) - m_in
             var *= float(d.var()) / v_in if v_in > 0 else 1.0
     except (ValueError, ZeroDivisionError):
@@ -263,7 +276,8 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
                                 "std and blurs the shape: longer exposures or more frames make the choice surer"
                                 if blurred else "")},
         "mean_e_per_s": {"value": mean, "ci95": [mean - z * se_mean, mean + z * se_mean],
-                         "method": f"per-pixel slope over exposure time: mean of the {n} pixels below the threshold"},
+                         "method": f"per-pixel slope over exposure time: mean of the {n} pixels below {cut:.4g} e-/s "
+                                   "(the body's cut)"},
         "std_e_per_s": {"value": body_std, "ci95": [math.sqrt(max(lo_var, 0.0)), math.sqrt(max(hi_var, floor**2))],
                         "method": f"their standard deviation, less the slope's temporal noise "
                                   f"({math.sqrt(slope_noise_var):.3g} e-/s rms)"
@@ -275,7 +289,7 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
     }
     families = [{"family": f.family, "mean": f.mean, "std": f.std, "loglik": f.loglik, "aic": f.aic,
                  "delta_aic": f.aic - best.aic} for f in fits]
-    return {"parameters": params, "families": families, "threshold": float(threshold)}
+    return {"parameters": params, "families": families, "threshold": float(threshold), "body_cut": float(cut)}
 
 
 def doubling(temperatures: list[float], means: list[float], ses: list[float]) -> dict:
