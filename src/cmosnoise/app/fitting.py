@@ -155,13 +155,31 @@ def describe(p: dict) -> str:
     return f"{value}{ci}: {p['method']}"
 
 
+def dark_exposures(sensor: Sensor, base_s: tuple[float, ...] = (0.25, 0.5, 1.0), signal_e: float = 200.0) -> list[float]:
+    """Dark-current exposure times (s) for ``sensor``: ``base_s``, and where the body's mean dark signal is below
+    ``signal_e`` at the longest of them, ``base_s`` scaled up until it is (never past a third of saturation;
+    rounded to 3 significant digits). The short ones measure the white pixels, which clip in the long ones
+    (each pixel's slope is taken where it does not clip); the long ones the body, above the read noise."""
+    state = sensor.dark_state
+    if state is None or state.mean <= 0:
+        return list(base_s)
+    longest = max(base_s)
+    scale = max(1.0, min(signal_e / (state.mean * longest), sensor.saturation_e / 3 / (state.mean * longest)))
+    if scale <= 1.0:
+        return list(base_s)
+    return list(base_s) + [float(f"{t * scale:.3g}") for t in base_s]
+
+
 def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float] | None = None, levels: int = 40,
                       long_frames: int = 100, dark_times: tuple[float, ...] = (0.25, 0.5, 1.0),
                       say: Callable[[str], None] = lambda m: None) -> Path:
     """A lab's measurement of the sensor ``cfg``, simulated, as ``.npy`` stacks and a manifest (what ``fit`` reads).
 
     At each temperature: a ``long_frames`` dark stack at 5 ms (the readout
-    noise) and 8-frame dark stacks at ``dark_times`` (the dark current). At
+    noise) and 8-frame dark stacks at ``dark_times`` (the dark current),
+    and on a cool sensor, as a lab would, at those times lengthened until the
+    body's mean dark signal is 200 e- at the longest (:func:`dark_exposures`),
+    so the dark signal stands above the read noise. At
     the first temperature also: ``levels`` flat pairs at 5 ms from 2 % to
     130 % of saturation, a 16-frame flat at half saturation (PRNU, column
     gain), an 8-frame stack of single lit pixels 7 apart (crosstalk). Every
@@ -188,7 +206,7 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
         s = Sensor(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"temperature_c": T})}), seed=seed)
         save(f"dark_{T:g}C_{t_flat:g}s.npy", s.with_exposure(t_flat).expose("flat:0"), long_frames,
              kind="dark", exposure_s=t_flat, temperature_c=T)
-        for t in dark_times:
+        for t in dark_exposures(s, dark_times):
             save(f"dark_{T:g}C_{t:g}s.npy", s.with_exposure(t).expose("flat:0"), 8, kind="dark", exposure_s=t,
                  temperature_c=T)
         if j == 0:
