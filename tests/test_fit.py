@@ -343,3 +343,24 @@ def test_measure_then_fit_recovers_a_per_colour_crosstalk_kernel_from_spots(tmp_
     fitted = yaml.safe_load((tmp_path / "fit" / "config.yaml").read_text())
     assert set(fitted["crosstalk"]["kernel_pct"]) == {"R", "G", "B"}
     assert "crosstalk" not in json.loads((tmp_path / "fit" / "fit.json").read_text())["not_fitted"]
+
+
+def test_k_uncertainty_widens_the_parameters_in_electrons_only():
+    """A parameter in e- or e-/s is a DN figure over K: its interval gains K's relative error in quadrature. K
+    itself (DN per e-), percentages and ppm keep theirs."""
+    from cmosnoise.analysis.fit import _include_gain_uncertainty
+    from cmosnoise.analysis.fit_readout import Z95
+
+    P = {"system_gain_K_dn_per_e": {"value": 0.4, "ci95": [0.39, 0.41], "method": "k"},
+         "row_noise.sigma_e": {"value": 2.0, "ci95": [1.9, 2.2], "method": "r"},
+         "dark_current[45 C].mean_e_per_s": {"value": 50.0, "ci95": [49.0, 51.0], "method": "d"},
+         "dark_current[45 C].tail.ppm_above": {"value": 80.0, "ci95": [20.0, 200.0], "method": "p"},
+         "prnu.sigma_pct": {"value": 1.0, "ci95": [0.99, 1.01], "method": "g"},
+         "full_well_e": {"value": 9000.0, "ci95": None, "method": "f"}}
+    before = {k: dict(v) for k, v in P.items()}
+    _include_gain_uncertainty(P, 0.01)
+    g = Z95 * 0.01 * 2.0
+    assert P["row_noise.sigma_e"]["ci95"] == pytest.approx([2.0 - math.hypot(0.1, g), 2.0 + math.hypot(0.2, g)])
+    assert P["dark_current[45 C].mean_e_per_s"]["ci95"] == pytest.approx([50 - math.hypot(1, Z95 / 2), 50 + math.hypot(1, Z95 / 2)])
+    for name in ("system_gain_K_dn_per_e", "dark_current[45 C].tail.ppm_above", "prnu.sigma_pct", "full_well_e"):
+        assert P[name] == before[name], name

@@ -48,8 +48,8 @@ def _p(value, ci95=None, method: str = "", **extra) -> dict:
 
 
 def _in_electrons(name: str) -> bool:
-    """Whether a fitted parameter is in e- or e-/s: measured in DN and divided by K."""
-    return name.endswith(("_e", "_e_per_s"))
+    """Whether a fitted parameter is in e- or e-/s: measured in DN and divided by K (not K itself, DN per e-)."""
+    return name.endswith(("_e", "_e_per_s")) and not name.endswith("_per_e")
 
 
 def _include_gain_uncertainty(P: dict, k_rel_se: float) -> None:
