@@ -246,7 +246,7 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
     x = rates[rates < cut].astype(np.float64).ravel()
     n = x.size
     mean, var = float(x.mean()), float(x.var(ddof=1))
-    # what the threshold cuts off the body's upper end, by the chosen family: added back to the moments
+    # what the cut takes off the body's upper end, by the chosen family: added back to the moments
     try:
         d = body(best.family, best.mean, best.std)
         p_in = float(d.cdf(cut))
