@@ -19,6 +19,9 @@ if not os.environ.get("NUMBA_CACHE_DIR"):
     SESSION_CACHE = tempfile.mkdtemp(prefix="cmosnoise-numba-cache-")
     os.environ["NUMBA_CACHE_DIR"] = SESSION_CACHE
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
+# numba's target as the package sets it (engine/jit.py: the host's full vector width), before a test module
+# imports numba itself: this process and its children then key the compile cache alike
+import cmosnoise.engine.jit  # noqa: E402, F401
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

@@ -244,3 +244,22 @@ def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path
     second = subprocess.run(cmd + ["--out", str(tmp_path / "b")], env=env, capture_output=True, text=True, timeout=600)
     assert second.returncode == 0, second.stderr
     assert "compil" not in second.stderr, second.stderr
+    # the cache is found by a run's preload (in a process of its own, and in this one, which renders with the
+    # same numba target: conftest imported engine.jit first), and it loads what render then uses
+    probe = ("from cmosnoise.engine import kernel\n"
+             "from cmosnoise import Sensor, load_config\n"
+             "print(kernel.preload(), len(kernel._render.signatures))\n"
+             "Sensor(load_config(extra={'sensor': {'width': 64, 'height': 48}})).expose().frame(0)\n"
+             "print(len(kernel._render.signatures), sum(kernel._render.stats.cache_misses.values()))\n")
+    third = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=600)
+    assert third.returncode == 0, third.stderr
+    assert third.stdout.split() == ["True", "1", "1", "0"], third.stdout + third.stderr
+    empty = subprocess.run([sys.executable, "-c", "from cmosnoise.engine import kernel\n"
+                            "print(kernel.preload(), len(kernel._render.signatures))\n"],
+                           env={**env, "NUMBA_CACHE_DIR": str(tmp_path / "empty")}, capture_output=True, text=True,
+                           timeout=600)
+    assert empty.stdout.split() == ["False", "0"], empty.stdout + empty.stderr  # nothing cached: never compiles
+    if SESSION_CACHE is not None:
+        from cmosnoise.engine import kernel
+
+        assert kernel.preload(), "this process keys numba's cache unlike its children: the suite would compile twice"

@@ -15,10 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised where numba is missing
-    numba = None
+from ..engine.jit import numba  # None where numba is not installed
 
 #: the sums one frame contributes: e- total, DN total, saturated count, and,
 #: against the previous frame, sum and sum of squares of the differences (DN, e-)

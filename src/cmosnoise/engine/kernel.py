@@ -27,10 +27,7 @@ import numpy as np
 
 from . import fdmath, philox, samplers
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised where numba is missing
-    numba = None
+from .jit import numba  # None where numba is not installed
 
 #: whether the compiled kernel can run here
 AVAILABLE = numba is not None
@@ -351,20 +348,28 @@ def preload() -> bool:
 
     A run calls this in a second thread while it makes the sensor's fixed
     pattern, so the 0.2 s of loading overlaps that work instead of delaying
-    the first frame. It never compiles: with nothing cached, the first
-    frame compiles, and says so (:func:`render`).
+    the first frame. It never compiles: with nothing cached for this
+    machine and these argument types, the first frame compiles, and says so
+    (:func:`render`). It loads without calling the kernel: a call would start
+    a parallel region from this thread, and the OpenMP layer would keep a
+    second team of threads for it beside the main thread's.
     """
     if numba is None or _render.signatures:
         return False
-    try:
-        if not _render._cache._cache_file._load_index():
-            return False
-    except Exception:  # numba's internals moved: leave it to the first frame
-        return False
-    flags = np.zeros(7, np.bool_)  # every stage off: the call loads the kernel and draws nothing
-    _render(_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
+    flags = np.zeros(7, np.bool_)
+    args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
             np.zeros((4, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0,
             np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
+    sig = tuple(numba.typeof(a) for a in args)
+    try:
+        index = _render._cache._cache_file._load_index()  # {(signature, target, ...): file}
+        magic = _render.targetctx.codegen().magic_tuple()
+        cached = any(key[0] == sig and key[1] == magic for key in index)
+    except Exception:  # numba's internals moved: leave it to the first frame
+        return False
+    if not cached:
+        return False
+    _render.compile(sig)
     return True
 
 

@@ -129,10 +129,7 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ pictures in one pass
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised where numba is missing
-    numba = None
+from ..engine.jit import numba  # None where numba is not installed
 
 #: whether :func:`superpixel_srgb8` and :func:`bilinear_srgb8` can run here (without numba, Processor takes the
 #: steps one by one)

@@ -1,0 +1,51 @@
+"""numba for the package's compiled loops, imported here once, with the host's full vector width.
+
+On a CPU with AVX-512, LLVM prefers 256-bit vectors unless told otherwise
+(its ``prefer-256-bit`` tuning). The frame kernel's branch-free passes (the
+Philox blocks, the PTRS quick test, Box-Muller) run faster with 512-bit
+vectors: on the development machine ``benchmarks/bench_chain.py`` put the
+1080p kernel at 0.40 of its NumPy reference on one thread and 0.21 on two
+before, 0.32 and 0.18 after (``NUMBA_CPU_FEATURES`` set to the host's plain
+features, and a cache folder of its own, measures the before). So, before
+numba is first imported in a process, and unless ``NUMBA_CPU_NAME`` or
+``NUMBA_CPU_FEATURES`` is already set, this sets ``NUMBA_CPU_FEATURES`` to
+the host's own features plus ``-prefer-256-bit`` where the host has
+AVX-512; elsewhere it changes nothing. Child processes (worker pools, the
+tests' command lines) inherit it, so every process keys numba's on-disk
+cache the same way.
+
+The bits do not change: vector width changes how many pixels one
+instruction takes, not the IEEE arithmetic of each (``fastmath`` is off, so
+no fused multiply-add or reordering), and the tests hold the compiled
+kernel to the NumPy implementation bit for bit.
+
+``numba`` is None where numba is not installed (the NumPy paths run).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+
+def _widest_vectors() -> None:
+    if "numba" in sys.modules or os.environ.get("NUMBA_CPU_NAME") or os.environ.get("NUMBA_CPU_FEATURES"):
+        return  # too late to change, or the user's choice
+    try:
+        import llvmlite.binding as ll
+
+        features = ll.get_host_cpu_features().flatten()
+    except Exception:  # no llvmlite (no numba), or a host LLVM cannot describe: leave numba's defaults
+        return
+    if "+avx512f" in features.split(","):
+        os.environ["NUMBA_CPU_FEATURES"] = features + ",-prefer-256-bit"
+
+
+_widest_vectors()
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised where numba is missing
+    numba = None
+
+__all__ = ["numba"]
