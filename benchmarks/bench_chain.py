@@ -36,22 +36,16 @@ import numpy as np
 from cmosnoise import Sensor, load_config
 
 
-def best_fps(fn, frames: int, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for k in range(frames):
-            fn(k)
-        best = min(best, time.perf_counter() - t0)
-    return frames / best
-
-
 def per_frame(fn, frames: int) -> float:
     """Seconds per frame of ``fn(k)`` over ``frames`` frames."""
     t0 = time.perf_counter()
     for k in range(frames):
         fn(k)
     return (time.perf_counter() - t0) / frames
+
+
+def best_fps(fn, frames: int, repeats: int) -> float:
+    return 1 / min(per_frame(fn, frames) for _ in range(repeats))
 
 
 def against_reference(fn, frames: int, repeats: int, reference, ref_frames: int) -> tuple[float, float]:

@@ -4,7 +4,7 @@
 It runs exactly that test's measurements and fits (its ``measure``, ``truth``, ``COMBOS``, ``STAGES`` and
 seeds: imported from the test, so the two cannot differ) in two processes, and prints, for each parameter
 and (sensor, temperature), how many of the 20 intervals hold the truth, and the source follower's mean
-(estimate - truth) / standard error. About four minutes on two cores.
+(estimate - truth) / standard error. Two to three minutes on two cores.
 
     python benchmarks/fit_coverage.py [--json docs/numbers/fit_coverage.json]
 """

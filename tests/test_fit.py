@@ -88,9 +88,10 @@ def test_photon_transfer_weights_each_level_by_its_sampling_variance():
     lin = slice(0, 5)
     w = 1 / ((K * mu[lin] + vd) ** 2 * 2 / dof[lin] + vd**2 * 2 / ddof)  # absolute sampling variances
     se_theory = math.sqrt(1 / np.sum(w * mu[lin] ** 2))
-    ks, hits = np.empty(trials), 0
+    ks, unweighted, hits = np.empty(trials), np.empty(trials), 0
     for i in range(trials):
         v = sigma2 * rng.chisquare(dof) / dof - vd * rng.chisquare(ddof, mu.size) / ddof
+        unweighted[i] = np.sum(mu[lin] * v[lin]) / np.sum(mu[lin] ** 2)  # EMVA 1288's slope, on the same data
         r = fit_photo.photon_transfer(mu, v, frames=frames, dark_var=np.full(mu.size, vd), dark_frames=np.full(mu.size, dark_frames))
         assert r["fit_points"] == 5 and r["saturation_index"] == 5
         ks[i] = r["K"]
@@ -98,8 +99,9 @@ def test_photon_transfer_weights_each_level_by_its_sampling_variance():
     assert abs(ks.mean() - K) <= Z * se_theory / math.sqrt(trials)
     assert abs(ks.var(ddof=1) / se_theory**2 - 1) <= Z * math.sqrt(2 / (trials - 1))
     assert abs(hits - 0.95 * trials) <= Z * math.sqrt(trials * 0.05 * 0.95), hits
-    unweighted = math.sqrt(np.sum(mu[lin] ** 2 / w) / np.sum(mu[lin] ** 2) ** 2)
-    assert unweighted > 2 * se_theory
+    # the README's claim: on such a set the unweighted slope is more than twice as noisy (its variance more than
+    # four times; the ratio of two sample variances of 2000 is itself within a few per cent)
+    assert unweighted.var(ddof=1) > 4 * ks.var(ddof=1)
 
 
 def test_rate_map_from_dark_stacks_is_unbiased_with_the_predicted_noise():

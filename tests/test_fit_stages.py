@@ -29,6 +29,8 @@ from cmosnoise.app.fitting import dark_exposures
 from cmosnoise.io.stacks import Dataset, reduce_stack
 from cmosnoise.model import physics
 
+from conftest import Z
+
 SEEDS = 20
 #: a true 95 % interval misses 4 or more times in 20 with probability 1.6 %, 5 or more 0.3 %
 MIN_COVERED = 16
@@ -316,6 +318,6 @@ def test_column_sigma_fit_on_variances_drawn_as_the_likelihood_assumes():
             covered[name] += ci[0] <= t <= ci[1]
     for name in truth_:
         zs = np.array(z[name])
-        assert abs(zs.mean()) <= 5 / math.sqrt(trials), (name, zs.mean())
-        assert abs(zs.std() - 1) <= 5 / math.sqrt(2 * trials), (name, zs.std())
-        assert abs(covered[name] - 0.95 * trials) <= 5 * math.sqrt(trials * 0.05 * 0.95), (name, covered[name])
+        assert abs(zs.mean()) <= Z / math.sqrt(trials), (name, zs.mean())
+        assert abs(zs.std() - 1) <= Z / math.sqrt(2 * trials), (name, zs.std())
+        assert abs(covered[name] - 0.95 * trials) <= Z * math.sqrt(trials * 0.05 * 0.95), (name, covered[name])

@@ -60,9 +60,8 @@ def _include_gain_uncertainty(P: dict, k_rel_se: float) -> None:
             continue
         v, (lo, hi) = float(p["value"]), p["ci95"]
         g = Z95 * k_rel_se * abs(v)
-        p["ci95"] = [v - math.hypot(v - lo, g), v + math.hypot(hi - v, g)]
-        if lo >= 0 > v - math.hypot(v - lo, g):
-            p["ci95"][0] = 0.0  # a sigma or a rate is not negative
+        new_lo = v - math.hypot(v - lo, g)
+        p["ci95"] = [max(new_lo, 0.0) if lo >= 0 else new_lo, v + math.hypot(hi - v, g)]  # a sigma or rate stays >= 0
         p["method"] += "; interval includes K's uncertainty"
 
 

@@ -42,8 +42,8 @@ def photon_transfer(mu, v, frames=None, dark_var=None, dark_frames=None) -> dict
 
     The slope through the origin of the points below 70 % of saturation (the point of largest
     variance), weighted by the inverse of each point's sampling variance: a mean of per-pixel variances
-    over ``n`` frames has a variance proportional to ``sigma^4 / (n - 1)``, so a 2-frame level near
-    saturation is worth a sixtieth of a 16-frame level a quarter as bright. (An unweighted slope, which
+    over ``n`` frames has a variance proportional to ``sigma^4 / (n - 1)``, so a 2-frame level has 240
+    times the sampling variance of a 16-frame level a quarter as bright. (An unweighted slope, which
     EMVA 1288 draws, is more than twice as noisy on such a set.) The weights' scale is left to the data:
     the interval is Student t on the weighted residuals, exact when the weights are right up to a
     factor, and honest when the pixels share noise the weights do not know of.
