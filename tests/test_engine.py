@@ -163,6 +163,38 @@ def test_kernel_equals_the_numpy_implementation_on_any_threads_and_tiling(extra)
     np.testing.assert_array_equal(crop.raw, full[4:20, 9:50])
 
 
+@needs_numba
+def test_kernel_ptrs_decides_the_tries_whose_count_is_below_6_exactly():
+    """The kernel's branch-free PTRS pass takes loggam's Stirling series alone (exact from a count of 6 up)
+    and leaves the tries whose log test meets a lower count to an exact pass: means just above 10 reach it
+    often, and the frame still equals the NumPy implementation bit for bit."""
+    from cmosnoise.engine import samplers
+
+    lam = np.random.default_rng(5).uniform(10.0, 14.0, (40, 50)).astype(np.float32)
+    keys = np.array([[21, 22], [0, 0], [0, 0], [0, 0]], np.uint64)
+    plan = kernel.FramePlan(shape=lam.shape, keys=keys, sequence=0, full_well_e=1e9, noisy_e=lam)
+    stream, idx, lam64 = Stream((21, 22), 3), np.arange(lam.size, dtype=U), lam.ravel().astype(np.float64)
+    _, a, b, _, vr = samplers.ptrs_constants(lam64)
+    k, us, V = samplers.ptrs_candidate(lam64, a, b, *stream.uniforms(idx))
+    decided = ((us >= 0.07) & (V <= vr)) | (k < 0) | ((us < 0.013) & (V > us))
+    undecided = ~decided & (k < 6)
+    assert np.count_nonzero(undecided) >= 50  # first tries alone; the retries add more
+    u1, u2 = stream.uniforms(idx)
+    left = np.array([kernel._ptrs_test(m, v1, v2) == kernel._REDO for m, v1, v2 in zip(lam64, u1, u2)])
+    np.testing.assert_array_equal(left, undecided)  # the branch-free pass leaves exactly those
+    raw, _ = kernel.render(plan, 3)
+    np.testing.assert_array_equal(raw.ravel(), stream.poisson(lam64, idx).astype(np.float32))
+
+
+def test_loggam_is_its_stirling_series_from_7_up_and_not_below():
+    """What lets the kernel's branch-free PTRS pass drop loggam's product below 7 (and what makes it redo
+    those counts): the same bits from 7 up, other bits below, where numpy's recursion adds precision."""
+    x = np.arange(1.0, 20_001.0)
+    whole, series = fdmath.loggam(x), fdmath.loggam_stirling(x)
+    np.testing.assert_array_equal(whole[6:].view(U), series[6:].view(U))
+    assert np.all(whole[2:6] != series[2:6])  # 3 .. 6 (1 and 2 are 0 by definition)
+
+
 def test_frame_k_alone_equals_frame_k_of_a_run():
     shot = _full_chain().expose("ramp")
     run = [shot.frame(k) for k in range(5)]

@@ -74,8 +74,11 @@ def _compiled():
     def where(c, a, b):
         return a if c else b
 
-    def ldexp(y, k):  # y * 2**k for |k| < 1023 and y in [0.5, 2): build 2**k from its bits
-        return y * np.uint64(np.uint64(int(k) + 1023) << np.uint64(52)).view(np.float64)
+    def ldexp(y, k):  # y * 2**k for whole |k| < 1023 and y in [0.5, 2): build 2**k from its bits
+        # k + 1023 + 2**52 is exact and holds k + 1023 in its low mantissa bits; shifted up 52 they are 2**k's
+        # exponent field. No float-to-integer conversion, which AVX2 lacks for 64-bit lanes.
+        biased = np.float64(k + 4503599627371519.0).view(np.uint64)  # 2**52 + 1023
+        return y * np.uint64(biased << np.uint64(52)).view(np.float64)
 
     def frexp(x):  # x = m 2**e, m in [0.5, 1), for positive normal x: read the bits, no libm call
         bits = np.float64(x).view(np.uint64)
@@ -84,17 +87,20 @@ def _compiled():
         return m, e
 
     scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor}
+
+    def compile_as(module, name, as_name, **bind):
+        g = {**module.__dict__, **scalar, **space, **bind}
+        f = getattr(module, name)
+        space[as_name] = jit(types.FunctionType(f.__code__, g, as_name, f.__defaults__))
+
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
-            (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
+            (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam_stirling", "loggam"]),
             (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_accept"])]
     for module, names in plan:
-        g = dict(module.__dict__)
-        g.update(scalar)
-        g.update(space)
         for name in names:
-            f = getattr(module, name)
-            space[name] = jit(types.FunctionType(f.__code__, g, name, f.__defaults__))
-            g[name] = space[name]
+            compile_as(module, name, name)
+    # PTRS's log test with loggam's Stirling series alone: the same bits where the count is 6 or more
+    compile_as(samplers, "ptrs_log_accept", "ptrs_log_accept_from6", loggam=space["loggam_stirling"])
     return space
 
 
@@ -102,6 +108,7 @@ if numba is not None:
     _h = _compiled()
     _uniform_pair, _normal_from, _exp = _h["uniform_pair"], _h["normal_from"], _h["exp"]
     _ptrs_constants, _ptrs_candidate, _ptrs_log_accept = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_accept"]
+    _ptrs_log_accept_from6 = _h["ptrs_log_accept_from6"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
 
     @numba.njit(inline="always", fastmath=False, error_model="numpy")
@@ -127,15 +134,43 @@ if numba is not None:
     _JIT = dict(fastmath=False, error_model="numpy")
     _ROWS_PER_BLOCK = 8
 
+    def _ptrs_try(log_accept):
+        """One whole PTRS try, branch-free (samplers.ptrs_try), with this log test.
+
+        The try returns (the count if accepted, else -1; the candidate k;
+        whether the quick tests decided it without the log test).
+        """
+        @numba.njit(inline="always", **_JIT)
+        def one(m, u1, u2):
+            loglam, a, b, invalpha, vr = _ptrs_constants(m)
+            k, us, V = _ptrs_candidate(m, a, b, u1, u2)
+            quick = (us >= 0.07) & (V <= vr)
+            reject = (k < 0.0) | ((us < 0.013) & (V > us))
+            ok = quick | (~reject & log_accept(m, loglam, a, b, invalpha, k, us, V))
+            return (k if ok else -1.0), k, quick | reject
+        return one
+
+    _ptrs_try_exact = _ptrs_try(_ptrs_log_accept)
+    _ptrs_try_from6 = _ptrs_try(_ptrs_log_accept_from6)
+    #: a try the branch-free pass leaves undecided (its log test met a count below 6)
+    _REDO = -2.0
+
     @numba.njit(inline="always", **_JIT)
     def _ptrs_test(m, u1, u2):
-        """One whole PTRS try, branch-free: the count if accepted, else -1 (samplers.ptrs_try)."""
-        loglam, a, b, invalpha, vr = _ptrs_constants(m)
-        k, us, V = _ptrs_candidate(m, a, b, u1, u2)
-        quick = (us >= 0.07) & (V <= vr)
-        reject = (k < 0.0) | ((us < 0.013) & (V > us))
-        ok = quick | (~reject & _ptrs_log_accept(m, loglam, a, b, invalpha, k, us, V))
-        return k if ok else -1.0
+        """One whole PTRS try, branch-free: the count if accepted, -1 if rejected, _REDO if undecided.
+
+        Its log test takes loggam's Stirling series alone, one log fewer than
+        the whole loggam and the same bits for counts from 6 up; a try whose
+        log test meets a count below 6 (rare from a mean of 10) is _REDO, for
+        :func:`_ptrs_test_exact`.
+        """
+        r, k, decided = _ptrs_try_from6(m, u1, u2)
+        return r if (decided | (k >= 6.0)) else _REDO
+
+    @numba.njit(**_JIT)
+    def _ptrs_test_exact(m, u1, u2):
+        """One whole PTRS try with the whole loggam: the count if accepted, else -1."""
+        return _ptrs_try_exact(m, u1, u2)[0]
 
     @numba.njit(inline="always", **_JIT)
     def _shot_row(noisy_row, base, frame, seq, k0, k1, lam, u1, u2, res, small, big, normal_above):
@@ -233,6 +268,9 @@ if numba is not None:
                     bu1[t], bu2[t] = _uniform_pair(base + np.uint64(big[t]), frame, seq, attempt, k0, k1)
             for t in range(nb):  # one whole try, branch-free
                 bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
+            for t in range(nb):  # the few it left undecided, exactly
+                if bk[t] == _REDO:
+                    bk[t] = _ptrs_test_exact(bl[t], bu1[t], bu2[t])
             attempt += np.uint64(1)
             nf = 0
             for t in range(nb):  # keep the pixels still without a count (branch-free compaction)

@@ -20,7 +20,8 @@ _MASK32 = np.uint64(0xFFFFFFFF)
 _S32 = np.uint64(32)
 _S20 = np.uint64(20)
 _S12 = np.uint64(12)
-_TWO_M52 = 2.0**-52
+_ONE_BITS = np.uint64(0x3FF0000000000000)  # the bits of 1.0
+_TWO_M53 = 2.0**-53
 
 #: counter layout: (pixel or row or column index, frame, sequence, try)
 ROUNDS = 10
@@ -48,10 +49,14 @@ def open_uniform(hi, lo):
     """A float64 in the open interval (0, 1) from two 32-bit words: ``(m + 0.5) * 2**-52``, m of 52 bits.
 
     Never 0 or 1, so ``log(u)`` is finite and PTRS's ``0.5 - |u - 0.5|`` is
-    never 0; every step is exact.
+    never 0; every step is exact. ``m * 2**-52`` is read as the float whose
+    bits are 1.0's with m as mantissa, less 1 (exact): no 64-bit integer to
+    float conversion, which AVX2 has no vector instruction for (LLVM would
+    convert lane by lane). ``(2m + 1) * 2**-53`` has 53 significant bits,
+    so adding ``2**-53`` is exact too: the same value as ``(m + 0.5) * 2**-52``.
     """
     m = ((hi << _S20) | (lo >> _S12)) & np.uint64(0xFFFFFFFFFFFFF)
-    return (m + 0.5) * _TWO_M52
+    return (np.uint64(m | _ONE_BITS).view(np.float64) - 1.0) + _TWO_M53
 
 
 def uniform_pair(index, frame, sequence, attempt, k0, k1):
