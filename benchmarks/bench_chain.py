@@ -59,6 +59,31 @@ def against_reference(fn, frames: int, repeats: int, reference, ref_frames: int)
     return t_fn, min(t_ref, per_frame(reference, ref_frames))
 
 
+def cpu() -> dict:
+    """The processor the ratios belong to: its model and the widest vectors numba compiles for here.
+
+    The kernel's branch-free passes are SIMD code, the reference mostly scalar, so their ratio depends on
+    the vector width: record it with every measurement.
+    """
+    import platform
+
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
+    except OSError:
+        pass
+    from cmosnoise.engine.jit import numba  # sets the vector width the package compiles with
+
+    features = set((os.environ.get("NUMBA_CPU_FEATURES") or "").split(","))
+    if not features - {""}:
+        import llvmlite.binding as ll
+
+        features = set(ll.get_host_cpu_features().flatten().split(","))
+    vectors = "AVX-512" if "+avx512f" in features else "AVX2" if "+avx2" in features else "SSE/other"
+    return {"cpu": model, "vectors": vectors, "numba": numba.__version__}
+
+
 def _run(cmd: list[str]) -> None:
     r = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ})
     if r.returncode:
@@ -140,6 +165,7 @@ def main() -> None:
     rows.append(("NumPy reference (Poisson+Gauss+q)", t_ref, t_ref))
 
     print(f"cmosnoise full chain, 1920 x 1080 {cfg.sensor.cfa}, stages on: {', '.join(on)}")
+    print("  on {cpu} ({vectors}), numba {numba}".format(**cpu()))
     print(f"  sensor set-up (fixed pattern)     {t_fixed * 1000:8.1f} ms (once per sensor)")
     print(f"  expose scene '{args.scene}'            {t_expose * 1000:8.1f} ms (once per scene)")
     print(f"  {'':36s} {'frames/s':>10s} {'ms/frame':>10s} {'reference':>10s} {'x reference':>12s}")
@@ -175,6 +201,7 @@ def main() -> None:
             f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("json",))
         data = {
             "machine": f"{os.cpu_count()} cores, {platform.processor() or platform.machine()}, numba threads {nthreads}",
+            **cpu(),
             "command": command,
             "fixed_ms": t_fixed * 1000, "expose_ms": t_expose * 1000, "cli_start_up_s": start_up,
             "rows": [{"label": label.strip(), "fps": 1 / t, "ms": 1000 * t, "ref_ms": 1000 * ref, "ratio": t / ref}

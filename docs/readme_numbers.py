@@ -9,7 +9,7 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
     python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
-``speed``, ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by the scripts in
+``speed`` (and ``speed_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by the scripts in
 ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes long, never recomputed by tests); ``sweep_fig9`` is
 deterministic but takes minutes, so the tests check its stored data instead. The tests check that every
 README block is the rendering of its JSON, and recompute the deterministic
@@ -89,7 +89,8 @@ def render_dark_budget(d: dict) -> str:
 
 
 def render_speed(d: dict) -> str:
-    lines = [f"On the development machine ({d['machine']}; `{d['command']}`). Each ratio is to the reference "
+    cpu = f"{d['machine']}; CPU {d['cpu']}, {d['vectors']} vectors" if "vectors" in d else d["machine"]
+    lines = [f"On the development machine ({cpu}; `{d['command']}`). Each ratio is to the reference "
              "timed alternately with that row (its ms/frame beside it), so a slow spell of the machine falls on "
              "both sides:", "",
              "| | frames/s | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|---|"]
@@ -335,6 +336,7 @@ SECTIONS = {
     "fig9_map": (compute_fig9_map, render_fig9_map),
     "dark_budget": (compute_dark_budget, render_dark_budget),
     "speed": (None, render_speed),
+    "speed_avx2": (None, render_speed),
     "explore": (None, render_explore),
     "sweep_fig9": (compute_sweep_fig9, render_sweep_fig9),
     "sweep_speed": (None, render_sweep_speed),
@@ -343,7 +345,9 @@ SECTIONS = {
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
+#: speed on a CPU with AVX-512 and on one with AVX2 only: run the one that fits the machine you measure on
 BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
+              "speed_avx2": ["bench_chain.py", "--json", "speed_avx2.json"],
               "explore": ["bench_explore.py", "--repeats", "10", "--json", "explore.json", "--screenshot", "../img/explore.png"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
               "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"],

@@ -377,7 +377,7 @@ def _needs_compile() -> bool:
     except Exception:  # numba's internals moved: say it after the fact instead (see render)
         return True
     if not cached:
-        print("cmosnoise: compiling the frame kernel for this machine (once; 30 to 60 s) ...", file=sys.stderr, flush=True)
+        print("cmosnoise: compiling the frame kernel for this machine (once; about a minute) ...", file=sys.stderr, flush=True)
     return True
 
 
