@@ -165,7 +165,8 @@ def main() -> None:
     rows.append(("NumPy reference (Poisson+Gauss+q)", t_ref, t_ref))
 
     print(f"cmosnoise full chain, 1920 x 1080 {cfg.sensor.cfa}, stages on: {', '.join(on)}")
-    print("  on {cpu} ({vectors}), numba {numba}".format(**cpu()))
+    host = cpu()
+    print("  on {cpu} ({vectors}), numba {numba}".format(**host))
     print(f"  sensor set-up (fixed pattern)     {t_fixed * 1000:8.1f} ms (once per sensor)")
     print(f"  expose scene '{args.scene}'            {t_expose * 1000:8.1f} ms (once per scene)")
     print(f"  {'':36s} {'frames/s':>10s} {'ms/frame':>10s} {'reference':>10s} {'x reference':>12s}")
@@ -201,7 +202,7 @@ def main() -> None:
             f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("json",))
         data = {
             "machine": f"{os.cpu_count()} cores, {platform.processor() or platform.machine()}, numba threads {nthreads}",
-            **cpu(),
+            **host,
             "command": command,
             "fixed_ms": t_fixed * 1000, "expose_ms": t_expose * 1000, "cli_start_up_s": start_up,
             "rows": [{"label": label.strip(), "fps": 1 / t, "ms": 1000 * t, "ref_ms": 1000 * ref, "ratio": t / ref}

@@ -9,8 +9,8 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
     python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
-``speed`` (and ``speed_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by the scripts in
-``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes long, never recomputed by tests); ``sweep_fig9`` is
+``speed`` (and ``speed_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by
+the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes long, never recomputed by tests); ``sweep_fig9`` is
 deterministic but takes minutes, so the tests check its stored data instead. The tests check that every
 README block is the rendering of its JSON, and recompute the deterministic
 sections (``tests/test_readme_numbers.py``), so the README cannot drift.
@@ -89,8 +89,8 @@ def render_dark_budget(d: dict) -> str:
 
 
 def render_speed(d: dict) -> str:
-    cpu = f"{d['machine']}; CPU {d['cpu']}, {d['vectors']} vectors" if "vectors" in d else d["machine"]
-    lines = [f"On the development machine ({cpu}; `{d['command']}`). Each ratio is to the reference "
+    lines = [f"On the development machine ({d['machine']}; CPU {d['cpu']}, {d['vectors']} vectors; `{d['command']}`). "
+             "Each ratio is to the reference "
              "timed alternately with that row (its ms/frame beside it), so a slow spell of the machine falls on "
              "both sides:", "",
              "| | frames/s | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|---|"]

@@ -174,12 +174,12 @@ def test_kernel_ptrs_decides_the_tries_whose_count_is_below_6_exactly():
     keys = np.array([[21, 22], [0, 0], [0, 0], [0, 0]], np.uint64)
     plan = kernel.FramePlan(shape=lam.shape, keys=keys, sequence=0, full_well_e=1e9, noisy_e=lam)
     stream, idx, lam64 = Stream((21, 22), 3), np.arange(lam.size, dtype=U), lam.ravel().astype(np.float64)
+    u1, u2 = stream.uniforms(idx)
     _, a, b, _, vr = samplers.ptrs_constants(lam64)
-    k, us, V = samplers.ptrs_candidate(lam64, a, b, *stream.uniforms(idx))
+    k, us, V = samplers.ptrs_candidate(lam64, a, b, u1, u2)
     decided = ((us >= 0.07) & (V <= vr)) | (k < 0) | ((us < 0.013) & (V > us))
     undecided = ~decided & (k < 6)
     assert np.count_nonzero(undecided) >= 50  # first tries alone; the retries add more
-    u1, u2 = stream.uniforms(idx)
     left = np.array([kernel._ptrs_test(m, v1, v2) == kernel._REDO for m, v1, v2 in zip(lam64, u1, u2)])
     np.testing.assert_array_equal(left, undecided)  # the branch-free pass leaves exactly those
     raw, _ = kernel.render(plan, 3)
