@@ -61,14 +61,18 @@ class FramePlan:
 
 
 # ------------------------------------------------------------------ compiled helpers
-def _compiled():
+def _compiled(inline: str):
     """The helpers of fdmath, philox and samplers compiled by numba from their own source.
 
     Each function is re-created with its module's globals, where the exact
     array helpers (``frexp``, ``ldexp``, ``where``) are replaced by their
-    scalar forms and every callee by its compiled version.
+    scalar forms and every callee by its compiled version. ``inline``:
+    numba's ``"always"`` for the hot loops (inlined into numba's IR before
+    typing: LLVM then vectorizes them, at a cost in compile time), or
+    ``"never"`` for the rare paths (a call each; a tenth of the compile time).
+    The bits are the same either way: inlining does not change IEEE arithmetic.
     """
-    jit = numba.njit(inline="always", fastmath=False, error_model="numpy")
+    jit = numba.njit(inline=inline, fastmath=False, error_model="numpy")
     space: dict = {}
 
     def where(c, a, b):
@@ -105,53 +109,59 @@ def _compiled():
 
 
 if numba is not None:
-    _h = _compiled()
+    _h = _compiled("always")
+    _cold = _compiled("never")  # for the tries past the vectorized ones, a few pixels in 10 000
+    _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_candidate, _cold_log_accept = (
+        _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_accept"))
     _uniform_pair, _normal_from, _exp = _h["uniform_pair"], _h["normal_from"], _h["exp"]
-    _ptrs_constants, _ptrs_candidate, _ptrs_log_accept = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_accept"]
-    _ptrs_log_accept_from6 = _h["ptrs_log_accept_from6"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
 
-    @numba.njit(inline="always", fastmath=False, error_model="numpy")
+    @numba.njit(fastmath=False, error_model="numpy")
     def _normal(index, frame, seq, k0, k1):
-        u1, u2 = _uniform_pair(np.uint64(index), frame, seq, np.uint64(0), k0, k1)
-        return _normal_from(u1, u2)
+        """One normal: a row's or a column's (once a row or column, so called, not inlined)."""
+        u1, u2 = _cold_uniform_pair(np.uint64(index), frame, seq, np.uint64(0), k0, k1)
+        return _cold_normal_from(u1, u2)
 
     @numba.njit(fastmath=False, error_model="numpy")
     def _ptrs_from(lam, index, frame, seq, k0, k1, attempt):
-        """PTRS from try ``attempt`` on (samplers.Stream.poisson's loop, numpy's early exits)."""
-        loglam, a, b, invalpha, vr = _ptrs_constants(lam)
+        """PTRS from try ``attempt`` on (samplers.Stream.poisson's loop, numpy's early exits); a rare path, its
+        helpers called, not inlined."""
+        loglam, a, b, invalpha, vr = _cold_constants(lam)
         while True:
-            u1, u2 = _uniform_pair(index, frame, seq, attempt, k0, k1)
+            u1, u2 = _cold_uniform_pair(index, frame, seq, attempt, k0, k1)
             attempt += np.uint64(1)
-            k, us, V = _ptrs_candidate(lam, a, b, u1, u2)
+            k, us, V = _cold_candidate(lam, a, b, u1, u2)
             if us >= 0.07 and V <= vr:
                 return k
             if k < 0.0 or (us < 0.013 and V > us):
                 continue
-            if _ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
+            if _cold_log_accept(lam, loglam, a, b, invalpha, k, us, V):
                 return k
 
     _JIT = dict(fastmath=False, error_model="numpy")
     _ROWS_PER_BLOCK = 8
 
-    def _ptrs_try(log_accept):
-        """One whole PTRS try, branch-free (samplers.ptrs_try), with this log test.
+    def _ptrs_try(helpers, log_accept, inline):
+        """One whole PTRS try, branch-free (samplers.ptrs_try), with these helpers and this log test.
 
         The try returns (the count if accepted, else -1; the candidate k;
         whether the quick tests decided it without the log test).
         """
-        @numba.njit(inline="always", **_JIT)
+        constants, candidate = helpers["ptrs_constants"], helpers["ptrs_candidate"]
+
+        @numba.njit(inline=inline, **_JIT)
         def one(m, u1, u2):
-            loglam, a, b, invalpha, vr = _ptrs_constants(m)
-            k, us, V = _ptrs_candidate(m, a, b, u1, u2)
+            loglam, a, b, invalpha, vr = constants(m)
+            k, us, V = candidate(m, a, b, u1, u2)
             quick = (us >= 0.07) & (V <= vr)
             reject = (k < 0.0) | ((us < 0.013) & (V > us))
             ok = quick | (~reject & log_accept(m, loglam, a, b, invalpha, k, us, V))
             return (k if ok else -1.0), k, quick | reject
         return one
 
-    _ptrs_try_exact = _ptrs_try(_ptrs_log_accept)
-    _ptrs_try_from6 = _ptrs_try(_ptrs_log_accept_from6)
+    _ptrs_try_exact = _ptrs_try(_cold, _cold["ptrs_log_accept"], "never")  # the rare redo
+    _ptrs_try_from6 = _ptrs_try(_h, _h["ptrs_log_accept_from6"], "always")
+    _ptrs_constants, _ptrs_candidate = _h["ptrs_constants"], _h["ptrs_candidate"]
     #: a try the branch-free pass leaves undecided (its log test met a count below 6)
     _REDO = -2.0
 
@@ -285,71 +295,86 @@ if numba is not None:
         for t in range(nb):  # further tries, one pixel at a time (a few in 10 000)
             res[big[t]] = _ptrs_from(bl[t], base + np.uint64(big[t]), frame, seq, k0, k1, attempt)
 
+    @numba.njit(**_JIT)
+    def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
+                     gain, keys, fr, sq, r0, c0, c1, cols, k_adc, black, top, out_dn, out_e):
+        """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
+
+        Compiled on its own, not inside :func:`_render`'s parallel loop: numba's
+        parfor passes then see a loop of calls, not the inlined samplers, which
+        saves some 30 s of the first compile (measured); LLVM vectorizes this
+        function's loops alike.
+        """
+        has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
+            flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
+        zero = np.uint64(0)
+        w = c1 - c0
+        s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
+        lam = np.empty(w)
+        u1 = np.empty(w)
+        u2 = np.empty(w)
+        small = np.empty(w, np.int64)
+        big = np.empty(w, np.int64)
+        bl = np.empty(w)
+        bu1 = np.empty(w)
+        bu2 = np.empty(w)
+        bk = np.empty(w)
+        n = np.zeros(w)
+        noise = np.empty(w)
+        for i in range(i0, i1):
+            r = r0 + i
+            base = np.uint64(r * cols + c0)
+            if has_noisy:
+                ns, nb = _shot_row(noisy[r, c0:c1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
+                _shot_rest(lam, u1, u2, n, small, ns, big, nb, bl, bu1, bu2, bk, base, fr, sq, s0, s1)
+            if has_exact:
+                for j in range(w):
+                    n[j] = n[j] + np.float64(exact[r, c0 + j])
+            for j in range(w):
+                n[j] = min(n[j], full_well)
+            if has_sf:  # uniforms, then Box-Muller: 25 % faster than one loop (measured)
+                for j in range(w):
+                    u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
+                for j in range(w):
+                    noise[j] = np.float64(sf[r, c0 + j]) * _normal_from(u1[j], u2[j])
+                for j in range(w):
+                    n[j] = n[j] + noise[j]
+            if has_row:
+                rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
+                for j in range(w):
+                    n[j] = n[j] + rowval
+            if has_col:
+                for j in range(w):
+                    n[j] = n[j] * gain[j] + colterm[j]
+            if want_e:
+                for j in range(w):
+                    out_e[i, j] = n[j]
+            if adc_on:
+                for j in range(w):
+                    v = np.rint(n[j] * k_adc + black)
+                    out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+            if not has_noisy:
+                n[:] = 0.0
+
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
                 col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, out_dn, out_e):
-        has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
-            flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
         fr = np.uint64(frame)
         sq = np.uint64(seq)
-        zero = np.uint64(0)
         w = c1 - c0
         h = r1 - r0
         colterm = np.zeros(w)
         gain = np.ones(w)
-        if has_col:
+        if flags[4]:
             for j in range(w):
                 c = c0 + j
                 colterm[j] = col_offset[c] + col_sigma[c] * _normal(c, fr, sq, keys[3, 0], keys[3, 1])
                 gain[j] = col_gain[c]
-        s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
         nblocks = (h + _ROWS_PER_BLOCK - 1) // _ROWS_PER_BLOCK
         for blk in numba.prange(nblocks):
-            lam = np.empty(w)
-            u1 = np.empty(w)
-            u2 = np.empty(w)
-            small = np.empty(w, np.int64)
-            big = np.empty(w, np.int64)
-            bl = np.empty(w)
-            bu1 = np.empty(w)
-            bu2 = np.empty(w)
-            bk = np.empty(w)
-            n = np.zeros(w)
-            noise = np.empty(w)
-            for i in range(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK)):
-                r = r0 + i
-                base = np.uint64(r * cols + c0)
-                if has_noisy:
-                    ns, nb = _shot_row(noisy[r, c0:c1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
-                    _shot_rest(lam, u1, u2, n, small, ns, big, nb, bl, bu1, bu2, bk, base, fr, sq, s0, s1)
-                if has_exact:
-                    for j in range(w):
-                        n[j] = n[j] + np.float64(exact[r, c0 + j])
-                for j in range(w):
-                    n[j] = min(n[j], full_well)
-                if has_sf:  # uniforms, then Box-Muller: 25 % faster than one loop (measured)
-                    for j in range(w):
-                        u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
-                    for j in range(w):
-                        noise[j] = np.float64(sf[r, c0 + j]) * _normal_from(u1[j], u2[j])
-                    for j in range(w):
-                        n[j] = n[j] + noise[j]
-                if has_row:
-                    rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
-                    for j in range(w):
-                        n[j] = n[j] + rowval
-                if has_col:
-                    for j in range(w):
-                        n[j] = n[j] * gain[j] + colterm[j]
-                if want_e:
-                    for j in range(w):
-                        out_e[i, j] = n[j]
-                if adc_on:
-                    for j in range(w):
-                        v = np.rint(n[j] * k_adc + black)
-                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
-                if not has_noisy:
-                    n[:] = 0.0
+            _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
+                         normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
+                         c1, cols, k_adc, black, top, out_dn, out_e)
 
 
 def generator_info() -> dict:
@@ -377,7 +402,7 @@ def _needs_compile() -> bool:
     except Exception:  # numba's internals moved: say it after the fact instead (see render)
         return True
     if not cached:
-        print("cmosnoise: compiling the frame kernel for this machine (once; about a minute) ...", file=sys.stderr, flush=True)
+        print("cmosnoise: compiling the frame kernel for this machine (once; about half a minute) ...", file=sys.stderr, flush=True)
     return True
 
 
