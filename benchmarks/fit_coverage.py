@@ -4,7 +4,7 @@
 It runs exactly that test's measurements and fits (its ``measure``, ``truth``, ``COMBOS``, ``STAGES`` and
 seeds: imported from the test, so the two cannot differ) in two processes, and prints, for each parameter
 and (sensor, temperature), how many of the 20 intervals hold the truth, and the source follower's mean
-(estimate - truth) / standard error. Two to three minutes on two cores.
+(estimate - truth) / standard error. About two minutes on two cores.
 
     python benchmarks/fit_coverage.py [--json docs/numbers/fit_coverage.json]
 """
@@ -13,11 +13,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
@@ -30,8 +28,7 @@ def main() -> None:
     args = ap.parse_args()
     tasks = [(preset, T, seed) for preset, T in t.COMBOS for seed in range(t.SEEDS)]
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
-        results = list(pool.map(t._fit_one, *zip(*tasks), chunksize=5))
+    results = t.run_fits(tasks)
     names = [n for stage in t.STAGES.values() for n in stage]
     combos = [f"{p or 'default'}@{T:g}" for p, T in t.COMBOS]
     hits = {n: {c: 0 for c in combos} for n in names}

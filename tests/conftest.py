@@ -10,14 +10,20 @@ import tempfile
 from dataclasses import dataclass
 
 # One numba compile cache per test session, empty at its start (set before anything imports numba). The
-# test of a first run (moved to the front below) compiles the kernels into it, as a user's first run does,
-# and every later test, in this process or a child, loads them: the suite compiles once instead of twice
-# (about 50 s on CI's two cores). A NUMBA_CACHE_DIR already set (a developer's lasting cache) is kept, and
-# the first-run test then makes an empty cache of its own.
+# suite runs in two pytest-xdist workers (pyproject's addopts), which start after this file has run in the
+# controlling process and so inherit the cache through the environment (CMOSNOISE_TEST_CACHE marks it as
+# the session's, not a developer's). Each worker's first test that renders a frame compiles the kernel
+# into it or loads what the other compiled (numba writes each entry whole), and every later test, in that
+# process or a child, loads it. The test of a first run (moved to the front below) compiles into the
+# session's cache while that is still empty, as a user's first run does; where the other worker got there
+# first, into an empty cache of its own. A NUMBA_CACHE_DIR already set (a developer's lasting cache) is
+# kept, and the first-run test then makes an empty cache of its own.
 SESSION_CACHE = None
-if not os.environ.get("NUMBA_CACHE_DIR"):
+if os.environ.get("CMOSNOISE_TEST_CACHE") and os.environ.get("NUMBA_CACHE_DIR") == os.environ["CMOSNOISE_TEST_CACHE"]:
+    SESSION_CACHE = os.environ["CMOSNOISE_TEST_CACHE"]  # an xdist worker: the controller's
+elif not os.environ.get("NUMBA_CACHE_DIR"):
     SESSION_CACHE = tempfile.mkdtemp(prefix="cmosnoise-numba-cache-")
-    os.environ["NUMBA_CACHE_DIR"] = SESSION_CACHE
+    os.environ["NUMBA_CACHE_DIR"] = os.environ["CMOSNOISE_TEST_CACHE"] = SESSION_CACHE
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
 # numba's target as the package sets it (engine/jit.py: the host's full vector width), before a test module
 # imports numba itself: this process and its children then key the compile cache alike
@@ -35,7 +41,7 @@ def pytest_collection_modifyitems(items):
 
 
 def pytest_sessionfinish(session):
-    if SESSION_CACHE is not None:
+    if SESSION_CACHE is not None and not hasattr(session.config, "workerinput"):  # the controller's, at the end
         shutil.rmtree(SESSION_CACHE, ignore_errors=True)
 
 #: number of standard errors a statistic may stray before a test fails.
