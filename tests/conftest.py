@@ -1,5 +1,6 @@
 """Shared helpers: every statistical tolerance comes from the estimator's sampling error."""
 
+import atexit
 import contextlib
 import io
 import os
@@ -24,6 +25,9 @@ if os.environ.get("CMOSNOISE_TEST_CACHE") and os.environ.get("NUMBA_CACHE_DIR") 
 elif not os.environ.get("NUMBA_CACHE_DIR"):
     SESSION_CACHE = tempfile.mkdtemp(prefix="cmosnoise-numba-cache-")
     os.environ["NUMBA_CACHE_DIR"] = os.environ["CMOSNOISE_TEST_CACHE"] = SESSION_CACHE
+    # removed when the process that made it exits: pytest's (or xdist's controlling) process, or a script
+    # that imports a test module (benchmarks/fit_coverage.py)
+    atexit.register(shutil.rmtree, SESSION_CACHE, True)
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
 # numba's target as the package sets it (engine/jit.py: the host's full vector width), before a test module
 # imports numba itself: this process and its children then key the compile cache alike
@@ -39,10 +43,6 @@ def pytest_collection_modifyitems(items):
     """The first-run test before every other: it needs the session's compile cache still empty."""
     items.sort(key=lambda item: item.name != FIRST_RUN_TEST)  # stable: the rest keep their order
 
-
-def pytest_sessionfinish(session):
-    if SESSION_CACHE is not None and not hasattr(session.config, "workerinput"):  # the controller's, at the end
-        shutil.rmtree(SESSION_CACHE, ignore_errors=True)
 
 #: number of standard errors a statistic may stray before a test fails.
 #: 5 sigma: a correct implementation fails about once in 1.7 million runs.
