@@ -114,6 +114,7 @@ if numba is not None:
     _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_candidate, _cold_log_accept = (
         _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_accept"))
     _uniform_pair, _normal_from, _exp = _h["uniform_pair"], _h["normal_from"], _h["exp"]
+    _ptrs_constants, _ptrs_candidate = _h["ptrs_constants"], _h["ptrs_candidate"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
 
     @numba.njit(fastmath=False, error_model="numpy")
@@ -161,7 +162,6 @@ if numba is not None:
 
     _ptrs_try_exact = _ptrs_try(_cold, _cold["ptrs_log_accept"], "never")  # the rare redo
     _ptrs_try_from6 = _ptrs_try(_h, _h["ptrs_log_accept_from6"], "always")
-    _ptrs_constants, _ptrs_candidate = _h["ptrs_constants"], _h["ptrs_candidate"]
     #: a try the branch-free pass leaves undecided (its log test met a count below 6)
     _REDO = -2.0
 
