@@ -2,15 +2,15 @@
 
 For the default sensor, ``paper-fig11-full`` and ``paper-fig9-vga``, each at
 25 and 65 C (the temperature changes the dark current, and with it the dark
-shot noise the readout fits take off: these are its two ends; 45 C gave
-the coverage of its neighbours in 60 more fits, and is left out to keep the
-suite within its 10 minutes), 20 sensors each are measured (a 48-frame dark stack, two short dark
-stacks, nine flat levels) and fitted. A true 95 % interval holds the value
-in at least 18 of 20 with probability 92.5 % only, so with some 70
-(parameter, sensor, temperature) checks a few would fall below 18 by
-chance; each check asks for 16 of 20 (a true 95 % interval falls below that
-with probability 0.3 %), and each stage's pooled misses must stay within 3
-standard deviations of 5 %.
+shot noise the readout fits take off: these are its two ends; 45 C gave the
+coverage of its neighbours in 60 more fits, and is left out to keep the
+suite within its 10 minutes), 20 sensors each are measured (a 48-frame dark
+stack, two short dark stacks, nine flat levels) and fitted. A true 95 %
+interval holds the value in at least 18 of 20 with probability 92.5 % only,
+so with some 70 (parameter, sensor, temperature) checks a few would fall
+below 18 by chance; each check asks for 16 of 20 (a true 95 % interval falls
+below that with probability 0.3 %), and each stage's pooled misses must stay
+within 3 standard deviations of 5 %.
 Sensors are 256 x 192 to keep the suite fast; the intervals scale with the
 pixel count, the coverage does not.
 
