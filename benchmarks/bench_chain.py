@@ -73,15 +73,9 @@ def cpu() -> dict:
             model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
     except OSError:
         pass
-    from cmosnoise.engine.jit import numba  # sets the vector width the package compiles with
+    from cmosnoise.engine import jit  # sets the vector width the package compiles with
 
-    features = set((os.environ.get("NUMBA_CPU_FEATURES") or "").split(","))
-    if not features - {""}:
-        import llvmlite.binding as ll
-
-        features = set(ll.get_host_cpu_features().flatten().split(","))
-    vectors = "AVX-512" if "+avx512f" in features else "AVX2" if "+avx2" in features else "SSE/other"
-    return {"cpu": model, "vectors": vectors, "numba": numba.__version__}
+    return {"cpu": model, "vectors": jit.vectors(), "numba": jit.numba.__version__}
 
 
 def _run(cmd: list[str]) -> None:

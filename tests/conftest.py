@@ -39,9 +39,15 @@ import pytest  # noqa: E402
 from cmosnoise import load_config  # noqa: E402
 
 
+#: the longest file (its fit round trip is some three minutes): started at once, on the other worker
+LONGEST_FILE = "test_fit_stages.py"
+
+
 def pytest_collection_modifyitems(items):
-    """The first-run test before every other: it needs the session's compile cache still empty."""
-    items.sort(key=lambda item: item.name != FIRST_RUN_TEST)  # stable: the rest keep their order
+    """The first-run test before every other (it needs the session's compile cache still empty), then the
+    longest file. xdist hands files to its two workers in this order (pyproject's ``--no-loadscope-reorder``):
+    the first-run test's file to one, the longest file to the other."""
+    items.sort(key=lambda item: (item.name != FIRST_RUN_TEST, item.path.name != LONGEST_FILE))  # stable
 
 
 #: number of standard errors a statistic may stray before a test fails.

@@ -290,7 +290,10 @@ def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path
                            env={**env, "NUMBA_CACHE_DIR": str(tmp_path / "empty")}, capture_output=True, text=True,
                            timeout=600)
     assert empty.stdout.split() == ["False", "0"], empty.stdout + empty.stderr  # nothing cached: never compiles
+    # this process and its children key numba's cache alike (conftest imported engine.jit first), so what one
+    # compiles the other loads; where this test's child compiled into the session's cache, this process loads it
+    key = "from cmosnoise.engine import kernel\nprint(repr(kernel._render.targetctx.codegen().magic_tuple()))\n"
+    child = subprocess.run([sys.executable, "-c", key], env=env, capture_output=True, text=True, timeout=600)
+    assert child.stdout.strip() == repr(kernel._render.targetctx.codegen().magic_tuple()), child.stdout + child.stderr
     if shared:
-        from cmosnoise.engine import kernel
-
         assert kernel.preload(), "this process keys numba's cache unlike its children: the suite would compile twice"

@@ -28,14 +28,27 @@ import os
 import sys
 
 
-def _widest_vectors() -> None:
-    if "numba" in sys.modules or os.environ.get("NUMBA_CPU_NAME") or os.environ.get("NUMBA_CPU_FEATURES"):
-        return  # too late to change, or the user's choice
+def host_features() -> str | None:
+    """The host CPU's features as LLVM names them (``+avx2,-avx512f,...``), or None where llvmlite cannot say."""
     try:
         import llvmlite.binding as ll
 
-        features = ll.get_host_cpu_features().flatten()
-    except Exception:  # no llvmlite (no numba), or a host LLVM cannot describe: leave numba's defaults
+        return ll.get_host_cpu_features().flatten()
+    except Exception:  # no llvmlite (no numba), or a host LLVM cannot describe
+        return None
+
+
+def vectors() -> str:
+    """The widest vectors numba compiles for in this process: ``"AVX-512"``, ``"AVX2"`` or ``"SSE/other"``."""
+    features = set((os.environ.get("NUMBA_CPU_FEATURES") or host_features() or "").split(","))
+    return "AVX-512" if "+avx512f" in features else "AVX2" if "+avx2" in features else "SSE/other"
+
+
+def _widest_vectors() -> None:
+    if "numba" in sys.modules or os.environ.get("NUMBA_CPU_NAME") or os.environ.get("NUMBA_CPU_FEATURES"):
+        return  # too late to change, or the user's choice
+    features = host_features()
+    if features is None:  # leave numba's defaults
         return
     if "+avx512f" in features.split(","):
         os.environ["NUMBA_CPU_FEATURES"] = features + ",-prefer-256-bit"
@@ -48,4 +61,4 @@ try:
 except ImportError:  # pragma: no cover - exercised where numba is missing
     numba = None
 
-__all__ = ["numba"]
+__all__ = ["numba", "host_features", "vectors"]

@@ -363,9 +363,10 @@ if numba is not None:
         sq = np.uint64(seq)
         w = c1 - c0
         h = r1 - r0
+        has_col = flags[4]
         colterm = np.zeros(w)
         gain = np.ones(w)
-        if flags[4]:
+        if has_col:
             for j in range(w):
                 c = c0 + j
                 colterm[j] = col_offset[c] + col_sigma[c] * _normal(c, fr, sq, keys[3, 0], keys[3, 1])
