@@ -164,35 +164,56 @@ def test_kernel_equals_the_numpy_implementation_on_any_threads_and_tiling(extra)
 
 
 @needs_numba
-def test_kernel_ptrs_decides_the_tries_whose_count_is_below_6_exactly():
-    """The kernel's branch-free PTRS pass takes loggam's Stirling series alone (exact from a count of 6 up)
-    and leaves the tries whose log test meets a lower count to an exact pass: means just above 10 reach it
-    often, and the frame still equals the NumPy implementation bit for bit."""
+@pytest.mark.parametrize("low, high, table_for", [(10.0, 14.0, None), (4500.0, 6000.0, 0.0)])
+def test_kernel_ptrs_takes_loggam_from_a_table_and_redoes_the_counts_past_it(low, high, table_for):
+    """The kernel's PTRS log test reads loggam(k + 1) from the plan's table (samplers.loggam_table).
+    Means just above 10: counts below 7, where loggam recurses, come from the table too. Means past the
+    table (forced here: a table for means up to 0 holds 4096 counts): each try whose log test meets such a
+    count is left undecided and redone exactly. Either way the frame equals the NumPy implementation bit for
+    bit."""
     from cmosnoise.engine import samplers
 
-    lam = np.random.default_rng(5).uniform(10.0, 14.0, (40, 50)).astype(np.float32)
+    lam = np.random.default_rng(5).uniform(low, high, (40, 50)).astype(np.float32)
     keys = np.array([[21, 22], [0, 0], [0, 0], [0, 0]], np.uint64)
     plan = kernel.FramePlan(shape=lam.shape, keys=keys, sequence=0, full_well_e=1e9, noisy_e=lam)
+    if table_for is not None:
+        plan.__dict__["loggam_table"] = samplers.loggam_table(table_for)  # what the cached property holds
+    table = plan.loggam_table
+    last = float(table.size - 1)
     stream, idx, lam64 = Stream((21, 22), 3), np.arange(lam.size, dtype=U), lam.ravel().astype(np.float64)
     u1, u2 = stream.uniforms(idx)
-    _, a, b, _, vr = samplers.ptrs_constants(lam64)
+    loglam, a, b, invalpha, vr = samplers.ptrs_constants(lam64)
     k, us, V = samplers.ptrs_candidate(lam64, a, b, u1, u2)
-    decided = ((us >= 0.07) & (V <= vr)) | (k < 0) | ((us < 0.013) & (V > us))
-    undecided = ~decided & (k < 6)
-    assert np.count_nonzero(undecided) >= 50  # first tries alone; the retries add more
-    left = np.array([kernel._ptrs_test(m, v1, v2) == kernel._REDO for m, v1, v2 in zip(lam64, u1, u2)])
-    np.testing.assert_array_equal(left, undecided)  # the branch-free pass leaves exactly those
+    log_test = ~(((us >= 0.07) & (V <= vr)) | (k < 0) | ((us < 0.013) & (V > us)))
+    past = log_test & (np.maximum(k, 0.0) + 1.0 > last)
+    if table_for is None:
+        assert np.count_nonzero(log_test & (k < 6)) >= 50 and not past.any()  # first tries alone
+    else:
+        assert np.count_nonzero(past) >= 200  # about a fifth of the first tries
+    left = np.array([kernel._ptrs_test(*c, kernel._ptrs_loggam(kc, table), last) == kernel._REDO
+                     for *c, kc in zip(lam64, loglam, a, b, fdmath.log(invalpha), vr, u1, u2, k)])
+    np.testing.assert_array_equal(left, past)  # the branch-free pass leaves exactly those
     raw, _ = kernel.render(plan, 3)
     np.testing.assert_array_equal(raw.ravel(), stream.poisson(lam64, idx).astype(np.float32))
 
 
-def test_loggam_is_its_stirling_series_from_7_up_and_not_below():
-    """What lets the kernel's branch-free PTRS pass drop loggam's product below 7 (and what makes it redo
-    those counts): the same bits from 7 up, other bits below, where numpy's recursion adds precision."""
-    x = np.arange(1.0, 20_001.0)
-    whole, series = fdmath.loggam(x), fdmath.loggam_stirling(x)
-    np.testing.assert_array_equal(whole[6:].view(U), series[6:].view(U))
-    assert np.all(whole[2:6] != series[2:6])  # 3 .. 6 (1 and 2 are 0 by definition)
+def test_loggam_table_holds_loggam_and_every_count_the_log_test_meets():
+    """table[n] is loggam(n), the same bits; it reaches past the highest count a log test can meet with
+    us >= 0.013 (k <= mean + 0.43 + (0.5 - 0.013)(2a/0.013 + b), numpy's constants), and it is shared."""
+    from cmosnoise.engine import samplers
+
+    for mean_max in (0.0, 9.9, 10.0, 350.0, 4096.0, 1e5, 3e6, np.inf):
+        table = samplers.loggam_table(mean_max)
+        assert table.size % 4096 == 0 and table.size <= samplers.TABLE_MAX and not table.flags.writeable
+        if mean_max < 2e6:
+            m = np.array(max(mean_max, 10.0))
+            _, a, b, _, _ = samplers.ptrs_constants(m)
+            assert m + 0.43 + (0.5 - 0.013) * (2 * a / 0.013 + b) + 1 < table.size - 1
+        else:
+            assert table.size == samplers.TABLE_MAX
+    n = np.arange(1.0, samplers.loggam_table(20_000.0).size)
+    np.testing.assert_array_equal(samplers.loggam_table(20_000.0)[1:].view(U), fdmath.loggam(n).view(U))
+    assert samplers.loggam_table(300.0) is samplers.loggam_table(310.0)
 
 
 def test_frame_k_alone_equals_frame_k_of_a_run():

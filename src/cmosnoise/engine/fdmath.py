@@ -110,22 +110,6 @@ def cos_turn(u):
     return where(q == 0.0, c, where(q == 1.0, -s, where(q == 2.0, -c, s)))
 
 
-def loggam_stirling(x0):
-    """ln Gamma(x0) for x0 >= 7: the Stirling series of numpy's ``random_loggam``.
-
-    Equal to :func:`loggam` bit for bit from 7 up (there loggam subtracts
-    ``log(1.0)``, which is 0 exactly); the fused kernel's branch-free PTRS
-    pass uses it alone and redoes the rare pixels whose count is below 6.
-    """
-    x2 = (1.0 / x0) * (1.0 / x0)
-    gl0 = -1.39243221690590e00
-    for a in (1.796443723688307e-01, -2.955065359477124e-02, 6.410256410256410e-03, -1.917526917526918e-03,
-              8.417508417508418e-04, -5.952380952380952e-04, 7.936507936507937e-04, -2.777777777777778e-03,
-              8.333333333333333e-02):
-        gl0 = gl0 * x2 + a
-    return gl0 / x0 + 0.5 * 1.8378770664093453e00 + (x0 - 0.5) * log(x0) - x0
-
-
 def loggam(x):
     """ln Gamma(x) for whole x >= 1 (numpy's ``random_loggam``: Stirling series, recursion below 7).
 
@@ -134,7 +118,13 @@ def loggam(x):
     """
     n = where(x < 7.0, floor(7.0 - x), 0.0)
     x0 = x + n
-    gl = loggam_stirling(x0)
+    x2 = (1.0 / x0) * (1.0 / x0)
+    gl0 = -1.39243221690590e00
+    for a in (1.796443723688307e-01, -2.955065359477124e-02, 6.410256410256410e-03, -1.917526917526918e-03,
+              8.417508417508418e-04, -5.952380952380952e-04, 7.936507936507937e-04, -2.777777777777778e-03,
+              8.333333333333333e-02):
+        gl0 = gl0 * x2 + a
+    gl = gl0 / x0 + 0.5 * 1.8378770664093453e00 + (x0 - 0.5) * log(x0) - x0
     # numpy subtracts log(x0 - i) for i = 1..n; one log of the product (exact: whole numbers below 2**53)
     prod = 1.0
     for i in range(1, 7):

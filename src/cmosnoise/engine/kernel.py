@@ -17,6 +17,7 @@ generator. ``fastmath`` is off: no fused multiply-add, no reordering.
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -59,6 +60,13 @@ class FramePlan:
     col_gain: np.ndarray | None = None
     adc: tuple[float, float, int] | None = None  #: (K DN/e-, black level DN, top code); None: float32 e-
 
+    @functools.cached_property
+    def loggam_table(self) -> np.ndarray:
+        """``loggam(n)`` for the counts PTRS's log test meets in this plan (:func:`samplers.loggam_table`)."""
+        if self.noisy_e is None:
+            return samplers.loggam_table(0.0)
+        return samplers.loggam_table(min(float(self.noisy_e.max()), self.normal_above_e))
+
 
 # ------------------------------------------------------------------ compiled helpers
 def _compiled(inline: str):
@@ -98,13 +106,11 @@ def _compiled(inline: str):
         space[as_name] = jit(types.FunctionType(f.__code__, g, as_name, f.__defaults__))
 
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
-            (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam_stirling", "loggam"]),
-            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_accept"])]
+            (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
+            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_test", "ptrs_log_accept"])]
     for module, names in plan:
         for name in names:
             compile_as(module, name, name)
-    # PTRS's log test with loggam's Stirling series alone: the same bits where the count is 6 or more
-    compile_as(samplers, "ptrs_log_accept", "ptrs_log_accept_from6", loggam=space["loggam_stirling"])
     return space
 
 
@@ -113,8 +119,8 @@ if numba is not None:
     _cold = _compiled("never")  # for the tries past the vectorized ones, a few pixels in 10 000
     _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_candidate, _cold_log_accept = (
         _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_accept"))
-    _uniform_pair, _normal_from, _exp = _h["uniform_pair"], _h["normal_from"], _h["exp"]
-    _ptrs_constants, _ptrs_candidate = _h["ptrs_constants"], _h["ptrs_candidate"]
+    _uniform_pair, _normal_from, _exp, _log = _h["uniform_pair"], _h["normal_from"], _h["exp"], _h["log"]
+    _ptrs_constants, _ptrs_candidate, _ptrs_log_test = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_test"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
 
     @numba.njit(fastmath=False, error_model="numpy")
@@ -142,45 +148,51 @@ if numba is not None:
     _JIT = dict(fastmath=False, error_model="numpy")
     _ROWS_PER_BLOCK = 8
 
-    def _ptrs_try(helpers, log_accept, inline):
-        """One whole PTRS try, branch-free (samplers.ptrs_try), with these helpers and this log test.
-
-        The try returns (the count if accepted, else -1; the candidate k;
-        whether the quick tests decided it without the log test).
-        """
-        constants, candidate = helpers["ptrs_constants"], helpers["ptrs_candidate"]
-
-        @numba.njit(inline=inline, **_JIT)
-        def one(m, u1, u2):
-            loglam, a, b, invalpha, vr = constants(m)
-            k, us, V = candidate(m, a, b, u1, u2)
-            quick = (us >= 0.07) & (V <= vr)
-            reject = (k < 0.0) | ((us < 0.013) & (V > us))
-            ok = quick | (~reject & log_accept(m, loglam, a, b, invalpha, k, us, V))
-            return (k if ok else -1.0), k, quick | reject
-        return one
-
-    _ptrs_try_exact = _ptrs_try(_cold, _cold["ptrs_log_accept"], "never")  # the rare redo
-    _ptrs_try_from6 = _ptrs_try(_h, _h["ptrs_log_accept_from6"], "always")
-    #: a try the branch-free pass leaves undecided (its log test met a count below 6)
+    #: a try the branch-free pass leaves undecided (its log test met a count past the loggam table)
     _REDO = -2.0
 
     @numba.njit(inline="always", **_JIT)
-    def _ptrs_test(m, u1, u2):
-        """One whole PTRS try, branch-free: the count if accepted, -1 if rejected, _REDO if undecided.
+    def _ptrs_count(m, a, b, u1, u2):
+        """A PTRS try's candidate count: the first of the try's passes, which store it."""
+        return _ptrs_candidate(m, a, b, u1, u2)[0]
 
-        Its log test takes loggam's Stirling series alone, one log fewer than
-        the whole loggam and the same bits for counts from 6 up; a try whose
-        log test meets a count below 6 (rare from a mean of 10) is _REDO, for
-        :func:`_ptrs_test_exact`.
+    @numba.njit(inline="always", **_JIT)
+    def _ptrs_loggam(k, table):
+        """``loggam(max(k, 0) + 1)`` from ``table`` (:func:`samplers.loggam_table`), the table's last entry past it.
+
+        Its own pass, a load per try: LLVM does not vectorize a loop that
+        indexes a table, so the passes on either side are kept free of it.
         """
-        r, k, decided = _ptrs_try_from6(m, u1, u2)
-        return r if (decided | (k >= 6.0)) else _REDO
+        return table[np.uint32(min(max(k, 0.0) + 1.0, np.float64(table.size - 1)))]
+
+    @numba.njit(inline="always", **_JIT)
+    def _ptrs_test(m, loglam, a, b, log_invalpha, vr, u1, u2, loggam_k1, last):
+        """One whole PTRS try, branch-free (samplers.ptrs_try), the pixel's constants given: the count if
+        accepted, -1 if rejected, _REDO if undecided.
+
+        ``loggam_k1`` is :func:`_ptrs_loggam`'s: a load instead of loggam's
+        log, two divisions and series, the same bits. A try whose log test
+        meets a count past the table's ``last`` (a few in a million) is
+        _REDO, for :func:`_ptrs_test_exact`.
+        """
+        k, us, V = _ptrs_candidate(m, a, b, u1, u2)
+        quick = (us >= 0.07) & (V <= vr)
+        reject = (k < 0.0) | ((us < 0.013) & (V > us))
+        kk = max(k, 0.0)
+        ok = quick | (~reject & _ptrs_log_test(m, loglam, a, b, log_invalpha, kk, us, V, loggam_k1))
+        decided = quick | reject | (kk + 1.0 <= last)
+        return (k if ok else -1.0) if decided else _REDO
 
     @numba.njit(**_JIT)
     def _ptrs_test_exact(m, u1, u2):
-        """One whole PTRS try with the whole loggam: the count if accepted, else -1."""
-        return _ptrs_try_exact(m, u1, u2)[0]
+        """One whole PTRS try with loggam computed (samplers.ptrs_try): the count if accepted, else -1."""
+        loglam, a, b, invalpha, vr = _cold_constants(m)
+        k, us, V = _cold_candidate(m, a, b, u1, u2)
+        if us >= 0.07 and V <= vr:
+            return k
+        if k < 0.0 or (us < 0.013 and V > us):
+            return -1.0
+        return k if _cold_log_accept(m, loglam, a, b, invalpha, k, us, V) else -1.0
 
     @numba.njit(inline="always", **_JIT)
     def _shot_row(noisy_row, base, frame, seq, k0, k1, lam, u1, u2, res, small, big, normal_above):
@@ -248,13 +260,18 @@ if numba is not None:
                 break
 
     @numba.njit(inline="always", **_JIT)
-    def _shot_rest(lam, u1, u2, res, small, ns, big, nb, bl, bu1, bu2, bk, base, frame, seq, k0, k1):
+    def _shot_rest(lam, u1, u2, res, small, ns, big, nb, buf, table, base, frame, seq, k0, k1):
         """The pixels the first pass left: inversion below 10 in SIMD lanes; PTRS: all of try 0, tries 1 and 2, then one by one.
 
-        Pixels are copied into the contiguous buffers ``bl``, ``bu1``,
-        ``bu2``, ``bk`` before each branch-free pass: LLVM vectorizes a pass
-        over contiguous memory, not one through an index list.
+        Pixels are copied into the contiguous rows of ``buf`` (10, width)
+        before the branch-free passes: LLVM vectorizes a pass over contiguous
+        memory, not one through an index list. PTRS's per-pixel constants
+        (two logs, a square root, two divisions) are taken once there, not
+        at every try.
         """
+        bl, bu1, bu2, bk, bll, ba, bb, blia, bvr, bg = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6],
+                                                        buf[7], buf[8], buf[9])
+        last = np.float64(table.size - 1)
         m = np.empty(_LANES)
         u = np.empty(_LANES)
         got = np.empty(_LANES)
@@ -271,13 +288,24 @@ if numba is not None:
             bl[t] = lam[j]
             bu1[t] = u1[j]
             bu2[t] = u2[j]
+        for t in range(nb):
+            loglam, a, b, invalpha, vr = _ptrs_constants(bl[t])
+            bll[t] = loglam
+            ba[t] = a
+            bb[t] = b
+            blia[t] = _log(invalpha)
+            bvr[t] = vr
         attempt = np.uint64(0)
         while nb:  # PTRS: the whole of try 0 where the quick test did not accept, then tries 1 and 2
             if attempt > 0:
                 for t in range(nb):
                     bu1[t], bu2[t] = _uniform_pair(base + np.uint64(big[t]), frame, seq, attempt, k0, k1)
-            for t in range(nb):  # one whole try, branch-free
-                bk[t] = _ptrs_test(bl[t], bu1[t], bu2[t])
+            for t in range(nb):  # one whole try, branch-free, in three passes
+                bk[t] = _ptrs_count(bl[t], ba[t], bb[t], bu1[t], bu2[t])
+            for t in range(nb):
+                bg[t] = _ptrs_loggam(bk[t], table)
+            for t in range(nb):
+                bk[t] = _ptrs_test(bl[t], bll[t], ba[t], bb[t], blia[t], bvr[t], bu1[t], bu2[t], bg[t], last)
             for t in range(nb):  # the few it left undecided, exactly
                 if bk[t] == _REDO:
                     bk[t] = _ptrs_test_exact(bl[t], bu1[t], bu2[t])
@@ -288,6 +316,11 @@ if numba is not None:
                 res[j] = bk[t]
                 big[nf] = j
                 bl[nf] = bl[t]
+                bll[nf] = bll[t]
+                ba[nf] = ba[t]
+                bb[nf] = bb[t]
+                blia[nf] = blia[t]
+                bvr[nf] = bvr[t]
                 nf += 1 if bk[t] < 0.0 else 0
             nb = nf
             if attempt == _VECTOR_TRIES:
@@ -297,7 +330,7 @@ if numba is not None:
 
     @numba.njit(**_JIT)
     def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
-                     gain, keys, fr, sq, r0, c0, c1, cols, k_adc, black, top, out_dn, out_e):
+                     gain, keys, fr, sq, r0, c0, c1, cols, k_adc, black, top, loggam_table, out_dn, out_e):
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
 
         Compiled on its own, not inside :func:`_render`'s parallel loop: numba's
@@ -315,10 +348,7 @@ if numba is not None:
         u2 = np.empty(w)
         small = np.empty(w, np.int64)
         big = np.empty(w, np.int64)
-        bl = np.empty(w)
-        bu1 = np.empty(w)
-        bu2 = np.empty(w)
-        bk = np.empty(w)
+        buf = np.empty((10, w))
         n = np.zeros(w)
         noise = np.empty(w)
         for i in range(i0, i1):
@@ -326,7 +356,7 @@ if numba is not None:
             base = np.uint64(r * cols + c0)
             if has_noisy:
                 ns, nb = _shot_row(noisy[r, c0:c1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
-                _shot_rest(lam, u1, u2, n, small, ns, big, nb, bl, bu1, bu2, bk, base, fr, sq, s0, s1)
+                _shot_rest(lam, u1, u2, n, small, ns, big, nb, buf, loggam_table, base, fr, sq, s0, s1)
             if has_exact:
                 for j in range(w):
                     n[j] = n[j] + np.float64(exact[r, c0 + j])
@@ -358,7 +388,7 @@ if numba is not None:
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
-                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, out_dn, out_e):
+                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, loggam_table, out_dn, out_e):
         fr = np.uint64(frame)
         sq = np.uint64(seq)
         w = c1 - c0
@@ -375,7 +405,7 @@ if numba is not None:
         for blk in numba.prange(nblocks):
             _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
                          normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
-                         c1, cols, k_adc, black, top, out_dn, out_e)
+                         c1, cols, k_adc, black, top, loggam_table, out_dn, out_e)
 
 
 def generator_info() -> dict:
@@ -392,6 +422,8 @@ def generator_info() -> dict:
 
 _DUMMY2 = np.zeros((1, 1), np.float32)
 _DUMMY1 = np.zeros(1)
+_DUMMY_TABLE = np.zeros(1)
+_DUMMY_TABLE.flags.writeable = False  # as the tables are: numba types a read-only array apart
 
 
 def _needs_compile() -> bool:
@@ -422,7 +454,7 @@ def preload() -> bool:
         return False
     flags = np.zeros(7, np.bool_)
     args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
-            np.zeros((4, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0,
+            np.zeros((4, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0, _DUMMY_TABLE,
             np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
     try:
@@ -468,7 +500,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
             plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
             plan.col_gain if plan.col_gain is not None else _DUMMY1,
             plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, float(k_adc), float(black), float(top),
-            out_dn, out_e)
+            plan.loggam_table, out_dn, out_e)
     elapsed = time.perf_counter() - t0
     if first and elapsed > 2.0:  # a cache load takes well under a second; this was a compile
         print(f"cmosnoise: compiled the frame kernel in {elapsed:.0f} s; later runs reuse it", file=sys.stderr, flush=True)

@@ -17,6 +17,7 @@ fused kernel (:mod:`.kernel`) reproduces these results bit for bit.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,12 +74,49 @@ def ptrs_candidate(lam, a, b, u1, u2):
     return k, us, V
 
 
+def ptrs_log_test(lam, loglam, a, b, log_invalpha, kk, us, V, loggam_k1):
+    """PTRS's final test given ``log(invalpha)`` and ``loggam(kk + 1)``, both functions of the pixel's mean and
+    count alone (the fused kernel takes the first once per pixel and the second from :func:`loggam_table`)."""
+    lhs = log(V) + log_invalpha - log(a / (us * us) + b)
+    rhs = -lam + kk * loglam - loggam_k1
+    return lhs <= rhs
+
+
 def ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V):
     """PTRS's final test (after the quick accept and the rejection of k < 0 and the corners)."""
     kk = np.maximum(k, 0.0)
-    lhs = log(V) + log(invalpha) - log(a / (us * us) + b)
-    rhs = -lam + kk * loglam - loggam(kk + 1.0)
-    return lhs <= rhs
+    return ptrs_log_test(lam, loglam, a, b, log(invalpha), kk, us, V, loggam(kk + 1.0))
+
+
+#: the counts a loggam table holds are rounded up to a multiple of this (so similar scenes share one table) ...
+_TABLE_STEP = 4096
+#: ... and never more than this many (16 MB); a log test meeting a higher count computes loggam instead
+TABLE_MAX = 1 << 21
+
+
+@functools.lru_cache(maxsize=4)
+def _loggam_table(size: int) -> np.ndarray:
+    n = np.arange(size, dtype=np.float64)
+    n[0] = 1.0  # loggam(0) is not defined and never asked for: counts start at 0, so n = k + 1 at 1
+    table = loggam(n)
+    table.flags.writeable = False
+    return table
+
+
+def loggam_table(mean_max: float) -> np.ndarray:
+    """``table[n] = loggam(n)`` (the same bits) for every count PTRS's log test meets at means up to ``mean_max``.
+
+    A try reaches the log test only with ``us >= 0.013`` (or, in about one
+    try in 10 000, with ``V <= us`` below it), so its count is within
+    ``(2 a / 0.013 + b) / 2 + 1``, under ``6.2 sqrt(mean) + 2``, of the
+    mean; the table goes to ``mean_max + 8 sqrt(mean_max) + 64``, rounded up
+    to a multiple of 4096 and at most :data:`TABLE_MAX` counts. float64,
+    read-only, shared between calls of the same size.
+    """
+    top = max(float(mean_max), 0.0)
+    need = top + 8.0 * np.sqrt(top) + 64.0 if np.isfinite(top) else np.inf
+    size = TABLE_MAX if need >= TABLE_MAX else int(-(-need // _TABLE_STEP)) * _TABLE_STEP
+    return _loggam_table(min(size, TABLE_MAX))
 
 
 def ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2):
