@@ -172,7 +172,7 @@ if numba is not None:
 
         ``loggam_k1`` is :func:`_ptrs_loggam`'s: a load instead of loggam's
         log, two divisions and series, the same bits. A try whose log test
-        meets a count past the table's ``last`` (a few in a million) is
+        meets a count past the table's ``last`` (about one in a million) is
         _REDO, for :func:`_ptrs_test_exact`.
         """
         k, us, V = _ptrs_candidate(m, a, b, u1, u2)
