@@ -59,6 +59,19 @@ def against_reference(fn, frames: int, repeats: int, reference, ref_frames: int)
     return t_fn, min(t_ref, per_frame(reference, ref_frames))
 
 
+def numpy_reference(mean_e: np.ndarray, k_gain: float):
+    """The reference: ``fn(k)`` draws a frame of Poisson charge on ``mean_e`` (e-), adds Gaussian read noise
+    (2 e-) and quantizes (``k_gain`` DN/e-, black level 64, 12 bits) to uint16, with NumPy's generator."""
+    mean = mean_e.astype(np.float64)
+    rng = np.random.default_rng(0)
+
+    def reference(_k):
+        n = rng.poisson(mean) + rng.normal(0.0, 2.0, mean.shape)
+        return np.clip(np.rint(n * k_gain + 64), 0, 4095).astype(np.uint16)
+
+    return reference
+
+
 def cpu() -> dict:
     """The processor the ratios belong to: its model and the widest vectors numba compiles for here.
 
@@ -103,14 +116,7 @@ def main() -> None:
     t_expose = time.perf_counter() - t0
     on = [k for k, v in sensor.stages_on().items() if v]
 
-    mean = shot.mean_charge_e.astype(np.float64)
-    k_gain = sensor.transfer.gain_dn_per_e
-    rng = np.random.default_rng(0)
-
-    def reference(_k):
-        n = rng.poisson(mean) + rng.normal(0.0, 2.0, mean.shape)
-        return np.clip(np.rint(n * k_gain + 64), 0, 4095).astype(np.uint16)
-
+    reference = numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)
     import numba
 
     shot.frame(0)  # compile or load the kernel outside the timing

@@ -9,7 +9,7 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
     python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
-``speed`` (and ``speed_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by
+``speed`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by
 the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes long, never recomputed by tests); ``sweep_fig9`` is
 deterministic but takes minutes, so the tests check its stored data instead. The tests check that every
 README block is the rendering of its JSON, and recompute the deterministic
@@ -114,6 +114,27 @@ def render_speed(d: dict) -> str:
                   f"(target 0.4) and {two:.2f} on two (target 0.25); `simulate`, TIFF writing and run statistics "
                   f"included, at {further['ratio']:.2f} per further frame and {cli['ratio']:.2f} per frame of the "
                   f"whole 50-frame command, start-up included (target 0.5)."]
+    return "\n".join(lines)
+
+
+def render_kernel_parts(d: dict) -> str:
+    lines = [f"Where a frame of the kernel goes on that CPU ({d['cpu']}, {d['vectors']} vectors, numba {d['numba']}; "
+             f"`{d['command']}`), one thread, the photo at 1920 x 1080:", "",
+             "| the kernel with | ms/frame |", "|---|---|"]
+    lines += [f"| {row['label']} | {row['ms']:.1f} |" for row in d["parts"]]
+    lines += ["", "The generator scheme's building blocks, the kernel's own compiled helpers, each alone over "
+              "1920 x 1080 values on one thread:", "", "| block | ms/frame |", "|---|---|"]
+    lines += [f"| {row['label']} | {row['ms']:.1f} |" for row in d["blocks"]]
+    floor, ref, whole = d["floor_ms"], d["ref_ms"], d["whole_ms"]
+    budget = 0.4 * ref
+    left = (f"would leave {budget - floor:.0f} ms for them" if budget >= floor else
+            f"is {floor - budget:.0f} ms below it already")
+    lines += ["", f"Shot noise's first pass, the source follower's Philox block and normal, and the kernel with "
+              f"nothing but the ADC ({d['adc_ms']:.1f} ms) add up to {floor:.0f} ms: what the scheme of MODEL.md "
+              f"section 1 costs here before any PTRS retry or inversion, {floor / ref:.2f} of the reference's "
+              f"{ref:.0f} ms timed in the same run. The PTRS retries and the inversion take the other "
+              f"{whole - floor:.0f} ms of the whole kernel's {whole:.0f} ms; the one-thread target of 0.4 "
+              f"({budget:.0f} ms) {left}."]
     return "\n".join(lines)
 
 
@@ -337,6 +358,7 @@ SECTIONS = {
     "dark_budget": (compute_dark_budget, render_dark_budget),
     "speed": (None, render_speed),
     "speed_avx2": (None, render_speed),
+    "kernel_parts_avx2": (None, render_kernel_parts),
     "explore": (None, render_explore),
     "sweep_fig9": (compute_sweep_fig9, render_sweep_fig9),
     "sweep_speed": (None, render_sweep_speed),
@@ -348,6 +370,7 @@ SECTIONS = {
 #: speed on a CPU with AVX-512 and on one with AVX2 only: run the one that fits the machine you measure on
 BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "speed_avx2": ["bench_chain.py", "--json", "speed_avx2.json"],
+              "kernel_parts_avx2": ["kernel_parts.py", "--json", "kernel_parts_avx2.json"],
               "explore": ["bench_explore.py", "--repeats", "10", "--json", "explore.json", "--screenshot", "../img/explore.png"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
               "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"],
