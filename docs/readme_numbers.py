@@ -9,11 +9,11 @@ Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
     python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
     python docs/readme_numbers.py images               # the README's pictures, into docs/img
 
-``speed`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and ``fit_coverage`` are measured by
-the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes long, never recomputed by tests); ``sweep_fig9`` is
-deterministic but takes minutes, so the tests check its stored data instead. The tests check that every
-README block is the rendering of its JSON, and recompute the deterministic
-sections (``tests/test_readme_numbers.py``), so the README cannot drift.
+``speed`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and
+``fit_coverage`` are measured by the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes
+long, never recomputed by tests); ``sweep_fig9`` is deterministic but takes minutes, so the tests check its
+stored data instead. The tests check that every README block is the rendering of its JSON, and recompute the
+deterministic sections (``tests/test_readme_numbers.py``), so the README cannot drift.
 """
 
 from __future__ import annotations

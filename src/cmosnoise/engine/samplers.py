@@ -106,8 +106,8 @@ def _loggam_table(size: int) -> np.ndarray:
 def loggam_table(mean_max: float) -> np.ndarray:
     """``table[n] = loggam(n)`` (the same bits) for every count PTRS's log test meets at means up to ``mean_max``.
 
-    A try reaches the log test only with ``us >= 0.013`` (or, in about one
-    try in 10 000, with ``V <= us`` below it), so its count is within
+    A try reaches the log test only with ``us >= 0.013`` (or, in 1.7 tries
+    in 10 000, with ``V <= us`` below it), so its count is within
     ``(2 a / 0.013 + b) / 2 + 1``, under ``6.2 sqrt(mean) + 2``, of the
     mean; the table goes to ``mean_max + 8 sqrt(mean_max) + 64``, rounded up
     to a multiple of 4096 and at most :data:`TABLE_MAX` counts. float64,
