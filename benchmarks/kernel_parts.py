@@ -26,11 +26,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import time
 
 import numpy as np
 
-from bench_chain import cpu, numpy_reference, per_frame
+from bench_chain import best_fps, cpu, numpy_reference, per_frame
 from cmosnoise import Sensor, load_config
 from cmosnoise.engine import kernel
 from cmosnoise.engine.jit import numba
@@ -39,18 +38,14 @@ _JIT = dict(fastmath=False, error_model="numpy")
 
 
 def best_ms(fn, repeats: int) -> float:
+    """The best of ``repeats`` calls of ``fn()``, in ms, after one call that compiles or warms it."""
     fn()
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return 1000 * best
+    return 1000 / best_fps(lambda _k: fn(), 1, repeats)
 
 
 def kernel_ms(plan: kernel.FramePlan, repeats: int) -> float:
-    frame = iter(range(10**9))
-    return best_ms(lambda: kernel.render(plan, next(frame)), repeats)
+    kernel.render(plan, 0)
+    return 1000 / best_fps(lambda k: kernel.render(plan, k), 1, repeats)
 
 
 def building_blocks(plan: kernel.FramePlan, repeats: int) -> list[tuple[str, float]]:

@@ -107,7 +107,8 @@ def _compiled(inline: str):
 
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
             (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
-            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_test", "ptrs_log_accept"])]
+            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
+                        "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
     for module, names in plan:
         for name in names:
             compile_as(module, name, name)
@@ -117,10 +118,11 @@ def _compiled(inline: str):
 if numba is not None:
     _h = _compiled("always")
     _cold = _compiled("never")  # for the tries past the vectorized ones, a few pixels in 10 000
-    _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_candidate, _cold_log_accept = (
-        _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_log_accept"))
+    _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_ptrs_try = (
+        _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_try"))
     _uniform_pair, _normal_from, _exp, _log = _h["uniform_pair"], _h["normal_from"], _h["exp"], _h["log"]
     _ptrs_constants, _ptrs_candidate, _ptrs_log_test = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_test"]
+    _ptrs_quick_accept, _ptrs_early_reject = _h["ptrs_quick_accept"], _h["ptrs_early_reject"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
 
     @numba.njit(fastmath=False, error_model="numpy")
@@ -131,18 +133,14 @@ if numba is not None:
 
     @numba.njit(fastmath=False, error_model="numpy")
     def _ptrs_from(lam, index, frame, seq, k0, k1, attempt):
-        """PTRS from try ``attempt`` on (samplers.Stream.poisson's loop, numpy's early exits); a rare path, its
+        """PTRS from try ``attempt`` on (samplers.Stream.poisson's loop of samplers.ptrs_try); a rare path, its
         helpers called, not inlined."""
         loglam, a, b, invalpha, vr = _cold_constants(lam)
         while True:
             u1, u2 = _cold_uniform_pair(index, frame, seq, attempt, k0, k1)
             attempt += np.uint64(1)
-            k, us, V = _cold_candidate(lam, a, b, u1, u2)
-            if us >= 0.07 and V <= vr:
-                return k
-            if k < 0.0 or (us < 0.013 and V > us):
-                continue
-            if _cold_log_accept(lam, loglam, a, b, invalpha, k, us, V):
+            k, ok = _cold_ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2)
+            if ok:
                 return k
 
     _JIT = dict(fastmath=False, error_model="numpy")
@@ -153,7 +151,8 @@ if numba is not None:
 
     @numba.njit(inline="always", **_JIT)
     def _ptrs_count(m, a, b, u1, u2):
-        """A PTRS try's candidate count: the first of the try's passes, which store it."""
+        """A PTRS try's candidate count: the first of the try's passes, which store it (the last pass takes the
+        candidate again: a division more per try, and the candidate's arithmetic kept in one place)."""
         return _ptrs_candidate(m, a, b, u1, u2)[0]
 
     @numba.njit(inline="always", **_JIT)
@@ -176,8 +175,7 @@ if numba is not None:
         _REDO, for :func:`_ptrs_test_exact`.
         """
         k, us, V = _ptrs_candidate(m, a, b, u1, u2)
-        quick = (us >= 0.07) & (V <= vr)
-        reject = (k < 0.0) | ((us < 0.013) & (V > us))
+        quick, reject = _ptrs_quick_accept(us, V, vr), _ptrs_early_reject(k, us, V)
         kk = max(k, 0.0)
         ok = quick | (~reject & _ptrs_log_test(m, loglam, a, b, log_invalpha, kk, us, V, loggam_k1))
         decided = quick | reject | (kk + 1.0 <= last)
@@ -187,12 +185,8 @@ if numba is not None:
     def _ptrs_test_exact(m, u1, u2):
         """One whole PTRS try with loggam computed (samplers.ptrs_try): the count if accepted, else -1."""
         loglam, a, b, invalpha, vr = _cold_constants(m)
-        k, us, V = _cold_candidate(m, a, b, u1, u2)
-        if us >= 0.07 and V <= vr:
-            return k
-        if k < 0.0 or (us < 0.013 and V > us):
-            return -1.0
-        return k if _cold_log_accept(m, loglam, a, b, invalpha, k, us, V) else -1.0
+        k, ok = _cold_ptrs_try(m, loglam, a, b, invalpha, vr, u1, u2)
+        return k if ok else -1.0
 
     @numba.njit(inline="always", **_JIT)
     def _shot_row(noisy_row, base, frame, seq, k0, k1, lam, u1, u2, res, small, big, normal_above):
@@ -213,7 +207,7 @@ if numba is not None:
             u2[j] = v2
             loglam, a, b, invalpha, vr = _ptrs_constants(m)
             k, us, V = _ptrs_candidate(m, a, b, v1, v2)
-            quick = (us >= 0.07) & (V <= vr) & (m >= _PTRS_FROM)
+            quick = _ptrs_quick_accept(us, V, vr) & (m >= _PTRS_FROM)
             res[j] = k if quick else -1.0
         if normal_above < np.inf:
             for j in range(w):

@@ -74,6 +74,16 @@ def ptrs_candidate(lam, a, b, u1, u2):
     return k, us, V
 
 
+def ptrs_quick_accept(us, V, vr):
+    """PTRS's quick acceptance of a candidate, before any log (numpy's first test)."""
+    return (us >= 0.07) & (V <= vr)
+
+
+def ptrs_early_reject(k, us, V):
+    """PTRS's rejection of a negative candidate and of the corners, before any log (numpy's second test)."""
+    return (k < 0.0) | ((us < 0.013) & (V > us))
+
+
 def ptrs_log_test(lam, loglam, a, b, log_invalpha, kk, us, V, loggam_k1):
     """PTRS's final test given ``log(invalpha)`` and ``loggam(kk + 1)``, both functions of the pixel's mean and
     count alone (the fused kernel takes the first once per pixel and the second from :func:`loggam_table`)."""
@@ -122,8 +132,7 @@ def loggam_table(mean_max: float) -> np.ndarray:
 def ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2):
     """One PTRS try, vectorized: (k, accepted), numpy's order of tests."""
     k, us, V = ptrs_candidate(lam, a, b, u1, u2)
-    quick = (us >= 0.07) & (V <= vr)
-    reject = (k < 0.0) | ((us < 0.013) & (V > us))
+    quick, reject = ptrs_quick_accept(us, V, vr), ptrs_early_reject(k, us, V)
     return k, quick | (~reject & ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V))
 
 
