@@ -102,8 +102,12 @@ def _set(page, key, value, kind="range"):
     page.eval_on_selector(sel, f"(e, v) => {{ e.value = v; e.dispatchEvent(new Event('{event}')); }}", str(value))
 
 
+#: what the page sends with every request that does work (the server refuses requests without it)
+PAGE_HEADERS = {"Content-Type": "application/json", "X-Cmosnoise": "1"}
+
+
 def _post(url, body: bytes, headers=None):
-    req = urllib.request.Request(url, data=body, headers=headers or {}, method="POST")
+    req = urllib.request.Request(url, data=body, headers={**PAGE_HEADERS, **(headers or {})}, method="POST")
     try:
         with urllib.request.urlopen(req, timeout=60) as r:
             return r.status, r.read(), dict(r.headers)
@@ -223,6 +227,8 @@ def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
     conn.putrequest("POST", "/api/upload")
     conn.putheader("Content-Length", str(51 * 10**6))
     conn.putheader("X-Filename", "big.png")
+    conn.putheader("X-Cmosnoise", "1")
+    conn.putheader("Content-Type", "application/octet-stream")
     conn.endheaders()
     conn.send(b"x" * 1000)
     resp = conn.getresponse()
@@ -233,7 +239,8 @@ def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
 
     buf = io.BytesIO()
     Image.fromarray(np.zeros((9000, 8000), np.uint8)).save(buf, format="PNG")
-    status, body, _ = _post(server + "api/upload", buf.getvalue(), {"X-Filename": "bomb.png"})
+    status, body, _ = _post(server + "api/upload", buf.getvalue(), {"X-Filename": "bomb.png",
+                                                                        "Content-Type": "application/octet-stream"})
     assert status == 413 and "8000 x 9000 pixels" in json.loads(body)["error"]
     # a path instead of a scene, bad JSON, an invalid value, a too large picture: 4xx with one line
     cfg = json.loads(urllib.request.urlopen(server + "api/meta").read())["base"]

@@ -16,18 +16,31 @@ the same picture, and with one parameter changed their difference is that
 parameter's effect alone (common random numbers, MODEL.md section 1).
 
 Safety: it binds 127.0.0.1 unless told otherwise; requests must name a
-loopback host (or the one given with ``--host``); request bodies, uploads,
-decoded images, sensor size and output size are capped; the page never sends
-a path (scenes are built-in names or uploads the server stored in its own
-temporary folder); a Content-Security-Policy allows only the page's origin.
-Bad requests get a 4xx with a one-line reason.
+loopback host (or the one given with ``--host``). A request that does work
+(every POST) must come from the page itself: ``Sec-Fetch-Site`` same-origin
+(or absent), an ``Origin`` (if sent) equal to the page's, the custom header
+``X-Cmosnoise: 1`` that a cross-site page cannot send without a CORS
+preflight this server never grants, and the content type the endpoint takes
+(``application/json``; an upload ``application/octet-stream``); anything else
+is refused with 403 or 415 before any work. Request bodies (and the time to
+send them), request headers (the time to send them), uploads (each, their
+number and their total bytes: the oldest go first), decoded images (all
+frames and pages, from the header), sensor size, output size and the sensor
+cache (weighed in bytes against the memory this machine has) are capped;
+the page never sends a path (scenes are built-in names or uploads the server
+stored in its own temporary folder); a Content-Security-Policy allows only
+the page's origin. Bad requests get a 4xx with a one-line reason; the
+server's own warnings are rate-limited, so a flood of bad connections cannot
+fill the log.
 """
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import io
 import json
+import logging
 import secrets
 import tempfile
 import threading
@@ -41,6 +54,7 @@ import numpy as np
 from ..config import Config, format_validation_error
 from ..config.explain import fields
 from ..config.loading import load_yaml_text, preset_data, preset_names, resolve_config
+from .. import inputs
 from ..errors import CmosnoiseError
 from ..isp import calibration
 from ..isp.process import Processor
@@ -55,6 +69,16 @@ MAX_UPLOAD = 50_000_000
 MAX_UPLOAD_PIXELS = 50_000_000
 MAX_SENSOR_PIXELS = 50_000_000
 MAX_OUT_SIDE = 4096
+#: uploads kept at once, and their total bytes: past either the oldest upload is removed
+MAX_UPLOADS = 16
+MAX_UPLOADS_BYTES = 200_000_000
+#: seconds a connection may take to send a request's headers, and a request's body
+HEADER_TIMEOUT_S = 10.0
+BODY_TIMEOUT_S = 30.0
+#: JSON bodies nested deeper than this are refused
+MAX_JSON_DEPTH = 32
+#: the custom header every state-changing request carries (a cross-site page cannot send it without a preflight)
+CSRF_HEADER = "x-cmosnoise"
 #: the region rendered is extended by this many pixels on each side (even: the CFA phase is kept), so that
 #: demosaicing and defect correction see real neighbours at the viewport's edges
 MARGIN = 4
@@ -105,6 +129,24 @@ def validate(data) -> Config:
     return cfg
 
 
+def _check_json(data, depth: int = 0) -> None:
+    """Refuse what JSON can carry but no request needs: nesting past MAX_JSON_DEPTH, lone surrogates."""
+    if depth > MAX_JSON_DEPTH:
+        raise BadRequest(f"the request body is nested more than {MAX_JSON_DEPTH} levels deep")
+    if isinstance(data, dict):
+        for k, v in data.items():
+            _check_json(k, depth + 1)
+            _check_json(v, depth + 1)
+    elif isinstance(data, list):
+        for v in data:
+            _check_json(v, depth + 1)
+    elif isinstance(data, str):
+        try:
+            data.encode("utf-8")
+        except UnicodeEncodeError:
+            raise BadRequest("the request body holds a string that is not valid Unicode (a lone surrogate)") from None
+
+
 def _key(obj) -> str:
     return hashlib.sha1(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
 
@@ -131,11 +173,18 @@ def exposure_key(cfg: Config, scene: str) -> str:
 
 
 class _Lru:
-    """A small least-recently-used cache, safe across threads (the value is made outside its lock)."""
+    """A small least-recently-used cache, safe across threads (the value is made outside its lock).
 
-    def __init__(self, size: int):
+    At most ``size`` items and, with ``weigh``, at most ``max_bytes`` by their
+    weights (the newest item is always kept, whatever it weighs).
+    """
+
+    def __init__(self, size: int, max_bytes: int | None = None, weigh=None):
         self.size = size
+        self.max_bytes = max_bytes
+        self.weigh = weigh
         self._items: OrderedDict = OrderedDict()
+        self._weights: dict = {}
         self._lock = threading.Lock()
 
     def get_or(self, key, make):
@@ -144,11 +193,45 @@ class _Lru:
                 self._items.move_to_end(key)
                 return self._items[key]
         value = make()
+        weight = self.weigh(value) if self.weigh else 0
         with self._lock:
             self._items[key] = value
-            while len(self._items) > self.size:
-                self._items.popitem(last=False)
+            self._weights[key] = weight
+            while len(self._items) > self.size or (
+                    self.max_bytes is not None and len(self._items) > 1 and self.nbytes() > self.max_bytes):
+                old, _ = self._items.popitem(last=False)
+                self._weights.pop(old, None)
         return value
+
+    def nbytes(self) -> int:
+        return sum(self._weights.values())
+
+
+def _nbytes(obj, depth: int = 3, seen: set | None = None) -> int:
+    """Bytes of the NumPy arrays an object holds (its attributes, dataclass fields, dicts, lists), ``depth`` deep."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen or depth < 0:
+        return 0
+    seen.add(id(obj))
+    if isinstance(obj, np.ndarray):
+        return int(obj.nbytes)
+    if isinstance(obj, dict):
+        items = obj.values()
+    elif isinstance(obj, (list, tuple)):
+        items = obj
+    elif hasattr(obj, "__dict__"):
+        items = vars(obj).values()
+    else:
+        return 0
+    return sum(_nbytes(v, depth - 1, seen) for v in items)
+
+
+def _cache_budget() -> int:
+    """Bytes the sensor cache may hold: a quarter of the memory available at start, at most 4 GB."""
+    from ..model.footprint import available_bytes
+
+    avail = available_bytes()
+    return int(min(4e9, 0.25 * avail)) if avail else int(1e9)
 
 
 # ------------------------------------------------------------------ the work
@@ -159,8 +242,10 @@ class Workbench:
         self.folder = Path(folder)
         self.base = base
         self.scene = scene or base.scene.source
-        self.uploads: dict[str, dict] = {}
-        self._sensors = _Lru(4)
+        self.uploads: OrderedDict[str, dict] = OrderedDict()
+        self.served: dict[str, int] = {}  # requests that did work, by endpoint (the tests read it at /api/stats)
+        budget = _cache_budget()
+        self._sensors = _Lru(4, max_bytes=budget, weigh=_nbytes)
         self._signals = _Lru(4)
         self._exposures = _Lru(6)
         self._masters = _Lru(4)
@@ -199,8 +284,26 @@ class Workbench:
             path.unlink(missing_ok=True)
             msg = str(exc).replace(str(path), filename or "upload")
             raise BadRequest(msg, 413 if "megapixels" in msg else 400) from None
-        self.uploads[uid] = {"path": path, "name": Path(filename or "image").name}
+        self.uploads[uid] = {"path": path, "name": Path(filename or "image").name, "bytes": len(data)}
+        self._trim_uploads(keep=uid)
         return {"id": uid, "scene": f"upload:{uid}", "name": self.uploads[uid]["name"]}
+
+    def upload_bytes(self) -> int:
+        return sum(item["bytes"] for item in self.uploads.values())
+
+    def _trim_uploads(self, keep: str) -> None:
+        """The oldest uploads removed (never the start scene, nor ``keep``) until both caps hold."""
+        pinned = {keep, self.scene[7:] if self.scene.startswith("upload:") else None}
+        for uid in list(self.uploads):
+            if len(self.uploads) <= MAX_UPLOADS and self.upload_bytes() <= MAX_UPLOADS_BYTES:
+                break
+            if uid in pinned:
+                continue
+            item = self.uploads.pop(uid)
+            Path(item["path"]).unlink(missing_ok=True)
+
+    def count(self, endpoint: str) -> None:
+        self.served[endpoint] = self.served.get(endpoint, 0) + 1
 
     def sensor(self, cfg: Config) -> Sensor:
         """A sensor of ``cfg``: its fixed pattern from the cache, or drawn reusing the last sensor's unchanged maps."""
@@ -318,8 +421,8 @@ class Workbench:
 def _clip_region(region, rows: int, cols: int) -> tuple[int, int, int, int]:
     try:
         r0, r1, c0, c1 = (int(v) for v in region)
-    except (TypeError, ValueError):
-        raise BadRequest("region must be [row0, row1, col0, col1]") from None
+    except (TypeError, ValueError, OverflowError):
+        raise BadRequest("region must be [row0, row1, col0, col1] of whole numbers") from None
     r0, c0 = max(0, min(r0, rows - 1)), max(0, min(c0, cols - 1))
     r1, c1 = max(r0 + 1, min(r1, rows)), max(c0 + 1, min(c1, cols))
     return r0, r1, c0, c1
@@ -365,26 +468,55 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         declared = request.headers.get("content-length")
         if declared is not None and declared.isdigit() and int(declared) > limit:
             raise BadRequest(f"request body of {int(declared) / 1e6:.1f} MB; at most {limit / 1e6:g} MB", 413)
-        chunks, size = [], 0
-        async for chunk in request.stream():
-            size += len(chunk)
-            if size > limit:
-                raise BadRequest(f"request body larger than {limit / 1e6:g} MB", 413)
-            chunks.append(chunk)
-        return b"".join(chunks)
+
+        async def read() -> bytes:
+            chunks, size = [], 0
+            async for chunk in request.stream():
+                size += len(chunk)
+                if size > limit:
+                    raise BadRequest(f"request body larger than {limit / 1e6:g} MB", 413)
+                chunks.append(chunk)
+            return b"".join(chunks)
+
+        try:  # a body sent a byte at a time holds a connection and a task: it has BODY_TIMEOUT_S in all
+            return await asyncio.wait_for(read(), BODY_TIMEOUT_S)
+        except asyncio.TimeoutError:
+            raise BadRequest(f"the request body took longer than {BODY_TIMEOUT_S:g} s to arrive", 408) from None
 
     async def json_body(request: Request) -> dict:
+        raw = await body(request, MAX_BODY)
         try:
-            data = json.loads(await body(request, MAX_BODY))
+            data = json.loads(raw)
+        except RecursionError:
+            raise BadRequest(f"the request body is nested more than {MAX_JSON_DEPTH} levels deep") from None
         except (ValueError, UnicodeDecodeError):
             raise BadRequest("the request body is not JSON") from None
         if not isinstance(data, dict):
             raise BadRequest("the request body must be a JSON object")
+        _check_json(data)
         return data
 
-    def errors(func):
+    def same_origin(request: Request, endpoint: str, media: str) -> None:
+        """Refuse, before any work, a request that does not come from the page itself (see the module docstring)."""
+        site = request.headers.get("sec-fetch-site")
+        if site is not None and site not in ("same-origin", "none"):
+            raise BadRequest(f"refused: a {site} request (the explorer answers only its own page)", 403)
+        origin = request.headers.get("origin")
+        if origin is not None and origin != f"{request.url.scheme}://{request.headers.get('host', '')}":
+            raise BadRequest("refused: the request comes from another origin (the explorer answers only its own page)", 403)
+        if request.headers.get(CSRF_HEADER) != "1":
+            raise BadRequest(f"refused: the request lacks the header {CSRF_HEADER.title()}: 1 that the explorer's page "
+                             "sends", 403)
+        ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+        if ctype != media:
+            raise BadRequest(f"{endpoint} takes {media}, not {ctype or 'a body without a content type'}", 415)
+        bench.count(endpoint)
+
+    def errors(func, media: str | None = None):
         async def wrapped(request: Request):
             try:
+                if request.method == "POST":
+                    same_origin(request, request.url.path, media or "application/json")
                 return secured(await func(request))
             except BadRequest as exc:
                 return secured(JSONResponse({"error": exc.message, "errors": exc.errors}, status_code=exc.status))
@@ -400,6 +532,12 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         from starlette.concurrency import run_in_threadpool
 
         return await run_in_threadpool(run_locked, lock or bench.lock, func, *args)
+
+    @errors
+    async def stats(request: Request):
+        """What the server did and holds: requests that did work, uploads, cache bytes (read by the tests)."""
+        return JSONResponse({"served": dict(bench.served), "uploads": len(bench.uploads),
+                             "upload_bytes": bench.upload_bytes(), "sensor_cache_bytes": bench._sensors.nbytes()})
 
     @errors
     async def meta(request: Request):
@@ -446,7 +584,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
             if bench.latest.get(token, -1) > seq:  # a newer request of this pane is waiting: drop this one
                 return None
             t0 = time.perf_counter()
-            img, info = bench.picture(cfg, data.get("scene") or bench.scene, str(data.get("view", "pre")), frame,
+            img, info = bench.picture(cfg, scene_of(data), str(data.get("view", "pre")), frame,
                                       (r0, r1, c0, c1), step)
             info["ms"] = round(1000 * (time.perf_counter() - t0), 1)
             if data.get("couplets"):
@@ -470,7 +608,8 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     async def figures_route(request: Request):
         data = await json_body(request)
         cfg = validate(data.get("config"))
-        scene = data.get("scene") or bench.scene
+        scene = scene_of(data)
+        bench.scene_source(scene)
         return JSONResponse(await in_thread(bench.figures, cfg, scene, lock=bench.figures_lock))
 
     @errors
@@ -481,22 +620,29 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         frame = data.get("frame", 0)
         if not isinstance(frame, int) or frame < 0:
             raise BadRequest("frame must be a whole number >= 0")
-        raw = await in_thread(bench.raw, cfg, data.get("scene") or bench.scene, frame)
+        raw = await in_thread(bench.raw, cfg, scene_of(data), frame)
         buf = io.BytesIO()
         np.save(buf, raw, allow_pickle=False)
         return Response(buf.getvalue(), media_type="application/octet-stream")
 
-    @errors
+    def scene_of(data: dict) -> str:
+        scene = data.get("scene") or bench.scene
+        if not isinstance(scene, str):
+            raise BadRequest("scene must be a built-in name or an uploaded image's id (a string)")
+        return scene
+
     async def upload(request: Request):
         data = await body(request, MAX_UPLOAD)
         name = request.headers.get("x-filename", "image.png")[:200]
         return JSONResponse(await in_thread(bench.add_upload, data, name))
 
+    upload = errors(upload, "application/octet-stream")
+
     @errors
     async def to_yaml(request: Request):
         data = await json_body(request)
         cfg = validate(data.get("config"))
-        scene = data.get("scene") or bench.scene
+        scene = scene_of(data)
         if scene.startswith("upload:") and scene[7:] in bench.uploads:
             cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"source": bench.uploads[scene[7:]]["name"]})})
         else:
@@ -505,7 +651,9 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
 
     @errors
     async def from_yaml(request: Request):
-        text = (await body(request, MAX_BODY)).decode("utf-8", "replace")
+        text = (await json_body(request)).get("yaml")
+        if not isinstance(text, str):
+            raise BadRequest("the body must be {\"yaml\": \"the configuration's text\"}")
         try:
             data = load_yaml_text(text)
         except Exception as exc:  # yaml's errors: one line
@@ -514,7 +662,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         return JSONResponse({"config": cfg.model_dump(mode="json")})
 
     routes = [Route(path, page) for path in files] + [
-        Route("/api/meta", meta), Route("/api/preset", preset), Route("/api/check", check, methods=["POST"]),
+        Route("/api/meta", meta), Route("/api/stats", stats), Route("/api/preset", preset), Route("/api/check", check, methods=["POST"]),
         Route("/api/render", render, methods=["POST"]), Route("/api/figures", figures_route, methods=["POST"]),
         Route("/api/raw", raw_route, methods=["POST"]), Route("/api/upload", upload, methods=["POST"]),
         Route("/api/yaml", to_yaml, methods=["POST"]), Route("/api/load", from_yaml, methods=["POST"]),
@@ -523,19 +671,95 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     return Starlette(routes=routes, middleware=[Middleware(TrustedHostMiddleware, allowed_hosts=hosts)])
 
 
+class _RateLimited(logging.Filter):
+    """At most ``limit`` records every ``window_s`` seconds; the next one let through says how many were dropped."""
+
+    def __init__(self, limit: int = 20, window_s: float = 10.0):
+        super().__init__()
+        self.limit, self.window_s = limit, window_s
+        self.start, self.count, self.dropped = time.monotonic(), 0, 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        now = time.monotonic()
+        if now - self.start > self.window_s:
+            self.start, self.count = now, 0
+        self.count += 1
+        if self.count > self.limit:
+            self.dropped += 1
+            return False
+        if self.dropped:
+            record.msg = f"{record.msg} ({self.dropped} similar messages dropped)"
+            self.dropped = 0
+        return True
+
+
+def _guarded_h11():
+    """uvicorn's h11 protocol with a header timeout: a connection that has not sent a whole request's headers
+    within HEADER_TIMEOUT_S of opening (or of its last response) is closed. uvicorn has no such setting; its
+    keep-alive timeout starts only after a first response, so idle or trickling connections were kept forever."""
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    class GuardedH11(H11Protocol):
+        def connection_made(self, transport):
+            super().connection_made(transport)
+            self._idle_since = self.loop.time()
+            self._guard = self.loop.call_later(1.0, self._check_idle)
+
+        def _check_idle(self):
+            waiting = self.cycle is None or self.cycle.response_complete
+            if not waiting:  # a request is being answered: its body has its own timeout
+                self._idle_since = self.loop.time()
+            elif self.loop.time() - self._idle_since > HEADER_TIMEOUT_S:
+                self.transport.close()
+                return
+            self._guard = self.loop.call_later(1.0, self._check_idle)
+
+        def connection_lost(self, exc):
+            self._guard.cancel()
+            super().connection_lost(exc)
+
+    return GuardedH11
+
+
+def _raise_file_limit() -> None:
+    """The soft limit on open files raised to the hard one: many idle connections must not use up descriptors."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard == resource.RLIM_INFINITY or soft < hard:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (hard if hard != resource.RLIM_INFINITY else max(soft, 65536), hard))
+        except (ValueError, OSError):
+            pass
+
+
 def serve(base: Config, scene: str | None, host: str = "127.0.0.1", port: int = 8765, open_browser: bool = True,
           say=print) -> None:
-    """Run the explorer until Ctrl-C (or SIGTERM); its temporary folder is removed on the way out."""
+    """Run the explorer until Ctrl-C (or SIGTERM); its temporary folder is removed on the way out.
+
+    The base configuration and the start scene are checked as every request
+    would check them, before the server starts: a setting every request would
+    refuse is one line and exit status 2, not a page that shows only errors.
+    """
     import uvicorn
 
+    try:
+        validate(base.model_dump(mode="json"))
+    except BadRequest as exc:
+        raise CmosnoiseError(f"explore: {exc.message}") from None
     with tempfile.TemporaryDirectory(prefix="cmosnoise-explore-") as tmp:
         bench = Workbench(Path(tmp), base)
-        if scene is not None:
-            if Path(scene).is_file():  # a path given on the command line: taken in as an upload
-                item = bench.add_upload(Path(scene).read_bytes(), Path(scene).name)
-                bench.scene = item["scene"]
+        try:
+            if scene is not None:
+                if Path(scene).exists() or Path(scene).is_symlink():  # a path: taken in as an upload
+                    item = bench.add_upload(inputs.read_bytes(scene, "--scene", MAX_UPLOAD), Path(scene).name)
+                    bench.scene = item["scene"]
+                else:
+                    bench.scene = bench.scene_source(scene)
             else:
-                bench.scene = bench.scene_source(scene)
+                bench.scene_source(bench.scene)
+        except BadRequest as exc:
+            raise CmosnoiseError(f"--scene {scene if scene is not None else bench.scene!r}: {exc.message}") from None
         hosts = LOOPBACK if host in LOOPBACK else (*LOOPBACK, host)
         app = create_app(bench, hosts)
         url = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}/"
@@ -547,6 +771,11 @@ def serve(base: Config, scene: str | None, host: str = "127.0.0.1", port: int = 
             import webbrowser
 
             threading.Timer(1.0, lambda: webbrowser.open(url)).start()
-        config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False)
+        _raise_file_limit()
+        limiter = _RateLimited()
+        for name in ("uvicorn.error", "uvicorn"):
+            logging.getLogger(name).addFilter(limiter)
+        config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False, http=_guarded_h11(),
+                                timeout_keep_alive=5)
         server = uvicorn.Server(config)
         server.run()

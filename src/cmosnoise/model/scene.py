@@ -28,7 +28,6 @@ sensor takes the luminance.
 
 from __future__ import annotations
 
-import warnings
 from importlib import resources
 from pathlib import Path
 
@@ -36,6 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import cfa as cfa_mod
+from .. import inputs
 from ..errors import CmosnoiseError
 
 #: Rec. 709 / sRGB luminance weights for linear RGB
@@ -193,73 +193,45 @@ MAX_SCENE_BYTES = 2_000_000_000
 MAX_SCENE_PIXELS = 64_000_000
 
 
-def _stored_size(p: Path, suffix: str) -> tuple[int, int]:
-    """(rows, cols) from the file's header, without decoding the pixels."""
-    if suffix == ".npy":
-        shape = np.load(p, mmap_mode="r", allow_pickle=False).shape
-    elif suffix in (".tif", ".tiff"):
-        import tifffile
-
-        with tifffile.TiffFile(p) as tf:
-            shape = tf.series[0].shape if tf.series else (0, 0)
-    else:
-        from PIL import Image
-
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # the limit below says it better
-                with Image.open(p) as im:
-                    return im.size[1], im.size[0]
-        except Image.DecompressionBombError:
-            return 10**6, 10**6  # beyond any limit
-        except Exception:  # a format Pillow does not know: imageio's own header reader
-            import imageio.v3 as iio
-
-            shape = iio.improps(p).shape
-    shape = tuple(int(x) for x in shape)
-    if len(shape) < 2:
-        return (shape[0] if shape else 0), 1
-    # (rows, cols), (rows, cols, channels) or (frames, rows, cols[, channels]): the largest plane
-    if len(shape) >= 3 and shape[-1] <= 4:
-        shape = shape[:-1]
-    return shape[-2], shape[-1]
-
-
 def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MAX_SCENE_PIXELS) -> np.ndarray:
-    """Read an image file as linear RGB in [0, 1] (see module docstring); larger than ``max_pixels``: refused unread."""
+    """Read an image file as linear RGB in [0, 1] (see module docstring).
+
+    The file passes the input gate first (:mod:`cmosnoise.inputs`): a regular
+    file, at most ``MAX_SCENE_BYTES``, and at most ``max_pixels`` decoded
+    pixels over all its frames and pages, read from its header. Only the
+    first frame or page is decoded.
+    """
     p = Path(path)
     name = str(path)
-    if not p.exists():
+    if not p.exists() and not p.is_symlink():
         raise CmosnoiseError(f"scene {name!r}: no such file (built-in scenes: {', '.join(BUILTINS)})")
     if p.is_dir():
         raise CmosnoiseError(f"scene {name!r} is a folder, not an image file")
-    if not p.is_file():
-        raise CmosnoiseError(f"scene {name!r} is not a regular file (a device or a pipe cannot be an image)")
+    inputs.check_regular(p, "scene")
     if p.stat().st_size > MAX_SCENE_BYTES:
         raise CmosnoiseError(f"scene {name!r} is {p.stat().st_size / 1e9:.1f} GB; images up to "
                              f"{MAX_SCENE_BYTES / 1e9:g} GB are read")
     suffix = p.suffix.lower()
     try:
-        rows, cols = _stored_size(p, suffix)
-    except CmosnoiseError:
-        raise
-    except Exception as exc:
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {first}") from None
-    if rows * cols > max_pixels:
-        raise CmosnoiseError(f"scene {name!r} is {cols} x {rows} pixels; at most {max_pixels / 1e6:g} megapixels "
-                             "are decoded (a scene is resampled to the sensor anyway: scale it down first)")
+        inputs.check_image_pixels(p, "scene", max_pixels)
+    except CmosnoiseError as exc:
+        msg = str(exc)
+        if "megapixels" in msg:
+            msg += " (a scene is resampled to the sensor anyway: scale it down first)"
+        raise CmosnoiseError(msg) from None
     try:
         if suffix == ".npy":
             a = np.load(p, allow_pickle=False)
+            if a.ndim == 4 or (a.ndim == 3 and a.shape[-1] > 4):  # a stack: its first plane
+                a = a[0]
         elif suffix in (".tif", ".tiff"):
             import tifffile
 
-            a = tifffile.imread(p)
+            a = tifffile.imread(p, key=0)
         else:
             import imageio.v3 as iio
 
-            a = iio.imread(p)
+            a = iio.imread(p, index=0)
     except CmosnoiseError:
         raise
     except Exception as exc:  # any decoder failure is the file's fault

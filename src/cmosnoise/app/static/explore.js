@@ -266,7 +266,7 @@ async function render(p) {
   let resp;
   try {
     resp = await fetch("api/render", { method: "POST", body: JSON.stringify(body), signal: ctl.signal,
-      headers: { "Content-Type": "application/json" } });
+      headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" } });
   } catch (e) { if (seq === S.seq[p]) S.busy[p] = false; return; }
   if (seq !== S.seq[p]) return;                            // stale
   S.busy[p] = false;
@@ -348,7 +348,7 @@ function figures(p) {
   clearTimeout(figTimers[p]);
   figTimers[p] = setTimeout(async () => {
     const pane = S.panes[p];
-    const resp = await fetch("api/figures", { method: "POST", headers: { "Content-Type": "application/json" },
+    const resp = await fetch("api/figures", { method: "POST", headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" },
       body: JSON.stringify({ config: pane.config, scene: pane.scene }) }).catch(() => null);
     if (!resp || !resp.ok) return;
     showFigures(p, await resp.json());
@@ -472,14 +472,14 @@ async function init() {
   });
   $("upload").addEventListener("change", async () => {
     const f = $("upload").files[0]; if (!f) return;
-    const r = await fetch("api/upload", { method: "POST", body: f, headers: { "X-Filename": f.name } });
+    const r = await fetch("api/upload", { method: "POST", body: f, headers: { "X-Filename": f.name, "Content-Type": "application/octet-stream", "X-Cmosnoise": "1" } });
     const j = await r.json();
     if (!r.ok) { $("paneError").textContent = j.error; return; }
     addSceneOption(j.scene, j.name); S.panes[S.edit].scene = j.scene; $("scene").value = j.scene; saveUrl(); schedule(S.edit);
   });
   $("export").addEventListener("click", async () => {
     const pane = S.panes[S.edit];
-    const r = await fetch("api/yaml", { method: "POST", headers: { "Content-Type": "application/json" },
+    const r = await fetch("api/yaml", { method: "POST", headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" },
       body: JSON.stringify({ config: pane.config, scene: pane.scene }) });
     if (!r.ok) { $("paneError").textContent = (await r.json()).error; return; }
     const a = document.createElement("a");
@@ -488,7 +488,8 @@ async function init() {
   });
   $("load").addEventListener("change", async () => {
     const f = $("load").files[0]; if (!f) return;
-    const r = await fetch("api/load", { method: "POST", body: await f.text() });
+    const r = await fetch("api/load", { method: "POST", body: JSON.stringify({ yaml: await f.text() }),
+      headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" } });
     const j = await r.json();
     if (!r.ok) { $("paneError").textContent = j.error; return; }
     S.panes[S.edit].config = j.config; buildPanel(); saveUrl(); schedule(S.edit);
