@@ -107,7 +107,7 @@ def test_load_rejects_a_bad_descriptor(tmp_path):
     (tmp_path / "EMVA1288_descriptor.txt").write_text("v 3.0\nb 1000 abc\n")
     with pytest.raises(CmosnoiseError, match="line 2"):
         ch.load(tmp_path)
-    with pytest.raises(CmosnoiseError, match="cannot be read"):
+    with pytest.raises(CmosnoiseError, match="does not exist"):
         ch.load(tmp_path / "nothing.txt")
 
 
@@ -130,7 +130,7 @@ def test_characterize_command_end_to_end(tmp_path):
     assert again["measured"]["system_gain_K_dn_per_e"] == pytest.approx(data["measured"]["system_gain_K_dn_per_e"], rel=1e-9)
     r = cli("characterize", "--frames-from", tmp_path / "nowhere",
                         "--out", tmp_path / "c3")
-    assert r.returncode == 2 and "cannot be read" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
 
 
 # ------------------------------------------------------------------ every shipped preset

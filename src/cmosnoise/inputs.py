@@ -18,6 +18,13 @@ from pathlib import Path
 
 from .errors import CmosnoiseError
 
+#: pixels of one decoded frame or page (400 MP: a 20000 x 20000 sensor), and of a whole file read frame by frame
+#: (20 gigapixels: 50 000 frames of 400 kP; beyond that a file is decoding time, not data)
+MAX_FRAME_PIXELS = 400_000_000
+MAX_STREAM_PIXELS = 20_000_000_000
+#: pixels of a file read into memory at once (a dark stack: 2 bytes a pixel as uint16, 8 while averaged)
+MAX_LOADED_PIXELS = 500_000_000
+
 __all__ = ["check_regular", "open_regular", "read_bytes", "read_text", "image_planes", "check_image_pixels"]
 
 
@@ -87,7 +94,7 @@ def read_text(path: str | Path, what: str, limit: int) -> str:
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
-        raise CmosnoiseError(f"{what} {str(path)!r} is not UTF-8 text") from None
+        raise CmosnoiseError(f"{what} {str(path)!r} is not a text file (not UTF-8)") from None
 
 
 def _size(n: int) -> str:

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from .. import inputs
 from ..errors import CmosnoiseError
 from ..io.stacks import DESCRIPTOR  # the file name export writes and load reads
 from ..model.stages import adc
@@ -433,6 +434,7 @@ def load(descriptor: Path) -> Measurement:
     def read(paths):
         out = []
         for p in paths:
+            inputs.check_image_pixels(p, "EMVA image", inputs.MAX_FRAME_PIXELS, inputs.MAX_FRAME_PIXELS)
             try:
                 img = tifffile.imread(p)
             except Exception as exc:

@@ -9,8 +9,6 @@ merged last. Everything here is about data: the result is a validated
 from __future__ import annotations
 
 import copy
-import os
-import stat
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -18,6 +16,7 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
+from .. import inputs
 from ..errors import CmosnoiseError
 from .messages import format_validation_error
 from .schema import Config
@@ -146,21 +145,7 @@ def load_yaml_text(text: str):
 def read_yaml(path: str | Path) -> dict:
     """A configuration file: a regular file of at most MAX_CONFIG_BYTES, strict YAML, a mapping."""
     p = Path(path)
-    try:
-        with open(p, "rb") as fh:
-            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
-                raise CmosnoiseError(f"config file {str(p)!r} is not a regular file")
-            raw = fh.read(MAX_CONFIG_BYTES + 1)
-        if len(raw) > MAX_CONFIG_BYTES:
-            raise CmosnoiseError(f"config file {str(p)!r} is larger than {MAX_CONFIG_BYTES // 1000} kB; "
-                                 "a configuration is a few kB")
-        text = raw.decode("utf-8")
-    except FileNotFoundError:
-        raise CmosnoiseError(f"config file {str(p)!r} does not exist") from None
-    except IsADirectoryError:
-        raise CmosnoiseError(f"config file {str(p)!r} is a folder, not a file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CmosnoiseError(f"config file {str(p)!r} cannot be read: {exc}") from None
+    text = inputs.read_text(p, "config file", MAX_CONFIG_BYTES)
     try:
         data = load_yaml_text(text)
     except yaml.YAMLError as exc:

@@ -42,6 +42,107 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _helper_name(kind: str) -> str:
+    """The prefix of a helper folder of this process: KIND-HOST-PID- (HOST without dashes)."""
+    return f"{kind}{socket.gethostname().replace('-', '_')}-{os.getpid()}-"
+
+
+def _helper_owner(name: str) -> tuple[str, int] | None:
+    """(host, pid) of a helper's name ``.cmosnoise-KIND-HOST-PID-random``; None for other names."""
+    parts = name.split("-")
+    try:
+        return parts[2], int(parts[3])
+    except (IndexError, ValueError):
+        return None
+
+
+class FolderLock:
+    """An exclusive lock (``flock``) on an output folder, in a file beside it: one cmosnoise run per folder.
+
+    ``with FolderLock(out, anchor, option):``; a second run gets a one-line
+    error naming the holder. The lock file is removed on release; one left by
+    a killed run is removed by the next run beside it (:func:`remove_stale_locks`).
+    """
+
+    def __init__(self, out: Path, anchor: Path, option: str = "--out"):
+        self.out, self.anchor, self.option = Path(out), Path(anchor), option
+        self._fh = None
+
+    @property
+    def path(self) -> Path:
+        digest = hashlib.sha1(str(self.out.resolve()).encode()).hexdigest()[:16]
+        return self.anchor / f"{_LOCK}{digest}"
+
+    def acquire(self) -> None:
+        import fcntl
+
+        for _ in range(20):
+            fh = open(self.path, "a+")
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                fh.seek(0)
+                holder = fh.read().strip() or "another process"
+                fh.close()
+                raise CmosnoiseError(f"{self.option} {str(self.out)!r} is being written by another cmosnoise run "
+                                     f"({holder}); wait for it to finish or choose another folder") from None
+            try:  # the file we locked must still be the lock: a run that released it unlinked it meanwhile
+                same = os.stat(self.path).st_ino == os.fstat(fh.fileno()).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                fh.seek(0)
+                fh.truncate()
+                fh.write(f"pid {os.getpid()} on {socket.gethostname()}")
+                fh.flush()
+                self._fh = fh
+                return
+            fh.close()
+        raise CmosnoiseError(f"{self.option} {str(self.out)!r}: its lock keeps changing hands; try again")
+
+    def release(self) -> None:
+        if self._fh is not None:
+            with contextlib.suppress(OSError):
+                self.path.unlink()
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self):
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+        return False
+
+
+def remove_stale_locks(anchor: Path) -> None:
+    """Lock files beside outputs whose run was killed (nobody holds them): removed."""
+    import fcntl
+
+    for item in anchor.iterdir():
+        if not item.name.startswith(_LOCK) or not item.is_file():
+            continue
+        try:
+            with open(item, "a+") as fh:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                item.unlink()  # under its lock: a run that opened it meanwhile sees another inode and retries
+        except OSError:
+            continue
+
+
+def check_folder_name(out: Path, option: str, anchor: Path) -> None:
+    """A one-line error for an output name the file system cannot hold (too long), before anything runs."""
+    try:
+        name_max = os.pathconf(anchor, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    for part in out.parts:
+        if len(part.encode()) > name_max:
+            raise CmosnoiseError(f"{option} {str(out)!r}: the name {part[:40]!r}... is {len(part.encode())} bytes long; "
+                                 f"this file system takes names of at most {name_max}")
+
+
 class OutputFolder:
     """Context manager: ``with OutputFolder(out) as tmp: write into tmp``; on success ``tmp`` becomes ``out``, whole.
 
@@ -49,12 +150,20 @@ class OutputFolder:
     non-empty one is refused unless ``overwrite``, and then replaced as a
     whole (the old one is moved aside and removed only after the new one is
     in place), never merged. ``out`` must not be the current folder or
-    contain it. While a run writes, a lock (``flock``) beside ``out`` stops a
-    second run on the same folder with a clear message. On an exception
-    (Ctrl-C, SIGTERM and SIGHUP included, see :mod:`cmosnoise.app.cli`) the
-    temporary folder is removed and ``out`` is untouched. Temporary folders
-    left by runs that were killed (their process is gone) are removed when
-    the next run beside them starts.
+    contain it. While a run writes, a lock (:class:`FolderLock`) beside
+    ``out`` stops a second run on the same folder with a clear message. On an
+    exception (Ctrl-C, SIGTERM and SIGHUP included, see
+    :mod:`cmosnoise.app.cli`) the temporary folder is removed and ``out`` is
+    untouched.
+
+    The replacement is made recoverable: the temporary folder
+    ``.cmosnoise-tmp-HOST-PID-*`` holds the results in ``out/`` and, once they
+    are complete, a file ``target`` naming the destination; the old folder
+    goes to ``.cmosnoise-old-HOST-PID-*/out`` with its own ``target``. A run
+    killed between the two renames (``out`` missing) is repaired by the next
+    run beside it: the completed results, else the old folder, are put back
+    in place, and it says so. Helpers of killed runs that hold nothing to
+    restore are removed (and listed), and so are lock files nobody holds.
 
     Nothing is created before ``__enter__``: a run that fails on its inputs
     leaves nothing behind.
@@ -68,6 +177,10 @@ class OutputFolder:
                                  "the current folder itself is never written into")
         self.out = Path(out)
         self.overwrite = overwrite
+        anchor = Path(os.path.abspath(self.out)).parent
+        while not anchor.exists():
+            anchor = anchor.parent
+        check_folder_name(self.out, option, anchor)
         resolved = self.out.resolve()
         cwd = Path.cwd().resolve()
         if resolved == cwd or resolved in cwd.parents:
@@ -84,74 +197,59 @@ class OutputFolder:
         self.anchor = anchor
         self._check_existing()
         self.tmp: Path | None = None
-        self._lock = None
+        self._wrapper: Path | None = None
+        self._lock = FolderLock(self.out, anchor, option)
         self.removed_stale: list[str] = []
+        self.restored: list[str] = []
 
     def _check_existing(self) -> None:
         if self.out.is_dir() and not self.overwrite and any(self.out.iterdir()):
             raise CmosnoiseError(f"{self.option} {str(self.out)!r} already exists and is not empty; give --overwrite to "
                                  "replace it as a whole, or another folder")
 
-    def _lock_path(self) -> Path:
-        digest = hashlib.sha1(str(self.out.resolve()).encode()).hexdigest()[:16]
-        return self.anchor / f"{_LOCK}{digest}"
-
-    def _take_lock(self) -> None:
-        import fcntl
-
-        path = self._lock_path()
-        fh = open(path, "a+")
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            fh.seek(0)
-            holder = fh.read().strip() or "another process"
-            fh.close()
-            raise CmosnoiseError(f"{self.option} {str(self.out)!r} is being written by another cmosnoise run "
-                                 f"({holder}); wait for it to finish or choose another folder") from None
-        fh.seek(0)
-        fh.truncate()
-        fh.write(f"pid {os.getpid()} on {socket.gethostname()}")
-        fh.flush()
-        self._lock = fh
-
-    def _release_lock(self) -> None:
-        if self._lock is not None:
-            with contextlib.suppress(OSError):
-                self._lock_path().unlink()
-            self._lock.close()
-            self._lock = None
-
     def _remove_stale(self) -> None:
-        """Temporary folders of runs on this machine whose process is gone (killed): removed, and listed."""
-        host = socket.gethostname()
+        """Helpers of runs on this machine whose process is gone (killed): what they can restore is put back
+        where its destination is missing; the rest removed. Both listed on stderr."""
+        host = socket.gethostname().replace("-", "_")
+        dead = []
         for item in self.anchor.iterdir():
-            name = item.name
-            if not (name.startswith(_TMP) or name.startswith(_OLD)) or not item.is_dir():
-                continue
-            parts = name.split("-")  # .cmosnoise-tmp-HOST-PID-random (HOST without dashes)
-            try:
-                item_host, pid = parts[2], int(parts[3])
-            except (IndexError, ValueError):
-                continue
-            if item_host == host.replace("-", "_") and not _pid_alive(pid):
-                shutil.rmtree(item, ignore_errors=True)
+            owner = _helper_owner(item.name)
+            if (item.name.startswith(_TMP) or item.name.startswith(_OLD)) and item.is_dir() and owner \
+                    and owner[0] == host and not _pid_alive(owner[1]):
+                dead.append(item)
+        # completed results first: where both a run's new results and the folder they replaced survive, the new win
+        for item in sorted(dead, key=lambda i: not i.name.startswith(_TMP)):
+            target_file, results = item / "target", item / "out"
+            if target_file.is_file() and results.is_dir():
+                target = Path(target_file.read_text())
+                if not target.exists() and not target.is_symlink() and target.parent.is_dir():
+                    os.rename(results, target)
+                    what = "the completed results" if item.name.startswith(_TMP) else "the previous results"
+                    self.restored.append(f"{what} of an interrupted run into {str(target)!r}")
+            shutil.rmtree(item, ignore_errors=True)
+            if not item.exists():
                 self.removed_stale.append(str(item))
+        remove_stale_locks(self.anchor)
+        for line in self.restored:
+            print(f"cmosnoise: restored {line}", file=sys.stderr)
         if self.removed_stale:
             print(f"cmosnoise: removed {len(self.removed_stale)} temporary folder(s) left by interrupted runs: "
                   + ", ".join(self.removed_stale), file=sys.stderr)
 
     def __enter__(self) -> Path:
         try:
-            self._take_lock()
+            self._lock.acquire()
             try:
-                self._check_existing()  # again, under the lock: a run may have finished meanwhile
                 self._remove_stale()
-                prefix = f"{_TMP}{socket.gethostname().replace('-', '_')}-{os.getpid()}-"
-                self.tmp = Path(tempfile.mkdtemp(prefix=prefix, dir=self.anchor))
-                os.chmod(self.tmp, 0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
+                self._check_existing()  # again, under the lock: a run may have finished (or been restored) meanwhile
+                self._wrapper = Path(tempfile.mkdtemp(prefix=_helper_name(_TMP), dir=self.anchor))
+                os.chmod(self._wrapper, 0o700)
+                self.tmp = self._wrapper / "out"
+                self.tmp.mkdir(mode=0o777 & ~_umask())
             except BaseException:
-                self._release_lock()
+                if self._wrapper is not None:
+                    shutil.rmtree(self._wrapper, ignore_errors=True)
+                self._lock.release()
                 raise
         except OSError as exc:
             raise CmosnoiseError(f"{self.option} {str(self.out)!r} cannot be written: {exc.strerror or exc}") from None
@@ -163,16 +261,18 @@ class OutputFolder:
                 try:  # an interrupt whose exception a library swallowed still means: no output
                     check_terminated()
                 except Terminated:
-                    shutil.rmtree(self.tmp, ignore_errors=True)
+                    shutil.rmtree(self._wrapper, ignore_errors=True)
                     raise
             if exc_type is not None:
-                shutil.rmtree(self.tmp, ignore_errors=True)
+                shutil.rmtree(self._wrapper, ignore_errors=True)
                 return False
             old = None
+            target = str(Path(os.path.abspath(self.out)))
             try:
+                _write_marker(self._wrapper / "target", target)  # complete: from here on, a kill is recoverable
                 if self.out.exists():  # empty, or --overwrite: moved aside, removed once the new one is in place
-                    old = Path(tempfile.mkdtemp(prefix=f"{_OLD}{socket.gethostname().replace('-', '_')}-{os.getpid()}-",
-                                                dir=self.out.resolve().parent))
+                    old = Path(tempfile.mkdtemp(prefix=_helper_name(_OLD), dir=self.out.resolve().parent))
+                    _write_marker(old / "target", target)
                     os.rename(self.out, old / "out")
                 self.out.parent.mkdir(parents=True, exist_ok=True)
                 try:
@@ -182,14 +282,22 @@ class OutputFolder:
                         os.rename(old / "out", self.out)  # put the old one back
                     raise
             except OSError as exc:
-                shutil.rmtree(self.tmp, ignore_errors=True)
+                shutil.rmtree(self._wrapper, ignore_errors=True)
                 raise CmosnoiseError(f"{self.option} {str(self.out)!r} cannot be written: {exc.strerror or exc}") from None
             finally:
                 if old is not None:
                     shutil.rmtree(old, ignore_errors=True)
+            shutil.rmtree(self._wrapper, ignore_errors=True)
             return False
         finally:
-            self._release_lock()
+            self._lock.release()
+
+
+def _write_marker(path: Path, text: str) -> None:
+    """A small file written whole (a temporary name, then a rename)."""
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(text)
+    os.replace(tmp, path)
 
 
 @contextlib.contextmanager

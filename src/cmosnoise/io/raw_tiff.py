@@ -7,6 +7,7 @@ from typing import Iterable
 
 import numpy as np
 
+from .. import inputs
 from ..errors import CmosnoiseError
 
 #: TIFF/EP tags for the colour filter array
@@ -65,18 +66,24 @@ def write_float_tiff(path: str | Path, image: np.ndarray, metadata: dict) -> Non
     tifffile.imwrite(path, image.astype(np.float32), photometric="minisblack", metadata=metadata)
 
 
-def read_raw_tiff(path: str | Path) -> tuple[np.ndarray, dict]:
-    """Read raw frames written by :func:`write_raw_tiff`: (frames, rows, cols) and metadata."""
+def read_raw_tiff(path: str | Path, what: str = "raw file") -> tuple[np.ndarray, dict]:
+    """Read raw frames written by :func:`write_raw_tiff`: (frames, rows, cols) and metadata.
+
+    The whole file is read into memory, so it is bounded first, from its
+    header, by :data:`cmosnoise.inputs.MAX_LOADED_PIXELS` (``what`` names the
+    file in messages: "raw file", "dark file").
+    """
     import tifffile
 
+    if not Path(path).exists() and not Path(path).is_symlink():
+        raise CmosnoiseError(f"{what} {str(path)!r} does not exist")
+    inputs.check_image_pixels(path, what, inputs.MAX_LOADED_PIXELS, inputs.MAX_FRAME_PIXELS)
     try:
         with tifffile.TiffFile(path) as tf:
             data = tf.asarray()
             meta = dict(tf.shaped_metadata[0]) if tf.shaped_metadata else {}
-    except FileNotFoundError:
-        raise CmosnoiseError(f"raw file {str(path)!r} does not exist") from None
     except Exception as exc:
-        raise CmosnoiseError(f"raw file {str(path)!r} cannot be read as TIFF: {exc}") from None
+        raise CmosnoiseError(f"{what} {str(path)!r} cannot be read as TIFF: {' '.join(str(exc).split())[:200]}") from None
     meta.pop("shape", None)
     if data.ndim == 2:
         data = data[None]
@@ -96,12 +103,15 @@ class RawTiffReader:
         import tifffile
 
         self.name = str(path)
+        p = Path(path)
+        if not p.exists() and not p.is_symlink():
+            raise CmosnoiseError(f"raw file {self.name!r} does not exist")
+        if p.is_dir():
+            raise CmosnoiseError(f"raw file {self.name!r} is a folder, not a TIFF file")
+        # a regular file, no frame larger than a sensor, not endless: from the header, before a frame is decoded
+        inputs.check_image_pixels(p, "raw file", inputs.MAX_STREAM_PIXELS, inputs.MAX_FRAME_PIXELS)
         try:
             self._tf = tifffile.TiffFile(path)
-        except FileNotFoundError:
-            raise CmosnoiseError(f"raw file {self.name!r} does not exist") from None
-        except IsADirectoryError:
-            raise CmosnoiseError(f"raw file {self.name!r} is a folder, not a TIFF file") from None
         except Exception as exc:
             raise CmosnoiseError(f"raw file {self.name!r} cannot be read as TIFF: {' '.join(str(exc).split())[:200]}") from None
         try:

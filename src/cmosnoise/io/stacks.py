@@ -41,6 +41,7 @@ from typing import Iterator, Literal, Optional
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from .. import inputs
 from ..errors import CmosnoiseError
 
 #: an EMVA 1288 descriptor's default file name inside a folder
@@ -181,8 +182,11 @@ def _dng_frames(path: Path, meta: _Meta) -> Iterator[np.ndarray]:
 def _frames_of(path: Path, meta: _Meta) -> Iterator[np.ndarray]:
     """The frames of one file, each (rows, cols)."""
     suffix = path.suffix.lower()
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         raise CmosnoiseError(f"{str(path)!r}: no such file")
+    inputs.check_regular(path, "frames file")
+    if suffix in (".tif", ".tiff", ".npy"):  # from the header: no frame larger than a sensor, no endless file
+        inputs.check_image_pixels(path, "frames file", inputs.MAX_STREAM_PIXELS, inputs.MAX_FRAME_PIXELS)
     if suffix == ".dng":
         yield from _dng_frames(path, meta)
         return
@@ -238,14 +242,7 @@ def _stack(paths: list[Path], meta: _Meta, **info) -> StackStats:
 
 
 def _read_text(path: Path, what: str) -> str:
-    try:
-        if path.stat().st_size > MAX_TEXT_BYTES:
-            raise CmosnoiseError(f"{what} {str(path)!r} is larger than 10 MB: not a {what}")
-        return path.read_text()
-    except OSError as exc:
-        raise CmosnoiseError(f"{what} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise CmosnoiseError(f"{what} {str(path)!r} is not a text file") from None
+    return inputs.read_text(path, what, MAX_TEXT_BYTES)
 
 
 # ------------------------------------------------------------------ EMVA 1288 descriptor

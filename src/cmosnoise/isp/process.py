@@ -148,7 +148,7 @@ def read_dark(path) -> np.ndarray:
     """A master dark from a file: the mean of a dark-frame stack, or an already averaged frame."""
     from ..io.raw_tiff import read_raw_tiff
 
-    data, _ = read_raw_tiff(path)
+    data, _ = read_raw_tiff(path, "dark file")
     if data.dtype.kind not in "uif":
         raise CmosnoiseError(f"dark file {str(path)!r}: pixel type {data.dtype} is not image data")
     if data.ndim == 2:
