@@ -221,6 +221,11 @@ def characterize(
     from ..model.sensor import Sensor
 
     folder = OutputFolder(out, overwrite)
+    if emva_export is not None:
+        a, b = Path(emva_export).resolve(), Path(out).resolve()
+        if a == b or a in b.parents or b in a.parents:
+            raise CmosnoiseError(f"--emva-export {str(emva_export)!r} and --out {str(out)!r} are the same folder or one "
+                                 "holds the other; give two separate folders")
     export_folder = OutputFolder(emva_export, overwrite, "--emva-export") if emva_export is not None else None
     model = None
     if frames_from is not None:
@@ -381,6 +386,8 @@ def fit(
     """Fit a sensor model to measured frames: config.yaml, fit.json (values, 95 % intervals, methods), fit_report.html."""
     from . import fitting
 
+    if threshold is not None and not math.isfinite(threshold):
+        raise CmosnoiseError(f"--threshold-e-per-s {threshold}: give a finite rate, e-/s (or leave it out)")
     if cfa is not None and cfa not in ("RGGB", "BGGR", "GRBG", "GBRG", "none"):
         raise CmosnoiseError(f"--cfa {cfa!r}: expected RGGB, BGGR, GRBG, GBRG or none")
     base = load_config(config, preset, None, extra={"sensor": {"cfa": cfa}} if cfa else None)
@@ -465,7 +472,7 @@ def run(argv: list[str] | None = None) -> int:
     unraisable = sys.unraisablehook
     sys.unraisablehook = _quiet_interrupts(unraisable)
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _libraries_quiet(argv):
             # numerical warnings of NumPy and SciPy (an overflow in a tail far beyond any pixel) are not the
             # user's to read: every result is checked to be finite, and bad input is refused with a message
             warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"(numpy|scipy)(\.|$)")
@@ -481,6 +488,11 @@ def run(argv: list[str] | None = None) -> int:
         message = " ".join(str(exc).split())  # one line, whatever a library put in it
         print(f"cmosnoise: error: {message}", file=sys.stderr)
         return 2
+    except OSError as exc:  # the machine's fault, not the input's: a full disk, a vanished folder
+        where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        print(f"cmosnoise: error: cannot read or write{where}: {exc.strerror or exc}; nothing was written",
+              file=sys.stderr)
+        return 1
     except Terminated as exc:
         name = "Ctrl-C" if exc.signum == signal.SIGINT else signal.Signals(exc.signum).name
         print(f"cmosnoise: interrupted ({name}); nothing was written", file=sys.stderr)
@@ -492,6 +504,28 @@ def run(argv: list[str] | None = None) -> int:
         sys.unraisablehook = unraisable
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+@contextlib.contextmanager
+def _libraries_quiet(argv):
+    """Warnings of the file libraries (tifffile, LibRaw through rawpy, imageio, Pillow) kept off stderr unless
+    --verbose: a damaged file's problems are reported by our own one-line error, not by 200 lines of theirs."""
+    import logging
+
+    args = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    if "-v" in args or "--verbose" in args:
+        yield
+        return
+    warnings.filterwarnings("ignore", module=r"(tifffile|rawpy|imageio|PIL|colour_demosaicing)(\.|$)")
+    loggers = [logging.getLogger(n) for n in ("tifffile", "rawpy", "imageio", "PIL")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
 
 
 def _quiet_interrupts(hook):

@@ -62,6 +62,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
+    check_free_space(folder.anchor, output_bytes(config), "--out")
     # Two more threads take work nothing waits for: loading the compiled kernel and drawing the dark-current
     # map while this thread draws the other fixed-pattern maps, and frame 0's pictures while the summary is
     # built (PNG encoding and most of NumPy's work release the GIL).
@@ -177,6 +178,29 @@ def processing_summary(processor: Processor, t_dark: float, t_process: float) ->
         out["note"] = ("processed.png equals preview.png: no step beyond the preview's is on "
                        "(add --dark-frames N or set processing.defects.method)")
     return out
+
+
+def output_bytes(config) -> int:
+    """Bytes a run writes, estimated: the raw frames (uint16, or float32 electrons without the ADC), their DNG
+    copies, a master dark, and 64 kB plus 4 bytes a pixel for the pictures and the rest."""
+    pixels = config.sensor.width * config.sensor.height
+    per_frame = pixels * (2 if config.adc.enabled else 4) * (2 if config.run.dng else 1)
+    extra = pixels * 4 * (1 + (config.processing.dark_frames > 0) + config.processing.enabled)
+    return config.run.frames * per_frame + extra + 65536
+
+
+def check_free_space(folder: Path, needed: int, option: str) -> None:
+    """A one-line refusal when the file system holding ``folder`` has less free space than ``needed`` bytes."""
+    import shutil
+
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return  # unknown: the write itself will say
+    if needed > free:
+        raise CmosnoiseError(f"{option}: this run writes about {needed / 1e9:.2f} GB; the file system of "
+                             f"{str(folder)!r} has {free / 1e9:.2f} GB free (fewer --frames, a smaller sensor, "
+                             "or another place)")
 
 
 def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray, read_var_e2: float) -> dict | None:

@@ -27,9 +27,11 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import yaml
 
 from ..config.loading import load_yaml_text
 from ..errors import CmosnoiseError
+from ..io.output import FolderLock, OutputFolder
 
 #: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
 DEFECT_TOLERANCE_E = 150.0
@@ -216,8 +218,17 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int) -> dict:
 
 
 def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int) -> dict:
-    """What a worker runs: one instance, tagged with its point and instance."""
-    return {"point": point, "instance": instance, "seed": seed, **run_instance(config_data, scene, frames, seed)}
+    """What a worker runs: one instance, tagged with its point and instance.
+
+    An error of the input (a :class:`CmosnoiseError`) is returned as
+    ``{"error": message}``, not raised: Dask would retry it and then show a
+    traceback; the sweep stops with the one line instead.
+    """
+    try:
+        metrics = run_instance(config_data, scene, frames, seed)
+    except CmosnoiseError as exc:
+        return {"point": point, "instance": instance, "error": " ".join(str(exc).split())}
+    return {"point": point, "instance": instance, "seed": seed, **metrics}
 
 
 # ------------------------------------------------------------------ the sweep
@@ -261,14 +272,29 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
     if len(set(seen)) != len(seen):
         raise CmosnoiseError(f"--vary: a key is varied twice ({', '.join(sorted({k for k in seen if seen.count(k) > 1}))})")
     points = grid(axes) if axes else [{}]
-    configs = [point_config(base, p).model_dump(mode="json") for p in points]
+    checked = [point_config(base, p) for p in points]
+    configs = [c.model_dump(mode="json") for c in checked]
     scene = scene or base.scene.source
+    from ..model import footprint
     from ..model import scene as scene_mod
 
-    if not scene_mod.is_builtin(scene) and not Path(scene).is_file():
-        raise CmosnoiseError(f"--scene {scene!r}: no such built-in or file")
-    if Path(scene).is_file():
+    # what every task would find, found once before any task runs: the scene decodes, each point's sensor fits
+    if scene_mod.is_builtin(scene):
+        scene_mod.render(scene, (8, 8))
+    else:
+        if not Path(scene).exists() and not Path(scene).is_symlink():
+            raise CmosnoiseError(f"--scene {scene!r}: no such built-in or file")
+        scene_mod.load_file(scene)
         scene = str(Path(scene).resolve())
+    sizes = {}
+    for point, cfg in zip(points, checked):
+        sizes.setdefault((cfg.sensor.width, cfg.sensor.height), (point, cfg))
+    for point, cfg in sizes.values():
+        try:
+            footprint.check_fits(cfg)
+        except CmosnoiseError as exc:
+            shown = ", ".join(f"{k}={v}" for k, v in point.items())
+            raise CmosnoiseError(f"sweep point {shown}: {exc}" if shown else str(exc)) from None
     return Plan(base, axes, points, configs, instances, frames, scene, [parse_spec(s) for s in specs or []],
                 tuple(metrics) if metrics else METRICS)
 
@@ -304,15 +330,46 @@ def connect(scheduler: str | None, workers: int | None, say: Callable[[str], Non
     return client, cluster
 
 
+def repair_rows(path: Path) -> int:
+    """Cut a last row that was half written (a kill or a full disk mid-row): ``results.csv`` ends at its last
+    whole line. Returns the bytes removed."""
+    size = path.stat().st_size
+    if size == 0:
+        return 0
+    with open(path, "rb+") as fh:
+        fh.seek(max(0, size - 65536))
+        tail = fh.read()
+        if tail.endswith(b"\n"):
+            return 0
+        cut = tail.rfind(b"\n")
+        keep = (size - len(tail) + cut + 1) if cut >= 0 else 0
+        fh.truncate(keep)
+    return size - keep
+
+
 def _done_rows(path: Path, columns: list[str]) -> set[tuple[int, int]]:
+    """(point, instance) of every whole row of ``results.csv``, after :func:`repair_rows`."""
     if not path.exists():
         return set()
+    repair_rows(path)
+    done = set()
     with open(path, newline="") as fh:
         reader = csv.reader(fh)
         head = next(reader, None)
+        if head is None:
+            return set()
         if head != columns:
             raise CmosnoiseError(f"--resume: {str(path)!r} has other columns than this sweep's; it is a different sweep")
-        return {(int(r[0]), int(r[columns.index("instance")])) for r in reader if len(r) == len(columns)}
+        for n, r in enumerate(reader, 2):
+            try:
+                key = (int(r[0]), int(r[columns.index("instance")]))
+                if len(r) != len(columns):
+                    raise ValueError
+            except (ValueError, IndexError):
+                raise CmosnoiseError(f"--resume: {str(path)!r} line {n} is not a row of this sweep; "
+                                     "start again with --overwrite") from None
+            done.add(key)
+    return done
 
 
 def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable[[int, int], None] | None = None) -> Path:
@@ -326,7 +383,7 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
     total = len(p.points) * p.instances
     if progress:
         progress(len(done), total)
-    new = not results.exists() or not resume
+    new = not results.exists() or not resume or results.stat().st_size == 0
     fh = open(results, "w" if new else "a", newline="")
     writer = csv.writer(fh)
     if new:
@@ -345,8 +402,17 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
         running = as_completed([submit(x) for x in itertools.islice(queue, window)])
         finished = len(done)
         for future in running:
-            rec = future.result()
+            try:
+                rec = future.result()
+            except CmosnoiseError:
+                raise
+            except Exception as exc:  # a worker's failure past its retries: one line, not Dask's traceback
+                first = (str(exc).strip().splitlines() or [""])[0][:200]
+                raise CmosnoiseError(f"a sweep task failed: {type(exc).__name__}: {first}") from None
             future.release()
+            if "error" in rec:
+                shown = ", ".join(f"{k}={v}" for k, v in p.points[rec["point"]].items())
+                raise CmosnoiseError(f"sweep point {shown or '(the base)'}, instance {rec['instance']}: {rec['error']}")
             row = [rec["point"], *[_cell(p.points[rec["point"]][k]) for k in p.keys], rec["instance"], rec["seed"],
                    *[_cell(rec[m]) for m in METRICS]]
             if p.specs:
@@ -374,7 +440,11 @@ def summarize(p: Plan, out: Path):
     """summary.csv, a plot per metric (percentile bands), the yield plot, and index.html, from results.csv."""
     import pandas as pd
 
-    df = pd.read_csv(out / "results.csv").sort_values(["point", "instance"])
+    try:
+        df = pd.read_csv(out / "results.csv").sort_values(["point", "instance"])
+    except (ValueError, KeyError, OSError) as exc:  # pandas' parser errors are ValueErrors
+        raise CmosnoiseError(f"{str(out / 'results.csv')!r} cannot be summarized: {' '.join(str(exc).split())[:200]} "
+                             "(--resume repairs a half-written last row)") from None
     rows = []
     for i, point in enumerate(p.points):
         sub = df[df["point"] == i]
@@ -398,10 +468,7 @@ def summarize(p: Plan, out: Path):
 
 
 def _plots(p: Plan, summary, out: Path) -> list[str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     if not p.axes:
         return []
@@ -412,7 +479,8 @@ def _plots(p: Plan, summary, out: Path) -> list[str]:
     names = []
     metrics = [m for m in p.plot_metrics if f"{m}_mean" in summary] + (["yield"] if p.specs else [])
     for m in metrics:
-        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
+        fig = Figure(figsize=(6.4, 4.2), dpi=100)
+        ax = fig.add_subplot()
         for g in groups:
             sel = np.ones(len(summary), bool)
             label = []
@@ -446,7 +514,6 @@ def _plots(p: Plan, summary, out: Path) -> list[str]:
         fig.tight_layout()
         name = f"{m}.png"
         fig.savefig(out / name)
-        plt.close(fig)
         names.append(name)
     return names
 
@@ -479,6 +546,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     configuration); ``vary`` holds ``--vary`` texts. Without ``out`` the
     files go to a temporary folder that is removed afterwards.
     """
+    import shutil
     import tempfile
 
     import pandas as pd
@@ -492,73 +560,102 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
         tmp = tempfile.TemporaryDirectory(prefix="cmosnoise-sweep-")
         out = tmp.name
     out = Path(out)
-    fresh = _prepare(out, p, resume, overwrite, create=False)  # every check before the cluster starts
+    mode = _mode(out, p, resume, overwrite)  # every check before the cluster starts
     client, cluster = connect(scheduler, workers, say)
     try:
-        _prepare(out, p, resume, overwrite, create=True)
-        try:
-            execute(p, out, client, resume, progress)
-        except BaseException:
-            if fresh and not (out / "results.csv").exists():
-                import shutil
-
-                shutil.rmtree(out, ignore_errors=True)
-            raise
+        if mode == "replace":  # the old sweep stays whole until the new one is complete (simulate's rule)
+            with OutputFolder(out, overwrite=True) as work:
+                _write_plan(work, p)
+                execute(p, work, client, False, progress)
+                summarize(p, work)
+        else:  # a new folder, or --resume: rows go straight into out, so an interrupted sweep can be resumed
+            folder = OutputFolder(out, overwrite=True)  # its checks (not the current folder, writable, name)
+            with FolderLock(out, folder.anchor):
+                mode = _mode(out, p, resume, overwrite)  # again, under the lock: another run may have written
+                fresh = mode == "new"
+                try:
+                    if fresh:
+                        out.mkdir(parents=True, exist_ok=True)
+                        _write_plan(out, p)
+                    execute(p, out, client, resume and not fresh, progress)
+                except BaseException:
+                    if fresh and not (out / "results.csv").exists():
+                        shutil.rmtree(out, ignore_errors=True)
+                    raise
+                summarize(p, out)
+    except OSError as exc:
+        raise CmosnoiseError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from None
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-    summarize(p, out)
+        _close(client, cluster)
     df = pd.read_csv(out / "results.csv").sort_values(["point", "instance"]).reset_index(drop=True)
     if tmp is not None:
         tmp.cleanup()
     return df
 
 
-def _prepare(out: Path, p: Plan, resume: bool, overwrite: bool, create: bool) -> bool:
-    """The output folder: new (or --overwrite), or the same sweep's folder with --resume (its sweep.yaml must match).
+def _close(client, cluster) -> None:
+    """Close the Dask client and cluster without their shutdown chatter (closed streams, cancelled heartbeats)."""
+    import logging
 
-    With ``create=False`` only checks; returns whether the folder is (to be) made new.
-    """
-    import shutil
-
-    import yaml
-
-    from ..io.output import OutputFolder
-
-    text = yaml.safe_dump(p.to_yaml_data(), sort_keys=False, default_flow_style=None, width=100)
-    # the output folder's own checks (not the current folder, not a file, a writable place); it creates nothing.
-    # A sweep writes into the folder as it goes (rows appended, --resume), so not through a temporary one.
-    OutputFolder(out, overwrite=True)
-    if out.is_dir() and any(out.iterdir()):
-        if resume:
-            old = (out / "sweep.yaml").read_text() if (out / "sweep.yaml").exists() else None
-            if old != text:
-                raise CmosnoiseError(f"--resume: {str(out)!r} holds another sweep (its sweep.yaml differs); "
-                                     "resume with the same options")
-            return False
-        if not overwrite:
-            raise CmosnoiseError(f"--out {str(out)!r} already exists and is not empty; give --resume to continue that "
-                                 "sweep, --overwrite to start again, or another folder")
-        if create:
-            shutil.rmtree(out)
-    if not create:
-        return True
+    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL)
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        tmpfile = out / ".sweep.yaml.tmp"
-        tmpfile.write_text(text)
-        os.replace(tmpfile, out / "sweep.yaml")
-    except OSError as exc:
-        raise CmosnoiseError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from None
-    return True
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
+
+
+class _NoAliases(yaml.SafeDumper):
+    """sweep.yaml is read back with the loader that refuses aliases: never write one."""
+
+    def ignore_aliases(self, data):
+        return True
+
+
+def _plan_text(p: Plan) -> str:
+    return yaml.dump(p.to_yaml_data(), Dumper=_NoAliases, sort_keys=False, default_flow_style=None, width=100)
+
+
+def _write_plan(folder: Path, p: Plan) -> None:
+    tmpfile = folder / ".sweep.yaml.tmp"
+    tmpfile.write_text(_plan_text(p))
+    os.replace(tmpfile, folder / "sweep.yaml")
+
+
+def _mode(out: Path, p: Plan, resume: bool, overwrite: bool) -> str:
+    """"new" (no folder, or an empty one), "resume" (the same sweep's folder, --resume) or "replace" (--overwrite)."""
+    OutputFolder(out, overwrite=True)  # the output folder's own checks; it creates nothing
+    if not (out.is_dir() and any(out.iterdir())):
+        return "new"
+    if resume:
+        old = (out / "sweep.yaml").read_text() if (out / "sweep.yaml").is_file() else None
+        if old != _plan_text(p):
+            raise CmosnoiseError(f"--resume: {str(out)!r} holds another sweep (its sweep.yaml differs); "
+                                 "resume with the same options")
+        return "resume"
+    if not overwrite:
+        raise CmosnoiseError(f"--out {str(out)!r} already exists and is not empty; give --resume to continue that "
+                             "sweep, --overwrite to start again, or another folder")
+    return "replace"
 
 
 def sweep_from_yaml(path: Path) -> dict:
     """The options of a ``sweep.yaml`` (to rerun a sweep: ``cmosnoise sweep --from out/sweep.yaml``)."""
-    import yaml
+    from .. import inputs
 
-    data = yaml.safe_load(Path(path).read_text())
+    text = inputs.read_text(path, "--from", 10_000_000)
+    try:
+        data = load_yaml_text(text)  # the strict loader: no aliases, bounded nesting
+    except yaml.YAMLError as exc:
+        raise CmosnoiseError(f"--from {str(path)!r} is not valid YAML: {' '.join(str(exc).split())[:200]}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("vary", []), list):
+        raise CmosnoiseError(f"--from {str(path)!r} is not a sweep.yaml (a mapping with base, scene, instances, "
+                             "frames and vary)")
     vary = []
     for a in data.get("vary", []):
         vals = ",".join("x".join(json.dumps(v) if isinstance(v, str) else repr(v) for v in step) for step in a["values"])

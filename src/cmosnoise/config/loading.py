@@ -43,6 +43,8 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         raise CmosnoiseError(f"--set {text!r}: the key must be a dotted path such as prnu.sigma_pct")
     try:
         value = load_yaml_text(raw) if raw.strip() else None
+    except yaml.constructor.ConstructorError as exc:
+        raise CmosnoiseError(f"--set {text!r}: {exc.problem}") from None
     except yaml.YAMLError:
         value = raw
     return key.split("."), value
@@ -135,6 +137,28 @@ class _StrictLoader(yaml.SafeLoader):
             return super().compose_node(parent, index)
         finally:
             self._depth -= 1
+
+
+def _strict_number(kind: str):
+    """YAML 1.1 reads ``1:2`` as 62 (base 60) and ``010`` as 8 (octal): refused as numbers, with the reason."""
+    base = yaml.SafeLoader.construct_yaml_int if kind == "int" else yaml.SafeLoader.construct_yaml_float
+
+    def construct(loader, node):
+        text = str(node.value).replace("_", "")
+        digits = text.lstrip("+-")
+        if ":" in text:
+            raise yaml.constructor.ConstructorError(None, None, f"{node.value!r} would be read as a base-60 number; "
+                                                    "write the number itself (or quote it as text)", node.start_mark)
+        if kind == "int" and len(digits) > 1 and digits[0] == "0" and digits[1:].isdigit():
+            raise yaml.constructor.ConstructorError(None, None, f"{node.value!r} would be read as an octal number; "
+                                                    "write it without the leading zero", node.start_mark)
+        return base(loader, node)
+
+    return construct
+
+
+_StrictLoader.add_constructor("tag:yaml.org,2002:int", _strict_number("int"))
+_StrictLoader.add_constructor("tag:yaml.org,2002:float", _strict_number("float"))
 
 
 def load_yaml_text(text: str):

@@ -22,6 +22,16 @@ class Section(BaseModel):
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_booleans_for_numbers(cls, value, info):
+        """``seed: true`` is a mistake, not 1: a boolean is refused where a number is expected."""
+        field = cls.model_fields.get(info.field_name)
+        if isinstance(value, bool) and field is not None and field.annotation in (int, float, "int", "float",
+                                                                                   Optional[int], Optional[float]):
+            raise ValueError(f"expected a number, got {str(value).lower()}")
+        return value
+
 
 # --------------------------------------------------------------------------- run
 class SceneSection(Section):

@@ -323,7 +323,21 @@ def write_png(path: str | Path, image: np.ndarray) -> None:
 
 
 def write_json(path: str | Path, obj) -> None:
-    Path(path).write_text(json.dumps(obj, indent=2, default=_json_default) + "\n")
+    """``obj`` as strict JSON: NaN and infinities (which JSON has no numbers for) are written as null."""
+    Path(path).write_text(json.dumps(finite(obj), indent=2, default=_json_default, allow_nan=False) + "\n")
+
+
+def finite(obj):
+    """``obj`` with every non-finite float (NaN, inf; NumPy's too) replaced by None, for strict JSON."""
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return finite(obj.tolist())
+    return obj
 
 
 def _json_default(o):
