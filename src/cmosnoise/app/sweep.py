@@ -16,6 +16,7 @@ already there.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import itertools
 import json
@@ -561,32 +562,31 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
         out = tmp.name
     out = Path(out)
     mode = _mode(out, p, resume, overwrite)  # every check before the cluster starts
-    client, cluster = connect(scheduler, workers, say)
     try:
-        if mode == "replace":  # the old sweep stays whole until the new one is complete (simulate's rule)
-            with OutputFolder(out, overwrite=True) as work:
-                _write_plan(work, p)
-                execute(p, work, client, False, progress)
-                summarize(p, work)
-        else:  # a new folder, or --resume: rows go straight into out, so an interrupted sweep can be resumed
-            folder = OutputFolder(out, overwrite=True)  # its checks (not the current folder, writable, name)
-            with FolderLock(out, folder.anchor):
+        with contextlib.ExitStack() as stack:
+            # the folder is taken (locked) before the cluster starts: a second sweep on it is refused at once
+            if mode == "replace":  # the old sweep stays whole until the new one is complete (simulate's rule)
+                work = stack.enter_context(OutputFolder(out, overwrite=True))
+                fresh = True
+            else:  # a new folder, or --resume: rows go straight into out, so an interrupted sweep can be resumed
+                folder = OutputFolder(out, overwrite=True)  # its checks (not the current folder, writable, name)
+                stack.enter_context(FolderLock(out, folder.anchor))
                 mode = _mode(out, p, resume, overwrite)  # again, under the lock: another run may have written
-                fresh = mode == "new"
-                try:
-                    if fresh:
-                        out.mkdir(parents=True, exist_ok=True)
-                        _write_plan(out, p)
-                    execute(p, out, client, resume and not fresh, progress)
-                except BaseException:
-                    if fresh and not (out / "results.csv").exists():
-                        shutil.rmtree(out, ignore_errors=True)
-                    raise
-                summarize(p, out)
+                work, fresh = out, mode == "new"
+            client, cluster = connect(scheduler, workers, say)
+            stack.callback(_close, client, cluster)
+            try:
+                if fresh:
+                    work.mkdir(parents=True, exist_ok=True)
+                    _write_plan(work, p)
+                execute(p, work, client, resume and not fresh, progress)
+            except BaseException:
+                if fresh and mode == "new" and not (out / "results.csv").exists():
+                    shutil.rmtree(out, ignore_errors=True)
+                raise
+            summarize(p, work)
     except OSError as exc:
         raise CmosnoiseError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from None
-    finally:
-        _close(client, cluster)
     df = pd.read_csv(out / "results.csv").sort_values(["point", "instance"]).reset_index(drop=True)
     if tmp is not None:
         tmp.cleanup()
