@@ -28,8 +28,8 @@ import dataclasses
 import json
 
 import numpy as np
-
 from bench_chain import best_fps, cpu, numpy_reference, per_frame
+
 from cmosnoise import Sensor, load_config
 from cmosnoise.engine import kernel
 from cmosnoise.engine.jit import numba

@@ -31,13 +31,11 @@ elif not os.environ.get("NUMBA_CACHE_DIR"):
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
 # numba's target as the package sets it (engine/jit.py: the host's full vector width), before a test module
 # imports numba itself: this process and its children then key the compile cache alike
-import cmosnoise.engine.jit  # noqa: E402, F401
-
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+import cmosnoise.engine.jit  # noqa: E402, F401
 from cmosnoise import load_config  # noqa: E402
-
 
 #: the longest file (its fit round trip is some three minutes): started at once, on the other worker
 LONGEST_FILE = "test_fit_stages.py"

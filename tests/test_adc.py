@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
+from conftest import quiet_config
 
 from cmosnoise import Sensor
 from cmosnoise.model.stages.adc import Transfer, convert
-
-from conftest import quiet_config
 
 
 def reference(n, bits, black, full_scale):

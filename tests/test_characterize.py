@@ -4,12 +4,11 @@ import math
 
 import numpy as np
 import pytest
+from conftest import Z, cli, temporal_variance_se
 
 from cmosnoise import Sensor, load_config, noise_budget, preset_names
 from cmosnoise import characterize as ch
 from cmosnoise.analysis.emva_reference import reference_results
-
-from conftest import Z, temporal_variance_se, cli
 
 
 @pytest.fixture(scope="module")

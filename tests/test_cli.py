@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import tifffile
 import yaml
-from conftest import cli as run, cli_subprocess
+from conftest import cli as run
+from conftest import cli_subprocess
 
 
 def test_simulate_writes_the_four_outputs(tmp_path):

@@ -2,12 +2,10 @@
 
 import numpy as np
 import pytest
-
-from cmosnoise import Sensor, load_config
-from cmosnoise import crosstalk
-from cmosnoise.model.cfa import masks
-
 from conftest import quiet_config
+
+from cmosnoise import Sensor, crosstalk, load_config
+from cmosnoise.model.cfa import masks
 
 
 def test_single_lit_pixel_spreads_exactly_as_the_kernel_says():

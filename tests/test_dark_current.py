@@ -4,17 +4,14 @@ import json
 
 import numpy as np
 import pytest
+from conftest import Z, assert_close, cli, quiet_config
 from scipy import stats
 
-from cmosnoise import CmosnoiseError, Sensor, load_config
-from cmosnoise import dark_current, white_pixels
+from cmosnoise import CmosnoiseError, Sensor, dark_current, load_config, white_pixels
 from cmosnoise.model.distributions import body
+from cmosnoise.model.heavy_tail import variates
 from cmosnoise.model.physics import dark_points
 from cmosnoise.model.units import aa_to_e_per_s, na_per_cm2_to_e_per_s
-
-from cmosnoise.model.heavy_tail import variates
-
-from conftest import Z, assert_close, cli, quiet_config
 
 
 def dark_cfg(points, shape=(1000, 1000), temperature=25.0, **extra):

@@ -1,12 +1,11 @@
 """EMVA 1288 view of simulated frames: temporal dark noise, DSNU (with its column part) and PRNU."""
 
 import numpy as np
+from conftest import assert_close, quiet_config, std_se_with_noise, temporal_variance_se
 from scipy import signal
 
 from cmosnoise import Sensor, emva, load_config, noise_budget
 from cmosnoise.model.scene import steps_levels
-
-from conftest import assert_close, quiet_config, std_se_with_noise, temporal_variance_se
 
 
 def stack(shot, frames, first=0):

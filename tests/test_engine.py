@@ -4,13 +4,13 @@ import math
 
 import numpy as np
 import pytest
+from conftest import assert_close
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.engine import fdmath, kernel
 from cmosnoise.engine.philox import philox4x32
 from cmosnoise.engine.samplers import Stream, poisson_inversion
-from conftest import assert_close
 
 U = np.uint64
 

@@ -4,12 +4,11 @@ import math
 
 import numpy as np
 import pytest
+from conftest import Z
 
 from cmosnoise import Sensor, load_config, noise_budget
 from cmosnoise.analysis import fit_dark as fit
 from cmosnoise.analysis import fit_photo
-
-from conftest import Z
 
 
 @pytest.mark.parametrize("family", ["logistic", "inverse_gaussian", "lognormal", "normal", "gamma"])

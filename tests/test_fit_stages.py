@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import Z
 from scipy import stats
 
 from cmosnoise import Sensor, load_config, noise_budget
@@ -30,8 +31,6 @@ from cmosnoise.analysis import fit, fit_dark, fit_readout
 from cmosnoise.app.fitting import dark_exposures
 from cmosnoise.io.stacks import Dataset, reduce_stack
 from cmosnoise.model import physics
-
-from conftest import Z
 
 SEEDS = 20
 #: a true 95 % interval misses 4 or more times in 20 with probability 1.6 %, 5 or more 0.3 %

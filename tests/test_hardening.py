@@ -258,8 +258,8 @@ def test_a_run_that_cannot_fit_in_memory_is_refused_with_the_estimate(tmp_path):
     r = cli("simulate", "--set", "sensor.width=30000", "--set", "sensor.height=30000", "--out", tmp_path / "o")
     assert r.returncode == 2 and "needs about" in r.stderr and "GB available" in r.stderr
     assert time.monotonic() - t0 < 10 and list(tmp_path.iterdir()) == []
+    from cmosnoise import CmosnoiseError, load_config
     from cmosnoise.model import footprint
-    from cmosnoise import load_config, CmosnoiseError
 
     cfg = load_config(extra={"sensor": {"width": 1920, "height": 1080}})
     need = footprint.estimate_bytes(cfg)
@@ -363,6 +363,7 @@ def test_characterize_inputs_are_checked(tmp_path):
 # ------------------------------------------------------------------ the Python API
 def test_the_api_raises_cmosnoise_errors_that_name_the_argument():
     import numpy as np
+
     from cmosnoise import CmosnoiseError, Sensor
 
     small = {"sensor": {"width": 16, "height": 12}}

@@ -2,12 +2,11 @@
 
 import numpy as np
 import pytest
+from conftest import Z
 from scipy import stats
 
 from cmosnoise.model.distributions import body
 from cmosnoise.model.heavy_tail import HeavyTail, UnreachablePpm
-
-from conftest import Z
 
 
 def binomial_ok(count, n, p):

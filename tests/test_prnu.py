@@ -1,14 +1,12 @@
 """Stage 2: PRNU gain map, fixed and Normal(1, sigma)."""
 
 import numpy as np
+import pytest
+from conftest import Z, assert_close, quiet_config, smoothed_std_se
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.model.stages.prnu import gain_map
-
-import pytest
-
-from conftest import Z, assert_close, quiet_config, smoothed_std_se
 
 
 def test_gain_map_is_normal_with_configured_sigma():

@@ -4,13 +4,12 @@
 import numpy as np
 import pytest
 import tifffile
+from conftest import assert_close, cli, quiet_config, temporal_variance_se
 
 from cmosnoise import CmosnoiseError, Sensor, calibration, load_config, noise_budget, scene, white_pixels
 from cmosnoise.config import ProcessingSection
 from cmosnoise.io.dng import write_dng
 from cmosnoise.isp.process import Processor
-
-from conftest import assert_close, quiet_config, temporal_variance_se, cli
 
 
 def processor_for(sensor, master=None, **settings):
@@ -204,8 +203,9 @@ def test_simulate_writes_processed_outputs_and_dngs(tmp_path):
 
 
 def test_process_command_reproduces_the_simulators_processing(tmp_path):
-    from cmosnoise.app.run import simulate
     import imageio.v3 as iio
+
+    from cmosnoise.app.run import simulate
 
     cfg = load_config(preset="paper-fig9-vga", overrides=["sensor.width=160", "sensor.height=120"])
     simulate(cfg, tmp_path / "sim")
@@ -275,7 +275,6 @@ def test_raw_reader_takes_2d_and_3d_codes_and_refuses_other_data(tmp_path):
 def test_demosaicing_leaves_no_colour_fringe_on_the_border(pattern, method):
     """A grey flat field demosaics to grey everywhere, the outermost rows and columns included."""
     from cmosnoise.isp.reconstruction import demosaic
-
     from cmosnoise.model import cfa
 
     levels = np.array([0.3, 0.6, 0.45])  # a neutral grey seen through channels of different responsivity

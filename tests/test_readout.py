@@ -2,12 +2,11 @@
 
 import numpy as np
 import pytest
+from conftest import Z, assert_close, quiet_config, smoothed_std_se, temporal_variance_se
 from scipy import stats
 
 from cmosnoise import CmosnoiseError, Sensor, load_config, noise_budget
 from cmosnoise.model.physics import flicker_model
-
-from conftest import Z, assert_close, quiet_config, smoothed_std_se, temporal_variance_se
 
 
 def dark_stack(cfg, frames, seed=0, scene="flat:0"):

@@ -256,6 +256,7 @@ def test_a_run_larger_than_the_free_space_is_refused(tmp_path, monkeypatch):
 
     usage = collections.namedtuple("usage", "total used free")
     monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 10**6, 10**6))
+    # 1000 frames of 64 x 48 uint16 are 6 MB: more than the 1 MB "free"
     r = cli("simulate", *SMALL, "--frames", 1000, "--out", tmp_path / "o")
     assert r.returncode == 2 and "GB free" in r.stderr and not (tmp_path / "o").exists()
 

@@ -2,10 +2,9 @@
 
 import numpy as np
 import pytest
+from conftest import quiet_config
 
 from cmosnoise import CmosnoiseError, Sensor, scene
-
-from conftest import quiet_config
 
 
 def test_srgb_round_trip_and_known_values():

@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
+from conftest import assert_close, quiet_config
 from scipy import stats
 
 from cmosnoise import Sensor
 from cmosnoise.engine.samplers import Stream
 from cmosnoise.model.stages.shot_noise import collect
-
-from conftest import assert_close, quiet_config
 
 
 def _stack(sensor, scene, frames):

@@ -134,8 +134,9 @@ def image_planes(path: str | Path) -> tuple[int, int, int]:
             if first[0] * first[1] != largest:  # pages of different sizes: bound by the largest
                 return largest, 1, n
             return first[0], first[1], n
-    from PIL import Image
     import warnings
+
+    from PIL import Image
 
     try:
         with warnings.catch_warnings():

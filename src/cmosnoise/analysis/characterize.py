@@ -33,8 +33,8 @@ import numpy as np
 from .. import inputs
 from ..errors import CmosnoiseError
 from ..io.stacks import DESCRIPTOR  # the file name export writes and load reads
-from ..model.stages import adc
 from ..model.seeds import SEQ_EMVA_BRIGHT, SEQ_EMVA_DARK, SEQ_EMVA_STACK_BRIGHT, SEQ_EMVA_STACK_DARK
+from ..model.stages import adc
 from . import emva, noise_budget
 
 if TYPE_CHECKING:
@@ -343,16 +343,14 @@ def footnotes(measured: dict) -> list[str]:
 # ------------------------------------------------------------------ plots
 def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
     """Photon-transfer and SNR curves as PNGs (labelled axes with units, legend, title)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     paths = []
     k = res["system_gain_K_dn_per_e"]
     y = m.mu_y - m.mu_ydark
     v = m.s2_y - m.s2_ydark
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=110)
+    fig = Figure(figsize=(6.4, 4.4), dpi=110)
+    ax = fig.add_subplot()
     ax.plot(y, v, "o", ms=4, label="measured")
     xs = np.linspace(0, y[res["saturation_index"]], 50)
     if k is not None:
@@ -369,9 +367,9 @@ def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
     fig.tight_layout()
     paths.append(out / "photon_transfer.png")
     fig.savefig(paths[-1])
-    plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=110)
+    fig = Figure(figsize=(6.4, 4.4), dpi=110)
+    ax = fig.add_subplot()
     snr = y / np.sqrt(np.maximum(m.s2_y, 1e-12))
     ok = (y > 0) & (np.arange(len(y)) <= res["saturation_index"])
     ax.loglog(m.mu_p[ok], snr[ok], "o", ms=4, label="measured")
@@ -390,7 +388,6 @@ def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
     fig.tight_layout()
     paths.append(out / "snr.png")
     fig.savefig(paths[-1])
-    plt.close(fig)
     return paths
 
 

@@ -283,8 +283,8 @@ def figures(
     overwrite: bool = OverwriteOpt,
 ):
     """Regenerate the paper's figures (3, 5, 6, 7, 9, 10, 11) as PNGs with an index.html gallery."""
-    from .figures import write_gallery
     from ..io.output import OutputFolder
+    from .figures import write_gallery
 
     with OutputFolder(out, overwrite) as tmp:
         with Progress(TextColumn("[bold]figure"), TextColumn("{task.description}"), console=err_console,

@@ -51,10 +51,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import inputs
 from ..config import Config, format_validation_error
 from ..config.explain import fields
 from ..config.loading import load_yaml_text, preset_data, preset_names, resolve_config
-from .. import inputs
 from ..errors import CmosnoiseError
 from ..isp import calibration
 from ..isp.process import Processor

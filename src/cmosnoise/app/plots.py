@@ -1,4 +1,4 @@
-"""Plots shared by the run report and the paper's figures (matplotlib, Agg).
+"""Plots shared by the run report and the paper's figures (matplotlib Figure objects, never pyplot).
 
 Every plot has labelled axes with units, a legend where there is more than
 one thing to tell apart, and a title.
@@ -11,24 +11,21 @@ import io
 
 import numpy as np
 
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+_FIGURE_KEYS = ("figsize", "dpi", "facecolor", "edgecolor", "layout")
 
 
 def figure(*args, **kwargs):
-    return _plt().subplots(*args, **kwargs)
+    """``(fig, axes)`` as ``pyplot.subplots`` gives them, on a :class:`matplotlib.figure.Figure` of its own: no
+    pyplot, no global backend switch (a notebook's backend is left alone), nothing to close."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(**{k: kwargs.pop(k) for k in _FIGURE_KEYS if k in kwargs})
+    return fig, fig.subplots(*args, **kwargs)
 
 
 def to_png_bytes(fig, dpi: int = 100) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-    _plt().close(fig)
     return buf.getvalue()
 
 

@@ -194,9 +194,12 @@ def check_free_space(folder: Path, needed: int, option: str) -> None:
     import shutil
 
     try:
-        free = shutil.disk_usage(folder).free
+        usage = shutil.disk_usage(folder)
     except OSError:
         return  # unknown: the write itself will say
+    if usage.total == 0:  # a pseudo file system (/sys, /proc) reports no size: the write itself will say
+        return
+    free = usage.free
     if needed > free:
         raise CmosnoiseError(f"{option}: this run writes about {needed / 1e9:.2f} GB; the file system of "
                              f"{str(folder)!r} has {free / 1e9:.2f} GB free (fewer --frames, a smaller sensor, "

@@ -7,8 +7,16 @@
 """
 
 from .loading import (
-    apply_overrides, build_config, build_section, deep_merge, merge_updates, parse_override, preset_data,
-    preset_names, read_yaml, resolve_config,
+    apply_overrides,
+    build_config,
+    build_section,
+    deep_merge,
+    merge_updates,
+    parse_override,
+    preset_data,
+    preset_names,
+    read_yaml,
+    resolve_config,
 )
 from .messages import format_validation_error
 from .schema import Config, ExposureSection, ProcessingSection

@@ -9,7 +9,6 @@ from pydantic import BaseModel
 
 from .schema import Config
 
-
 _DEFAULT_TEXT = {"enabled": "switch this stage (or part) on or off"}
 
 

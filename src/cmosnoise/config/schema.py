@@ -16,7 +16,6 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 
-
 class Section(BaseModel):
     """Base of every section: unknown keys are errors, values are re-validated on assignment, inf and NaN refused."""
 

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import fdmath, philox, samplers
-
 from .jit import numba  # None where numba is not installed
 
 #: whether the compiled kernel can run here

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..model import cfa as cfa_mod
 
+
 def _offsets(pattern: str) -> tuple[np.ndarray, np.ndarray | None]:
     """(R/B or mono offsets, G offsets or None) as arrays (8, 2)."""
     if cfa_mod.is_mono(pattern):

@@ -34,9 +34,9 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from . import cfa as cfa_mod
 from .. import inputs
 from ..errors import CmosnoiseError
+from . import cfa as cfa_mod
 
 #: Rec. 709 / sRGB luminance weights for linear RGB
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from ...engine.samplers import Stream
 from ..distributions import gumbel
 

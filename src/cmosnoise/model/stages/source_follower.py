@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+
 from ...engine.samplers import Stream
 from ..distributions import gumbel
 from ..heavy_tail import HeavyTail, variates

@@ -1,0 +1,58 @@
+"""The random streams pinned: the bits of frames and fixed maps, per random-number scheme version.
+
+``tests/golden/scheme-N.json`` holds, for scheme version N, a digest (the
+first 16 hex digits of SHA-256 over dtype, shape and bytes) of every fixed
+map and of frames 0, 1 and 4 000 000 000 of the default sensor and every
+preset at 96 x 64, seed 11, looking at the colour checker. A change that
+moves any bit fails here unless it also raises
+``cmosnoise.engine.samplers.SCHEME_VERSION`` and adds that version's file
+(regenerate it with ``python tests/test_golden.py > tests/golden/scheme-N.json``),
+so a consistent change to both the samplers and the kernel cannot pass
+unnoticed.
+"""
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cmosnoise
+from cmosnoise import Sensor
+from cmosnoise.config.loading import preset_names
+from cmosnoise.engine.samplers import SCHEME_VERSION
+
+GOLDEN = Path(__file__).parent / "golden" / f"scheme-{SCHEME_VERSION}.json"
+MAPS = ("prnu_gain", "dark_rate", "flicker_sigma", "row_offset", "column_sigma", "vfpn", "column_gain")
+FRAMES = (0, 1, 4_000_000_000)
+
+
+def digest(a: np.ndarray) -> str:
+    a = np.ascontiguousarray(a)
+    return hashlib.sha256(a.dtype.str.encode() + str(a.shape).encode() + a.tobytes()).hexdigest()[:16]
+
+
+def measure(name: str | None) -> dict:
+    sets = ["sensor.width=96", "sensor.height=64"]
+    sensor = Sensor(cmosnoise.load_config(preset=name, overrides=sets), seed=11)
+    fp = sensor.fixed_pattern
+    maps = {k: digest(getattr(fp, k)) for k in MAPS if getattr(fp, k) is not None}
+    shot = sensor.expose("colorchecker")
+    return {"maps": maps, "frames": {str(k): digest(shot.frame(k)) for k in FRAMES}}
+
+
+def test_the_scheme_version_has_its_golden_file():
+    assert GOLDEN.is_file(), (f"random-number scheme {SCHEME_VERSION} has no golden file {GOLDEN.name}: "
+                              "a new scheme version needs its bits pinned")
+
+
+@pytest.mark.parametrize("name", [None, *preset_names()], ids=lambda n: n or "default")
+def test_frames_and_maps_have_the_pinned_bits(name):
+    expected = json.loads(GOLDEN.read_text())[name or "default"]
+    assert measure(name) == expected, (f"the bits moved under scheme version {SCHEME_VERSION}: raise SCHEME_VERSION "
+                                       "and pin the new bits in a new golden file, or undo the change")
+
+
+if __name__ == "__main__":
+    print(json.dumps({n or "default": measure(n) for n in [None, *preset_names()]}, indent=1, sort_keys=True))
