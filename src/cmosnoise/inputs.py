@@ -104,11 +104,10 @@ def _size(n: int) -> str:
 def image_planes(path: str | Path) -> tuple[int, int, int]:
     """(rows, cols, planes) of an image file from its header alone: planes counts every frame and page.
 
-    ``rows`` and ``cols`` are the first plane's; the decoded size of the
-    whole file is bounded by ``planes`` times the largest plane, which is
-    what is returned for ``rows * cols`` where planes differ (a TIFF whose
-    pages have different sizes reports its largest page). Raises whatever
-    the header reader raises for a file it cannot read.
+    ``rows`` and ``cols`` are the largest plane's (a TIFF's pages may differ
+    in size), so ``rows * cols * planes`` bounds the decoded pixels of the
+    whole file. Raises whatever the header reader raises for a file it cannot
+    read.
     """
     p = Path(path)
     suffix = p.suffix.lower()
@@ -121,19 +120,11 @@ def image_planes(path: str | Path) -> tuple[int, int, int]:
         import tifffile
 
         with tifffile.TiffFile(p) as tf:
-            pages = tf.pages
-            n = len(pages)
-            largest, first = 0, None
-            for page in pages:  # page headers only: no pixel is decoded
-                rows = int(getattr(page, "imagelength", 0))
-                cols = int(getattr(page, "imagewidth", 0)) * max(int(getattr(page, "imagedepth", 1)), 1)
-                first = first or (rows, cols)
-                largest = max(largest, rows * cols)
-            if first is None:
-                return 0, 0, 0
-            if first[0] * first[1] != largest:  # pages of different sizes: bound by the largest
-                return largest, 1, n
-            return first[0], first[1], n
+            sizes = [(int(getattr(page, "imagelength", 0)),  # page headers only: no pixel is decoded
+                      int(getattr(page, "imagewidth", 0)) * max(int(getattr(page, "imagedepth", 1)), 1))
+                     for page in tf.pages]
+        rows, cols = max(sizes, key=lambda rc: rc[0] * rc[1], default=(0, 0))
+        return rows, cols, len(sizes)
     import warnings
 
     from PIL import Image
@@ -169,9 +160,11 @@ def _from_shape(shape: tuple[int, ...]) -> tuple[int, int, int]:
     return shape[-2], shape[-1], planes
 
 
-def check_image_pixels(path: str | Path, what: str, max_pixels: int, max_plane_pixels: int | None = None) -> tuple[int, int, int]:
+def check_image_pixels(path: str | Path, what: str, max_pixels: int, max_plane_pixels: int | None = None,
+                       hint: str = "") -> tuple[int, int, int]:
     """Refuse an image whose frames or pages hold more than ``max_pixels`` pixels in all (or one plane more
-    than ``max_plane_pixels``), from its header; returns (rows, cols, planes)."""
+    than ``max_plane_pixels``), from its header, after :func:`check_regular`; returns (rows, cols, planes).
+    ``hint`` ends a refusal for size (what to do instead)."""
     p = check_regular(path, what)
     try:
         rows, cols, planes = image_planes(p)
@@ -182,10 +175,10 @@ def check_image_pixels(path: str | Path, what: str, max_pixels: int, max_plane_p
         raise CmosnoiseError(f"{what} {str(p)!r} cannot be read as an image: {first}") from None
     if max_plane_pixels is not None and rows * cols > max_plane_pixels:
         raise CmosnoiseError(f"{what} {str(p)!r} has a {cols} x {rows} frame; at most {max_plane_pixels / 1e6:g} "
-                             "megapixels a frame are read")
+                             f"megapixels a frame are read{hint}")
     total = rows * cols * planes
     if total > max_pixels:
         many = f" in {planes} frames or pages" if planes > 1 else ""
         raise CmosnoiseError(f"{what} {str(p)!r} is {cols} x {rows} pixels{many} ({total / 1e6:.0f} megapixels "
-                             f"decoded); at most {max_pixels / 1e6:g} megapixels are read")
+                             f"decoded); at most {max_pixels / 1e6:g} megapixels are read{hint}")
     return rows, cols, planes

@@ -510,22 +510,15 @@ def run(argv: list[str] | None = None) -> int:
 def _libraries_quiet(argv):
     """Warnings of the file libraries (tifffile, LibRaw through rawpy, imageio, Pillow) kept off stderr unless
     --verbose: a damaged file's problems are reported by our own one-line error, not by 200 lines of theirs."""
-    import logging
+    from .logs import quieted
 
     args = sys.argv[1:] if argv is None else [str(a) for a in argv]
     if "-v" in args or "--verbose" in args:
         yield
         return
     warnings.filterwarnings("ignore", module=r"(tifffile|rawpy|imageio|PIL|colour_demosaicing)(\.|$)")
-    loggers = [logging.getLogger(n) for n in ("tifffile", "rawpy", "imageio", "PIL")]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.ERROR)
-    try:
+    with quieted(("tifffile", "rawpy", "imageio", "PIL")):
         yield
-    finally:
-        for lg, level in zip(loggers, levels):
-            lg.setLevel(level)
 
 
 def _quiet_interrupts(hook):

@@ -37,6 +37,7 @@ fill the log.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import io
 import json
@@ -58,7 +59,7 @@ from ..config.loading import load_yaml_text, preset_data, preset_names, resolve_
 from ..errors import CmosnoiseError
 from ..isp import calibration
 from ..isp.process import Processor
-from ..model import physics
+from ..model import footprint, physics
 from ..model import scene as scene_mod
 from ..model.seeds import SEQ_DARK_CALIBRATION
 from ..model.sensor import Exposure, Sensor, fixed_pattern_inputs
@@ -207,31 +208,15 @@ class _Lru:
         return sum(self._weights.values())
 
 
-def _nbytes(obj, depth: int = 3, seen: set | None = None) -> int:
-    """Bytes of the NumPy arrays an object holds (its attributes, dataclass fields, dicts, lists), ``depth`` deep."""
-    seen = set() if seen is None else seen
-    if id(obj) in seen or depth < 0:
-        return 0
-    seen.add(id(obj))
-    if isinstance(obj, np.ndarray):
-        return int(obj.nbytes)
-    if isinstance(obj, dict):
-        items = obj.values()
-    elif isinstance(obj, (list, tuple)):
-        items = obj
-    elif hasattr(obj, "__dict__"):
-        items = vars(obj).values()
-    else:
-        return 0
-    return sum(_nbytes(v, depth - 1, seen) for v in items)
-
-
 def _cache_budget() -> int:
     """Bytes the sensor cache may hold: a quarter of the memory available at start, at most 4 GB."""
-    from ..model.footprint import available_bytes
-
-    avail = available_bytes()
+    avail = footprint.available_bytes()
     return int(min(4e9, 0.25 * avail)) if avail else int(1e9)
+
+
+def _sensor_weight(sensor: Sensor) -> int:
+    """A cached sensor's maps, bytes (the workbench keeps the dark map's draws: keep_draws=True)."""
+    return footprint.sensor_bytes(sensor.config, keep_draws=True)
 
 
 # ------------------------------------------------------------------ the work
@@ -245,7 +230,7 @@ class Workbench:
         self.uploads: OrderedDict[str, dict] = OrderedDict()
         self.served: dict[str, int] = {}  # requests that did work, by endpoint (the tests read it at /api/stats)
         budget = _cache_budget()
-        self._sensors = _Lru(4, max_bytes=budget, weigh=_nbytes)
+        self._sensors = _Lru(4, max_bytes=budget, weigh=_sensor_weight)
         self._signals = _Lru(4)
         self._exposures = _Lru(6)
         self._masters = _Lru(4)
@@ -304,6 +289,9 @@ class Workbench:
 
     def count(self, endpoint: str) -> None:
         self.served[endpoint] = self.served.get(endpoint, 0) + 1
+
+    def cache_bytes(self) -> int:
+        return self._sensors.nbytes()
 
     def sensor(self, cfg: Config) -> Sensor:
         """A sensor of ``cfg``: its fixed pattern from the cache, or drawn reusing the last sensor's unchanged maps."""
@@ -510,13 +498,13 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
         if ctype != media:
             raise BadRequest(f"{endpoint} takes {media}, not {ctype or 'a body without a content type'}", 415)
-        bench.count(endpoint)
 
     def errors(func, media: str | None = None):
         async def wrapped(request: Request):
             try:
                 if request.method == "POST":
                     same_origin(request, request.url.path, media or "application/json")
+                    bench.count(request.url.path)
                 return secured(await func(request))
             except BadRequest as exc:
                 return secured(JSONResponse({"error": exc.message, "errors": exc.errors}, status_code=exc.status))
@@ -537,7 +525,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     async def stats(request: Request):
         """What the server did and holds: requests that did work, uploads, cache bytes (read by the tests)."""
         return JSONResponse({"served": dict(bench.served), "uploads": len(bench.uploads),
-                             "upload_bytes": bench.upload_bytes(), "sensor_cache_bytes": bench._sensors.nbytes()})
+                             "upload_bytes": bench.upload_bytes(), "sensor_cache_bytes": bench.cache_bytes()})
 
     @errors
     async def meta(request: Request):
@@ -726,11 +714,10 @@ def _raise_file_limit() -> None:
     import resource
 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-    if hard == resource.RLIM_INFINITY or soft < hard:
-        try:
-            resource.setrlimit(resource.RLIMIT_NOFILE, (hard if hard != resource.RLIM_INFINITY else max(soft, 65536), hard))
-        except (ValueError, OSError):
-            pass
+    target = max(soft, 65536) if hard == resource.RLIM_INFINITY else hard
+    if soft < target:
+        with contextlib.suppress(ValueError, OSError):
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
 
 
 def serve(base: Config, scene: str | None, host: str = "127.0.0.1", port: int = 8765, open_browser: bool = True,
@@ -759,7 +746,7 @@ def serve(base: Config, scene: str | None, host: str = "127.0.0.1", port: int = 
             else:
                 bench.scene_source(bench.scene)
         except BadRequest as exc:
-            raise CmosnoiseError(f"--scene {scene if scene is not None else bench.scene!r}: {exc.message}") from None
+            raise CmosnoiseError(f"--scene {scene if scene is not None else bench.scene}: {exc.message}") from None
         hosts = LOOPBACK if host in LOOPBACK else (*LOOPBACK, host)
         app = create_app(bench, hosts)
         url = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}/"
@@ -775,7 +762,6 @@ def serve(base: Config, scene: str | None, host: str = "127.0.0.1", port: int = 
         limiter = _RateLimited()
         for name in ("uvicorn.error", "uvicorn"):
             logging.getLogger(name).addFilter(limiter)
-        config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False, http=_guarded_h11(),
-                                timeout_keep_alive=5)
+        config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False, http=_guarded_h11())
         server = uvicorn.Server(config)
         server.run()

@@ -62,7 +62,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
-    check_free_space(folder.anchor, output_bytes(config), "--out")
+    folder.check_space(output_bytes(config))
     # Two more threads take work nothing waits for: loading the compiled kernel and drawing the dark-current
     # map while this thread draws the other fixed-pattern maps, and frame 0's pictures while the summary is
     # built (PNG encoding and most of NumPy's work release the GIL).
@@ -187,23 +187,6 @@ def output_bytes(config) -> int:
     per_frame = pixels * (2 if config.adc.enabled else 4) * (2 if config.run.dng else 1)
     extra = pixels * 4 * (1 + (config.processing.dark_frames > 0) + config.processing.enabled)
     return config.run.frames * per_frame + extra + 65536
-
-
-def check_free_space(folder: Path, needed: int, option: str) -> None:
-    """A one-line refusal when the file system holding ``folder`` has less free space than ``needed`` bytes."""
-    import shutil
-
-    try:
-        usage = shutil.disk_usage(folder)
-    except OSError:
-        return  # unknown: the write itself will say
-    if usage.total == 0:  # a pseudo file system (/sys, /proc) reports no size: the write itself will say
-        return
-    free = usage.free
-    if needed > free:
-        raise CmosnoiseError(f"{option}: this run writes about {needed / 1e9:.2f} GB; the file system of "
-                             f"{str(folder)!r} has {free / 1e9:.2f} GB free (fewer --frames, a smaller sensor, "
-                             "or another place)")
 
 
 def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray, read_var_e2: float) -> dict | None:

@@ -32,7 +32,7 @@ import yaml
 
 from ..config.loading import load_yaml_text
 from ..errors import CmosnoiseError
-from ..io.output import FolderLock, OutputFolder
+from ..io.output import OutputFolder
 
 #: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
 DEFECT_TOLERANCE_E = 150.0
@@ -561,27 +561,26 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
         tmp = tempfile.TemporaryDirectory(prefix="cmosnoise-sweep-")
         out = tmp.name
     out = Path(out)
+    folder = OutputFolder(out, overwrite=True)  # its checks (not the current folder, writable, name); creates nothing
     mode = _mode(out, p, resume, overwrite)  # every check before the cluster starts
     try:
         with contextlib.ExitStack() as stack:
             # the folder is taken (locked) before the cluster starts: a second sweep on it is refused at once
             if mode == "replace":  # the old sweep stays whole until the new one is complete (simulate's rule)
-                work = stack.enter_context(OutputFolder(out, overwrite=True))
-                fresh = True
+                work = stack.enter_context(folder)
             else:  # a new folder, or --resume: rows go straight into out, so an interrupted sweep can be resumed
-                folder = OutputFolder(out, overwrite=True)  # its checks (not the current folder, writable, name)
-                stack.enter_context(FolderLock(out, folder.anchor))
+                stack.enter_context(folder.lock)
                 mode = _mode(out, p, resume, overwrite)  # again, under the lock: another run may have written
-                work, fresh = out, mode == "new"
+                work = out
             client, cluster = connect(scheduler, workers, say)
             stack.callback(_close, client, cluster)
             try:
-                if fresh:
+                if mode != "resume":
                     work.mkdir(parents=True, exist_ok=True)
                     _write_plan(work, p)
-                execute(p, work, client, resume and not fresh, progress)
+                execute(p, work, client, mode == "resume", progress)
             except BaseException:
-                if fresh and mode == "new" and not (out / "results.csv").exists():
+                if mode == "new" and not (out / "results.csv").exists():
                     shutil.rmtree(out, ignore_errors=True)
                 raise
             summarize(p, work)
@@ -597,17 +596,12 @@ def _close(client, cluster) -> None:
     """Close the Dask client and cluster without their shutdown chatter (closed streams, cancelled heartbeats)."""
     import logging
 
-    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.CRITICAL)
-    try:
+    from .logs import quieted
+
+    with quieted(("distributed", "tornado", "asyncio"), logging.CRITICAL):
         client.close()
         if cluster is not None:
             cluster.close()
-    finally:
-        for lg, level in zip(loggers, levels):
-            lg.setLevel(level)
 
 
 class _NoAliases(yaml.SafeDumper):
@@ -629,7 +623,6 @@ def _write_plan(folder: Path, p: Plan) -> None:
 
 def _mode(out: Path, p: Plan, resume: bool, overwrite: bool) -> str:
     """"new" (no folder, or an empty one), "resume" (the same sweep's folder, --resume) or "replace" (--overwrite)."""
-    OutputFolder(out, overwrite=True)  # the output folder's own checks; it creates nothing
     if not (out.is_dir() and any(out.iterdir())):
         return "new"
     if resume:

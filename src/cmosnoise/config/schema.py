@@ -26,8 +26,8 @@ class Section(BaseModel):
     def _no_booleans_for_numbers(cls, value, info):
         """``seed: true`` is a mistake, not 1: a boolean is refused where a number is expected."""
         field = cls.model_fields.get(info.field_name)
-        if isinstance(value, bool) and field is not None and field.annotation in (int, float, "int", "float",
-                                                                                   Optional[int], Optional[float]):
+        numeric = (int, float, Optional[int], Optional[float])
+        if isinstance(value, bool) and field is not None and field.annotation in numeric:
             raise ValueError(f"expected a number, got {str(value).lower()}")
         return value
 

@@ -131,8 +131,12 @@ def remove_stale_locks(anchor: Path) -> None:
             continue
 
 
-def check_folder_name(out: Path, option: str, anchor: Path) -> None:
-    """A one-line error for an output name the file system cannot hold (too long), before anything runs."""
+def check_folder_name(out: Path, option: str) -> None:
+    """A one-line error for an output name the file system cannot hold (too long), before anything runs (a path
+    with such a name makes even ``Path.exists`` raise)."""
+    anchor = Path(os.path.abspath(out)).parent
+    while not os.path.isdir(anchor):  # os.path.isdir is False, never an error, for a name too long
+        anchor = anchor.parent
     try:
         name_max = os.pathconf(anchor, "PC_NAME_MAX")
     except (OSError, ValueError):
@@ -177,10 +181,7 @@ class OutputFolder:
                                  "the current folder itself is never written into")
         self.out = Path(out)
         self.overwrite = overwrite
-        anchor = Path(os.path.abspath(self.out)).parent
-        while not anchor.exists():
-            anchor = anchor.parent
-        check_folder_name(self.out, option, anchor)
+        check_folder_name(self.out, option)
         resolved = self.out.resolve()
         cwd = Path.cwd().resolve()
         if resolved == cwd or resolved in cwd.parents:
@@ -198,9 +199,22 @@ class OutputFolder:
         self._check_existing()
         self.tmp: Path | None = None
         self._wrapper: Path | None = None
-        self._lock = FolderLock(self.out, anchor, option)
+        self.lock = FolderLock(self.out, anchor, option)  #: the folder's lock, for writers that write in place
         self.removed_stale: list[str] = []
         self.restored: list[str] = []
+
+    def check_space(self, needed: int) -> None:
+        """A one-line refusal when the file system ``out`` goes to has less free space than ``needed`` bytes."""
+        try:
+            usage = shutil.disk_usage(self.anchor)
+        except OSError:
+            return  # unknown: the write itself will say
+        if usage.total == 0:  # a pseudo file system (/sys, /proc) reports no size: the write itself will say
+            return
+        if needed > usage.free:
+            raise CmosnoiseError(f"{self.option} {str(self.out)!r}: this run writes about {needed / 1e9:.2f} GB; the "
+                                 f"file system of {str(self.anchor)!r} has {usage.free / 1e9:.2f} GB free (fewer "
+                                 "--frames, a smaller sensor, or another place)")
 
     def _check_existing(self) -> None:
         if self.out.is_dir() and not self.overwrite and any(self.out.iterdir()):
@@ -238,7 +252,7 @@ class OutputFolder:
 
     def __enter__(self) -> Path:
         try:
-            self._lock.acquire()
+            self.lock.acquire()
             try:
                 self._remove_stale()
                 self._check_existing()  # again, under the lock: a run may have finished (or been restored) meanwhile
@@ -249,7 +263,7 @@ class OutputFolder:
             except BaseException:
                 if self._wrapper is not None:
                     shutil.rmtree(self._wrapper, ignore_errors=True)
-                self._lock.release()
+                self.lock.release()
                 raise
         except OSError as exc:
             raise CmosnoiseError(f"{self.option} {str(self.out)!r} cannot be written: {exc.strerror or exc}") from None
@@ -290,7 +304,7 @@ class OutputFolder:
             shutil.rmtree(self._wrapper, ignore_errors=True)
             return False
         finally:
-            self._lock.release()
+            self.lock.release()
 
 
 def _write_marker(path: Path, text: str) -> None:

@@ -75,8 +75,6 @@ def read_raw_tiff(path: str | Path, what: str = "raw file") -> tuple[np.ndarray,
     """
     import tifffile
 
-    if not Path(path).exists() and not Path(path).is_symlink():
-        raise CmosnoiseError(f"{what} {str(path)!r} does not exist")
     inputs.check_image_pixels(path, what, inputs.MAX_LOADED_PIXELS, inputs.MAX_FRAME_PIXELS)
     try:
         with tifffile.TiffFile(path) as tf:
@@ -103,13 +101,8 @@ class RawTiffReader:
         import tifffile
 
         self.name = str(path)
-        p = Path(path)
-        if not p.exists() and not p.is_symlink():
-            raise CmosnoiseError(f"raw file {self.name!r} does not exist")
-        if p.is_dir():
-            raise CmosnoiseError(f"raw file {self.name!r} is a folder, not a TIFF file")
         # a regular file, no frame larger than a sensor, not endless: from the header, before a frame is decoded
-        inputs.check_image_pixels(p, "raw file", inputs.MAX_STREAM_PIXELS, inputs.MAX_FRAME_PIXELS)
+        inputs.check_image_pixels(path, "raw file", inputs.MAX_STREAM_PIXELS, inputs.MAX_FRAME_PIXELS)
         try:
             self._tf = tifffile.TiffFile(path)
         except Exception as exc:

@@ -184,9 +184,10 @@ def _frames_of(path: Path, meta: _Meta) -> Iterator[np.ndarray]:
     suffix = path.suffix.lower()
     if not path.exists() and not path.is_symlink():
         raise CmosnoiseError(f"{str(path)!r}: no such file")
-    inputs.check_regular(path, "frames file")
     if suffix in (".tif", ".tiff", ".npy"):  # from the header: no frame larger than a sensor, no endless file
         inputs.check_image_pixels(path, "frames file", inputs.MAX_STREAM_PIXELS, inputs.MAX_FRAME_PIXELS)
+    else:
+        inputs.check_regular(path, "frames file")
     if suffix == ".dng":
         yield from _dng_frames(path, meta)
         return

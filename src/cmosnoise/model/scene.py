@@ -207,18 +207,12 @@ def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MA
         raise CmosnoiseError(f"scene {name!r}: no such file (built-in scenes: {', '.join(BUILTINS)})")
     if p.is_dir():
         raise CmosnoiseError(f"scene {name!r} is a folder, not an image file")
-    inputs.check_regular(p, "scene")
+    inputs.check_image_pixels(p, "scene", max_pixels,
+                              hint=" (a scene is resampled to the sensor anyway: scale it down first)")
     if p.stat().st_size > MAX_SCENE_BYTES:
         raise CmosnoiseError(f"scene {name!r} is {p.stat().st_size / 1e9:.1f} GB; images up to "
                              f"{MAX_SCENE_BYTES / 1e9:g} GB are read")
     suffix = p.suffix.lower()
-    try:
-        inputs.check_image_pixels(p, "scene", max_pixels)
-    except CmosnoiseError as exc:
-        msg = str(exc)
-        if "megapixels" in msg:
-            msg += " (a scene is resampled to the sensor anyway: scale it down first)"
-        raise CmosnoiseError(msg) from None
     try:
         if suffix == ".npy":
             a = np.load(p, allow_pickle=False)
