@@ -43,6 +43,12 @@ def server():
         stop_process(proc)
 
 
+@pytest.fixture(scope="module")
+def base(server):
+    """The server's base configuration, as the page gets it."""
+    return _get(server[0] + "api/meta")["base"]
+
+
 def _post(url, body: bytes, headers=None, timeout=60):
     req = urllib.request.Request(url, data=body, headers=headers or {}, method="POST")
     try:
@@ -213,13 +219,12 @@ def test_malformed_requests_get_a_4xx_with_one_line(server):
 
 @settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(data=st.data())
-def test_fuzz_the_json_api_never_answers_500(server, data):
+def test_fuzz_the_json_api_never_answers_500(server, base, data):
     url, proc = server
     leaf = st.one_of(st.none(), st.booleans(), st.integers(-2**40, 2**40), st.floats(allow_nan=True),
                      st.text(max_size=12))
     value = st.recursive(leaf, lambda kids: st.lists(kids, max_size=4) | st.dictionaries(st.text(max_size=8), kids,
                                                                                           max_size=4), max_leaves=12)
-    base = _BASE.setdefault("cfg", _get(url + "api/meta")["base"])
     section = data.draw(st.sampled_from(sorted(base)))
     config = data.draw(st.one_of(value, st.just(base), st.builds(
         lambda v: {**base, section: v if not isinstance(base[section], dict) else {**base[section], "x": v}}, value)))
@@ -232,9 +237,6 @@ def test_fuzz_the_json_api_never_answers_500(server, data):
     status, answer = _post(url + f"api/{ep}", text.encode(), PAGE)
     assert status < 500, (ep, text[:300], answer[:300])
     assert _memory_mb(proc.pid, "VmRSS") < 1500
-
-
-_BASE: dict = {}
 
 
 def test_explore_refuses_unusable_settings_and_scenes_before_it_starts(tmp_path):
