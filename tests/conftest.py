@@ -36,6 +36,7 @@ import pytest  # noqa: E402
 
 import cmosnoise.engine.jit  # noqa: E402, F401
 from cmosnoise import load_config  # noqa: E402
+from cmosnoise.model.spec import resolve  # noqa: E402
 
 #: the longest file (its fit round trip is some three minutes): started at once, on the other worker
 LONGEST_FILE = "test_fit_stages.py"
@@ -54,7 +55,8 @@ Z = 5.0
 
 
 def quiet_config(**sections):
-    """A configuration with every stage off except those given (dict per section)."""
+    """A resolved configuration (physics checked, PRNU solved) with every stage off except those given (dict per
+    section)."""
     base = {
         "prnu": {"enabled": False},
         "crosstalk": {"enabled": False},
@@ -66,7 +68,7 @@ def quiet_config(**sections):
     }
     for k, v in sections.items():
         base[k] = {**base.get(k, {}), **v}
-    return load_config(extra=base)
+    return resolve(load_config(extra=base)).config
 
 
 def assert_close(measured, expected, se, what=""):

@@ -4,12 +4,11 @@ import pytest
 import yaml
 
 from cmosnoise import CmosnoiseError, load_config, preset_names
-from cmosnoise.config import build_config
 
 
 def test_defaults_validate_and_round_trip_through_yaml():
     cfg = load_config()
-    again = build_config(yaml.safe_load(cfg.to_yaml()))
+    again = load_config(extra=yaml.safe_load(cfg.to_yaml()))
     assert again == cfg
 
 

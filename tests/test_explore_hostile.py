@@ -175,7 +175,7 @@ def test_slow_connections_do_not_stop_a_normal_request_and_are_closed(server):
 
 def test_uploads_are_capped_in_number_oldest_first(server):
     url, _ = server
-    from cmosnoise.app.explore import MAX_UPLOADS
+    from cmosnoise.app.workbench import MAX_UPLOADS
 
     ids = []
     for i in range(MAX_UPLOADS + 4):

@@ -6,6 +6,7 @@ from conftest import Z, assert_close, quiet_config, smoothed_std_se
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
+from cmosnoise.model.spec import resolve
 from cmosnoise.model.stages.prnu import gain_map
 
 
@@ -65,6 +66,6 @@ def test_data_sheet_prnu_solves_the_gain_map_sigma_and_frames_show_it():
     se = smoothed_std_se(seen, inner.size, np.array(cfg.crosstalk.kernel_pct) / 100)
     assert abs(seen - 1.5) <= Z * se, seen
     with pytest.raises(CmosnoiseError, match="give one of them"):
-        load_config(overrides=["prnu.measured_pct=0.79", "prnu.sigma_pct=2"])
+        resolve(load_config(overrides=["prnu.measured_pct=0.79", "prnu.sigma_pct=2"]))
     off = quiet_config(prnu={"enabled": True, "measured_pct": 1.5}, sensor={"width": 8, "height": 8})
     assert off.prnu.sigma_pct == pytest.approx(1.5)  # no crosstalk: what is measured is the gain map

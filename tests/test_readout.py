@@ -7,6 +7,7 @@ from scipy import stats
 
 from cmosnoise import CmosnoiseError, Sensor, load_config, noise_budget
 from cmosnoise.model.physics import flicker_model
+from cmosnoise.model.spec import resolve
 
 
 def dark_stack(cfg, frames, seed=0, scene="flat:0"):
@@ -57,7 +58,7 @@ def test_measured_per_pixel_temporal_sigma_fits_the_configured_gumbel():
 
 def test_unreachable_flicker_ppm_is_rejected():
     with pytest.raises(CmosnoiseError, match="source_follower.flicker.tail.ppm_above = 0.001.*reachable"):
-        load_config(overrides=["source_follower.flicker.tail={ppm_above: 0.001, threshold_e: 1.0, max_e: 5}"])
+        resolve(load_config(overrides=["source_follower.flicker.tail={ppm_above: 0.001, threshold_e: 1.0, max_e: 5}"]))
 
 
 def test_thermal_noise_alone_is_normal_with_configured_sigma():

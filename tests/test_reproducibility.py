@@ -107,23 +107,29 @@ def test_switching_one_stage_off_leaves_every_other_stages_noise_unchanged():
     {"row_noise": {"fixed_sigma_e": 1.0}},
     {"seed": 9},
 ])
-@pytest.mark.parametrize("keep", [False, True])
-def test_a_sensor_reusing_anothers_unchanged_maps_is_the_sensor_drawn_afresh(change, keep):
-    """Sensor(config, reuse=other) (the explorer's path, which also keeps the dark map's draws) keeps only maps
-    whose inputs did not change, and redraws the others bit for bit."""
+@pytest.mark.parametrize("temperature", [25.0, 33.0, 60.0])  # at a point, between two, beyond the last
+def test_a_sensor_from_the_pattern_cache_is_the_sensor_drawn_afresh(change, temperature):
+    """Sensor(config, cache=cache) (the explorer's and the sweep's path) takes only maps whose inputs did not
+    change from an earlier sensor's, and its exposure's photo and dark means too: every map and mean image
+    equals a fresh sensor's, bit for bit, at a characterization point, between two and beyond them."""
     from dataclasses import fields
 
-    from cmosnoise import Sensor, load_config
+    from cmosnoise import PatternCache, Sensor, load_config
 
-    base = {"sensor": {"width": 64, "height": 48}}
-    first = Sensor(load_config(extra=base), keep_draws=keep)
+    base = {"sensor": {"width": 64, "height": 48, "temperature_c": temperature}, "scene": {"source": "photo"}}
+    cache = PatternCache(10**9)
+    first = Sensor(load_config(extra=base), cache=cache)
+    first.expose()
     cfg = load_config(extra={**base, **change} if "sensor" not in change
                       else {"sensor": {**base["sensor"], **change["sensor"]}})
-    reused, fresh = Sensor(cfg, reuse=first, keep_draws=keep).fixed_pattern, Sensor(cfg).fixed_pattern
-    assert (reused.dark_draws is not None) == keep
-    for f in [f for f in fields(fresh) if f.name != "dark_draws"]:
-        a, b = getattr(reused, f.name), getattr(fresh, f.name)
+    held, fresh = Sensor(cfg, cache=cache), Sensor(cfg)
+    for f in fields(fresh.fixed_pattern):
+        a, b = getattr(held.fixed_pattern, f.name), getattr(fresh.fixed_pattern, f.name)
         if isinstance(b, np.ndarray):
             assert np.array_equal(a, b), f.name
         else:
             assert a == b, f.name
+    for name in ("perfect_e", "after_prnu_e", "photo_mean_e", "dark_mean_e"):
+        assert np.array_equal(getattr(held.expose(), name), getattr(fresh.expose(), name)), name
+    assert np.array_equal(held.expose().frame(3), fresh.expose().frame(3))
+    assert np.array_equal(held.source_follower_sigma, fresh.source_follower_sigma)

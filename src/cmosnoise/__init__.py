@@ -1,11 +1,12 @@
 """cmosnoise: simulate the noise of CMOS image sensors.
 
 The model follows Gow et al., "A Comprehensive Tool for Modeling CMOS
-Image-Sensor-Noise Performance" (IEEE TED 2007), as specified in MODEL.md.
+Image-Sensor-Noise Performance" (IEEE TED 2007), as specified in
+``docs/model.md``.
 
 The public API, imported on first use so that ``import cmosnoise`` stays fast::
 
-    from cmosnoise import Sensor, load_config          # the model
+    from cmosnoise import Sensor, load_config          # the model (resolve: the SensorSpec a Sensor reads)
     from cmosnoise import Processor                    # raw to picture
     from cmosnoise import white_pixels, noise_budget   # analysis modules
 
@@ -23,11 +24,15 @@ from .errors import CmosnoiseError
 _NAMES = {
     "Config": "config.schema",
     "preset_names": "config.loading",
-    "load_config": "model.physics",
+    "load_config": "config.loading",
+    "merge_updates": "config.loading",
+    "SensorSpec": "model.spec",
+    "resolve": "model.spec",
+    "PatternCache": "model.fixed_pattern",
     "Sensor": "model.sensor",
     "Exposure": "model.sensor",
     "FrameDetail": "model.sensor",
-    "FixedPattern": "model.sensor",
+    "FixedPattern": "model.fixed_pattern",
     "RawInfo": "model.raw_info",
     "Processor": "isp.process",
 }

@@ -18,6 +18,8 @@ import math
 
 import numpy as np
 
+from ..estimators import robust_centre
+
 
 def temporal_variance(a: np.ndarray, b: np.ndarray) -> float:
     """Temporal variance (DN^2) from two frames of the same scene: ``var(a - b) / 2``.
@@ -81,7 +83,7 @@ def defect_pixels(bright_stack: np.ndarray, dark_stack: np.ndarray, saturation_d
     """Pixels to leave out of the PRNU: outliers of the dark image and pixels near saturation, (rows, cols) bool.
 
     A pixel is a defect when its dark-stack mean lies more than 5 robust
-    standard deviations (1.4826 x the median absolute deviation, at least
+    standard deviations (the median absolute deviation / 0.6745, at least
     the averaged temporal noise and 1 DN) from the median dark level - white
     and dark pixels, as EMVA 1288 sets them apart - or when its bright-stack
     mean is above 90 % of the way from the dark level to ``saturation_dn``
@@ -91,10 +93,9 @@ def defect_pixels(bright_stack: np.ndarray, dark_stack: np.ndarray, saturation_d
     """
     dark = dark_stack.astype(np.float64).mean(axis=0)
     bright = bright_stack.mean(axis=0, dtype=np.float64)
-    med = float(np.median(dark))
-    mad = float(np.median(np.abs(dark - med)))
+    med, robust = robust_centre(dark)
     floor = math.sqrt(temporal_variance_stack(dark_stack) / dark_stack.shape[0]) if dark_stack.shape[0] > 1 else 0.0
-    sigma = max(1.4826 * mad, floor, 1.0)
+    sigma = max(robust, floor, 1.0)
     return (np.abs(dark - med) > 5.0 * sigma) | (bright > med + 0.9 * (saturation_dn - med))
 
 

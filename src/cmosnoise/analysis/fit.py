@@ -31,9 +31,11 @@ import math
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..estimators import Z95, robust_centre
 from ..model import physics
+from ..model.spec import resolve
 from . import fit_dark, fit_photo, fit_readout, white_pixels
-from .fit_readout import Z95, centred_series, sigma_from_variance
+from .fit_readout import centred_series, sigma_from_variance
 
 #: a dark pixel's mean counts for its dark current only below this fraction of the way from black to saturation
 DARK_FIT_LIMIT = 0.9
@@ -195,8 +197,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         points = physics.dark_points(base)
         if thr is None and points:  # the base's white-pixel threshold at its nearest point, when above the body
             cand = min(points, key=lambda p: abs(p.temperature_c - T)).threshold
-            med = float(np.median(rates))
-            if cand is not None and cand > med + 5 * 1.4826 * float(np.median(np.abs(rates - med))):
+            med, robust = robust_centre(rates)
+            if cand is not None and cand > med + 5 * robust:
                 thr = cand
         # every pixel's slope shares the frames' whole-map mean noise (row and column noise, averaged)
         common = float(np.sum(w**2 * np.array([np.var(d.row_means.mean(axis=1), ddof=1) / d.n for d in ok]))) / k**2
@@ -428,6 +430,6 @@ def fitted_config(base, result: dict):
         u["prnu"] = {"enabled": True, "sigma_pct": min(v("prnu.sigma_pct"), 100.0), "measured_pct": None}
         u.setdefault("column_noise", {})["gain_sigma_pct"] = min(v("column_noise.gain_sigma_pct"), 50.0)
     try:
-        return physics.check(merge_updates(base, u))
+        return resolve(merge_updates(base, u)).config
     except CmosnoiseError as exc:
         raise CmosnoiseError(f"the fitted configuration is not valid: {exc}") from None

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..estimators import Z95, robust_centre
 from ..model.distributions import FAMILIES, POSITIVE_FAMILIES, body
 
 #: pixels used for the family fits (a fixed random subset: the ranking is clear long before all 300 000)
@@ -204,9 +205,6 @@ def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], g
     return slope / gain_dn_per_e
 
 
-Z95 = 1.959963984540054
-
-
 def clipped_pixels(means_dn: list[np.ndarray], limit_dn: float) -> np.ndarray:
     """Pixels below ``limit_dn`` at fewer than two of the stacks: their rate is a lower bound (bool map)."""
     return sum((np.asarray(m) < limit_dn).astype(np.int32) for m in means_dn) < 2
@@ -232,8 +230,7 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
     Returns ``{"parameters": {name: {value, ci95, method}}, "families": [...], "threshold": thr,
     "body_cut": cut}``.
     """
-    med = float(np.median(rates))
-    robust = 1.4826 * float(np.median(np.abs(rates - med)))
+    med, robust = robust_centre(rates)
     cut = med + 8 * robust
     if threshold is None:
         threshold = cut

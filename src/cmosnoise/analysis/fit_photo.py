@@ -23,8 +23,9 @@ import math
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..estimators import Z95
 from ..model import cfa as cfa_mod
-from .fit_readout import Z95, centred_series, residual_variance, robust_mask, split_half_covariance
+from .fit_readout import centred_series, residual_variance, robust_mask, split_half_covariance
 
 
 def photon_transfer(mu, v, frames=None, dark_var=None, dark_frames=None) -> dict:

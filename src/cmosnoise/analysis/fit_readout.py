@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..estimators import Z95, robust_centre
 
-Z95 = 1.959963984540054
 GRID = 600  #: at most this many bins of the variance grid
 
 
@@ -414,9 +414,8 @@ def sigma_from_variance(var: float, se: float) -> dict:
 
 def robust_mask(image: np.ndarray, k: float = 5.0) -> np.ndarray:
     """Pixels within ``k`` robust standard deviations of the median (white and dead pixels out)."""
-    med = float(np.median(image))
-    mad = 1.4826 * float(np.median(np.abs(image - med))) or 1e-12
-    return np.abs(image - med) <= k * mad
+    med, sigma = robust_centre(image)
+    return np.abs(image - med) <= k * (sigma or 1e-12)
 
 
 def split_half_covariance(image: np.ndarray, mask: np.ndarray, axis: str) -> tuple[float, float]:

@@ -58,7 +58,7 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
     return out
 
 
-def _fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, float]]:
+def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, float]]:
     """The fixed-pattern variances that do not depend on the signal (e-^2), and those per signal^2 (e-^2 / e-^2)."""
     c = sensor.config
     fp = sensor.fixed_pattern
@@ -80,9 +80,9 @@ def _fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, fl
 def fixed_pattern_variances(sensor: Sensor, signal_e: float = 0.0, _parts=None) -> dict[str, float]:
     """Each fixed-pattern source's spatial variance (e-^2) at mean photo-signal ``signal_e``.
 
-    (``_parts``: :func:`_fixed_pattern_parts` of this sensor, when several levels are asked for.)
+    (``_parts``: :func:`fixed_pattern_parts` of this sensor, when several levels are asked for.)
     """
-    const, per_s2 = _parts or _fixed_pattern_parts(sensor)
+    const, per_s2 = _parts or fixed_pattern_parts(sensor)
     return {**const, **{k: v * signal_e**2 for k, v in per_s2.items()}}
 
 
@@ -272,26 +272,4 @@ def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = N
         "fixed_pattern_total_e": math.sqrt(total_f),
         "snr_temporal": signal_e / math.sqrt(total_t) if signal_e > 0 else 0.0,
         "snr": signal_e / math.sqrt(total_t + total_f) if signal_e > 0 else 0.0,
-    }
-
-
-def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
-    """SNR (temporal and fixed pattern) at several signal levels, and the dynamic range."""
-    sat = sensor.saturation_e
-    levels = sorted({*levels_e, round(sat / 2, 3)})
-    parts = _fixed_pattern_parts(sensor)  # once for every level
-    dark = budget(sensor, 0.0, _parts=parts)["temporal_total_e"]
-    at = {f"{lvl:g}": budget(sensor, lvl, _parts=parts) for lvl in levels if lvl < sat}
-
-    def db(v):
-        return 20 * math.log10(v) if v > 0 else None
-
-    return {
-        "saturation_e": sat,
-        "dark_temporal_noise_e": dark,
-        "dynamic_range": sat / dark,
-        "dynamic_range_db": 20 * math.log10(sat / dark),
-        # temporal SNR (the EMVA 1288 convention), and with the fixed pattern added
-        "snr_temporal_db_at_signal_e": {k: db(b["snr_temporal"]) for k, b in at.items()},
-        "snr_total_db_at_signal_e": {k: db(b["snr"]) for k, b in at.items()},
     }

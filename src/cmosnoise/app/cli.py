@@ -15,9 +15,15 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-from ..config import preset_data, preset_names
+from ..config import load_config, preset_data, preset_names
 from ..errors import CmosnoiseError, Terminated, check_terminated, clear_terminated, signal_received
-from ..model.physics import load_config
+from ..model.spec import SensorSpec, resolve
+
+
+def _sensor(config: Path | None, preset: str | None, overrides: list[str] | None, extra: dict | None = None) -> SensorSpec:
+    """The resolved sensor of the command line's --config, --preset, --set and options (physics checked)."""
+    return resolve(load_config(config, preset, overrides, extra))
+
 
 app = typer.Typer(
     help="Simulate CMOS image-sensor noise (Gow et al. model) and see what it does to pictures.",
@@ -134,7 +140,8 @@ def simulate(
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
     from .run import simulate as run_simulate
 
-    cfg = load_config(config, preset, set_, extra=_run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
+    spec = _sensor(config, preset, set_, _run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
+    cfg = spec.config
     if _level(ctx) < 0:
         progress = False
     show = progress if progress is not None else (err_console.is_terminal
@@ -149,7 +156,7 @@ def simulate(
             status.start()
 
     try:
-        summary = run_simulate(cfg, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height),
+        summary = run_simulate(spec, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height),
                                phase=phase, overwrite=overwrite)
     finally:
         if status is not None:
@@ -231,9 +238,9 @@ def characterize(
     if frames_from is not None:
         m = ch.load(frames_from)
         if config or preset or set_:
-            model = ch.model_values(Sensor(load_config(config, preset, set_, extra={"seed": seed} if seed is not None else None)))
+            model = ch.model_values(Sensor(_sensor(config, preset, set_, {"seed": seed} if seed is not None else None)))
     else:
-        sensor = Sensor(load_config(config, preset, set_, extra={"seed": seed} if seed is not None else None))
+        sensor = Sensor(_sensor(config, preset, set_, {"seed": seed} if seed is not None else None))
         with Progress(TextColumn("[bold]measuring"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                       console=err_console, disable=not err_console.is_terminal or _level(ctx) < 0) as p:
             task = p.add_task("series", total=steps + 1)
@@ -309,7 +316,7 @@ def explore(
 
     from .explore import serve
 
-    cfg = load_config(config, preset, set_)
+    cfg = _sensor(config, preset, set_).config
     try:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         with socket.socket(family, socket.SOCK_STREAM) as probe:
@@ -347,10 +354,10 @@ def sweep(
             opts = sw.sweep_from_yaml(from_)
         except (OSError, KeyError, TypeError, ValueError) as exc:
             raise CmosnoiseError(f"--from {str(from_)!r} is not a sweep.yaml: {exc}") from None
-        base = load_config(extra=opts["base"])  # a full configuration, merged over the defaults and checked
+        base = _sensor(None, None, None, opts["base"]).config  # a full configuration, merged over the defaults, checked
         vary, instances, frames, scene, spec = opts["vary"], opts["instances"], opts["frames"], opts["scene"], opts["specs"]
     else:
-        base = load_config(config, preset, set_)
+        base = _sensor(config, preset, set_).config
     show = err_console.is_terminal and _level(ctx) >= 0
     with Progress(TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=err_console, disable=not show) as bar:
@@ -390,7 +397,7 @@ def fit(
         raise CmosnoiseError(f"--threshold-e-per-s {threshold}: give a finite rate, e-/s (or leave it out)")
     if cfa is not None and cfa not in ("RGGB", "BGGR", "GRBG", "GBRG", "none"):
         raise CmosnoiseError(f"--cfa {cfa!r}: expected RGGB, BGGR, GRBG, GBRG or none")
-    base = load_config(config, preset, None, extra={"sensor": {"cfa": cfa}} if cfa else None)
+    base = _sensor(config, preset, None, {"sensor": {"cfa": cfa}} if cfa else None).config
     doc = fitting.run(frames_from, base, out, overwrite, temperature, threshold, cfa, black_level, bits,
                       with_round_trip=round_trip, say=lambda m: _say(ctx, m))
     for name, p in doc["parameters"].items():
@@ -421,7 +428,7 @@ def measure(
     from ..io.output import OutputFolder
     from . import fitting
 
-    cfg = load_config(config, preset, set_, extra={"seed": seed} if seed is not None else None)
+    cfg = _sensor(config, preset, set_, {"seed": seed} if seed is not None else None).config
     temps = None
     if temperatures:
         try:
@@ -458,7 +465,7 @@ def config_cmd(
 
         typer.echo(text(), nl=False)
         return
-    typer.echo(load_config(config, preset, set_).to_yaml(), nl=False)
+    typer.echo(_sensor(config, preset, set_).config.to_yaml(), nl=False)
 
 
 def run(argv: list[str] | None = None) -> int:

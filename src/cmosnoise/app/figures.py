@@ -16,9 +16,9 @@ import numpy as np
 
 from .._version import __version__
 from ..analysis import white_pixels
+from ..config import load_config, merge_updates
 from ..isp import calibration
 from ..isp.process import Processor
-from ..model.physics import flicker_model, load_config, with_updates
 from ..model.sensor import Sensor
 from . import plots
 
@@ -59,12 +59,12 @@ def fig3_prnu(seed: int = 0):
 
 def _dark_maps(temps, shape=(400, 500), seed=0, tails=True):
     base = load_config(overrides=[f"sensor.height={shape[0]}", f"sensor.width={shape[1]}"])
-    pts = base.to_dict()["dark_current"]["points"]
+    pts = base.model_dump(mode="json")["dark_current"]["points"]
     if not tails:
         pts = [{k: v for k, v in p.items() if k != "tail"} for p in pts]
     out = {}
     for t in temps:
-        cfg = with_updates(base, {"sensor": {"temperature_c": t}, "dark_current": {"points": pts}})
+        cfg = merge_updates(base, {"sensor": {"temperature_c": t}, "dark_current": {"points": pts}})
         s = Sensor(cfg, seed=seed)
         out[t] = (s.dark_rate.astype(np.float64), s.dark_state)
     return out
@@ -132,7 +132,7 @@ def fig7_temporal_noise(seed: int = 0, frames: int = 100):
     e = np.stack([shot.frame(k, detail=True).electrons for k in range(frames)]).astype(np.float64)
     sigma = e.std(axis=0, ddof=1)
     fig, ax = plots.figure(figsize=(7.5, 4.6))
-    plots.temporal_noise_histogram(ax, sigma, _TotalSigma(flicker_model(cfg), 1.0), 5.0,
+    plots.temporal_noise_histogram(ax, sigma, _TotalSigma(sensor.flicker_model, 1.0), 5.0,
                                    f"Per-pixel temporal noise measured over {frames} dark frames")
     true_var = 1.0 + sensor.fixed_pattern.flicker_sigma.astype(np.float64) ** 2  # each pixel's own variance
     facts = {"frames": frames, "mean_measured_var_e2": float(np.mean(sigma**2)), "mean_true_var_e2": float(true_var.mean()),

@@ -23,9 +23,10 @@ from typing import Callable
 import numpy as np
 
 from .._version import __version__
-from ..analysis import noise_budget, white_pixels
+from ..analysis import figures_of_merit as fom
+from ..analysis import noise_budget
 from ..analysis.run_stats import RunStats
-from ..config import Config, ProcessingSection, build_config
+from ..config import Config, ProcessingSection, load_config, merge_updates
 from ..engine import kernel
 from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
@@ -36,13 +37,12 @@ from ..io.video import VideoWriter
 from ..isp import calibration
 from ..isp.process import Processor, read_dark
 from ..model import footprint
-from ..model.physics import with_updates
 from ..model.raw_info import RawInfo
 from ..model.sensor import Sensor
-from ..model.units import e_per_s_to_aa
+from ..model.spec import SensorSpec, resolve
 
 
-def simulate(config: Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
+def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
              phase: Callable[[str], None] | None = None, overwrite: bool = False) -> dict:
     """Run the simulation of ``config`` and write the results into ``out``; returns the summary.
 
@@ -55,9 +55,11 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
     """
     phase = phase or (lambda _name: None)
 
-    source = config.scene.source
+    spec = resolve(config)
+    source = spec.config.scene.source
     if Path(source).is_file():  # record a file scene by its absolute path: config.yaml reruns from anywhere
-        config = with_updates(config, {"scene": {"source": str(Path(source).resolve())}})
+        spec = spec.with_config(merge_updates(spec.config, {"scene": {"source": str(Path(source).resolve())}}))
+    config = spec.config
     if config.run.dng and not config.adc.enabled:
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     footprint.check_fits(config)  # before anything is drawn or written
@@ -69,7 +71,7 @@ def simulate(config: Config, out: str | Path, progress: Callable[[int], contextl
     with folder as tmp, ThreadPoolExecutor(2, thread_name_prefix="cmosnoise-aside") as aside:
         t_start = time.perf_counter()
         aside.submit(kernel.preload)
-        sensor = Sensor(config, executor=aside)  # the dark-current map drawn aside too
+        sensor = Sensor(spec, executor=aside)  # the dark-current map drawn aside too
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
         transfer = sensor.transfer
@@ -189,57 +191,6 @@ def output_bytes(config) -> int:
     return config.run.frames * per_frame + extra + 65536
 
 
-def dark_current_summary(sensor: Sensor, shot, electrons0: np.ndarray, read_var_e2: float) -> dict | None:
-    """Dark-current figures: the map's statistics, white pixels and couplets (map and frame 0)."""
-    state, rate = sensor.dark_state, sensor.dark_rate
-    if state is None:
-        return None
-    c = sensor.config
-    t_int = c.exposure.integration_time_s
-    out = {
-        "temperature_c": state.temperature_c,
-        "body": {"family": state.family, "mean_e_per_s": state.mean, "std_e_per_s": state.std},
-        "tail": {"fraction": state.tail_fraction, "max_e_per_s": state.tail_max},
-        "map_mean_e_per_s": float(rate.mean()),
-        "map_median_e_per_s": float(np.median(rate)),
-        "mean_dark_e_per_frame": float(rate.mean() * t_int),
-        "interpolation": (f"per-pixel exponential between the points at {state.temperature_c:g} C (weight {state.w:.3f})"
-                          if state.between else "at a characterization point, or scaled from the nearest one"),
-    }
-    cooling = sensor.dark_cooling_fraction
-    out["cooling_fraction"] = cooling
-    if cooling > 0:
-        out["warning"] = (f"{100 * cooling:.3g} % of pixels cool while the sensor warms between two of the "
-                          "dark_current.points: a warmer point's quantiles lie below a colder one's")
-    if state.threshold is not None:
-        thr = state.threshold
-        out["threshold_e_per_s"] = thr
-        out["threshold_aA"] = e_per_s_to_aa(thr)
-        out["ppm_expected"] = state.expected_ppm_above()
-        out["map"] = white_pixels.report(rate, thr, sensor.cfa)
-        out["frame0"] = frame0_white_pixels(sensor, shot, electrons0, thr, read_var_e2)
-    return out
-
-
-def frame0_white_pixels(sensor: Sensor, shot, electrons0: np.ndarray, threshold_e_per_s: float, read_var_e2: float) -> dict:
-    """White pixels seen in frame 0, counted so that temporal noise is not taken for dark current.
-
-    A pixel counts when its charge, less the expected photo-charge, exceeds
-    the threshold's charge by 5 sigma of its temporal noise (photon shot
-    noise plus the read noise): false alarms about 3e-7 per pixel. In a
-    short exposure or a bright area a white pixel can hide in that noise,
-    so the count is a lower bound of the map's; the summary says so.
-    """
-    t_int = sensor.config.exposure.integration_time_s
-    photo = shot.photo_mean_e.astype(np.float64)
-    excess_e = electrons0 - photo - 5.0 * np.sqrt(photo + read_var_e2)  # read_var_e2: the budget's dark variance (e-^2)
-    rep = white_pixels.report(excess_e / t_int, threshold_e_per_s, sensor.cfa)
-    kind = "dark frame" if float(photo.max()) <= 0 else "lit frame"
-    rep["method"] = (f"{kind}: (charge - expected photo-charge - 5 sigma of photon shot and read noise) / integration "
-                     "time, above the threshold; a lower bound of the map's count (white pixels can hide in the noise)")
-    return rep
-
-
 def run_warnings(measured: dict, predicted: dict) -> list[str]:
     """What a user should know before trusting the figures: pixels that clip."""
     out = []
@@ -281,12 +232,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "saturated_fraction": measured.get("saturated_fraction"),
         },
         "temporal_noise": {
-            # measured from raw DN (quantization included), and converted with K
-            "rms_dn": measured.get("temporal_noise_dn"),
-            "rms_e": None if measured.get("temporal_noise_dn") is None else measured["temporal_noise_dn"] / t.gain_dn_per_e,
-            # measured on the charge at the ADC input (no quantization)
-            "rms_e_before_adc": measured.get("temporal_noise_e"),
-            "method": measured.get("temporal_noise_method"),
+            **fom.temporal_noise(measured, t.gain_dn_per_e),
             "predicted_rms_e": predicted["temporal_total_e"],
             "predicted_rms_dn": predicted["temporal_total_dn"],
         },
@@ -294,8 +240,8 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "dark": at_dark,
             "scene_mean": predicted,
         },
-        "key_figures": noise_budget.key_figures(sensor),
-        "dark_current": (dark := dark_current_summary(sensor, shot, electrons0, at_dark["temporal_total_e"] ** 2)),
+        "key_figures": fom.key_figures(sensor),
+        "dark_current": (dark := fom.dark_current(sensor, shot, electrons0, at_dark["temporal_total_e"] ** 2)),
         "warnings": run_warnings(measured, predicted) + ([dark["warning"]] if dark and "warning" in dark else []),
         "timings_s": {
             "total": round(wall_s, 6),
@@ -370,7 +316,7 @@ def _raw_info(meta: dict, name: str) -> RawInfo:
     if meta.get("scene_white_dn") is not None:
         data["processing"] = {"white_dn": meta["scene_white_dn"]}
     try:
-        cfg = build_config(data)
+        cfg = load_config(extra=data)
     except CmosnoiseError as exc:
         raise CmosnoiseError(f"raw file {name!r}: its metadata is not valid: "
                              f"{str(exc).removeprefix('invalid configuration: ')}") from None

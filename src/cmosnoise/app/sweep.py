@@ -120,12 +120,12 @@ def _nested(point: dict) -> dict:
 def point_config(base, point: dict):
     """The base configuration with a point's values, validated (physics included)."""
     from ..config.loading import merge_updates
-    from ..model.physics import check
+    from ..model.spec import resolve
 
     if any(re.search(r"\.\d+(\.|$)", k) for k in point):
         raise CmosnoiseError("--vary: list items (points.0...) cannot be varied; vary a whole section instead")
     try:
-        return check(merge_updates(base, _nested(point)))
+        return resolve(merge_updates(base, _nested(point))).config
     except CmosnoiseError as exc:
         shown = ", ".join(f"{k}={v}" for k, v in point.items())
         raise CmosnoiseError(f"sweep point {shown}: {str(exc)}") from None
@@ -167,55 +167,79 @@ METRICS = ("mean_e", "temporal_noise_e", "temporal_noise_predicted_e", "snr_db_a
            "couplets_expected_random", "residual_defects", "couplets_after_correction")
 
 
-def run_instance(config_data: dict, scene: str, frames: int, seed: int) -> dict:
-    """The metrics of one sensor instance: a dict of numbers (what a Dask task returns)."""
-    from ..analysis import noise_budget, white_pixels
+def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=None) -> dict:
+    """The metrics of one sensor instance: a dict of numbers (what a Dask task returns).
+
+    ``cache`` (a :class:`~cmosnoise.model.fixed_pattern.PatternCache`) lends the maps that another point of
+    the same seed drew with the same inputs (the worker's own cache); the numbers are the same without it.
+    """
+    from ..analysis import figures_of_merit as fom
+    from ..analysis import white_pixels
+    from ..analysis.run_stats import RunStats
     from ..config import Config, ProcessingSection
     from ..isp import calibration
     from ..isp.process import Processor
     from ..model.sensor import Sensor
 
     cfg = Config.model_validate(config_data)
-    sensor = Sensor(cfg, seed=seed)
+    sensor = Sensor(cfg, seed=seed, cache=cache)
     shot = sensor.expose(scene)
     t = sensor.transfer
     k = t.gain_dn_per_e
-    raws = [shot.frame(i).astype(np.float64) for i in range(max(frames, 1))]
-    out = {"mean_e": float((raws[0].mean() - t.black_level_dn) / k)}
-    if len(raws) >= 2:
-        d = raws[1] - raws[0]
-        out["temporal_noise_e"] = float(math.sqrt(max(np.var(d) / 2 - 1 / 12, 0.0)) / k)
-    else:
-        out["temporal_noise_e"] = math.nan
-    b = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)
-    out["temporal_noise_predicted_e"] = float(b["temporal_total_e"])
-    kf = noise_budget.key_figures(sensor, levels_e=(100.0, 1000.0))
+    stats = RunStats(t.max_code)
+    raw0 = None
+    for raw in shot.frames(max(frames, 1)):
+        stats.update(raw, raw)
+        raw0 = raw if raw0 is None else raw0
+    measured = stats.result()
+    out = {"mean_e": float((measured["mean_dn"] - t.black_level_dn) / k)}
+    tn = fom.temporal_noise(measured, k)["rms_e"]
+    out["temporal_noise_e"] = math.nan if tn is None else tn
+    figures = fom.pane(sensor, shot, levels_e=(100.0, 1000.0))
+    out["temporal_noise_predicted_e"] = float(figures["budget"]["temporal_total_e"])
+    kf = figures["key_figures"]
     snr = kf.get("snr_total_db_at_signal_e", {})
     out["snr_db_at_100e"] = float(snr.get("100", math.nan))  # key_figures names its levels as text, in e-
     out["snr_db_at_1000e"] = float(snr.get("1000", math.nan))
     out["dynamic_range_db"] = float(kf["dynamic_range_db"])
-    state, rate = sensor.dark_state, sensor.dark_rate
-    nan_dark = {"dark_mean_e_per_s": math.nan, "ppm_above_threshold": math.nan, "white_pixels": math.nan,
-                "couplets": math.nan, "couplets_expected_random": math.nan}
-    if state is None:
-        out.update(nan_dark)
-    else:
-        out["dark_mean_e_per_s"] = float(rate.mean())
-        if state.threshold is not None:
-            rep = white_pixels.report(rate, state.threshold, sensor.cfa)
-            out.update({"ppm_above_threshold": rep["ppm"], "white_pixels": rep["white_pixels"],
-                        "couplets": rep["couplets"], "couplets_expected_random": rep["couplets_expected_random"]})
-        else:
-            out.update({k2: v for k2, v in nan_dark.items() if k2 != "dark_mean_e_per_s"})
+    dark = figures.get("dark", {})
+    out["dark_mean_e_per_s"] = dark.get("mean_e_per_s", math.nan)
+    out["ppm_above_threshold"] = dark.get("ppm", math.nan)
+    for name in ("white_pixels", "couplets", "couplets_expected_random"):
+        out[name] = dark.get(name, math.nan)
     # what survives dark calibration and the chosen defect corrector (median when none is chosen)
     n_dark = cfg.processing.dark_frames or 8
     method = cfg.processing.defects.method if cfg.processing.defects.method != "off" else "median"
     master = calibration.master_dark(sensor.dark_frames(n_dark))
     proc = Processor(ProcessingSection(dark_frames=n_dark, defects={"method": method}), sensor.raw_info(), master)
-    bad = np.abs(proc.cfa_image(raws[0].astype(np.uint16)) - shot.photo_mean_e * k) > DEFECT_TOLERANCE_E * k
+    bad = np.abs(proc.cfa_image(raw0) - shot.photo_mean_e * k) > DEFECT_TOLERANCE_E * k
     out["residual_defects"] = int(bad.sum())
     out["couplets_after_correction"] = white_pixels.count_couplets(bad, sensor.cfa)
     return {m: out.get(m, math.nan) for m in METRICS}
+
+
+def _worker_cache():
+    """The Dask worker's own :class:`PatternCache` (made on its first task; None outside a worker).
+
+    Tasks of one instance (one seed) at several points share the maps whose
+    inputs the points do not change. A tenth of the memory available when
+    it is made, at most 2 GB, across the worker's threads.
+    """
+    try:
+        from distributed import get_worker
+
+        worker = get_worker()
+    except (ImportError, ValueError):
+        return None
+    cache = getattr(worker, "_cmosnoise_patterns", None)
+    if cache is None:
+        from ..model import footprint
+        from ..model.fixed_pattern import PatternCache
+
+        avail = footprint.available_bytes() or 1e9
+        cache = PatternCache(int(min(2e9, 0.1 * avail)))
+        worker._cmosnoise_patterns = cache
+    return cache
 
 
 def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int) -> dict:
@@ -226,7 +250,7 @@ def _task(config_data: dict, scene: str, frames: int, point: int, instance: int,
     traceback; the sweep stops with the one line instead.
     """
     try:
-        metrics = run_instance(config_data, scene, frames, seed)
+        metrics = run_instance(config_data, scene, frames, seed, _worker_cache())
     except CmosnoiseError as exc:
         return {"point": point, "instance": instance, "error": " ".join(str(exc).split())}
     return {"point": point, "instance": instance, "seed": seed, **metrics}
@@ -380,7 +404,8 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
     results = out / "results.csv"
     columns = p.columns()
     done = _done_rows(results, columns) if resume else set()
-    todo = [(i, j) for i in range(len(p.points)) for j in range(p.instances) if (i, j) not in done]
+    # instance by instance: one seed's points in a row, so a worker's cache lends the maps they share
+    todo = [(i, j) for j in range(p.instances) for i in range(len(p.points)) if (i, j) not in done]
     total = len(p.points) * p.instances
     if progress:
         progress(len(done), total)
@@ -552,9 +577,9 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
 
     import pandas as pd
 
-    from ..model.sensor import _as_config
+    from ..model.sensor import _as_spec
 
-    base = _as_config(base)
+    base = _as_spec(base).config
     p = plan(base, vary, instances, frames, scene, specs, metrics)
     tmp = None
     if out is None:

@@ -190,7 +190,7 @@ def build_section(cls, data: dict, name: str):
         raise CmosnoiseError(msg) from None
 
 
-def build_config(data: dict | None = None) -> Config:
+def _validate(data: dict | None = None) -> Config:
     """Validate a (partial) configuration dict merged over the defaults."""
     try:
         return Config.model_validate(data or {})
@@ -198,16 +198,31 @@ def build_config(data: dict | None = None) -> Config:
         raise CmosnoiseError(format_validation_error(exc)) from None
 
 
-def resolve_config(
+def load_config(
     path: str | Path | None = None,
     preset: str | None = None,
     overrides: list[str] | None = None,
     extra: dict | None = None,
 ) -> Config:
-    """Resolve a configuration: defaults <- preset <- file <- ``extra`` <- ``--set`` overrides.
+    """A configuration: defaults <- preset <- file <- ``extra`` <- ``--set`` overrides, validated.
 
-    Schema-valid only; :func:`cmosnoise.load_config` also checks what the
-    values imply (reachable ppm, valid distributions).
+    Parameters
+    ----------
+    path : str or Path, optional
+        A YAML configuration file (a mapping of sections; any key left out keeps its default).
+    preset : str, optional
+        A shipped preset (:func:`preset_names`), merged under the file.
+    overrides : list of str, optional
+        ``--set`` strings, ``key.path=value`` in YAML syntax, applied last (a number indexes a list).
+    extra : dict, optional
+        A (partial) configuration as data, merged over the file.
+
+    Returns
+    -------
+    Config
+        Schema-valid. What the values imply (reachable ppm, computable
+        distributions, PRNU solved from its measured value) is resolved by
+        :func:`cmosnoise.model.spec.resolve`, which :class:`~cmosnoise.Sensor` calls.
     """
     data: dict = {}
     if preset:
@@ -218,9 +233,14 @@ def resolve_config(
         data = deep_merge(data, extra)
     if overrides:
         data = apply_overrides(data, overrides, Config().model_dump(mode="json"))
-    return build_config(data)
+    return _validate(data)
 
 
 def merge_updates(config: Config, updates: dict) -> Config:
-    """A new schema-valid configuration: ``config`` with ``updates`` merged in."""
-    return build_config(deep_merge(config.to_dict(), updates))
+    """A new schema-valid configuration: ``config`` with ``updates`` merged in.
+
+    Every value ``config`` set is kept, ``None`` included (a ``tail: null``
+    stays no tail): the merge starts from the keys that were set, not from a
+    dump that leaves nulls out, and what was never set keeps its default.
+    """
+    return _validate(deep_merge(config.model_dump(mode="json", exclude_unset=True), updates))

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..estimators import robust_sigma
 from ..model import cfa as cfa_mod
 
 
@@ -59,13 +60,6 @@ def neighbours_at(img: np.ndarray, pattern: str, r: np.ndarray, c: np.ndarray) -
         green = cfa_mod.channel_map(pattern, img.shape)[r, c] == 1
         offs[:, green] = g[:, None, :]
     return pad[2 + r[None] + offs[..., 0], 2 + c[None] + offs[..., 1]]
-
-
-def robust_sigma(values: np.ndarray) -> float:
-    """Standard deviation estimated from the median absolute deviation (finite values only)."""
-    from scipy import stats  # here: the default run does not need it, and it takes 0.6 s to import
-
-    return float(stats.median_abs_deviation(values[np.isfinite(values)], axis=None, scale="normal"))
 
 
 def correct_isolated(img: np.ndarray, pattern: str, threshold_sigma: float = 6.0,

@@ -4,15 +4,14 @@ The configuration layer validates types and ranges; this module turns a
 :class:`~cmosnoise.config.Config` into the model's objects (dark-current
 characterization points in e-/s, the flicker-sigma distribution) and checks
 what only the physics can tell: that every ppm is reachable and every body
-distribution valid. :func:`load_config` is the public entry: resolved and
-checked, ready for :class:`~cmosnoise.model.sensor.Sensor`.
+distribution valid. :func:`cmosnoise.model.spec.resolve` calls them once per
+configuration and keeps what they give in a
+:class:`~cmosnoise.model.spec.SensorSpec`.
 """
 
 from __future__ import annotations
 
-import functools
-
-from ..config import Config, merge_updates, resolve_config
+from ..config import Config
 from ..errors import CmosnoiseError
 from .heavy_tail import HeavyTail, UnreachablePpm
 from .stages.dark_current import Point
@@ -129,27 +128,3 @@ def resolve_prnu(config: Config) -> Config:
     if sigma > 100:
         raise CmosnoiseError(f"prnu.measured_pct = {p.measured_pct:g}: needs a gain-map sigma of {sigma:.4g} %, above 100 %")
     return config.model_copy(update={"prnu": p.model_copy(update={"sigma_pct": float(round(sigma, 9))})})
-
-
-def check(config: Config) -> Config:
-    """``config`` with what it implies resolved (PRNU from its measured value), once its dark-current points
-    and flicker tail are known to be reachable."""
-    config = resolve_prnu(config)
-    dark_points(config)
-    flicker_model(config)
-    return config
-
-
-@functools.wraps(resolve_config, assigned=("__module__", "__annotations__"))
-def load_config(*args, **kwargs) -> Config:
-    """Resolve a configuration (defaults <- preset <- file <- ``extra`` <- ``--set``) and check its physics.
-
-    Takes the arguments of :func:`cmosnoise.config.resolve_config`:
-    ``path``, ``preset``, ``overrides`` (``--set`` strings), ``extra`` (a dict).
-    """
-    return check(resolve_config(*args, **kwargs))
-
-
-def with_updates(config: Config, updates: dict) -> Config:
-    """A new checked configuration: ``config`` with ``updates`` merged in."""
-    return check(merge_updates(config, updates))

@@ -17,26 +17,25 @@ This module contains no physics: each stage is a function in its own module.
 
 from __future__ import annotations
 
-import copy
 import time
 from collections import defaultdict
-from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
-from ..config import Config, ExposureSection, build_section
+from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
 from ..engine import kernel
 from ..errors import CmosnoiseError
 from . import footprint
 from . import scene as scene_mod
+from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
 from .heavy_tail import variates
-from .physics import dark_points, flicker_model, load_config, with_updates
 from .raw_info import RawInfo
 from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, stream_key, temporal_stream
+from .spec import SensorSpec, resolve
 from .stages import adc, column_noise, crosstalk, dark_current, prnu, row_noise, shot_noise, source_follower
 
 
@@ -54,55 +53,40 @@ class FrameDetail:
     contributions: dict[str, np.ndarray]
 
 
-@dataclass(frozen=True)
-class FixedPattern:
-    """A sensor instance's fixed-pattern maps (None where the stage is off).
-
-    Drawn once by :class:`Sensor`; read them through ``sensor.fixed_pattern``.
-    """
-
-    prnu_gain: np.ndarray | None = None
-    dark_state: dark_current.DarkState | None = None  #: DCNU parameters at the sensor's temperature
-    dark_rate: np.ndarray | None = None  #: dark-current map at the sensor's temperature, e-/s
-    flicker_sigma: np.ndarray | None = None  #: per-pixel flicker sigma, e- rms
-    row_offset: np.ndarray | None = None  #: fixed row offsets, e-, (rows, 1)
-    column_sigma: np.ndarray | None = None  #: per-column temporal sigma, e- rms, (1, cols)
-    vfpn: np.ndarray | None = None  #: fixed column offsets, e-, (1, cols)
-    column_gain: np.ndarray | None = None  #: fixed column gains, (1, cols)
-    #: the dark map's variates and quantile cells (dark_current.draws), kept only with Sensor(keep_draws=True):
-    #: interactive use redraws the map at another temperature from them (40 bytes per pixel)
-    dark_draws: tuple | None = None
-
-
 class Sensor:
     """A simulated sensor: a configuration, a seed, and the fixed pattern drawn from them.
 
     Parameters
     ----------
-    config : Config, optional
-        Resolved configuration (defaults if omitted).
+    config : SensorSpec, Config, dict, str or Path, optional
+        The sensor: a resolved spec, a configuration, a (partial) configuration as data merged over the
+        defaults, or a YAML file's path (defaults if omitted).
     seed : int, optional
-        Overrides ``config.seed``.
+        Overrides the configuration's seed (every other value it set is kept, nulls included).
+    cache : PatternCache, optional
+        Fixed-pattern maps and exposure products kept between sensors (:mod:`.fixed_pattern`): a map
+        whose inputs a cached sensor of the same seed and size shared is taken from it, bit for bit.
     executor : concurrent.futures.Executor, optional
         Where the dark-current map is drawn while this thread draws the others (the maps are independent,
         each from its own stream, so the bits are the same; NumPy releases the GIL for most of the work).
     """
 
-    def __init__(self, config: Config | dict | str | Path | None = None, seed: int | None = None, *,
-                 fixed_pattern: FixedPattern | None = None, reuse: "Sensor | None" = None, keep_draws: bool = False,
-                 executor=None):
-        config = _as_config(config)
+    def __init__(self, config: SensorSpec | Config | dict | str | Path | None = None, seed: int | None = None, *,
+                 fixed_pattern: FixedPattern | None = None, cache: PatternCache | None = None, executor=None):
+        spec = _as_spec(config)
         if seed is not None:
             seed = _whole(seed, "seed")
-            if seed != config.seed:
-                config = with_updates(config, {"seed": seed})
+            if seed != spec.seed:
+                spec = spec.updated({"seed": seed})
         if fixed_pattern is None:
-            footprint.check_fits(config, run=False)
-        self.config = config
+            footprint.check_fits(spec.config, run=False)
+        #: the resolved specification this sensor reads (its ``config``: the configuration, PRNU solved)
+        self.spec = spec
+        self.config = spec.config
+        self.cache = cache
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
-        self._keep_draws = keep_draws
-        self._fixed = fixed_pattern if fixed_pattern is not None else self._draw_fixed_pattern(reuse, executor)
+        self._fixed = fixed_pattern if fixed_pattern is not None else draw(spec, cache, executor)
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
         self.timings["fixed_pattern"] += time.perf_counter() - t0
@@ -118,7 +102,8 @@ class Sensor:
         if peak_rate_e_per_s is not None:
             updates["peak_rate_e_per_s"] = float(peak_rate_e_per_s)
         exposure = build_section(ExposureSection, {**self.config.exposure.model_dump(), **updates}, "exposure")
-        other = Sensor(self.config.model_copy(update={"exposure": exposure}), fixed_pattern=self._fixed)
+        spec = self.spec.with_config(self.config.model_copy(update={"exposure": exposure}))
+        other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache)
         other.timings = self.timings
         return other
 
@@ -142,9 +127,10 @@ class Sensor:
     def source_follower_sigma(self) -> np.ndarray:
         """Each pixel's fixed source-follower sigma, thermal and flicker together (e-), (rows, cols) float32."""
         if self._sf_sigma is None:
-            self._sf_sigma = source_follower.total_sigma(
-                self.config.source_follower.thermal_sigma_e, self._fixed.flicker_sigma, self.shape
-            )
+            thermal = self.config.source_follower.thermal_sigma_e
+            self._sf_sigma = cached(
+                self.cache, "sf_sigma", (self.seed, self.shape, dependencies(self.spec)["flicker_sigma"], thermal),
+                lambda: source_follower.total_sigma(thermal, self._fixed.flicker_sigma, self.shape))
         return self._sf_sigma
 
     @property
@@ -156,13 +142,23 @@ class Sensor:
         times it with the default kernel). All ones when both stages are off.
         """
         if self._flat is None:
-            c = self.config
-            g = (self._fixed.prnu_gain.astype(np.float64) if self._fixed.prnu_gain is not None
-                 else np.ones(self.shape))
-            if c.crosstalk.enabled:
-                g = crosstalk.apply(g, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
+            g = self.photo_response(np.ones(self.shape))[1]
             self._flat = g / g.mean()
         return self._flat
+
+    def photo_response(self, perfect_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean photo-charge of ``perfect_e`` through PRNU (stage 2) and crosstalk (stage 3), e- float64.
+
+        Returns (after PRNU, after crosstalk), each (rows, cols); the one
+        place both stages meet a mean image (exposures and
+        :attr:`flat_response` call it).
+        """
+        c = self.config
+        after_prnu = perfect_e if self._fixed.prnu_gain is None else prnu.apply(perfect_e, self._fixed.prnu_gain)
+        mean = after_prnu
+        if c.crosstalk.enabled:
+            mean = crosstalk.apply(mean, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
+        return after_prnu, mean
 
     @property
     def dark_cooling_fraction(self) -> float:
@@ -170,12 +166,13 @@ class Sensor:
         c = self.config
         if not c.dark_current.enabled:
             return 0.0
-        return dark_current.cooling_fraction(dark_points(c), lambda: variates(self.shape, fixed_rng(c.seed, "dark_current")))
+        return dark_current.cooling_fraction(list(self.spec.dark_points),
+                                             lambda: variates(self.shape, fixed_rng(c.seed, "dark_current")))
 
     @property
     def flicker_model(self):
         """The distribution the per-pixel flicker sigma was drawn from (e- rms)."""
-        return flicker_model(self.config)
+        return self.spec.flicker
 
     @property
     def seed(self) -> int:
@@ -191,25 +188,18 @@ class Sensor:
 
     @property
     def transfer(self) -> adc.Transfer:
-        a = self.config.adc
-        if not a.enabled:
-            return adc.Transfer.ideal()
-        full_scale = a.full_scale_e if a.full_scale_e is not None else self.config.sensor.full_well_e
-        return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale)
+        """The ADC transfer (the ideal one, 1 DN per e-, with the ADC off)."""
+        return self.spec.transfer
 
     @property
     def saturation_e(self) -> float:
         """Charge at saturation: the full well, or the ADC's full scale if that comes first (e-)."""
-        t = self.transfer
-        return float(min(self.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
+        return self.spec.saturation_e
 
     @property
     def white_dn(self) -> float:
         """The raw code of scene white: a scene value of 1, or the top code if that is lower."""
-        c = self.config
-        t = self.transfer
-        white_e = c.exposure.peak_rate_e_per_s * c.exposure.integration_time_s
-        return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
+        return self.spec.white_dn
 
     def raw_info(self) -> RawInfo:
         """What the processing chain needs to know about this sensor's raw frames."""
@@ -236,72 +226,6 @@ class Sensor:
             "column_noise": c.column_noise.enabled,
             "adc": c.adc.enabled,
         }
-
-    # ------------------------------------------------------------ fixed pattern
-    def _draw_fixed_pattern(self, reuse: "Sensor | None" = None, executor=None) -> FixedPattern:
-        """Every fixed-pattern map; with ``reuse`` (the same seed and size), its maps whose inputs did not change.
-
-        A map is a pure function of the seed, the size and its own section's
-        parameters, so a reused map is the one this sensor would draw (the
-        explorer moves one slider at a time).
-        """
-        c = self.config
-        old = reuse.config if reuse is not None and reuse.shape == self.shape and reuse.config.seed == c.seed else None
-        prev = reuse.fixed_pattern if old is not None else None
-
-        inputs, old_inputs = fixed_pattern_inputs(c), (fixed_pattern_inputs(old) if old is not None else None)
-
-        def kept(name):
-            """The previous sensor's map ``name`` when its inputs are unchanged, else None."""
-            if prev is None or getattr(prev, name) is None or old_inputs[name] != inputs[name]:
-                return None
-            return getattr(prev, name)
-
-        maps: dict = {}
-        if c.prnu.enabled:
-            maps["prnu_gain"] = kept("prnu_gain")
-            if maps["prnu_gain"] is None:
-                maps["prnu_gain"] = prnu.gain_map(self.shape, c.prnu.sigma_pct, fixed_rng(c.seed, "prnu"))
-        if c.dark_current.enabled:
-            d = c.dark_current
-            if kept("dark_rate") is not None:
-                maps["dark_state"], maps["dark_rate"] = prev.dark_state, prev.dark_rate
-                if self._keep_draws:
-                    maps["dark_draws"] = prev.dark_draws or dark_current.draws(self.shape, fixed_rng(c.seed, "dark_current"))
-            else:
-                state = dark_current.at_temperature(dark_points(c), c.sensor.temperature_c, d.doubling_c, d.tail_doubling_c)
-                maps["dark_state"] = state
-                draws = prev.dark_draws if prev is not None else None  # the same seed and size: the same draws
-                if draws is None and self._keep_draws:
-                    draws = dark_current.draws(self.shape, fixed_rng(c.seed, "dark_current"))
-                args = (state, self.shape, fixed_rng(c.seed, "dark_current"), draws)
-                maps["dark_rate"] = (executor.submit(dark_current.rate_map, *args) if executor is not None
-                                     else dark_current.rate_map(*args))
-                if self._keep_draws:
-                    maps["dark_draws"] = draws
-        rows, cols = self.shape
-        sf = c.source_follower
-        if sf.enabled and sf.flicker.enabled:
-            maps["flicker_sigma"] = kept("flicker_sigma")
-            if maps["flicker_sigma"] is None:
-                maps["flicker_sigma"] = source_follower.flicker_sigma_map(
-                    flicker_model(c), self.shape, fixed_rng(c.seed, "source_follower")
-                )
-        if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
-            maps["row_offset"] = row_noise.fixed_offsets(rows, c.row_noise.fixed_sigma_e, fixed_rng(c.seed, "row_noise"))
-        cn = c.column_noise
-        if cn.enabled:
-            if cn.temporal.enabled:
-                maps["column_sigma"] = column_noise.temporal_sigma_map(
-                    cols, cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e, fixed_rng(c.seed, "column_noise", 0)
-                )
-            if cn.vfpn_sigma_e > 0:
-                maps["vfpn"] = column_noise.vfpn_offsets(cols, cn.vfpn_sigma_e, fixed_rng(c.seed, "column_noise", 1))
-            if cn.gain_sigma_pct > 0:
-                maps["column_gain"] = column_noise.gain_map(cols, cn.gain_sigma_pct, fixed_rng(c.seed, "column_noise", 2))
-        if isinstance(maps.get("dark_rate"), Future):
-            maps["dark_rate"] = maps["dark_rate"].result()
-        return FixedPattern(**maps)
 
     # ------------------------------------------------------------ scene
     def scene_signal(self, scene: str | np.ndarray | None = None) -> np.ndarray:
@@ -338,9 +262,18 @@ class Sensor:
         """Mean charge of ``scene`` at the configured exposure and temperature.
 
         ``sequence`` numbers independent frame series of the same sensor
-        (0: the run; 1: the dark frames of a dark calibration).
+        (0: the run; 1: the dark frames of a dark calibration). With a
+        cache, a named scene's signal and the exposure's mean images come
+        from it when their inputs are unchanged.
         """
-        return Exposure(self, self.scene_signal(scene), sequence)
+        if scene is None:
+            scene = self.config.scene.source
+        if self.cache is None or not isinstance(scene, str):
+            return Exposure(self, self.scene_signal(scene), sequence)
+        c = self.config
+        signal_parts = (scene, self.shape, self.cfa, list(c.sensor.channel_responsivity), c.scene.scale, c.scene.fit)
+        signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))
+        return Exposure(self, signal, sequence, signal_parts)
 
     def dark_frames(self, n: int) -> "Iterator[np.ndarray]":
         """``n`` dark frames (no light) for dark calibration, from their own noise sequence."""
@@ -356,31 +289,48 @@ class Sensor:
 
 
 class Exposure:
-    """What is fixed for one scene on one sensor: the mean charge per pixel (e-)."""
+    """What is fixed for one scene on one sensor: the mean charge per pixel (e-).
 
-    def __init__(self, sensor: Sensor, signal: np.ndarray, sequence: int = SEQ_SCENE):
+    Parameters
+    ----------
+    sensor : Sensor
+    signal : ndarray, (rows, cols)
+        The scene through the CFA, relative signal.
+    sequence : int
+        Which frame series (see :meth:`Sensor.expose`).
+    signal_parts : tuple, optional
+        What ``signal`` was made from, when the sensor has a cache: the
+        photo mean (signal, exposure, PRNU, crosstalk) and the dark mean
+        (dark map, integration time) are then kept in it as two products,
+        so a change of one (a temperature, say) reuses the other.
+    """
+
+    def __init__(self, sensor: Sensor, signal: np.ndarray, sequence: int = SEQ_SCENE, signal_parts: tuple | None = None):
         self.sensor = sensor
         self.sequence = sequence
         c = sensor.config
         timings = sensor.timings
         t0 = time.perf_counter()
-        #: stage 1: mean photo-electrons of the perfect image
-        self.perfect_e = scene_mod.photo_electrons(
-            signal, c.exposure.peak_rate_e_per_s, c.exposure.integration_time_s
-        )
-        mean = self.perfect_e
-        if sensor.fixed_pattern.prnu_gain is not None:
-            mean = prnu.apply(mean, sensor.fixed_pattern.prnu_gain)
-        #: after PRNU (stage 2)
-        self.after_prnu_e = mean
-        if c.crosstalk.enabled:
-            mean = crosstalk.apply(mean, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
-        #: after crosstalk (stage 3): the mean photo-charge that shot noise acts on
-        self.photo_mean_e = mean.astype(np.float32)
+        cache = sensor.cache if signal_parts is not None else None
+        deps = dependencies(sensor.spec)
+        ex = c.exposure
+
+        def photo():
+            perfect = scene_mod.photo_electrons(signal, ex.peak_rate_e_per_s, ex.integration_time_s)
+            after_prnu, mean = sensor.photo_response(perfect)
+            return perfect, after_prnu, mean.astype(np.float32)
+
+        photo_parts = (signal_parts, sensor.seed, sensor.shape, ex.peak_rate_e_per_s, ex.integration_time_s,
+                       deps["prnu_gain"], c.crosstalk)
+        #: stage 1: mean photo-electrons of the perfect image; after PRNU (stage 2); after crosstalk (stage 3):
+        #: the mean photo-charge that shot noise acts on
+        self.perfect_e, self.after_prnu_e, self.photo_mean_e = cached(cache, "photo_mean", photo_parts, photo)
         #: stage 4: mean dark electrons (None with dark current off)
         self.dark_mean_e = None
         if sensor.fixed_pattern.dark_rate is not None:
-            self.dark_mean_e = dark_current.mean_charge(sensor.fixed_pattern.dark_rate, c.exposure.integration_time_s)
+            self.dark_mean_e = cached(
+                cache, "dark_mean", (sensor.seed, sensor.shape, deps["dark_rate"], ex.integration_time_s),
+                lambda: dark_current.mean_charge(sensor.fixed_pattern.dark_rate, ex.integration_time_s))
         # what shot noise acts on, and what enters as its mean
         noisy, exact = [], []
         (noisy if c.shot_noise.enabled else exact).append(self.photo_mean_e)
@@ -390,20 +340,6 @@ class Exposure:
         self._exact_e = sum(exact[1:], exact[0]) if exact else None
         self._plan: kernel.FramePlan | None = None
         timings["expose"] += time.perf_counter() - t0
-
-    def rebind(self, sensor: "Sensor") -> "Exposure":
-        """This exposure on ``sensor``, which differs only in temporal or readout parameters.
-
-        ``sensor`` must share this one's fixed pattern and have the same scene
-        response, exposure, crosstalk and shot-noise switches (the mean charge
-        is reused as it is); its source follower, row and column noise and ADC
-        may differ. Only the frame plan is rebuilt. For interactive use, where
-        a slider moves a temporal parameter.
-        """
-        other = copy.copy(self)
-        other.sensor = sensor
-        other._plan = None
-        return other
 
     @property
     def mean_charge_e(self) -> np.ndarray:
@@ -557,30 +493,19 @@ class Exposure:
             yield self._render(k)
 
 
-def fixed_pattern_inputs(c: Config) -> dict:
-    """What draws each fixed-pattern map, besides the seed and the size: map name -> the configuration's parts.
-
-    The one place that knows it: :meth:`Sensor._draw_fixed_pattern` reuses a
-    map whose inputs are unchanged, and the explorer keys its sensors by them.
-    """
-    sf, rn = c.source_follower, c.row_noise
-    return {"prnu_gain": c.prnu,
-            "dark_rate": (c.dark_current, c.sensor.temperature_c, c.sensor.pixel_pitch_um),
-            "flicker_sigma": (sf.enabled, sf.flicker),
-            "row_offset": (rn.enabled, rn.fixed_sigma_e),
-            "column": c.column_noise}
-
-
-def _as_config(config) -> Config:
-    """A configuration from what a user means by it: None (defaults), a Config, a dict (merged over the defaults) or a YAML path."""
-    if config is None:
-        return load_config()
-    if isinstance(config, Config):
+def _as_spec(config) -> SensorSpec:
+    """The resolved sensor a user means: None (defaults), a spec, a Config, a dict (merged over the defaults)
+    or a YAML file's path."""
+    if isinstance(config, SensorSpec):
         return config
+    if config is None:
+        return resolve(load_config())
+    if isinstance(config, Config):
+        return resolve(config)
     if isinstance(config, dict):
-        return load_config(extra=config)
+        return resolve(load_config(extra=config))
     if isinstance(config, (str, Path)):
-        return load_config(Path(config))
+        return resolve(load_config(Path(config)))
     raise CmosnoiseError(f"config: expected a Config, a dict or a YAML file's path, got {type(config).__name__}")
 
 

@@ -102,13 +102,23 @@ class DarkState:
             raise ValueError("between two characterization points the DCNU is a per-pixel interpolation, not one model")
         return HeavyTail(body_dist(self.family, self.mean, self.std), self.tail_fraction, self.tail_max)
 
-    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None) -> np.ndarray:
-        """Rates (e-/s, float64) of pixels with these fixed uniform variates (``cells``: ``ppf_cells(u_body)`` if known)."""
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None,
+               kept: "DarkDraws | None" = None) -> np.ndarray:
+        """Rates (e-/s, float64) of pixels with these fixed uniform variates.
+
+        ``cells``: ``ppf_cells(u_body)`` if known; ``kept``: the
+        :class:`DarkDraws` these variates come from, whose kept point maps
+        are used (the same bits).
+        """
         if not self.between:
+            if kept is not None and self.body_scale == 1.0 and self.tail_scale == 1.0:
+                return kept.point_values(self.lo)  # at a point: its own map (read-only)
             body = np.maximum(tabulated_ppf(self.lo.body, u_body, cells), 0.0) * self.body_scale
             if self.lo.tail_fraction > 0 and self.lo.tail_max > 0:
                 body += np.where(u_member < self.lo.tail_fraction, u_tail * self.lo.tail_max * self.tail_scale, 0.0)
             return body
+        if kept is not None:
+            return np.exp((1.0 - self.w) * kept.point_log(self.lo) + self.w * kept.point_log(self.hi))
         cells = cells if cells is not None else ppf_cells(u_body)  # both points' bodies at the same quantiles
         r_lo = self.lo.values(u_body, u_member, u_tail, cells)
         r_hi = self.hi.values(u_body, u_member, u_tail, cells)
@@ -186,25 +196,62 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     )
 
 
-def draws(shape: tuple[int, int], rng: np.random.Generator) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """The map's fixed variates and where their body quantiles fall in the quantile tables: (u, cells).
+class DarkDraws:
+    """A sensor's fixed dark-current variates, kept to make its map at any temperature quickly.
 
-    They depend on the seed and the size only, not on the temperature or the
-    points: interactive use keeps them to redraw the map at another
-    temperature without drawing or locating them again.
+    The variates (body quantile, tail membership, tail magnitude) and where
+    their body quantiles fall in the quantile tables depend on the seed and
+    the size only. Each characterization point's own map at its own
+    temperature is kept the first time a temperature needs it: a
+    temperature between two points is then one exponential of their kept
+    log-maps, bit for bit the map :meth:`DarkState.values` gives.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+    rng : numpy.random.Generator
+        The sensor's fixed stream for this stage.
     """
-    u = variates(shape, rng)
-    return u, ppf_cells(u[0])
+
+    def __init__(self, shape: tuple[int, int], rng: np.random.Generator):
+        self.u = variates(shape, rng)
+        self.cells = ppf_cells(self.u[0])
+        self._maps: dict = {}
+
+    def point_values(self, model: HeavyTail) -> np.ndarray:
+        """``model.values`` of these variates (the point's own map, e-/s, float64), kept."""
+        k = ("values", id(model))
+        if k not in self._maps:
+            self._maps[k] = (model, _read_only(model.values(*self.u, self.cells)))
+        return self._maps[k][1]
+
+    def point_log(self, model: HeavyTail) -> np.ndarray:
+        """``log(max(values, RATE_FLOOR * body mean))`` of a point's own map, kept (the interpolation's input)."""
+        k = ("log", id(model))
+        if k not in self._maps:
+            v = np.maximum(model.values(*self.u, self.cells), RATE_FLOOR * float(model.body.mean()))
+            self._maps[k] = (model, _read_only(np.log(v)))
+        return self._maps[k][1]
+
+    @property
+    def nbytes(self) -> int:
+        return self.u.nbytes + sum(a.nbytes for a in self.cells) + sum(m[1].nbytes for m in self._maps.values())
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
 
 
 def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator | None = None,
-             kept: tuple | None = None) -> np.ndarray:
+             kept: DarkDraws | None = None) -> np.ndarray:
     """Fixed dark-current map at ``state``'s temperature, e-/s per pixel, float32 (>= 0).
 
-    ``kept`` is :func:`draws` of this sensor (then ``rng`` is not used): the same map, bit for bit.
+    ``kept`` is this sensor's :class:`DarkDraws` (then ``rng`` is not used): the same map, bit for bit.
     """
-    u, cells = kept if kept is not None else (variates(shape, rng), None)
-    return state.values(*u, cells=cells).astype(np.float32)
+    if kept is None:
+        return state.values(*variates(shape, rng)).astype(np.float32)
+    return state.values(*kept.u, cells=kept.cells, kept=kept).astype(np.float32)
 
 
 def cooling_fraction(points: list[Point], draw_variates) -> float:

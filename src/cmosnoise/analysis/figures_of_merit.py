@@ -1,0 +1,154 @@
+"""Figures of merit of a simulated sensor and of its frames: one estimator for each.
+
+``simulate``'s summary (:mod:`cmosnoise.app.run`), the sweep's records
+(:mod:`cmosnoise.app.sweep`), the explorer's key figures
+(:mod:`cmosnoise.app.workbench`) and the report all take their numbers from
+here, so a figure means the same wherever it shows:
+
+- :func:`temporal_noise`: from consecutive frames, ``var(A - B) / 2`` over
+  the pixels (EMVA 1288), gathered by :class:`~.run_stats.RunStats`; in DN
+  (quantization included) and in e- through K;
+- :func:`key_figures`: SNR at signal levels and the dynamic range, from the
+  noise budget (:mod:`.noise_budget`);
+- :func:`dark_current`: the dark map's statistics and its white pixels
+  (:func:`.white_pixels.report`, the one count: above the threshold of the
+  nearest characterization point), and those seen in frame 0;
+- :func:`pane`: what the explorer shows beside a picture.
+
+The robust sigma and the 95 % quantile are :mod:`cmosnoise.estimators`'.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..estimators import Z95, robust_centre, robust_sigma
+from ..model.sensor import Exposure, Sensor
+from ..model.units import e_per_s_to_aa
+from . import noise_budget, white_pixels
+
+__all__ = ["Z95", "robust_centre", "robust_sigma", "temporal_noise", "key_figures", "dark_current",
+           "frame0_white_pixels", "pane"]
+
+
+def temporal_noise(stats: dict, gain_dn_per_e: float) -> dict:
+    """Temporal noise from a :meth:`RunStats.result` (``var(frame k - frame k-1) / 2`` over the pixels).
+
+    Returns ``rms_dn`` (raw codes: quantization included), ``rms_e``
+    (``rms_dn`` through K), ``rms_e_before_adc`` (the charge at the ADC
+    input, without quantization) and ``method``; each None with fewer than
+    two frames.
+    """
+    dn = stats.get("temporal_noise_dn")
+    return {"rms_dn": dn, "rms_e": None if dn is None else dn / gain_dn_per_e,
+            "rms_e_before_adc": stats.get("temporal_noise_e"), "method": stats.get("temporal_noise_method")}
+
+
+def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
+    """SNR (temporal, and with the fixed pattern) at signal levels ``levels_e`` (e-) and half the saturation,
+    and the dynamic range (saturation over the dark temporal noise); levels are keyed as text (``"100"``)."""
+    sat = sensor.saturation_e
+    levels = sorted({*levels_e, round(sat / 2, 3)})
+    parts = noise_budget.fixed_pattern_parts(sensor)  # once for every level
+    dark = noise_budget.budget(sensor, 0.0, _parts=parts)["temporal_total_e"]
+    at = {f"{lvl:g}": noise_budget.budget(sensor, lvl, _parts=parts) for lvl in levels if lvl < sat}
+
+    def db(v):
+        return 20 * math.log10(v) if v > 0 else None
+
+    return {
+        "saturation_e": sat,
+        "dark_temporal_noise_e": dark,
+        "dynamic_range": sat / dark,
+        "dynamic_range_db": 20 * math.log10(sat / dark),
+        # temporal SNR (the EMVA 1288 convention), and with the fixed pattern added
+        "snr_temporal_db_at_signal_e": {k: db(b["snr_temporal"]) for k, b in at.items()},
+        "snr_total_db_at_signal_e": {k: db(b["snr"]) for k, b in at.items()},
+    }
+
+
+def dark_map(sensor: Sensor) -> dict | None:
+    """The dark-current map's mean and white pixels (None with dark current off).
+
+    ``mean_e_per_s``, ``threshold_e_per_s`` (the nearest characterization
+    point's, or None) and, with a threshold, :func:`white_pixels.report`'s
+    ``ppm``, ``white_pixels``, ``couplets`` and ``couplets_expected_random``.
+    """
+    state, rate = sensor.dark_state, sensor.dark_rate
+    if state is None:
+        return None
+    out = {"mean_e_per_s": float(rate.mean()), "threshold_e_per_s": state.threshold}
+    if state.threshold is not None:
+        rep = white_pixels.report(rate, state.threshold, sensor.cfa)
+        out.update({k: rep[k] for k in rep if isinstance(rep[k], (int, float))})
+    return out
+
+
+def dark_current(sensor: Sensor, shot: Exposure | None = None, electrons0: np.ndarray | None = None,
+                 read_var_e2: float = 0.0) -> dict | None:
+    """Dark-current figures of a run: the map's statistics, its white pixels and couplets, and (given frame 0's
+    charge ``electrons0`` of ``shot`` and the dark read variance, e-^2) those seen in frame 0. None with the
+    stage off."""
+    state, rate = sensor.dark_state, sensor.dark_rate
+    if state is None:
+        return None
+    t_int = sensor.config.exposure.integration_time_s
+    out = {
+        "temperature_c": state.temperature_c,
+        "body": {"family": state.family, "mean_e_per_s": state.mean, "std_e_per_s": state.std},
+        "tail": {"fraction": state.tail_fraction, "max_e_per_s": state.tail_max},
+        "map_mean_e_per_s": float(rate.mean()),
+        "map_median_e_per_s": float(np.median(rate)),
+        "mean_dark_e_per_frame": float(rate.mean() * t_int),
+        "interpolation": (f"per-pixel exponential between the points at {state.temperature_c:g} C (weight {state.w:.3f})"
+                          if state.between else "at a characterization point, or scaled from the nearest one"),
+    }
+    cooling = sensor.dark_cooling_fraction
+    out["cooling_fraction"] = cooling
+    if cooling > 0:
+        out["warning"] = (f"{100 * cooling:.3g} % of pixels cool while the sensor warms between two of the "
+                          "dark_current.points: a warmer point's quantiles lie below a colder one's")
+    if state.threshold is not None:
+        thr = state.threshold
+        out["threshold_e_per_s"] = thr
+        out["threshold_aA"] = e_per_s_to_aa(thr)
+        out["ppm_expected"] = state.expected_ppm_above()
+        out["map"] = white_pixels.report(rate, thr, sensor.cfa)
+        if shot is not None and electrons0 is not None:
+            out["frame0"] = frame0_white_pixels(sensor, shot, electrons0, thr, read_var_e2)
+    return out
+
+
+def frame0_white_pixels(sensor: Sensor, shot: Exposure, electrons0: np.ndarray, threshold_e_per_s: float,
+                        read_var_e2: float) -> dict:
+    """White pixels seen in frame 0, counted so that temporal noise is not taken for dark current.
+
+    A pixel counts when its charge, less the expected photo-charge, exceeds
+    the threshold's charge by 5 sigma of its temporal noise (photon shot
+    noise plus the read noise): false alarms about 3e-7 per pixel. In a
+    short exposure or a bright area a white pixel can hide in that noise,
+    so the count is a lower bound of the map's; the summary says so.
+    """
+    t_int = sensor.config.exposure.integration_time_s
+    photo = shot.photo_mean_e.astype(np.float64)
+    excess_e = electrons0 - photo - 5.0 * np.sqrt(photo + read_var_e2)  # read_var_e2: the budget's dark variance (e-^2)
+    rep = white_pixels.report(excess_e / t_int, threshold_e_per_s, sensor.cfa)
+    kind = "dark frame" if float(photo.max()) <= 0 else "lit frame"
+    rep["method"] = (f"{kind}: (charge - expected photo-charge - 5 sigma of photon shot and read noise) / integration "
+                     "time, above the threshold; a lower bound of the map's count (white pixels can hide in the noise)")
+    return rep
+
+
+def pane(sensor: Sensor, shot: Exposure, levels_e=(10.0, 100.0, 1000.0)) -> dict:
+    """What the explorer shows beside a picture and a sweep records of an instance: key figures, the noise
+    budget over the scene (per source, e- rms) and the dark map's figures (:func:`dark_map`)."""
+    b = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)
+    out = {"key_figures": key_figures(sensor, levels_e),
+           "budget": {"temporal_e": b["temporal_rms_e"], "fixed_e": b["fixed_pattern_rms_e"],
+                      "temporal_total_e": b["temporal_total_e"], "fixed_total_e": b["fixed_pattern_total_e"]}}
+    dark = dark_map(sensor)
+    if dark is not None:
+        out["dark"] = dark
+    return out

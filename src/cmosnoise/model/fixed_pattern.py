@@ -1,0 +1,212 @@
+"""A sensor instance's fixed pattern: every map drawn once from the seed, what each map reads, and a cache.
+
+Each map is a pure function of the seed, the sensor's size and a few parts of
+the configuration; :func:`dependencies` is the one table of those parts.
+:func:`draw` draws every map of a :class:`~cmosnoise.model.spec.SensorSpec`;
+given a :class:`PatternCache`, it takes each map from the cache when a
+sensor of the same seed and size with the same inputs drew it before, so
+interactive use (the explorer, a slider at a time) and a sweep (many points
+of one seed) redraw only what a change touches. A cached map is the map a
+fresh draw gives, bit for bit (``tests/test_reproducibility.py``).
+
+The cache also keeps the products an exposure is built from, each keyed by
+what it reads (:mod:`cmosnoise.model.sensor` asks for them):
+
+- the scene's signal through the CFA (scene, size, CFA, responsivities);
+- the photo mean: the perfect image through PRNU and crosstalk (signal,
+  exposure, PRNU map, crosstalk) - not the temperature;
+- the dark mean: the dark-current map times the integration time - not the scene;
+- each pixel's source-follower sigma (flicker map, thermal sigma).
+
+So a temperature move redraws the dark map alone (from the kept variates,
+with each characterization point's own map kept too) and reuses the photo mean.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import threading
+from collections import OrderedDict
+from concurrent.futures import Future
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .seeds import fixed_rng
+from .spec import SensorSpec
+from .stages import column_noise, dark_current, prnu, row_noise, source_follower
+
+
+@dataclass(frozen=True)
+class FixedPattern:
+    """A sensor instance's fixed-pattern maps (None where the stage is off).
+
+    Drawn once by :class:`~cmosnoise.model.sensor.Sensor`; read them through ``sensor.fixed_pattern``.
+    """
+
+    prnu_gain: np.ndarray | None = None  #: per-pixel photo gain, (rows, cols) float32
+    dark_state: dark_current.DarkState | None = None  #: DCNU parameters at the sensor's temperature
+    dark_rate: np.ndarray | None = None  #: dark-current map at the sensor's temperature, e-/s, (rows, cols) float32
+    flicker_sigma: np.ndarray | None = None  #: per-pixel flicker sigma, e- rms, (rows, cols) float32
+    row_offset: np.ndarray | None = None  #: fixed row offsets, e-, (rows, 1)
+    column_sigma: np.ndarray | None = None  #: per-column temporal sigma, e- rms, (1, cols)
+    vfpn: np.ndarray | None = None  #: fixed column offsets, e-, (1, cols)
+    column_gain: np.ndarray | None = None  #: fixed column gains, (1, cols)
+
+
+def dependencies(spec: SensorSpec) -> dict[str, object]:
+    """What draws each fixed-pattern map besides the seed and the size: map -> the configuration's parts.
+
+    The one table of it: :func:`draw` keys its cache by it. A map's entry
+    holds every value its drawing function reads (a section switched off
+    draws nothing, so its switch is part of the entry).
+    """
+    c = spec.config
+    sf, rn = c.source_follower, c.row_noise
+    return {
+        "prnu_gain": (c.prnu.enabled, c.prnu.sigma_pct),
+        "dark_rate": (c.dark_current.enabled, c.dark_current.doubling_c, c.dark_current.tail_doubling_c,
+                      spec.dark_points, c.sensor.temperature_c),
+        "flicker_sigma": (sf.enabled, sf.flicker),
+        "row_offset": (rn.enabled, rn.fixed_sigma_e),
+        "column": c.column_noise,
+    }
+
+
+def key(*parts) -> str:
+    """A cache key: a digest of ``parts`` (pydantic sections and dataclasses by their values)."""
+    return hashlib.sha1(json.dumps(parts, sort_keys=True, default=_plain).encode()).hexdigest()
+
+
+def _plain(value):
+    if hasattr(value, "model_dump"):
+        return value.model_dump(mode="json")
+    if hasattr(value, "__dataclass_fields__"):
+        return {f: getattr(value, f) for f in value.__dataclass_fields__}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return repr(value)
+
+
+class PatternCache:
+    """Fixed-pattern maps and exposure products by key, least recently used first out; thread-safe.
+
+    Parameters
+    ----------
+    max_bytes : int
+        What the values may hold together (the newest is kept whatever it weighs), bytes.
+    max_items : int
+        At most this many values.
+    """
+
+    def __init__(self, max_bytes: int, max_items: int = 64):
+        self.max_bytes = int(max_bytes)
+        self.max_items = int(max_items)
+        self._items: OrderedDict[str, object] = OrderedDict()
+        self._weights: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    def get(self, name: str, parts: tuple, make: Callable[[], object]):
+        """The value of ``name`` for ``parts``, made by ``make()`` (outside the lock) when not held."""
+        k = name + ":" + key(*parts)
+        with self._lock:
+            if k in self._items:
+                self._items.move_to_end(k)
+                return self._items[k]
+        value = make()
+        with self._lock:
+            self._items[k] = value
+            self._weights[k] = nbytes(value)
+            while len(self._items) > 1 and (len(self._items) > self.max_items or self.nbytes() > self.max_bytes):
+                old, _ = self._items.popitem(last=False)
+                self._weights.pop(old, None)
+        return value
+
+    def nbytes(self) -> int:
+        """Bytes the held values weigh."""
+        return sum(self._weights.values())
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+
+def nbytes(value) -> int:
+    """Bytes of the arrays in ``value`` (an array, a tuple of them, or an object with ``nbytes``)."""
+    if isinstance(value, np.ndarray):
+        return value.nbytes
+    if isinstance(value, (tuple, list)):
+        return sum(nbytes(v) for v in value)
+    return int(getattr(value, "nbytes", 0))
+
+
+def cached(cache: PatternCache | None, name: str, parts: tuple, make: Callable[[], object]):
+    """``make()`` through ``cache`` when there is one."""
+    return make() if cache is None else cache.get(name, parts, make)
+
+
+def draw(spec: SensorSpec, cache: PatternCache | None = None, executor=None) -> FixedPattern:
+    """Every fixed-pattern map of ``spec``, each from its own stream of the seed.
+
+    Parameters
+    ----------
+    spec : SensorSpec
+        The resolved sensor.
+    cache : PatternCache, optional
+        Maps of the same seed and size with unchanged :func:`dependencies` are taken from it (and new ones
+        put in it). The dark map is then made from the kept variates of :class:`dark_current.DarkDraws`.
+    executor : concurrent.futures.Executor, optional
+        Where the dark-current map is drawn while this thread draws the others (each map has its own stream,
+        so the bits are the same).
+    """
+    c = spec.config
+    shape, seed = spec.shape, spec.seed
+    deps = dependencies(spec)
+
+    def held(name, make):
+        return cached(cache, name, (seed, shape, deps[name]), make)
+
+    maps: dict = {}
+    if c.prnu.enabled:
+        maps["prnu_gain"] = held("prnu_gain", lambda: prnu.gain_map(shape, c.prnu.sigma_pct, fixed_rng(seed, "prnu")))
+    if c.dark_current.enabled:
+        d = c.dark_current
+        state = dark_current.at_temperature(list(spec.dark_points), c.sensor.temperature_c, d.doubling_c,
+                                            d.tail_doubling_c)
+        maps["dark_state"] = state
+        if cache is None:
+            args = (state, shape, fixed_rng(seed, "dark_current"))
+            maps["dark_rate"] = (executor.submit(dark_current.rate_map, *args) if executor is not None
+                                 else dark_current.rate_map(*args))
+        else:
+            kept = cache.get("dark_draws", (seed, shape),
+                             lambda: dark_current.DarkDraws(shape, fixed_rng(seed, "dark_current")))
+            maps["dark_rate"] = held("dark_rate", lambda: dark_current.rate_map(state, shape, kept=kept))
+    rows, cols = shape
+    sf = c.source_follower
+    if sf.enabled and sf.flicker.enabled:
+        maps["flicker_sigma"] = held("flicker_sigma", lambda: source_follower.flicker_sigma_map(
+            spec.flicker, shape, fixed_rng(seed, "source_follower")))
+    if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
+        maps["row_offset"] = held("row_offset", lambda: row_noise.fixed_offsets(rows, c.row_noise.fixed_sigma_e,
+                                                                                 fixed_rng(seed, "row_noise")))
+    if c.column_noise.enabled:
+        maps["column_sigma"], maps["vfpn"], maps["column_gain"] = held("column", lambda: _column_maps(c, cols))
+    if isinstance(maps.get("dark_rate"), Future):
+        maps["dark_rate"] = maps["dark_rate"].result()
+    return FixedPattern(**maps)
+
+
+def _column_maps(c, cols: int) -> tuple:
+    """(temporal sigma, VFPN offsets, gains) of the columns, each None where off."""
+    cn, seed = c.column_noise, c.seed
+    sigma = vfpn = gain = None
+    if cn.temporal.enabled:
+        sigma = column_noise.temporal_sigma_map(cols, cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e,
+                                                fixed_rng(seed, "column_noise", 0))
+    if cn.vfpn_sigma_e > 0:
+        vfpn = column_noise.vfpn_offsets(cols, cn.vfpn_sigma_e, fixed_rng(seed, "column_noise", 1))
+    if cn.gain_sigma_pct > 0:
+        gain = column_noise.gain_map(cols, cn.gain_sigma_pct, fixed_rng(seed, "column_noise", 2))
+    return sigma, vfpn, gain

@@ -1,0 +1,107 @@
+"""The resolved sensor specification: a configuration and everything it implies, built once.
+
+A :class:`~cmosnoise.config.Config` is data the schema accepted. A
+:class:`SensorSpec` is what the model reads: that configuration with
+``prnu.sigma_pct`` solved from ``prnu.measured_pct`` where it was given, the
+dark-current characterization points in e-/s, the flicker-sigma
+distribution, the PRNU a flat field shows per unit of gain-map sigma, and
+the ADC's transfer. :func:`resolve` builds it and raises
+:class:`~cmosnoise.errors.CmosnoiseError` for what only the physics can
+tell (an unreachable ppm, a body distribution that cannot be computed). It
+is immutable: :class:`~cmosnoise.model.sensor.Sensor` and the frame plan
+read it and never recompute any of it.
+
+>>> from cmosnoise import load_config
+>>> from cmosnoise.model.spec import resolve
+>>> spec = resolve(load_config(preset="paper-fig11-full"))
+>>> spec.transfer.bits
+12
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..config import Config, merge_updates
+from . import physics
+from .heavy_tail import HeavyTail
+from .stages import adc
+from .stages.dark_current import Point
+
+
+@dataclass(frozen=True, eq=False)
+class SensorSpec:
+    """A configuration resolved: what the model reads (see the module docstring).
+
+    Attributes
+    ----------
+    config : Config
+        The validated configuration, ``prnu.sigma_pct`` solved.
+    dark_points : tuple of Point
+        Dark-current characterization points, rates in e-/s (resolved whether the stage is on or off).
+    flicker : HeavyTail
+        Per-pixel flicker-sigma distribution, e- rms.
+    prnu_seen_per_sigma : float
+        PRNU a flat field shows per unit of gain-map sigma (crosstalk averages neighbours; 1 without it).
+    transfer : adc.Transfer
+        The ADC transfer (the ideal one, 1 DN per e-, with the ADC off).
+    """
+
+    config: Config
+    dark_points: tuple[Point, ...]
+    flicker: HeavyTail
+    prnu_seen_per_sigma: float
+    transfer: adc.Transfer
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows, cols) of the sensor."""
+        return self.config.shape
+
+    @property
+    def seed(self) -> int:
+        return self.config.seed
+
+    @property
+    def saturation_e(self) -> float:
+        """Charge at saturation: the full well, or the ADC's full scale if that comes first (e-)."""
+        t = self.transfer
+        return float(min(self.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
+
+    @property
+    def white_dn(self) -> float:
+        """The raw code of scene white: a scene value of 1, or the top code if that is lower."""
+        c, t = self.config, self.transfer
+        white_e = c.exposure.peak_rate_e_per_s * c.exposure.integration_time_s
+        return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
+
+    def with_config(self, config: Config) -> "SensorSpec":
+        """This spec with ``config`` in place of its own, where ``config`` differs only in what implies nothing
+        (the exposure, the run, the scene, the processing): nothing is solved again."""
+        return SensorSpec(config, self.dark_points, self.flicker, self.prnu_seen_per_sigma, self.transfer)
+
+    def updated(self, updates: dict) -> "SensorSpec":
+        """A new spec: this configuration with ``updates`` merged in (every value set kept), resolved."""
+        return resolve(merge_updates(self.config, updates))
+
+
+def transfer(config: Config) -> adc.Transfer:
+    """The ADC transfer a configuration sets (the ideal one with the ADC off)."""
+    a = config.adc
+    if not a.enabled:
+        return adc.Transfer.ideal()
+    full_scale = a.full_scale_e if a.full_scale_e is not None else config.sensor.full_well_e
+    return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale)
+
+
+def resolve(config: Config | SensorSpec) -> SensorSpec:
+    """The :class:`SensorSpec` of ``config``; raises CmosnoiseError on what its values cannot mean.
+
+    A spec passes through unchanged.
+    """
+    if isinstance(config, SensorSpec):
+        return config
+    config = physics.resolve_prnu(config)
+    # every section is checked, those switched off too (a file must stay valid when one is switched on)
+    return SensorSpec(config, tuple(physics.dark_points(config)), physics.flicker_model(config),
+                      physics.prnu_seen_per_sigma(config), transfer(config))
