@@ -15,7 +15,7 @@ two uniforms, ``log``, the cosine of a turn, a Box-Muller normal from two
 uniforms, a square root and a division (the last two for scale), and shot
 noise's first pass (every pixel's Philox block and PTRS quick test, as the
 kernel makes it). Their sum with the kernel's "nothing but the ADC" frame
-(the row and column terms, the clip, the ADC) is what MODEL.md section 1's
+(the row and column terms, the clip, the ADC) is what docs/model.md section 1's
 scheme costs per frame on this CPU before any PTRS retry or inversion, set
 beside the NumPy reference of ``bench_chain.py`` timed in the same run. It
 guides work on the kernel; the speed targets are measured by ``bench_chain.py``.

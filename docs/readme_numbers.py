@@ -130,7 +130,7 @@ def render_kernel_parts(d: dict) -> str:
     left = (f"would leave {budget - floor:.0f} ms for them" if budget >= floor else
             f"is {floor - budget:.0f} ms below it already")
     lines += ["", f"Shot noise's first pass, the source follower's Philox block and normal, and the kernel with "
-              f"nothing but the ADC ({d['adc_ms']:.1f} ms) add up to {floor:.0f} ms: what the scheme of MODEL.md "
+              f"nothing but the ADC ({d['adc_ms']:.1f} ms) add up to {floor:.0f} ms: what the scheme of docs/model.md "
               f"section 1 costs here before any PTRS retry or inversion, {floor / ref:.2f} of the reference's "
               f"{ref:.0f} ms timed in the same run. The PTRS retries and the inversion take the other "
               f"{whole - floor:.0f} ms of the whole kernel's {whole:.0f} ms; the one-thread target of 0.4 "
@@ -156,7 +156,7 @@ def compute_characterize() -> dict:
 
 
 def render_characterize(d: dict) -> str:
-    from cmosnoise.analysis.characterize import TABLE_ROWS, table
+    from cmosnoise.analysis.emva_evaluation import TABLE_ROWS, table
 
     labels = {key: label for key, label, _, _ in TABLE_ROWS}
     keep = {labels[k] for k in README_CHARACTERIZE_ROWS}
@@ -176,12 +176,13 @@ def compute_characterize_presets() -> dict:
     """`characterize` (40 steps, 16-frame stacks, seed 0) on presets with white pixels that saturate, and without shot noise."""
     from cmosnoise import Sensor, load_config
     from cmosnoise import characterize as ch
+    from cmosnoise.analysis import emva_evaluation as ev
 
     out = {}
     for name in README_PRESETS:
         sensor = Sensor(load_config(preset=name), seed=0)
         m = ch.measure(sensor)
-        res, model = ch.evaluate(m), ch.model_values(sensor, m.stack_texp_s)
+        res, model = ev.evaluate(m), ch.model_values(sensor, m.stack_texp_s)
         out[name] = {"measured": {k: res[k] for k in README_PRESET_ROWS}, "model": {k: model[k] for k in README_PRESET_ROWS},
                      "excluded": res["prnu_excluded_pixels"], "dark_fit_points": res["dark_fit_points"],
                      "unavailable": sorted(k for k in res["unavailable"] if k in README_PRESET_ROWS)}
@@ -189,7 +190,7 @@ def compute_characterize_presets() -> dict:
 
 
 def render_characterize_presets(d: dict) -> str:
-    from cmosnoise.analysis.characterize import TABLE_ROWS, table
+    from cmosnoise.analysis.emva_evaluation import TABLE_ROWS, table
 
     labels = {key: label.strip() for key, label, _, _ in TABLE_ROWS}
     head = "| preset | " + " | ".join(labels[k] for k in README_PRESET_ROWS) + " | PRNU: defects left out | dark fit: exposure times |"

@@ -1,4 +1,4 @@
-"""Stage 9: the ADC follows MODEL.md's formula exactly."""
+"""Stage 9: the ADC follows docs/model.md's formula exactly."""
 
 import numpy as np
 import pytest
@@ -35,7 +35,7 @@ def test_ideal_readout_when_adc_is_off():
     cfg = quiet_config(adc={"enabled": False}, sensor={"width": 8, "height": 8, "cfa": "none"},
                        exposure={"integration_time_s": 1, "peak_rate_e_per_s": 1234.4})
     raw = Sensor(cfg).capture(scene="flat:1.0")
-    # MODEL.md stage 9: the ideal readout is the charge itself, float32 e-, unquantized
+    # docs/model.md stage 9: the ideal readout is the charge itself, float32 e-, unquantized
     assert raw.dtype == np.float32 and (raw == np.float32(1234.4)).all()
 
 

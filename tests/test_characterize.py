@@ -8,6 +8,8 @@ from conftest import Z, cli, temporal_variance_se
 
 from cmosnoise import Sensor, load_config, noise_budget, preset_names
 from cmosnoise import characterize as ch
+from cmosnoise.analysis import emva_evaluation as ev
+from cmosnoise.analysis import emva_files
 from cmosnoise.analysis.emva_reference import reference_results
 
 
@@ -15,7 +17,7 @@ from cmosnoise.analysis.emva_reference import reference_results
 def default_run():
     sensor = Sensor(load_config(), seed=0)
     m = ch.measure(sensor, steps=40, stack_frames=16, keep_frames=True)
-    return sensor, m, ch.evaluate(m), ch.model_values(sensor, m.stack_texp_s)
+    return sensor, m, ev.evaluate(m), ch.model_values(sensor, m.stack_texp_s)
 
 
 def _ols_coefficients(t):
@@ -87,8 +89,8 @@ def test_saturation_snr_and_dynamic_range_are_consistent(default_run):
 
 def test_export_round_trips_and_the_reference_implementation_agrees(default_run, tmp_path):
     sensor, m, res, model = default_run
-    descriptor = ch.export(m, tmp_path)
-    again = ch.evaluate(ch.load(descriptor))
+    descriptor = emva_files.export(m, tmp_path)
+    again = ev.evaluate(emva_files.load(descriptor))
     for key in ["system_gain_K_dn_per_e", "temporal_dark_noise_e", "dsnu_e", "prnu_pct", "dark_current_mean_e_per_s"]:
         assert again[key] == pytest.approx(res[key], rel=1e-9), key
     pytest.importorskip("emva1288")
@@ -105,9 +107,9 @@ def test_load_rejects_a_bad_descriptor(tmp_path):
 
     (tmp_path / "EMVA1288_descriptor.txt").write_text("v 3.0\nb 1000 abc\n")
     with pytest.raises(CmosnoiseError, match="line 2"):
-        ch.load(tmp_path)
+        emva_files.load(tmp_path)
     with pytest.raises(CmosnoiseError, match="does not exist"):
-        ch.load(tmp_path / "nothing.txt")
+        emva_files.load(tmp_path / "nothing.txt")
 
 
 def test_characterize_command_end_to_end(tmp_path):
@@ -121,7 +123,7 @@ def test_characterize_command_end_to_end(tmp_path):
     assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["characterization.json", "photon_transfer.png", "snr.png"]
     data = json.loads((tmp_path / "c" / "characterization.json").read_text())
     assert set(data["model"]) <= set(data["measured"])  # every model value has its measured partner
-    assert (tmp_path / "e" / ch.DESCRIPTOR).exists()
+    assert (tmp_path / "e" / emva_files.DESCRIPTOR).exists()
     r = cli("characterize", "--frames-from", tmp_path / "e",
                         "--out", tmp_path / "c2")
     assert r.returncode == 0, r.stderr
@@ -182,7 +184,7 @@ def test_characterize_agrees_with_the_model_on_every_preset(preset):
     sensor = Sensor(cfg, seed=3)
     big = sensor.shape[0] * sensor.shape[1] > 1_000_000
     m = ch.measure(sensor, steps=40, stack_frames=4 if big else 16)
-    res = ch.evaluate(m)
+    res = ev.evaluate(m)
     model = ch.model_values(sensor, m.stack_texp_s)
     k = model["system_gain_K_dn_per_e"]
     n = m.stack_dark[0].size
@@ -258,6 +260,6 @@ def test_characterize_agrees_with_the_model_on_every_preset(preset):
           (model["dsnu_column_e"] * k) ** 2, se_c + 1e-12)
     # saturation, SNR max and dynamic range follow EMVA's definition of saturation: named, and below the model's
     for key in ("saturation_capacity_e", "snr_max", "dynamic_range_db"):
-        assert key in ch.DEFINITION_NOTES
+        assert key in ev.DEFINITION_NOTES
     assert 0.8 * model["saturation_capacity_e"] < res["saturation_capacity_e"] <= model["saturation_capacity_e"] * (1 + 5 * rel_k)
     assert not failures, failures

@@ -1,4 +1,4 @@
-"""The noise engine (MODEL.md section 1): Philox, the samplers, and frames that never change a bit."""
+"""The noise engine (docs/model.md section 1): Philox, the samplers, and frames that never change a bit."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Fitting the dark-current stage from a rate map (issue 14, first part): family selection and the tail."""
+"""Fitting the dark-current stage from a rate map: family selection and the tail."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Property-based: `simulate` with random values for every configuration key (issue 12).
+"""Property-based: `simulate` with random values for every configuration key.
 
 Whatever the values (non-finite, huge, tiny, wrong types, nested), a run ends
 with exit 0 and finite outputs, or exit 2 and one line on stderr: never a

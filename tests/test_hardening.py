@@ -1,4 +1,4 @@
-"""Hardening: an output folder whole or absent, clean interrupts, no leftovers (issue 12).
+"""Hardening: an output folder whole or absent, clean interrupts, no leftovers.
 
 Every process a test starts is stopped by its id before the test ends.
 """

@@ -1,4 +1,4 @@
-"""MODEL.md section 4: body + uniform tail, tail fraction solved from ppm above a threshold."""
+"""docs/model.md section 4: body + uniform tail, tail fraction solved from ppm above a threshold."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""MODEL.md section 1: same seed, same sensor; frame k does not depend on batching."""
+"""docs/model.md section 1: same seed, same sensor; frame k does not depend on batching."""
 
 import tracemalloc
 

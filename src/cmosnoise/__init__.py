@@ -47,7 +47,9 @@ _MODULES = {
     "calibration": "isp.calibration", "defects": "isp.defects", "reconstruction": "isp.reconstruction",
     "process": "isp.process",
     "noise_budget": "analysis.noise_budget", "emva": "analysis.emva", "characterize": "analysis.characterize",
-    "white_pixels": "analysis.white_pixels",
+    "white_pixels": "analysis.white_pixels", "figures_of_merit": "analysis.figures_of_merit",
+    "emva_evaluation": "analysis.emva_evaluation", "emva_files": "analysis.emva_files",
+    "fixed_pattern": "model.fixed_pattern", "spec": "model.spec",
     "plots": "app.plots", "sweep": "app.sweep",
 }
 

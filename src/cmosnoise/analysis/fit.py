@@ -1,4 +1,4 @@
-"""``cmosnoise fit``: every stage MODEL.md describes, fitted to a measured data set (:class:`~cmosnoise.io.stacks.Dataset`).
+"""``cmosnoise fit``: every stage docs/model.md describes, fitted to a measured data set (:class:`~cmosnoise.io.stacks.Dataset`).
 
 What is fitted from what (the README's "Fit" section says the same for a lab):
 

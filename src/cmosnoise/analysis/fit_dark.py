@@ -1,8 +1,8 @@
-"""Fitting the dark-current stage (MODEL.md section 3): the rate map's body family, its white-pixel tail, doubling.
+"""Fitting the dark-current stage (docs/model.md section 3): the rate map's body family, its white-pixel tail, doubling.
 
 The paper chose each temperature's dark-current distribution by fitting
 candidate families to the measured histogram and ranking them by
-log-likelihood. Here every family of MODEL.md section 3 is fitted by maximum
+log-likelihood. Here every family of docs/model.md section 3 is fitted by maximum
 likelihood to the pixels below the white-pixel threshold, the likelihood
 truncated there (the tail is a separate population): each candidate gets
 its mean, std, log-likelihood and AIC, and the lowest AIC is chosen. The
@@ -137,7 +137,7 @@ def fit_family(family: str, x: np.ndarray | TruncatedLikelihood, threshold: floa
 
 
 def select_family(rates: np.ndarray, threshold: float | None = None, seed: int = 0) -> list[FamilyFit]:
-    """Every family of MODEL.md fitted to the body of a dark-rate map (e-/s), best (lowest AIC) first.
+    """Every family of docs/model.md fitted to the body of a dark-rate map (e-/s), best (lowest AIC) first.
 
     Pixels at or above ``threshold`` (the white-pixel tail) are left out and
     the likelihood is truncated there; without a threshold every pixel is
@@ -268,7 +268,7 @@ def fit_point(rates: np.ndarray, slope_noise_var: float, threshold: float | None
     z = Z95
     params = {
         "family": {"value": best.family, "ci95": None,
-                   "method": "truncated maximum likelihood of MODEL.md's five families, lowest AIC"
+                   "method": "truncated maximum likelihood of docs/model.md's five families, lowest AIC"
                              + (f"; the slope noise is {math.sqrt(slope_noise_var) / max(body_std, 1e-12):.0%} of the body's "
                                 "std and blurs the shape: longer exposures or more frames make the choice surer"
                                 if blurred else "")},

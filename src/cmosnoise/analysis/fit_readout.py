@@ -2,7 +2,7 @@
 
 All in e- (the stack's DN divided by the system gain K).
 
-**Source follower** (MODEL.md stage 6). Each pixel's temporal variance over
+**Source follower** (docs/model.md stage 6). Each pixel's temporal variance over
 a stack of N frames, its own row and column means removed frame by frame,
 is a scaled chi-square with N - 1 degrees of freedom::
 
@@ -11,7 +11,7 @@ is a scaled chi-square with N - 1 degrees of freedom::
 where ``a_i`` is what is known per pixel (dark shot noise ``rate_i * t``,
 the quantizer's 1/(12 K^2)) and ``sigma_i`` is the pixel's flicker sigma,
 ``max(gumbel_r(loc, scale), 0)`` plus, for a fraction f of the pixels,
-``Uniform(0, tail_max)`` (MODEL.md section 4). The parameters (thermal,
+``Uniform(0, tail_max)`` (docs/model.md section 4). The parameters (thermal,
 loc, scale, f, tail_max) maximise the marginal likelihood of the observed
 s2_i, the flicker sigma integrated out on a grid of v; the histogram of the
 noisy s2_i itself is never fitted. Confidence intervals: from the outer
@@ -76,7 +76,7 @@ def _gumbel_cdf_at_0(loc: float, scale: float) -> float:
 
 
 def ppm_above(threshold: float, loc: float, scale: float, f: float, tail_max: float) -> float:
-    """Parts per million of flicker sigmas above ``threshold`` (MODEL.md section 4's ppm)."""
+    """Parts per million of flicker sigmas above ``threshold`` (docs/model.md section 4's ppm)."""
     return float(1e6 * (1 - sigma_cdf(np.array([threshold]), loc, scale, f, tail_max)[0]))
 
 

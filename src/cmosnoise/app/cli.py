@@ -222,59 +222,33 @@ def characterize(
     """EMVA 1288 characterization: measured values next to the values the configuration implies."""
     from rich.table import Table
 
-    from ..analysis import characterize as ch
-    from ..analysis.emva_reference import reference_results
-    from ..io.output import OutputFolder, write_json
-    from ..model.sensor import Sensor
+    from ..analysis.emva_evaluation import TABLE_ROWS, table
+    from .characterizing import run as characterize_job
 
-    folder = OutputFolder(out, overwrite)
-    if emva_export is not None:
-        a, b = Path(emva_export).resolve(), Path(out).resolve()
-        if a == b or a in b.parents or b in a.parents:
-            raise CmosnoiseError(f"--emva-export {str(emva_export)!r} and --out {str(out)!r} are the same folder or one "
-                                 "holds the other; give two separate folders")
-    export_folder = OutputFolder(emva_export, overwrite, "--emva-export") if emva_export is not None else None
-    model = None
-    if frames_from is not None:
-        m = ch.load(frames_from)
-        if config or preset or set_:
-            model = ch.model_values(Sensor(_sensor(config, preset, set_, {"seed": seed} if seed is not None else None)))
-    else:
-        sensor = Sensor(_sensor(config, preset, set_, {"seed": seed} if seed is not None else None))
-        with Progress(TextColumn("[bold]measuring"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                      console=err_console, disable=not err_console.is_terminal or _level(ctx) < 0) as p:
-            task = p.add_task("series", total=steps + 1)
-            m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=lambda: p.advance(task))
-        model = ch.model_values(sensor, m.stack_texp_s)
-    results = ch.evaluate(m)
-    with folder as tmp:
-        ch.plot_curves(m, results, tmp)
-        write_json(tmp / "characterization.json", {
-            "measured": results, "model": model, "notes": ch.footnotes(results),
-            "series": {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
-                       "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark},
-        })
-    reference = None
-    if export_folder is not None:
-        with export_folder as tmp:
-            ch.export(m, tmp)
-        try:
-            reference = reference_results(emva_export / ch.DESCRIPTOR)
-        except CmosnoiseError:
-            reference = None  # emva1288 not installed: nothing to compare with
+    spec = None
+    if frames_from is None or config or preset or set_:
+        spec = _sensor(config, preset, set_, {"seed": seed} if seed is not None else None)
+    with Progress(TextColumn("[bold]measuring"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  console=err_console, disable=not err_console.is_terminal or _level(ctx) < 0) as p:
+        def progress(total: int):
+            task = p.add_task("series", total=total)
+            return lambda: p.advance(task)
+
+        done = characterize_job(spec, out, overwrite, frames_from, steps, stack_frames, emva_export, progress)
+    results, model, reference = done["measured"], done["model"], done["reference"]
     tab = Table(title="EMVA 1288 characterization" + (" (measured vs. the configuration)" if model else ""))
     cols = ["quantity", "unit", "measured", "model", "deviation %"] + (["emva1288"] if reference else [])
     for col in cols:
         tab.add_column(col, justify="left" if col == "quantity" else "right")
-    for (key, _, _, fmt), row in zip(ch.TABLE_ROWS, ch.table(results, model)):
+    for (key, _, _, fmt), row in zip(TABLE_ROWS, table(results, model)):
         ref = [fmt.format(reference[key]) if reference and key in reference else ""] if reference else []
         tab.add_row(*row, *ref)
     if _level(ctx) >= 0:
         Console().print(tab)
-        for line in ch.footnotes(results):
+        for line in done["notes"]:
             typer.echo(f"  {line}")
         if reference:
-            missing = [label.strip() for key, label, _, _ in ch.TABLE_ROWS
+            missing = [label.strip() for key, label, _, _ in TABLE_ROWS
                        if key in reference and not math.isfinite(reference[key])]
             if missing:
                 typer.echo(f"  emva1288 gave no value (nan) for: {', '.join(missing)}")

@@ -74,7 +74,7 @@ def sigma_plot(d: dict, names: list[str], title: str, xlabel: str, with_thermal:
 
     from ..model.heavy_tail import HeavyTail
 
-    # the fitted distribution (MODEL.md section 4: a clipped Gumbel body, a uniform tail for a fraction of units)
+    # the fitted distribution (docs/model.md section 4: a clipped Gumbel body, a uniform tail for a fraction of units)
     model_sigma = HeavyTail(stats.gumbel_r(loc=prm["gumbel_loc_e"], scale=prm["gumbel_scale_e"]),
                             d.get("tail_fraction", 0.0), d.get("tail_max", 0.0))
     sig = model_sigma.rvs(s2.size, rng)

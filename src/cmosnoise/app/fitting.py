@@ -17,6 +17,8 @@ from typing import Callable
 import numpy as np
 
 from ..analysis import characterize as ch
+from ..analysis import emva_evaluation as ev
+from ..analysis import emva_files
 from ..analysis import fit as fitting
 from ..io import stacks
 from ..io.output import OutputFolder, write_json
@@ -94,12 +96,12 @@ def round_trip(result: dict, again: dict) -> list[dict]:
 
 def emva_round_trip(descriptor: Path, cfg) -> list[dict]:
     """EMVA 1288 quantities of the measured series and of a series of the same size simulated from ``cfg``."""
-    m = ch.load(descriptor)
-    measured = ch.evaluate(m)
+    m = emva_files.load(descriptor)
+    measured = ev.evaluate(m)
     sim = ch.measure(Sensor(cfg), steps=max(len(m.texp_s), ch.MIN_STEPS), stack_frames=max(len(m.stack_dark), 2))
-    simulated = ch.evaluate(sim)
+    simulated = ev.evaluate(sim)
     rows = []
-    for key, label, unit, _fmt in ch.TABLE_ROWS:
+    for key, label, unit, _fmt in ev.TABLE_ROWS:
         a, b = measured.get(key), simulated.get(key)
         if isinstance(a, (int, float)) and isinstance(b, (int, float)):
             rows.append({"quantity": label, "unit": unit, "measured": float(a), "simulated": float(b)})

@@ -1,6 +1,6 @@
 """The configuration layer: schema, loading and merging, presets. No physics.
 
-- :mod:`.schema`: the pydantic sections, one per stage of MODEL.md;
+- :mod:`.schema`: the pydantic sections, one per stage of docs/model.md;
 - :mod:`.loading`: :func:`load_config` (defaults <- preset <- file <- overrides), :func:`merge_updates`
   (which keeps every value set, None included), YAML reading;
 - :mod:`.messages`: validation errors as one line naming key, value and range;

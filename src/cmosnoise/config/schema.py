@@ -1,4 +1,4 @@
-"""The configuration schema: one pydantic section per stage of MODEL.md.
+"""The configuration schema: one pydantic section per stage of docs/model.md.
 
 A configuration is YAML (or a dict) with one section per stage, each with an
 ``enabled`` switch, plus the run settings (``seed``, ``scene``, ``run``).
@@ -49,7 +49,7 @@ class SceneSection(Section):
     )
 
 
-#: the last frame number: the frame is one 32-bit word of the random numbers' counter (MODEL.md section 1)
+#: the last frame number: the frame is one 32-bit word of the random numbers' counter (docs/model.md section 1)
 LAST_FRAME = 2**32 - 1
 
 
@@ -91,7 +91,7 @@ class WhiteBalanceSection(Section):
 
 
 class ProcessingSection(Section):
-    """From raw to picture (MODEL.md section 5): each step switchable."""
+    """From raw to picture (docs/model.md section 5): each step switchable."""
 
     enabled: bool = Field(False, description="write processed.png (and processed.mp4 for several frames)")
     dark_frames: int = Field(0, ge=0, le=100000, description="dark calibration: master dark from this many dark frames (0: off)")
@@ -264,7 +264,7 @@ def _default_dark_points():
 
 
 class DarkCurrentSection(Section):
-    """Dark current (stage 4, MODEL.md sections 3 and 4)."""
+    """Dark current (stage 4, docs/model.md sections 3 and 4)."""
 
     enabled: bool = True
     shot_noise: bool = Field(True, description="dark shot noise (Poisson); off: dark charge enters as its mean")

@@ -402,7 +402,7 @@ if numba is not None:
 
 
 def generator_info() -> dict:
-    """What made the random numbers, for every output's metadata (MODEL.md section 1)."""
+    """What made the random numbers, for every output's metadata (docs/model.md section 1)."""
     return {
         "scheme": "philox4x32-10; counter (index, frame, sequence, try); Box-Muller normals; "
                   "Poisson by inversion below 10, PTRS from 10",

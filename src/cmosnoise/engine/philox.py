@@ -1,4 +1,4 @@
-"""Philox4x32-10, the counter-based generator of MODEL.md section 1 (Salmon et al. 2011).
+"""Philox4x32-10, the counter-based generator of docs/model.md section 1 (Salmon et al. 2011).
 
 A block of four 32-bit words is a pure function of a 128-bit counter and a
 64-bit key: no state, so any pixel's random numbers can be made alone, in any

@@ -1,4 +1,4 @@
-"""Black level and dark calibration (MODEL.md section 5).
+"""Black level and dark calibration (docs/model.md section 5).
 
 Dark calibration subtracts a **master dark**: the mean of n dark frames taken
 by the same sensor instance at the same temperature and exposure. It removes

@@ -1,4 +1,4 @@
-"""Defect correction on the CFA image (MODEL.md section 5).
+"""Defect correction on the CFA image (docs/model.md section 5).
 
 Two correctors, so users can compare them:
 

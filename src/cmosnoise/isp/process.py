@@ -1,4 +1,4 @@
-"""From raw frames to pictures (MODEL.md section 5), each step switchable.
+"""From raw frames to pictures (docs/model.md section 5), each step switchable.
 
 Steps, in order:
 

@@ -5,7 +5,7 @@
   ``colour-demosaicing``'s (a test checks they agree), written here because
   importing ``colour-demosaicing`` takes about a second (it imports
   ``colour`` and matplotlib), longer than a whole quick-look preview.
-- Crosstalk colour mixing (MODEL.md section 5): the kernel and the CFA induce
+- Crosstalk colour mixing (docs/model.md section 5): the kernel and the CFA induce
   a 3 x 3 matrix M between the true and the measured R, G, B channel means
   (:func:`cmosnoise.crosstalk.channel_mixing_matrix`); its inverse is applied
   per pixel after demosaicing.

@@ -1,4 +1,4 @@
-"""The sensor model of MODEL.md: scenes, the stages, and the sensor that composes them.
+"""The sensor model of docs/model.md: scenes, the stages, and the sensor that composes them.
 
 - :mod:`.sensor`: :class:`Sensor` (a configuration plus a seed, its fixed
   pattern drawn once) and :class:`Exposure` (one scene's mean charge, frames);

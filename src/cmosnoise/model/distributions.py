@@ -1,4 +1,4 @@
-"""Body distributions set by their mean and standard deviation (MODEL.md section 3).
+"""Body distributions set by their mean and standard deviation (docs/model.md section 3).
 
 Each is a frozen distribution with the interface of :mod:`scipy.stats`
 (``pdf``, ``cdf``, ``sf``, ``ppf``, ``rvs``, ``fit``, ...):
@@ -14,7 +14,7 @@ Each is a frozen distribution with the interface of :mod:`scipy.stats`
 =================  ====================================================
 
 plus :func:`gumbel` (``gumbel_r``), the source-follower and column
-amplifiers' noise sigma over the array (MODEL.md stages 6 and 8).
+amplifiers' noise sigma over the array (docs/model.md stages 6 and 8).
 
 Why not :mod:`scipy.stats` itself: importing it takes about 0.6 s, a third
 of a whole ``cmosnoise simulate`` run's start-up, and making a sensor needs

@@ -1,4 +1,4 @@
-"""A body distribution plus a thin uniform tail (MODEL.md section 4).
+"""A body distribution plus a thin uniform tail (docs/model.md section 4).
 
 ``value = body + tail`` where ``tail ~ Uniform(0, tail_max)`` for a fraction
 ``f`` of the pixels and 0 for the rest. Used for the dark-current

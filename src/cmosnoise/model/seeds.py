@@ -1,4 +1,4 @@
-"""Random streams keyed by what they are for (MODEL.md section 1).
+"""Random streams keyed by what they are for (docs/model.md section 1).
 
 A sensor instance is a configuration plus a seed. Each stage draws its fixed
 pattern from a generator keyed by ``(seed, FIXED, stage, part)`` and its
@@ -24,7 +24,7 @@ SEQ_EMVA_DARK = 101  #: EMVA 1288 photon-transfer series, dark pairs
 SEQ_EMVA_STACK_BRIGHT = 102  #: EMVA 1288 bright stack (spatial statistics)
 SEQ_EMVA_STACK_DARK = 103  #: EMVA 1288 dark stack
 
-#: stage numbers of MODEL.md section 2; they key the random streams.
+#: stage numbers of docs/model.md section 2; they key the random streams.
 STAGE_IDS = {
     "prnu": 2,
     "crosstalk": 3,
@@ -60,7 +60,7 @@ def stream_key(seed: int, stage: str) -> tuple[int, int]:
 def temporal_stream(seed: int, stage: str, frame: int, sequence: int = SEQ_SCENE) -> Stream:
     """A stage's temporal random numbers in frame ``frame`` (0-based) of frame series ``sequence``.
 
-    Counter-based (MODEL.md section 1): the draw of pixel ``i`` depends on
+    Counter-based (docs/model.md section 1): the draw of pixel ``i`` depends on
     nothing but (seed, stage, frame, sequence, i), so frames, crops, threads
     and machines never change a bit.
     """

@@ -1,4 +1,4 @@
-"""The chain of MODEL.md section 2, composed from the stage modules.
+"""The chain of docs/model.md section 2, composed from the stage modules.
 
 >>> from cmosnoise import Sensor, load_config
 >>> sensor = Sensor(load_config(preset="paper-fig3-prnu"), seed=7)   # fixed pattern drawn here
@@ -94,7 +94,7 @@ class Sensor:
     def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
         """The same sensor instance at another exposure: the fixed pattern is shared, not redrawn.
 
-        Valid because nothing fixed-pattern depends on the exposure (MODEL.md section 1).
+        Valid because nothing fixed-pattern depends on the exposure (docs/model.md section 1).
         """
         updates = {}
         if integration_time_s is not None:
@@ -212,7 +212,7 @@ class Sensor:
         )
 
     def stages_on(self) -> dict[str, bool]:
-        """Which stages of MODEL.md run in this configuration."""
+        """Which stages of docs/model.md run in this configuration."""
         c = self.config
         return {
             "prnu": c.prnu.enabled,

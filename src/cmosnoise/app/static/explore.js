@@ -74,7 +74,7 @@ function loadUrl() {
 
 // ------------------------------------------------------------------ the parameter panel
 const SKIP = /^(description|run\.)/;
-// the keys carry their units in their names (MODEL.md's convention): sigma_e is e-, integration_time_s is s, ...
+// the keys carry their units in their names (docs/model.md's convention): sigma_e is e-, integration_time_s is s, ...
 const UNITS = [["_e_per_s", "e-/s"], ["_nA_per_cm2", "nA/cm2"], ["_aA", "aA"], ["_pct", "%"], ["_um", "um"], ["_dn", "DN"],
   ["_fps", "1/s"], ["_c", "C"], ["_s", "s"], ["_e", "e-"]];
 function unitOf(key) { const last = key.split(".").pop(); const u = UNITS.find(([s]) => last.endsWith(s)); return u ? u[1] : ""; }

@@ -1,4 +1,4 @@
-"""The chain of MODEL.md section 2, one module per stage, named after its physics.
+"""The chain of docs/model.md section 2, one module per stage, named after its physics.
 
 Each is a set of pure functions of arrays and parameters (and a random
 stream) returning arrays, with units and shapes in the docstrings:

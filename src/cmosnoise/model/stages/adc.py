@@ -1,6 +1,6 @@
 """Stage 9, analogue-to-digital conversion: electrons to digital numbers (DN).
 
-A linear ramp ADC (MODEL.md stage 9)::
+A linear ramp ADC (docs/model.md stage 9)::
 
     K  = (2**bits - 1 - black_level_dn) / full_scale_e          # DN per e-
     DN = clip(round(N_total * K + black_level_dn), 0, 2**bits - 1)

@@ -8,7 +8,7 @@ offset (dr, dc). ``sum(k) <= 1``; the rest is lost to the substrate.
 The kernel acts on the photo-electron **mean**, before the shot-noise draw:
 each electron lands in exactly one pixel, so collected counts stay independent
 Poisson variables with mean ``k * mu`` (Poisson thinning) and the shot noise
-is not smoothed (MODEL.md stage 3; the paper's MATLAB blurred the noisy image,
+is not smoothed (docs/model.md stage 3; the paper's MATLAB blurred the noisy image,
 which lowers the shot-noise variance by ``sum(k**2)``).
 
 A kernel per CFA colour models longer diffusion of red (deeper) photo-charge;
@@ -33,7 +33,7 @@ def kernel_fractions(kernel_pct) -> np.ndarray | dict[str, np.ndarray]:
 def spread(mean_e: np.ndarray, kernel) -> np.ndarray:
     """Spread charge with one kernel: pixel q sends ``mean_e[q] * k[d]`` to pixel q + d (e-).
 
-    Edges reflect (MODEL.md stage 3): charge that would diffuse off the
+    Edges reflect (docs/model.md stage 3): charge that would diffuse off the
     array is sent back into the edge pixel it left, so the array keeps all
     the charge the kernel keeps, whatever the kernel's symmetry. (A
     convolution with ``mode="reflect"`` mirrors the sources instead, which

@@ -1,7 +1,7 @@
 """Stage 4, dark current: a temperature-dependent non-uniformity with white pixels.
 
 The dark-current non-uniformity (DCNU) is a body distribution plus a thin
-uniform tail of very leaky "white" pixels (MODEL.md sections 3 and 4). A
+uniform tail of very leaky "white" pixels (docs/model.md sections 3 and 4). A
 sensor is characterized at one or more temperatures (the paper: logistic at
 25 C, inverse Gaussian at 45 C, lognormal at 65 C). At an operating
 temperature ``T``:

@@ -4,7 +4,7 @@ Thermal noise is ``Normal(0, thermal_sigma_e)`` in every pixel and frame.
 
 Flicker/RTS (paper Section VII-B): each pixel has a fixed temporal sigma,
 drawn once from a Fisher-Tippett-Gumbel body (``gumbel_r(loc, scale)``,
-clipped at 0) plus a thin uniform tail of very noisy pixels (MODEL.md
+clipped at 0) plus a thin uniform tail of very noisy pixels (docs/model.md
 section 4, the same heavy-tail map as the dark current). In each frame the
 pixel gets ``Normal(0, sigma_i)``. That is the paper's simplification:
 the per-pixel noise is Gaussian in time, only its size varies over the array.

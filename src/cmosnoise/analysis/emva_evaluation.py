@@ -1,0 +1,201 @@
+"""EMVA 1288 evaluation: the results a lab reports, from a :class:`~.characterize.Measurement` alone.
+
+The system gain K from the photon-transfer curve, the temporal dark noise
+from the dark variance extrapolated to zero exposure, the dark current from
+the dark mean's growth with exposure time, the saturation capacity at the
+variance maximum, SNR max, dynamic range, DSNU and PRNU (:func:`evaluate`);
+and the comparison table with what a configuration implies (:func:`table`,
+:func:`footnotes`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import CmosnoiseError
+from . import emva
+from .characterize import Measurement
+
+
+def _fit_through_origin(x, y):
+    return float(np.sum(x * y) / np.sum(x * x))
+
+
+def _saturation_index(s2_y: np.ndarray) -> int:
+    """Index of the variance maximum (EMVA 1288: the saturation point)."""
+    return int(np.argmax(s2_y))
+
+
+#: a fit needs this many exposure times
+MIN_FIT_POINTS = 3
+#: the dark series is fitted where no dark pixel is above this fraction of the way to saturation
+DARK_FIT_LIMIT = 0.9
+
+#: what needs the system gain K (e- values), for when the series cannot give it
+_NEEDS_K = ("system_gain_K_dn_per_e", "inverse_gain_e_per_dn", "quantum_efficiency", "temporal_dark_noise_e",
+            "saturation_capacity_e", "snr_max", "snr_max_db", "absolute_sensitivity_threshold_photons",
+            "dynamic_range", "dynamic_range_db", "dark_current_mean_e_per_s", "dark_current_var_e_per_s",
+            "dsnu_e", "dsnu_column_e", "dsnu_row_e", "dsnu_pixel_e")
+
+
+def evaluate(m: Measurement) -> dict:
+    """EMVA 1288 results from a :class:`Measurement`, frames only (DN, e-, photons).
+
+    Quantities the frames cannot give are ``None``, with the reason in
+    ``unavailable`` (quantity -> why): the system gain K when the temporal
+    variance does not grow with the signal (no shot noise), the dark
+    series when white pixels near saturation in all but a few exposure
+    times. The dark series is fitted only over exposure times where no dark
+    pixel is near saturation (``dark_fit_points``), and the PRNU leaves out
+    the defect pixels (``prnu_excluded_pixels``, :func:`emva.defect_pixels`).
+    """
+    unavailable: dict[str, str] = {}
+    y = m.mu_y - m.mu_ydark
+    v = m.s2_y - m.s2_ydark
+    i_sat = _saturation_index(m.s2_y)
+    lin = np.nonzero(y <= 0.7 * y[i_sat])[0]
+    lin = lin[lin < i_sat]
+    if len(lin) < MIN_FIT_POINTS:
+        # no variance maximum to speak of (no shot noise: the variance is flat): saturation from the mean instead,
+        # where it reaches 98 % of its top (the K test below then says that K cannot be measured)
+        i_sat = int(np.argmax(y >= 0.98 * float(np.max(y))))
+        lin = np.nonzero(y <= 0.7 * y[i_sat])[0]
+        lin = lin[lin < i_sat]
+    if len(lin) < MIN_FIT_POINTS:
+        raise CmosnoiseError(f"the photon-transfer series has {len(lin)} exposure times below 70 % of saturation, "
+                             f"a fit needs {MIN_FIT_POINTS}: use more --steps")
+    k = _fit_through_origin(y[lin], v[lin])  # DN/e-
+    resid = v[lin] - k * y[lin]
+    se_k = math.sqrt(float(np.sum(resid**2)) / (len(lin) - 1) / float(np.sum(y[lin] ** 2)))
+    if not k > 5.0 * se_k:
+        k = math.nan
+        why = (f"needs the system gain K, and the photon-transfer series cannot give it: the temporal variance does "
+               f"not grow with the signal (slope {_fit_through_origin(y[lin], v[lin]):.3g} +- {se_k:.2g} DN/e-; "
+               "is shot noise off?)")
+        unavailable.update({key: why for key in _NEEDS_K})
+    r = _fit_through_origin(m.mu_p[lin], y[lin])  # DN/photon
+    qe = r / k
+    # dark variance and mean against exposure time, where no dark pixel nears saturation:
+    # intercept = sigma_y.dark^2, slopes = dark current
+    limit = m.mu_ydark[0] + DARK_FIT_LIMIT * (float(np.max(m.mu_y)) - m.mu_ydark[0])
+    dark_ok = np.nonzero(m.max_ydark < limit)[0]
+    if len(dark_ok) >= MIN_FIT_POINTS:
+        slope_v, s2_ydark0 = np.polyfit(m.texp_s[dark_ok], m.s2_ydark[dark_ok], 1)
+        slope_m, _ = np.polyfit(m.texp_s[dark_ok], m.mu_ydark[dark_ok], 1)
+    else:
+        slope_v = slope_m = s2_ydark0 = math.nan
+        why = (f"white pixels come within {100 * (1 - DARK_FIT_LIMIT):.0f} % of saturation in the dark in all but "
+               f"{len(dark_ok)} of the {len(m.texp_s)} exposure times (a fit needs {MIN_FIT_POINTS}): "
+               "use more --steps (shorter first exposures)")
+        for key in ("temporal_dark_noise_e", "temporal_dark_noise_dn", "dark_current_mean_e_per_s",
+                    "dark_current_var_e_per_s", "absolute_sensitivity_threshold_photons", "dynamic_range",
+                    "dynamic_range_db"):
+            unavailable.setdefault(key, why)
+    s2_ydark0 = max(s2_ydark0, 1 / 12 + 1e-12) if math.isfinite(s2_ydark0) else math.nan
+    sigma_y_dark = math.sqrt(s2_ydark0)
+    sigma_d = math.sqrt(s2_ydark0 - 1 / 12) / k
+    u_e_sat = y[i_sat] / k
+    u_p_sat = m.mu_p[i_sat]
+    u_p_min = (sigma_y_dark / k + 0.5) / qe
+    sp_b = emva.spatial_variances(m.stack_bright)
+    sp_d = emva.spatial_variances(m.stack_dark)
+    dsnu = emva.dsnu(m.stack_dark)
+    defects = emva.defect_pixels(m.stack_bright, m.stack_dark, float(np.max(m.mu_y)))
+    prnu = emva.prnu(m.stack_bright, m.stack_dark, exclude=defects)
+    out = {
+        "system_gain_K_dn_per_e": k,
+        "inverse_gain_e_per_dn": 1 / k,
+        "quantum_efficiency": qe,
+        "responsivity_dn_per_photon": r,
+        "temporal_dark_noise_e": sigma_d,
+        "temporal_dark_noise_dn": sigma_y_dark,
+        "saturation_capacity_e": u_e_sat,
+        "saturation_capacity_photons": u_p_sat,
+        "snr_max": math.sqrt(u_e_sat),
+        "snr_max_db": 20 * math.log10(math.sqrt(u_e_sat)) if u_e_sat > 0 else math.nan,
+        "absolute_sensitivity_threshold_photons": u_p_min,
+        "dynamic_range": u_p_sat / u_p_min,
+        "dynamic_range_db": 20 * math.log10(u_p_sat / u_p_min) if u_p_sat / u_p_min > 0 else math.nan,
+        "dark_current_mean_e_per_s": slope_m / k,
+        "dark_current_var_e_per_s": slope_v / k**2,
+        "dsnu_e": dsnu["total"] / k,
+        "dsnu_column_e": dsnu["column"] / k,
+        "dsnu_row_e": dsnu["row"] / k,
+        "dsnu_pixel_e": dsnu["pixel"] / k,
+        "dsnu_dn": dsnu["total"],
+        "dsnu_column_dn": dsnu["column"],
+        "prnu_pct": 100 * prnu,
+        "prnu_excluded_pixels": int(defects.sum()),
+        "stack_mean_bright_dn": sp_b["mean"],
+        "stack_mean_dark_dn": sp_d["mean"],
+        "saturation_index": i_sat,
+        "linear_fit_points": int(len(lin)),
+        "dark_fit_points": int(len(dark_ok)),
+        "series_points": int(len(m.texp_s)),
+    }
+    out = {key: (None if isinstance(val, float) and not math.isfinite(val) else val) for key, val in out.items()}
+    out["unavailable"] = unavailable
+    return out
+
+
+#: quantities whose measured and model values agree only up to a definition:
+#: EMVA's saturation is the variance maximum, below the full well when PRNU
+#: spreads the pixels' clipping points
+DEFINITION_NOTES = {
+    "saturation_capacity_e": "EMVA: mean at the variance maximum; the model gives the full well (or ADC full scale)",
+    "snr_max": "from the saturation capacity: sqrt(mu_e.sat), so below the model's as mu_e.sat is",
+    "dynamic_range_db": "from the saturation capacity: follows mu_e.sat's definition",
+}
+
+TABLE_ROWS = [
+    ("system_gain_K_dn_per_e", "System gain K", "DN/e-", "{:.4f}"),
+    ("quantum_efficiency", "Quantum efficiency eta", "", "{:.3f}"),
+    ("temporal_dark_noise_e", "Temporal dark noise sigma_d", "e-", "{:.3f}"),
+    ("saturation_capacity_e", "Saturation capacity mu_e.sat", "e-", "{:.0f}"),
+    ("snr_max", "SNR max", "", "{:.1f}"),
+    ("dynamic_range_db", "Dynamic range", "dB", "{:.1f}"),
+    ("dark_current_mean_e_per_s", "Dark current (from mean)", "e-/s", "{:.2f}"),
+    ("dark_current_var_e_per_s", "Dark current (from variance)", "e-/s", "{:.2f}"),
+    ("dsnu_e", "DSNU1288", "e-", "{:.3f}"),
+    ("dsnu_column_e", "  of which column (VFPN)", "e-", "{:.3f}"),
+    ("prnu_pct", "PRNU1288", "%", "{:.3f}"),
+]
+
+
+def table(measured: dict, model: dict | None) -> list[tuple[str, str, str, str, str]]:
+    """Rows (quantity, unit, measured, model, deviation %) for printing; "n/a" where the frames cannot give it."""
+    rows = []
+    for key, label, unit, fmt in TABLE_ROWS:
+        mv = measured.get(key)
+        xv = (model or {}).get(key)
+        dev = ""
+        if xv is not None and float(fmt.format(xv)) != 0 and mv is not None and np.isfinite(mv):  # no % of a 0
+            dev = f"{100 * (mv - xv) / xv:+.2f}"
+        rows.append((label, unit, fmt.format(mv) if mv is not None else "n/a", fmt.format(xv) if xv is not None else "", dev))
+    return rows
+
+
+def footnotes(measured: dict) -> list[str]:
+    """Why a quantity is n/a, what was left out, and the quantities that agree only up to a definition."""
+    labels = {key: label.strip() for key, label, _, _ in TABLE_ROWS}
+    out = []
+    reasons: dict[str, list[str]] = {}
+    for key, why in measured.get("unavailable", {}).items():
+        if key in labels:
+            reasons.setdefault(why, []).append(labels[key])
+    for why, names in reasons.items():
+        out.append(f"n/a: {', '.join(names)}: {why}")
+    fit, steps = measured.get("dark_fit_points"), measured.get("series_points")
+    if fit is not None and steps is not None and MIN_FIT_POINTS <= fit < steps:
+        out.append(f"dark current and sigma_d: fitted over the {fit} shortest of {steps} exposure times (in the longer "
+                   "ones white pixels near saturation in the dark)")
+    if measured.get("prnu_excluded_pixels"):
+        out.append(f"PRNU1288 leaves out {measured['prnu_excluded_pixels']} defect pixel(s) (dark outliers beyond 5 "
+                   "robust sigma, or near saturation in the bright stack)")
+    for key, note in DEFINITION_NOTES.items():
+        out.append(f"{labels[key]}: {note}")
+    return out
+
+

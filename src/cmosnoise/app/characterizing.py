@@ -1,0 +1,124 @@
+"""``cmosnoise characterize``: the EMVA 1288 job, from a sensor or a descriptor to the folder and the table.
+
+The measurement is :mod:`cmosnoise.analysis.characterize`'s, the evaluation
+:mod:`cmosnoise.analysis.emva_evaluation`'s, the descriptor files
+:mod:`cmosnoise.analysis.emva_files`'; this module writes what a user keeps:
+``characterization.json``, the photon-transfer and SNR curves, and the EMVA
+data set with ``--emva-export`` (compared with the emva1288 reference
+implementation where it is installed).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..analysis import characterize as ch
+from ..analysis import emva_evaluation as ev
+from ..analysis import emva_files
+from ..analysis.characterize import Measurement
+from ..analysis.emva_reference import reference_results
+from ..errors import CmosnoiseError
+from ..io.output import OutputFolder, write_json
+from ..io.stacks import DESCRIPTOR
+from ..model.sensor import Sensor
+from ..model.spec import SensorSpec
+
+
+def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from: Path | None = None,
+        steps: int = 40, stack_frames: int = 16, emva_export: Path | None = None,
+        progress: Callable[[int], Callable[[], None]] | None = None) -> dict:
+    """Characterize ``spec``'s sensor (or the frames of the descriptor ``frames_from``, compared with ``spec``
+    when given) into ``out``; returns ``{"measured", "model", "notes", "reference"}``.
+
+    ``progress(total)`` returns what is called once per step of the series.
+    """
+    folder = OutputFolder(out, overwrite)
+    if emva_export is not None:
+        a, b = Path(emva_export).resolve(), Path(out).resolve()
+        if a == b or a in b.parents or b in a.parents:
+            raise CmosnoiseError(f"--emva-export {str(emva_export)!r} and --out {str(out)!r} are the same folder or one "
+                                 "holds the other; give two separate folders")
+    export_folder = OutputFolder(emva_export, overwrite, "--emva-export") if emva_export is not None else None
+    model = None
+    if frames_from is not None:
+        m = emva_files.load(frames_from)
+        if spec is not None:
+            model = ch.model_values(Sensor(spec))
+    else:
+        sensor = Sensor(spec)
+        advance = progress(steps + 1) if progress else None
+        m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance)
+        model = ch.model_values(sensor, m.stack_texp_s)
+    results = ev.evaluate(m)
+    notes = ev.footnotes(results)
+    with folder as tmp:
+        plot_curves(m, results, tmp)
+        write_json(tmp / "characterization.json", {
+            "measured": results, "model": model, "notes": notes,
+            "series": {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
+                       "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark},
+        })
+    reference = None
+    if export_folder is not None:
+        with export_folder as tmp:
+            emva_files.export(m, tmp)
+        try:
+            reference = reference_results(emva_export / DESCRIPTOR)
+        except CmosnoiseError:
+            reference = None  # emva1288 not installed: nothing to compare with
+    return {"measured": results, "model": model, "notes": notes, "reference": reference}
+
+
+def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
+    """Photon-transfer and SNR curves as PNGs (labelled axes with units, legend, title)."""
+    from matplotlib.figure import Figure
+
+    paths = []
+    k = res["system_gain_K_dn_per_e"]
+    y = m.mu_y - m.mu_ydark
+    v = m.s2_y - m.s2_ydark
+    fig = Figure(figsize=(6.4, 4.4), dpi=110)
+    ax = fig.add_subplot()
+    ax.plot(y, v, "o", ms=4, label="measured")
+    xs = np.linspace(0, y[res["saturation_index"]], 50)
+    if k is not None:
+        ax.plot(xs, k * xs, "-", label=f"fit: K = {k:.4f} DN/e-")
+    else:
+        ax.text(0.03, 0.95, "K cannot be measured: the variance does not grow with the signal",
+                transform=ax.transAxes, va="top", fontsize=8)
+    ax.axvline(y[res["saturation_index"]], color="grey", ls=":", label="saturation (variance max)")
+    ax.set_xlabel("mean signal above dark, mu_y - mu_y.dark [DN]")
+    ax.set_ylabel("temporal variance above dark, s2_y - s2_y.dark [DN^2]")
+    ax.set_title("Photon transfer (EMVA 1288)")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    paths.append(out / "photon_transfer.png")
+    fig.savefig(paths[-1])
+
+    fig = Figure(figsize=(6.4, 4.4), dpi=110)
+    ax = fig.add_subplot()
+    snr = y / np.sqrt(np.maximum(m.s2_y, 1e-12))
+    ok = (y > 0) & (np.arange(len(y)) <= res["saturation_index"])
+    ax.loglog(m.mu_p[ok], snr[ok], "o", ms=4, label="measured")
+    mp = np.logspace(np.log10(max(m.mu_p[ok].min() / 10, 0.1)), np.log10(res["saturation_capacity_photons"]), 100)
+    eta, sd = res["quantum_efficiency"], res["temporal_dark_noise_e"]
+    if None not in (k, eta, sd):
+        model = eta * mp / np.sqrt(sd**2 + 1 / (12 * k**2) + eta * mp)
+        ax.loglog(mp, model, "-", label="EMVA model from the fitted eta, sigma_d, K")
+    eta = eta if eta is not None else 1.0
+    ax.loglog(mp, np.sqrt(eta * mp), ":", label="ideal (shot noise only)" + ("" if res["quantum_efficiency"] else ", eta = 1"))
+    ax.set_xlabel("irradiation mu_p [photons per pixel]")
+    ax.set_ylabel("SNR (temporal)")
+    ax.set_title("SNR curve (EMVA 1288)")
+    ax.legend()
+    ax.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    paths.append(out / "snr.png")
+    fig.savefig(paths[-1])
+    return paths
+
+
