@@ -453,7 +453,9 @@ def run(argv: list[str] | None = None) -> int:
     unraisable = sys.unraisablehook
     sys.unraisablehook = _quiet_interrupts(unraisable)
     try:
-        with warnings.catch_warnings(), _libraries_quiet(argv):
+        from .logs import said
+
+        with warnings.catch_warnings(), _libraries_quiet(argv), said():
             # numerical warnings of NumPy and SciPy (an overflow in a tail far beyond any pixel) are not the
             # user's to read: every result is checked to be finite, and bad input is refused with a message
             warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"(numpy|scipy)(\.|$)")

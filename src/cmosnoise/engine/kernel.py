@@ -18,8 +18,8 @@ generator. ``fastmath`` is off: no fused multiply-add, no reordering.
 from __future__ import annotations
 
 import functools
+import logging
 import math
-import sys
 import time
 import types
 from dataclasses import dataclass
@@ -28,6 +28,8 @@ import numpy as np
 
 from . import fdmath, philox, samplers
 from .jit import numba  # None where numba is not installed
+
+_logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
 
 #: whether the compiled kernel can run here
 AVAILABLE = numba is not None
@@ -401,6 +403,15 @@ if numba is not None:
                          c1, cols, k_adc, black, top, loggam_table, out_dn, out_e)
 
 
+def _version_of(package: str) -> str | None:
+    from importlib import metadata
+
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return None
+
+
 def generator_info() -> dict:
     """What made the random numbers, for every output's metadata (docs/model.md section 1)."""
     return {
@@ -409,6 +420,8 @@ def generator_info() -> dict:
         "scheme_version": samplers.SCHEME_VERSION,
         "numpy": np.__version__,
         "numba": numba.__version__ if numba is not None else None,
+        # the fixed maps' quantiles are scipy's (docs/reproducibility.md); read without importing scipy
+        "scipy": _version_of("scipy"),
         "frame_kernel": "numba" if AVAILABLE else "numpy",
     }
 
@@ -428,7 +441,7 @@ def _needs_compile() -> bool:
     except Exception:  # numba's internals moved: say it after the fact instead (see render)
         return True
     if not cached:
-        print("cmosnoise: compiling the frame kernel for this machine (once; about half a minute) ...", file=sys.stderr, flush=True)
+        _logger.info("compiling the frame kernel for this machine (once; about half a minute) ...")
     return True
 
 
@@ -496,6 +509,6 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
             plan.loggam_table, out_dn, out_e)
     elapsed = time.perf_counter() - t0
     if first and elapsed > 2.0:  # a cache load takes well under a second; this was a compile
-        print(f"cmosnoise: compiled the frame kernel in {elapsed:.0f} s; later runs reuse it", file=sys.stderr, flush=True)
+        _logger.info(f"compiled the frame kernel in {elapsed:.0f} s; later runs reuse it")
     raw = out_dn if adc_on else out_e
     return raw, (out_e if electrons or not adc_on else None)

@@ -11,16 +11,18 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import os
 import shutil
 import socket
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import CmosnoiseError, Terminated, check_terminated
+
+_logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
 
 #: names of the helpers beside an output folder: a run's temporary folder, the old folder being replaced, the lock
 _TMP, _OLD, _LOCK = ".cmosnoise-tmp-", ".cmosnoise-old-", ".cmosnoise-lock-"
@@ -245,10 +247,10 @@ class OutputFolder:
                 self.removed_stale.append(str(item))
         remove_stale_locks(self.anchor)
         for line in self.restored:
-            print(f"cmosnoise: restored {line}", file=sys.stderr)
+            _logger.warning(f"restored {line}")
         if self.removed_stale:
-            print(f"cmosnoise: removed {len(self.removed_stale)} temporary folder(s) left by interrupted runs: "
-                  + ", ".join(self.removed_stale), file=sys.stderr)
+            _logger.info(f"removed {len(self.removed_stale)} temporary folder(s) left by interrupted runs: "
+                      + ", ".join(self.removed_stale))
 
     def __enter__(self) -> Path:
         try:

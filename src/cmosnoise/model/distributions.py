@@ -91,15 +91,26 @@ class Frozen:
             return special.gammaincinv(self.shapes[0], q)
         if n == "gumbel_r":
             return -np.log(-np.log(q))
-        # invgauss, as scipy has it: Boost's quantile, its complement's in the upper half
-        from scipy.special import _ufuncs
+        # invgauss: scipy.stats' own quantile of the standard form (Boost's, its complement's in the upper
+        # half). scipy.stats.invgauss.ppf is the public way, but importing scipy.stats costs a run 0.6 s, and a
+        # quantile of our own would move the bits of every inverse Gaussian map; so scipy's Boost ufuncs are
+        # called directly where this scipy has them (docs/reproducibility.md), else the public one.
+        try:
+            from scipy.special import _ufuncs
 
+            ppf, isf = _ufuncs._invgauss_ppf, _ufuncs._invgauss_isf
+        except (ImportError, AttributeError):  # a scipy that moved them: the public quantile (same values)
+            from scipy import stats
+
+            return np.asarray(stats.invgauss.ppf(q, self.shapes[0]), dtype=np.float64)
         mu = self.shapes[0]
-        x = np.array(_ufuncs._invgauss_ppf(q, mu, 1), dtype=np.float64, ndmin=1)
+        x = np.array(ppf(q, mu, 1), dtype=np.float64, ndmin=1)
         upper = np.broadcast_to(q > 0.5, x.shape)
-        x[upper] = _ufuncs._invgauss_isf(1 - np.broadcast_to(q, x.shape)[upper], mu, 1)
-        if np.isnan(x).any():  # where Boost fails scipy.stats solves numerically
-            x[np.isnan(x)] = self.scipy.dist._ppf(np.broadcast_to(q, x.shape)[np.isnan(x)], mu)
+        x[upper] = isf(1 - np.broadcast_to(q, x.shape)[upper], mu, 1)
+        if np.isnan(x).any():  # where Boost fails, scipy.stats' public quantile (it solves numerically)
+            from scipy import stats
+
+            x[np.isnan(x)] = stats.invgauss.ppf(np.broadcast_to(q, x.shape)[np.isnan(x)], mu)
         return x.reshape(np.shape(q))
 
     def _sf(self, x):
