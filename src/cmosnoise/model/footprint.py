@@ -16,14 +16,7 @@ from ..config import Config
 from ..errors import CmosnoiseError
 
 BASE_BYTES = 300_000_000
-PER_PIXEL = {"sensor": 60, "run": 130, "processing": 50, "malvar2004": 60, "menon2007": 130,
-             "dark_draws": 40}  # Sensor(keep_draws=True): the dark map's variates and cells (FixedPattern.dark_draws)
-
-
-def sensor_bytes(config: Config, keep_draws: bool = False) -> int:
-    """Memory one :class:`~cmosnoise.Sensor` of ``config`` holds beyond the libraries (its maps), bytes."""
-    per = PER_PIXEL["sensor"] + (PER_PIXEL["dark_draws"] if keep_draws else 0)
-    return per * config.sensor.width * config.sensor.height
+PER_PIXEL = {"sensor": 60, "run": 130, "processing": 50, "malvar2004": 60, "menon2007": 130}
 
 
 def estimate_bytes(config: Config, run: bool = True) -> int:
