@@ -19,14 +19,15 @@ def robust_centre(values: np.ndarray) -> tuple[float, float]:
     """(median, robust sigma) of the finite ``values``: sigma = median absolute deviation / NORMAL_MAD.
 
     The sigma of a normal law's sample, unmoved by a few outliers (white or
-    dead pixels); scipy's ``median_abs_deviation(scale="normal")``.
+    dead pixels); scipy's ``median_abs_deviation(scale="normal")``, the same
+    operations in the values' own precision (float32 stays float32).
 
     Parameters
     ----------
     values : ndarray, any shape
         NaN and infinite values are left out.
     """
-    v = np.asarray(values, dtype=np.float64)
+    v = np.asarray(values)
     if not np.isfinite(v).all():
         v = v[np.isfinite(v)]
     med = np.median(v)

@@ -15,7 +15,8 @@ here, so a figure means the same wherever it shows:
   nearest characterization point), and those seen in frame 0;
 - :func:`pane`: what the explorer shows beside a picture.
 
-The robust sigma and the 95 % quantile are :mod:`cmosnoise.estimators`'.
+The robust sigma and the 95 % quantile are :mod:`cmosnoise.estimators`'
+(one place for every layer, ``isp`` included).
 """
 
 from __future__ import annotations
@@ -24,13 +25,11 @@ import math
 
 import numpy as np
 
-from ..estimators import Z95, robust_centre, robust_sigma
 from ..model.sensor import Exposure, Sensor
 from ..model.units import e_per_s_to_aa
 from . import noise_budget, white_pixels
 
-__all__ = ["Z95", "robust_centre", "robust_sigma", "temporal_noise", "key_figures", "dark_current",
-           "frame0_white_pixels", "pane"]
+__all__ = ["temporal_noise", "key_figures", "dark_map", "dark_current", "frame0_white_pixels", "pane"]
 
 
 def temporal_noise(stats: dict, gain_dn_per_e: float) -> dict:

@@ -200,7 +200,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     @errors
     async def check(request: Request):
         data = await json_body(request)
-        cfg = validate(data.get("config"))
+        cfg = validate(data.get("config")).config
         return JSONResponse({"ok": True, "config": cfg.model_dump(mode="json")})
 
     @errors
@@ -213,14 +213,14 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         client = str(data.get("client", ""))[:40]
         token = f"{client}/{pane}"
         bench.latest[token] = max(bench.latest.get(token, -1), seq)
-        cfg = validate(data.get("config"))
+        spec = validate(data.get("config"))
+        rows, cols = spec.shape
         frame, step = data.get("frame", 0), data.get("step", 1)
         if not isinstance(frame, int) or not 0 <= frame <= 2**32 - 1:
             raise BadRequest("frame must be a whole number from 0 to 4294967295")
         if not isinstance(step, int) or not 1 <= step <= 64:
             raise BadRequest("step must be a whole number from 1 to 64")
-        region = data.get("region") or [0, cfg.sensor.height, 0, cfg.sensor.width]
-        r0, r1, c0, c1 = _clip_region(region, cfg.sensor.height, cfg.sensor.width)
+        r0, r1, c0, c1 = _clip_region(data.get("region") or [0, rows, 0, cols], rows, cols)
         if max(r1 - r0, c1 - c0) / step > MAX_OUT_SIDE:
             raise BadRequest(f"the picture would be larger than {MAX_OUT_SIDE} pixels a side: use a larger step")
 
@@ -228,11 +228,11 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
             if bench.latest.get(token, -1) > seq:  # a newer request of this pane is waiting: drop this one
                 return None
             t0 = time.perf_counter()
-            img, info = bench.picture(cfg, scene_of(data), str(data.get("view", "pre")), frame,
+            img, info = bench.picture(spec, scene_of(data), str(data.get("view", "pre")), frame,
                                       (r0, r1, c0, c1), step)
             info["ms"] = round(1000 * (time.perf_counter() - t0), 1)
             if data.get("couplets"):
-                info["couplets"] = bench.couplets(cfg, (r0, r1, c0, c1))
+                info["couplets"] = bench.couplets(spec, (r0, r1, c0, c1))
             return img, info
 
         result = await in_thread(work)
@@ -251,20 +251,20 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     @errors
     async def figures_route(request: Request):
         data = await json_body(request)
-        cfg = validate(data.get("config"))
+        spec = validate(data.get("config"))
         scene = scene_of(data)
         bench.scene_source(scene)
-        return JSONResponse(await in_thread(bench.figures, cfg, scene, lock=bench.figures_lock))
+        return JSONResponse(await in_thread(bench.figures, spec, scene, lock=bench.figures_lock))
 
     @errors
     async def raw_route(request: Request):
         """Frame k of a pane as .npy (uint16 DN), whole: what ``cmosnoise simulate`` with the exported config writes."""
         data = await json_body(request)
-        cfg = validate(data.get("config"))
+        spec = validate(data.get("config"))
         frame = data.get("frame", 0)
         if not isinstance(frame, int) or frame < 0:
             raise BadRequest("frame must be a whole number >= 0")
-        raw = await in_thread(bench.raw, cfg, scene_of(data), frame)
+        raw = await in_thread(bench.raw, spec, scene_of(data), frame)
         buf = io.BytesIO()
         np.save(buf, raw, allow_pickle=False)
         return Response(buf.getvalue(), media_type="application/octet-stream")
@@ -285,7 +285,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     @errors
     async def to_yaml(request: Request):
         data = await json_body(request)
-        cfg = validate(data.get("config"))
+        cfg = validate(data.get("config")).config
         scene = scene_of(data)
         if scene.startswith("upload:") and scene[7:] in bench.uploads:
             cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"source": bench.uploads[scene[7:]]["name"]})})
@@ -302,7 +302,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
             data = load_yaml_text(text)
         except Exception as exc:  # yaml's errors: one line
             raise BadRequest(f"not a valid configuration YAML: {' '.join(str(exc).split())[:200]}") from None
-        cfg = validate(data if data is not None else {})
+        cfg = validate(data if data is not None else {}).config
         return JSONResponse({"config": cfg.model_dump(mode="json")})
 
     routes = [Route(path, page) for path in files] + [

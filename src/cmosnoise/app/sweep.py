@@ -187,10 +187,10 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     t = sensor.transfer
     k = t.gain_dn_per_e
     stats = RunStats(t.max_code)
-    raw0 = None
-    for raw in shot.frames(max(frames, 1)):
+    raw0 = shot.frame(0)
+    stats.update(raw0, raw0)  # raw codes only: the e- sums are not read
+    for raw in shot.frames(max(frames, 1) - 1, first=1):
         stats.update(raw, raw)
-        raw0 = raw if raw0 is None else raw0
     measured = stats.result()
     out = {"mean_e": float((measured["mean_dn"] - t.black_level_dn) / k)}
     tn = fom.temporal_noise(measured, k)["rms_e"]

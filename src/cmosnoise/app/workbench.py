@@ -62,8 +62,9 @@ class BadRequest(Exception):
 
 
 # ------------------------------------------------------------------ configuration
-def validate(data) -> Config:
-    """A pane's configuration (a full or partial dict) validated as the CLI does; BadRequest names each bad field."""
+def validate(data) -> SensorSpec:
+    """A pane's configuration (a full or partial dict) validated and resolved as the CLI does; BadRequest names
+    each bad field. The workbench takes the :class:`SensorSpec` it returns (resolved once a request)."""
     if not isinstance(data, dict):
         raise BadRequest("config must be an object of sections")
     from pydantic import ValidationError
@@ -80,14 +81,13 @@ def validate(data) -> Config:
                 errors.setdefault(key or "config", e.get("msg", "invalid").removeprefix("Value error, "))
             raise BadRequest(format_validation_error(verr), 422, errors) from None
         raise BadRequest(str(exc), 422, {"config": str(exc)}) from None
-    try:
-        cfg = resolve(cfg).config
-    except CmosnoiseError as exc:
-        raise BadRequest(str(exc), 422, {"config": str(exc)}) from None
     if cfg.sensor.width * cfg.sensor.height > MAX_SENSOR_PIXELS:
         msg = f"the explorer takes sensors up to {MAX_SENSOR_PIXELS / 1e6:g} MP; use cmosnoise simulate for larger ones"
         raise BadRequest(msg, 422, {"sensor.width": msg})
-    return cfg
+    try:
+        return resolve(cfg)
+    except CmosnoiseError as exc:
+        raise BadRequest(str(exc), 422, {"config": str(exc)}) from None
 
 
 def _cache_budget() -> int:
@@ -167,40 +167,38 @@ class Workbench:
     def cache_bytes(self) -> int:
         return self.patterns.nbytes()
 
-    def spec(self, cfg: Config) -> SensorSpec:
-        """The resolved sensor of ``cfg`` (kept: a picture request resolves nothing twice)."""
-        return self.patterns.get("spec", (cfg,), lambda: resolve(cfg))
+    def sensor(self, spec: SensorSpec) -> Sensor:
+        """A sensor of ``spec``, its maps from the pattern cache where their inputs are unchanged."""
+        return Sensor(spec, cache=self.patterns)
 
-    def sensor(self, cfg: Config) -> Sensor:
-        """A sensor of ``cfg``, its maps from the pattern cache where their inputs are unchanged."""
-        return Sensor(self.spec(cfg), cache=self.patterns)
+    def exposure(self, spec: SensorSpec, scene: str) -> Exposure:
+        """The exposure of ``scene`` on ``spec``'s sensor (its signal, photo mean and dark mean from the cache)."""
+        return self.sensor(spec).expose(self.scene_source(scene))
 
-    def exposure(self, cfg: Config, scene: str) -> Exposure:
-        """The exposure of ``scene`` on ``cfg``'s sensor (its signal, photo mean and dark mean from the cache)."""
-        return self.sensor(cfg).expose(self.scene_source(scene))
-
-    def master_dark(self, cfg: Config, region) -> np.ndarray | None:
+    def master_dark(self, spec: SensorSpec, region) -> np.ndarray | None:
+        cfg = spec.config
         n = cfg.processing.dark_frames
         if n <= 0:
             return None
 
         def make():
-            dark = self.sensor(cfg).expose("flat:0", sequence=SEQ_DARK_CALIBRATION)
+            dark = self.sensor(spec).expose("flat:0", sequence=SEQ_DARK_CALIBRATION)
             return calibration.master_dark(dark.frame(k, region=region) for k in range(n))
 
         return self._masters.get("master", (cfg, list(region)), make)
 
-    def picture(self, cfg: Config, scene: str, view: str, frame: int, region, step: int) -> tuple[np.ndarray, dict]:
+    def picture(self, spec: SensorSpec, scene: str, view: str, frame: int, region, step: int) -> tuple[np.ndarray, dict]:
         """An 8-bit picture of ``region`` (row0, row1, col0, col1) of frame ``frame``, one pixel per ``step`` sensor pixels."""
         if view not in VIEWS:
             raise BadRequest(f"view {view!r}: use one of {', '.join(VIEWS)}")
+        cfg = spec.config
         rows, cols = cfg.sensor.height, cfg.sensor.width
         r0, r1, c0, c1 = _clip_region(region, rows, cols)
         # extend by the margin and align to the CFA's 2 x 2 cell (the pattern's phase is kept)
         e0, e1 = max(0, (r0 - MARGIN) // 2 * 2), min(rows, r1 + MARGIN)
         f0, f1 = max(0, (c0 - MARGIN) // 2 * 2), min(cols, c1 + MARGIN)
         t0 = time.perf_counter()
-        shot = self.exposure(cfg, scene)
+        shot = self.exposure(spec, scene)
         t1 = time.perf_counter()
         raw = shot.frame(frame, region=(e0, e1, f0, f1))
         t2 = time.perf_counter()
@@ -212,7 +210,7 @@ class Workbench:
             img = np.clip((raw.astype(np.float32) - t.black_level_dn) / max(t.max_code - t.black_level_dn, 1), 0, 1)
             img = (img ** (1 / 2.2) * 255 + 0.5).astype(np.uint8)
         else:
-            master = self.master_dark(cfg, (e0, e1, f0, f1)) if view == "processed" else None
+            master = self.master_dark(spec, (e0, e1, f0, f1)) if view == "processed" else None
             proc = Processor(cfg.processing, info, master)
             img = proc.render(raw, pre=(view == "pre"), half=half)
         # back to the region asked for (in the picture's own pixels), then down to one pixel per step
@@ -227,17 +225,20 @@ class Workbench:
                                                         "frame": round(1000 * (t2 - t1), 1),
                                                         "picture": round(1000 * (t3 - t2), 1)}}
 
-    def raw(self, cfg: Config, scene: str, frame: int) -> np.ndarray:
-        return self.exposure(cfg, scene).frame(frame)
+    def raw(self, spec: SensorSpec, scene: str, frame: int) -> np.ndarray:
+        return self.exposure(spec, scene).frame(frame)
 
-    def figures(self, cfg: Config, scene: str) -> dict:
+    def figures(self, spec: SensorSpec, scene: str) -> dict:
         """Key figures, the noise budget and the dark-current figures of a pane (:func:`figures_of_merit.pane`)."""
-        return self._figures.get("figures", (cfg, scene),
-                                 lambda: fom.pane(self.sensor(cfg), self.exposure(cfg, scene)))
+        def make():
+            shot = self.exposure(spec, scene)
+            return fom.pane(shot.sensor, shot)
 
-    def couplets(self, cfg: Config, region) -> list:
+        return self._figures.get("figures", (spec.config, scene), make)
+
+    def couplets(self, spec: SensorSpec, region) -> list:
         """Couplets of the dark map (both white pixels) inside ``region``: [[r1, c1, r2, c2], ...]."""
-        sensor = self.sensor(cfg)
+        sensor = self.sensor(spec)
         state, rate = sensor.dark_state, sensor.dark_rate
         if state is None or state.threshold is None:
             return []

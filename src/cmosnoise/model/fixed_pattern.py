@@ -18,8 +18,9 @@ what it reads (:mod:`cmosnoise.model.sensor` asks for them):
 - the dark mean: the dark-current map times the integration time - not the scene;
 - each pixel's source-follower sigma (flicker map, thermal sigma).
 
-So a temperature move redraws the dark map alone (from the kept variates,
-with each characterization point's own map kept too) and reuses the photo mean.
+So a temperature move redraws the dark map alone (from the kept variates;
+between two characterization points, from their kept log-maps) and reuses
+the photo mean.
 """
 
 from __future__ import annotations
@@ -181,8 +182,14 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None, executor=None) -> 
                                  else dark_current.rate_map(*args))
         else:
             kept = cache.get("dark_draws", (seed, shape),
-                             lambda: dark_current.DarkDraws(shape, fixed_rng(seed, "dark_current")))
-            maps["dark_rate"] = held("dark_rate", lambda: dark_current.rate_map(state, shape, kept=kept))
+                             lambda: dark_current.DarkDraws.draw(shape, fixed_rng(seed, "dark_current")))
+
+            def log_map(model):  # a point's own log-map: each kept as a product of its own
+                return cache.get("dark_point_log", (seed, shape, model),
+                                 lambda: dark_current.point_log_rates(model, kept.u, kept.cells))
+
+            maps["dark_rate"] = held("dark_rate", lambda: dark_current.rate_map(state, shape, kept=kept,
+                                                                                 log_map=log_map))
     rows, cols = shape
     sf = c.source_follower
     if sf.enabled and sf.flicker.enabled:

@@ -103,28 +103,26 @@ class DarkState:
         return HeavyTail(body_dist(self.family, self.mean, self.std), self.tail_fraction, self.tail_max)
 
     def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None,
-               kept: "DarkDraws | None" = None) -> np.ndarray:
+               log_map=None) -> np.ndarray:
         """Rates (e-/s, float64) of pixels with these fixed uniform variates.
 
-        ``cells``: ``ppf_cells(u_body)`` if known; ``kept``: the
-        :class:`DarkDraws` these variates come from, whose kept point maps
-        are used (the same bits).
+        ``cells``: ``ppf_cells(u_body)`` if known. ``log_map(model)``, if
+        given, returns :func:`point_log_rates` of a characterization point's
+        model for these variates, kept from an earlier call (the same bits):
+        between two points the map is then one exponential of two kept maps.
         """
         if not self.between:
-            if kept is not None and self.body_scale == 1.0 and self.tail_scale == 1.0:
-                return kept.point_values(self.lo)  # at a point: its own map (read-only)
             body = np.maximum(tabulated_ppf(self.lo.body, u_body, cells), 0.0) * self.body_scale
             if self.lo.tail_fraction > 0 and self.lo.tail_max > 0:
                 body += np.where(u_member < self.lo.tail_fraction, u_tail * self.lo.tail_max * self.tail_scale, 0.0)
             return body
-        if kept is not None:
-            return np.exp((1.0 - self.w) * kept.point_log(self.lo) + self.w * kept.point_log(self.hi))
-        cells = cells if cells is not None else ppf_cells(u_body)  # both points' bodies at the same quantiles
-        r_lo = self.lo.values(u_body, u_member, u_tail, cells)
-        r_hi = self.hi.values(u_body, u_member, u_tail, cells)
-        r_lo = np.maximum(r_lo, RATE_FLOOR * float(self.lo.body.mean()))
-        r_hi = np.maximum(r_hi, RATE_FLOOR * float(self.hi.body.mean()))
-        return np.exp((1.0 - self.w) * np.log(r_lo) + self.w * np.log(r_hi))
+        if log_map is None:
+            u = (u_body, u_member, u_tail)
+            cells = cells if cells is not None else ppf_cells(u_body)  # both points' bodies at the same quantiles
+
+            def log_map(model):
+                return point_log_rates(model, u, cells)
+        return np.exp((1.0 - self.w) * log_map(self.lo) + self.w * log_map(self.hi))
 
     def expected_ppm_above(self, threshold: float | None = None) -> float | None:
         """Expected ppm of pixels above ``threshold`` (default: the state's own), e-/s.
@@ -196,62 +194,44 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     )
 
 
+def point_log_rates(model: HeavyTail, u: np.ndarray, cells=None) -> np.ndarray:
+    """``ln`` of a characterization point's own map for the variates ``u`` (3, ...), each rate floored at
+    RATE_FLOOR times the point's body mean first: what the interpolation between two points reads, float64."""
+    return np.log(np.maximum(model.values(*u, cells), RATE_FLOOR * float(model.body.mean())))
+
+
+@dataclass(frozen=True)
 class DarkDraws:
-    """A sensor's fixed dark-current variates, kept to make its map at any temperature quickly.
+    """A sensor's fixed dark-current variates and where their body quantiles fall in the quantile tables.
 
-    The variates (body quantile, tail membership, tail magnitude) and where
-    their body quantiles fall in the quantile tables depend on the seed and
-    the size only. Each characterization point's own map at its own
-    temperature is kept the first time a temperature needs it: a
-    temperature between two points is then one exponential of their kept
-    log-maps, bit for bit the map :meth:`DarkState.values` gives.
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-    rng : numpy.random.Generator
-        The sensor's fixed stream for this stage.
+    They depend on the seed and the size only, not on the temperature or the
+    points: interactive use keeps them to make the map at another temperature
+    without drawing or locating them again.
     """
 
-    def __init__(self, shape: tuple[int, int], rng: np.random.Generator):
-        self.u = variates(shape, rng)
-        self.cells = ppf_cells(self.u[0])
-        self._maps: dict = {}
+    u: np.ndarray  #: (3, rows, cols): body quantile, tail membership, tail magnitude
+    cells: tuple  #: ``ppf_cells(u[0])``
 
-    def point_values(self, model: HeavyTail) -> np.ndarray:
-        """``model.values`` of these variates (the point's own map, e-/s, float64), kept."""
-        k = ("values", id(model))
-        if k not in self._maps:
-            self._maps[k] = (model, _read_only(model.values(*self.u, self.cells)))
-        return self._maps[k][1]
-
-    def point_log(self, model: HeavyTail) -> np.ndarray:
-        """``log(max(values, RATE_FLOOR * body mean))`` of a point's own map, kept (the interpolation's input)."""
-        k = ("log", id(model))
-        if k not in self._maps:
-            v = np.maximum(model.values(*self.u, self.cells), RATE_FLOOR * float(model.body.mean()))
-            self._maps[k] = (model, _read_only(np.log(v)))
-        return self._maps[k][1]
+    @classmethod
+    def draw(cls, shape: tuple[int, int], rng: np.random.Generator) -> "DarkDraws":
+        u = variates(shape, rng)
+        return cls(u, ppf_cells(u[0]))
 
     @property
     def nbytes(self) -> int:
-        return self.u.nbytes + sum(a.nbytes for a in self.cells) + sum(m[1].nbytes for m in self._maps.values())
-
-
-def _read_only(a: np.ndarray) -> np.ndarray:
-    a.flags.writeable = False
-    return a
+        return self.u.nbytes + sum(a.nbytes for a in self.cells)
 
 
 def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator | None = None,
-             kept: DarkDraws | None = None) -> np.ndarray:
+             kept: DarkDraws | None = None, log_map=None) -> np.ndarray:
     """Fixed dark-current map at ``state``'s temperature, e-/s per pixel, float32 (>= 0).
 
-    ``kept`` is this sensor's :class:`DarkDraws` (then ``rng`` is not used): the same map, bit for bit.
+    ``kept`` is this sensor's :class:`DarkDraws` (then ``rng`` is not used), ``log_map`` as in
+    :meth:`DarkState.values`: the same map, bit for bit.
     """
     if kept is None:
-        return state.values(*variates(shape, rng)).astype(np.float32)
-    return state.values(*kept.u, cells=kept.cells, kept=kept).astype(np.float32)
+        return state.values(*variates(shape, rng), log_map=log_map).astype(np.float32)
+    return state.values(*kept.u, cells=kept.cells, log_map=log_map).astype(np.float32)
 
 
 def cooling_fraction(points: list[Point], draw_variates) -> float:
