@@ -39,6 +39,68 @@ POSITIVE_FAMILIES = ("inverse_gaussian", "lognormal", "gamma")
 _EULER = 0.577215664901532860606512090082402431042
 
 
+def _invgauss_ppf(q: np.ndarray, mu: float, max_steps: int = 100) -> np.ndarray:
+    """Quantile of scipy's standard inverse Gaussian ``invgauss(mu)`` at ``q`` in (0, 1).
+
+    Safeguarded Newton steps in ``t = log x`` on the log of the lower tail
+    (``q <= 0.5``) or of the upper tail (``q > 0.5``), so neither tail loses
+    digits to ``1 - q``; each step is kept inside the bracket the earlier
+    steps found, else the bracket is halved. The tails are scipy's own
+    formulas through :func:`scipy.special.log_ndtr`::
+
+        F(x) = Phi((x/mu - 1)/sqrt(x)) + exp(2/mu) Phi(-(x/mu + 1)/sqrt(x))
+
+    It converges (to 4e-16 in ``t``) in 6 to 11 steps for most ``q``; at the
+    last bits the evaluated tail is flat and a step may cycle, where
+    ``max_steps`` ends it. Its error is that of evaluating the tail in
+    float64: within 1e-12 of scipy.stats' quantile over mu from 1e-2 to 20,
+    closer than scipy's at small mu (1e-3: scipy's Boost quantile is 3e-6 off).
+
+    Parameters
+    ----------
+    q : ndarray of float64, probabilities strictly inside (0, 1)
+    mu : float, scipy's shape (mean over shape lambda of the Wald law)
+
+    Returns
+    -------
+    ndarray of float64, the shape of ``q``
+    """
+    q = np.asarray(q, dtype=np.float64)
+    lower = q <= 0.5
+    target = np.where(lower, np.log(q), np.log1p(-q))
+    sign = np.where(lower, 1.0, -1.0)
+    inv_mu = 1.0 / mu
+
+    def log_tail_and_slope(t):
+        x, root = np.exp(t), np.exp(-0.5 * t)
+        a = special.log_ndtr(sign * root * (x * inv_mu - 1))  # log Phi(+-(x/mu - 1)/sqrt(x))
+        b = 2 * inv_mu + special.log_ndtr(-root * (x * inv_mu + 1))
+        log_tail = np.where(lower, np.logaddexp(a, b), a + np.log1p(-np.exp(b - a)))
+        log_pdf = -0.5 * math.log(2 * math.pi) - 1.5 * t - (x - mu) ** 2 / (2 * x * mu * mu)
+        return log_tail, sign * np.exp(t + log_pdf - log_tail)  # d log(tail) / dt
+
+    s2 = math.log1p(mu)  # start: the lognormal with the same mean and variance
+    t = math.log(mu) - s2 / 2 + math.sqrt(s2) * special.ndtri(q)
+    lo, hi = np.full(q.shape, -np.inf), np.full(q.shape, np.inf)
+    active = np.ones(q.shape, dtype=bool)
+    with np.errstate(all="ignore"):
+        for _ in range(max_steps):
+            g, slope = log_tail_and_slope(t)
+            g = g - target
+            below = sign * g < 0  # the root lies above t
+            lo, hi = np.where(below, t, lo), np.where(below, hi, t)
+            step = t + np.clip(-g / slope, -2.0, 2.0)
+            halved = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi),
+                              np.where(np.isfinite(lo), lo + 2.0, hi - 2.0))
+            step = np.where((step > lo) & (step < hi), step, halved)
+            done = np.abs(step - t) <= 4e-16 * np.maximum(1.0, np.abs(t))
+            t = np.where(active, step, t)
+            active &= ~done
+            if not active.any():
+                break
+    return np.exp(t)
+
+
 class Frozen:
     """A frozen distribution: scipy.stats' ``name(*shapes, loc=loc, scale=scale)``.
 
@@ -91,27 +153,7 @@ class Frozen:
             return special.gammaincinv(self.shapes[0], q)
         if n == "gumbel_r":
             return -np.log(-np.log(q))
-        # invgauss: scipy.stats' own quantile of the standard form (Boost's, its complement's in the upper
-        # half). scipy.stats.invgauss.ppf is the public way, but importing scipy.stats costs a run 0.6 s, and a
-        # quantile of our own would move the bits of every inverse Gaussian map; so scipy's Boost ufuncs are
-        # called directly where this scipy has them (docs/reproducibility.md), else the public one.
-        try:
-            from scipy.special import _ufuncs
-
-            ppf, isf = _ufuncs._invgauss_ppf, _ufuncs._invgauss_isf
-        except (ImportError, AttributeError):  # a scipy that moved them: the public quantile (same values)
-            from scipy import stats
-
-            return np.asarray(stats.invgauss.ppf(q, self.shapes[0]), dtype=np.float64)
-        mu = self.shapes[0]
-        x = np.array(ppf(q, mu, 1), dtype=np.float64, ndmin=1)
-        upper = np.broadcast_to(q > 0.5, x.shape)
-        x[upper] = isf(1 - np.broadcast_to(q, x.shape)[upper], mu, 1)
-        if np.isnan(x).any():  # where Boost fails, scipy.stats' public quantile (it solves numerically)
-            from scipy import stats
-
-            x[np.isnan(x)] = stats.invgauss.ppf(np.broadcast_to(q, x.shape)[np.isnan(x)], mu)
-        return x.reshape(np.shape(q))
+        return _invgauss_ppf(q, self.shapes[0])
 
     def _sf(self, x):
         n = self.name
