@@ -4,7 +4,8 @@
 import numpy as np
 import pytest
 import tifffile
-from conftest import assert_close, cli, quiet_config, temporal_variance_se
+from conftest import Z, assert_close, cli, quiet_config, temporal_variance_se
+from scipy import stats
 
 from cmosnoise import CmosnoiseError, Sensor, calibration, load_config, noise_budget, scene, white_pixels
 from cmosnoise.config import ProcessingSection
@@ -163,9 +164,16 @@ def test_median_removes_single_white_pixels_but_not_couplets_and_the_map_removes
     singles0 = bad0 - 2 * couplets0
     singles_med = bad_med - 2 * couplets_med
     assert couplets0 >= 10 and singles0 > 1000
-    assert singles_med <= 0.05 * singles0  # single defects are removed
-    assert couplets_med >= 0.7 * couplets0  # couplets survive the median corrector
-    assert couplets_map == 0 and bad_map <= 0.01 * bad0  # the defect map removes both
+    # Requirements on the correctors, not estimates (measured: 2528 singles and 19 couplets, 31 and 18
+    # after the median, none after the map): the median replaces a lone defect by its neighbours (95 % of
+    # singles at least; what stays sits on scene detail the 3x3 median cannot follow) and cannot see a
+    # pair, whose partner is in its window (70 % of couplets stay at least)
+    assert singles_med <= 0.05 * singles0
+    assert couplets_med >= 0.7 * couplets0
+    # The map names every white pixel, so what stays is the 6-sigma residual's false alarms: a normal tail
+    # of 2e-9 a pixel, 0.01 expected over 5 Mpixel; Poisson at the Z-sigma level allows none
+    n = raw.size
+    assert couplets_map == 0 and bad_map <= stats.poisson.isf(2 * stats.norm.sf(Z), n * 2 * stats.norm.sf(6))
 
 
 @pytest.mark.parametrize("pattern", ["RGGB", "GBRG", "none"])

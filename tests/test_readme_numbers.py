@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 
 import pytest
+from conftest import Z
 
 ROOT = Path(__file__).resolve().parent.parent
 _spec = importlib.util.spec_from_file_location("readme_numbers", ROOT / "docs" / "readme_numbers.py")
@@ -54,6 +55,9 @@ def _close(a, b):
 
 @pytest.mark.parametrize("name,vectors", [("speed", "AVX-512"), ("speed_avx2", "AVX2")])
 def test_speed_data_has_every_row_the_issue_asks_for(name, vectors):
+    """The speed tables are measured (benchmarks/, minutes, on a named CPU) and cannot be re-run here: this
+    checks that the stored measurement is complete and self-consistent (a row's ratio is its own time over
+    the reference timed beside it), which a hand edit or a partial re-measurement breaks."""
     data = numbers.load(name)
     assert data["vectors"] == vectors  # each table is measured on the kind of CPU its name says
     rows = [r["label"] for r in data["rows"]]
@@ -64,8 +68,10 @@ def test_speed_data_has_every_row_the_issue_asks_for(name, vectors):
 
 
 def test_the_fig9_sweep_shows_what_the_paper_shows():
-    """Stored by `compute sweep_fig9` (a few minutes): more couplets at 5 MP than at VGA and at higher temperatures,
-    each mean within 5 standard errors of the count expected at random placement."""
+    """Stored by `compute sweep_fig9` (a few minutes, too slow for the suite): the README's claims hold for
+    the stored data, so a re-measurement that breaks them fails here. More couplets at 5 MP than at VGA and
+    at higher temperatures; each mean within Z standard errors of the count expected at random placement
+    (standard error: the instances' spread over sqrt(instances), floored at one count)."""
     pts = numbers.load("sweep_fig9")["points"]
     by = {(p["width"], p["temperature_c"]): p for p in pts}
     temps = sorted({p["temperature_c"] for p in pts})
@@ -76,4 +82,4 @@ def test_the_fig9_sweep_shows_what_the_paper_shows():
         assert means == sorted(means) and means[0] < means[-1]
     for p in pts:
         se = max(p["couplets_std"], 1.0) / p["instances"] ** 0.5
-        assert abs(p["couplets_mean"] - p["expected_mean"]) <= 5 * se, p
+        assert abs(p["couplets_mean"] - p["expected_mean"]) <= Z * se, p

@@ -164,7 +164,6 @@ def test_total_dark_temporal_noise_matches_two_frame_difference_in_e_and_dn():
     se = temporal_variance_se(sensor, pairs)
     assert_close(measured_dn2, b["temporal_total_dn"] ** 2, se, "dark temporal variance, DN^2")
     assert_close(measured_dn2 / k**2, b["temporal_total_e"] ** 2, se / k**2, "dark temporal variance, e-^2")
-    assert 1.5 < b["temporal_total_e"] < 5  # "a few e-" for the default 4T pixel
     assert b["dominant_temporal"] == "thermal"
 
 
@@ -196,13 +195,33 @@ def test_budget_follows_frames_through_the_full_well_and_the_top_code(level):
     k = sensor.transfer.gain_dn_per_e
     tv = np.var(a - c) / 2
     measured_e = np.sqrt(tv) / k
-    # the estimate's sampling error is tiny (76 800 pixels); the model's normal approximations of the
-    # clipped Poisson leave a few per cent, and about 0.3 e- of quantization at the top code
-    assert abs(b["temporal_total_e"] - measured_e) <= 0.05 * measured_e + 0.35, (b["temporal_total_e"], measured_e)
+    # Sampling error of the two estimates, from the n pixels of one frame pair. The temporal variance
+    # v = var(a - c)/2 has relative standard error sqrt(2/n) from independent pixels, plus the row and
+    # column noise, shared along a row (column): their variance is estimated from only `rows` (`cols`)
+    # draws, standard error var_row sqrt(2/rows). The fixed-pattern variance var((a + c)/2) - v/2 carries
+    # var((a + c)/2) sqrt(2/n) and v/2 sqrt(2/n). Both in e-^2, carried to e- by d sqrt(x) = dx / (2 sqrt(x)).
+    rows, cols = a.shape
+    n = a.size
+    dark = b["temporal_rms_e"]
+    v_e = tv / k**2
+    se_v = np.sqrt(2 / n * v_e**2 + 2 / rows * dark.get("row", 0.0) ** 4 + 2 / cols * dark.get("column", 0.0) ** 4)
+    fixed_e2 = max(np.var((a + c) / 2) - tv / 2, 0.0) / k**2
+    se_f = np.sqrt(2 / n) * (np.var((a + c) / 2) / k**2 + v_e / 2)
+    fixed = np.sqrt(fixed_e2)
+    # Below the clips (level 0.3) the budget is exact: sampling error alone. Where pixels clip, the budget
+    # treats the charge as normal (not Poisson) and the two clips in sequence as clipped normals: an
+    # approximation, not sampling. Its error, measured here at 0.99, 1.02 and 1.3 of the full well, is at
+    # most 3 % of the temporal noise + 0.3 e- (the top code's quantization), 1.8 points of the top-code
+    # fraction and 4 % of the fixed pattern + 0.2 e-; the allowance is that, rounded up (noise_budget.clipped_moments
+    # says so).
+    clips = level > 0.9
+    allow_t, allow_top, allow_f = (0.04 * measured_e + 0.35, 0.025, 0.05 * fixed + 0.25) if clips else (0, 0, 0)
+    assert abs(b["temporal_total_e"] - measured_e) <= Z * se_v / (2 * measured_e) + allow_t, (b["temporal_total_e"], measured_e)
     top = noise_budget.clipping(sensor, float(shot.photo_mean_e.mean()))["top_code_fraction"]
-    assert abs(top - np.mean(a >= sensor.transfer.max_code)) <= 0.04
-    fixed = np.sqrt(max(np.var((a + c) / 2) - tv / 2, 0.0)) / k
-    assert abs(b["fixed_pattern_total_e"] - fixed) <= 0.06 * fixed + 0.5, (b["fixed_pattern_total_e"], fixed)
+    measured_top = np.mean(a >= sensor.transfer.max_code)
+    # a fraction of n pixels: binomial standard error (pixels clip independently given their means)
+    assert abs(top - measured_top) <= Z * np.sqrt(max(top * (1 - top), 1 / n) / n) + allow_top
+    assert abs(b["fixed_pattern_total_e"] - fixed) <= Z * se_f / (2 * max(fixed, 1e-9)) + allow_f, (b["fixed_pattern_total_e"], fixed)
 
 
 def test_budget_prnu_is_what_frames_show_after_crosstalk():

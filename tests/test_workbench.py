@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from cmosnoise import Sensor
+from cmosnoise import CmosnoiseError, Sensor
 from cmosnoise.app.workbench import BadRequest, Workbench, validate
 
 BASE = {"sensor": {"width": 96, "height": 64, "temperature_c": 30.0}, "scene": {"source": "photo"}}
@@ -46,3 +46,18 @@ def test_a_temporal_move_redraws_no_map(tmp_path):
     for name in ("prnu_gain", "dark_rate", "flicker_sigma"):
         assert getattr(b.fixed_pattern, name) is getattr(a.fixed_pattern, name), name
     assert not np.array_equal(a.source_follower_sigma, b.source_follower_sigma)
+
+
+def test_one_region_rule_refuses_in_the_model_and_clips_in_the_viewer():
+    """model.sensor.region_of is the one region check: an Exposure refuses a region outside the sensor,
+    the workbench cuts it to the sensor (panning past an edge), both refuse what is not four numbers."""
+    from cmosnoise.app.workbench import _clip_region
+    from cmosnoise.model.sensor import region_of
+
+    assert region_of(None, (48, 64)) == (0, 48, 0, 64)
+    assert region_of((-5, 100, 60, 200), (48, 64), clip=True) == (0, 48, 60, 64)
+    assert _clip_region((47, 47, 70, 80), 48, 64) == (47, 48, 63, 64)  # at least one pixel
+    with pytest.raises(CmosnoiseError, match=r"0 <= row0 < row1 <= 48"):
+        region_of((0, 49, 0, 64), (48, 64))
+    with pytest.raises(BadRequest, match="whole numbers"):
+        _clip_region(("a", 1, 2, 3), 48, 64)

@@ -35,7 +35,7 @@ from ..model import footprint
 from ..model import scene as scene_mod
 from ..model.fixed_pattern import PatternCache
 from ..model.seeds import SEQ_DARK_CALIBRATION
-from ..model.sensor import Exposure, Sensor
+from ..model.sensor import Exposure, Sensor, region_of
 from ..model.spec import SensorSpec, resolve
 
 #: limits: uploads, decoded upload size, sensor size
@@ -251,12 +251,9 @@ class Workbench:
 
 def _clip_region(region, rows: int, cols: int) -> tuple[int, int, int, int]:
     try:
-        r0, r1, c0, c1 = (int(v) for v in region)
-    except (TypeError, ValueError, OverflowError):
-        raise BadRequest("region must be [row0, row1, col0, col1] of whole numbers") from None
-    r0, c0 = max(0, min(r0, rows - 1)), max(0, min(c0, cols - 1))
-    r1, c1 = max(r0 + 1, min(r1, rows)), max(c0 + 1, min(c1, cols))
-    return r0, r1, c0, c1
+        return region_of(region, (rows, cols), clip=True)
+    except CmosnoiseError as e:
+        raise BadRequest(str(e)) from None
 
 
 def _bin(img: np.ndarray, f: int) -> np.ndarray:

@@ -430,18 +430,7 @@ class Exposure:
         return n
 
     def _region(self, region) -> tuple[int, int, int, int]:
-        rows, cols = self.sensor.shape
-        if region is None:
-            return (0, rows, 0, cols)
-        try:
-            r0, r1, c0, c1 = (int(v) for v in region)
-        except (TypeError, ValueError):
-            raise CmosnoiseError(f"region = {region!r}: give (row0, row1, col0, col1)") from None
-        if not (0 <= r0 < r1 <= rows and 0 <= c0 < c1 <= cols):
-            raise CmosnoiseError(
-                f"region = {(r0, r1, c0, c1)}: must satisfy 0 <= row0 < row1 <= {rows} and 0 <= col0 < col1 <= {cols}"
-            )
-        return r0, r1, c0, c1
+        return region_of(region, self.sensor.shape)
 
     def _render(self, k: int, keep: dict | None = None, region=None, electrons: bool = True):
         """(raw, charge at the ADC input in e- or None) of frame ``k``.
@@ -530,3 +519,32 @@ def _frame_index(k) -> int:
     if k < 0 or k > LAST_FRAME:
         raise CmosnoiseError(f"frame = {k}: a frame number must be 0 to {LAST_FRAME} (a 32-bit counter word)")
     return int(k)
+
+
+def region_of(region, shape: tuple[int, int], *, clip: bool = False) -> tuple[int, int, int, int]:
+    """A region ``(row0, row1, col0, col1)`` of an array of ``shape``, validated.
+
+    ``None`` is the whole array. Bounds are half-open, as slices. With
+    ``clip`` a region reaching outside is cut to the array (at least one
+    pixel), as a viewer panning past an edge wants; without it, it is refused.
+
+    Raises
+    ------
+    CmosnoiseError
+        Not four whole numbers, or (without ``clip``) outside the array.
+    """
+    rows, cols = shape
+    if region is None:
+        return (0, rows, 0, cols)
+    try:
+        r0, r1, c0, c1 = (int(v) for v in region)
+    except (TypeError, ValueError, OverflowError):
+        raise CmosnoiseError(f"region = {region!r}: give (row0, row1, col0, col1), whole numbers") from None
+    if clip:
+        r0, c0 = max(0, min(r0, rows - 1)), max(0, min(c0, cols - 1))
+        r1, c1 = max(r0 + 1, min(r1, rows)), max(c0 + 1, min(c1, cols))
+    if not (0 <= r0 < r1 <= rows and 0 <= c0 < c1 <= cols):
+        raise CmosnoiseError(
+            f"region = {(r0, r1, c0, c1)}: must satisfy 0 <= row0 < row1 <= {rows} and 0 <= col0 < col1 <= {cols}"
+        )
+    return r0, r1, c0, c1
