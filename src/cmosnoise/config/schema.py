@@ -335,6 +335,99 @@ class AdcSection(Section):
     full_scale_e: Optional[float] = Field(None, ge=1, le=1e9, description="charge mapped to the top code, e-; null: the full well")
 
 
+# ------------------------------------------------ what measured sensors show
+class OffsetTail(Section):
+    """Pixels with a large offset: ``ppm_above`` ppm of pixels above ``threshold_e``."""
+
+    ppm_above: float = Field(ge=0, le=1e6, description="parts per million of pixels whose offset exceeds threshold_e")
+    threshold_e: float = Field(gt=0, le=1e6, description="offset threshold, e-")
+    max_e: float = Field(gt=0, le=1e6, description="largest extra offset of a tail pixel, e-")
+
+
+class PixelOffsetSection(Section):
+    """Pixel offset non-uniformity (DSNU at zero exposure, dark shading), docs/model.md stage 5c.
+
+    A fixed offset per pixel, e-: a Normal(0, sigma_e) body plus a uniform
+    tail of pixels with large offsets; independent of exposure time and temperature.
+    """
+
+    enabled: bool = False
+    sigma_e: float = Field(0.0, ge=0, le=1e5, description="standard deviation of the offsets' normal body, e-")
+    tail: Optional[OffsetTail] = Field(None, description="pixels with large offsets (ppm above a threshold); null: none")
+
+
+class NonlinearitySection(Section):
+    """Photo-response nonlinearity: the charge-to-voltage transfer before the readout noise (stage 5b).
+
+    Give ``linearity_error_pct`` (EMVA 1288's LE min and max over 5 to 95 %
+    of saturation) or ``curve_e`` (points of the transfer, e- in to e- out,
+    strictly increasing, from (0, 0)). Off: the exact identity.
+    """
+
+    enabled: bool = False
+    linearity_error_pct: Optional[tuple[float, float]] = Field(
+        None, description="EMVA 1288 linearity error [min, max], % (min <= 0 <= max), over 5-95 % of saturation")
+    curve_e: Optional[list[tuple[float, float]]] = Field(
+        None, description="the transfer as points [[charge_e, output_e], ...], strictly increasing, from [0, 0]")
+
+    @model_validator(mode="after")
+    def _one_form(self):
+        if self.enabled and (self.linearity_error_pct is None) == (self.curve_e is None):
+            raise ValueError("nonlinearity: give linearity_error_pct or curve_e (one of the two)")
+        if self.linearity_error_pct is not None:
+            lo, hi = self.linearity_error_pct
+            if not (-20 <= lo <= 0 <= hi <= 20) or lo == hi:
+                raise ValueError(f"nonlinearity.linearity_error_pct = {[lo, hi]}: need -20 <= min <= 0 <= max <= 20 "
+                                 "(a linear fit leaves deviations of both signs), not both 0")
+        if self.curve_e is not None:
+            pts = [(float(a), float(b)) for a, b in self.curve_e]
+            if len(pts) < 2 or pts[0] != (0.0, 0.0):
+                raise ValueError(f"nonlinearity.curve_e must start at [0, 0] and have 2 points or more, got {pts[:3]}")
+            for (a0, b0), (a1, b1) in zip(pts, pts[1:]):
+                if not (a1 > a0 and b1 > b0):
+                    raise ValueError(f"nonlinearity.curve_e must be strictly increasing in both columns (invertible): "
+                                     f"[{a0:g}, {b0:g}] is followed by [{a1:g}, {b1:g}]")
+        return self
+
+
+class BlackLevelSection(Section):
+    """The black level's offsets beside adc.black_level_dn: per CFA cell position and per frame (DN)."""
+
+    channel_offsets_dn: tuple[float, float, float, float] = Field(
+        (0.0, 0.0, 0.0, 0.0), description="offset of each position of the 2 x 2 CFA cell, in sensor.cfa's order "
+                                          "(RGGB: R, Gr, Gb, B), DN")
+    frame_sigma_dn: float = Field(0.0, ge=0, le=1000, description="black-level error of each frame, Normal(0, sigma), DN")
+
+    @field_validator("channel_offsets_dn")
+    @classmethod
+    def _bounded(cls, v):
+        if any(abs(x) > 1000 for x in v):
+            raise ValueError(f"channel_offsets_dn = {list(v)}: each must be within +-1000 DN")
+        return v
+
+
+class ReadNoiseSection(Section):
+    """Read noise after the analogue gain, in DN (stage 9a), as ELD calibrates it.
+
+    ``normal``: Normal(0, scale_dn). ``tukey_lambda``: Tukey-lambda with
+    shape ``shape`` and scale ``scale_dn`` (heavy tails for shape < 0.14,
+    light ones above; 0 is the logistic law), drawn by its quantile function.
+    """
+
+    enabled: bool = False
+    distribution: Literal["normal", "tukey_lambda"] = Field("normal", description="normal or tukey_lambda")
+    scale_dn: float = Field(1.0, gt=0, le=10000, description="scale: the normal's sigma, or the Tukey-lambda scale, DN")
+    shape: float = Field(0.14, description="Tukey-lambda shape lambda, -0.5 < lambda <= 2")
+
+    @field_validator("shape")
+    @classmethod
+    def _shape(cls, v):
+        if not -0.5 < v <= 2.0:
+            raise ValueError(f"read_noise.shape = {v:g}: a Tukey-lambda shape must be in (-0.5, 2] "
+                             "(at -0.5 and below its variance is infinite)")
+        return v
+
+
 # ------------------------------------------------------------------------- root
 class Config(Section):
     """A complete, resolved cmosnoise configuration."""
@@ -353,6 +446,10 @@ class Config(Section):
     row_noise: RowNoiseSection = Field(default_factory=RowNoiseSection)
     column_noise: ColumnNoiseSection = Field(default_factory=ColumnNoiseSection)
     adc: AdcSection = Field(default_factory=AdcSection)
+    pixel_offset: PixelOffsetSection = Field(default_factory=PixelOffsetSection)
+    nonlinearity: NonlinearitySection = Field(default_factory=NonlinearitySection)
+    black_level: BlackLevelSection = Field(default_factory=BlackLevelSection)
+    read_noise: ReadNoiseSection = Field(default_factory=ReadNoiseSection)
     processing: ProcessingSection = Field(default_factory=ProcessingSection)
 
     @model_validator(mode="after")

@@ -42,7 +42,8 @@ class FramePlan:
     Arrays are full-frame: ``noisy_e``/``exact_e``/``sf_sigma_e`` (rows, cols)
     float32, e-; ``row_offset_e`` (rows,), ``col_sigma_e``, ``col_offset_e``,
     ``col_gain`` (cols,) float64. ``keys`` holds the two key words of the
-    shot-noise, source-follower, row and column streams, (4, 2) uint64.
+    shot-noise, source-follower, row, column, black-level and read-noise
+    streams, (6, 2) uint64.
     A ``None`` switches that term off.
     """
 
@@ -60,6 +61,12 @@ class FramePlan:
     col_offset_e: np.ndarray | None = None
     col_gain: np.ndarray | None = None
     adc: tuple[float, float, int] | None = None  #: (K DN/e-, black level DN, top code); None: float32 e-
+    #: the charge-to-voltage transfer tabulated on equal steps from 0 to the full well (stage 5b), float64
+    nonlinearity: np.ndarray | None = None
+    offset_e: np.ndarray | None = None  #: per-pixel offsets (rows, cols) float32, e- (stage 5c)
+    cell_offsets_dn: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  #: black level per 2 x 2 cell position
+    frame_black_sigma_dn: float = 0.0  #: the black level's error per frame, DN (keys row 4)
+    read_noise: tuple[str, float, float] | None = None  #: (normal | tukey_lambda, scale DN, shape), keys row 5
 
     @functools.cached_property
     def loggam_table(self) -> np.ndarray:
@@ -108,7 +115,7 @@ def _compiled(inline: str):
 
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
             (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
-            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
+            (samplers, ["normal_from", "tukey_lambda_from", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
                         "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
     for module, names in plan:
         for name in names:
@@ -122,6 +129,7 @@ if numba is not None:
     _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_ptrs_try = (
         _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_try"))
     _uniform_pair, _normal_from, _exp, _log = _h["uniform_pair"], _h["normal_from"], _h["exp"], _h["log"]
+    _tukey_lambda_from = _h["tukey_lambda_from"]
     _ptrs_constants, _ptrs_candidate, _ptrs_log_test = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_test"]
     _ptrs_quick_accept, _ptrs_early_reject = _h["ptrs_quick_accept"], _h["ptrs_early_reject"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
@@ -325,7 +333,8 @@ if numba is not None:
 
     @numba.njit(**_JIT)
     def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
-                     gain, keys, fr, sq, r0, c0, c1, cols, k_adc, black, top, loggam_table, out_dn, out_e):
+                     gain, keys, fr, sq, r0, c0, c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale,
+                     offset, read_kind, read_scale, read_shape, out_dn, out_e):
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
 
         Compiled on its own, not inside :func:`_render`'s parallel loop: numba's
@@ -335,6 +344,8 @@ if numba is not None:
         """
         has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
             flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
+        has_nl, has_offset, has_read = flags[7], flags[8], flags[9]
+        nl_last = np.float64(nl_table.size - 2)
         zero = np.uint64(0)
         w = c1 - c0
         s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
@@ -357,6 +368,15 @@ if numba is not None:
                     n[j] = n[j] + np.float64(exact[r, c0 + j])
             for j in range(w):
                 n[j] = min(n[j], full_well)
+            if has_nl:  # stage 5b: linear in the tabulated transfer (nonlinearity.apply)
+                for j in range(w):
+                    q = n[j] * nl_scale
+                    t = np.int64(min(np.floor(q), nl_last))
+                    lo = nl_table[t]
+                    n[j] = lo + (q - t) * (nl_table[t + 1] - lo)
+            if has_offset:  # stage 5c
+                for j in range(w):
+                    n[j] = n[j] + np.float64(offset[r, c0 + j])
             if has_sf:  # uniforms, then Box-Muller: 25 % faster than one loop (measured)
                 for j in range(w):
                     u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
@@ -375,17 +395,36 @@ if numba is not None:
                 for j in range(w):
                     out_e[i, j] = n[j]
             if adc_on:
+                if has_read:  # stage 9a: read noise after the gain, DN (read_noise.noise)
+                    for j in range(w):
+                        u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, keys[5, 0], keys[5, 1])
+                    if read_kind == 0:
+                        for j in range(w):
+                            noise[j] = read_scale * _normal_from(u1[j], u2[j])
+                    else:
+                        for j in range(w):
+                            noise[j] = read_scale * _tukey_lambda_from(u1[j], read_shape)
+                cb = (r & 1) * 2
                 for j in range(w):
-                    v = np.rint(n[j] * k_adc + black)
+                    v = n[j] * k_adc + cell_black[cb + ((c0 + j) & 1)]
+                    if has_read:
+                        v = v + noise[j]
+                    v = np.rint(v)
                     out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
             if not has_noisy:
                 n[:] = 0.0
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
-                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, loggam_table, out_dn, out_e):
+                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, loggam_table, nl_table, nl_scale,
+                offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_shape, out_dn, out_e):
         fr = np.uint64(frame)
         sq = np.uint64(seq)
+        # the black level of each 2 x 2 cell position in this frame (read_noise.cell_black)
+        err = frame_black_sigma * _normal(0, fr, sq, keys[4, 0], keys[4, 1]) if frame_black_sigma > 0.0 else 0.0
+        cell_black = np.empty(4)
+        for q in range(4):
+            cell_black[q] = (black + cell_offsets[q]) + err
         w = c1 - c0
         h = r1 - r0
         has_col = flags[4]
@@ -400,7 +439,8 @@ if numba is not None:
         for blk in numba.prange(nblocks):
             _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
                          normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
-                         c1, cols, k_adc, black, top, loggam_table, out_dn, out_e)
+                         c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale, offset, read_kind,
+                         read_scale, read_shape, out_dn, out_e)
 
 
 def _version_of(package: str) -> str | None:
@@ -430,6 +470,10 @@ _DUMMY2 = np.zeros((1, 1), np.float32)
 _DUMMY1 = np.zeros(1)
 _DUMMY_TABLE = np.zeros(1)
 _DUMMY_TABLE.flags.writeable = False  # as the tables are: numba types a read-only array apart
+_DUMMY_NL = np.zeros(2)
+_DUMMY_NL.flags.writeable = False
+#: the kernel's switches: noisy, exact, source follower, row, column, ADC, electrons out, nonlinearity, offset, read
+_FLAGS = 10
 
 
 def _needs_compile() -> bool:
@@ -458,10 +502,10 @@ def preload() -> bool:
     """
     if numba is None or _render.signatures:
         return False
-    flags = np.zeros(7, np.bool_)
+    flags = np.zeros(_FLAGS, np.bool_)
     args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
-            np.zeros((4, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0, _DUMMY_TABLE,
-            np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
+            np.zeros((6, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
+            _DUMMY2, _DUMMY1, 0.0, 0, 0.0, 0.0, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
     try:
         index = _render._cache._cache_file._load_index()  # {(signature, target, ...): file}
@@ -494,8 +538,17 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
     out_dn = np.empty((h, w) if adc_on else (1, 1), np.uint16)
     out_e = np.empty((h, w) if (electrons or not adc_on) else (1, 1), np.float32)
     flags = np.array([plan.noisy_e is not None, plan.exact_e is not None, plan.sf_sigma_e is not None,
-                      plan.row_sigma_e is not None, plan.col_gain is not None, adc_on, electrons or not adc_on])
+                      plan.row_sigma_e is not None, plan.col_gain is not None, adc_on, electrons or not adc_on,
+                      plan.nonlinearity is not None, plan.offset_e is not None,
+                      adc_on and plan.read_noise is not None])
     k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
+    nl, nl_scale = _DUMMY_NL, 0.0
+    if plan.nonlinearity is not None:
+        nl, nl_scale = plan.nonlinearity, (plan.nonlinearity.size - 1) / plan.full_well_e  # nonlinearity.apply's
+    read_kind, read_scale, read_shape = 0, 0.0, 0.0
+    if plan.read_noise is not None:
+        kind, read_scale, read_shape = plan.read_noise
+        read_kind = 0 if kind == "normal" else 1
     first = _needs_compile()
     t0 = time.perf_counter()
     _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
@@ -506,7 +559,9 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
             plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
             plan.col_gain if plan.col_gain is not None else _DUMMY1,
             plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, float(k_adc), float(black), float(top),
-            plan.loggam_table, out_dn, out_e)
+            plan.loggam_table, nl, float(nl_scale), plan.offset_e if plan.offset_e is not None else _DUMMY2,
+            np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),
+            read_kind, float(read_scale), float(read_shape), out_dn, out_e)
     elapsed = time.perf_counter() - t0
     if first and elapsed > 2.0:  # a cache load takes well under a second; this was a compile
         _logger.info(f"compiled the frame kernel in {elapsed:.0f} s; later runs reuse it")

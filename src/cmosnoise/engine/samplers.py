@@ -38,6 +38,21 @@ def normal_from(u1, u2):
     return np.sqrt(-2.0 * log(u1)) * cos_turn(u2)
 
 
+def tukey_lambda_from(u, lam):
+    """A standard Tukey-lambda variate from an open uniform: its quantile ``(u**lam - (1 - u)**lam) / lam``.
+
+    ``lam == 0`` is the logistic law's ``log(u) - log(1 - u)``. Powers are
+    ``exp(lam * log(u))`` with :mod:`.fdmath`'s log and exp, so the kernel
+    gives the same bits; ``1 - u`` is exact for :func:`.philox.open_uniform`'s
+    values. ``lam`` is one number for all ``u``.
+    """
+    a = log(u)
+    b = log(1.0 - u)
+    if lam == 0.0:
+        return a - b
+    return (exp(lam * a) - exp(lam * b)) / lam
+
+
 def poisson_inversion(lam, u):
     """Poisson(lam) by inversion of the CDF at ``u`` (lam < 10): the smallest k with F(k) >= u."""
     lam = np.asarray(lam, np.float64)

@@ -35,9 +35,9 @@ from typing import Callable
 
 import numpy as np
 
-from .seeds import fixed_rng
+from .seeds import fixed_key, fixed_rng
 from .spec import SensorSpec
-from .stages import column_noise, dark_current, prnu, row_noise, source_follower
+from .stages import column_noise, dark_current, pixel_offset, prnu, row_noise, source_follower
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,7 @@ class FixedPattern:
     column_sigma: np.ndarray | None = None  #: per-column temporal sigma, e- rms, (1, cols)
     vfpn: np.ndarray | None = None  #: fixed column offsets, e-, (1, cols)
     column_gain: np.ndarray | None = None  #: fixed column gains, (1, cols)
+    pixel_offset: np.ndarray | None = None  #: per-pixel offset, e-, (rows, cols) float32
 
 
 def dependencies(spec: SensorSpec) -> dict[str, object]:
@@ -73,6 +74,7 @@ def dependencies(spec: SensorSpec) -> dict[str, object]:
         "flicker_sigma": (sf.enabled, sf.flicker),
         "row_offset": (rn.enabled, rn.fixed_sigma_e),
         "column": c.column_noise,
+        "pixel_offset": (c.pixel_offset.enabled, spec.offsets),
     }
 
 
@@ -200,6 +202,9 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None, executor=None) -> 
                                                                                  fixed_rng(seed, "row_noise")))
     if c.column_noise.enabled:
         maps["column_sigma"], maps["vfpn"], maps["column_gain"] = held("column", lambda: _column_maps(c, cols))
+    if c.pixel_offset.enabled and (spec.offsets.sigma_e > 0 or spec.offsets.tail_fraction > 0):
+        maps["pixel_offset"] = held("pixel_offset", lambda: pixel_offset.offset_map(
+            spec.offsets, fixed_key(seed, "pixel_offset"), (0, rows, 0, cols), cols))
     if isinstance(maps.get("dark_rate"), Future):
         maps["dark_rate"] = maps["dark_rate"].result()
     return FixedPattern(**maps)

@@ -49,6 +49,32 @@ def flicker_model(config: Config) -> HeavyTail:
         raise _invalid(f"source_follower.flicker.tail.ppm_above = {f.tail.ppm_above:g}: {exc}") from None
 
 
+def offset_model(config: Config):
+    """The pixel offsets' law (e-) of ``config``; raises on an unreachable ppm."""
+    from .stages.pixel_offset import offset_model as model
+
+    o = config.pixel_offset
+    try:
+        if o.tail is None:
+            return model(o.sigma_e)
+        return model(o.sigma_e, o.tail.ppm_above, o.tail.threshold_e, o.tail.max_e)
+    except ValueError as exc:
+        raise _invalid(str(exc)) from None
+
+
+def nonlinearity_table(config: Config):
+    """The tabulated charge-to-voltage transfer of ``config`` (None when neither form is given)."""
+    from .stages import nonlinearity
+
+    n = config.nonlinearity
+    if n.linearity_error_pct is None and n.curve_e is None:
+        return None
+    try:
+        return nonlinearity.table(config.sensor.full_well_e, n.linearity_error_pct, n.curve_e)
+    except ValueError as exc:
+        raise _invalid(str(exc)) from None
+
+
 #: a dark-current body's std, relative to its mean (to 1 e-/s for the families that allow 0 or below)
 MIN_CV, MAX_CV = 1e-6, 1e3
 

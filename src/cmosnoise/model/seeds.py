@@ -33,11 +33,14 @@ STAGE_IDS = {
     "source_follower": 6,
     "row_noise": 7,
     "column_noise": 8,
+    "pixel_offset": 10,
+    "black_level": 11,
+    "read_noise": 12,
 }
 
 
 #: the stages with temporal noise, in the engine's key order
-TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise")
+TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level", "read_noise")
 
 
 def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
@@ -48,6 +51,18 @@ def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
     """
     ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage], part))
     return np.random.Generator(np.random.PCG64(ss))
+
+
+def fixed_key(seed: int, stage: str) -> tuple[int, int]:
+    """The two 32-bit key words of a stage's counter-based fixed map, from ``(seed, FIXED, stage)``.
+
+    A map drawn from it is addressed per pixel, as the temporal noise: pixel
+    ``i``'s value depends on (seed, stage, i) alone, so a tile of the map can
+    be made without the rest.
+    """
+    ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage], 2**31))
+    k0, k1 = ss.generate_state(2, np.uint32)
+    return int(k0), int(k1)
 
 
 def stream_key(seed: int, stage: str) -> tuple[int, int]:

@@ -36,7 +36,18 @@ from .heavy_tail import variates
 from .raw_info import RawInfo
 from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, stream_key, temporal_stream
 from .spec import SensorSpec, resolve
-from .stages import adc, column_noise, crosstalk, dark_current, prnu, row_noise, shot_noise, source_follower
+from .stages import (
+    adc,
+    column_noise,
+    crosstalk,
+    dark_current,
+    nonlinearity,
+    prnu,
+    read_noise,
+    row_noise,
+    shot_noise,
+    source_follower,
+)
 
 
 @dataclass
@@ -44,7 +55,11 @@ class FrameDetail:
     """One frame with its parts.
 
     ``contributions`` maps each stage to what it added, in e-, shape (rows,
-    cols); they sum to ``electrons``. ``raw`` is the ADC output in DN.
+    cols); those before the ADC sum to ``electrons``. What the ADC adds is
+    referred back to e- too: ``black_level`` (the CFA cell's offsets and the
+    frame's black-level error, where set), ``read_noise`` (after the gain,
+    where on) and ``quantization`` (rounding and clipping); ``raw`` is the ADC
+    output in DN.
     """
 
     index: int
@@ -225,6 +240,10 @@ class Sensor:
             "row_noise": c.row_noise.enabled,
             "column_noise": c.column_noise.enabled,
             "adc": c.adc.enabled,
+            "nonlinearity": self.spec.nonlinearity is not None and c.nonlinearity.enabled,
+            "pixel_offset": self.fixed_pattern.pixel_offset is not None,
+            "black_level_offsets": any(v != 0 for v in c.black_level.channel_offsets_dn) or c.black_level.frame_sigma_dn > 0,
+            "read_noise": c.read_noise.enabled,
         }
 
     # ------------------------------------------------------------ scene
@@ -374,6 +393,12 @@ class Exposure:
                 col_offset_e=col(fp.vfpn, 0.0) if cn.enabled else None,
                 col_gain=col(fp.column_gain, 1.0) if cn.enabled else None,
                 adc=(t.gain_dn_per_e, t.black_level_dn, t.max_code) if c.adc.enabled else None,
+                nonlinearity=s.spec.nonlinearity if c.nonlinearity.enabled else None,
+                offset_e=fp.pixel_offset,
+                cell_offsets_dn=tuple(float(v) for v in c.black_level.channel_offsets_dn),
+                frame_black_sigma_dn=float(c.black_level.frame_sigma_dn),
+                read_noise=((c.read_noise.distribution, float(c.read_noise.scale_dn), float(c.read_noise.shape))
+                            if c.read_noise.enabled else None),
             )
         return self._plan
 
@@ -399,6 +424,11 @@ class Exposure:
                                c.shot_noise.gaussian_above_e, index)
         collected = n
         fp = s.fixed_pattern
+        if c.nonlinearity.enabled and s.spec.nonlinearity is not None:
+            n = nonlinearity.apply(n, s.spec.nonlinearity, c.sensor.full_well_e)
+        converted = n
+        if fp.pixel_offset is not None:
+            n = n + fp.pixel_offset[win]
         if c.source_follower.enabled:
             sfn = source_follower.noise(s.source_follower_sigma[win], stream("source_follower"), index)
             n = n + sfn
@@ -421,6 +451,10 @@ class Exposure:
             if self.dark_mean_e is not None:
                 keep["dark_current"] = self.dark_mean_e[win]
             keep["shot_noise"] = (collected - self.mean_charge_e[win]).astype(np.float32)
+            if converted is not collected:
+                keep["nonlinearity"] = (converted - collected).astype(np.float32)
+            if fp.pixel_offset is not None:
+                keep["pixel_offset"] = fp.pixel_offset[win]
             if c.source_follower.enabled:
                 keep["source_follower"] = sfn.astype(np.float32)
             if c.row_noise.enabled:
@@ -431,6 +465,22 @@ class Exposure:
 
     def _region(self, region) -> tuple[int, int, int, int]:
         return region_of(region, self.sensor.shape)
+
+    def _after_gain(self, k: int, region: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray | None]:
+        """Frame ``k``'s black level per pixel (DN, the cell offsets and the frame's error in it) and read
+        noise after the gain (DN, or None) over ``region``: stage 9a on the NumPy samplers."""
+        c = self.sensor.config
+        b, rn = c.black_level, c.read_noise
+        err = read_noise.frame_error(b.frame_sigma_dn, temporal_stream(c.seed, "black_level", k, self.sequence))
+        cell = read_noise.cell_black(self.sensor.transfer.black_level_dn, b.channel_offsets_dn, err)
+        black = read_noise.black_map(cell, region)
+        read = None
+        if rn.enabled:
+            r0, r1, c0, c1 = region
+            index = (np.arange(r0, r1)[:, None] * self.sensor.shape[1] + np.arange(c0, c1)[None, :]).astype(np.uint64)
+            read = read_noise.noise(rn.distribution, rn.scale_dn, rn.shape,
+                                    temporal_stream(c.seed, "read_noise", k, self.sequence), index)
+        return black, read
 
     def _render(self, k: int, keep: dict | None = None, region=None, electrons: bool = True):
         """(raw, charge at the ADC input in e- or None) of frame ``k``.
@@ -450,7 +500,16 @@ class Exposure:
             return raw, e
         e = self._electrons(k, region, keep)
         t = self.sensor.transfer
-        raw = adc.convert(e, t) if self.sensor.config.adc.enabled else e.astype(np.float32)
+        if self.sensor.config.adc.enabled:
+            black, read = self._after_gain(k, region)
+            raw = adc.convert(e, t, black, read)
+            if keep is not None:  # in e-, beside the quantization
+                if self.sensor.stages_on()["black_level_offsets"]:
+                    keep["black_level"] = ((black - t.black_level_dn) / t.gain_dn_per_e).astype(np.float32)
+                if read is not None:
+                    keep["read_noise"] = (read / t.gain_dn_per_e).astype(np.float32)
+        else:
+            raw = e.astype(np.float32)
         timings["frame_numpy"] += time.perf_counter() - t0
         return raw, e.astype(np.float32)
 
@@ -468,7 +527,8 @@ class Exposure:
         if not detail:
             return raw
         if self.sensor.config.adc.enabled:
-            keep["quantization"] = (self.sensor.transfer.to_electrons(raw) - electrons).astype(np.float32)
+            after = sum(keep.get(part, 0.0) for part in ("black_level", "read_noise"))
+            keep["quantization"] = (self.sensor.transfer.to_electrons(raw) - electrons - after).astype(np.float32)
         return FrameDetail(_frame_index(k), raw, electrons, keep)
 
     def frames(self, n: int, first: int = 0) -> Iterator[np.ndarray]:

@@ -22,11 +22,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..config import Config, merge_updates
 from . import physics
 from .heavy_tail import HeavyTail
 from .stages import adc
 from .stages.dark_current import Point
+from .stages.pixel_offset import OffsetModel
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,6 +48,11 @@ class SensorSpec:
         PRNU a flat field shows per unit of gain-map sigma (crosstalk averages neighbours; 1 without it).
     transfer : adc.Transfer
         The ADC transfer (the ideal one, 1 DN per e-, with the ADC off).
+    offsets : OffsetModel
+        The pixel offsets' law, e- (its tail fraction solved).
+    nonlinearity : ndarray or None
+        The charge-to-voltage transfer tabulated from 0 to the full well (:mod:`.stages.nonlinearity`),
+        ``None`` where the configuration gives none.
     """
 
     config: Config
@@ -52,6 +60,8 @@ class SensorSpec:
     flicker: HeavyTail
     prnu_seen_per_sigma: float
     transfer: adc.Transfer
+    offsets: OffsetModel
+    nonlinearity: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -78,7 +88,8 @@ class SensorSpec:
     def with_config(self, config: Config) -> "SensorSpec":
         """This spec with ``config`` in place of its own, where ``config`` differs only in what implies nothing
         (the exposure, the run, the scene, the processing): nothing is solved again."""
-        return SensorSpec(config, self.dark_points, self.flicker, self.prnu_seen_per_sigma, self.transfer)
+        return SensorSpec(config, self.dark_points, self.flicker, self.prnu_seen_per_sigma, self.transfer,
+                          self.offsets, self.nonlinearity)
 
     def updated(self, updates: dict) -> "SensorSpec":
         """A new spec: this configuration with ``updates`` merged in (every value set kept), resolved."""
@@ -104,4 +115,5 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     config = physics.resolve_prnu(config)
     # every section is checked, those switched off too (a file must stay valid when one is switched on)
     return SensorSpec(config, tuple(physics.dark_points(config)), physics.flicker_model(config),
-                      physics.prnu_seen_per_sigma(config), transfer(config))
+                      physics.prnu_seen_per_sigma(config), transfer(config), physics.offset_model(config),
+                      physics.nonlinearity_table(config))

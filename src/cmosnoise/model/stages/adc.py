@@ -49,11 +49,20 @@ class Transfer:
         return (np.asarray(dn, dtype=np.float64) - self.black_level_dn) / self.gain_dn_per_e
 
 
-def convert(electrons: np.ndarray, transfer: Transfer) -> np.ndarray:
-    """Quantize charge (e-, float) to raw codes (DN, uint16)."""
+def convert(electrons: np.ndarray, transfer: Transfer, black_dn: np.ndarray | None = None,
+            read_dn: np.ndarray | None = None) -> np.ndarray:
+    """Quantize charge (e-, float) to raw codes (DN, uint16).
+
+    ``black_dn``: each pixel's black level (the CFA cell's offsets and the
+    frame's error included, :func:`.read_noise.black_map`), else the
+    transfer's; ``read_dn``: read noise after the gain (DN), added before the
+    rounding.
+    """
     # float64 so that rounding at .5 boundaries is the formula's, not float32's
     v = electrons.astype(np.float64) * transfer.gain_dn_per_e
-    v += transfer.black_level_dn
+    v += transfer.black_level_dn if black_dn is None else black_dn
+    if read_dn is not None:
+        v += read_dn
     np.rint(v, out=v)
     np.clip(v, 0, transfer.max_code, out=v)
     return v.astype(np.uint16)
