@@ -1,0 +1,197 @@
+"""What measured sensors show and the paper's model lacks: pixel offsets, black level per CFA cell and per frame,
+photo-response nonlinearity, read noise after the gain (normal or Tukey-lambda). Each tested as a statistic."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import Z, assert_close, cli, quiet_config
+from scipy import stats
+
+from cmosnoise import Sensor, load_config
+from cmosnoise.engine.samplers import Stream
+from cmosnoise.model.seeds import fixed_key
+from cmosnoise.model.stages import nonlinearity, pixel_offset, read_noise
+
+SIZE = {"width": 320, "height": 240}
+
+
+# ------------------------------------------------------------------ pixel offsets
+def test_offset_map_has_the_configured_moments_and_ppm():
+    """Offsets: Normal(0, 4 e-) body, 2000 ppm above 20 e- (a tail up to 200 e-). Over n = 640 x 480 pixels:
+    the mean (standard error std/sqrt(n)), the variance (its standard error sqrt((m4 - s^4)/n), m4 the
+    model's fourth central moment estimated from the map itself), the fraction above the threshold
+    (binomial) and a KS test of the body pixels (those under the threshold, against the truncated normal
+    the tail barely touches) at the Z-sigma level."""
+    cfg = load_config(extra={"sensor": {"width": 640, "height": 480}, "pixel_offset": {
+        "enabled": True, "sigma_e": 4.0, "tail": {"ppm_above": 2000, "threshold_e": 20.0, "max_e": 200.0}}})
+    sensor = Sensor(cfg, seed=2)
+    m = sensor.spec.offsets
+    off = sensor.fixed_pattern.pixel_offset.astype(np.float64)
+    n = off.size
+    assert_close(off.mean(), m.mean_e, m.std_e / math.sqrt(n), "offset mean")
+    centred = off - off.mean()
+    m4 = np.mean(centred**4)
+    assert_close(off.var(), m.std_e**2, math.sqrt((m4 - m.std_e**4) / n), "offset variance")
+    p = m.ppm_above(20.0) * 1e-6
+    assert p == pytest.approx(2000e-6, rel=1e-9)
+    assert_close((off > 20.0).mean(), p, math.sqrt(p * (1 - p) / n), "fraction above 20 e-")
+    # the body: pixels not in the tail, below 10 e- (the tail adds U(0, 200): it puts 5 % of its 0.2 % there)
+    low = off[off < 10.0]
+    body = stats.truncnorm(-np.inf, 10.0 / 4.0, scale=4.0)
+    assert stats.kstest(low, body.cdf).pvalue > 2 * stats.norm.sf(Z)
+
+
+def test_offset_map_is_addressed_per_pixel_and_independent_of_exposure_and_temperature():
+    cfg = load_config(extra={"sensor": SIZE, "pixel_offset": {"enabled": True, "sigma_e": 3.0}})
+    whole = Sensor(cfg, seed=7).fixed_pattern.pixel_offset
+    tile = pixel_offset.offset_map(pixel_offset.offset_model(3.0), fixed_key(7, "pixel_offset"), (17, 90, 33, 301), 320)
+    np.testing.assert_array_equal(tile, whole[17:90, 33:301])
+    warm = load_config(extra={"sensor": {**SIZE, "temperature_c": 60}, "exposure": {"integration_time_s": 2.0},
+                              "pixel_offset": {"enabled": True, "sigma_e": 3.0}})
+    np.testing.assert_array_equal(Sensor(warm, seed=7).fixed_pattern.pixel_offset, whole)
+
+
+def test_offset_shows_in_dark_frames_and_does_not_grow_with_exposure():
+    """Every other stage off but the offsets and a little read noise: each pixel's dark level is its offset
+    (in e-, through K and the black level), at 1 ms and at 1 s alike."""
+    cfg = quiet_config(sensor=SIZE, pixel_offset={"enabled": True, "sigma_e": 5.0})
+    for t in (0.001, 1.0):
+        sensor = Sensor(cfg, seed=1).with_exposure(integration_time_s=t)
+        k, black = sensor.transfer.gain_dn_per_e, sensor.transfer.black_level_dn
+        raw = sensor.expose("flat:0").frame(0).astype(np.float64)
+        expected = np.rint(sensor.fixed_pattern.pixel_offset.astype(np.float64) * k + black)
+        np.testing.assert_array_equal(raw, np.clip(expected, 0, sensor.transfer.max_code))
+
+
+def test_an_unreachable_offset_ppm_is_one_line(tmp_path):
+    r = cli("simulate", "--set", "pixel_offset.enabled=true", "--set", "pixel_offset.sigma_e=1",
+            "--set", "pixel_offset.tail.ppm_above=900000", "--set", "pixel_offset.tail.threshold_e=5",
+            "--set", "pixel_offset.tail.max_e=6", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "pixel_offset.tail.ppm_above = 900000" in r.stderr and "reachable" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ black level
+def test_black_level_per_cell_position_and_per_frame():
+    """Dark frames, every stage off but the read noise (normal, 2 DN) and the black level's offsets: each
+    2 x 2 cell position's mean over F frames is black + its offset, within the standard error of a mean
+    of F P values whose frames share an error: sqrt(read^2/(F P) + frame_sigma^2/F); the frames' means
+    spread by frame_sigma (chi-square: relative standard error of a standard deviation 1/sqrt(2(F - 1)))."""
+    offsets, frame_sigma, frames = (1.5, -2.0, 0.75, 3.0), 0.8, 60
+    cfg = quiet_config(sensor=SIZE, black_level={"channel_offsets_dn": offsets, "frame_sigma_dn": frame_sigma},
+                       read_noise={"enabled": True, "scale_dn": 2.0})
+    sensor = Sensor(cfg, seed=4)
+    stack = np.stack(list(sensor.expose("flat:0").frames(frames))).astype(np.float64)
+    black = sensor.transfer.black_level_dn
+    p = stack[0].size / 4
+    se = math.sqrt(2.0**2 / (frames * p) + frame_sigma**2 / frames)
+    for q, (dr, dc) in enumerate([(0, 0), (0, 1), (1, 0), (1, 1)]):
+        assert_close(stack[:, dr::2, dc::2].mean(), black + offsets[q], se, f"cell position {q}")
+    frame_means = stack.mean(axis=(1, 2))
+    # each frame's mean carries its error plus the read noise averaged over the frame (2/sqrt(76 800) DN)
+    expected_sd = math.sqrt(frame_sigma**2 + 2.0**2 / stack[0].size)
+    assert_close(frame_means.std(ddof=1), expected_sd, expected_sd / math.sqrt(2 * (frames - 1)), "frame error")
+
+
+# ------------------------------------------------------------------ read noise after the gain
+@pytest.mark.parametrize("shape", [-0.09, 0.0, 0.1474653, 0.5])
+def test_tukey_lambda_read_noise_is_scipys_tukeylambda(shape):
+    """The read-noise sampler's draws against scipy.stats.tukeylambda(shape, scale): KS at the Z level over
+    200 000 draws, and the 1 %, 50 % and 99 % quantiles within Z standard errors of a sample quantile,
+    sqrt(q (1 - q) / n) / f(x_q)."""
+    n, scale = 200_000, 1.5
+    x = read_noise.noise("tukey_lambda", scale, shape, Stream((11, 12), 3), np.arange(n, dtype=np.uint64))
+    ref = stats.tukeylambda(shape, scale=scale)
+    assert stats.kstest(x, ref.cdf).pvalue > 2 * stats.norm.sf(Z)
+    for q in (0.01, 0.5, 0.99):
+        xq = ref.ppf(q)
+        assert_close(np.quantile(x, q), xq, math.sqrt(q * (1 - q) / n) / ref.pdf(xq), f"quantile {q}")
+    assert read_noise.variance_dn2("tukey_lambda", scale, shape) == pytest.approx(ref.var(), rel=1e-9)
+
+
+def test_read_noise_in_frames_has_its_variance_and_is_fresh_each_frame():
+    """Frames with the read noise alone (normal, 1.3 DN): the variance of a two-frame difference over 2 is
+    1.3^2 + 1/12 (rounding of a noise wider than a code), standard error var sqrt(2/n); frames differ."""
+    cfg = quiet_config(sensor=SIZE, read_noise={"enabled": True, "scale_dn": 1.3})
+    shot = Sensor(cfg, seed=5).expose("flat:0.3")
+    a, b = (shot.frame(k).astype(np.float64) for k in (0, 1))
+    v = np.var(a - b) / 2
+    expected = 1.3**2 + 1 / 12
+    assert_close(v, expected, expected * math.sqrt(2 / a.size), "read noise variance, DN^2")
+
+
+def test_a_tukey_shape_outside_its_range_is_one_line(tmp_path):
+    r = cli("simulate", "--set", "read_noise.enabled=true", "--set", "read_noise.distribution=tukey_lambda",
+            "--set", "read_noise.shape=-0.7", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "read_noise.shape" in r.stderr and "(-0.5, 2]" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+# ------------------------------------------------------------------ nonlinearity
+def test_linearity_error_is_the_reference_implementations():
+    """linearity_error against emva1288's own formula on a compressive curve with an offset-free series."""
+    x = np.linspace(0, 5e4, 60)
+    y = 0.4 * x * (1 - 0.05 * (x / 5e4) ** 2)
+    lo, hi = nonlinearity.linearity_error(x, y, y[-1])
+    i = np.nonzero((y >= 0.05 * y[-1]) & (y <= 0.95 * y[-1]))[0]
+    a, b = np.polynomial.polynomial.polyfit(x[i[0]:i[-1] + 1], y[i[0]:i[-1] + 1], 1, w=1 / y[i[0]:i[-1] + 1])[::-1]
+    dev = 100 * (y[i[0]:i[-1] + 1] - (a * x[i[0]:i[-1] + 1] + b)) / (a * x[i[0]:i[-1] + 1] + b)
+    assert (lo, hi) == pytest.approx((dev.min(), dev.max()), abs=1e-9)
+
+
+@pytest.mark.parametrize("pair", [(-1.133, 0.595), (-0.55, 0.294), (-2.0, 1.0)])
+def test_linearity_error_is_recovered_from_simulated_flats(pair):
+    """Flats at 101 equal exposures up to the full well, every stage off but the nonlinearity and shot
+    noise: the EMVA 1288 linearity error of the frames' means is the solved transfer's, within the sampling
+    error of the means (shot noise over n pixels moves a mean by sqrt(mu/n), a relative deviation by about
+    100 sqrt(mu/n)/mu %, largest at the first point used, 5 % of saturation: Z of that allowed), and the
+    solved transfer is within 0.25 points of the asked pair."""
+    full_well = 10000.0
+    cfg = quiet_config(sensor={"width": 256, "height": 256, "full_well_e": full_well}, shot_noise={"enabled": True},
+                       nonlinearity={"enabled": True, "linearity_error_pct": list(pair)},
+                       adc={"enabled": False})
+    (coefficients, reached) = nonlinearity.solve_polynomial(pair[0], pair[1], full_well)
+    assert abs(reached[0] - pair[0]) <= 0.25 and abs(reached[1] - pair[1]) <= 0.25
+    sensor = Sensor(cfg, seed=1)
+    x = np.linspace(0.0, full_well, nonlinearity.SERIES)
+    means = []
+    for mu in x:
+        s = sensor.with_exposure(integration_time_s=max(mu, 1e-9) / sensor.config.exposure.peak_rate_e_per_s)
+        means.append(float(s.expose("flat:1").frame(0).astype(np.float64).mean()))
+    means = np.array(means)
+    lo, hi = nonlinearity.linearity_error(x, means, means[-1])
+    n = 256 * 256
+    se = 100 * math.sqrt(0.05 * full_well / n) / (0.05 * full_well)
+    assert abs(lo - reached[0]) <= Z * se and abs(hi - reached[1]) <= Z * se, ((lo, hi), reached, se)
+
+
+def test_a_curve_is_applied_as_given_and_must_be_increasing(tmp_path):
+    curve = [[0, 0], [1000, 1000], [5000, 4800], [10000, 9000]]
+    cfg = quiet_config(sensor={"width": 64, "height": 48}, nonlinearity={"enabled": True, "curve_e": curve},
+                       adc={"enabled": False})
+    sensor = Sensor(cfg, seed=0).with_exposure(integration_time_s=3000 / 100000)
+    e = sensor.expose("flat:1").frame(0)
+    assert float(e[0, 0]) == pytest.approx(1000 + 2000 * 3800 / 4000, rel=1e-6)  # on the segment (1000, 5000)
+    r = cli("simulate", "--set", "nonlinearity.enabled=true", "--set", "nonlinearity.curve_e=[[0,0],[10,20],[20,15]]",
+            "--out", tmp_path / "o")
+    assert r.returncode == 2 and "strictly increasing" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_kernel_and_numpy_agree_with_every_new_stage_on_crops_included():
+    extra = {"sensor": {"width": 96, "height": 64},
+             "pixel_offset": {"enabled": True, "sigma_e": 4.0, "tail": {"ppm_above": 2000, "threshold_e": 20, "max_e": 200}},
+             "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.2, 0.6]},
+             "black_level": {"channel_offsets_dn": [1.5, -0.5, 0.25, 2.0], "frame_sigma_dn": 0.3},
+             "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.2, "shape": -0.05}}
+    shot = Sensor(load_config(extra=extra), seed=3).expose("colorchecker")
+    for k in (0, 7, 4_000_000_000):
+        whole = shot.frame(k)
+        detail = shot.frame(k, detail=True)
+        np.testing.assert_array_equal(whole, detail.raw)
+        np.testing.assert_array_equal(shot.frame(k, region=(3, 41, 5, 77)), whole[3:41, 5:77])
+        parts = detail.contributions
+        assert {"nonlinearity", "pixel_offset", "black_level", "read_noise"} <= set(parts)
+        before_adc = sum(v.astype(np.float64) for key, v in parts.items()
+                         if key not in ("black_level", "read_noise", "quantization"))
+        np.testing.assert_allclose(before_adc, detail.electrons, atol=1e-3)
