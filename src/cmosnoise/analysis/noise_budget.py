@@ -4,11 +4,15 @@ Temporal noise adds in variance. For one pixel at mean signal ``mu`` (e-),
 averaged over the array (the sensor's own fixed maps: flicker sigmas,
 column sigmas, column gains, dark-current map)::
 
-    var = (mu + d + thermal^2 + <flicker_i^2> + row^2) * <g_c^2> + <sigma_c^2> + 1 / (12 K^2)
+    var = ((mu + d) f'^2 + thermal^2 + <flicker_i^2> + row^2) * <g_c^2> + <sigma_c^2>
+          + (read_dn^2 + black_frame_dn^2 + 1/12) / K^2
 
-with ``d`` the mean dark charge (its shot noise), ``g_c`` the column gains
-and the last term quantization (1/12 DN^2, in e-). Fixed pattern noise is
-listed apart: DSNU (dark-current map, row and column offsets) and PRNU, the
+with ``d`` the mean dark charge (its shot noise), ``f'`` the
+nonlinearity's slope at ``mu + d`` (1 without one), ``g_c`` the column
+gains, the read noise after the gain and the frame's black-level error in DN,
+and quantization (1/12 DN^2), referred to e-. Fixed pattern noise is
+listed apart: DSNU (dark-current map, pixel offsets, row and column offsets,
+the black level's cell offsets) and PRNU, the
 PRNU as the photo-charge shows it, after crosstalk has averaged neighbouring
 gains (:attr:`Sensor.flat_response`).
 
@@ -34,17 +38,33 @@ if TYPE_CHECKING:
     from ..model.sensor import Sensor
 
 
+def transfer_slope(sensor: Sensor, charge_e: float) -> float:
+    """The nonlinearity's slope (output e- per collected e-) at ``charge_e``; 1 without one (stage 5b).
+
+    Charge-referred noise (shot noise) and signal differences (PRNU) pass
+    through the transfer scaled by it, to first order.
+    """
+    table = sensor.spec.nonlinearity
+    if table is None or not sensor.config.nonlinearity.enabled:
+        return 1.0
+    steps = table.size - 1
+    i = min(max(int(charge_e * steps / sensor.config.sensor.full_well_e), 0), steps - 1)
+    return float(table[i + 1] - table[i]) * steps / sensor.config.sensor.full_well_e
+
+
 def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:
     """Each temporal source's variance (e-^2) at mean photo-signal ``signal_e``."""
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
     g2 = float(np.mean(fp.column_gain.astype(np.float64) ** 2)) if fp.column_gain is not None else 1.0
+    dark_e = float(fp.dark_rate.mean()) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0
+    slope2 = transfer_slope(sensor, signal_e + dark_e) ** 2
     out: dict[str, float] = {}
     if c.shot_noise.enabled:
-        out["photon_shot"] = signal_e * g2
+        out["photon_shot"] = signal_e * g2 * slope2
     if fp.dark_rate is not None and c.dark_current.shot_noise:
-        out["dark_shot"] = float(fp.dark_rate.mean()) * c.exposure.integration_time_s * g2
+        out["dark_shot"] = dark_e * g2 * slope2
     if c.source_follower.enabled:
         out["thermal"] = c.source_follower.thermal_sigma_e**2 * g2
         if fp.flicker_sigma is not None:
@@ -53,7 +73,14 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
         out["row"] = c.row_noise.sigma_e**2 * g2
     if fp.column_sigma is not None:
         out["column"] = float(np.mean(fp.column_sigma.astype(np.float64) ** 2))
-    if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
+    if c.adc.enabled:  # the ideal readout (ADC off) is not quantized; after the gain, DN referred to e-
+        if c.read_noise.enabled:
+            from ..model.stages.read_noise import variance_dn2
+
+            rn = c.read_noise
+            out["read_after_gain"] = variance_dn2(rn.distribution, rn.scale_dn, rn.shape) / t.gain_dn_per_e**2
+        if c.black_level.frame_sigma_dn > 0:
+            out["black_level_frame"] = c.black_level.frame_sigma_dn**2 / t.gain_dn_per_e**2
         out["quantization"] = 1.0 / (12.0 * t.gain_dn_per_e**2)
     return out
 
@@ -70,6 +97,11 @@ def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, flo
         const["row_fixed"] = float(np.var(fp.row_offset.astype(np.float64)))
     if fp.vfpn is not None:
         const["vfpn"] = float(np.var(fp.vfpn.astype(np.float64)))
+    if fp.pixel_offset is not None:
+        const["pixel_offset"] = float(np.var(fp.pixel_offset.astype(np.float64)))
+    offsets = np.asarray(c.black_level.channel_offsets_dn, np.float64)
+    if c.adc.enabled and offsets.any():  # the four cell positions, equally many pixels each
+        const["black_level_cells"] = float(np.var(offsets)) / sensor.transfer.gain_dn_per_e**2
     if fp.prnu_gain is not None or c.crosstalk.enabled:
         per_s2["prnu"] = float(np.var(sensor.flat_response))  # after crosstalk, as frames show it
     if fp.column_gain is not None:
@@ -83,7 +115,8 @@ def fixed_pattern_variances(sensor: Sensor, signal_e: float = 0.0, _parts=None) 
     (``_parts``: :func:`fixed_pattern_parts` of this sensor, when several levels are asked for.)
     """
     const, per_s2 = _parts or fixed_pattern_parts(sensor)
-    return {**const, **{k: v * signal_e**2 for k, v in per_s2.items()}}
+    seen = signal_e * transfer_slope(sensor, signal_e)  # a gain difference passes the transfer by its slope
+    return {**const, **{k: v * seen**2 for k, v in per_s2.items()}}
 
 
 def _clipped_normal(m: np.ndarray, v: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -114,7 +147,10 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     approximation of the Poisson count) is clipped at the full well; the
     source follower's and the row's noise and offset are added; the column
     gain multiplies, the column's offset (VFPN) and noise are added; the ADC
-    clips at its top. Below the clips the moments are exact; where pixels
+    clips at its top (the read noise after the gain, the frame's black-level
+    error and the cell offsets with it). The nonlinearity is not followed
+    here: its slope scales the unclipped lines (:func:`transfer_slope`).
+    Below the clips the moments are exact; where pixels
     clip, the normal charge and the two clips taken as clipped normals leave
     an error of up to about 3 % of the temporal noise (+ 0.3 e- of the top
     code's quantization), 2 points of the top-code fraction and 4 % of the
@@ -140,7 +176,17 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
     col_read = fp.column_sigma.astype(np.float64) ** 2 if fp.column_sigma is not None else 0.0  # after it
     row_off = fp.row_offset.astype(np.float64) if fp.row_offset is not None else 0.0
+    if fp.pixel_offset is not None:  # with the row offsets: before the column gain
+        row_off = row_off + fp.pixel_offset.astype(np.float64)
     col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
+    if c.adc.enabled:  # after the gain, in DN: referred to e-
+        after = temporal_variances(sensor, 0.0)
+        col_read = col_read + after.get("read_after_gain", 0.0) + after.get("black_level_frame", 0.0)
+        cells = np.asarray(c.black_level.channel_offsets_dn, np.float64).reshape(2, 2)
+        if cells.any():
+            from ..model.stages.read_noise import black_map
+
+            col_off = col_off + black_map(cells, (0, shape[0], 0, shape[1])) / t.gain_dn_per_e
     gain = fp.column_gain.astype(np.float64) if fp.column_gain is not None else 1.0
     g2 = gain * gain
     mean = np.broadcast_to((mean_n + row_off) * gain + col_off, shape).copy()
