@@ -18,8 +18,9 @@ simulated sensor instance implies them, for the comparison table. The
 descriptor files a lab exchanges are :mod:`.emva_files`'; the job that
 writes the table and the curves is :mod:`cmosnoise.app.characterizing`.
 
-cmosnoise has no quantum efficiency: the "photons" of a series are the
-photo-electrons generated per pixel (eta = 1 before crosstalk's loss to the
+The "photons" of a series are the photo-electrons generated per pixel over
+the sensor's quantum efficiency (``sensor.quantum_efficiency``); without
+one, the photo-electrons themselves (eta = 1 before crosstalk's loss to the
 substrate and the PRNU gain map).
 """
 
@@ -108,8 +109,9 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
     stack_dark = np.stack(list(sd.frames(stack_frames)))
     if progress:
         progress()
+    qe = sensor.config.sensor.qe_mean() or 1.0  # photo-electrons per photon
     return Measurement(
-        t.bits, sensor.shape, texp, rate * texp, mu_y, mu_yd, s2_y, s2_yd, t50, rate * t50,
+        t.bits, sensor.shape, texp, rate * texp / qe, mu_y, mu_yd, s2_y, s2_yd, t50, rate * t50 / qe,
         stack_bright, stack_dark, max_yd, frames,
     )
 
@@ -134,7 +136,7 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
     signal = shot.photo_mean_e.astype(np.float64)
     if fp.column_gain is not None:
         signal = signal * fp.column_gain
-    qe = float(signal.mean())  # photo-electrons collected per photon
+    qe = float(signal.mean()) * (c.sensor.qe_mean() or 1.0)  # photo-electrons collected per photon
     dark = np.zeros(sensor.shape) if fp.dark_rate is None else fp.dark_rate.astype(np.float64)
     mo = noise_budget.clipped_moments(sensor.with_exposure(stack_texp_s), 0.0)
     expected_dark = mo["mean"]

@@ -134,8 +134,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     if all(ph is not None and ph > 0 for ph in photons):
         qe = fit_photo.quantum_efficiency([p[0] for p in pts], photons, k, ptc["saturation_index"], ptc["rel_se"])
         P["quantum_efficiency"] = _p(qe["value"], qe["ci95"], f"photo-electrons (signal / K) over photons per pixel, "
-                                     f"{qe['points']} levels below 70 % of saturation (reported; the configuration "
-                                     "gives light in e-/s, so it holds no QE)")
+                                     f"{qe['points']} levels below 70 % of saturation")
     else:
         not_fitted["quantum_efficiency"] = "needs the photons per pixel of every flat stack (EMVA 'b' lines, manifest 'photons')"
     plots["ptc"] = {"mu": ptc["mu"].tolist(), "v": ptc["v"].tolist(), "linear": ptc["linear"].tolist(), "K": k,
@@ -210,6 +209,28 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             if wp["couplets"] > 0 else 1.0
         res["white_pixels"] = wp
         res["exposures_s"] = sorted(set(float(x) for x in t))
+        if T == t_ref:  # the pixel offsets: each pixel's intercept, at the reference temperature
+            off = fit_dark.pixel_offsets([d.mean for d in ok], list(t), [d.pixel_var for d in ok], [d.n for d in ok],
+                                         k, limit)
+            where = (f"each pixel's dark intercept over {len(ok)} exposure times, rows and columns taken out, less "
+                     f"the intercepts' temporal noise ({off['noise_e']:.3g} e- rms): robust sigma of {off['pixels']} pixels")
+            P["pixel_offset.sigma_e"] = _p(off["sigma_e"]["value"], off["sigma_e"]["ci95"], where)
+            if off["tail"] is not None:
+                tl = off["tail"]
+                P["pixel_offset.tail.ppm_above"] = _p(tl["ppm_above"], tl["ci95"], f"pixels whose intercept is above "
+                                                      f"{tl['threshold_e']:.4g} e- (exact binomial interval)",
+                                                      threshold_e=tl["threshold_e"])
+                P["pixel_offset.tail.max_e"] = _p(tl["max_e"], None, "largest intercept above the body")
+            plots["pixel_offset"] = {"residual": off["residual_e"]}
+            # the intercept holds this sensor's mean offset; another instance of the fitted sensor draws its own
+            # map, whose mean strays by sigma / sqrt(pixels): the black level's interval carries that spread too
+            b = P["black_level_dn"]
+            if b["ci95"] is not None:
+                half = (b["ci95"][1] - b["ci95"][0]) / 2
+                spread = off["sigma_e"]["value"] * k / math.sqrt(rows * cols)
+                half = math.sqrt(half**2 + (Z95 * spread) ** 2)
+                b["ci95"] = [b["value"] - half, b["value"] + half]
+                b["method"] += "; interval includes an instance's mean pixel offset"
         dark_maps[T], dark_fits[T] = rates, res
         for name, p in res["parameters"].items():
             P[f"dark_current[{T:g} C].{name}"] = p
@@ -417,12 +438,35 @@ def fitted_config(base, result: dict):
         base_ppm = fit_readout.ppm_above(thr, loc, scale, 0.0, 0.0)
         if mx is not None and ppm > base_ppm * 1.001 and mx > 0:
             tail = {"ppm_above": ppm, "threshold_e": thr, "max_e": mx}
+            from ..model.heavy_tail import UnreachablePpm
+            from ..model.stages.source_follower import flicker_model
+
+            try:  # a tail the body and its maximum can give (a fraction of a pixel's ppm often cannot)
+                flicker_model(loc, scale, ppm, thr, mx)
+            except UnreachablePpm as exc:
+                tail = None
+                result["not_fitted"]["source_follower.flicker.tail"] = (
+                    f"the fitted tail ({ppm:.3g} ppm above {thr:g} e-, up to {mx:.3g} e-) cannot be put on the fitted "
+                    f"body ({exc}); left out: too few tail pixels to model")
         u["source_follower"] = {"enabled": True, "thermal_sigma_e": v("source_follower.thermal_sigma_e"),
                                 "flicker": {"enabled": True, "gumbel_loc_e": loc, "gumbel_scale_e": scale, "tail": tail}}
         u["row_noise"] = {"enabled": True, "sigma_e": v("row_noise.sigma_e"), "fixed_sigma_e": v("row_noise.fixed_sigma_e")}
         u["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
                              "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
                                           "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+    if "quantum_efficiency" in P and 0 < v("quantum_efficiency") <= 1:
+        # photons per pixel over the fitted configuration's e-: what a crosstalk loss and the PRNU map leave aside
+        u["sensor"]["quantum_efficiency"] = v("quantum_efficiency")
+    if "pixel_offset.sigma_e" in P:
+        lo = P["pixel_offset.sigma_e"]["ci95"][0]
+        sig = v("pixel_offset.sigma_e")
+        off_tail = None
+        if "pixel_offset.tail.ppm_above" in P:
+            off_tail = {"ppm_above": v("pixel_offset.tail.ppm_above"),
+                        "threshold_e": P["pixel_offset.tail.ppm_above"]["threshold_e"],
+                        "max_e": max(v("pixel_offset.tail.max_e"), P["pixel_offset.tail.ppm_above"]["threshold_e"])}
+        # on only where the data show offsets (the interval excludes 0, or a tail): else the section is left off
+        u["pixel_offset"] = {"enabled": bool(lo > 0 or off_tail is not None), "sigma_e": sig, "tail": off_tail}
     xt = _crosstalk_update(P)
     if xt is not None:
         u["crosstalk"] = xt

@@ -205,6 +205,67 @@ def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], g
     return slope / gain_dn_per_e
 
 
+def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_vars_dn2: list[np.ndarray],
+                  frames: list[int], gain_dn_per_e: float, limit_dn: float) -> dict:
+    """The pixel offsets (docs/model.md stage 5c) from each pixel's dark intercept over exposure time.
+
+    Each pixel's dark mean is a line in exposure time: its intercept is the
+    black level plus the pixel's offset, its slope the pixel's dark current.
+    The intercepts' spread over the array, with the row and column means
+    taken out (the fixed row offsets and VFPN are fitted apart) and the
+    intercepts' own temporal noise removed, is the offsets' variance:
+
+        var(offset) = var_robust(residual) / (1 - 1/rows - 1/cols) - <var(intercept)>
+
+    with ``var(intercept) = sum_j c_j**2 var_j / n_j`` (``c_j`` the intercept's
+    least-squares weights, ``var_j`` a pixel's temporal variance at exposure
+    ``j`` over its ``n_j`` frames). The body's sigma is taken robustly
+    (median absolute deviation: a tail of large offsets does not inflate it);
+    pixels more than 5 body sigmas (with the noise) above it are the tail,
+    counted with an exact binomial interval against what the body puts there.
+    Pixels that reach ``limit_dn`` in any stack are left out (a white pixel
+    bends its own line).
+
+    Returns
+    -------
+    dict with ``sigma_e`` (value, ci95), ``tail`` (ppm_above, threshold_e,
+    max_e, ci95, pixels) or None, ``residual_e`` (rows, cols) and ``pixels``.
+    """
+    from scipy import stats
+
+    t = np.asarray(exposures_s, np.float64)
+    J = t.size
+    tc = t - t.mean()
+    c = 1.0 / J - t.mean() * tc / np.sum(tc * tc)  # the intercept's weights on the J means
+    stack = np.stack([np.asarray(m, np.float64) for m in means_dn])
+    usable = np.all(stack < limit_dn, axis=0)
+    intercept = np.tensordot(c, stack, axes=1)
+    rows, cols = intercept.shape
+    resid = np.where(usable, intercept, np.nan)
+    resid = resid - np.nanmean(resid, axis=1, keepdims=True) - np.nanmean(resid, axis=0, keepdims=True) + np.nanmean(resid)
+    resid_e = resid / gain_dn_per_e
+    values = resid_e[usable]
+    n = values.size
+    noise = float(sum(ci * ci * float(np.mean(v)) / nj for ci, v, nj in zip(c, pixel_vars_dn2, frames))) / gain_dn_per_e**2
+    shrink = 1 - 1 / rows - 1 / cols
+    _, robust = robust_centre(values)
+    total_var = robust**2 / shrink
+    var = total_var - noise
+    # the MAD's sampling variance is 1.36 times the standard deviation's: se(var) = 2 var sqrt(1.36 / (2 n))
+    se = 2 * total_var * math.sqrt(1.36 / (2 * n))
+    sigma = math.sqrt(max(var, 0.0))
+    threshold = 5.0 * math.sqrt(total_var)
+    above = int(np.sum(values > threshold))
+    expected = n * float(stats.norm.sf(threshold / math.sqrt(total_var)))
+    tail = None
+    if above >= 3 and stats.poisson.sf(above - 1, expected) < 1e-3:
+        ci = stats.binomtest(above, n).proportion_ci(0.95, method="exact")
+        tail = {"ppm_above": above / n * 1e6, "threshold_e": threshold, "max_e": float(values.max()),
+                "ci95": [ci.low * 1e6, ci.high * 1e6], "pixels": above}
+    return {"sigma_e": {"value": sigma, "ci95": [math.sqrt(max(var - Z95 * se, 0.0)), math.sqrt(max(var + Z95 * se, 0.0))]},
+            "noise_e": math.sqrt(noise), "tail": tail, "residual_e": resid_e, "pixels": n}
+
+
 def clipped_pixels(means_dn: list[np.ndarray], limit_dn: float) -> np.ndarray:
     """Pixels below ``limit_dn`` at fewer than two of the stacks: their rate is a lower bound (bool map)."""
     return sum((np.asarray(m) < limit_dn).astype(np.int32) for m in means_dn) < 2

@@ -114,6 +114,25 @@ class SensorSection(Section):
     full_well_e: float = Field(10000.0, ge=1, le=1e7, description="full-well capacity, e-")
     temperature_c: float = Field(25.0, ge=-60, le=150, description="operating temperature, degrees C")
     pixel_pitch_um: float = Field(2.2, gt=0, le=100, description="pixel pitch, um")
+    quantum_efficiency: Optional[Union[float, tuple[float, float, float]]] = Field(
+        None, description="quantum efficiency (0, 1], one number or R, G, B: photo-electrons per photon. Light given "
+                          "in photons (exposure.peak_rate_photons_per_s) needs it; with light in e-/s it says how many "
+                          "photons that was (characterize's eta). null: light in e-/s, no photons")
+
+    @field_validator("quantum_efficiency")
+    @classmethod
+    def _qe(cls, v):
+        values = [v] if isinstance(v, (int, float)) else list(v or [])
+        if any(not 0 < x <= 1 for x in values):
+            raise ValueError(f"quantum_efficiency = {v}: each must be in (0, 1] (electrons per photon)")
+        return v
+
+    def qe_mean(self) -> float | None:
+        """The quantum efficiency, one number (the channels' mean), or None."""
+        q = self.quantum_efficiency
+        if q is None:
+            return None
+        return float(q) if isinstance(q, (int, float)) else float(sum(q) / 3)
 
     @field_validator("cfa", mode="before")
     @classmethod
@@ -133,6 +152,9 @@ class ExposureSection(Section):
     peak_rate_e_per_s: float = Field(
         100000.0, ge=0, le=1e10, description="photo-electron rate of a scene value of 1.0, e-/s per pixel"
     )
+    peak_rate_photons_per_s: Optional[float] = Field(
+        None, ge=0, le=1e12, description="light as photons: photons per second per pixel at a scene value of 1.0 "
+                                         "(times sensor.quantum_efficiency: e-/s); null: peak_rate_e_per_s")
 
 
 # ------------------------------------------------------------------------ stages
@@ -459,6 +481,12 @@ class Config(Section):
             raise ValueError(
                 f"adc.black_level_dn = {self.adc.black_level_dn:g} leaves no range: it must be below 2^bits - 1 = {top}"
             )
+        ex = self.exposure
+        if ex.peak_rate_photons_per_s is not None:
+            if self.sensor.quantum_efficiency is None:
+                raise ValueError("exposure.peak_rate_photons_per_s needs sensor.quantum_efficiency (electrons per photon)")
+            if "peak_rate_e_per_s" in ex.model_fields_set:
+                raise ValueError("give the light once: exposure.peak_rate_e_per_s or exposure.peak_rate_photons_per_s")
         if isinstance(self.crosstalk.kernel_pct, dict) and self.sensor.cfa == "none" and self.crosstalk.enabled:
             raise ValueError("crosstalk.kernel_pct: a per-colour kernel needs a colour sensor (sensor.cfa is 'none')")
         return self

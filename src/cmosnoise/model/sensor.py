@@ -114,8 +114,9 @@ class Sensor:
         updates = {}
         if integration_time_s is not None:
             updates["integration_time_s"] = float(integration_time_s)
-        if peak_rate_e_per_s is not None:
+        if peak_rate_e_per_s is not None:  # light in e-/s from here (a photon rate would take precedence)
             updates["peak_rate_e_per_s"] = float(peak_rate_e_per_s)
+            updates["peak_rate_photons_per_s"] = None
         exposure = build_section(ExposureSection, {**self.config.exposure.model_dump(), **updates}, "exposure")
         spec = self.spec.with_config(self.config.model_copy(update={"exposure": exposure}))
         other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache)
@@ -223,7 +224,7 @@ class Sensor:
         return RawInfo(
             cfa=self.cfa, black_level_dn=t.black_level_dn, bits=t.bits, white_dn=self.white_dn,
             crosstalk_kernel_pct=c.crosstalk.kernel_pct if c.crosstalk.enabled else None,
-            responsivity=tuple(c.sensor.channel_responsivity),
+            responsivity=self.spec.channel_responsivity,
         )
 
     def stages_on(self) -> dict[str, bool]:
@@ -275,7 +276,7 @@ class Sensor:
                 return rgb
             if rgb.shape[2] == 1:
                 rgb = np.repeat(rgb, 3, axis=2)
-        return scene_mod.to_cfa(rgb, self.cfa, c.sensor.channel_responsivity)
+        return scene_mod.to_cfa(rgb, self.cfa, self.spec.channel_responsivity)
 
     def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> "Exposure":
         """Mean charge of ``scene`` at the configured exposure and temperature.
@@ -290,7 +291,7 @@ class Sensor:
         if self.cache is None or not isinstance(scene, str):
             return Exposure(self, self.scene_signal(scene), sequence)
         c = self.config
-        signal_parts = (scene, self.shape, self.cfa, list(c.sensor.channel_responsivity), c.scene.scale, c.scene.fit)
+        signal_parts = (scene, self.shape, self.cfa, list(self.spec.channel_responsivity), c.scene.scale, c.scene.fit)
         signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))
         return Exposure(self, signal, sequence, signal_parts)
 
@@ -335,11 +336,11 @@ class Exposure:
         ex = c.exposure
 
         def photo():
-            perfect = scene_mod.photo_electrons(signal, ex.peak_rate_e_per_s, ex.integration_time_s)
+            perfect = scene_mod.photo_electrons(signal, sensor.spec.peak_rate_e_per_s, ex.integration_time_s)
             after_prnu, mean = sensor.photo_response(perfect)
             return perfect, after_prnu, mean.astype(np.float32)
 
-        photo_parts = (signal_parts, sensor.seed, sensor.shape, ex.peak_rate_e_per_s, ex.integration_time_s,
+        photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
                        deps["prnu_gain"], c.crosstalk)
         #: stage 1: mean photo-electrons of the perfect image; after PRNU (stage 2); after crosstalk (stage 3):
         #: the mean photo-charge that shot noise acts on

@@ -79,10 +79,29 @@ class SensorSpec:
         return float(min(self.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
 
     @property
+    def peak_rate_e_per_s(self) -> float:
+        """Photo-electrons per second per pixel at a scene value of 1: the configuration's, or its photons times
+        the quantum efficiency (the channels' mean; :attr:`channel_responsivity` carries their ratios)."""
+        ex, q = self.config.exposure, self.config.sensor.qe_mean()
+        return ex.peak_rate_e_per_s if ex.peak_rate_photons_per_s is None else ex.peak_rate_photons_per_s * q
+
+    @property
+    def channel_responsivity(self) -> tuple[float, float, float]:
+        """Relative R, G, B responsivity: the filters', times each channel's quantum efficiency over their mean
+        when light is given in photons with a QE per channel."""
+        sen = self.config.sensor
+        r = tuple(sen.channel_responsivity)
+        q = sen.quantum_efficiency
+        if self.config.exposure.peak_rate_photons_per_s is None or q is None or isinstance(q, (int, float)):
+            return r
+        m = sen.qe_mean()
+        return tuple(ri * qi / m for ri, qi in zip(r, q))
+
+    @property
     def white_dn(self) -> float:
         """The raw code of scene white: a scene value of 1, or the top code if that is lower."""
         c, t = self.config, self.transfer
-        white_e = c.exposure.peak_rate_e_per_s * c.exposure.integration_time_s
+        white_e = self.peak_rate_e_per_s * c.exposure.integration_time_s
         return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
 
     def with_config(self, config: Config) -> "SensorSpec":
