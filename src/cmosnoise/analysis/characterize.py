@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import CmosnoiseError
 from ..model.seeds import SEQ_EMVA_BRIGHT, SEQ_EMVA_DARK, SEQ_EMVA_STACK_BRIGHT, SEQ_EMVA_STACK_DARK
-from ..model.stages import adc
+from ..model.stages import adc, nonlinearity
 from . import emva, noise_budget
 
 if TYPE_CHECKING:
@@ -82,13 +82,37 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
         raise CmosnoiseError(f"steps = {steps!r}: the photon-transfer series needs at least {MIN_STEPS} exposure times")
     if not isinstance(stack_frames, (int, np.integer)) or stack_frames < 2:
         raise CmosnoiseError(f"stack_frames = {stack_frames!r}: a stack needs at least 2 frames")
-    t = sensor.transfer
     rate = sensor.saturation_e / 1.0  # photo-electrons per second per pixel at scene value 1
     texp = np.linspace(1.3 / steps, 1.3, steps)
+    t50 = 0.5  # half of saturation
+    return _series(sensor, texp, np.full(steps, rate), t50, rate, stack_frames, keep_frames, progress)
+
+
+def measure_like(sensor: Sensor, like: Measurement, keep_frames: bool = False,
+                 progress: Callable[[], None] | None = None) -> Measurement:
+    """The measurement series of ``like`` (a lab's: its exposure times, photons per pixel and stack sizes) made on
+    ``sensor``: each step's photons times the sensor's quantum efficiency (1 without one) are its photo-electrons.
+
+    What a comparison with a measured data set needs: EMVA 1288's linearity
+    error and saturation depend on where the series samples the response.
+    """
+    qe = sensor.config.sensor.qe_mean() or 1.0
+    texp = np.maximum(np.asarray(like.texp_s, np.float64), 1e-9)
+    stack_t = max(float(like.stack_texp_s), 1e-9)
+    return _series(sensor, texp, np.asarray(like.mu_p, np.float64) * qe / texp, stack_t,
+                   float(like.stack_mu_p) * qe / stack_t, max(len(like.stack_dark), 2), keep_frames, progress)
+
+
+def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: float, stack_rate: float,
+            stack_frames: int, keep_frames: bool, progress) -> Measurement:
+    """Bright and dark pairs at each exposure time ``texp`` under ``rates`` photo-electrons per second generated per
+    pixel, and the two stacks; photons are the photo-electrons over the sensor's quantum efficiency."""
+    t = sensor.transfer
+    steps = texp.size
     mu_y, mu_yd, s2_y, s2_yd, max_yd = (np.zeros(steps) for _ in range(5))
     frames: dict = {}
-    for i, ti in enumerate(texp):
-        s = sensor.with_exposure(ti, rate)
+    for i, (ti, ri) in enumerate(zip(texp, rates)):
+        s = sensor.with_exposure(ti, ri)
         bright = s.expose("flat:1.0", sequence=SEQ_EMVA_BRIGHT)
         dark = s.expose("flat:0", sequence=SEQ_EMVA_DARK)
         a, b = bright.frame(2 * i), bright.frame(2 * i + 1)
@@ -101,8 +125,7 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
             frames[f"d_{i:03d}"] = [da, db]
         if progress:
             progress()
-    t50 = 0.5  # half of saturation
-    s = sensor.with_exposure(t50, rate)
+    s = sensor.with_exposure(stack_texp, stack_rate)
     sb = s.expose("flat:1.0", sequence=SEQ_EMVA_STACK_BRIGHT)
     sd = s.expose("flat:0", sequence=SEQ_EMVA_STACK_DARK)
     stack_bright = np.stack(list(sb.frames(stack_frames)))
@@ -111,13 +134,16 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
         progress()
     qe = sensor.config.sensor.qe_mean() or 1.0  # photo-electrons per photon
     return Measurement(
-        t.bits, sensor.shape, texp, rate * texp / qe, mu_y, mu_yd, s2_y, s2_yd, t50, rate * t50 / qe,
+        t.bits, sensor.shape, texp, rates * texp / qe, mu_y, mu_yd, s2_y, s2_yd, stack_texp, stack_rate * stack_texp / qe,
         stack_bright, stack_dark, max_yd, frames,
     )
 
 
-def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
+def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray | None = None) -> dict:
     """The same quantities as the simulated sensor instance implies them (its configuration and maps).
+
+    ``series_e``: the photo-charge per pixel at each step of the measured
+    series, where the linearity error is sampled (default: 101 equal steps to the full well).
 
     DSNU: the EMVA estimator applied to the expected dark image at the
     stack's exposure time, with the full-well and ADC clips (white pixels
@@ -144,6 +170,15 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
         dn = adc.expected_code(mo["mean"] * k + t.black_level_dn, np.sqrt(mo["var"]) * k)
         expected_dark = (dn - t.black_level_dn) / k
     sp = emva.spatial_variances(expected_dark[None])
+    le = (0.0, 0.0)
+    if sensor.spec.nonlinearity is not None and c.nonlinearity.enabled:
+        # the transfer on the series' own photo-charges (the linearity error depends on where it is sampled)
+        fw = c.sensor.full_well_e
+        x = (np.asarray(series_e, np.float64) if series_e is not None
+             else np.linspace(0.0, fw, nonlinearity.SERIES))
+        x = x[x <= fw]
+        y = nonlinearity.apply(x, sensor.spec.nonlinearity, fw)
+        le = nonlinearity.linearity_error(x, y, float(y[-1]))
     sigma_y_dark = math.sqrt(read_var * k**2 + 1 / 12)
     u_p_min = (sigma_y_dark / k + 0.5) / qe
     return {
@@ -158,5 +193,7 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5) -> dict:
         "dark_current_var_e_per_s": float(dark.mean()) if c.dark_current.shot_noise else 0.0,
         "dsnu_e": math.sqrt(max(sp["total"], 0.0)),
         "dsnu_column_e": math.sqrt(max(sp["column"], 0.0)),
-        "prnu_pct": 100 * float(signal.std(ddof=1) / signal.mean()),  # ddof=1 as the EMVA estimator (matters on tiny sensors)
+        "prnu_pct": 100 * float(signal.std(ddof=1) / signal.mean()),
+        "linearity_error_min_pct": le[0],
+        "linearity_error_max_pct": le[1],  # ddof=1 as the EMVA estimator (matters on tiny sensors)
     }

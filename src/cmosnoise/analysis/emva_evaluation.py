@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..model.stages.nonlinearity import linearity_error
 from . import emva
 from .characterize import Measurement
 
@@ -104,8 +105,16 @@ def evaluate(m: Measurement) -> dict:
     dsnu = emva.dsnu(m.stack_dark)
     defects = emva.defect_pixels(m.stack_bright, m.stack_dark, float(np.max(m.mu_y)))
     prnu = emva.prnu(m.stack_bright, m.stack_dark, exclude=defects)
+    try:  # EMVA 1288's linearity error: the mean signal against the photons, 5 to 95 % of saturation
+        le_min, le_max = linearity_error(m.mu_p, y, float(y[i_sat]))
+    except ValueError:
+        le_min = le_max = math.nan
+        unavailable["linearity_error_min_pct"] = unavailable["linearity_error_max_pct"] = (
+            "fewer than 3 exposure times between 5 and 95 % of saturation")
     out = {
         "system_gain_K_dn_per_e": k,
+        "linearity_error_min_pct": le_min,
+        "linearity_error_max_pct": le_max,
         "inverse_gain_e_per_dn": 1 / k,
         "quantum_efficiency": qe,
         "responsivity_dn_per_photon": r,
@@ -158,6 +167,8 @@ TABLE_ROWS = [
     ("dynamic_range_db", "Dynamic range", "dB", "{:.1f}"),
     ("dark_current_mean_e_per_s", "Dark current (from mean)", "e-/s", "{:.2f}"),
     ("dark_current_var_e_per_s", "Dark current (from variance)", "e-/s", "{:.2f}"),
+    ("linearity_error_min_pct", "Linearity error min", "%", "{:.3f}"),
+    ("linearity_error_max_pct", "Linearity error max", "%", "{:.3f}"),
     ("dsnu_e", "DSNU1288", "e-", "{:.3f}"),
     ("dsnu_column_e", "  of which column (VFPN)", "e-", "{:.3f}"),
     ("prnu_pct", "PRNU1288", "%", "{:.3f}"),

@@ -53,6 +53,8 @@ def _evaluate(descriptor: str) -> dict:
         "dark_current_var_e_per_s": float(r.u_I_var),
         "dsnu_e": float(r.DSNU1288),
         "prnu_pct": float(r.PRNU1288),
+        "linearity_error_min_pct": float(r.LE_min),
+        "linearity_error_max_pct": float(r.LE_max),
     }
 
 

@@ -137,6 +137,26 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                                      f"{qe['points']} levels below 70 % of saturation")
     else:
         not_fitted["quantum_efficiency"] = "needs the photons per pixel of every flat stack (EMVA 'b' lines, manifest 'photons')"
+    nonlin = None
+    if all(ph is not None and ph > 0 for ph in photons):
+        npix = rows * cols
+        mean_var = [p[2].temporal_var / (npix * p[2].n) + p[3].temporal_var / (npix * p[3].n) for p in pts]
+        nonlin = fit_photo.nonlinearity([p[0] for p in pts], [p[1] for p in pts], photons, k,
+                                        ptc["saturation_index"], mean_var)
+        if nonlin["bent"]:
+            P["quantum_efficiency"] = _p(nonlin["qe"], [nonlin["qe"] - Z95 * nonlin["qe_se"],
+                                                        nonlin["qe"] + Z95 * nonlin["qe_se"]],
+                                         f"the small-signal slope of the mean signal (e-) over photons, a quartic "
+                                         f"through the origin of {nonlin['levels']} levels below saturation")
+            P["nonlinearity.acts_on"] = _p(nonlin["acts_on"], None, "the photon transfer's variance follows "
+                                           + ("f'(c)^2 c: the conversion bends after the shot noise"
+                                              if nonlin["acts_on"] == "charge" else
+                                              "the mean: the collection bends before the shot noise"))
+        else:
+            not_fitted["nonlinearity"] = (f"the mean signal is a straight line in the photons (F test of a quartic, "
+                                          f"p = {nonlin['p_value']:.2g}): left off")
+    else:
+        not_fitted["nonlinearity"] = "needs the photons per pixel of every flat stack"
     plots["ptc"] = {"mu": ptc["mu"].tolist(), "v": ptc["v"].tolist(), "linear": ptc["linear"].tolist(), "K": k,
                     "saturation_index": ptc["saturation_index"]}
 
@@ -302,6 +322,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         plots["prnu"] = {"residual": pg["relative_residual"]}
     _include_gain_uncertainty(P, ptc["rel_se"])
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
+            "_nonlinearity": nonlin if nonlin is not None and nonlin["bent"] else None,
             "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
                      "temperatures": temps, "source": ds.source, "input": ds.kind},
             "_maps": dark_maps}
@@ -404,6 +425,21 @@ def fitted_config(base, result: dict):
     k, black, bits = v("system_gain_K_dn_per_e"), v("black_level_dn"), meta["bits"]
     black = min(max(round(black, 3), 0.0), 2**bits - 2)
     full = v("full_well_e", base.sensor.full_well_e)
+    nonlin = result.get("_nonlinearity")
+    nl_update = None
+    if nonlin is not None:
+        # the full well clips the collected charge: on each frame's charge that is before the transfer, so the
+        # measured top (output e-) is the transfer of the full well; on the mean charge, the output itself
+        if nonlin["acts_on"] == "charge":
+            grid = np.linspace(0.0, 2.0 * full, 4001)
+            full = float(np.interp(full, nonlin["transfer"](grid), grid))
+        c = np.linspace(0.0, full, 33)
+        out = nonlin["transfer"](c)
+        if np.all(np.diff(out) > 0) and np.all(nonlin["slope"](c) > 0):
+            nl_update = {"enabled": True, "acts_on": nonlin["acts_on"], "linearity_error_pct": None,
+                         "curve_e": [[float(a), float(b)] for a, b in zip(c, out)]}
+        else:
+            result["not_fitted"]["nonlinearity"] = "the fitted transfer is not increasing over the full well: left off"
     u: dict = {
         "sensor": {"width": meta["shape"][1], "height": meta["shape"][0], "cfa": meta["cfa"],
                    "full_well_e": round(float(full), 1), "temperature_c": meta["temperature_c"]},
@@ -454,6 +490,8 @@ def fitted_config(base, result: dict):
         u["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
                              "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
                                           "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+    if nl_update is not None:
+        u["nonlinearity"] = nl_update
     if "quantum_efficiency" in P and 0 < v("quantum_efficiency") <= 1:
         # photons per pixel over the fitted configuration's e-: what a crosstalk loss and the PRNU map leave aside
         u["sensor"]["quantum_efficiency"] = v("quantum_efficiency")

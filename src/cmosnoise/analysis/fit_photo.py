@@ -98,6 +98,72 @@ def quantum_efficiency(mu_dn, photons, k: float, saturation_index: int, k_rel_se
     return {"value": q, "ci95": [q - half, q + half], "points": int(lin.size)}
 
 
+def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_var_dn2=None) -> dict:
+    """The photo-response nonlinearity (docs/model.md stage 5b) from the photon-transfer means.
+
+    The mean signal in e- (``mu_dn / k``) below saturation is fitted as a
+    quartic through the origin in the photons, ``y = p1 x + p2 x**2 + p3 x**3
+    + p4 x**4`` (weighted least squares, each mean's sampling variance from
+    ``mean_var_dn2`` or its temporal variance over the pixels it averages),
+    and against a line through the origin: an F test says whether the bend is
+    there (p < 1e-3). ``p1`` is then the quantum efficiency (the small-signal
+    slope), and the transfer, as a function of the collected charge
+    ``c = p1 x``, is ``f(c) = c + p2 c**2 / p1**2 + p3 c**3 / p1**3 + p4 c**4 / p1**4``.
+
+    Where it acts: on each frame's charge (after the shot noise) the
+    variance follows ``K**2 f'(c)**2 c``; on the mean charge (before it)
+    ``K**2 f(c)``, as the photon transfer of a linear sensor. The one with
+    the smaller chi-square over the same points is taken.
+
+    Returns
+    -------
+    dict: ``bent`` (bool), ``p_value``, ``coefficients`` (p1..p4), ``qe`` and
+    its standard error, ``acts_on``, and ``transfer(c)`` (e- in, e- out).
+    """
+    from scipy import stats
+
+    mu = np.asarray(mu_dn, np.float64) / k
+    v = np.asarray(v_dn2, np.float64) / k**2
+    ph = np.asarray(photons, np.float64)
+    order = np.argsort(mu)
+    mu, v, ph = mu[order], v[order], ph[order]
+    use = np.nonzero((np.arange(mu.size) < saturation_index) & (mu > 0) & (mu <= 0.95 * mu[saturation_index]))[0]
+    if use.size < 6:
+        return {"bent": False, "p_value": 1.0, "why": f"{use.size} levels below saturation; a bend needs 6"}
+    x, y = ph[use], mu[use]
+    var_mean = (np.asarray(mean_var_dn2, np.float64)[order][use] / k**2 if mean_var_dn2 is not None
+                else np.maximum(v[use], 1e-12) / 1e4)
+    w = 1.0 / var_mean
+    scale = float(x.max())
+    X4 = np.stack([(x / scale) ** j for j in (1, 2, 3, 4)], axis=1)
+    sw = np.sqrt(w)
+    coef4, *_ = np.linalg.lstsq(X4 * sw[:, None], y * sw, rcond=None)
+    rss4 = float(np.sum(w * (y - X4 @ coef4) ** 2))
+    coef1 = float(np.sum(w * X4[:, 0] * y) / np.sum(w * X4[:, 0] ** 2))
+    rss1 = float(np.sum(w * (y - X4[:, 0] * coef1) ** 2))
+    dof = use.size - 4
+    F = ((rss1 - rss4) / 3) / max(rss4 / dof, 1e-300)
+    p_value = float(stats.f.sf(F, 3, dof))
+    p = coef4 / scale ** np.arange(1, 5)  # in photons
+    cov = np.linalg.pinv((X4 * w[:, None]).T @ X4) * max(rss4 / dof, 1.0)
+    qe, qe_se = float(p[0]), float(math.sqrt(cov[0, 0])) / scale
+
+    def transfer(c):
+        c = np.asarray(c, np.float64)
+        return c + p[1] * c**2 / p[0] ** 2 + p[2] * c**3 / p[0] ** 3 + p[3] * c**4 / p[0] ** 4
+
+    def slope(c):
+        return 1 + 2 * p[1] * c / p[0] ** 2 + 3 * p[2] * c**2 / p[0] ** 3 + 4 * p[3] * c**3 / p[0] ** 4
+
+    c = qe * x
+    var_v = 2 * np.maximum(v[use], 1e-12) ** 2 / 100  # only the comparison of the two matters: a common scale
+    chi_charge = float(np.sum((v[use] - slope(c) ** 2 * c) ** 2 / var_v))
+    chi_mean = float(np.sum((v[use] - transfer(c)) ** 2 / var_v))
+    return {"bent": p_value < 1e-3, "p_value": p_value, "coefficients": [float(a) for a in p], "qe": qe,
+            "qe_se": qe_se, "acts_on": "charge" if chi_charge < chi_mean else "mean", "transfer": transfer,
+            "slope": slope, "levels": int(use.size)}
+
+
 def channel_normalised(signal: np.ndarray, pattern: str, mask: np.ndarray) -> np.ndarray:
     """``signal`` divided, colour channel by colour channel, by the channel's mean over the kept pixels."""
     out = np.empty_like(signal, dtype=np.float64)

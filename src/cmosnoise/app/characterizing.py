@@ -29,7 +29,7 @@ from ..model.spec import SensorSpec
 
 def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from: Path | None = None,
         steps: int = 40, stack_frames: int = 16, emva_export: Path | None = None,
-        progress: Callable[[int], Callable[[], None]] | None = None) -> dict:
+        progress: Callable[[int], Callable[[], None]] | None = None, like: Path | None = None) -> dict:
     """Characterize ``spec``'s sensor (or the frames of the descriptor ``frames_from``, compared with ``spec``
     when given) into ``out``; returns ``{"measured", "model", "notes", "reference"}``.
 
@@ -46,12 +46,16 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
     if frames_from is not None:
         m = emva_files.load(frames_from)
         if spec is not None:
-            model = ch.model_values(Sensor(spec))
+            model = ch.model_values(Sensor(spec), series_e=m.mu_p * (spec.config.sensor.qe_mean() or 1.0))
     else:
         sensor = Sensor(spec)
-        advance = progress(steps + 1) if progress else None
-        m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance)
-        model = ch.model_values(sensor, m.stack_texp_s)
+        plan = emva_files.load(like) if like is not None else None
+        advance = progress((len(plan.texp_s) if plan is not None else steps) + 1) if progress else None
+        if plan is not None:  # another data set's exposure times, photons and stack sizes
+            m = ch.measure_like(sensor, plan, keep_frames=emva_export is not None, progress=advance)
+        else:
+            m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance)
+        model = ch.model_values(sensor, m.stack_texp_s, series_e=m.mu_p * (sensor.config.sensor.qe_mean() or 1.0))
     results = ev.evaluate(m)
     notes = ev.footnotes(results)
     with folder as tmp:

@@ -216,6 +216,9 @@ def characterize(
     stack_frames: int = typer.Option(16, "--stack-frames", min=2, max=10000, help="frames per stack for DSNU and PRNU"),
     emva_export: Optional[Path] = typer.Option(None, "--emva-export", help="also write the frames and an EMVA 1288 descriptor here"),
     frames_from: Optional[Path] = typer.Option(None, "--frames-from", help="characterize frames from an EMVA 1288 descriptor (folder or file) instead"),
+    like: Optional[Path] = typer.Option(None, "--like", help="measure the configuration with the exposure times, photons "
+                                        "and stack sizes of this EMVA 1288 data set (folder or descriptor), for a "
+                                        "side-by-side comparison with it"),
     out: Path = typer.Option(Path("cmosnoise-characterization"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
@@ -225,6 +228,9 @@ def characterize(
     from ..analysis.emva_evaluation import TABLE_ROWS, table
     from .characterizing import run as characterize_job
 
+    if like is not None and frames_from is not None:
+        raise CmosnoiseError("--like measures a configuration on another data set's plan; --frames-from reads frames "
+                             "instead: give one of the two")
     spec = None
     if frames_from is None or config or preset or set_:
         spec = _sensor(config, preset, set_, {"seed": seed} if seed is not None else None)
@@ -234,7 +240,7 @@ def characterize(
             task = p.add_task("series", total=total)
             return lambda: p.advance(task)
 
-        done = characterize_job(spec, out, overwrite, frames_from, steps, stack_frames, emva_export, progress)
+        done = characterize_job(spec, out, overwrite, frames_from, steps, stack_frames, emva_export, progress, like)
     results, model, reference = done["measured"], done["model"], done["reference"]
     tab = Table(title="EMVA 1288 characterization" + (" (measured vs. the configuration)" if model else ""))
     cols = ["quantity", "unit", "measured", "model", "deviation %"] + (["emva1288"] if reference else [])

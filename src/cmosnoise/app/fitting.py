@@ -95,10 +95,11 @@ def round_trip(result: dict, again: dict) -> list[dict]:
 
 
 def emva_round_trip(descriptor: Path, cfg) -> list[dict]:
-    """EMVA 1288 quantities of the measured series and of a series of the same size simulated from ``cfg``."""
+    """EMVA 1288 quantities of the measured series and of the fitted sensor measured with the same plan (the
+    measured exposure times, photons per pixel and stack sizes: :func:`characterize.measure_like`)."""
     m = emva_files.load(descriptor)
     measured = ev.evaluate(m)
-    sim = ch.measure(Sensor(cfg), steps=max(len(m.texp_s), ch.MIN_STEPS), stack_frames=max(len(m.stack_dark), 2))
+    sim = ch.measure_like(Sensor(cfg), m)
     simulated = ev.evaluate(sim)
     rows = []
     for key, label, unit, _fmt in ev.TABLE_ROWS:

@@ -379,7 +379,8 @@ class PixelOffsetSection(Section):
 
 
 class NonlinearitySection(Section):
-    """Photo-response nonlinearity: the charge-to-voltage transfer before the readout noise (stage 5b).
+    """Photo-response nonlinearity (stage 5b): the charge-to-voltage transfer before the readout noise, or the
+    collection of the mean photo-charge before the shot noise (``acts_on``).
 
     Give ``linearity_error_pct`` (EMVA 1288's LE min and max over 5 to 95 %
     of saturation) or ``curve_e`` (points of the transfer, e- in to e- out,
@@ -391,6 +392,10 @@ class NonlinearitySection(Section):
         None, description="EMVA 1288 linearity error [min, max], % (min <= 0 <= max), over 5-95 % of saturation")
     curve_e: Optional[list[tuple[float, float]]] = Field(
         None, description="the transfer as points [[charge_e, output_e], ...], strictly increasing, from [0, 0]")
+    acts_on: Literal["charge", "mean"] = Field(
+        "charge", description="charge: the sense node's conversion of each frame's collected charge (after the shot "
+                              "noise: the photon transfer bends too); mean: the collection of the mean photo-charge "
+                              "(before the shot noise: the variance follows the mean, as a QE falling near full well)")
 
     @model_validator(mode="after")
     def _one_form(self):

@@ -335,13 +335,17 @@ class Exposure:
         deps = dependencies(sensor.spec)
         ex = c.exposure
 
+        on_mean = c.nonlinearity.enabled and c.nonlinearity.acts_on == "mean" and sensor.spec.nonlinearity is not None
+
         def photo():
             perfect = scene_mod.photo_electrons(signal, sensor.spec.peak_rate_e_per_s, ex.integration_time_s)
             after_prnu, mean = sensor.photo_response(perfect)
+            if on_mean:  # stage 5b on the mean photo-charge: the collection saturates, the shot noise follows it
+                mean = nonlinearity.apply(mean, sensor.spec.nonlinearity, c.sensor.full_well_e)
             return perfect, after_prnu, mean.astype(np.float32)
 
         photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
-                       deps["prnu_gain"], c.crosstalk)
+                       deps["prnu_gain"], c.crosstalk, c.nonlinearity if on_mean else None)
         #: stage 1: mean photo-electrons of the perfect image; after PRNU (stage 2); after crosstalk (stage 3):
         #: the mean photo-charge that shot noise acts on
         self.perfect_e, self.after_prnu_e, self.photo_mean_e = cached(cache, "photo_mean", photo_parts, photo)
@@ -394,7 +398,8 @@ class Exposure:
                 col_offset_e=col(fp.vfpn, 0.0) if cn.enabled else None,
                 col_gain=col(fp.column_gain, 1.0) if cn.enabled else None,
                 adc=(t.gain_dn_per_e, t.black_level_dn, t.max_code) if c.adc.enabled else None,
-                nonlinearity=s.spec.nonlinearity if c.nonlinearity.enabled else None,
+                nonlinearity=(s.spec.nonlinearity if c.nonlinearity.enabled and c.nonlinearity.acts_on == "charge"
+                              else None),
                 offset_e=fp.pixel_offset,
                 cell_offsets_dn=tuple(float(v) for v in c.black_level.channel_offsets_dn),
                 frame_black_sigma_dn=float(c.black_level.frame_sigma_dn),
@@ -425,7 +430,7 @@ class Exposure:
                                c.shot_noise.gaussian_above_e, index)
         collected = n
         fp = s.fixed_pattern
-        if c.nonlinearity.enabled and s.spec.nonlinearity is not None:
+        if c.nonlinearity.enabled and c.nonlinearity.acts_on == "charge" and s.spec.nonlinearity is not None:
             n = nonlinearity.apply(n, s.spec.nonlinearity, c.sensor.full_well_e)
         converted = n
         if fp.pixel_offset is not None:
