@@ -100,7 +100,9 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     not_fitted: dict = {}
     plots: dict = {}
     rows, cols = ds.shape
-    pattern = ds.cfa or base.sensor.cfa
+    # an EMVA 1288 data set is one channel (the standard measures a colour sensor channel by channel): monochrome
+    # unless told otherwise; a manifest without a CFA takes the base configuration's
+    pattern = ds.cfa or ("none" if ds.kind == "emva" else base.sensor.cfa)
     bits = ds.bits
     if bits is None:
         top = max(s.max_dn for s in ds.stacks)
@@ -185,8 +187,16 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     i_sat = ptc["saturation_index"]
     if i_sat < len(ptc["mu"]) - 1:
         brightest = max(pts, key=lambda p: p[0])
-        full = (float(brightest[2].mean.mean()) - black) / k
-        P["full_well_e"] = _p(full, None, "the brightest flat's mean above black / K (beyond the saturation point)")
+        top = float(brightest[2].mean.mean())
+        full = (top - black) / k
+        adc_e = (sat_dn - black) / k
+        if np.mean(brightest[2].mean >= sat_dn - 0.5) > 0.05:
+            # pixels sit at the top code: the ADC clips before the well fills, which the data cannot see
+            # past; a full well just beyond the ADC's range lets the ADC clip, as measured
+            P["full_well_e"] = _p(1.005 * adc_e, None, f"the ADC's range ({adc_e:.0f} e-) clips first: pixels of "
+                                  "the brightest flat sit at the top code; the well is put just beyond it")
+        else:
+            P["full_well_e"] = _p(full, None, "the brightest flat's mean above black / K (beyond the saturation point)")
     else:
         not_fitted["full_well_e"] = "the flat levels do not reach saturation (the variance never turns down); add brighter flats"
 

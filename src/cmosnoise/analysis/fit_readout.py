@@ -52,11 +52,12 @@ def sigma_cdf(s: np.ndarray, loc: float, scale: float, f: float = 0.0, tail_max:
     s = np.asarray(s, np.float64)
 
     def fb(x):
-        return np.where(x >= 0, np.exp(-np.exp(-(x - loc) / scale)), 0.0)
+        with np.errstate(over="ignore"):  # exp(-exp(large)) is 0, as it should be
+            return np.where(x >= 0, np.exp(-np.exp(-(x - loc) / scale)), 0.0)
 
     out = fb(s)
     if f > 0 and tail_max > 0:
-        t0 = math.exp(loc / scale)  # exp(-z(0))
+        t0 = math.exp(min(loc / scale, 700.0))  # exp(-z(0)); past 700 its exponential integral is 0 anyway
 
         def J(x):
             xp = np.maximum(x, 0.0)
