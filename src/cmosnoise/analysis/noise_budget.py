@@ -70,7 +70,7 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
         if fp.flicker_sigma is not None:
             out["flicker"] = float(np.mean(fp.flicker_sigma.astype(np.float64) ** 2)) * g2
     if c.row_noise.enabled:
-        out["row"] = c.row_noise.sigma_e**2 * g2
+        out["row"] = sensor.spec.row_sigma_e**2 * g2
     if fp.column_sigma is not None:
         out["column"] = float(np.mean(fp.column_sigma.astype(np.float64) ** 2))
     if c.adc.enabled:  # the ideal readout (ADC off) is not quantized; after the gain, DN referred to e-
@@ -171,7 +171,7 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     # the top code's charge (values within half a code of it round to it)
     top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
     # the other terms as they come: per pixel, (rows, 1) or (1, cols); broadcast, never expanded
-    read = c.row_noise.sigma_e**2 if c.row_noise.enabled else 0.0  # before the column gain, e-^2
+    read = sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0  # before the column gain, e-^2
     if c.source_follower.enabled:
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
     col_read = fp.column_sigma.astype(np.float64) ** 2 if fp.column_sigma is not None else 0.0  # after it
@@ -260,7 +260,7 @@ def _may_clip(sensor: Sensor, signal_e: float, photo_e: np.ndarray | None) -> bo
     if not c.adc.enabled:
         return False
     top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e
-    read = (c.row_noise.sigma_e**2 if c.row_noise.enabled else 0.0) + (
+    read = (sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0) + (
         top_of(sensor.source_follower_sigma) ** 2 if c.source_follower.enabled else 0.0)
     g_hi = top_of(fp.column_gain) if fp.column_gain is not None else 1.0
     g_lo = float(np.min(fp.column_gain)) if fp.column_gain is not None else 1.0

@@ -114,6 +114,10 @@ class SensorSection(Section):
     full_well_e: float = Field(10000.0, ge=1, le=1e7, description="full-well capacity, e-")
     temperature_c: float = Field(25.0, ge=-60, le=150, description="operating temperature, degrees C")
     pixel_pitch_um: float = Field(2.2, gt=0, le=100, description="pixel pitch, um")
+    iso: Optional[float] = Field(None, gt=0, le=1e7, description="gain setting as ISO: selects the row of gain_table "
+                                                                 "with this iso")
+    gain_db: Optional[float] = Field(None, ge=-60, le=120, description="gain setting in dB: selects the row of "
+                                                                       "gain_table with this gain_db")
     quantum_efficiency: Optional[Union[float, tuple[float, float, float]]] = Field(
         None, description="quantum efficiency (0, 1], one number or R, G, B: photo-electrons per photon. Light given "
                           "in photons (exposure.peak_rate_photons_per_s) needs it; with light in e-/s it says how many "
@@ -335,6 +339,8 @@ class RowNoiseSection(Section):
     enabled: bool = True
     sigma_e: float = Field(0.4, ge=0, le=10000, description="temporal row noise, e- rms per row per frame")
     fixed_sigma_e: float = Field(0.0, ge=0, le=10000, description="fixed row offsets, e- rms (the paper neglects them)")
+    sigma_dn: float = Field(0.0, ge=0, le=10000, description="temporal row noise after the gain, DN rms per row per frame "
+                                                             "(as ELD calibrates it; adds to sigma_e in variance)")
 
 
 class ColumnTemporalSection(Section):
@@ -355,6 +361,14 @@ class AdcSection(Section):
     bits: int = Field(12, ge=8, le=16, description="ADC resolution, bits")
     black_level_dn: float = Field(64.0, ge=0, le=65535, description="offset added before quantization, DN")
     full_scale_e: Optional[float] = Field(None, ge=1, le=1e9, description="charge mapped to the top code, e-; null: the full well")
+    gain_dn_per_e: Optional[float] = Field(None, gt=0, le=1000, description="system gain K, DN per e- (instead of "
+                                                                            "full_scale_e: the top code is then at (top - black) / K)")
+
+    @model_validator(mode="after")
+    def _one_scale(self):
+        if self.full_scale_e is not None and self.gain_dn_per_e is not None:
+            raise ValueError("give the ADC's scale once: adc.full_scale_e or adc.gain_dn_per_e")
+        return self
 
 
 # ------------------------------------------------ what measured sensors show
@@ -455,6 +469,34 @@ class ReadNoiseSection(Section):
         return v
 
 
+class GainRow(Section):
+    """One gain setting of a camera (docs/model.md stage 9b): its system gain K and what else changes with it.
+
+    ``set`` holds the configuration keys this setting changes, dotted
+    (``read_noise.scale_dn``, ``row_noise.sigma_dn``, ``sensor.full_well_e``,
+    ``nonlinearity.linearity_error_pct``, ...): a camera with two conversion
+    gains switches K, read noise, saturation and linearity there. Noise given
+    in e- (the source follower's) stays in e-, so in DN it follows K; noise
+    given in DN after the gain stays in DN unless the row sets it.
+    """
+
+    iso: Optional[float] = Field(None, gt=0, le=1e7, description="the setting as ISO")
+    gain_db: Optional[float] = Field(None, ge=-60, le=120, description="the setting in dB")
+    mode: Optional[str] = Field(None, max_length=40, description="a name for the row's mode, e.g. LCG or HCG")
+    k_dn_per_e: float = Field(gt=0, le=1000, description="system gain K at this setting, DN per e-")
+    set: dict[str, Union[float, bool, str, list, None]] = Field(
+        default_factory=dict, description="configuration keys this setting changes, dotted, e.g. read_noise.scale_dn")
+
+    @model_validator(mode="after")
+    def _one_index(self):
+        if (self.iso is None) == (self.gain_db is None):
+            raise ValueError("a gain_table row is indexed by iso or by gain_db (one of the two)")
+        bad = [k for k in self.set if k.split(".")[0] in ("gain_table", "seed", "run", "scene") or k in ("sensor.iso", "sensor.gain_db")]
+        if bad:
+            raise ValueError(f"gain_table row: {bad} cannot be set per gain (set sensor, stage and adc keys)")
+        return self
+
+
 # ------------------------------------------------------------------------- root
 class Config(Section):
     """A complete, resolved cmosnoise configuration."""
@@ -477,6 +519,8 @@ class Config(Section):
     nonlinearity: NonlinearitySection = Field(default_factory=NonlinearitySection)
     black_level: BlackLevelSection = Field(default_factory=BlackLevelSection)
     read_noise: ReadNoiseSection = Field(default_factory=ReadNoiseSection)
+    gain_table: list[GainRow] = Field(default_factory=list, description="the camera's gain settings (ISO or dB): "
+                                      "sensor.iso or sensor.gain_db picks one")
     processing: ProcessingSection = Field(default_factory=ProcessingSection)
 
     @model_validator(mode="after")
@@ -486,6 +530,18 @@ class Config(Section):
             raise ValueError(
                 f"adc.black_level_dn = {self.adc.black_level_dn:g} leaves no range: it must be below 2^bits - 1 = {top}"
             )
+        if self.sensor.iso is not None and self.sensor.gain_db is not None:
+            raise ValueError("give the gain once: sensor.iso or sensor.gain_db")
+        index = "iso" if self.sensor.iso is not None else "gain_db" if self.sensor.gain_db is not None else None
+        if index is not None:
+            value = getattr(self.sensor, index)
+            have = [getattr(r, index) for r in self.gain_table if getattr(r, index) is not None]
+            if not have:
+                raise ValueError(f"sensor.{index} = {value:g} needs a gain_table with {index} rows (this configuration "
+                                 "has none)")
+            if value not in have:
+                raise ValueError(f"sensor.{index} = {value:g} is not in the gain table; it has "
+                                 f"{', '.join(f'{h:g}' for h in sorted(have))}")
         ex = self.exposure
         if ex.peak_rate_photons_per_s is not None:
             if self.sensor.quantum_efficiency is None:

@@ -49,6 +49,37 @@ def flicker_model(config: Config) -> HeavyTail:
         raise _invalid(f"source_follower.flicker.tail.ppm_above = {f.tail.ppm_above:g}: {exc}") from None
 
 
+def gain_row(config: Config):
+    """The gain_table row ``sensor.iso`` or ``sensor.gain_db`` selects, or None."""
+    sen = config.sensor
+    index = "iso" if sen.iso is not None else "gain_db" if sen.gain_db is not None else None
+    if index is None:
+        return None
+    return next(r for r in config.gain_table if getattr(r, index) == getattr(sen, index))
+
+
+def apply_gain(config: Config) -> Config:
+    """``config`` at its gain setting: the selected row's K (``adc.gain_dn_per_e``) and its ``set`` keys merged in
+    (docs/model.md stage 9b); unchanged without a setting. The row wins over the keys it sets."""
+    from ..config import merge_updates
+
+    row = gain_row(config)
+    if row is None:
+        return config
+    updates: dict = {"adc": {"gain_dn_per_e": row.k_dn_per_e, "full_scale_e": None}}
+    for dotted, value in row.set.items():
+        node = updates
+        *parents, leaf = dotted.split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    where = f"iso {row.iso:g}" if row.iso is not None else f"gain_db {row.gain_db:g}"
+    try:
+        return merge_updates(config, updates)
+    except CmosnoiseError as exc:
+        raise _invalid(f"gain_table row at {where}: {exc}") from None
+
+
 def offset_model(config: Config):
     """The pixel offsets' law (e-) of ``config``; raises on an unreachable ppm."""
     from .stages.pixel_offset import offset_model as model

@@ -392,7 +392,7 @@ class Exposure:
                 noisy_e=self._noisy_e, exact_e=self._exact_e,
                 normal_above_e=c.shot_noise.gaussian_above_e if c.shot_noise.gaussian_above_e is not None else np.inf,
                 sf_sigma_e=s.source_follower_sigma if c.source_follower.enabled else None,
-                row_sigma_e=c.row_noise.sigma_e if c.row_noise.enabled else None,
+                row_sigma_e=s.spec.row_sigma_e if c.row_noise.enabled else None,
                 row_offset_e=(np.zeros(s.shape[0]) if fp.row_offset is None else fp.row_offset.ravel().astype(np.float64)),
                 col_sigma_e=col(fp.column_sigma, 0.0) if cn.enabled else None,
                 col_offset_e=col(fp.vfpn, 0.0) if cn.enabled else None,
@@ -439,7 +439,7 @@ class Exposure:
             sfn = source_follower.noise(s.source_follower_sigma[win], stream("source_follower"), index)
             n = n + sfn
         if c.row_noise.enabled:
-            rown = row_noise.temporal(rows, c.row_noise.sigma_e, stream("row_noise"))
+            rown = row_noise.temporal(rows, s.spec.row_sigma_e, stream("row_noise"))
             if fp.row_offset is not None:
                 rown = rown + fp.row_offset[r0:r1]
             n = n + rown

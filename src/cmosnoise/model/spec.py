@@ -79,6 +79,15 @@ class SensorSpec:
         return float(min(self.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
 
     @property
+    def row_sigma_e(self) -> float:
+        """The temporal row noise, e- rms: ``row_noise.sigma_e`` and ``row_noise.sigma_dn`` (after the gain) referred
+        to e- through K, added in variance (one normal per row and frame carries both)."""
+        rn = self.config.row_noise
+        if rn.sigma_dn == 0:
+            return rn.sigma_e
+        return float(np.sqrt(rn.sigma_e**2 + (rn.sigma_dn / self.transfer.gain_dn_per_e) ** 2))
+
+    @property
     def peak_rate_e_per_s(self) -> float:
         """Photo-electrons per second per pixel at a scene value of 1: the configuration's, or its photons times
         the quantum efficiency (the channels' mean; :attr:`channel_responsivity` carries their ratios)."""
@@ -120,6 +129,8 @@ def transfer(config: Config) -> adc.Transfer:
     a = config.adc
     if not a.enabled:
         return adc.Transfer.ideal()
+    if a.gain_dn_per_e is not None:
+        return adc.Transfer.from_gain(a.bits, a.black_level_dn, a.gain_dn_per_e)
     full_scale = a.full_scale_e if a.full_scale_e is not None else config.sensor.full_well_e
     return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale)
 
@@ -131,7 +142,7 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     """
     if isinstance(config, SensorSpec):
         return config
-    config = physics.resolve_prnu(config)
+    config = physics.resolve_prnu(physics.apply_gain(config))
     # every section is checked, those switched off too (a file must stay valid when one is switched on)
     return SensorSpec(config, tuple(physics.dark_points(config)), physics.flicker_model(config),
                       physics.prnu_seen_per_sigma(config), transfer(config), physics.offset_model(config),

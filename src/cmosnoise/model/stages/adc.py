@@ -40,6 +40,14 @@ class Transfer:
         return cls((top - black_level_dn) / full_scale_e, float(black_level_dn), bits)
 
     @classmethod
+    def from_gain(cls, bits: int, black_level_dn: float, gain_dn_per_e: float) -> "Transfer":
+        """The transfer of a given system gain K (DN per e-): its top code at ``(2**bits - 1 - black) / K`` e-."""
+        cls.from_settings(bits, black_level_dn, 1.0)  # the same checks
+        if not gain_dn_per_e > 0:
+            raise ValueError(f"gain_dn_per_e must be > 0, got {gain_dn_per_e}")
+        return cls(float(gain_dn_per_e), float(black_level_dn), bits)
+
+    @classmethod
     def ideal(cls) -> "Transfer":
         """1 DN per electron, no black level, 16-bit range (ADC switched off)."""
         return cls(1.0, 0.0, 16)

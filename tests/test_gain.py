@@ -1,0 +1,80 @@
+"""Gain settings (docs/model.md stage 9b): a table of ISO or dB rows sets K and what else changes with the
+setting; the Sony A7S II preset reproduces its published calibration per ISO."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from conftest import assert_close, cli, quiet_config
+from scipy import stats
+
+from cmosnoise import Sensor, load_config
+
+#: ../shared/published-sensors.md section 1: ISO -> (K DN/e-, lam, sigTL DN, sigR DN)
+A7S2 = {100: (0.09563, 0.14875287, 0.70181876, 0.1391465), 1600: (1.53008, -0.0441045, 3.2283993, 0.988786),
+        2000: (1.9126, -0.012963797, 1.4356787, 0.33124214), 6400: (6.12032, -0.07517104, 3.4502964, 0.7218788)}
+
+
+@pytest.mark.parametrize("iso", list(A7S2))
+def test_sony_a7s2_characterizes_as_published(iso, tmp_path):
+    """characterize of the preset at four ISOs (the step to the high conversion gain at 2000 among them): K within
+    2 % of the table, the temporal dark noise within 3 % of what the read-noise parameters imply,
+    sqrt(var(Tukey-lambda(lam)) sigTL^2 + sigR^2) / K (the variance from scipy.stats; EMVA 1288's dark noise
+    leaves quantization out)."""
+    k, lam, s_tl, s_row = A7S2[iso]
+    r = cli("-q", "characterize", "-p", "sony-a7s2", "--set", f"sensor.iso={iso}", "--set", "sensor.width=256",
+            "--set", "sensor.height=192", "--out", tmp_path / "c")
+    assert r.returncode == 0, r.stderr
+    m = json.loads((tmp_path / "c" / "characterization.json").read_text())["measured"]
+    implied = math.sqrt(stats.tukeylambda(lam).var() * s_tl**2 + s_row**2) / k
+    assert m["system_gain_K_dn_per_e"] == pytest.approx(k, rel=0.02)
+    assert m["temporal_dark_noise_e"] == pytest.approx(implied, rel=0.03)
+
+
+def test_read_noise_floor_drops_at_the_conversion_gain_step():
+    """The published floor in e-: 4.1 at ISO 1600, 1.4 at ISO 2000 (the sensor's high conversion gain)."""
+    from cmosnoise import noise_budget
+
+    floors = {}
+    for iso in (1600, 2000):
+        sensor = Sensor(load_config(preset="sony-a7s2", overrides=[f"sensor.iso={iso}", "sensor.width=64",
+                                                                     "sensor.height=48"]))
+        assert sensor.transfer.gain_dn_per_e == A7S2[iso][0]
+        parts = noise_budget.temporal_variances(sensor, 0.0)
+        floors[iso] = math.sqrt(parts["read_after_gain"] + parts["row"])
+    assert floors[1600] == pytest.approx(4.19, abs=0.01) and floors[2000] == pytest.approx(1.40, abs=0.01)
+
+
+def test_noise_in_electrons_follows_k_and_noise_in_dn_stays():
+    """A table of two gains on a sensor whose source follower is 3 e- and whose read noise after the gain is 2 DN:
+    the frames' temporal variance in DN^2 is (3 K)^2 + 2^2 + 1/12 at each (two-frame difference over n pixels:
+    standard error var sqrt(2/n))."""
+    table = [{"gain_db": 0, "k_dn_per_e": 0.5}, {"gain_db": 12, "k_dn_per_e": 2.0}]
+    for db, k in ((0, 0.5), (12, 2.0)):
+        cfg = quiet_config(sensor={"width": 256, "height": 192},
+                           source_follower={"enabled": True, "thermal_sigma_e": 3.0, "flicker": {"enabled": False}},
+                           read_noise={"enabled": True, "scale_dn": 2.0})
+        cfg = load_config(extra={**cfg.model_dump(), "gain_table": table, "sensor": {**cfg.sensor.model_dump(),
+                                                                                     "gain_db": db}})
+        shot = Sensor(cfg, seed=1).expose("flat:0")
+        a, b = (shot.frame(i).astype(np.float64) for i in (0, 1))
+        v = np.var(a - b) / 2
+        expected = (3 * k) ** 2 + 4 + 1 / 12
+        assert_close(v, expected, expected * math.sqrt(2 / a.size), f"{db} dB")
+
+
+def test_a_gain_not_in_the_table_is_one_line(tmp_path):
+    r = cli("simulate", "-p", "sony-a7s2", "--set", "sensor.iso=1700", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "sensor.iso = 1700 is not in the gain table" in r.stderr and "1600" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+    r = cli("simulate", "--set", "sensor.iso=100", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "gain_table" in r.stderr
+
+
+def test_a_row_sets_its_keys_and_wins_over_the_base():
+    cfg = load_config(preset="sony-a7s2", overrides=["sensor.iso=6400", "read_noise.scale_dn=99"])
+    spec = Sensor(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"width": 64, "height": 48})})).spec
+    assert spec.config.read_noise.scale_dn == pytest.approx(3.4502964)  # the row's
+    assert spec.config.black_level.channel_offsets_dn == (-2.254,) * 4
+    assert spec.transfer.max_code == 16383 and spec.transfer.black_level_dn == 512
