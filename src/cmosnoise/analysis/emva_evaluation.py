@@ -158,6 +158,22 @@ DEFINITION_NOTES = {
     "dynamic_range_db": "from the saturation capacity: follows mu_e.sat's definition",
 }
 
+#: how closely a fitted sensor must reproduce a measured EMVA 1288 quantity (relative, or in percentage points
+#: for the linearity error): the limits the fit's round trip and its foreign-data tests hold it to
+AGREEMENT_LIMITS = {"system_gain_K_dn_per_e": 0.03, "temporal_dark_noise_e": 0.05, "dsnu_e": 0.10, "prnu_pct": 0.10,
+                    "dark_current_mean_e_per_s": 0.10, "saturation_capacity_e": 0.05, "quantum_efficiency": 0.05}
+LINEARITY_POINTS = 0.25
+
+
+def agrees(key: str, measured: float, simulated: float) -> bool | None:
+    """Whether ``simulated`` reproduces ``measured`` within :data:`AGREEMENT_LIMITS` (None: no limit for it)."""
+    if key in ("linearity_error_min_pct", "linearity_error_max_pct"):
+        return bool(abs(simulated - measured) <= LINEARITY_POINTS)
+    if key not in AGREEMENT_LIMITS or not measured:
+        return None
+    return bool(abs(simulated / measured - 1) <= AGREEMENT_LIMITS[key])
+
+
 TABLE_ROWS = [
     ("system_gain_K_dn_per_e", "System gain K", "DN/e-", "{:.4f}"),
     ("quantum_efficiency", "Quantum efficiency eta", "", "{:.3f}"),

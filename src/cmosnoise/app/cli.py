@@ -384,10 +384,14 @@ def fit(
         _say(ctx, f"{name} = {fitting.describe(p)}")
     for name, why in doc["not_fitted"].items():
         _say(ctx, f"not fitted, kept from the base configuration: {name}: {why}")
-    if doc.get("round_trip"):
-        bad = [r["parameter"] for r in doc["round_trip"] if r["agree"] is False]
-        _say(ctx, f"round trip: {len(doc['round_trip']) - len(bad)} of {len(doc['round_trip'])} parameters agree"
-             + (f"; differ: {', '.join(bad)}" if bad else ""))
+    for what, rows, key in (("round trip", doc.get("round_trip"), "parameter"),
+                             ("EMVA 1288 of the fitted sensor on the measured plan", doc.get("emva_round_trip"), "quantity")):
+        if rows:
+            bad = [r[key] for r in rows if r["agree"] is False]
+            judged = [r for r in rows if r["agree"] is not None]
+            _say(ctx, f"{what}: {len(judged) - len(bad)} of {len(judged)} agree"
+                 + (f"; differ: {', '.join(bad)}" if bad else "")
+                 + (f" ({len(rows) - len(judged)} without an interval to judge by)" if len(judged) < len(rows) else ""))
     _say(ctx, f"wrote config.yaml, fit.json and fit_report.html to {out}/")
 
 

@@ -105,7 +105,8 @@ def emva_round_trip(descriptor: Path, cfg) -> list[dict]:
     for key, label, unit, _fmt in ev.TABLE_ROWS:
         a, b = measured.get(key), simulated.get(key)
         if isinstance(a, (int, float)) and isinstance(b, (int, float)):
-            rows.append({"quantity": label, "unit": unit, "measured": float(a), "simulated": float(b)})
+            rows.append({"quantity": label.strip(), "unit": unit, "measured": float(a), "simulated": float(b),
+                         "agree": ev.agrees(key, float(a), float(b))})
     return rows
 
 
