@@ -105,7 +105,8 @@ def temporal_variance_se(sensor, dof: float, signal_e=0.0) -> float:
     frames (dof = L - 1), or of var(A - B)/2 over P independent frame pairs
     (dof = P). A normal term of variance v contributes 2 v^2 / dof per
     independent sample: pixels (each with its own v: dark shot, flicker,
-    photon shot), rows (one sample per row) and columns (one per column).
+    photon shot, read noise after the gain, with its fourth cumulant where it
+    is not normal), rows (one sample per row) and columns (one per column).
     """
     c = sensor.config
     fp = sensor.fixed_pattern
@@ -119,9 +120,20 @@ def temporal_variance_se(sensor, dof: float, signal_e=0.0) -> float:
         if fp.flicker_sigma is not None:
             v_pix = v_pix + fp.flicker_sigma.astype(np.float64) ** 2
     v_pix = v_pix * k2 + 1 / 12
-    se2 = np.mean(2 * v_pix**2) / v_pix.size
+    k4 = 0.0  # the read noise's fourth cumulant (DN^4): a pair's var(D^2 / 2) is 2 v^2 + k4 / 2, not 2 v^2
+    if c.read_noise.enabled and c.adc.enabled:
+        rn = c.read_noise
+        if rn.distribution == "normal":
+            v_pix = v_pix + rn.scale_dn**2
+        else:
+            from scipy import stats
+
+            var, kurt = (float(x) for x in stats.tukeylambda(rn.shape).stats(moments="vk"))
+            v_pix = v_pix + var * rn.scale_dn**2
+            k4 = kurt * (var * rn.scale_dn**2) ** 2
+    se2 = (np.mean(2 * v_pix**2) + k4 / 2) / v_pix.size
     if c.row_noise.enabled:
-        se2 += 2 * (c.row_noise.sigma_e**2 * k2) ** 2 / rows
+        se2 += 2 * (sensor.spec.row_sigma_e**2 * k2) ** 2 / rows
     if fp.column_sigma is not None:
         se2 += np.mean(2 * (fp.column_sigma.astype(np.float64) ** 2 * k2) ** 2) / cols
     return float(np.sqrt(se2 / dof))
