@@ -242,8 +242,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         if T == t_ref:  # the pixel offsets: each pixel's intercept, at the reference temperature
             off = fit_dark.pixel_offsets([d.mean for d in ok], list(t), [d.pixel_var for d in ok], [d.n for d in ok],
                                          k, limit)
-            where = (f"each pixel's dark intercept over {len(ok)} exposure times, rows and columns taken out, less "
-                     f"the intercepts' temporal noise ({off['noise_e']:.3g} e- rms): robust sigma of {off['pixels']} pixels")
+            where = (f"each pixel's dark intercept over {len(ok)} exposure times, rows and columns taken out "
+                     f"(temporal noise {off['noise_e']:.3g} e- rms): {off['method']}, {off['pixels']} pixels")
             P["pixel_offset.sigma_e"] = _p(off["sigma_e"]["value"], off["sigma_e"]["ci95"], where)
             if off["tail"] is not None:
                 tl = off["tail"]
@@ -288,7 +288,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
     else:
         st = max(longs, key=lambda d: (d.n, -d.exposure_s))
-        _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed)
+        _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed,
+                 not_fitted)
 
     # ---------------------------------------------------------------- crosstalk from spots
     spots = [(sp, _dark_at(ds, sp)) for sp in ds.of_kind("spot")]
@@ -355,8 +356,13 @@ def _with_crosstalk(base, P: dict):
     return base if xt is None else merge_updates(base, {"crosstalk": xt})
 
 
-def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int) -> None:
-    """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``."""
+def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int,
+             not_fitted_readout: dict | None = None) -> None:
+    """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``; the
+    read noise's shape (Tukey-lambda) where the pixels' noise is not normal."""
+    from ..model.stages.read_noise import tukey_lambda_variance as fit_tukey_variance
+
+    not_fitted_readout = {} if not_fitted_readout is None else not_fitted_readout
     rows, cols = st.shape
     n = st.n
     corr = 1 - 2 / cols - 2 / rows
@@ -395,6 +401,30 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     plots["source_follower"] = {"s2": s2.ravel(), "known": known.ravel(), "frames": n,
                                 "params": [float(x) for x in f.value], "tail_fraction": r["tail_fraction"],
                                 "tail_max": r["tail_max"]}
+    # the shape of the pixels' temporal noise: normal, or (ELD's read noise) Tukey-lambda; judged where the pixels
+    # share one noise (the per-pixel sigmas spread by less than 10 % of their mean variance, as on ELD's cameras)
+    if st.pixel_m4 is not None:
+        v_i = st.pixel_var / corr - dark_var * k**2  # DN^2, less the dark charge's shot noise
+        med, rob = robust_centre(v_i)  # the mean variance (a median is low: a sample variance is skewed), white
+        common = float(np.mean(v_i[v_i <= med + 10 * rob]))  # and noisy pixels out
+        known_k4 = dark_var * k**4 - 1 / 120  # the dark charge's Poisson fourth cumulant and the quantizer's, DN^4
+        shp = fit_readout.read_noise_shape(st.pixel_var / corr, st.pixel_m4 / corr**2, n, common, known_k4)
+        if shp is not None:
+            (kurt, kci), (lam, lci) = shp["kurtosis"], shp["lam"]
+            # the pixels' own variances spread beyond what n frames of a noise of this kurtosis leave:
+            # var(s^2) = V^2 (kurt / n + 2 / (n - 1))
+            sampling = common**2 * (max(kurt, 0.0) / n + 2 / (n - 1))
+            spread = math.sqrt(max(float(np.var(v_i)) - sampling, 0.0)) / max(common, 1e-12)
+            if (kci[0] > 0 or kci[1] < 0) and spread < 0.1:
+                P["read_noise.shape"] = _p(lam, lci, f"the Tukey-lambda shape whose excess kurtosis is the pixels' noise's, "
+                                           f"{kurt:.3g} (95 % CI {kci[0]:.3g} to {kci[1]:.3g}), from their fourth moments "
+                                           f"over {n} frames less the dark charge's and the quantizer's")
+                P["read_noise.scale_dn"] = _p(math.sqrt(common / fit_tukey_variance(lam)), None,
+                                              "the scale that gives the pixels' mean variance (less the dark charge's)")
+            elif kci[0] > 0 or kci[1] < 0:
+                not_fitted_readout["read_noise"] = (
+                    f"the pixels' noise is not normal (excess kurtosis {kurt:.3g}, 95 % CI {kci[0]:.3g} to {kci[1]:.3g}) "
+                    f"but their sigmas spread by {spread:.0%}: the flicker model holds it; no Tukey-lambda read noise")
     # rows: temporal then fixed
     rs = centred_series(st.row_means) / k
     cs = centred_series(st.col_means) / k
@@ -502,6 +532,11 @@ def fitted_config(base, result: dict):
                                           "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
     if nl_update is not None:
         u["nonlinearity"] = nl_update
+    if "read_noise.shape" in P and "source_follower" in u:
+        # the pixels' noise is the read noise after the gain, Tukey-lambda: it takes the source follower's place
+        u["read_noise"] = {"enabled": True, "distribution": "tukey_lambda", "shape": v("read_noise.shape"),
+                           "scale_dn": v("read_noise.scale_dn")}
+        u["source_follower"] = {"enabled": False}
     if "quantum_efficiency" in P and 0 < v("quantum_efficiency") <= 1:
         # photons per pixel over the fitted configuration's e-: what a crosstalk loss and the PRNU map leave aside
         u["sensor"]["quantum_efficiency"] = v("quantum_efficiency")

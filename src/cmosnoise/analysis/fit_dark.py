@@ -213,7 +213,10 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     black level plus the pixel's offset, its slope the pixel's dark current.
     The intercepts' spread over the array, with the row and column means
     taken out (the fixed row offsets and VFPN are fitted apart) and the
-    intercepts' own temporal noise removed, is the offsets' variance:
+    intercepts' own temporal noise removed, is the offsets' variance. With
+    two or more exposure times in each half of the stacks, it is the
+    covariance of the intercepts of the two halves (their noises are
+    independent: no model of the noise needed); else
 
         var(offset) = var_robust(residual) / (1 - 1/rows - 1/cols) - <var(intercept)>
 
@@ -234,25 +237,48 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     from scipy import stats
 
     t = np.asarray(exposures_s, np.float64)
-    J = t.size
-    tc = t - t.mean()
-    c = 1.0 / J - t.mean() * tc / np.sum(tc * tc)  # the intercept's weights on the J means
     stack = np.stack([np.asarray(m, np.float64) for m in means_dn])
     usable = np.all(stack < limit_dn, axis=0)
-    intercept = np.tensordot(c, stack, axes=1)
-    rows, cols = intercept.shape
-    resid = np.where(usable, intercept, np.nan)
-    resid = resid - np.nanmean(resid, axis=1, keepdims=True) - np.nanmean(resid, axis=0, keepdims=True) + np.nanmean(resid)
-    resid_e = resid / gain_dn_per_e
+    rows, cols = stack.shape[1:]
+    shrink = 1 - 1 / rows - 1 / cols
+
+    def residual(idx):
+        """Each pixel's intercept from the stacks ``idx`` (least squares over their times), rows and columns out."""
+        ti = t[idx]
+        tc = ti - ti.mean()
+        w = 1.0 / ti.size - ti.mean() * tc / np.sum(tc * tc)
+        r = np.where(usable, np.tensordot(w, stack[idx], axes=1), np.nan)
+        r = r - np.nanmean(r, axis=1, keepdims=True) - np.nanmean(r, axis=0, keepdims=True) + np.nanmean(r)
+        return r / gain_dn_per_e, w
+
+    every = np.arange(t.size)
+    resid_e, c = residual(every)
     values = resid_e[usable]
     n = values.size
-    noise = float(sum(ci * ci * float(np.mean(v)) / nj for ci, v, nj in zip(c, pixel_vars_dn2, frames))) / gain_dn_per_e**2
-    shrink = 1 - 1 / rows - 1 / cols
+    # the pixels' variances are of frames less their row and column means: 1 - 2/cols - 2/rows of a pixel's own
+    corr = 1 - 2 / cols - 2 / rows
+    noise = float(sum(ci * ci * float(np.mean(v)) / nj for ci, v, nj in zip(c, pixel_vars_dn2, frames)))
+    noise /= corr * gain_dn_per_e**2
     _, robust = robust_centre(values)
     total_var = robust**2 / shrink
-    var = total_var - noise
-    # the MAD's sampling variance is 1.36 times the standard deviation's: se(var) = 2 var sqrt(1.36 / (2 n))
-    se = 2 * total_var * math.sqrt(1.36 / (2 * n))
+    order = np.argsort(t, kind="stable")
+    halves = order[0::2], order[1::2]
+    if min(len(set(np.round(t[h], 12))) for h in halves) >= 2:
+        # two intercepts from disjoint stacks: their noises are independent, so the covariance over the pixels is
+        # the offsets' variance whatever the noise's law (a robust spread assumes it normal); the body's pixels
+        # only (within 6 robust sigmas: a tail is counted apart)
+        a, _ = residual(halves[0])
+        b, _ = residual(halves[1])
+        body = usable & (np.abs(resid_e) <= 6 * robust)
+        xa, xb = a[body] - a[body].mean(), b[body] - b[body].mean()
+        var = float(np.mean(xa * xb)) / shrink
+        se = math.sqrt(float(np.mean(xa * xa)) * float(np.mean(xb * xb)) + var**2) / math.sqrt(xa.size) / shrink
+        how = "covariance of two intercepts from disjoint halves of the stacks"
+    else:
+        var = total_var - noise
+        # the MAD's sampling variance is 1.36 times the standard deviation's: se(var) = 2 var sqrt(1.36 / (2 n))
+        se = 2 * total_var * math.sqrt(1.36 / (2 * n))
+        how = "robust variance of the intercepts less their temporal noise"
     sigma = math.sqrt(max(var, 0.0))
     threshold = 5.0 * math.sqrt(total_var)
     above = int(np.sum(values > threshold))
@@ -263,7 +289,7 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
         tail = {"ppm_above": above / n * 1e6, "threshold_e": threshold, "max_e": float(values.max()),
                 "ci95": [ci.low * 1e6, ci.high * 1e6], "pixels": above}
     return {"sigma_e": {"value": sigma, "ci95": [math.sqrt(max(var - Z95 * se, 0.0)), math.sqrt(max(var + Z95 * se, 0.0))]},
-            "noise_e": math.sqrt(noise), "tail": tail, "residual_e": resid_e, "pixels": n}
+            "noise_e": math.sqrt(noise), "tail": tail, "residual_e": resid_e, "pixels": n, "method": how}
 
 
 def clipped_pixels(means_dn: list[np.ndarray], limit_dn: float) -> np.ndarray:

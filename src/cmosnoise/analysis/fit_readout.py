@@ -453,3 +453,58 @@ def residual_variance(image: np.ndarray, mask: np.ndarray) -> float:
     resid = (image - row[:, None] - col[None, :] + g)[mask]
     rows, cols = image.shape
     return float(np.var(resid)) * rows * cols / ((rows - 1) * (cols - 1))
+
+
+def tukey_lambda_kurtosis(lam: float) -> float:
+    """Excess kurtosis of the Tukey-lambda law (scale-free); decreasing in ``lam`` over (-0.25, 0.9)."""
+    from scipy import stats
+
+    return float(stats.tukeylambda(lam).stats(moments="k"))
+
+
+def read_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, common_var: float,
+                     known_k4: np.ndarray | float = 0.0) -> dict | None:
+    """The shape of the noise common to every pixel (the read noise) from the pixels' fourth moments.
+
+    Each pixel's frames (row and column means taken out) have variance
+    ``V_i`` and fourth cumulant ``k4`` (the common noise's, plus ``known_k4``:
+    the dark charge's Poisson ``mean`` and the quantizer's ``-1/120`` DN^4).
+    Over ``n`` frames the fourth central moment ``m4`` (ddof 0) and the
+    squared variance ``s4`` (ddof 1) have expectations linear in ``V_i**2``
+    and ``k4``::
+
+        E m4 = a (3 V^2 + k4) + b V^2,  a = (n-1)(n^2-3n+3)/n^3,  b = 3(2n-3)(n-1)/n^3
+        E s4 = V^2 + (3 V^2 + k4)/n - V^2 (n-3)/(n(n-1))
+
+    so each pixel gives an unbiased ``k4`` estimate, and their mean over the
+    pixels (standard error from their spread) divided by the common noise's
+    variance squared is its excess kurtosis; the Tukey-lambda shape with that
+    kurtosis is the fitted ``lam`` (ELD models the read noise so).
+
+    Returns ``{"kurtosis": (value, ci95), "lam": (value, ci95), "k4": ...}``
+    or None when the common variance is too small to judge.
+    """
+    from scipy.optimize import brentq
+
+    if common_var <= 0 or n < 8:
+        return None
+    s4 = np.asarray(pixel_var, np.float64) ** 2
+    m4 = np.asarray(pixel_m4, np.float64)
+    a = (n - 1) * (n * n - 3 * n + 3) / n**3
+    b = 3 * (2 * n - 3) * (n - 1) / n**3
+    # solve per pixel: m4 = (3a + b) V2 + a k4 ; s4 = (1 + 3/n - (n-3)/(n(n-1))) V2 + k4 / n
+    c = 1 + 3 / n - (n - 3) / (n * (n - 1))
+    det = (3 * a + b) / n - a * c
+    k4_i = ((3 * a + b) * s4 - c * m4) / det - known_k4
+    k4 = float(np.mean(k4_i))
+    se = float(np.std(k4_i, ddof=1)) / math.sqrt(k4_i.size)
+    kurt = k4 / common_var**2
+    kse = se / common_var**2
+    lo_k, hi_k = kurt - Z95 * kse, kurt + Z95 * kse
+    top, bottom = tukey_lambda_kurtosis(-0.24), tukey_lambda_kurtosis(0.9)
+
+    def shape(kv):
+        kv = min(max(kv, bottom + 1e-9), top - 1e-9)
+        return float(brentq(lambda lam: tukey_lambda_kurtosis(lam) - kv, -0.24, 0.9, xtol=1e-10))
+
+    return {"kurtosis": (kurt, [lo_k, hi_k]), "lam": (shape(kurt), [shape(hi_k), shape(lo_k)]), "k4": (k4, se)}

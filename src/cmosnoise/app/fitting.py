@@ -50,7 +50,8 @@ def simulate_like(ds, cfg, k_measured: float, seed: int = 0) -> stacks.Dataset:
             dark_e = float(np.mean(s.dark_rate)) * t if s.dark_rate is not None else 0.0
             photo_e = max((float(st.mean.mean()) - black) / k_measured - dark_e, 0.0)
             ex = s.with_exposure(t, photo_e / t).expose("flat:1.0")
-        frames = (ex.frame(frame + i) for i in range(st.n))
+        # the stack's own frame numbers, bound now (the generator runs after ``frame`` has moved on)
+        frames = (ex.frame(k) for k in range(frame, frame + st.n))
         frame += st.n
         out.append(stacks.reduce_stack(frames, kind=st.kind, exposure_s=st.exposure_s, temperature_c=st.temperature_c,
                                        level=st.level, photons=st.photons))

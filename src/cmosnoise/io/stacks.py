@@ -90,6 +90,7 @@ class StackStats:
     level: Optional[float] = None
     photons: Optional[float] = None
     files: list[str] = field(default_factory=list)
+    pixel_m4: Optional[np.ndarray] = None  #: (rows, cols) float64, per-pixel fourth central moment (ddof 0), as pixel_var
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -98,20 +99,21 @@ class StackStats:
 
 def reduce_stack(frames: Iterator[np.ndarray], **info) -> StackStats:
     """Reduce frames (each (rows, cols)) to a :class:`StackStats`, one frame at a time."""
-    s1 = s2 = c1 = c2 = None
+    s1 = s2 = c1 = c2 = c3 = c4 = None
     rows_, cols_, top = [], [], -math.inf
     n = 0
     for f in frames:
         x = np.asarray(f, np.float64)
         if s1 is None:
-            s1, s2, c1, c2 = (np.zeros(x.shape) for _ in range(4))
+            s1, s2, c1, c2, c3, c4 = (np.zeros(x.shape) for _ in range(6))
         elif x.shape != s1.shape:
             raise CmosnoiseError(f"stack {info.get('name', '')}: frame {n} is {x.shape[1]} x {x.shape[0]}, "
                                  f"the first was {s1.shape[1]} x {s1.shape[0]}: a stack's frames must have one size")
         rm, cm = x.mean(axis=1), x.mean(axis=0)
         g = rm.mean()
         y = x - rm[:, None] - cm[None, :] + g
-        s1 += x; s2 += x * x; c1 += y; c2 += y * y  # noqa: E702
+        y2 = y * y
+        s1 += x; s2 += x * x; c1 += y; c2 += y2; c3 += y2 * y; c4 += y2 * y2  # noqa: E702
         rows_.append(rm); cols_.append(cm)  # noqa: E702
         top = max(top, float(x.max()))
         n += 1
@@ -121,7 +123,9 @@ def reduce_stack(frames: Iterator[np.ndarray], **info) -> StackStats:
     mean = s1 / n
     var = np.maximum(s2 - s1 * mean, 0) / (n - 1)
     cvar = np.maximum(c2 - c1 * c1 / n, 0) / (n - 1)
-    return StackStats(mean=mean, pixel_var=cvar, temporal_var=float(var.mean()), row_means=np.array(rows_),
+    mu = c1 / n  # the fourth central moment from the raw sums: E y^4 - 4 mu E y^3 + 6 mu^2 E y^2 - 3 mu^4
+    m4 = np.maximum(c4 / n - 4 * mu * c3 / n + 6 * mu * mu * c2 / n - 3 * mu**4, 0)
+    return StackStats(mean=mean, pixel_var=cvar, pixel_m4=m4, temporal_var=float(var.mean()), row_means=np.array(rows_),
                       col_means=np.array(cols_), max_dn=top, n=n, **info)
 
 
