@@ -61,10 +61,13 @@ def sigma_cdf(s: np.ndarray, loc: float, scale: float, f: float = 0.0, tail_max:
 
         def J(x):
             xp = np.maximum(x, 0.0)
-            with np.errstate(over="ignore"):
-                t = np.exp(-(xp - loc) / scale)
+            z = -(xp - loc) / scale  # log t
+            with np.errstate(over="ignore", under="ignore"):
+                t = np.exp(z)
+            # far above the body t underflows to 0, where E1(t) = -gamma - ln t + O(t): taken from z itself
+            e1 = np.where(z < -700, -np.euler_gamma - z, exp1(np.where(z < -700, 1.0, t)))
             e0 = exp1(t0) if t0 < 700 else 0.0
-            return np.where(x > 0, scale * (exp1(t) - e0), 0.0)
+            return np.where(x > 0, scale * (e1 - e0), 0.0)
 
         out = (1 - f) * out + f * (J(s) - J(s - tail_max)) / tail_max
     return np.clip(out, 0.0, 1.0)
