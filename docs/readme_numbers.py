@@ -350,6 +350,17 @@ def render_fit_coverage(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_measured_stages(d: dict) -> str:
+    lines = [f"Measured with `python benchmarks/bench_measured_stages.py --frames {d['frames']}` ({d['cpu']}, "
+             f"{d['vectors']} vectors, numba threads {d['threads']}; 1920 x 1080 photo frame, each ratio to the NumPy "
+             "reference timed alternately with it):", "",
+             "| frame kernel | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| {r['label']} | {r['ms']:.1f} | {r['ref_ms']:.1f} | {r['ratio']:.3f} |")
+    lines += ["", f"The stages together cost {100 * d['cost']:+.0f} % per frame."]
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -365,6 +376,7 @@ SECTIONS = {
     "sweep_speed": (None, render_sweep_speed),
     "fit_speed": (None, render_fit_speed),
     "fit_coverage": (None, render_fit_coverage),
+    "measured_stages": (None, render_measured_stages),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -375,7 +387,8 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "explore": ["bench_explore.py", "--repeats", "10", "--json", "explore.json", "--screenshot", "../img/explore.png"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
               "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"],
-              "fit_coverage": ["fit_coverage.py", "--json", "fit_coverage.json"]}
+              "fit_coverage": ["fit_coverage.py", "--json", "fit_coverage.json"],
+              "measured_stages": ["bench_measured_stages.py", "--json", "measured_stages.json"]}
 SLOW = {"sweep_fig9"}
 
 

@@ -177,7 +177,7 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
         x = (np.asarray(series_e, np.float64) if series_e is not None
              else np.linspace(0.0, fw, nonlinearity.SERIES))
         x = x[x <= fw]
-        y = nonlinearity.apply(x, sensor.spec.nonlinearity, fw)
+        y = sensor.spec.nonlinearity.apply(x)
         le = nonlinearity.linearity_error(x, y, float(y[-1]))
     sigma_y_dark = math.sqrt(read_var * k**2 + 1 / 12)
     u_p_min = (sigma_y_dark / k + 0.5) / qe

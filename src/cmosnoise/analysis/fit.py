@@ -473,11 +473,13 @@ def fitted_config(base, result: dict):
         if nonlin["acts_on"] == "charge":
             grid = np.linspace(0.0, 2.0 * full, 4001)
             full = float(np.interp(full, nonlin["transfer"](grid), grid))
-        c = np.linspace(0.0, full, 33)
-        out = nonlin["transfer"](c)
-        if np.all(np.diff(out) > 0) and np.all(nonlin["slope"](c) > 0):
+        c = np.linspace(0.0, full, 1001)
+        if np.all(nonlin["slope"](c) > 0):
+            # the quartic in the photons as the configuration's cubic in s = c / full well: f(c) = c (1 + a s + b s^2 + ...)
+            p1, p2, p3, p4 = nonlin["coefficients"]
+            coefficients = [p2 * full / p1**2, p3 * full**2 / p1**3, p4 * full**3 / p1**4]
             nl_update = {"enabled": True, "acts_on": nonlin["acts_on"], "linearity_error_pct": None,
-                         "curve_e": [[float(a), float(b)] for a, b in zip(c, out)]}
+                         "curve_e": None, "coefficients": coefficients}
         else:
             result["not_fitted"]["nonlinearity"] = "the fitted transfer is not increasing over the full well: left off"
     u: dict = {

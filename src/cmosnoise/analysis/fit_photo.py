@@ -117,7 +117,7 @@ def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_va
 
     Returns
     -------
-    dict: ``bent`` (bool), ``p_value``, ``coefficients`` (p1..p4), ``qe`` and
+    dict: ``bent`` (bool), ``p_value``, ``coefficients`` (p1..p4, in photons), ``qe`` and
     its standard error, ``acts_on``, and ``transfer(c)`` (e- in, e- out).
     """
     from scipy import stats

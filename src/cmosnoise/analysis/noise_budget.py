@@ -44,12 +44,10 @@ def transfer_slope(sensor: Sensor, charge_e: float) -> float:
     Charge-referred noise (shot noise) and signal differences (PRNU) pass
     through the transfer scaled by it, to first order.
     """
-    table = sensor.spec.nonlinearity
-    if table is None or not sensor.config.nonlinearity.enabled or sensor.config.nonlinearity.acts_on != "charge":
+    curve = sensor.spec.nonlinearity
+    if curve is None or not sensor.config.nonlinearity.enabled or sensor.config.nonlinearity.acts_on != "charge":
         return 1.0  # on the mean charge, the shot noise follows the mean it is drawn with
-    steps = table.size - 1
-    i = min(max(int(charge_e * steps / sensor.config.sensor.full_well_e), 0), steps - 1)
-    return float(table[i + 1] - table[i]) * steps / sensor.config.sensor.full_well_e
+    return curve.slope(charge_e)
 
 
 def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:

@@ -406,6 +406,8 @@ class NonlinearitySection(Section):
         None, description="EMVA 1288 linearity error [min, max], % (min <= 0 <= max), over 5-95 % of saturation")
     curve_e: Optional[list[tuple[float, float]]] = Field(
         None, description="the transfer as points [[charge_e, output_e], ...], strictly increasing, from [0, 0]")
+    coefficients: Optional[tuple[float, float, float]] = Field(
+        None, description="the transfer as the cubic x (1 + a s + b s^2 + c s^3), s = x / full well: [a, b, c]")
     acts_on: Literal["charge", "mean"] = Field(
         "charge", description="charge: the sense node's conversion of each frame's collected charge (after the shot "
                               "noise: the photon transfer bends too); mean: the collection of the mean photo-charge "
@@ -413,8 +415,10 @@ class NonlinearitySection(Section):
 
     @model_validator(mode="after")
     def _one_form(self):
-        if self.enabled and (self.linearity_error_pct is None) == (self.curve_e is None):
-            raise ValueError("nonlinearity: give linearity_error_pct or curve_e (one of the two)")
+        given = [k for k in ("linearity_error_pct", "curve_e", "coefficients") if getattr(self, k) is not None]
+        if len(given) > 1 or (self.enabled and not given):
+            raise ValueError("nonlinearity: give one of linearity_error_pct, curve_e or coefficients"
+                             + (f" (got {', '.join(given)})" if given else ""))
         if self.linearity_error_pct is not None:
             lo, hi = self.linearity_error_pct
             if not (-20 <= lo <= 0 <= hi <= 20) or lo == hi:

@@ -61,8 +61,8 @@ class FramePlan:
     col_offset_e: np.ndarray | None = None
     col_gain: np.ndarray | None = None
     adc: tuple[float, float, int] | None = None  #: (K DN/e-, black level DN, top code); None: float32 e-
-    #: the charge-to-voltage transfer tabulated on equal steps from 0 to the full well (stage 5b), float64
-    nonlinearity: np.ndarray | None = None
+    #: the charge-to-voltage transfer (stage 5b): a nonlinearity.Curve (a cubic, or a table)
+    nonlinearity: object | None = None
     offset_e: np.ndarray | None = None  #: per-pixel offsets (rows, cols) float32, e- (stage 5c)
     cell_offsets_dn: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  #: black level per 2 x 2 cell position
     frame_black_sigma_dn: float = 0.0  #: the black level's error per frame, DN (keys row 4)
@@ -106,7 +106,11 @@ def _compiled(inline: str):
         m = np.uint64((bits & np.uint64(0x000FFFFFFFFFFFFF)) | np.uint64(0x3FE0000000000000)).view(np.float64)
         return m, e
 
-    scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor}
+    def as_index(x):
+        return np.int64(x)
+
+    scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor,
+              "as_index": jit(as_index)}
 
     def compile_as(module, name, as_name, **bind):
         g = {**module.__dict__, **scalar, **space, **bind}
@@ -115,12 +119,12 @@ def _compiled(inline: str):
 
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
             (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
-            (samplers, ["normal_from", "tukey_lambda_from", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
+            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
                         "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
     for module, names in plan:
         for name in names:
             compile_as(module, name, name)
-    return space
+    return {**scalar, **space}
 
 
 if numba is not None:
@@ -129,7 +133,8 @@ if numba is not None:
     _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_ptrs_try = (
         _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_try"))
     _uniform_pair, _normal_from, _exp, _log = _h["uniform_pair"], _h["normal_from"], _h["exp"], _h["log"]
-    _tukey_lambda_from = _h["tukey_lambda_from"]
+    _frexp = _h["frexp"]
+    _TUKEY_STEPS = float(samplers.TUKEY_STEPS)
     _ptrs_constants, _ptrs_candidate, _ptrs_log_test = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_test"]
     _ptrs_quick_accept, _ptrs_early_reject = _h["ptrs_quick_accept"], _h["ptrs_early_reject"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
@@ -334,7 +339,7 @@ if numba is not None:
     @numba.njit(**_JIT)
     def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
                      gain, keys, fr, sq, r0, c0, c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale,
-                     offset, read_kind, read_scale, read_shape, out_dn, out_e):
+                     nl_a, nl_b, nl_c, offset, read_kind, read_scale, read_table, out_dn, out_e):
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
 
         Compiled on its own, not inside :func:`_render`'s parallel loop: numba's
@@ -368,12 +373,18 @@ if numba is not None:
                     n[j] = n[j] + np.float64(exact[r, c0 + j])
             for j in range(w):
                 n[j] = min(n[j], full_well)
-            if has_nl:  # stage 5b: linear in the tabulated transfer (nonlinearity.apply)
-                for j in range(w):
-                    q = n[j] * nl_scale
-                    t = np.int64(min(np.floor(q), nl_last))
-                    lo = nl_table[t]
-                    n[j] = lo + (q - t) * (nl_table[t + 1] - lo)
+            if has_nl:  # stage 5b (nonlinearity.Curve.apply)
+                if nl_table.size > 2:  # a measured curve: linear in its table
+                    for j in range(w):
+                        q = n[j] * nl_scale
+                        t = np.int64(min(np.floor(q), nl_last))
+                        lo = nl_table[t]
+                        n[j] = lo + (q - t) * (nl_table[t + 1] - lo)
+                else:  # the cubic, as written
+                    for j in range(w):
+                        x = n[j]
+                        sx = x * nl_scale
+                        n[j] = x * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
             if has_offset:  # stage 5c
                 for j in range(w):
                     n[j] = n[j] + np.float64(offset[r, c0 + j])
@@ -396,28 +407,50 @@ if numba is not None:
                     out_e[i, j] = n[j]
             if adc_on:
                 if has_read:  # stage 9a: read noise after the gain, DN (read_noise.noise)
-                    for j in range(w):
-                        u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, keys[5, 0], keys[5, 1])
                     if read_kind == 0:
+                        for j in range(w):
+                            u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, keys[5, 0], keys[5, 1])
                         for j in range(w):
                             noise[j] = read_scale * _normal_from(u1[j], u2[j])
                     else:
+                        # samplers.tukey_lambda_from in two passes: the uniform and the arithmetic (SIMD), then the
+                        # table's loads (a loop that indexes a table is not vectorized; kept apart, the first pass is)
                         for j in range(w):
-                            noise[j] = read_scale * _tukey_lambda_from(u1[j], read_shape)
+                            u, _ = _uniform_pair(base + np.uint64(j), fr, sq, zero, keys[5, 0], keys[5, 1])
+                            v = 1.0 - u if u > 0.5 else u
+                            m, e = _frexp(v)
+                            x = (m - 0.5) * (2.0 * _TUKEY_STEPS)
+                            xi = np.floor(x)
+                            u1[j] = u
+                            u2[j] = x - xi
+                            lam[j] = (0.0 - e) * (_TUKEY_STEPS + 1.0) + xi
+                        for j in range(w):
+                            k = np.int64(lam[j])
+                            lo = read_table[k]
+                            q = lo + u2[j] * (read_table[k + 1] - lo)
+                            noise[j] = read_scale * (-q if u1[j] > 0.5 else q)
                 cb = (r & 1) * 2
-                for j in range(w):
-                    v = n[j] * k_adc + cell_black[cb + ((c0 + j) & 1)]
-                    if has_read:
-                        v = v + noise[j]
-                    v = np.rint(v)
-                    out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+                one_black = cell_black[0] == cell_black[1] == cell_black[2] == cell_black[3]
+                if one_black and not has_read:  # the paper's ADC: one black level, nothing after the gain
+                    b0 = cell_black[0]
+                    for j in range(w):
+                        v = np.rint(n[j] * k_adc + b0)
+                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+                else:
+                    for j in range(w):
+                        v = n[j] * k_adc + cell_black[cb + ((c0 + j) & 1)]
+                        if has_read:
+                            v = v + noise[j]
+                        v = np.rint(v)
+                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
             if not has_noisy:
                 n[:] = 0.0
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
                 col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, loggam_table, nl_table, nl_scale,
-                offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_shape, out_dn, out_e):
+                nl_a, nl_b, nl_c, offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_table, out_dn,
+                out_e):
         fr = np.uint64(frame)
         sq = np.uint64(seq)
         # the black level of each 2 x 2 cell position in this frame (read_noise.cell_black)
@@ -439,8 +472,8 @@ if numba is not None:
         for blk in numba.prange(nblocks):
             _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
                          normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
-                         c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale, offset, read_kind,
-                         read_scale, read_shape, out_dn, out_e)
+                         c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale, nl_a, nl_b, nl_c,
+                         offset, read_kind, read_scale, read_table, out_dn, out_e)
 
 
 def _version_of(package: str) -> str | None:
@@ -505,7 +538,7 @@ def preload() -> bool:
     flags = np.zeros(_FLAGS, np.bool_)
     args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
             np.zeros((6, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
-            _DUMMY2, _DUMMY1, 0.0, 0, 0.0, 0.0, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
+            0.0, 0.0, 0.0, _DUMMY2, _DUMMY1, 0.0, 0, 0.0, _DUMMY_NL, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
     try:
         index = _render._cache._cache_file._load_index()  # {(signature, target, ...): file}
@@ -542,13 +575,18 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
                       plan.nonlinearity is not None, plan.offset_e is not None,
                       adc_on and plan.read_noise is not None])
     k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
-    nl, nl_scale = _DUMMY_NL, 0.0
-    if plan.nonlinearity is not None:
-        nl, nl_scale = plan.nonlinearity, (plan.nonlinearity.size - 1) / plan.full_well_e  # nonlinearity.apply's
-    read_kind, read_scale, read_shape = 0, 0.0, 0.0
+    nl, nl_scale, (nl_a, nl_b, nl_c) = _DUMMY_NL, 0.0, (0.0, 0.0, 0.0)
+    curve = plan.nonlinearity
+    if curve is not None:  # nonlinearity.Curve.apply's constants
+        if curve.coefficients is not None:
+            nl_scale, (nl_a, nl_b, nl_c) = 1.0 / curve.full_well_e, curve.coefficients
+        else:
+            nl, nl_scale = curve.table, (curve.table.size - 1) / curve.full_well_e
+    read_kind, read_scale, read_table = 0, 0.0, _DUMMY_NL
     if plan.read_noise is not None:
-        kind, read_scale, read_shape = plan.read_noise
-        read_kind = 0 if kind == "normal" else 1
+        kind, read_scale, shape = plan.read_noise
+        if kind != "normal":
+            read_kind, read_table = 1, samplers.tukey_lambda_table(float(shape))
     first = _needs_compile()
     t0 = time.perf_counter()
     _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
@@ -559,9 +597,10 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
             plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
             plan.col_gain if plan.col_gain is not None else _DUMMY1,
             plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, float(k_adc), float(black), float(top),
-            plan.loggam_table, nl, float(nl_scale), plan.offset_e if plan.offset_e is not None else _DUMMY2,
+            plan.loggam_table, nl, float(nl_scale), nl_a, nl_b, nl_c,
+            plan.offset_e if plan.offset_e is not None else _DUMMY2,
             np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),
-            read_kind, float(read_scale), float(read_shape), out_dn, out_e)
+            read_kind, float(read_scale), read_table, out_dn, out_e)
     elapsed = time.perf_counter() - t0
     if first and elapsed > 2.0:  # a cache load takes well under a second; this was a compile
         _logger.info(f"compiled the frame kernel in {elapsed:.0f} s; later runs reuse it")

@@ -93,15 +93,16 @@ def offset_model(config: Config):
         raise _invalid(str(exc)) from None
 
 
-def nonlinearity_table(config: Config):
-    """The tabulated charge-to-voltage transfer of ``config`` (None when neither form is given)."""
+def nonlinearity_curve(config: Config):
+    """The charge-to-voltage transfer of ``config`` (a :class:`~.stages.nonlinearity.Curve`; None when no form
+    is given)."""
     from .stages import nonlinearity
 
     n = config.nonlinearity
-    if n.linearity_error_pct is None and n.curve_e is None:
+    if n.linearity_error_pct is None and n.curve_e is None and n.coefficients is None:
         return None
     try:
-        return nonlinearity.table(config.sensor.full_well_e, n.linearity_error_pct, n.curve_e)
+        return nonlinearity.curve(config.sensor.full_well_e, n.linearity_error_pct, n.curve_e, n.coefficients)
     except ValueError as exc:
         raise _invalid(str(exc)) from None
 

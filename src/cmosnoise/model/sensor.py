@@ -41,7 +41,6 @@ from .stages import (
     column_noise,
     crosstalk,
     dark_current,
-    nonlinearity,
     prnu,
     read_noise,
     row_noise,
@@ -341,7 +340,7 @@ class Exposure:
             perfect = scene_mod.photo_electrons(signal, sensor.spec.peak_rate_e_per_s, ex.integration_time_s)
             after_prnu, mean = sensor.photo_response(perfect)
             if on_mean:  # stage 5b on the mean photo-charge: the collection saturates, the shot noise follows it
-                mean = nonlinearity.apply(mean, sensor.spec.nonlinearity, c.sensor.full_well_e)
+                mean = sensor.spec.nonlinearity.apply(mean)
             return perfect, after_prnu, mean.astype(np.float32)
 
         photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
@@ -431,7 +430,7 @@ class Exposure:
         collected = n
         fp = s.fixed_pattern
         if c.nonlinearity.enabled and c.nonlinearity.acts_on == "charge" and s.spec.nonlinearity is not None:
-            n = nonlinearity.apply(n, s.spec.nonlinearity, c.sensor.full_well_e)
+            n = s.spec.nonlinearity.apply(n)
         converted = n
         if fp.pixel_offset is not None:
             n = n + fp.pixel_offset[win]

@@ -29,6 +29,7 @@ from . import physics
 from .heavy_tail import HeavyTail
 from .stages import adc
 from .stages.dark_current import Point
+from .stages.nonlinearity import Curve
 from .stages.pixel_offset import OffsetModel
 
 
@@ -50,9 +51,8 @@ class SensorSpec:
         The ADC transfer (the ideal one, 1 DN per e-, with the ADC off).
     offsets : OffsetModel
         The pixel offsets' law, e- (its tail fraction solved).
-    nonlinearity : ndarray or None
-        The charge-to-voltage transfer tabulated from 0 to the full well (:mod:`.stages.nonlinearity`),
-        ``None`` where the configuration gives none.
+    nonlinearity : nonlinearity.Curve or None
+        The charge-to-voltage transfer (:mod:`.stages.nonlinearity`), ``None`` where the configuration gives none.
     """
 
     config: Config
@@ -61,7 +61,7 @@ class SensorSpec:
     prnu_seen_per_sigma: float
     transfer: adc.Transfer
     offsets: OffsetModel
-    nonlinearity: np.ndarray | None = None
+    nonlinearity: Curve | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -146,4 +146,4 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     # every section is checked, those switched off too (a file must stay valid when one is switched on)
     return SensorSpec(config, tuple(physics.dark_points(config)), physics.flicker_model(config),
                       physics.prnu_seen_per_sigma(config), transfer(config), physics.offset_model(config),
-                      physics.nonlinearity_table(config))
+                      physics.nonlinearity_curve(config))

@@ -14,15 +14,18 @@ small-signal conversion gain), as one of:
 - a curve: points ``(charge, output)``, strictly increasing, linear between
   them (and past the last one, along its last segment).
 
-Either is tabulated once (:func:`table`) on 4096 equal steps from 0 to the
-full well, and the frame kernel interpolates linearly in it
-(:func:`apply`): a table lookup per pixel. Off, the stage is skipped: the
-exact identity.
+- the cubic's coefficients ``[a, b, c]`` themselves (what ``fit`` writes).
+
+The cubic is evaluated as written in every pixel (:class:`Curve`; SIMD in
+the kernel); a curve is tabulated once on 4096 equal steps from 0 to the
+full well and interpolated linearly. Off, the stage is skipped: the exact
+identity.
 """
 
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,12 +62,14 @@ def linearity_error(x: np.ndarray, y: np.ndarray, y_sat: float) -> tuple[float, 
 
 
 def polynomial(coefficients: tuple[float, ...], full_well_e: float):
-    """``f(x) = x (1 + a s + b s**2 + c s**3)``, ``s = x / full_well_e``, for ``coefficients = (a, b, c)``."""
+    """``f(x) = x (1 + s (a + s (b + s c)))``, ``s = x / full_well_e`` (as ``x * (1 / full_well_e)``, the
+    kernel's arithmetic), for ``coefficients = (a, b, c)``."""
     a, b, c = coefficients
+    inv = 1.0 / full_well_e
 
     def f(x):
         x = np.asarray(x, np.float64)
-        s = x / full_well_e
+        s = x * inv
         return x * (1.0 + s * (a + s * (b + s * c)))
 
     return f
@@ -124,36 +129,59 @@ def solve_polynomial(le_min: float, le_max: float, full_well_e: float) -> tuple[
     return coefficients, (lo, hi)
 
 
-def table(full_well_e: float, linearity_error_pct=None, curve_e=None) -> np.ndarray:
-    """The transfer tabulated at ``STEPS + 1`` charges from 0 to ``full_well_e`` (e- out), float64, read-only.
+@dataclass(frozen=True, eq=False)
+class Curve:
+    """A resolved transfer: the cubic ``x (1 + s (a + s (b + s c)))``, ``s = x / full_well_e``, where
+    ``coefficients`` is set (evaluated directly: SIMD in the kernel), else the ``table`` of ``STEPS + 1``
+    values from 0 to the full well, linear between (a measured curve)."""
+
+    full_well_e: float
+    coefficients: tuple[float, float, float] | None = None
+    table: np.ndarray | None = None
+
+    def apply(self, charge_e) -> np.ndarray:
+        """The transfer at ``charge_e`` (e-), float64: the kernel's arithmetic."""
+        if self.coefficients is not None:
+            return polynomial(self.coefficients, self.full_well_e)(charge_e)
+        q = np.asarray(charge_e, np.float64) * (STEPS / self.full_well_e)
+        i = np.minimum(np.floor(q), STEPS - 1).astype(np.int64)
+        lo = self.table[i]
+        return lo + (q - i) * (self.table[i + 1] - lo)
+
+    def slope(self, charge_e: float) -> float:
+        """Output e- per collected e- at ``charge_e``."""
+        if self.coefficients is not None:
+            a, b, c = self.coefficients
+            s = charge_e / self.full_well_e
+            return 1.0 + s * (2 * a + s * (3 * b + s * 4 * c))
+        i = min(max(int(charge_e * STEPS / self.full_well_e), 0), STEPS - 1)
+        return float(self.table[i + 1] - self.table[i]) * STEPS / self.full_well_e
+
+
+def curve(full_well_e: float, linearity_error_pct=None, curve_e=None, coefficients=None) -> Curve:
+    """The transfer a configuration gives: from the EMVA 1288 linearity error (solved to a cubic), the cubic's
+    coefficients, or a curve of points (tabulated, linear between and past the last point along its last segment).
 
     Raises
     ------
     ValueError
-        A linearity error no monotone transfer of this form has.
+        A linearity error no monotone transfer of this form has; coefficients not increasing up to the full well.
     """
-    grid = np.linspace(0.0, full_well_e, STEPS + 1)
     if linearity_error_pct is not None:
         coefficients, _ = solve_polynomial(float(linearity_error_pct[0]), float(linearity_error_pct[1]),
                                            float(full_well_e))
-        out = polynomial(coefficients, full_well_e)(grid)
-    else:
-        pts = np.asarray(curve_e, np.float64)
-        xs, ys = pts[:, 0], pts[:, 1]
-        out = np.interp(grid, xs, ys)
-        past = grid > xs[-1]  # past the last point: along the last segment
-        out[past] = ys[-1] + (grid[past] - xs[-1]) * (ys[-1] - ys[-2]) / (xs[-1] - xs[-2])
+    if coefficients is not None:
+        a, b, c = (float(v) for v in coefficients)
+        s = np.linspace(0.0, 1.0, 1001)
+        if not np.all(1.0 + s * (2 * a + s * (3 * b + s * 4 * c)) > 0):
+            raise ValueError(f"nonlinearity.coefficients = {[a, b, c]}: the transfer must increase up to the full "
+                             "well (its slope 1 + 2a s + 3b s^2 + 4c s^3 > 0 for s in [0, 1])")
+        return Curve(float(full_well_e), (a, b, c))
+    grid = np.linspace(0.0, full_well_e, STEPS + 1)
+    pts = np.asarray(curve_e, np.float64)
+    xs, ys = pts[:, 0], pts[:, 1]
+    out = np.interp(grid, xs, ys)
+    past = grid > xs[-1]  # past the last point: along the last segment
+    out[past] = ys[-1] + (grid[past] - xs[-1]) * (ys[-1] - ys[-2]) / (xs[-1] - xs[-2])
     out.flags.writeable = False
-    return out
-
-
-def apply(charge_e: np.ndarray, tab: np.ndarray, full_well_e: float) -> np.ndarray:
-    """The transfer at ``charge_e`` (e-, 0 to the full well), float64: linear in the table.
-
-    ``q = charge * STEPS / full_well``, ``i = min(floor(q), STEPS - 1)``,
-    ``tab[i] + (q - i) (tab[i + 1] - tab[i])``: the kernel's arithmetic.
-    """
-    q = np.asarray(charge_e, np.float64) * (STEPS / full_well_e)
-    i = np.minimum(np.floor(q), STEPS - 1).astype(np.int64)
-    lo = tab[i]
-    return lo + (q - i) * (tab[i + 1] - lo)
+    return Curve(float(full_well_e), table=out)

@@ -3,9 +3,10 @@
 Measured cameras calibrate part of their read noise after the gain, in DN
 (ELD, Wei et al. 2020): its law is often heavier-tailed than a normal, and
 a Tukey-lambda law with shape ``lam`` and scale ``s`` fits it. Each pixel in
-each frame gets ``s * Q(u)``, ``Q`` the standard Tukey-lambda quantile and
-``u`` its own counter-based uniform (:func:`cmosnoise.engine.samplers.tukey_lambda_from`),
-or ``s * Normal(0, 1)``.
+each frame gets ``s * Q(u)``, ``Q`` the standard Tukey-lambda quantile
+(tabulated per octave of ``min(u, 1 - u)`` and interpolated:
+:func:`cmosnoise.engine.samplers.tukey_lambda_from`) and ``u`` its own
+counter-based uniform, or ``s * Normal(0, 1)``.
 
 The black level has two errors beside ``adc.black_level_dn``: a fixed offset
 per position of the 2 x 2 CFA cell (the "colour bias" of ELD's cameras), and
@@ -19,7 +20,7 @@ import math
 
 import numpy as np
 
-from ...engine.samplers import Stream, normal_from, tukey_lambda_from
+from ...engine.samplers import Stream, normal_from, tukey_lambda_from, tukey_lambda_table
 
 
 def noise(kind: str, scale_dn: float, shape: float, stream: Stream, index: np.ndarray) -> np.ndarray:
@@ -27,7 +28,7 @@ def noise(kind: str, scale_dn: float, shape: float, stream: Stream, index: np.nd
     u1, u2 = stream.uniforms(index)
     if kind == "normal":
         return scale_dn * normal_from(u1, u2)
-    return scale_dn * tukey_lambda_from(u1, float(shape))
+    return scale_dn * tukey_lambda_from(u1, tukey_lambda_table(float(shape)))
 
 
 def tukey_lambda_variance(lam: float) -> float:

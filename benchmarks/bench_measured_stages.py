@@ -1,0 +1,61 @@
+"""What the stages of measured sensors cost the frame kernel, at 1920 x 1080 RGGB.
+
+The default chain is timed with every measured-sensor stage off, and again with pixel offsets, black-level
+offsets per CFA cell (and the frame's black-level error), the nonlinearity and Tukey-lambda read noise after
+the gain all on; each against the plain NumPy reference of bench_chain.py timed alternately with it, so the
+ratio of the two ratios is the stages' cost, free of a shared machine's slow spells.
+
+    python benchmarks/bench_measured_stages.py [--frames 20] [--repeats 5] [--threads 2] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from bench_chain import against_reference, cpu, numpy_reference  # noqa: E402
+
+from cmosnoise import Sensor, load_config  # noqa: E402
+
+ALL_ON = {
+    "pixel_offset": {"enabled": True, "sigma_e": 3.0, "tail": {"ppm_above": 200, "threshold_e": 20, "max_e": 200}},
+    "black_level": {"channel_offsets_dn": [1.5, -0.5, 0.25, 2.0], "frame_sigma_dn": 0.05},
+    "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.13, 0.6]},
+    "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 0.7, "shape": 0.149},
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--json", help="also write the results here (docs/numbers/measured_stages.json feeds the README)")
+    a = ap.parse_args()
+    import numba
+
+    numba.set_num_threads(a.threads)
+    size = {"sensor": {"width": 1920, "height": 1080}}
+    rows = []
+    for label, extra in (("every measured-sensor stage off (the default)", {}),
+                         ("offsets, cell black levels, nonlinearity, Tukey-lambda read noise on", ALL_ON)):
+        sensor = Sensor(load_config(extra={**size, **extra}), seed=0)
+        shot = sensor.expose("photo")
+        shot.frame(0)  # compile
+        ref = numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)
+        t, t_ref = against_reference(shot.frame, a.frames, a.repeats, ref, max(a.frames // 4, 2))
+        rows.append({"label": label, "ms": 1e3 * t, "ref_ms": 1e3 * t_ref, "ratio": t / t_ref})
+        print(f"{label}: {1e3 * t:.1f} ms/frame, reference {1e3 * t_ref:.1f} ms, ratio {t / t_ref:.3f}")
+    cost = rows[1]["ratio"] / rows[0]["ratio"] - 1
+    print(f"the stages cost {100 * cost:+.1f} % per frame ({a.threads} threads)")
+    if a.json:
+        Path(a.json).write_text(json.dumps({**cpu(), "threads": a.threads, "frames": a.frames, "rows": rows,
+                                            "cost": cost}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
