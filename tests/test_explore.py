@@ -307,3 +307,18 @@ def test_another_host_is_served_only_when_asked_and_with_a_warning():
         assert info.value.code == 400
     finally:
         stop_process(proc)
+
+
+def test_a_cameras_gain_table_gives_an_iso_menu(app_page):
+    """Loading the sony-a7s2 preset into pane A: its ISO is a menu of the table's settings (with the conversion
+    gain's name), and picking one redraws the pane with that setting's noise."""
+    page = app_page
+    page.select_option("#preset", "sony-a7s2")
+    _wait(page, "document.querySelector('#fields select[data-key=\"sensor.iso\"]') !== null")
+    options = page.eval_on_selector('#fields select[data-key="sensor.iso"]', "e => [...e.options].map(o => o.textContent)")
+    assert "2000 (HCG)" in options and "1600 (LCG)" in options and "1700" not in " ".join(options)
+    _settle(page)
+    before = page.evaluate("() => S.seq.A")
+    page.select_option('#fields select[data-key="sensor.iso"]', "2000")
+    _wait_rendered(page, "A", before)
+    assert page.evaluate("() => S.panes.A.config.sensor.iso") == 2000

@@ -141,6 +141,22 @@ function fieldRow(f, key, cfg) {
     box.type = "checkbox"; box.checked = !!value; box.className = "wide"; box.dataset.key = key;
     box.addEventListener("change", () => change(key, box.checked));
     row.appendChild(box);
+  } else if ((key === "sensor.iso" || key === "sensor.gain_db") &&
+             (cfg.gain_table || []).some((r) => r[key.split(".")[1]] != null)) {
+    // a gain setting picks a row of the camera's gain table: offer those settings only
+    const field = key.split(".")[1];
+    const sel = document.createElement("select");
+    sel.className = "wide"; sel.dataset.key = key;
+    const settings = cfg.gain_table.filter((r) => r[field] != null).map((r) => [r[field], r.mode]);
+    for (const [v, mode] of [[null, null], ...settings.sort((a, b) => a[0] - b[0])]) {
+      const o = document.createElement("option");
+      o.value = v == null ? "" : String(v);
+      o.textContent = v == null ? "(none)" : `${v}${mode ? " (" + mode + ")" : ""}`;
+      sel.appendChild(o);
+    }
+    sel.value = value == null ? "" : String(value);
+    sel.addEventListener("change", () => change(key, sel.value === "" ? null : Number(sel.value)));
+    row.appendChild(sel);
   } else if (f.kind === "enum") {
     const sel = document.createElement("select");
     sel.className = "wide"; sel.dataset.key = key;
