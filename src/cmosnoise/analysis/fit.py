@@ -252,6 +252,12 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                                                       threshold_e=tl["threshold_e"])
                 P["pixel_offset.tail.max_e"] = _p(tl["max_e"], None, "largest intercept above the body")
             plots["pixel_offset"] = {"residual": off["residual_e"]}
+            cells, cse = off["cells_dn"].ravel(), off["cells_se_dn"].ravel()
+            if np.any(np.abs(cells) > Z95 * np.hypot(cse, np.sqrt(np.mean(cse**2)))):
+                P["black_level.channel_offsets_dn"] = _p(
+                    [float(x) for x in cells], None, "each 2 x 2 cell position's mean dark intercept less the four's "
+                    "mean (in sensor.cfa's order)", ci95_each=[[float(x - Z95 * e), float(x + Z95 * e)]
+                                                                for x, e in zip(cells, cse)])
             # the intercept holds this sensor's mean offset; another instance of the fitted sensor draws its own
             # map, whose mean strays by sigma / sqrt(pixels): the black level's interval carries that spread too
             b = P["black_level_dn"]
@@ -425,6 +431,17 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
                 not_fitted_readout["read_noise"] = (
                     f"the pixels' noise is not normal (excess kurtosis {kurt:.3g}, 95 % CI {kci[0]:.3g} to {kci[1]:.3g}) "
                     f"but their sigmas spread by {spread:.0%}: the flicker model holds it; no Tukey-lambda read noise")
+    # the black level's error per frame: the frames' means spread beyond what the rows', the columns' and the
+    # pixels' temporal noise leave (each estimated from the stack's own row and column means about the frame's)
+    fm = st.row_means.mean(axis=1)
+    vr = float(np.mean((st.row_means - fm[:, None]).var(axis=0, ddof=1)))
+    vc = float(np.mean((st.col_means - fm[:, None]).var(axis=0, ddof=1)))
+    p_var = float(np.mean(st.pixel_var)) / corr
+    own = vr / (rows - 1) + vc / (cols - 1) - p_var / (rows * cols)
+    v_fm = float(np.var(fm, ddof=1))
+    P["black_level.frame_sigma_dn"] = _p(**sigma_from_variance(v_fm - own, v_fm * math.sqrt(2 / (n - 1))),
+                                         method=f"the spread of the {n} frames' means less what the rows', columns' "
+                                                "and pixels' temporal noise put there")
     # rows: temporal then fixed
     rs = centred_series(st.row_means) / k
     cs = centred_series(st.col_means) / k
@@ -539,6 +556,13 @@ def fitted_config(base, result: dict):
         u["read_noise"] = {"enabled": True, "distribution": "tukey_lambda", "shape": v("read_noise.shape"),
                            "scale_dn": v("read_noise.scale_dn")}
         u["source_follower"] = {"enabled": False}
+    black_level: dict = {}
+    if "black_level.channel_offsets_dn" in P:
+        black_level["channel_offsets_dn"] = v("black_level.channel_offsets_dn")
+    if "black_level.frame_sigma_dn" in P and P["black_level.frame_sigma_dn"]["ci95"][0] > 0:
+        black_level["frame_sigma_dn"] = v("black_level.frame_sigma_dn")
+    if black_level:
+        u["black_level"] = black_level
     if "quantum_efficiency" in P and 0 < v("quantum_efficiency") <= 1:
         # photons per pixel over the fitted configuration's e-: what a crosstalk loss and the PRNU map leave aside
         u["sensor"]["quantum_efficiency"] = v("quantum_efficiency")

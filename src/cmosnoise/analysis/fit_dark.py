@@ -229,10 +229,15 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     Pixels that reach ``limit_dn`` in any stack are left out (a white pixel
     bends its own line).
 
+    Each 2 x 2 cell position's mean intercept (less the four's mean) is the
+    black level's offset of that CFA position (``cells_dn``, with standard
+    errors ``cells_se_dn``); it is taken out before the spread is measured.
+
     Returns
     -------
     dict with ``sigma_e`` (value, ci95), ``tail`` (ppm_above, threshold_e,
-    max_e, ci95, pixels) or None, ``residual_e`` (rows, cols) and ``pixels``.
+    max_e, ci95, pixels) or None, ``residual_e`` (rows, cols), ``pixels``,
+    ``cells_dn`` and ``cells_se_dn`` (2, 2).
     """
     from scipy import stats
 
@@ -242,17 +247,39 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     rows, cols = stack.shape[1:]
     shrink = 1 - 1 / rows - 1 / cols
 
-    def residual(idx):
-        """Each pixel's intercept from the stacks ``idx`` (least squares over their times), rows and columns out."""
+    def intercepts(idx):
+        """Each pixel's intercept from the stacks ``idx`` (least squares over their times), DN; NaN where unusable."""
         ti = t[idx]
         tc = ti - ti.mean()
         w = 1.0 / ti.size - ti.mean() * tc / np.sum(tc * tc)
-        r = np.where(usable, np.tensordot(w, stack[idx], axes=1), np.nan)
+        return np.where(usable, np.tensordot(w, stack[idx], axes=1), np.nan), w
+
+    def residual(r):
+        """The intercepts less their 2 x 2 cell position's mean (the black level per CFA cell), then less their
+        rows' and columns' means (fixed row offsets and VFPN), e-."""
+        r = r.copy()
+        for dr in (0, 1):
+            for dc in (0, 1):
+                r[dr::2, dc::2] -= np.nanmean(r[dr::2, dc::2])
         r = r - np.nanmean(r, axis=1, keepdims=True) - np.nanmean(r, axis=0, keepdims=True) + np.nanmean(r)
-        return r / gain_dn_per_e, w
+        return r / gain_dn_per_e
 
     every = np.arange(t.size)
-    resid_e, c = residual(every)
+    raw, c = intercepts(every)
+    # the black level of each 2 x 2 cell position against their mean, DN: each position's mean intercept, its
+    # standard error from the intercepts' spread in that position
+    cells = np.array([[np.nanmean(raw[dr::2, dc::2]) for dc in (0, 1)] for dr in (0, 1)])
+    def position_se(sub):
+        """Standard error of a position's mean: its pixels' spread over their number, and what its rows and its
+        columns share (fixed row offsets, VFPN: a column's pixels move together), over their numbers."""
+        n_pix = np.sum(np.isfinite(sub))
+        by_col, by_row = np.nanmean(sub, axis=0), np.nanmean(sub, axis=1)
+        return math.sqrt(np.nanvar(sub, ddof=1) / n_pix + np.nanvar(by_col, ddof=1) / by_col.size
+                         + np.nanvar(by_row, ddof=1) / by_row.size)
+
+    cells_se = np.array([[position_se(raw[dr::2, dc::2]) for dc in (0, 1)] for dr in (0, 1)])
+    cells = cells - cells.mean()
+    resid_e = residual(raw)
     values = resid_e[usable]
     n = values.size
     # the pixels' variances are of frames less their row and column means: 1 - 2/cols - 2/rows of a pixel's own
@@ -267,8 +294,8 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
         # two intercepts from disjoint stacks: their noises are independent, so the covariance over the pixels is
         # the offsets' variance whatever the noise's law (a robust spread assumes it normal); the body's pixels
         # only (within 6 robust sigmas: a tail is counted apart)
-        a, _ = residual(halves[0])
-        b, _ = residual(halves[1])
+        a = residual(intercepts(halves[0])[0])
+        b = residual(intercepts(halves[1])[0])
         body = usable & (np.abs(resid_e) <= 6 * robust)
         xa, xb = a[body] - a[body].mean(), b[body] - b[body].mean()
         var = float(np.mean(xa * xb)) / shrink
@@ -289,7 +316,8 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
         tail = {"ppm_above": above / n * 1e6, "threshold_e": threshold, "max_e": float(values.max()),
                 "ci95": [ci.low * 1e6, ci.high * 1e6], "pixels": above}
     return {"sigma_e": {"value": sigma, "ci95": [math.sqrt(max(var - Z95 * se, 0.0)), math.sqrt(max(var + Z95 * se, 0.0))]},
-            "noise_e": math.sqrt(noise), "tail": tail, "residual_e": resid_e, "pixels": n, "method": how}
+            "noise_e": math.sqrt(noise), "tail": tail, "residual_e": resid_e, "pixels": n, "method": how,
+            "cells_dn": cells, "cells_se_dn": cells_se}
 
 
 def clipped_pixels(means_dn: list[np.ndarray], limit_dn: float) -> np.ndarray:

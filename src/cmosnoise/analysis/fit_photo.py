@@ -216,7 +216,8 @@ def prnu_and_column_gain(flat, dark, pattern: str, saturation_dn: float) -> dict
 def crosstalk_from_spots(spot, dark, pattern: str, kernel_sum: float, saturation_dn: float) -> dict:
     """The crosstalk kernel from a stack of frames lit on single, well separated pixels (:class:`StackStats`).
 
-    Each spot is a local maximum of (spot - dark) that stands clear of its
+    Each spot is a local maximum of (spot - dark), less the difference's
+    common level (the median of the unlit pixels), that stands clear of its
     5 x 5 surroundings; the 3 x 3 charge around it, divided by its sum, is
     the fraction of the lit pixel's charge in itself and each neighbour. A
     spot measures how charge is shared, not how much is lost to the
@@ -230,6 +231,11 @@ def crosstalk_from_spots(spot, dark, pattern: str, kernel_sum: float, saturation
     sig = spot.mean - dark.mean
     rows, cols = sig.shape
     noise = math.sqrt(max(float(np.median(spot.pixel_var)) / spot.n + float(np.median(dark.pixel_var)) / dark.n, 1e-12))
+    # the black level's error per frame does not average out of two stacks' means: a level common to the whole
+    # difference, taken off as the median of the unlit pixels (within 5 noise sigmas of the difference's median:
+    # the lit pixels' neighbours, a sixth of the frame, would pull a plain median up)
+    centre = float(np.median(sig))
+    sig = sig - float(np.median(sig[np.abs(sig - centre) < 5 * noise]))
     peak = (sig == ndimage.maximum_filter(sig, size=5)) & (sig > 50 * noise) & (spot.mean < 0.9 * saturation_dn)
     peak[:2, :] = peak[-2:, :] = False
     peak[:, :2] = peak[:, -2:] = False

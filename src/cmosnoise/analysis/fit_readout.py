@@ -428,8 +428,9 @@ def split_half_covariance(image: np.ndarray, mask: np.ndarray, axis: str) -> tup
     Each column's mean over the top half of the rows and over the bottom
     half: a column offset or gain is in both, a pixel's own deviation (even
     when crosstalk makes neighbours alike) in only one, so their covariance
-    over the columns is the column part's variance alone. Returns the
-    covariance and its standard error.
+    over the columns is the column part's variance alone; even and odd
+    columns are centred apart (a CFA cell's black level alternates them).
+    Returns the covariance and its standard error.
     """
     img = image if axis == "col" else image.T
     m = mask if axis == "col" else mask.T
@@ -440,8 +441,13 @@ def split_half_covariance(image: np.ndarray, mask: np.ndarray, axis: str) -> tup
 
     x, y = means(img[:h], m[:h]), means(img[h:], m[h:])
     n = x.size
-    c = float(np.cov(x, y)[0, 1])
-    se = math.sqrt((float(np.var(x, ddof=1)) * float(np.var(y, ddof=1)) + c * c) / (n - 1))
+    # each centred on its even and on its odd columns (rows) apart: a black level per CFA cell position makes
+    # them alternate, which is not a column's (row's) own offset; two means fitted, so n - 2 degrees of freedom
+    for a in (x, y):
+        a[0::2] -= a[0::2].mean()
+        a[1::2] -= a[1::2].mean()
+    c = float(np.sum(x * y)) / (n - 2)
+    se = math.sqrt((float(np.sum(x * x)) / (n - 2) * float(np.sum(y * y)) / (n - 2) + c * c) / (n - 2))
     return c, se
 
 

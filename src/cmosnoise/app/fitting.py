@@ -79,8 +79,9 @@ def round_trip(result: dict, again: dict) -> list[dict]:
             rows.append({"parameter": name, "measured": p["value"], "simulated": None if q is None else q["value"],
                          "agree": None})
             continue
-        if isinstance(p["value"], list):  # a kernel: every element's intervals overlap
-            a, b = np.asarray(p["ci95_pct"]), np.asarray(q.get("ci95_pct", p["ci95_pct"]))
+        if isinstance(p["value"], list):  # a kernel or the cell offsets: every element's intervals overlap
+            each = "ci95_pct" if "ci95_pct" in p else "ci95_each"
+            a, b = np.asarray(p[each]), np.asarray(q.get(each, p[each]))
             rows.append({"parameter": name, "measured": p["value"], "simulated": q["value"],
                          "agree": bool(np.all((a[..., 0] <= b[..., 1]) & (b[..., 0] <= a[..., 1])))})
             continue
