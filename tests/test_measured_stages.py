@@ -265,3 +265,29 @@ def test_fit_recovers_the_black_level_per_cfa_cell_and_per_frame(tmp_path):
     assert lo <= 0.5 <= hi, (lo, hi)
     assert P["row_noise.fixed_sigma_e"]["ci95"][0] == 0.0
     assert all(row["agree"] is not False for row in doc["round_trip"]), [r for r in doc["round_trip"] if r["agree"] is False]
+
+
+# ------------------------------------------------------------------ light in photons
+def test_light_in_photons_is_times_the_quantum_efficiency_per_channel():
+    """Photons per pixel per second times each channel's QE: the perfect image of a flat grey scene is
+    photons * t * QE_c on channel c (exactly, as QE_mean * (QE_c / QE_mean)), and characterize's eta is the QE."""
+    qe = (0.5, 0.8, 0.3)
+    cfg = quiet_config(sensor={"width": 64, "height": 48, "quantum_efficiency": list(qe)},
+                       exposure={"peak_rate_photons_per_s": 1e5})
+    shot = Sensor(cfg, seed=0).expose("flat:1")
+    t = cfg.exposure.integration_time_s
+    perfect = shot.perfect_e
+    for (dr, dc), q in zip([(0, 0), (0, 1), (1, 1)], (qe[0], qe[1], qe[2])):  # RGGB: R, G, B
+        np.testing.assert_allclose(perfect[dr::2, dc::2], 1e5 * t * q, rtol=1e-6)
+
+
+@pytest.mark.parametrize("value", ["1.2", "0", "[0.5,0.5,1.5]"])
+def test_a_quantum_efficiency_outside_0_1_is_one_line(value, tmp_path):
+    r = cli("simulate", "--set", f"sensor.quantum_efficiency={value}", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "quantum_efficiency" in r.stderr and "(0, 1]" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_light_in_photons_needs_a_quantum_efficiency(tmp_path):
+    r = cli("simulate", "--set", "exposure.peak_rate_photons_per_s=1e6", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "sensor.quantum_efficiency" in r.stderr
