@@ -198,24 +198,30 @@ def test_kernel_and_numpy_agree_with_every_new_stage_on_crops_included():
 
 
 # ------------------------------------------------------------------ fitted back
-def test_fit_recovers_tukey_lambda_read_noise_and_pixel_offsets(tmp_path):
-    """A lab data set (`cmosnoise measure`) of a sensor whose pixel noise is Tukey-lambda read noise after the gain
-    (shape -0.1, 2 DN) with pixel offsets of 3 e-: the fit's 95 % intervals hold the shape and the offsets'
-    sigma, its scale is within 5 % (its interval is not given: the mean variance it comes from is known to
-    0.5 %), the fitted configuration carries them, and the round trip agrees on every judged parameter."""
+def _measured_and_fitted(tmp_path, sets: list[str]) -> dict:
+    """`cmosnoise measure` of the default sensor with ``sets`` (a 64-frame dark stack, 12 flat levels), then
+    `cmosnoise fit` of it with its round trip: the fit's fit.json."""
     import json
 
-    import yaml
-
-    sets = ["sensor.width=256", "sensor.height=192", "sensor.cfa=none", "source_follower.enabled=false",
-            "dark_current.enabled=false", "read_noise.enabled=true", "read_noise.distribution=tukey_lambda",
-            "read_noise.shape=-0.1", "read_noise.scale_dn=2", "pixel_offset.enabled=true", "pixel_offset.sigma_e=3"]
     r = cli("-q", "measure", *[a for s in sets for a in ("--set", s)], "--long-frames", "64", "--levels", "12",
             "--out", tmp_path / "lab")
     assert r.returncode == 0, r.stderr
     r = cli("fit", "--frames-from", tmp_path / "lab" / "manifest.yaml", "--out", tmp_path / "fit")
     assert r.returncode == 0, r.stderr
-    doc = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    return json.loads((tmp_path / "fit" / "fit.json").read_text())
+
+
+def test_fit_recovers_tukey_lambda_read_noise_and_pixel_offsets(tmp_path):
+    """A lab data set (`cmosnoise measure`) of a sensor whose pixel noise is Tukey-lambda read noise after the gain
+    (shape -0.1, 2 DN) with pixel offsets of 3 e-: the fit's 95 % intervals hold the shape and the offsets'
+    sigma, its scale is within 5 % (its interval is not given: the mean variance it comes from is known to
+    0.5 %), the fitted configuration carries them, and the round trip agrees on every judged parameter."""
+    import yaml
+
+    doc = _measured_and_fitted(tmp_path, [
+        "sensor.width=256", "sensor.height=192", "sensor.cfa=none", "source_follower.enabled=false",
+        "dark_current.enabled=false", "read_noise.enabled=true", "read_noise.distribution=tukey_lambda",
+        "read_noise.shape=-0.1", "read_noise.scale_dn=2", "pixel_offset.enabled=true", "pixel_offset.sigma_e=3"])
     P = doc["parameters"]
     lo, hi = P["read_noise.shape"]["ci95"]
     assert lo <= -0.1 <= hi, (lo, hi)
@@ -247,17 +253,10 @@ def test_fit_recovers_the_black_level_per_cfa_cell_and_per_frame(tmp_path):
     errs by 0.5 DN a frame: each fitted position's 95 % interval holds its offset from the four's mean, the frame
     error's holds 0.5, the fixed row offsets (none configured) are not mistaken for the positions' alternation, and
     the round trip agrees on every judged parameter."""
-    import json
-
     offsets = np.array([2.0, -1.0, 0.5, 3.0])
-    sets = ["sensor.width=256", "sensor.height=192", f"black_level.channel_offsets_dn={offsets.tolist()}",
-            "black_level.frame_sigma_dn=0.5"]
-    r = cli("-q", "measure", *[a for s in sets for a in ("--set", s)], "--long-frames", "64", "--levels", "12",
-            "--out", tmp_path / "lab")
-    assert r.returncode == 0, r.stderr
-    r = cli("fit", "--frames-from", tmp_path / "lab" / "manifest.yaml", "--out", tmp_path / "fit")
-    assert r.returncode == 0, r.stderr
-    doc = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    doc = _measured_and_fitted(tmp_path, ["sensor.width=256", "sensor.height=192",
+                                          f"black_level.channel_offsets_dn={offsets.tolist()}",
+                                          "black_level.frame_sigma_dn=0.5"])
     P = doc["parameters"]
     for (lo, hi), truth in zip(P["black_level.channel_offsets_dn"]["ci95_each"], offsets - offsets.mean()):
         assert lo <= truth <= hi, (lo, hi, truth)
