@@ -290,3 +290,25 @@ def test_a_quantum_efficiency_outside_0_1_is_one_line(value, tmp_path):
 def test_light_in_photons_needs_a_quantum_efficiency(tmp_path):
     r = cli("simulate", "--set", "exposure.peak_rate_photons_per_s=1e6", "--out", tmp_path / "o")
     assert r.returncode == 2 and "sensor.quantum_efficiency" in r.stderr
+
+
+def test_characterize_reports_the_dsnu_at_the_shortest_exposure(tmp_path):
+    """With pixel offsets of 3 e- and the default dark current, EMVA 1288's DSNU of the dark stack holds the
+    dark-current map too; the DSNU at the shortest exposure is the offsets' (with VFPN and the rest): it agrees
+    with the model's, compared as variances. Its estimator is the spatial variance of a pair's mean (n pixels:
+    standard error sqrt(2/n) of that variance) less half the pair's temporal variance (whose own error is
+    sqrt(2/n) of it, halved)."""
+    import json
+
+    r = cli("-q", "characterize", "--set", "sensor.width=256", "--set", "sensor.height=192", "--set",
+            "pixel_offset.enabled=true", "--set", "pixel_offset.sigma_e=3", "--out", tmp_path / "c")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "c" / "characterization.json").read_text())
+    m, model = doc["measured"], doc["model"]
+    n = 256 * 192
+    k = m["system_gain_K_dn_per_e"]
+    tv = (m["temporal_dark_noise_dn"] / k) ** 2
+    var_model = model["dsnu_shortest_e"] ** 2
+    se = math.sqrt(2 / n) * (var_model + tv / 2) + math.sqrt(2 / n) * tv / 2
+    assert_close(m["dsnu_shortest_e"] ** 2, var_model, se, "DSNU at the shortest exposure, e-^2")
+    assert m["dsnu_e"] > m["dsnu_shortest_e"]  # the stack's exposure adds the dark-current map

@@ -63,6 +63,16 @@ class Measurement:
     stack_dark: np.ndarray
     max_ydark: np.ndarray  #: brightest pixel of the two dark frames at each step, DN (to see white pixels saturate)
     frames: dict = field(default_factory=dict)  #: for export: name -> list of frames
+    #: the fixed pattern of the dark pair at the shortest exposure time (DN^2): the pair mean's spatial variance
+    #: less half its temporal variance; the pixel offsets' DSNU, with the least dark current in it
+    dsnu_shortest_dn2: float | None = None
+
+
+def dsnu_of_pair(a: np.ndarray, b: np.ndarray) -> float:
+    """The fixed-pattern variance of two frames of one exposure (DN^2): the spatial variance of their mean less half
+    their temporal variance (what the mean of two frames keeps of it)."""
+    mean = (a.astype(np.float64) + b) / 2
+    return float(np.var(mean, ddof=1)) - emva.temporal_variance(a, b) / 2
 
 
 def pair_stats(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -111,6 +121,8 @@ def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: flo
     steps = texp.size
     mu_y, mu_yd, s2_y, s2_yd, max_yd = (np.zeros(steps) for _ in range(5))
     frames: dict = {}
+    shortest = int(np.argmin(texp))
+    dsnu_short = None
     for i, (ti, ri) in enumerate(zip(texp, rates)):
         s = sensor.with_exposure(ti, ri)
         bright = s.expose("flat:1.0", sequence=SEQ_EMVA_BRIGHT)
@@ -120,6 +132,8 @@ def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: flo
         mu_y[i], s2_y[i] = pair_stats(a, b)
         mu_yd[i], s2_yd[i] = pair_stats(da, db)
         max_yd[i] = max(float(da.max()), float(db.max()))
+        if i == shortest:
+            dsnu_short = dsnu_of_pair(da, db)
         if keep_frames:
             frames[f"b_{i:03d}"] = [a, b]
             frames[f"d_{i:03d}"] = [da, db]
@@ -135,15 +149,18 @@ def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: flo
     qe = sensor.config.sensor.qe_mean() or 1.0  # photo-electrons per photon
     return Measurement(
         t.bits, sensor.shape, texp, rates * texp / qe, mu_y, mu_yd, s2_y, s2_yd, stack_texp, stack_rate * stack_texp / qe,
-        stack_bright, stack_dark, max_yd, frames,
+        stack_bright, stack_dark, max_yd, frames, dsnu_short,
     )
 
 
-def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray | None = None) -> dict:
+def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray | None = None,
+                 shortest_texp_s: float | None = None) -> dict:
     """The same quantities as the simulated sensor instance implies them (its configuration and maps).
 
     ``series_e``: the photo-charge per pixel at each step of the measured
-    series, where the linearity error is sampled (default: 101 equal steps to the full well).
+    series, where the linearity error is sampled (default: 101 equal steps to the full well);
+    ``shortest_texp_s``: the series' shortest exposure, where the DSNU of
+    the pixel offsets is read (default: the stack's).
 
     DSNU: the EMVA estimator applied to the expected dark image at the
     stack's exposure time, with the full-well and ADC clips (white pixels
@@ -164,12 +181,17 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
         signal = signal * fp.column_gain
     qe = float(signal.mean()) * (c.sensor.qe_mean() or 1.0)  # photo-electrons collected per photon
     dark = np.zeros(sensor.shape) if fp.dark_rate is None else fp.dark_rate.astype(np.float64)
-    mo = noise_budget.clipped_moments(sensor.with_exposure(stack_texp_s), 0.0)
-    expected_dark = mo["mean"]
-    if c.adc.enabled:  # the quantizer: undithered where the temporal noise is well below a DN (adds its pattern)
+    def expected_dark_at(texp_s):
+        """The expected dark image (e-) at ``texp_s``, with the clips and the quantizer's pattern."""
+        mo = noise_budget.clipped_moments(sensor.with_exposure(texp_s), 0.0)
+        if not c.adc.enabled:
+            return mo["mean"]
+        # the quantizer: undithered where the temporal noise is well below a DN (adds its pattern)
         dn = adc.expected_code(mo["mean"] * k + t.black_level_dn, np.sqrt(mo["var"]) * k)
-        expected_dark = (dn - t.black_level_dn) / k
-    sp = emva.spatial_variances(expected_dark[None])
+        return (dn - t.black_level_dn) / k
+
+    sp = emva.spatial_variances(expected_dark_at(stack_texp_s)[None])
+    short = expected_dark_at(shortest_texp_s if shortest_texp_s is not None else stack_texp_s)
     le = (0.0, 0.0)
     if sensor.spec.nonlinearity is not None and c.nonlinearity.enabled:
         # the transfer on the series' own photo-charges (the linearity error depends on where it is sampled)
@@ -194,6 +216,7 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
         "dsnu_e": math.sqrt(max(sp["total"], 0.0)),
         "dsnu_column_e": math.sqrt(max(sp["column"], 0.0)),
         "prnu_pct": 100 * float(signal.std(ddof=1) / signal.mean()),
+        "dsnu_shortest_e": float(np.std(short, ddof=1)),
         "linearity_error_min_pct": le[0],
         "linearity_error_max_pct": le[1],  # ddof=1 as the EMVA estimator (matters on tiny sensors)
     }

@@ -38,7 +38,7 @@ DARK_FIT_LIMIT = 0.9
 _NEEDS_K = ("system_gain_K_dn_per_e", "inverse_gain_e_per_dn", "quantum_efficiency", "temporal_dark_noise_e",
             "saturation_capacity_e", "snr_max", "snr_max_db", "absolute_sensitivity_threshold_photons",
             "dynamic_range", "dynamic_range_db", "dark_current_mean_e_per_s", "dark_current_var_e_per_s",
-            "dsnu_e", "dsnu_column_e", "dsnu_row_e", "dsnu_pixel_e")
+            "dsnu_e", "dsnu_column_e", "dsnu_row_e", "dsnu_pixel_e", "dsnu_shortest_e")
 
 
 def evaluate(m: Measurement) -> dict:
@@ -130,6 +130,8 @@ def evaluate(m: Measurement) -> dict:
         "dark_current_mean_e_per_s": slope_m / k,
         "dark_current_var_e_per_s": slope_v / k**2,
         "dsnu_e": dsnu["total"] / k,
+        "dsnu_shortest_e": (math.sqrt(max(m.dsnu_shortest_dn2, 0.0)) / k if m.dsnu_shortest_dn2 is not None
+                            else math.nan),
         "dsnu_column_e": dsnu["column"] / k,
         "dsnu_row_e": dsnu["row"] / k,
         "dsnu_pixel_e": dsnu["pixel"] / k,
@@ -187,6 +189,7 @@ TABLE_ROWS = [
     ("linearity_error_max_pct", "Linearity error max", "%", "{:.3f}"),
     ("dsnu_e", "DSNU1288", "e-", "{:.3f}"),
     ("dsnu_column_e", "  of which column (VFPN)", "e-", "{:.3f}"),
+    ("dsnu_shortest_e", "DSNU at the shortest exposure", "e-", "{:.3f}"),
     ("prnu_pct", "PRNU1288", "%", "{:.3f}"),
 ]
 

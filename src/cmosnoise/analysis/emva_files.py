@@ -11,7 +11,7 @@ import numpy as np
 from .. import inputs
 from ..errors import CmosnoiseError
 from ..io.stacks import DESCRIPTOR  # the file name export writes and load reads
-from .characterize import Measurement, pair_stats
+from .characterize import Measurement, dsnu_of_pair, pair_stats
 
 
 def export(m: Measurement, folder: Path) -> Path:
@@ -75,6 +75,7 @@ def load(descriptor: Path) -> Measurement:
                              f"({', '.join(f'{t * 1e9:g}' for t in times[:5])} ns); the series needs at least 3 "
                              "distinct times >= 0")
     texp, mu_p, mu_y, mu_yd, s2_y, s2_yd, max_yd = [], [], [], [], [], [], []
+    dsnu_short = None
     for _, t, p, paths in bright_pairs:
         d = dark_pairs.get(round(t, 12))
         if d is None:
@@ -85,8 +86,10 @@ def load(descriptor: Path) -> Measurement:
         md, sd = pair_stats(da, db)
         texp.append(t); mu_p.append(p); mu_y.append(my); s2_y.append(sy); mu_yd.append(md); s2_yd.append(sd)
         max_yd.append(max(float(da.max()), float(db.max())))
+        if len(texp) == 1:  # the pairs come sorted by exposure time: the shortest
+            dsnu_short = dsnu_of_pair(da, db)
     sb, sdk = stacks_b[0], stacks_d[0]
     return Measurement(
         bits, shape, *map(np.array, (texp, mu_p, mu_y, mu_yd, s2_y, s2_yd)), sb[1], sb[2],
-        np.stack(read(sb[3])), np.stack(read(sdk[3])), np.array(max_yd),
+        np.stack(read(sb[3])), np.stack(read(sdk[3])), np.array(max_yd), dsnu_shortest_dn2=dsnu_short,
     )

@@ -46,7 +46,8 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
     if frames_from is not None:
         m = emva_files.load(frames_from)
         if spec is not None:
-            model = ch.model_values(Sensor(spec), series_e=m.mu_p * (spec.config.sensor.qe_mean() or 1.0))
+            model = ch.model_values(Sensor(spec), series_e=m.mu_p * (spec.config.sensor.qe_mean() or 1.0),
+                                    shortest_texp_s=float(np.min(m.texp_s)))
     else:
         sensor = Sensor(spec)
         plan = emva_files.load(like) if like is not None else None
@@ -55,7 +56,8 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
             m = ch.measure_like(sensor, plan, keep_frames=emva_export is not None, progress=advance)
         else:
             m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance)
-        model = ch.model_values(sensor, m.stack_texp_s, series_e=m.mu_p * (sensor.config.sensor.qe_mean() or 1.0))
+        model = ch.model_values(sensor, m.stack_texp_s, series_e=m.mu_p * (sensor.config.sensor.qe_mean() or 1.0),
+                                shortest_texp_s=float(np.min(m.texp_s)))
     results = ev.evaluate(m)
     notes = ev.footnotes(results)
     with folder as tmp:
