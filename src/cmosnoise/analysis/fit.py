@@ -348,10 +348,19 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
 def _crosstalk_update(P: dict) -> dict | None:
     """The configuration's crosstalk section from the fitted kernels (one per colour when all three are there)."""
     colours = [f"crosstalk.kernel_pct.{c}" for c in "RGB"]
+
+    def kernel(value):
+        """A share is >= 0: on a sensor without crosstalk the noise puts some just below 0; clipped, and scaled back
+        to the fitted total (what the base's kernel keeps)."""
+        total = float(np.sum(value))
+        clipped = np.maximum(np.asarray(value, np.float64), 0.0)
+        clipped *= total / float(clipped.sum())
+        return [[float(x) for x in row] for row in clipped]
+
     if all(c in P for c in colours):
-        return {"enabled": True, "kernel_pct": {c[-1]: P[c]["value"] for c in colours}}
+        return {"enabled": True, "kernel_pct": {c[-1]: kernel(P[c]["value"]) for c in colours}}
     if "crosstalk.kernel_pct" in P:
-        return {"enabled": True, "kernel_pct": P["crosstalk.kernel_pct"]["value"]}
+        return {"enabled": True, "kernel_pct": kernel(P["crosstalk.kernel_pct"]["value"])}
     return None
 
 
@@ -586,3 +595,60 @@ def fitted_config(base, result: dict):
         return resolve(merge_updates(base, u)).config
     except CmosnoiseError as exc:
         raise CmosnoiseError(f"the fitted configuration is not valid: {exc}") from None
+
+
+#: what a gain setting's row of the fitted gain table carries (docs/model.md stage 9b): the keys that follow the
+#: setting in a camera (its noise in e- and in DN, its well, its black level and the offsets after the amplifier);
+#: what the pixel does (dark current, crosstalk, PRNU, pixel offsets) is the lowest setting's for all
+GAIN_KEYS = ("sensor.full_well_e", "adc.black_level_dn", "source_follower.enabled", "source_follower.thermal_sigma_e",
+             "source_follower.flicker.gumbel_loc_e", "source_follower.flicker.gumbel_scale_e", "row_noise.sigma_e",
+             "row_noise.fixed_sigma_e", "column_noise.vfpn_sigma_e", "read_noise.enabled", "read_noise.distribution",
+             "read_noise.scale_dn", "read_noise.shape", "black_level.frame_sigma_dn", "black_level.channel_offsets_dn")
+
+
+def read_floor_e(cfg) -> float:
+    """The temporal dark noise a fitted configuration implies without dark shot noise and quantization, e-."""
+    from ..analysis import noise_budget
+    from ..model.sensor import Sensor
+
+    small = cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"width": 64, "height": 48})})
+    parts = noise_budget.temporal_variances(Sensor(small, seed=0), 0.0)
+    return math.sqrt(sum(v for k, v in parts.items() if k not in ("dark_shot", "photon_shot", "quantization")))
+
+
+def fitted_gain_config(base, index: str, results: dict):
+    """``base`` with a gain table fitted from data sets at several settings (``results``: setting -> its
+    :func:`fit_dataset`): the configuration of the setting with the lowest read-noise floor in e- (it measures
+    the pixel best), plus a ``gain_table`` row per setting with its K and :data:`GAIN_KEYS`, the lowest setting
+    picked by ``sensor.iso`` or ``sensor.gain_db``.
+
+    A conversion-gain step is named where the read-noise floor in e- falls most between two settings, by 30 %
+    or more: the settings below it are ``LCG``, from it up ``HCG``.
+    """
+    from ..config.loading import merge_updates
+
+    values = sorted(results)
+    configs = {v: fitted_config(base, results[v]) for v in values}
+    floors = [read_floor_e(configs[v]) for v in values]
+    drops = [(floors[i] - floors[i + 1]) / floors[i] if floors[i] > 0 else 0.0 for i in range(len(values) - 1)]
+    step = max(range(len(drops)), key=lambda i: drops[i]) + 1 if drops and max(drops) >= 0.3 else None
+    rows = []
+    for i, v in enumerate(values):
+        c = configs[v].model_dump(mode="json")
+        row = {index: v, "k_dn_per_e": results[v]["parameters"]["system_gain_K_dn_per_e"]["value"], "set": {}}
+        if step is not None:
+            row["mode"] = "LCG" if i < step else "HCG"
+        for dotted in GAIN_KEYS:
+            node = c
+            for part in dotted.split("."):
+                node = node[part]
+            row["set"][dotted] = node
+        rows.append(row)
+    # the pixel's own physics (dark current, crosstalk, PRNU, offsets) from the setting that measures it best: the
+    # one with the lowest read-noise floor in e-; the setting picked at first is the lowest
+    quietest = values[int(np.argmin(floors))]
+    updates = {"gain_table": rows, "sensor": {index: values[0]}}
+    try:
+        return resolve(merge_updates(configs[quietest], updates)).config
+    except CmosnoiseError as exc:
+        raise CmosnoiseError(f"the fitted gain table is not valid: {exc}") from None

@@ -380,6 +380,12 @@ def fit(
     base = _sensor(config, preset, None, {"sensor": {"cfa": cfa}} if cfa else None).config
     doc = fitting.run(frames_from, base, out, overwrite, temperature, threshold, cfa, black_level, bits,
                       with_round_trip=round_trip, say=lambda m: _say(ctx, m))
+    if doc.get("settings"):  # one fit per gain setting: a gain table
+        for setting, r in doc["settings"].items():
+            k = r["parameters"]["system_gain_K_dn_per_e"]
+            _say(ctx, f"setting {setting}{' (' + r['mode'] + ')' if r['mode'] else ''}: system gain K = "
+                      f"{fitting.describe(k)}")
+        _say(ctx, "the lowest setting's parameters in full (fit.json has every setting's):")
     for name, p in doc["parameters"].items():
         _say(ctx, f"{name} = {fitting.describe(p)}")
     for name, why in doc["not_fitted"].items():

@@ -175,6 +175,15 @@ def build(doc: dict, result: dict, cfg) -> str:
                      "\"Intervals overlap\" compares the two 95 % intervals.</p>"
                      + _table(rows, ["parameter", "fit of the measured frames", "fit of the simulated frames",
                                      "intervals overlap"], digits=5))
+    if doc.get("settings"):
+        keys = ["system_gain_K_dn_per_e", "read_noise.shape", "read_noise.scale_dn", "source_follower.thermal_sigma_e",
+                "row_noise.sigma_e", "black_level_dn"]
+        rows = [(setting, r["mode"] or "", *[r["parameters"][k]["value"] if k in r["parameters"] else "" for k in keys])
+                for setting, r in doc["settings"].items()]
+        parts.append("<h2>Gain settings</h2><p>One fit per setting the stacks were taken at; the configuration's "
+                     "gain_table holds each setting's K and what follows it. A conversion-gain step is named where "
+                     "the read-noise floor in e- falls by 30 % or more.</p>"
+                     + _table(rows, ["setting", "mode", *keys], digits=5))
     if doc.get("emva_round_trip"):
         rows = [(r["quantity"], r["unit"], r["measured"], r["simulated"],
                  (r["simulated"] / r["measured"] - 1) * 100 if r["measured"] and math.isfinite(r["measured"]) else "",

@@ -23,6 +23,7 @@ from ..analysis import fit as fitting
 from ..io import stacks
 from ..io.output import OutputFolder, write_json
 from ..model.sensor import Sensor
+from ..model.spec import resolve
 from . import fit_report
 
 #: the frame numbers the round trip's stacks start from (each stack its own range: no shared noise)
@@ -127,10 +128,33 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
         ds.bits = bits
     say(f"read {len(ds.stacks)} stacks ({sum(s.n for s in ds.stacks)} frames of {ds.shape[1]} x {ds.shape[0]}) "
         f"from {frames_from}")
-    result = fitting.fit_dataset(ds, base, temperature_c, threshold_e_per_s, seed)
-    cfg = fitting.fitted_config(base, result)
+    settings = ds.settings()
     trip = emva = None
-    if with_round_trip:
+    per_setting = None
+    if settings is not None:  # stacks at several gain settings: one fit each, a gain table from them
+        index, values = settings
+        parts = {v: ds.at_setting(index, v) for v in values}
+        fits = {}
+        for v, sub in parts.items():
+            say(f"fitting the stacks at {index} {v:g}")
+            fits[v] = fitting.fit_dataset(sub, base, temperature_c, threshold_e_per_s, seed)
+        cfg = fitting.fitted_gain_config(base, index, fits)
+        result = fits[values[0]]
+        per_setting = {f"{v:g}": {"parameters": fits[v]["parameters"], "not_fitted": fits[v]["not_fitted"],
+                                  "mode": next((r.mode for r in cfg.gain_table if getattr(r, index) == v), None)}
+                       for v in values}
+        if with_round_trip:
+            say("round trip: simulating each setting's measurement again from the fitted configuration")
+            trip = []
+            for v, sub in parts.items():
+                at = resolve(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={index: v})})).config
+                again = fitting.fit_dataset(simulate_like(sub, at, fits[v]["parameters"]["system_gain_K_dn_per_e"]["value"],
+                                                          seed), at, temperature_c, threshold_e_per_s, seed)
+                trip += [{**row, "parameter": f"{index} {v:g}: {row['parameter']}"} for row in round_trip(fits[v], again)]
+    else:
+        result = fitting.fit_dataset(ds, base, temperature_c, threshold_e_per_s, seed)
+        cfg = fitting.fitted_config(base, result)
+    if with_round_trip and settings is None:
         say("round trip: simulating the measurement again from the fitted configuration")
         again = fitting.fit_dataset(simulate_like(ds, cfg, result["parameters"]["system_gain_K_dn_per_e"]["value"], seed),
                                     cfg, temperature_c, threshold_e_per_s, seed)
@@ -143,7 +167,7 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
         "dark_current": {f"{T:g}": {"threshold_e_per_s": r["threshold"], "families": r["families"],
                                     "white_pixels": r["white_pixels"], "exposures_s": r["exposures_s"]}
                          for T, r in result["dark"].items()},
-        "round_trip": trip, "emva_round_trip": emva,
+        "round_trip": trip, "emva_round_trip": emva, "settings": per_setting,
     }
     html_text = fit_report.build(doc, result, cfg)
     with folder as tmp:

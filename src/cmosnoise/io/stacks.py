@@ -60,6 +60,8 @@ class StackEntry(BaseModel):
     temperature_c: Optional[float] = Field(None, ge=-60, le=150, description="sensor temperature, C")
     level: Optional[float] = Field(None, ge=0, le=1e9, description="relative illumination (any unit; flats)")
     photons: Optional[float] = Field(None, ge=0, le=1e12, description="photons per pixel during the exposure (flats)")
+    iso: Optional[float] = Field(None, gt=0, le=1e7, description="the camera's gain setting (ISO) the stack was taken at")
+    gain_db: Optional[float] = Field(None, ge=-60, le=120, description="the camera's gain setting (dB) the stack was taken at")
     files: list[str] = Field(min_length=1, description="files or globs, relative to the manifest")
 
 
@@ -91,6 +93,8 @@ class StackStats:
     photons: Optional[float] = None
     files: list[str] = field(default_factory=list)
     pixel_m4: Optional[np.ndarray] = None  #: (rows, cols) float64, per-pixel fourth central moment (ddof 0), as pixel_var
+    iso: Optional[float] = None  #: the gain setting the stack was taken at (ISO), when the manifest says
+    gain_db: Optional[float] = None  #: or in dB
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -148,6 +152,20 @@ class Dataset:
     @property
     def temperatures(self) -> list[float]:
         return sorted({s.temperature_c for s in self.stacks if s.temperature_c is not None})
+
+    def settings(self) -> tuple[str, list[float]] | None:
+        """The gain settings the stacks were taken at: ("iso" or "gain_db", sorted values), or None when the
+        manifest names none (one setting)."""
+        for index in ("iso", "gain_db"):
+            values = sorted({getattr(s, index) for s in self.stacks if getattr(s, index) is not None})
+            if values:
+                return index, values
+        return None
+
+    def at_setting(self, index: str, value: float) -> "Dataset":
+        """The stacks taken at one gain setting, as a data set of their own."""
+        return Dataset([s for s in self.stacks if getattr(s, index) == value], self.shape, self.bits, self.cfa,
+                       self.black_level_dn, f"{self.source} at {index} {value:g}", self.kind, self.descriptor)
 
 
 # ------------------------------------------------------------------ files
@@ -349,7 +367,7 @@ def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
             temp = temperature_c
         name = f"stacks.{i} ({e.kind}, {e.exposure_s:g} s)"
         stacks.append(_stack(paths, meta, name=name, kind=e.kind, exposure_s=e.exposure_s, temperature_c=temp,
-                             level=e.level, photons=e.photons))
+                             level=e.level, photons=e.photons, iso=e.iso, gain_db=e.gain_db))
     shapes = sorted({s.shape for s in stacks})
     if len(shapes) > 1:
         raise CmosnoiseError(f"manifest {str(path)!r}: the stacks have different frame sizes "
