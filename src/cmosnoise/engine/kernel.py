@@ -354,6 +354,12 @@ if numba is not None:
         zero = np.uint64(0)
         w = c1 - c0
         s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
+        one_black = cell_black[0] == cell_black[1] == cell_black[2] == cell_black[3]
+        black_even = np.empty(w)  # the black level of each pixel of an even row, and of an odd one (CFA cells)
+        black_odd = np.empty(w)
+        for j in range(w):
+            black_even[j] = cell_black[(c0 + j) & 1]
+            black_odd[j] = cell_black[2 + ((c0 + j) & 1)]
         lam = np.empty(w)
         u1 = np.empty(w)
         u2 = np.empty(w)
@@ -385,7 +391,7 @@ if numba is not None:
                         x = n[j]
                         sx = x * nl_scale
                         n[j] = x * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
-            if has_offset:  # stage 5c
+            if has_offset and not has_sf:  # stage 5c (with the source follower: in its last pass, same order)
                 for j in range(w):
                     n[j] = n[j] + np.float64(offset[r, c0 + j])
             if has_sf:  # uniforms, then Box-Muller: 25 % faster than one loop (measured)
@@ -393,8 +399,12 @@ if numba is not None:
                     u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
                 for j in range(w):
                     noise[j] = np.float64(sf[r, c0 + j]) * _normal_from(u1[j], u2[j])
-                for j in range(w):
-                    n[j] = n[j] + noise[j]
+                if has_offset:
+                    for j in range(w):
+                        n[j] = (n[j] + np.float64(offset[r, c0 + j])) + noise[j]
+                else:
+                    for j in range(w):
+                        n[j] = n[j] + noise[j]
             if has_row:
                 rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
                 for j in range(w):
@@ -429,16 +439,15 @@ if numba is not None:
                             lo = read_table[k]
                             q = lo + u2[j] * (read_table[k + 1] - lo)
                             noise[j] = read_scale * (-q if u1[j] > 0.5 else q)
-                cb = (r & 1) * 2
-                one_black = cell_black[0] == cell_black[1] == cell_black[2] == cell_black[3]
                 if one_black and not has_read:  # the paper's ADC: one black level, nothing after the gain
                     b0 = cell_black[0]
                     for j in range(w):
                         v = np.rint(n[j] * k_adc + b0)
                         out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
                 else:
+                    row_black = black_even if (r & 1) == 0 else black_odd  # this row's cell black levels, laid out
                     for j in range(w):
-                        v = n[j] * k_adc + cell_black[cb + ((c0 + j) & 1)]
+                        v = n[j] * k_adc + row_black[j]
                         if has_read:
                             v = v + noise[j]
                         v = np.rint(v)
