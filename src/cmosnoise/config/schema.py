@@ -417,7 +417,7 @@ class NonlinearitySection(Section):
     def _one_form(self):
         given = [k for k in ("linearity_error_pct", "curve_e", "coefficients") if getattr(self, k) is not None]
         if len(given) > 1 or (self.enabled and not given):
-            raise ValueError("nonlinearity: give one of linearity_error_pct, curve_e or coefficients"
+            raise ValueError("give one of linearity_error_pct, curve_e or coefficients"
                              + (f" (got {', '.join(given)})" if given else ""))
         if self.linearity_error_pct is not None:
             lo, hi = self.linearity_error_pct
@@ -494,10 +494,10 @@ class GainRow(Section):
     @model_validator(mode="after")
     def _one_index(self):
         if (self.iso is None) == (self.gain_db is None):
-            raise ValueError("a gain_table row is indexed by iso or by gain_db (one of the two)")
+            raise ValueError("a row is indexed by iso or by gain_db (one of the two)")
         bad = [k for k in self.set if k.split(".")[0] in ("gain_table", "seed", "run", "scene") or k in ("sensor.iso", "sensor.gain_db")]
         if bad:
-            raise ValueError(f"gain_table row: {bad} cannot be set per gain (set sensor, stage and adc keys)")
+            raise ValueError(f"{bad} cannot be set per gain (set sensor, stage and adc keys)")
         return self
 
 

@@ -77,7 +77,7 @@ def apply_gain(config: Config) -> Config:
     try:
         return merge_updates(config, updates)
     except CmosnoiseError as exc:
-        raise _invalid(f"gain_table row at {where}: {exc}") from None
+        raise _invalid(f"gain_table row at {where}: {str(exc).removeprefix('invalid configuration: ')}") from None
 
 
 def offset_model(config: Config):
