@@ -312,3 +312,25 @@ def test_characterize_reports_the_dsnu_at_the_shortest_exposure(tmp_path):
     se = math.sqrt(2 / n) * (var_model + tv / 2) + math.sqrt(2 / n) * tv / 2
     assert_close(m["dsnu_shortest_e"] ** 2, var_model, se, "DSNU at the shortest exposure, e-^2")
     assert m["dsnu_e"] > m["dsnu_shortest_e"]  # the stack's exposure adds the dark-current map
+
+
+# ------------------------------------------------------------------ common random numbers
+def test_switching_a_new_stage_leaves_every_other_random_number():
+    """Two runs that differ in one stage share every other random number (docs/model.md section 1): the charge at
+    the ADC input with pixel offsets on is the one without plus the offset map (to float32's rounding of values up
+    to a few thousand e-); switching the read noise after the gain, the frame's black-level error or the cell
+    offsets leaves that charge bit for bit; the Tukey-lambda read noise does not move the source follower's."""
+    base = {"sensor": {"width": 96, "height": 64}}
+    off = {"pixel_offset": {"enabled": True, "sigma_e": 4.0}}
+    after_gain = {"read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.5, "shape": -0.05},
+                  "black_level": {"channel_offsets_dn": [1, 2, 3, 4], "frame_sigma_dn": 0.5}}
+
+    def charge(extra, k=3):
+        shot = Sensor(load_config(extra={**base, **extra}), seed=6).expose("colorchecker")
+        return shot.frame(k, detail=True)
+
+    plain, with_off = charge({}), charge(off)
+    offsets = Sensor(load_config(extra={**base, **off}), seed=6).fixed_pattern.pixel_offset
+    np.testing.assert_allclose(with_off.electrons - plain.electrons, offsets, atol=1e-3)
+    assert np.array_equal(charge(after_gain).electrons, plain.electrons)
+    assert np.array_equal(charge(after_gain).contributions["source_follower"], plain.contributions["source_follower"])
