@@ -67,3 +67,18 @@ def test_config_file_errors(tmp_path):
     (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
     with pytest.raises(CmosnoiseError, match="mapping"):
         load_config(tmp_path / "list.yaml")
+
+
+def test_a_typo_in_a_key_gets_a_suggestion(tmp_path):
+    """An unknown key names the section's nearest keys (difflib), nested sections and list items included;
+    a key with nothing near gets none."""
+    from conftest import cli
+
+    for key, near in [("sensor.temprature_c=30", "'temperature_c'"), ("sensr.width=3", "'sensor'"),
+                      ("dark_current.points.0.mean_e_per_sec=3", "'mean_e_per_s'"),
+                      ("source_follower.flicker.gumbel_loc=2", "'gumbel_loc_e'")]:
+        r = cli("simulate", "--set", key, "--out", tmp_path / "o")
+        assert r.returncode == 2 and f"did you mean {near}" in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
+    r = cli("simulate", "--set", "sensor.zzzz=1", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "unknown key 'sensor.zzzz'" in r.stderr and "did you mean" not in r.stderr
