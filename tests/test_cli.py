@@ -212,3 +212,22 @@ def test_version_quiet_verbose_and_any_case_cfa(tmp_path):
 def test_flat_without_a_level_is_an_error(tmp_path):
     r = run("simulate", *SMALL, "--scene", "flat", "--out", tmp_path / "f")
     assert r.returncode == 2 and "flat:LEVEL" in r.stderr and not (tmp_path / "f").exists()
+
+
+def test_help_does_not_import_the_model_or_scipy():
+    """`cmosnoise --help` (and the parsing of any command) loads neither the model nor scipy.special: a fifth
+    of a second of a start-up that only prints."""
+    import subprocess
+    import sys
+
+    code = ("import sys, contextlib, io\n"
+            "from cmosnoise.app.cli import run\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n"
+            "        run(['--help'])\n"
+            "    except SystemExit:\n"
+            "        pass\n"
+            "print(sorted(m for m in ('scipy.special', 'cmosnoise.model.spec', 'numba') if m in sys.modules))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "[]", r.stdout

@@ -9,7 +9,7 @@ import sys
 import threading
 import warnings
 from pathlib import Path
-from typing import List, Optional
+from typing import TYPE_CHECKING, List, Optional
 
 import typer
 from rich.console import Console
@@ -17,11 +17,18 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from ..config import load_config, preset_data, preset_names
 from ..errors import CmosnoiseError, Terminated, check_terminated, clear_terminated, signal_received
-from ..model.spec import SensorSpec, resolve
+
+if TYPE_CHECKING:
+    from ..model.spec import SensorSpec
 
 
 def _sensor(config: Path | None, preset: str | None, overrides: list[str] | None, extra: dict | None = None) -> SensorSpec:
-    """The resolved sensor of the command line's --config, --preset, --set and options (physics checked)."""
+    """The resolved sensor of the command line's --config, --preset, --set and options (physics checked).
+
+    The model is imported here, not with the module: ``cmosnoise --help`` and the parsing of every command
+    do without it (and without scipy.special, a fifth of a second)."""
+    from ..model.spec import resolve
+
     return resolve(load_config(config, preset, overrides, extra))
 
 
