@@ -10,7 +10,7 @@ from scipy import stats
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.engine.samplers import Stream
-from cmosnoise.model.seeds import fixed_key
+from cmosnoise.model.seeds import fixed_key, pixel_index
 from cmosnoise.model.stages import nonlinearity, pixel_offset, read_noise
 
 SIZE = {"width": 320, "height": 240}
@@ -45,7 +45,8 @@ def test_offset_map_has_the_configured_moments_and_ppm():
 def test_offset_map_is_addressed_per_pixel_and_independent_of_exposure_and_temperature():
     cfg = load_config(extra={"sensor": SIZE, "pixel_offset": {"enabled": True, "sigma_e": 3.0}})
     whole = Sensor(cfg, seed=7).fixed_pattern.pixel_offset
-    tile = pixel_offset.offset_map(pixel_offset.offset_model(3.0), fixed_key(7, "pixel_offset"), (17, 90, 33, 301), 320)
+    tile = pixel_offset.offset_map(pixel_offset.offset_model(3.0), fixed_key(7, "pixel_offset"),
+                                   pixel_index((17, 90, 33, 301), 320))
     np.testing.assert_array_equal(tile, whole[17:90, 33:301])
     warm = load_config(extra={"sensor": {**SIZE, "temperature_c": 60}, "exposure": {"integration_time_s": 2.0},
                               "pixel_offset": {"enabled": True, "sigma_e": 3.0}})
@@ -317,8 +318,8 @@ def test_characterize_reports_the_dsnu_at_the_shortest_exposure(tmp_path):
 # ------------------------------------------------------------------ common random numbers
 def test_switching_a_new_stage_leaves_every_other_random_number():
     """Two runs that differ in one stage share every other random number (docs/model.md section 1): the charge at
-    the ADC input with pixel offsets on is the one without plus the offset map (to float32's rounding of values up
-    to a few thousand e-); switching the read noise after the gain, the frame's black-level error or the cell
+    the ADC input with pixel offsets on is the one without plus the offset map (to each side's float32 rounding);
+    switching the read noise after the gain, the frame's black-level error or the cell
     offsets leaves that charge bit for bit; the Tukey-lambda read noise does not move the source follower's."""
     base = {"sensor": {"width": 96, "height": 64}}
     off = {"pixel_offset": {"enabled": True, "sigma_e": 4.0}}
@@ -331,6 +332,9 @@ def test_switching_a_new_stage_leaves_every_other_random_number():
 
     plain, with_off = charge({}), charge(off)
     offsets = Sensor(load_config(extra={**base, **off}), seed=6).fixed_pattern.pixel_offset
-    np.testing.assert_allclose(with_off.electrons - plain.electrons, offsets, atol=1e-3)
+    # each side's charge is rounded to float32 once: half an ulp of each, at most one ulp of the larger
+    ulp = np.spacing(np.maximum(np.abs(with_off.electrons), np.abs(plain.electrons)))
+    diff = with_off.electrons.astype(np.float64) - plain.electrons - offsets
+    assert np.all(np.abs(diff) <= ulp), np.max(np.abs(diff) / ulp)
     assert np.array_equal(charge(after_gain).electrons, plain.electrons)
     assert np.array_equal(charge(after_gain).contributions["source_follower"], plain.contributions["source_follower"])

@@ -193,13 +193,14 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
     sp = emva.spatial_variances(expected_dark_at(stack_texp_s)[None])
     short = expected_dark_at(shortest_texp_s if shortest_texp_s is not None else stack_texp_s)
     le = (0.0, 0.0)
-    if sensor.spec.nonlinearity is not None and c.nonlinearity.enabled:
+    curve = sensor.spec.active_nonlinearity
+    if curve is not None:
         # the transfer on the series' own photo-charges (the linearity error depends on where it is sampled)
         fw = c.sensor.full_well_e
         x = (np.asarray(series_e, np.float64) if series_e is not None
              else np.linspace(0.0, fw, nonlinearity.SERIES))
         x = x[x <= fw]
-        y = sensor.spec.nonlinearity.apply(x)
+        y = curve.apply(x)
         le = nonlinearity.linearity_error(x, y, float(y[-1]))
     sigma_y_dark = math.sqrt(read_var * k**2 + 1 / 12)
     u_p_min = (sigma_y_dark / k + 0.5) / qe

@@ -44,10 +44,8 @@ def transfer_slope(sensor: Sensor, charge_e: float) -> float:
     Charge-referred noise (shot noise) and signal differences (PRNU) pass
     through the transfer scaled by it, to first order.
     """
-    curve = sensor.spec.nonlinearity
-    if curve is None or not sensor.config.nonlinearity.enabled or sensor.config.nonlinearity.acts_on != "charge":
-        return 1.0  # on the mean charge, the shot noise follows the mean it is drawn with
-    return curve.slope(charge_e)
+    curve = sensor.spec.nonlinearity_on("charge")  # on the mean charge, the shot noise follows the mean it is drawn with
+    return 1.0 if curve is None else curve.slope(charge_e)
 
 
 def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:
@@ -98,7 +96,7 @@ def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, flo
     if fp.pixel_offset is not None:
         const["pixel_offset"] = float(np.var(fp.pixel_offset.astype(np.float64)))
     offsets = np.asarray(c.black_level.channel_offsets_dn, np.float64)
-    if c.adc.enabled and offsets.any():  # the four cell positions, equally many pixels each
+    if c.adc.enabled and offsets.any():  # the four cell positions, equally many pixels each (the frame error: temporal)
         const["black_level_cells"] = float(np.var(offsets)) / sensor.transfer.gain_dn_per_e**2
     if fp.prnu_gain is not None or c.crosstalk.enabled:
         per_s2["prnu"] = float(np.var(sensor.flat_response))  # after crosstalk, as frames show it

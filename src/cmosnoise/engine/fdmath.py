@@ -19,11 +19,6 @@ floor = np.floor
 where = np.where
 
 
-def as_index(x):
-    """A whole number held as float, as an array index (the compiled form takes a scalar)."""
-    return np.asarray(x).astype(np.int64)
-
-
 def ldexp(y, k):
     """y * 2**k, exact; k a whole number held as float."""
     return np.ldexp(y, np.asarray(k).astype(np.int32))

@@ -106,11 +106,7 @@ def _compiled(inline: str):
         m = np.uint64((bits & np.uint64(0x000FFFFFFFFFFFFF)) | np.uint64(0x3FE0000000000000)).view(np.float64)
         return m, e
 
-    def as_index(x):
-        return np.int64(x)
-
-    scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor,
-              "as_index": jit(as_index)}
+    scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor}
 
     def compile_as(module, name, as_name, **bind):
         g = {**module.__dict__, **scalar, **space, **bind}
@@ -119,12 +115,12 @@ def _compiled(inline: str):
 
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
             (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
-            (samplers, ["normal_from", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
+            (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
                         "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
     for module, names in plan:
         for name in names:
             compile_as(module, name, name)
-    return {**scalar, **space}
+    return space
 
 
 if numba is not None:
@@ -133,8 +129,7 @@ if numba is not None:
     _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_ptrs_try = (
         _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_try"))
     _uniform_pair, _normal_from, _exp, _log = _h["uniform_pair"], _h["normal_from"], _h["exp"], _h["log"]
-    _frexp = _h["frexp"]
-    _TUKEY_STEPS = float(samplers.TUKEY_STEPS)
+    _tukey_lambda_cell = _h["tukey_lambda_cell"]
     _ptrs_constants, _ptrs_candidate, _ptrs_log_test = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_test"]
     _ptrs_quick_accept, _ptrs_early_reject = _h["ptrs_quick_accept"], _h["ptrs_early_reject"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
@@ -355,9 +350,10 @@ if numba is not None:
         w = c1 - c0
         s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
         one_black = cell_black[0] == cell_black[1] == cell_black[2] == cell_black[3]
-        black_even = np.empty(w)  # the black level of each pixel of an even row, and of an odd one (CFA cells)
-        black_odd = np.empty(w)
-        for j in range(w):
+        laid_out = 0 if (one_black and not has_read) else w  # only the per-pixel ADC pass reads them
+        black_even = np.empty(laid_out)  # the black level of each pixel of an even row, and of an odd one (CFA cells)
+        black_odd = np.empty(laid_out)
+        for j in range(laid_out):
             black_even[j] = cell_black[(c0 + j) & 1]
             black_odd[j] = cell_black[2 + ((c0 + j) & 1)]
         lam = np.empty(w)
@@ -423,17 +419,12 @@ if numba is not None:
                         for j in range(w):
                             noise[j] = read_scale * _normal_from(u1[j], u2[j])
                     else:
-                        # samplers.tukey_lambda_from in two passes: the uniform and the arithmetic (SIMD), then the
-                        # table's loads (a loop that indexes a table is not vectorized; kept apart, the first pass is)
+                        # samplers.tukey_lambda_from in two passes: the uniform and where it falls in the table
+                        # (SIMD), then the table's loads (a loop that indexes a table is not vectorized)
                         for j in range(w):
                             u, _ = _uniform_pair(base + np.uint64(j), fr, sq, zero, keys[5, 0], keys[5, 1])
-                            v = 1.0 - u if u > 0.5 else u
-                            m, e = _frexp(v)
-                            x = (m - 0.5) * (2.0 * _TUKEY_STEPS)
-                            xi = np.floor(x)
                             u1[j] = u
-                            u2[j] = x - xi
-                            lam[j] = (0.0 - e) * (_TUKEY_STEPS + 1.0) + xi
+                            lam[j], u2[j] = _tukey_lambda_cell(u)
                         for j in range(w):
                             k = np.int64(lam[j])
                             lo = read_table[k]

@@ -35,7 +35,7 @@ from typing import Callable
 
 import numpy as np
 
-from .seeds import fixed_key, fixed_rng
+from .seeds import fixed_key, fixed_rng, pixel_index
 from .spec import SensorSpec
 from .stages import column_noise, dark_current, pixel_offset, prnu, row_noise, source_follower
 
@@ -204,7 +204,7 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None, executor=None) -> 
         maps["column_sigma"], maps["vfpn"], maps["column_gain"] = held("column", lambda: _column_maps(c, cols))
     if c.pixel_offset.enabled and (spec.offsets.sigma_e > 0 or spec.offsets.tail_fraction > 0):
         maps["pixel_offset"] = held("pixel_offset", lambda: pixel_offset.offset_map(
-            spec.offsets, fixed_key(seed, "pixel_offset"), (0, rows, 0, cols), cols))
+            spec.offsets, fixed_key(seed, "pixel_offset"), pixel_index((0, rows, 0, cols), cols)))
     if isinstance(maps.get("dark_rate"), Future):
         maps["dark_rate"] = maps["dark_rate"].result()
     return FixedPattern(**maps)

@@ -43,6 +43,14 @@ STAGE_IDS = {
 TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level", "read_noise")
 
 
+def pixel_index(region: tuple[int, int, int, int], cols: int) -> np.ndarray:
+    """The address of each pixel of ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide: ``r * cols + c``,
+    (rows, cols) uint64, the counter word a pixel's random numbers are drawn at."""
+    r0, r1, c0, c1 = region
+    return (np.arange(r0, r1, dtype=np.uint64)[:, None] * np.uint64(cols)
+            + np.arange(c0, c1, dtype=np.uint64)[None, :])
+
+
 def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
     """Generator for a stage's fixed pattern; the same for every frame.
 

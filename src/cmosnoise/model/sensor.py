@@ -34,7 +34,7 @@ from . import scene as scene_mod
 from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
 from .heavy_tail import variates
 from .raw_info import RawInfo
-from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, stream_key, temporal_stream
+from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, pixel_index, stream_key, temporal_stream
 from .spec import SensorSpec, resolve
 from .stages import (
     adc,
@@ -240,9 +240,9 @@ class Sensor:
             "row_noise": c.row_noise.enabled,
             "column_noise": c.column_noise.enabled,
             "adc": c.adc.enabled,
-            "nonlinearity": self.spec.nonlinearity is not None and c.nonlinearity.enabled,
+            "nonlinearity": self.spec.active_nonlinearity is not None,
             "pixel_offset": self.fixed_pattern.pixel_offset is not None,
-            "black_level_offsets": any(v != 0 for v in c.black_level.channel_offsets_dn) or c.black_level.frame_sigma_dn > 0,
+            "black_level_offsets": self.spec.black_level_varies,
             "read_noise": c.read_noise.enabled,
         }
 
@@ -334,17 +334,17 @@ class Exposure:
         deps = dependencies(sensor.spec)
         ex = c.exposure
 
-        on_mean = c.nonlinearity.enabled and c.nonlinearity.acts_on == "mean" and sensor.spec.nonlinearity is not None
+        on_mean = sensor.spec.nonlinearity_on("mean")
 
         def photo():
             perfect = scene_mod.photo_electrons(signal, sensor.spec.peak_rate_e_per_s, ex.integration_time_s)
             after_prnu, mean = sensor.photo_response(perfect)
-            if on_mean:  # stage 5b on the mean photo-charge: the collection saturates, the shot noise follows it
-                mean = sensor.spec.nonlinearity.apply(mean)
+            if on_mean is not None:  # stage 5b on the mean photo-charge: the collection saturates, the shot noise follows
+                mean = on_mean.apply(mean)
             return perfect, after_prnu, mean.astype(np.float32)
 
         photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
-                       deps["prnu_gain"], c.crosstalk, c.nonlinearity if on_mean else None)
+                       deps["prnu_gain"], c.crosstalk, c.nonlinearity if on_mean is not None else None)
         #: stage 1: mean photo-electrons of the perfect image; after PRNU (stage 2); after crosstalk (stage 3):
         #: the mean photo-charge that shot noise acts on
         self.perfect_e, self.after_prnu_e, self.photo_mean_e = cached(cache, "photo_mean", photo_parts, photo)
@@ -397,8 +397,7 @@ class Exposure:
                 col_offset_e=col(fp.vfpn, 0.0) if cn.enabled else None,
                 col_gain=col(fp.column_gain, 1.0) if cn.enabled else None,
                 adc=(t.gain_dn_per_e, t.black_level_dn, t.max_code) if c.adc.enabled else None,
-                nonlinearity=(s.spec.nonlinearity if c.nonlinearity.enabled and c.nonlinearity.acts_on == "charge"
-                              else None),
+                nonlinearity=s.spec.nonlinearity_on("charge"),
                 offset_e=fp.pixel_offset,
                 cell_offsets_dn=tuple(float(v) for v in c.black_level.channel_offsets_dn),
                 frame_black_sigma_dn=float(c.black_level.frame_sigma_dn),
@@ -418,7 +417,7 @@ class Exposure:
         r0, r1, c0, c1 = region
         rows, cols = np.arange(r0, r1), np.arange(c0, c1)
         win = (slice(r0, r1), slice(c0, c1))
-        index = (rows[:, None] * s.shape[1] + cols[None, :]).astype(np.uint64)
+        index = pixel_index(region, s.shape[1])
 
         def stream(stage):
             return temporal_stream(c.seed, stage, k, self.sequence)
@@ -429,8 +428,9 @@ class Exposure:
                                c.shot_noise.gaussian_above_e, index)
         collected = n
         fp = s.fixed_pattern
-        if c.nonlinearity.enabled and c.nonlinearity.acts_on == "charge" and s.spec.nonlinearity is not None:
-            n = s.spec.nonlinearity.apply(n)
+        on_charge = s.spec.nonlinearity_on("charge")
+        if on_charge is not None:
+            n = on_charge.apply(n)
         converted = n
         if fp.pixel_offset is not None:
             n = n + fp.pixel_offset[win]
@@ -481,10 +481,9 @@ class Exposure:
         black = read_noise.black_map(cell, region)
         read = None
         if rn.enabled:
-            r0, r1, c0, c1 = region
-            index = (np.arange(r0, r1)[:, None] * self.sensor.shape[1] + np.arange(c0, c1)[None, :]).astype(np.uint64)
             read = read_noise.noise(rn.distribution, rn.scale_dn, rn.shape,
-                                    temporal_stream(c.seed, "read_noise", k, self.sequence), index)
+                                    temporal_stream(c.seed, "read_noise", k, self.sequence),
+                                    pixel_index(region, self.sensor.shape[1]))
         return black, read
 
     def _render(self, k: int, keep: dict | None = None, region=None, electrons: bool = True):
@@ -509,7 +508,7 @@ class Exposure:
             black, read = self._after_gain(k, region)
             raw = adc.convert(e, t, black, read)
             if keep is not None:  # in e-, beside the quantization
-                if self.sensor.stages_on()["black_level_offsets"]:
+                if self.sensor.spec.black_level_varies:
                     keep["black_level"] = ((black - t.black_level_dn) / t.gain_dn_per_e).astype(np.float32)
                 if read is not None:
                     keep["read_noise"] = (read / t.gain_dn_per_e).astype(np.float32)

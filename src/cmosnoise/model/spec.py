@@ -79,6 +79,22 @@ class SensorSpec:
         return float(min(self.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
 
     @property
+    def active_nonlinearity(self) -> Curve | None:
+        """The nonlinearity's curve when the stage is on (wherever it acts), else None."""
+        return self.nonlinearity if self.config.nonlinearity.enabled else None
+
+    def nonlinearity_on(self, acts_on: str) -> Curve | None:
+        """The nonlinearity's curve when the stage is on and acts on ``acts_on`` (``"charge"``: each frame's
+        collected charge, in the frame kernel; ``"mean"``: the mean photo-charge, in the exposure), else None."""
+        return self.active_nonlinearity if self.config.nonlinearity.acts_on == acts_on else None
+
+    @property
+    def black_level_varies(self) -> bool:
+        """Whether the black level has more than ``adc.black_level_dn``: offsets per CFA cell or a frame error."""
+        b = self.config.black_level
+        return any(v != 0 for v in b.channel_offsets_dn) or b.frame_sigma_dn > 0
+
+    @property
     def row_sigma_e(self) -> float:
         """The temporal row noise, e- rms: ``row_noise.sigma_e`` and ``row_noise.sigma_dn`` (after the gain) referred
         to e- through K, added in variance (one normal per row and frame carries both)."""

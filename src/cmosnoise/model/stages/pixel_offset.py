@@ -27,8 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from ...engine.philox import uniform_pair
-from ...engine.samplers import normal_from
+from ...engine.samplers import Stream
 
 
 @dataclass(frozen=True)
@@ -108,21 +107,17 @@ def offset_model(sigma_e: float, ppm_above: float | None = None, threshold_e: fl
     return OffsetModel(float(sigma_e), f, float(max_e))
 
 
-def offset_map(model: OffsetModel, key: tuple[int, int], region: tuple[int, int, int, int],
-               cols: int) -> np.ndarray:
-    """The fixed offsets (e-) of ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide, float32.
+def offset_map(model: OffsetModel, key: tuple[int, int], index: np.ndarray) -> np.ndarray:
+    """The fixed offsets (e-) of the pixels at ``index`` (``r * cols + c``, :func:`~cmosnoise.model.seeds.pixel_index`),
+    float32, from the stage's fixed ``key``.
 
-    Pixel ``i = r * cols + c``: block 0 of its counter gives the body's normal
-    (Box-Muller), block 1 its tail membership (first uniform below
+    Block 0 of a pixel's counter (frame and sequence 0) gives the body's
+    normal (Box-Muller), block 1 its tail membership (first uniform below
     ``tail_fraction``) and where in the tail it sits (second uniform).
     """
-    r0, r1, c0, c1 = region
-    index = (np.arange(r0, r1, dtype=np.uint64)[:, None] * np.uint64(cols)
-             + np.arange(c0, c1, dtype=np.uint64)[None, :])
-    k0, k1 = (np.uint64(w) for w in key)
-    zero = np.zeros(index.shape, np.uint64)
-    values = model.sigma_e * normal_from(*uniform_pair(index, zero, zero, zero, k0, k1))
+    stream = Stream(key, 0, 0)
+    values = model.sigma_e * stream.normal(index)
     if model.tail_fraction > 0.0:
-        member, where = uniform_pair(index, zero, zero, zero + np.uint64(1), k0, k1)
+        member, where = stream.uniforms(index, 1)
         values = values + np.where(member < model.tail_fraction, where * model.tail_max_e, 0.0)
     return values.astype(np.float32)
