@@ -133,19 +133,13 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                                      f"{ptc['fit_points']} levels below 70 % of saturation, each weighted by the "
                                      "inverse of its variance's sampling variance")
     photons = [p[2].photons for p in pts]
-    if all(ph is not None and ph > 0 for ph in photons):
-        qe = fit_photo.quantum_efficiency([p[0] for p in pts], photons, k, ptc["saturation_index"], ptc["rel_se"])
-        P["quantum_efficiency"] = _p(qe["value"], qe["ci95"], f"photo-electrons (signal / K) over photons per pixel, "
-                                     f"{qe['points']} levels below 70 % of saturation")
-    else:
-        not_fitted["quantum_efficiency"] = "needs the photons per pixel of every flat stack (EMVA 'b' lines, manifest 'photons')"
     nonlin = None
     if all(ph is not None and ph > 0 for ph in photons):
         npix = rows * cols
         mean_var = [p[2].temporal_var / (npix * p[2].n) + p[3].temporal_var / (npix * p[3].n) for p in pts]
         nonlin = fit_photo.nonlinearity([p[0] for p in pts], [p[1] for p in pts], photons, k,
                                         ptc["saturation_index"], mean_var)
-        if nonlin["bent"]:
+        if nonlin["bent"]:  # the QE is the bent response's small-signal slope
             P["quantum_efficiency"] = _p(nonlin["qe"], [nonlin["qe"] - Z95 * nonlin["qe_se"],
                                                         nonlin["qe"] + Z95 * nonlin["qe_se"]],
                                          f"the small-signal slope of the mean signal (e-) over photons, a quartic "
@@ -155,10 +149,14 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                                               if nonlin["acts_on"] == "charge" else
                                               "the mean: the collection bends before the shot noise"))
         else:
+            qe = fit_photo.quantum_efficiency([p[0] for p in pts], photons, k, ptc["saturation_index"], ptc["rel_se"])
+            P["quantum_efficiency"] = _p(qe["value"], qe["ci95"], f"photo-electrons (signal / K) over photons per "
+                                         f"pixel, {qe['points']} levels below 70 % of saturation")
             not_fitted["nonlinearity"] = (f"the mean signal is a straight line in the photons (F test of a quartic, "
                                           f"p = {nonlin['p_value']:.2g}): left off")
     else:
-        not_fitted["nonlinearity"] = "needs the photons per pixel of every flat stack"
+        why = "needs the photons per pixel of every flat stack (EMVA 'b' lines, manifest 'photons')"
+        not_fitted["quantum_efficiency"] = not_fitted["nonlinearity"] = why
     plots["ptc"] = {"mu": ptc["mu"].tolist(), "v": ptc["v"].tolist(), "linear": ptc["linear"].tolist(), "K": k,
                     "saturation_index": ptc["saturation_index"]}
 
@@ -253,7 +251,9 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                 P["pixel_offset.tail.max_e"] = _p(tl["max_e"], None, "largest intercept above the body")
             plots["pixel_offset"] = {"residual": off["residual_e"]}
             cells, cse = off["cells_dn"].ravel(), off["cells_se_dn"].ravel()
-            if np.any(np.abs(cells) > Z95 * np.hypot(cse, np.sqrt(np.mean(cse**2)))):
+            # the four positions less their mean, sum((c_i - mean)^2 / se^2) ~ chi-square with three degrees of
+            # freedom: kept where they differ beyond what their errors allow (95 % level), else one black level
+            if float(np.sum((cells / cse) ** 2)) > float(stats.chi2.isf(0.05, 3)):
                 P["black_level.channel_offsets_dn"] = _p(
                     [float(x) for x in cells], None, "each 2 x 2 cell position's mean dark intercept less the four's "
                     "mean (in sensor.cfa's order)", ci95_each=[[float(x - Z95 * e), float(x + Z95 * e)]
@@ -372,12 +372,10 @@ def _with_crosstalk(base, P: dict):
 
 
 def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int,
-             not_fitted_readout: dict | None = None) -> None:
+             not_fitted: dict) -> None:
     """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``; the
-    read noise's shape (Tukey-lambda) where the pixels' noise is not normal."""
-    from ..model.stages.read_noise import tukey_lambda_variance as fit_tukey_variance
-
-    not_fitted_readout = {} if not_fitted_readout is None else not_fitted_readout
+    read noise's shape (Tukey-lambda) where the pixels' noise is not normal, and the black level's error per
+    frame. What cannot be fitted goes to ``not_fitted``."""
     rows, cols = st.shape
     n = st.n
     corr = 1 - 2 / cols - 2 / rows
@@ -417,38 +415,29 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
                                 "params": [float(x) for x in f.value], "tail_fraction": r["tail_fraction"],
                                 "tail_max": r["tail_max"]}
     # the shape of the pixels' temporal noise: normal, or (ELD's read noise) Tukey-lambda; judged where the pixels
-    # share one noise (the per-pixel sigmas spread by less than 10 % of their mean variance, as on ELD's cameras)
+    # share one noise (their variances spread by less than 10 % of the mean, as on ELD's cameras)
     if st.pixel_m4 is not None:
-        v_i = st.pixel_var / corr - dark_var * k**2  # DN^2, less the dark charge's shot noise
-        med, rob = robust_centre(v_i)  # the mean variance (a median is low: a sample variance is skewed), white
-        common = float(np.mean(v_i[v_i <= med + 10 * rob]))  # and noisy pixels out
-        known_k4 = dark_var * k**4 - 1 / 120  # the dark charge's Poisson fourth cumulant and the quantizer's, DN^4
-        shp = fit_readout.read_noise_shape(st.pixel_var / corr, st.pixel_m4 / corr**2, n, common, known_k4)
+        # what is not the read noise: the dark charge's shot noise and the quantizer's, their variances (DN^2) and
+        # fourth cumulants (the Poisson's is its mean; a uniform code's -1/120 DN^4)
+        known_var, known_k4 = dark_var * k**2 + 1 / 12, dark_var * k**4 - 1 / 120
+        shp = fit_readout.pixel_noise_shape(st.pixel_var, st.pixel_m4, n, known_var, known_k4,
+                                            (1 - 1 / cols) * (1 - 1 / rows))
         if shp is not None:
             (kurt, kci), (lam, lci) = shp["kurtosis"], shp["lam"]
-            # the pixels' own variances spread beyond what n frames of a noise of this kurtosis leave:
-            # var(s^2) = V^2 (kurt / n + 2 / (n - 1))
-            sampling = common**2 * (max(kurt, 0.0) / n + 2 / (n - 1))
-            spread = math.sqrt(max(float(np.var(v_i)) - sampling, 0.0)) / max(common, 1e-12)
-            if (kci[0] > 0 or kci[1] < 0) and spread < 0.1:
+            if (kci[0] > 0 or kci[1] < 0) and shp["spread"] < 0.1:
                 P["read_noise.shape"] = _p(lam, lci, f"the Tukey-lambda shape whose excess kurtosis is the pixels' noise's, "
                                            f"{kurt:.3g} (95 % CI {kci[0]:.3g} to {kci[1]:.3g}), from their fourth moments "
                                            f"over {n} frames less the dark charge's and the quantizer's")
-                P["read_noise.scale_dn"] = _p(math.sqrt(common / fit_tukey_variance(lam)), None,
-                                              "the scale that gives the pixels' mean variance (less the dark charge's)")
+                P["read_noise.scale_dn"] = _p(*shp["scale_dn"], "the scale that gives the pixels' mean variance (less "
+                                              "the dark charge's and the quantizer's); interval from the shape's and "
+                                              "that variance's")
             elif kci[0] > 0 or kci[1] < 0:
-                not_fitted_readout["read_noise"] = (
+                not_fitted["read_noise"] = (
                     f"the pixels' noise is not normal (excess kurtosis {kurt:.3g}, 95 % CI {kci[0]:.3g} to {kci[1]:.3g}) "
-                    f"but their sigmas spread by {spread:.0%}: the flicker model holds it; no Tukey-lambda read noise")
-    # the black level's error per frame: the frames' means spread beyond what the rows', the columns' and the
-    # pixels' temporal noise leave (each estimated from the stack's own row and column means about the frame's)
-    fm = st.row_means.mean(axis=1)
-    vr = float(np.mean((st.row_means - fm[:, None]).var(axis=0, ddof=1)))
-    vc = float(np.mean((st.col_means - fm[:, None]).var(axis=0, ddof=1)))
-    p_var = float(np.mean(st.pixel_var)) / corr
-    own = vr / (rows - 1) + vc / (cols - 1) - p_var / (rows * cols)
-    v_fm = float(np.var(fm, ddof=1))
-    P["black_level.frame_sigma_dn"] = _p(**sigma_from_variance(v_fm - own, v_fm * math.sqrt(2 / (n - 1))),
+                    f"but their sigmas spread by {shp['spread']:.0%}: the flicker model holds it; no Tukey-lambda read "
+                    "noise")
+    e2, e2_se = fit_readout.frame_error_variance(st.row_means, st.col_means, float(np.mean(st.pixel_var)) / corr)
+    P["black_level.frame_sigma_dn"] = _p(**sigma_from_variance(e2, e2_se),
                                          method=f"the spread of the {n} frames' means less what the rows', columns' "
                                                 "and pixels' temporal noise put there")
     # rows: temporal then fixed
@@ -516,6 +505,11 @@ def fitted_config(base, result: dict):
     points = []
     for T, res in sorted(result["dark"].items()):
         p = res["parameters"]
+        if not p["mean_e_per_s"]["value"] > 0:  # no dark current to speak of (noise put the mean at or below 0)
+            result["not_fitted"][f"dark_current at {T:g} C"] = (
+                f"the body's mean is {p['mean_e_per_s']['value']:.3g} e-/s (95 % CI {p['mean_e_per_s']['ci95'][0]:.3g} "
+                f"to {p['mean_e_per_s']['ci95'][1]:.3g}): no dark current seen, none in the configuration")
+            continue
         point = {"temperature_c": T, "distribution": p["family"]["value"], "mean_e_per_s": p["mean_e_per_s"]["value"],
                  "std_e_per_s": p["std_e_per_s"]["value"], "tail": None}
         from ..model.distributions import body
@@ -528,6 +522,8 @@ def fitted_config(base, result: dict):
             point["tail"] = {"ppm_above": p["tail.ppm_above"]["value"], "threshold_e_per_s": res["threshold"],
                              "max_e_per_s": p["tail.max_e_per_s"]["value"]}
         points.append(point)
+    if result["dark"] and not points:
+        u["dark_current"] = {"enabled": False}
     if points:
         u["dark_current"] = {"enabled": True, "points": points}
         for name in ("doubling_c", "tail_doubling_c"):

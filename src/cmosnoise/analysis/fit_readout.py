@@ -472,7 +472,7 @@ def tukey_lambda_kurtosis(lam: float) -> float:
 
 
 def read_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, common_var: float,
-                     known_k4: np.ndarray | float = 0.0) -> dict | None:
+                     known_k4: np.ndarray | float = 0.0, shrink: float = 1.0) -> dict | None:
     """The shape of the noise common to every pixel (the read noise) from the pixels' fourth moments.
 
     Each pixel's frames (row and column means taken out) have variance
@@ -485,7 +485,11 @@ def read_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, common
         E m4 = a (3 V^2 + k4) + b V^2,  a = (n-1)(n^2-3n+3)/n^3,  b = 3(2n-3)(n-1)/n^3
         E s4 = V^2 + (3 V^2 + k4)/n - V^2 (n-3)/(n(n-1))
 
-    so each pixel gives an unbiased ``k4`` estimate, and their mean over the
+    so each pixel gives an unbiased ``k4`` estimate. Where the frames had
+    their row and column means taken out, a pixel keeps ``shrink = (1 - 1/cols)
+    (1 - 1/rows)`` of its own value: of its variance ``shrink``, of its fourth
+    cumulant ``shrink**4`` (the other pixels' shares are of order 1/cols^3),
+    so the estimate is divided by ``shrink**4``. Their mean over the
     pixels (standard error from their spread) divided by the common noise's
     variance squared is its excess kurtosis; the Tukey-lambda shape with that
     kurtosis is the fitted ``lam`` (ELD models the read noise so).
@@ -504,7 +508,7 @@ def read_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, common
     # solve per pixel: m4 = (3a + b) V2 + a k4 ; s4 = (1 + 3/n - (n-3)/(n(n-1))) V2 + k4 / n
     c = 1 + 3 / n - (n - 3) / (n * (n - 1))
     det = (3 * a + b) / n - a * c
-    k4_i = ((3 * a + b) * s4 - c * m4) / det - known_k4
+    k4_i = ((3 * a + b) * s4 - c * m4) / det / shrink**4 - known_k4
     k4 = float(np.mean(k4_i))
     se = float(np.std(k4_i, ddof=1)) / math.sqrt(k4_i.size)
     kurt = k4 / common_var**2
@@ -517,3 +521,63 @@ def read_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, common
         return float(brentq(lambda lam: tukey_lambda_kurtosis(lam) - kv, -0.24, 0.9, xtol=1e-10))
 
     return {"kurtosis": (kurt, [lo_k, hi_k]), "lam": (shape(kurt), [shape(hi_k), shape(lo_k)]), "k4": (k4, se)}
+
+
+def pixel_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, known_var: np.ndarray | float,
+                      known_k4: np.ndarray | float, shrink: float = 1.0) -> dict | None:
+    """Whether the pixels' temporal noise (DN, their frames less the row and column means) is Tukey-lambda read
+    noise they share, and its shape and scale.
+
+    The pixels' mean variance less what is known not to be the read noise
+    (``known_var``: the dark charge's shot noise, the quantizer's) is the
+    shared noise's (``common``: a median
+    would be low, a sample variance being skewed; white and noisy pixels out
+    beyond 10 robust sigmas) is the shared noise's; :func:`read_noise_shape`
+    gives its kurtosis and shape. ``spread`` is how far the pixels' own
+    variances spread beyond what ``n`` frames of a noise of that kurtosis
+    leave, ``var(s^2) = V^2 (kurt / n + 2 / (n - 1))``, relative to ``common``:
+    a flicker-like spread says the noise is not one shared law.
+
+    Returns ``read_noise_shape``'s dict plus ``common_dn2`` (value, standard
+    error), ``spread`` and ``scale_dn`` (value, 95 % interval: from the
+    shape's interval and the common variance's), or None.
+    """
+    from ..model.stages.read_noise import tukey_lambda_variance
+
+    v_i = pixel_var / shrink - known_var  # the frames' row and column means took (1 - shrink) of each variance
+    med, rob = robust_centre(v_i)
+    kept = v_i[v_i <= med + 10 * rob]
+    common = float(np.mean(kept))
+    common_se = float(np.std(kept, ddof=1)) / math.sqrt(kept.size)
+    shp = read_noise_shape(pixel_var, pixel_m4, n, common, known_k4, shrink)
+    if shp is None:
+        return None
+    (kurt, _), (lam, (lam_lo, lam_hi)) = shp["kurtosis"], shp["lam"]
+    sampling = common**2 * (max(kurt, 0.0) / n + 2 / (n - 1))
+    spread = math.sqrt(max(float(np.var(v_i)) - sampling, 0.0)) / max(common, 1e-12)
+    # the scale gives the common variance: s = sqrt(common / var(lam)); var(lam) falls as lam rises, so the
+    # interval's ends are the shape's ends with the common variance's own ends
+    scale = math.sqrt(common / tukey_lambda_variance(lam))
+    lo = math.sqrt(max(common - Z95 * common_se, 0.0) / tukey_lambda_variance(lam_lo))
+    hi = math.sqrt((common + Z95 * common_se) / tukey_lambda_variance(lam_hi))
+    return {**shp, "common_dn2": (common, common_se), "spread": spread, "scale_dn": (scale, [lo, hi])}
+
+
+def frame_error_variance(row_means: np.ndarray, col_means: np.ndarray, pixel_var: float) -> tuple[float, float]:
+    """The variance of the black level's error per frame (DN^2) and its standard error, from a dark stack's row
+    means (frames, rows), column means (frames, cols) and mean pixel temporal variance.
+
+    A frame's mean is its error plus the means of its rows' and columns'
+    temporal noise and of its pixels': ``var(fm) = e^2 + rho^2/rows + gamma^2/cols
+    + p/(rows cols)``. The rows' means about the frame's spread by
+    ``(rho^2 + p/cols)(1 - 1/rows)``, the columns' by ``(gamma^2 + p/rows)(1 - 1/cols)``,
+    which leaves ``e^2 = var(fm) - vr/(rows - 1) - vc/(cols - 1) + p/(rows cols)``;
+    its standard error is that of a variance over the frames, ``var(fm) sqrt(2/(n - 1))``.
+    """
+    n, rows = row_means.shape
+    cols = col_means.shape[1]
+    fm = row_means.mean(axis=1)
+    vr = float(np.mean((row_means - fm[:, None]).var(axis=0, ddof=1)))
+    vc = float(np.mean((col_means - fm[:, None]).var(axis=0, ddof=1)))
+    v_fm = float(np.var(fm, ddof=1))
+    return v_fm - vr / (rows - 1) - vc / (cols - 1) + pixel_var / (rows * cols), v_fm * math.sqrt(2 / (n - 1))
