@@ -421,7 +421,7 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
         # fourth cumulants (the Poisson's is its mean; a uniform code's -1/120 DN^4)
         known_var, known_k4 = dark_var * k**2 + 1 / 12, dark_var * k**4 - 1 / 120
         shp = fit_readout.pixel_noise_shape(st.pixel_var, st.pixel_m4, n, known_var, known_k4,
-                                            (1 - 1 / cols) * (1 - 1 / rows))
+                                            fit_readout.own_share(rows, cols))
         if shp is not None:
             (kurt, kci), (lam, lci) = shp["kurtosis"], shp["lam"]
             if (kci[0] > 0 or kci[1] < 0) and shp["spread"] < 0.1:
@@ -436,7 +436,8 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
                     f"the pixels' noise is not normal (excess kurtosis {kurt:.3g}, 95 % CI {kci[0]:.3g} to {kci[1]:.3g}) "
                     f"but their sigmas spread by {shp['spread']:.0%}: the flicker model holds it; no Tukey-lambda read "
                     "noise")
-    e2, e2_se = fit_readout.frame_error_variance(st.row_means, st.col_means, float(np.mean(st.pixel_var)) / corr)
+    e2, e2_se = fit_readout.frame_error_variance(st.row_means, st.col_means,
+                                                 float(np.mean(st.pixel_var)) / fit_readout.own_share(rows, cols))
     P["black_level.frame_sigma_dn"] = _p(**sigma_from_variance(e2, e2_se),
                                          method=f"the spread of the {n} frames' means less what the rows', columns' "
                                                 "and pixels' temporal noise put there")

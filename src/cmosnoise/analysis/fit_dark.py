@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import CmosnoiseError
 from ..estimators import Z95, robust_centre
 from ..model.distributions import FAMILIES, POSITIVE_FAMILIES, body
+from .fit_readout import own_share
 
 #: pixels used for the family fits (a fixed random subset: the ranking is clear long before all 300 000)
 FIT_PIXELS = 50_000
@@ -245,7 +246,7 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     stack = np.stack([np.asarray(m, np.float64) for m in means_dn])
     usable = np.all(stack < limit_dn, axis=0)
     rows, cols = stack.shape[1:]
-    shrink = 1 - 1 / rows - 1 / cols
+    shrink = own_share(rows, cols)  # what taking out the rows' and columns' means leaves of a pixel's variance
 
     def intercepts(idx):
         """Each pixel's intercept from the stacks ``idx`` (least squares over their times), DN; NaN where unusable."""
@@ -282,10 +283,9 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     resid_e = residual(raw)
     values = resid_e[usable]
     n = values.size
-    # the pixels' variances are of frames less their row and column means: 1 - 2/cols - 2/rows of a pixel's own
-    corr = 1 - 2 / cols - 2 / rows
+    # the pixels' variances are of frames less their row and column means: ``shrink`` of a pixel's own
     noise = float(sum(ci * ci * float(np.mean(v)) / nj for ci, v, nj in zip(c, pixel_vars_dn2, frames)))
-    noise /= corr * gain_dn_per_e**2
+    noise /= shrink * gain_dn_per_e**2
     _, robust = robust_centre(values)
     total_var = robust**2 / shrink
     order = np.argsort(t, kind="stable")

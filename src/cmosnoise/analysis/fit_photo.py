@@ -98,13 +98,13 @@ def quantum_efficiency(mu_dn, photons, k: float, saturation_index: int, k_rel_se
     return {"value": q, "ci95": [q - half, q + half], "points": int(lin.size)}
 
 
-def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_var_dn2=None) -> dict:
+def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_var_dn2) -> dict:
     """The photo-response nonlinearity (docs/model.md stage 5b) from the photon-transfer means.
 
     The mean signal in e- (``mu_dn / k``) below saturation is fitted as a
     quartic through the origin in the photons, ``y = p1 x + p2 x**2 + p3 x**3
-    + p4 x**4`` (weighted least squares, each mean's sampling variance from
-    ``mean_var_dn2`` or its temporal variance over the pixels it averages),
+    + p4 x**4`` (weighted least squares, each mean's sampling variance
+    ``mean_var_dn2``, DN^2),
     and against a line through the origin: an F test says whether the bend is
     there (p < 1e-3). ``p1`` is then the quantum efficiency (the small-signal
     slope), and the transfer, as a function of the collected charge
@@ -131,9 +131,7 @@ def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_va
     if use.size < 6:
         return {"bent": False, "p_value": 1.0, "why": f"{use.size} levels below saturation; a bend needs 6"}
     x, y = ph[use], mu[use]
-    var_mean = (np.asarray(mean_var_dn2, np.float64)[order][use] / k**2 if mean_var_dn2 is not None
-                else np.maximum(v[use], 1e-12) / 1e4)
-    w = 1.0 / var_mean
+    w = k**2 / np.asarray(mean_var_dn2, np.float64)[order][use]
     scale = float(x.max())
     X4 = np.stack([(x / scale) ** j for j in (1, 2, 3, 4)], axis=1)
     sw = np.sqrt(w)
@@ -156,9 +154,11 @@ def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_va
         return 1 + 2 * p[1] * c / p[0] ** 2 + 3 * p[2] * c**2 / p[0] ** 3 + 4 * p[3] * c**3 / p[0] ** 4
 
     c = qe * x
-    var_v = 2 * np.maximum(v[use], 1e-12) ** 2 / 100  # only the comparison of the two matters: a common scale
-    chi_charge = float(np.sum((v[use] - slope(c) ** 2 * c) ** 2 / var_v))
-    chi_mean = float(np.sum((v[use] - transfer(c)) ** 2 / var_v))
+    # a variance estimate's sampling variance goes as its square: each level weighted by 1 / v^2 (the common
+    # factor of frames and pixels cancels in the comparison)
+    w_v = 1.0 / np.maximum(v[use], 1e-12) ** 2
+    chi_charge = float(np.sum(w_v * (v[use] - slope(c) ** 2 * c) ** 2))
+    chi_mean = float(np.sum(w_v * (v[use] - transfer(c)) ** 2))
     return {"bent": p_value < 1e-3, "p_value": p_value, "coefficients": [float(a) for a in p], "qe": qe,
             "qe_se": qe_se, "acts_on": "charge" if chi_charge < chi_mean else "mean", "transfer": transfer,
             "slope": slope, "levels": int(use.size)}

@@ -523,6 +523,13 @@ def read_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, common
     return {"kurtosis": (kurt, [lo_k, hi_k]), "lam": (shape(kurt), [shape(hi_k), shape(lo_k)]), "k4": (k4, se)}
 
 
+def own_share(rows: int, cols: int) -> float:
+    """What a pixel keeps of its own value when each frame has its row and column means taken out:
+    ``(1 - 1/cols)(1 - 1/rows)``, the diagonal of that projection; so of its variance too (the variance of the
+    residual is this times the pixel's)."""
+    return (1 - 1 / cols) * (1 - 1 / rows)
+
+
 def pixel_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, known_var: np.ndarray | float,
                       known_k4: np.ndarray | float, shrink: float = 1.0) -> dict | None:
     """Whether the pixels' temporal noise (DN, their frames less the row and column means) is Tukey-lambda read
