@@ -128,39 +128,31 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
         ds.bits = bits
     say(f"read {len(ds.stacks)} stacks ({sum(s.n for s in ds.stacks)} frames of {ds.shape[1]} x {ds.shape[0]}) "
         f"from {frames_from}")
-    settings = ds.settings()
-    trip = emva = None
-    per_setting = None
-    if settings is not None:  # stacks at several gain settings: one fit each, a gain table from them
-        index, values = settings
-        parts = {v: ds.at_setting(index, v) for v in values}
-        fits = {}
-        for v, sub in parts.items():
+    # one fit per gain setting the stacks name (a gain table from them), or one fit of the whole
+    index, values = ds.settings() or (None, [None])
+    parts = {v: ds if v is None else ds.at_setting(index, v) for v in values}
+    fits = {}
+    for v, sub in parts.items():
+        if v is not None:
             say(f"fitting the stacks at {index} {v:g}")
-            fits[v] = fitting.fit_dataset(sub, base, temperature_c, threshold_e_per_s, seed)
-        cfg = fitting.fitted_gain_config(base, index, fits)
-        result = fits[values[0]]
-        per_setting = {f"{v:g}": {"parameters": fits[v]["parameters"], "not_fitted": fits[v]["not_fitted"],
-                                  "mode": next((r.mode for r in cfg.gain_table if getattr(r, index) == v), None)}
-                       for v in values}
-        if with_round_trip:
-            say("round trip: simulating each setting's measurement again from the fitted configuration")
-            trip = []
-            for v, sub in parts.items():
-                at = resolve(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={index: v})})).config
-                again = fitting.fit_dataset(simulate_like(sub, at, fits[v]["parameters"]["system_gain_K_dn_per_e"]["value"],
-                                                          seed), at, temperature_c, threshold_e_per_s, seed)
-                trip += [{**row, "parameter": f"{index} {v:g}: {row['parameter']}"} for row in round_trip(fits[v], again)]
-    else:
-        result = fitting.fit_dataset(ds, base, temperature_c, threshold_e_per_s, seed)
-        cfg = fitting.fitted_config(base, result)
-    if with_round_trip and settings is None:
+        fits[v] = fitting.fit_dataset(sub, base, temperature_c, threshold_e_per_s, seed)
+    cfg = fitting.fitted_config(base, fits[None]) if index is None else fitting.fitted_gain_config(base, index, fits)
+    result = fits[values[0]]
+    trip = emva = None
+    if with_round_trip:
         say("round trip: simulating the measurement again from the fitted configuration")
-        again = fitting.fit_dataset(simulate_like(ds, cfg, result["parameters"]["system_gain_K_dn_per_e"]["value"], seed),
-                                    cfg, temperature_c, threshold_e_per_s, seed)
-        trip = round_trip(result, again)
+        trip = []
+        for v, sub in parts.items():  # each setting's stacks from the fitted sensor at that setting
+            at = cfg if v is None else resolve(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={index: v})})).config
+            again = fitting.fit_dataset(simulate_like(sub, at, fits[v]["parameters"]["system_gain_K_dn_per_e"]["value"],
+                                                      seed), at, temperature_c, threshold_e_per_s, seed)
+            prefix = "" if v is None else f"{index} {v:g}: "
+            trip += [{**row, "parameter": prefix + row["parameter"]} for row in round_trip(fits[v], again)]
         if ds.kind == "emva" and ds.descriptor is not None:
             emva = emva_round_trip(ds.descriptor, cfg)
+    per_setting = None if index is None else {
+        f"{v:g}": {"parameters": fits[v]["parameters"], "not_fitted": fits[v]["not_fitted"],
+                   "mode": next((r.mode for r in cfg.gain_table if getattr(r, index) == v), None)} for v in values}
     doc = {
         "source": str(frames_from), "input": ds.kind, "meta": result["meta"],
         "parameters": result["parameters"], "not_fitted": result["not_fitted"],
