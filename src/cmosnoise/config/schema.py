@@ -128,7 +128,7 @@ class SensorSection(Section):
     def _qe(cls, v):
         values = [v] if isinstance(v, (int, float)) else list(v or [])
         if any(not 0 < x <= 1 for x in values):
-            raise ValueError(f"quantum_efficiency = {v}: each must be in (0, 1] (electrons per photon)")
+            raise ValueError("each must be in (0, 1] (electrons per photon)")
         return v
 
     def qe_mean(self) -> float | None:
@@ -397,8 +397,9 @@ class NonlinearitySection(Section):
     collection of the mean photo-charge before the shot noise (``acts_on``).
 
     Give ``linearity_error_pct`` (EMVA 1288's LE min and max over 5 to 95 %
-    of saturation) or ``curve_e`` (points of the transfer, e- in to e- out,
-    strictly increasing, from (0, 0)). Off: the exact identity.
+    of saturation), ``coefficients`` (the cubic it is solved to) or
+    ``curve_e`` (points of the transfer, e- in to e- out, strictly
+    increasing, from (0, 0)). Off: the exact identity.
     """
 
     enabled: bool = False
@@ -422,15 +423,15 @@ class NonlinearitySection(Section):
         if self.linearity_error_pct is not None:
             lo, hi = self.linearity_error_pct
             if not (-20 <= lo <= 0 <= hi <= 20) or lo == hi:
-                raise ValueError(f"nonlinearity.linearity_error_pct = {[lo, hi]}: need -20 <= min <= 0 <= max <= 20 "
+                raise ValueError(f"linearity_error_pct = {[lo, hi]}: need -20 <= min <= 0 <= max <= 20 "
                                  "(a linear fit leaves deviations of both signs), not both 0")
         if self.curve_e is not None:
             pts = [(float(a), float(b)) for a, b in self.curve_e]
             if len(pts) < 2 or pts[0] != (0.0, 0.0):
-                raise ValueError(f"nonlinearity.curve_e must start at [0, 0] and have 2 points or more, got {pts[:3]}")
+                raise ValueError(f"curve_e must start at [0, 0] and have 2 points or more, got {pts[:3]}")
             for (a0, b0), (a1, b1) in zip(pts, pts[1:]):
                 if not (a1 > a0 and b1 > b0):
-                    raise ValueError(f"nonlinearity.curve_e must be strictly increasing in both columns (invertible): "
+                    raise ValueError(f"curve_e must be strictly increasing in both columns (invertible): "
                                      f"[{a0:g}, {b0:g}] is followed by [{a1:g}, {b1:g}]")
         return self
 
@@ -447,7 +448,7 @@ class BlackLevelSection(Section):
     @classmethod
     def _bounded(cls, v):
         if any(abs(x) > 1000 for x in v):
-            raise ValueError(f"channel_offsets_dn = {list(v)}: each must be within +-1000 DN")
+            raise ValueError("each must be within +-1000 DN")
         return v
 
 
@@ -468,7 +469,7 @@ class ReadNoiseSection(Section):
     @classmethod
     def _shape(cls, v):
         if not -0.5 < v <= 2.0:
-            raise ValueError(f"read_noise.shape = {v:g}: a Tukey-lambda shape must be in (-0.5, 2] "
+            raise ValueError("a Tukey-lambda shape must be in (-0.5, 2] "
                              "(at -0.5 and below its variance is infinite)")
         return v
 
