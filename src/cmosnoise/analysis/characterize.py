@@ -63,16 +63,15 @@ class Measurement:
     stack_dark: np.ndarray
     max_ydark: np.ndarray  #: brightest pixel of the two dark frames at each step, DN (to see white pixels saturate)
     frames: dict = field(default_factory=dict)  #: for export: name -> list of frames
-    #: the fixed pattern of the dark pair at the shortest exposure time (DN^2): the pair mean's spatial variance
-    #: less half its temporal variance; the pixel offsets' DSNU, with the least dark current in it
+    #: the fixed pattern of the dark pair at the shortest exposure time (DN^2, :func:`dsnu_of_pair`): the pixel
+    #: offsets' DSNU, with the least dark current in it
     dsnu_shortest_dn2: float | None = None
 
 
 def dsnu_of_pair(a: np.ndarray, b: np.ndarray) -> float:
-    """The fixed-pattern variance of two frames of one exposure (DN^2): the spatial variance of their mean less half
-    their temporal variance (what the mean of two frames keeps of it)."""
-    mean = (a.astype(np.float64) + b) / 2
-    return float(np.var(mean, ddof=1)) - emva.temporal_variance(a, b) / 2
+    """The fixed-pattern variance of two frames of one exposure (DN^2): EMVA 1288's spatial variance of a stack
+    (:func:`emva.spatial_variances`), here of two frames."""
+    return emva.spatial_variances(np.stack([a, b]))["total"]
 
 
 def pair_stats(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
