@@ -69,15 +69,26 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
         out["row"] = sensor.spec.row_sigma_e**2 * g2
     if fp.column_sigma is not None:
         out["column"] = float(np.mean(fp.column_sigma.astype(np.float64) ** 2))
-    if c.adc.enabled:  # the ideal readout (ADC off) is not quantized; after the gain, DN referred to e-
-        if c.read_noise.enabled:
-            from ..model.stages.read_noise import variance_dn2
-
-            rn = c.read_noise
-            out["read_after_gain"] = variance_dn2(rn.distribution, rn.scale_dn, rn.shape) / t.gain_dn_per_e**2
-        if c.black_level.frame_sigma_dn > 0:
-            out["black_level_frame"] = c.black_level.frame_sigma_dn**2 / t.gain_dn_per_e**2
+    if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
+        out.update(after_gain_variances(sensor))
         out["quantization"] = 1.0 / (12.0 * t.gain_dn_per_e**2)
+    return out
+
+
+def after_gain_variances(sensor: Sensor) -> dict[str, float]:
+    """The temporal variances the ADC adds before rounding (stage 9a), DN^2 referred to e-^2: the read noise after
+    the gain and the black level's error per frame (empty with the ADC off)."""
+    c, k = sensor.config, sensor.transfer.gain_dn_per_e
+    out: dict[str, float] = {}
+    if not c.adc.enabled:
+        return out
+    if c.read_noise.enabled:
+        from ..model.stages.read_noise import variance_dn2
+
+        rn = c.read_noise
+        out["read_after_gain"] = variance_dn2(rn.distribution, rn.scale_dn, rn.shape) / k**2
+    if c.black_level.frame_sigma_dn > 0:
+        out["black_level_frame"] = c.black_level.frame_sigma_dn**2 / k**2
     return out
 
 
@@ -176,8 +187,7 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
         row_off = row_off + fp.pixel_offset.astype(np.float64)
     col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
     if c.adc.enabled:  # after the gain, in DN: referred to e-
-        after = temporal_variances(sensor, 0.0)
-        col_read = col_read + after.get("read_after_gain", 0.0) + after.get("black_level_frame", 0.0)
+        col_read = col_read + sum(after_gain_variances(sensor).values())
         cells = np.asarray(c.black_level.channel_offsets_dn, np.float64).reshape(2, 2)
         if cells.any():
             from ..model.stages.read_noise import black_map
