@@ -118,6 +118,9 @@ class SensorSection(Section):
                                                                  "with this iso")
     gain_db: Optional[float] = Field(None, ge=-60, le=120, description="gain setting in dB: selects the row of "
                                                                        "gain_table with this gain_db")
+    frame_rate_hz: Optional[float] = Field(None, gt=0, le=1e6, description="frames per second: frame k starts k / "
+                                           "frame_rate_hz seconds after frame 0 (random telegraph noise reads it); null: "
+                                           "frames back to back, 1 / exposure.integration_time_s")
     quantum_efficiency: Optional[Union[float, tuple[float, float, float]]] = Field(
         None, description="quantum efficiency (0, 1], one number or R, G, B: photo-electrons per photon. Light given "
                           "in photons (exposure.peak_rate_photons_per_s) needs it; with light in e-/s it says how many "
@@ -225,6 +228,76 @@ class ShotNoiseSection(Section):
     )
 
 
+# ------------------------------------------------------- random telegraph noise
+class DwellTimes(Section):
+    """A mean dwell time's law across traps or pixels: log-uniform from ``min_s`` to ``max_s`` (equal: one value)."""
+
+    min_s: float = Field(gt=0, le=1e6, description="shortest mean dwell time, s")
+    max_s: float = Field(gt=0, le=1e6, description="longest mean dwell time, s")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.max_s < self.min_s:
+            raise ValueError(f"max_s = {self.max_s:g} is below min_s = {self.min_s:g}; give min_s <= max_s")
+        return self
+
+
+class SpreadLaw(Section):
+    """A positive quantity's law across traps or pixels: lognormal (``median`` and ``sigma_log``, the standard
+    deviation of its natural log) or exponential (``mean``)."""
+
+    distribution: Literal["lognormal", "exponential"] = Field("lognormal", description="family across traps or pixels")
+    median: Optional[float] = Field(None, gt=0, le=1e9, description="lognormal: the median")
+    sigma_log: Optional[float] = Field(None, ge=0, le=5, description="lognormal: standard deviation of the natural log")
+    mean: Optional[float] = Field(None, gt=0, le=1e9, description="exponential: the mean")
+
+    @model_validator(mode="after")
+    def _complete(self):
+        if self.distribution == "lognormal":
+            if self.median is None or self.sigma_log is None or self.mean is not None:
+                raise ValueError("a lognormal law takes median and sigma_log (and no mean)")
+        elif self.mean is None or self.median is not None or self.sigma_log is not None:
+            raise ValueError("an exponential law takes mean (and no median or sigma_log)")
+        return self
+
+
+class SourceFollowerRtsSection(Section):
+    """Random telegraph noise of the source follower in time (stage 6b, docs/model.md): traps that switch between
+    two states, seen through correlated double sampling."""
+
+    enabled: bool = False
+    ppm: float = Field(1000.0, ge=0, lt=1e6, description="parts per million of pixels with one or more traps")
+    traps_per_pixel: Literal["one", "poisson"] = Field(
+        "one", description="one: each affected pixel has one trap; poisson: a pixel's trap count is Poisson, its mean "
+                           "such that ppm of pixels have at least one (at most 4 a pixel)")
+    amplitude_e: SpreadLaw = Field(default_factory=lambda: SpreadLaw(median=4.0, sigma_log=0.6),
+                                   description="a trap's amplitude across traps, e- at the source follower's input")
+    tau_capture_s: DwellTimes = Field(default_factory=lambda: DwellTimes(min_s=1e-6, max_s=1.0),
+                                      description="mean time a trap stays empty, log-uniform across traps, s")
+    tau_emission_s: DwellTimes = Field(default_factory=lambda: DwellTimes(min_s=1e-6, max_s=1.0),
+                                       description="mean time a trap stays filled, log-uniform across traps, s")
+    cds: bool = Field(True, description="correlated double sampling: a frame shows the trap's change between the reset "
+                                        "and the signal sample; off: its level, held over frames")
+    cds_interval_s: float = Field(1e-5, gt=0, le=10, description="time from the reset sample to the signal sample, s")
+
+
+class DarkCurrentRtsSection(Section):
+    """Dark-current random telegraph noise (stage 4b, docs/model.md): white pixels whose dark current blinks
+    between two rates."""
+
+    enabled: bool = False
+    ppm: float = Field(100.0, ge=0, lt=1e6, description="parts per million of pixels that blink")
+    step_e_per_s: SpreadLaw = Field(default_factory=lambda: SpreadLaw(median=300.0, sigma_log=0.7),
+                                    description="the extra dark current of the high state across pixels, e-/s, at "
+                                                "reference_temperature_c")
+    reference_temperature_c: float = Field(25.0, ge=-60, le=150, description="where step_e_per_s holds; it doubles "
+                                                                             "every dark_current.tail_doubling_c")
+    tau_low_s: DwellTimes = Field(default_factory=lambda: DwellTimes(min_s=1.0, max_s=100.0),
+                                  description="mean time at the low rate, log-uniform across pixels, s")
+    tau_high_s: DwellTimes = Field(default_factory=lambda: DwellTimes(min_s=1.0, max_s=100.0),
+                                   description="mean time at the high rate, log-uniform across pixels, s")
+
+
 # --------------------------------------------------------------- dark current
 RATE_UNITS = ("e_per_s", "aA", "nA_per_cm2")
 
@@ -298,6 +371,7 @@ class DarkCurrentSection(Section):
     tail_doubling_c: float = Field(10.0, gt=0, le=100, description="the white-pixel tail doubles every tail_doubling_c C")
     points: list[DarkPoint] = Field(default_factory=lambda: [DarkPoint(**p) for p in _default_dark_points()], min_length=1,
                                     description="characterization points (one or more temperatures)")
+    rts: DarkCurrentRtsSection = Field(default_factory=DarkCurrentRtsSection)
 
     @field_validator("points")
     @classmethod
@@ -333,6 +407,7 @@ class SourceFollowerSection(Section):
     enabled: bool = True
     thermal_sigma_e: float = Field(2.0, ge=0, le=10000, description="thermal noise, e- rms per pixel per frame")
     flicker: FlickerSection = Field(default_factory=FlickerSection)
+    rts: SourceFollowerRtsSection = Field(default_factory=SourceFollowerRtsSection)
 
 
 class RowNoiseSection(Section):

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import fdmath, philox, samplers
+from . import fdmath, philox, samplers, telegraph
 from .jit import numba  # None where numba is not installed
 
 _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
@@ -67,6 +67,22 @@ class FramePlan:
     cell_offsets_dn: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  #: black level per 2 x 2 cell position
     frame_black_sigma_dn: float = 0.0  #: the black level's error per frame, DN (keys row 4)
     read_noise: tuple[str, float, float] | None = None  #: (normal | tukey_lambda, scale DN, shape), keys row 5
+    #: source-follower random telegraph noise (stage 6b): the traps, their temporal key, and the CDS interval (s;
+    #: None: no CDS, the trap's level)
+    traps: telegraph.Telegraphs | None = None
+    trap_key: tuple[int, int] = (0, 0)
+    cds_interval_s: float | None = None
+    #: blinking white pixels (stage 4b): the pixels (size: the rate step, e-/s) and their temporal key
+    blinkers: telegraph.Telegraphs | None = None
+    blink_key: tuple[int, int] = (0, 0)
+    frame_period_s: float = 1.0  #: frame k starts at k frame_period_s (s)
+    exposure_s: float = 1.0  #: the exposure of a frame, s (blinking pixels integrate their rate over it)
+    blink_noisy: bool = True  #: whether the dark charge is in ``noisy_e`` (with shot noise) or in ``exact_e``
+
+    @property
+    def blink_mean_e(self) -> np.ndarray:
+        """The mean charge that holds the dark charge: ``noisy_e`` or ``exact_e``."""
+        return self.noisy_e if self.blink_noisy else self.exact_e
 
     @functools.cached_property
     def loggam_table(self) -> np.ndarray:
@@ -115,6 +131,7 @@ def _compiled(inline: str):
 
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
             (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
+            (telegraph, ["decay", "one_minus_exp", "transition", "bridge", "_uniform", "frame_states", "inside", "occupancy"]),
             (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
                         "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
     for module, names in plan:
@@ -154,6 +171,44 @@ if numba is not None:
 
     _JIT = dict(fastmath=False, error_model="numpy")
     _ROWS_PER_BLOCK = 8
+    _frame_states, _inside, _occupancy, _cold_exp = (_cold[name] for name in ("frame_states", "inside", "occupancy",
+                                                                              "exp"))
+
+    @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
+    def _trap_values(frame, seq, up, down, size, index, slot, dt, interval, cds, k0, k1, out):
+        """random_telegraph.trap_output, compiled: what each trap adds to frame ``frame`` (e-)."""
+        for t in numba.prange(out.size):
+            x, y = _frame_states(frame, up[t], down[t], dt, index[t], slot[t], seq, k0, k1)
+            if cds:
+                sig = _inside(frame, x, y, up[t], down[t], dt, interval, index[t], slot[t], seq, k0, k1)
+                out[t] = size[t] * (sig - x)
+            else:
+                out[t] = size[t] * x
+
+    @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
+    def _blink_values(frame, seq, up, down, size, index, slot, dt, exposure, k0, k1, out):
+        """random_telegraph.blink_charge, compiled: each blinking pixel's extra dark charge in frame ``frame`` (e-)."""
+        for t in numba.prange(out.size):
+            x, y = _frame_states(frame, up[t], down[t], dt, index[t], slot[t], seq, k0, k1)
+            end = _inside(frame, x, y, up[t], down[t], dt, exposure, index[t], slot[t], seq, k0, k1)
+            out[t] = size[t] * _occupancy(frame, x, end, up[t], down[t], exposure, index[t], slot[t], seq, k0, k1)
+
+    @numba.njit(**_JIT)
+    def _poisson_one(m, index, frame, seq, k0, k1, normal_above):
+        """One pixel's count as samplers.Stream.poisson_or_normal draws it (a blinking pixel's mean of this frame)."""
+        u1, u2 = _cold_uniform_pair(index, frame, seq, np.uint64(0), k0, k1)
+        if m > normal_above:
+            return max(np.rint(m + np.sqrt(m) * _cold_normal_from(u1, u2)), 0.0)
+        if m >= _PTRS_FROM:
+            return _ptrs_from(m, index, frame, seq, k0, k1, np.uint64(0))
+        p = _cold_exp(-m)  # samplers.poisson_inversion
+        total = p
+        k = 0.0
+        while u1 > total and k < _INV_MAX:
+            k = k + 1.0
+            p = p * m / k
+            total = total + p
+        return k
 
     #: a try the branch-free pass leaves undecided (its log test met a count past the loggam table)
     _REDO = -2.0
@@ -334,7 +389,8 @@ if numba is not None:
     @numba.njit(**_JIT)
     def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
                      gain, keys, fr, sq, r0, c0, c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale,
-                     nl_a, nl_b, nl_c, offset, read_kind, read_scale, read_table, out_dn, out_e):
+                     nl_a, nl_b, nl_c, offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val,
+                     blink_ptr, blink_col, blink_mean, out_dn, out_e):
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
 
         Compiled on its own, not inside :func:`_render`'s parallel loop: numba's
@@ -345,6 +401,7 @@ if numba is not None:
         has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
             flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
         has_nl, has_offset, has_read = flags[7], flags[8], flags[9]
+        has_rts, has_blink, blink_exact = flags[10], flags[11], flags[12]
         nl_last = np.float64(nl_table.size - 2)
         zero = np.uint64(0)
         w = c1 - c0
@@ -363,6 +420,7 @@ if numba is not None:
         big = np.empty(w, np.int64)
         buf = np.empty((10, w))
         n = np.zeros(w)
+        saved = np.empty(w if (has_blink and blink_exact) else 0)  # a row's counts of its blinking pixels
         noise = np.empty(w)
         for i in range(i0, i1):
             r = r0 + i
@@ -370,9 +428,20 @@ if numba is not None:
             if has_noisy:
                 ns, nb = _shot_row(noisy[r, c0:c1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
                 _shot_rest(lam, u1, u2, n, small, ns, big, nb, buf, loggam_table, base, fr, sq, s0, s1)
+                if has_blink and not blink_exact:  # stage 4b: a blinking pixel's count at this frame's mean
+                    for e in range(blink_ptr[i], blink_ptr[i + 1]):
+                        j = blink_col[e]
+                        n[j] = _poisson_one(np.float64(blink_mean[e]), base + np.uint64(j), fr, sq, s0, s1,
+                                            normal_above)
             if has_exact:
+                if has_blink and blink_exact:
+                    for e in range(blink_ptr[i], blink_ptr[i + 1]):
+                        saved[e - blink_ptr[i]] = n[blink_col[e]]
                 for j in range(w):
                     n[j] = n[j] + np.float64(exact[r, c0 + j])
+                if has_blink and blink_exact:  # stage 4b: a blinking pixel's mean dark charge of this frame
+                    for e in range(blink_ptr[i], blink_ptr[i + 1]):
+                        n[blink_col[e]] = saved[e - blink_ptr[i]] + np.float64(blink_mean[e])
             for j in range(w):
                 n[j] = min(n[j], full_well)
             if has_nl:  # stage 5b (nonlinearity.Curve.apply)
@@ -401,6 +470,10 @@ if numba is not None:
                 else:
                     for j in range(w):
                         n[j] = n[j] + noise[j]
+            if has_rts:  # stage 6b: the traps of this row's pixels
+                for e in range(rts_ptr[i], rts_ptr[i + 1]):
+                    j = rts_col[e]
+                    n[j] = n[j] + rts_val[e]
             if has_row:
                 rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
                 for j in range(w):
@@ -449,8 +522,8 @@ if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
                 col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, loggam_table, nl_table, nl_scale,
-                nl_a, nl_b, nl_c, offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_table, out_dn,
-                out_e):
+                nl_a, nl_b, nl_c, offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_table, rts_ptr,
+                rts_col, rts_val, blink_ptr, blink_col, blink_mean, out_dn, out_e):
         fr = np.uint64(frame)
         sq = np.uint64(seq)
         # the black level of each 2 x 2 cell position in this frame (read_noise.cell_black)
@@ -473,7 +546,8 @@ if numba is not None:
             _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
                          normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
                          c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale, nl_a, nl_b, nl_c,
-                         offset, read_kind, read_scale, read_table, out_dn, out_e)
+                         offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col,
+                         blink_mean, out_dn, out_e)
 
 
 def _version_of(package: str) -> str | None:
@@ -505,8 +579,12 @@ _DUMMY_TABLE = np.zeros(1)
 _DUMMY_TABLE.flags.writeable = False  # as the tables are: numba types a read-only array apart
 _DUMMY_NL = np.zeros(2)
 _DUMMY_NL.flags.writeable = False
-#: the kernel's switches: noisy, exact, source follower, row, column, ADC, electrons out, nonlinearity, offset, read
-_FLAGS = 10
+_DUMMY_PTR = np.zeros(2, np.int64)
+_DUMMY_COL = np.zeros(1, np.int64)
+_DUMMY_F32 = np.zeros(1, np.float32)
+#: the kernel's switches: noisy, exact, source follower, row, column, ADC, electrons out, nonlinearity, offset, read,
+#: traps, blinking pixels, blinking pixels' dark charge without shot noise
+_FLAGS = 13
 
 
 def _needs_compile() -> bool:
@@ -538,7 +616,8 @@ def preload() -> bool:
     flags = np.zeros(_FLAGS, np.bool_)
     args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
             np.zeros((6, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
-            0.0, 0.0, 0.0, _DUMMY2, _DUMMY1, 0.0, 0, 0.0, _DUMMY_NL, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
+            0.0, 0.0, 0.0, _DUMMY2, _DUMMY1, 0.0, 0, 0.0, _DUMMY_NL, _DUMMY_PTR, _DUMMY_COL, _DUMMY1, _DUMMY_PTR,
+            _DUMMY_COL, _DUMMY_F32, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
     try:
         index = _render._cache._cache_file._load_index()  # {(signature, target, ...): file}
@@ -570,10 +649,19 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
     adc_on = plan.adc is not None
     out_dn = np.empty((h, w) if adc_on else (1, 1), np.uint16)
     out_e = np.empty((h, w) if (electrons or not adc_on) else (1, 1), np.float32)
+    rts_ptr, rts_col, rts_val = _DUMMY_PTR, _DUMMY_COL, _DUMMY1
+    if plan.traps is not None:
+        rts_ptr, rts_col, rts_val = sparse_rows(*telegraph.per_pixel(*trap_values(plan, frame, (r0, r1, c0, c1))),
+                                                (r0, r1, c0, c1), cols)
+    blink_ptr, blink_col, blink_mean = _DUMMY_PTR, _DUMMY_COL, _DUMMY_F32
+    if plan.blinkers is not None:
+        pixels, means = blink_means(plan, frame, (r0, r1, c0, c1))
+        blink_ptr, blink_col, blink_mean = sparse_rows(pixels, means, (r0, r1, c0, c1), cols)
     flags = np.array([plan.noisy_e is not None, plan.exact_e is not None, plan.sf_sigma_e is not None,
                       plan.row_sigma_e is not None, plan.col_gain is not None, adc_on, electrons or not adc_on,
                       plan.nonlinearity is not None, plan.offset_e is not None,
-                      adc_on and plan.read_noise is not None])
+                      adc_on and plan.read_noise is not None, rts_val.size > 0 and plan.traps is not None,
+                      blink_mean.size > 0 and plan.blinkers is not None, not plan.blink_noisy])
     k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
     nl, nl_scale, (nl_a, nl_b, nl_c) = _DUMMY_NL, 0.0, (0.0, 0.0, 0.0)
     curve = plan.nonlinearity
@@ -600,9 +688,51 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
             plan.loggam_table, nl, float(nl_scale), nl_a, nl_b, nl_c,
             plan.offset_e if plan.offset_e is not None else _DUMMY2,
             np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),
-            read_kind, float(read_scale), read_table, out_dn, out_e)
+            read_kind, float(read_scale), read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col, blink_mean,
+            out_dn, out_e)
     elapsed = time.perf_counter() - t0
     if first and elapsed > 2.0:  # a cache load takes well under a second; this was a compile
         _logger.info(f"compiled the frame kernel in {elapsed:.0f} s; later runs reuse it")
     raw = out_dn if adc_on else out_e
     return raw, (out_e if electrons or not adc_on else None)
+
+
+def trap_values(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.ndarray]:
+    """(pixel index, what the trap adds in e-) of each trap of ``plan`` inside ``region`` in frame ``frame``
+    (random_telegraph.trap_output, compiled; the NumPy one where numba is not installed)."""
+    traps = plan.traps.within(region, plan.shape[1])
+    out = np.empty(traps.index.size)
+    k0, k1 = (np.uint64(w) for w in plan.trap_key)
+    cds = plan.cds_interval_s is not None
+    _trap_values(int(frame), np.uint64(plan.sequence), traps.up, traps.down, traps.size, traps.index, traps.slot,
+                 float(plan.frame_period_s), float(plan.cds_interval_s or 0.0), cds, k0, k1, out)
+    return traps.index, out
+
+
+def blink_means(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.ndarray]:
+    """(pixel index, this frame's mean charge, float32 e-) of each blinking pixel inside ``region``: its mean (the
+    plan's, whichever of the noisy or exact means holds the dark charge) plus its extra dark charge."""
+    pixels = plan.blinkers.within(region, plan.shape[1])
+    extra = np.empty(pixels.index.size)
+    k0, k1 = (np.uint64(w) for w in plan.blink_key)
+    _blink_values(int(frame), np.uint64(plan.sequence), pixels.up, pixels.down, pixels.size, pixels.index,
+                  pixels.slot, float(plan.frame_period_s), float(plan.exposure_s), k0, k1, extra)
+    return pixels.index, plus_charge(plan.blink_mean_e, pixels.index, extra)
+
+
+def plus_charge(mean_e: np.ndarray, index: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """``mean_e`` (float32, (rows, cols)) at the pixels ``index`` plus ``extra`` (e-), rounded to float32 as every
+    mean charge is: the one place a blinking pixel's mean of a frame is made."""
+    return (mean_e.ravel()[index.astype(np.int64)].astype(np.float64) + extra).astype(np.float32)
+
+
+def sparse_rows(index: np.ndarray, values: np.ndarray, region, cols: int):
+    """Per-pixel values at sorted pixel indices inside ``region``, by region row: (row pointers (h + 1,) int64,
+    region columns int64, values)."""
+    r0, r1, c0, c1 = region
+    if index.size == 0:
+        return np.zeros(r1 - r0 + 1, np.int64), _DUMMY_COL, values if values.size else values[:0]
+    i = index.astype(np.int64)
+    r, c = i // cols - r0, i % cols - c0
+    ptr = np.searchsorted(r, np.arange(r1 - r0 + 1)).astype(np.int64)
+    return ptr, np.ascontiguousarray(c), np.ascontiguousarray(values)

@@ -37,7 +37,8 @@ import numpy as np
 
 from .seeds import fixed_key, fixed_rng, pixel_index
 from .spec import SensorSpec
-from .stages import column_noise, dark_current, pixel_offset, prnu, row_noise, source_follower
+from ..engine.telegraph import Telegraphs
+from .stages import column_noise, dark_current, pixel_offset, prnu, random_telegraph, row_noise, source_follower
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,8 @@ class FixedPattern:
     vfpn: np.ndarray | None = None  #: fixed column offsets, e-, (1, cols)
     column_gain: np.ndarray | None = None  #: fixed column gains, (1, cols)
     pixel_offset: np.ndarray | None = None  #: per-pixel offset, e-, (rows, cols) float32
+    traps: Telegraphs | None = None  #: the source follower's random telegraph traps (sizes: amplitudes, e-)
+    blinkers: Telegraphs | None = None  #: blinking white pixels (sizes: rate steps at the temperature, e-/s)
 
 
 def dependencies(spec: SensorSpec) -> dict[str, object]:
@@ -75,6 +78,8 @@ def dependencies(spec: SensorSpec) -> dict[str, object]:
         "row_offset": (rn.enabled, rn.fixed_sigma_e),
         "column": c.column_noise,
         "pixel_offset": (c.pixel_offset.enabled, spec.offsets),
+        "traps": (sf.enabled, sf.rts),
+        "blinkers": (c.dark_current.enabled, c.dark_current.rts, c.sensor.temperature_c, c.dark_current.tail_doubling_c),
     }
 
 
@@ -205,6 +210,14 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None, executor=None) -> 
     if c.pixel_offset.enabled and (spec.offsets.sigma_e > 0 or spec.offsets.tail_fraction > 0):
         maps["pixel_offset"] = held("pixel_offset", lambda: pixel_offset.offset_map(
             spec.offsets, fixed_key(seed, "pixel_offset"), pixel_index((0, rows, 0, cols), cols)))
+    if sf.enabled and sf.rts.enabled:
+        maps["traps"] = held("traps", lambda: random_telegraph.draw_traps(
+            sf.rts, fixed_key(seed, "source_follower_rts"), shape))
+    d = c.dark_current
+    if d.enabled and d.rts.enabled:
+        scale = random_telegraph.step_scale(d.rts.reference_temperature_c, c.sensor.temperature_c, d.tail_doubling_c)
+        maps["blinkers"] = held("blinkers", lambda: random_telegraph.draw_blinkers(
+            d.rts, scale, fixed_key(seed, "dark_current_rts"), shape))
     if isinstance(maps.get("dark_rate"), Future):
         maps["dark_rate"] = maps["dark_rate"].result()
     return FixedPattern(**maps)

@@ -186,3 +186,13 @@ def resolve_prnu(config: Config) -> Config:
     if sigma > 100:
         raise CmosnoiseError(f"prnu.measured_pct = {p.measured_pct:g}: needs a gain-map sigma of {sigma:.4g} %, above 100 %")
     return config.model_copy(update={"prnu": p.model_copy(update={"sigma_pct": float(round(sigma, 9))})})
+
+
+def check_timing(config: Config) -> None:
+    """What random telegraph noise needs of the frame timing (:func:`.stages.random_telegraph.check`)."""
+    from .stages.random_telegraph import check
+
+    try:
+        check(config)
+    except ValueError as exc:
+        raise _invalid(str(exc)) from None

@@ -36,6 +36,8 @@ STAGE_IDS = {
     "pixel_offset": 10,
     "black_level": 11,
     "read_noise": 12,
+    "source_follower_rts": 13,
+    "dark_current_rts": 14,
 }
 
 

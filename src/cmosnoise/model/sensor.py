@@ -34,6 +34,7 @@ from . import scene as scene_mod
 from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
 from .heavy_tail import variates
 from .raw_info import RawInfo
+from ..engine.telegraph import per_pixel
 from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, pixel_index, stream_key, temporal_stream
 from .spec import SensorSpec, resolve
 from .stages import (
@@ -42,6 +43,7 @@ from .stages import (
     crosstalk,
     dark_current,
     prnu,
+    random_telegraph,
     read_noise,
     row_noise,
     shot_noise,
@@ -244,6 +246,8 @@ class Sensor:
             "pixel_offset": self.fixed_pattern.pixel_offset is not None,
             "black_level_offsets": self.spec.black_level_varies,
             "read_noise": c.read_noise.enabled,
+            "source_follower_rts": self.fixed_pattern.traps is not None,
+            "dark_current_rts": self.fixed_pattern.blinkers is not None,
         }
 
     # ------------------------------------------------------------ scene
@@ -371,6 +375,12 @@ class Exposure:
             return self.photo_mean_e
         return self.photo_mean_e + self.dark_mean_e
 
+    @property
+    def frame_period_s(self) -> float:
+        """Seconds between the starts of two frames (``sensor.frame_rate_hz``, or the exposure time)."""
+        c = self.sensor.config
+        return random_telegraph.frame_period_s(c.sensor.frame_rate_hz, c.exposure.integration_time_s)
+
     # ------------------------------------------------------------ frames
     def plan(self) -> kernel.FramePlan:
         """What every frame of this exposure shares, for the engine (built once, then reused)."""
@@ -403,6 +413,12 @@ class Exposure:
                 frame_black_sigma_dn=float(c.black_level.frame_sigma_dn),
                 read_noise=((c.read_noise.distribution, float(c.read_noise.scale_dn), float(c.read_noise.shape))
                             if c.read_noise.enabled else None),
+                traps=fp.traps if c.source_follower.enabled else None,
+                trap_key=stream_key(c.seed, "source_follower_rts"),
+                cds_interval_s=c.source_follower.rts.cds_interval_s if c.source_follower.rts.cds else None,
+                blinkers=fp.blinkers, blink_key=stream_key(c.seed, "dark_current_rts"),
+                frame_period_s=self.frame_period_s, exposure_s=float(c.exposure.integration_time_s),
+                blink_noisy=bool(c.dark_current.shot_noise),
             )
         return self._plan
 
@@ -424,10 +440,26 @@ class Exposure:
 
         noisy = self._noisy_e[win] if self._noisy_e is not None else None
         exact = self._exact_e[win] if self._exact_e is not None else None
+        fp = s.fixed_pattern
+        plan = self.plan()
+        blinking = None
+        if fp.blinkers is not None:  # stage 4b: this frame's mean at each blinking pixel
+            pixels = fp.blinkers.within(region, s.shape[1])
+            extra = random_telegraph.blink_charge(pixels, k, self.sequence, plan.frame_period_s, plan.exposure_s,
+                                                  plan.blink_key)
+            means = kernel.plus_charge(plan.blink_mean_e, pixels.index, extra)
+            at = at_blink = _local(pixels.index, region, s.shape[1])
+            if plan.blink_noisy:
+                noisy = noisy.copy()
+                blinking = means - noisy[at]
+                noisy[at] = means
+            else:
+                exact = exact.copy()
+                blinking = means - exact[at]
+                exact[at] = means
         n = shot_noise.collect(noisy, exact, c.sensor.full_well_e, stream("shot_noise") if noisy is not None else None,
                                c.shot_noise.gaussian_above_e, index)
         collected = n
-        fp = s.fixed_pattern
         on_charge = s.spec.nonlinearity_on("charge")
         if on_charge is not None:
             n = on_charge.apply(n)
@@ -437,6 +469,13 @@ class Exposure:
         if c.source_follower.enabled:
             sfn = source_follower.noise(s.source_follower_sigma[win], stream("source_follower"), index)
             n = n + sfn
+        traps = None
+        if plan.traps is not None:  # stage 6b
+            inside = plan.traps.within(region, s.shape[1])
+            pixels, traps = per_pixel(inside.index, random_telegraph.trap_output(
+                inside, k, self.sequence, plan.frame_period_s, plan.cds_interval_s, plan.trap_key))
+            at = _local(pixels, region, s.shape[1])
+            n[at] = n[at] + traps
         if c.row_noise.enabled:
             rown = row_noise.temporal(rows, s.spec.row_sigma_e, stream("row_noise"))
             if fp.row_offset is not None:
@@ -455,13 +494,23 @@ class Exposure:
             keep["crosstalk"] = self.photo_mean_e[win] - self.after_prnu_e[win]
             if self.dark_mean_e is not None:
                 keep["dark_current"] = self.dark_mean_e[win]
-            keep["shot_noise"] = (collected - self.mean_charge_e[win]).astype(np.float32)
+            mean = self.mean_charge_e[win]
+            if blinking is not None:
+                rts = np.zeros(n.shape, np.float32)
+                rts[at_blink] = blinking
+                keep["dark_current_rts"] = rts
+                mean = mean + rts
+            keep["shot_noise"] = (collected - mean).astype(np.float32)
             if converted is not collected:
                 keep["nonlinearity"] = (converted - collected).astype(np.float32)
             if fp.pixel_offset is not None:
                 keep["pixel_offset"] = fp.pixel_offset[win]
             if c.source_follower.enabled:
                 keep["source_follower"] = sfn.astype(np.float32)
+            if traps is not None:
+                rts = np.zeros(n.shape, np.float32)
+                rts[at] = traps
+                keep["source_follower_rts"] = rts
             if c.row_noise.enabled:
                 keep["row_noise"] = np.broadcast_to(rown, n.shape).astype(np.float32)
             if c.column_noise.enabled:
@@ -544,6 +593,12 @@ class Exposure:
         """(raw, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
         for k in range(first, first + n):
             yield self._render(k)
+
+
+def _local(index: np.ndarray, region: tuple[int, int, int, int], cols: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where the pixels ``index`` (``r * cols + c``, inside ``region``) sit in the region's arrays: (rows, cols)."""
+    i = index.astype(np.int64)
+    return i // cols - region[0], i % cols - region[2]
 
 
 def _as_spec(config) -> SensorSpec:

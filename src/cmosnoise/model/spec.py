@@ -159,6 +159,7 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     if isinstance(config, SensorSpec):
         return config
     config = physics.resolve_prnu(physics.apply_gain(config))
+    physics.check_timing(config)
     # every section is checked, those switched off too (a file must stay valid when one is switched on)
     return SensorSpec(config, tuple(physics.dark_points(config)), physics.flicker_model(config),
                       physics.prnu_seen_per_sigma(config), transfer(config), physics.offset_model(config),
