@@ -35,9 +35,9 @@ from typing import Callable
 
 import numpy as np
 
+from ..engine.telegraph import Telegraphs
 from .seeds import fixed_key, fixed_rng, pixel_index
 from .spec import SensorSpec
-from ..engine.telegraph import Telegraphs
 from .stages import column_noise, dark_current, pixel_offset, prnu, random_telegraph, row_noise, source_follower
 
 

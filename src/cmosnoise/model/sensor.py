@@ -28,13 +28,13 @@ import numpy as np
 from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
 from ..engine import kernel
+from ..engine.telegraph import per_pixel
 from ..errors import CmosnoiseError
 from . import footprint
 from . import scene as scene_mod
 from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
 from .heavy_tail import variates
 from .raw_info import RawInfo
-from ..engine.telegraph import per_pixel
 from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, pixel_index, stream_key, temporal_stream
 from .spec import SensorSpec, resolve
 from .stages import (

@@ -29,13 +29,14 @@ any frame alone (:func:`cmosnoise.engine.telegraph.frame_states`).
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from ...engine import telegraph
-from ...engine.telegraph import Telegraphs
 from ...engine.fdmath import exp, log
 from ...engine.philox import uniform_pair
 from ...engine.samplers import Stream, normal_from
+from ...engine.telegraph import Telegraphs
 
 #: a pixel holds at most this many traps (the rest of a Poisson count is cut; see :func:`trap_counts`)
 MAX_TRAPS = 4
