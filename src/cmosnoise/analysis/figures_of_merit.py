@@ -13,6 +13,7 @@ here, so a figure means the same wherever it shows:
 - :func:`dark_current`: the dark map's statistics and its white pixels
   (:func:`.white_pixels.report`, the one count: above the threshold of the
   nearest characterization point), and those seen in frame 0;
+- :func:`telegraph`: the random telegraph pixels (traps, blinking pixels);
 - :func:`pane`: what the explorer shows beside a picture.
 
 The robust sigma and the 95 % quantile are :mod:`cmosnoise.estimators`'
@@ -29,7 +30,7 @@ from ..model.sensor import Exposure, Sensor
 from ..model.units import e_per_s_to_aa
 from . import noise_budget, white_pixels
 
-__all__ = ["temporal_noise", "key_figures", "dark_map", "dark_current", "frame0_white_pixels", "pane"]
+__all__ = ["temporal_noise", "key_figures", "dark_map", "dark_current", "frame0_white_pixels", "telegraph", "pane"]
 
 
 def temporal_noise(stats: dict, gain_dn_per_e: float) -> dict:
@@ -150,4 +151,46 @@ def pane(sensor: Sensor, shot: Exposure, levels_e=(10.0, 100.0, 1000.0)) -> dict
     dark = dark_map(sensor)
     if dark is not None:
         out["dark"] = dark
+    return out
+
+
+def telegraph(sensor: Sensor, frame_period_s: float) -> dict | None:
+    """The random telegraph pixels of ``sensor`` (None with both stages off).
+
+    ``source_follower``: pixels with traps, traps, their ppm, the median
+    amplitude (e-), and the fraction of traps that change between the CDS
+    samples in a frame at least one time in a hundred (``2 pi0 pi1 (1 -
+    e^-s tau) >= 0.01``: those a dark stack shows; with CDS off, those whose
+    level is not all but always one state, ``min(pi0, pi1) >= 0.01``).
+    ``blinking``: pixels, ppm, median step (e-/s) and median dwell times (s).
+    """
+    fp, c = sensor.fixed_pattern, sensor.config
+    n = sensor.shape[0] * sensor.shape[1]
+    out = {}
+    if fp.traps is not None and c.source_follower.enabled:
+        t = fp.traps
+        rts = c.source_follower.rts
+        s = t.up + t.down
+        pi1 = t.occupancy
+        if rts.cds:
+            seen = 2 * pi1 * (1 - pi1) * -np.expm1(-s * rts.cds_interval_s)
+        else:
+            seen = np.minimum(pi1, 1 - pi1)
+        out["source_follower"] = {
+            "pixels": int(t.pixels.size), "traps": int(t.index.size), "ppm": 1e6 * t.pixels.size / n,
+            "median_amplitude_e": float(np.median(t.size)) if t.index.size else None,
+            "visible_fraction": float(np.mean(seen >= 0.01)) if t.index.size else None,
+            "cds": rts.cds,
+        }
+    if fp.blinkers is not None:
+        b = fp.blinkers
+        out["blinking"] = {
+            "pixels": int(b.index.size), "ppm": 1e6 * b.index.size / n,
+            "median_step_e_per_s": float(np.median(b.size)) if b.index.size else None,
+            "median_tau_low_s": float(np.median(b.tau_low_s)) if b.index.size else None,
+            "median_tau_high_s": float(np.median(b.tau_high_s)) if b.index.size else None,
+        }
+    if not out:
+        return None
+    out["frame_period_s"] = frame_period_s
     return out

@@ -242,6 +242,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
         },
         "key_figures": fom.key_figures(sensor),
         "dark_current": (dark := fom.dark_current(sensor, shot, electrons0, at_dark["temporal_total_e"] ** 2)),
+        "random_telegraph": fom.telegraph(sensor, shot.frame_period_s),
         "warnings": run_warnings(measured, predicted) + ([dark["warning"]] if dark and "warning" in dark else []),
         "timings_s": {
             "total": round(wall_s, 6),

@@ -1,0 +1,67 @@
+"""What random telegraph noise costs a frame, at 1920 x 1080 RGGB, and what frame 10^6 alone costs at VGA.
+
+The default chain is timed without RTS, and again with 1000 ppm source-follower RTS pixels (one trap each,
+CDS) and 100 ppm blinking white pixels; each against the plain NumPy reference of bench_chain.py timed
+alternately with it, so the ratio of the two ratios is RTS's cost, free of a shared machine's slow spells
+(#29 asks at most +20 %). Then frame 1 000 000 of a VGA sensor with RTS, made alone (#29: under a second).
+
+    python benchmarks/bench_telegraph.py [--frames 20] [--repeats 5] [--threads 2] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from bench_chain import against_reference, cpu, numpy_reference  # noqa: E402
+
+from cmosnoise import Sensor, load_config  # noqa: E402
+
+RTS_ON = {
+    "source_follower": {"rts": {"enabled": True, "ppm": 1000}},
+    "dark_current": {"rts": {"enabled": True, "ppm": 100}},
+    "sensor": {"frame_rate_hz": 30},
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--json", help="also write the results here")
+    a = ap.parse_args()
+    import numba
+
+    numba.set_num_threads(a.threads)
+    rows = []
+    for label, extra in (("without RTS (the default)", {}),
+                         ("1000 ppm source-follower RTS pixels and 100 ppm blinking pixels", RTS_ON)):
+        sensor = Sensor(load_config(extra={**extra, "sensor": {**extra.get("sensor", {}), "width": 1920,
+                                                               "height": 1080}}), seed=0)
+        shot = sensor.expose("photo")
+        shot.frame(0)  # compile
+        ref = numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)
+        t, t_ref = against_reference(shot.frame, a.frames, a.repeats, ref, max(a.frames // 4, 2))
+        rows.append({"label": label, "ms": 1e3 * t, "ref_ms": 1e3 * t_ref, "ratio": t / t_ref})
+        print(f"{label}: {1e3 * t:.1f} ms/frame, reference {1e3 * t_ref:.1f} ms, ratio {t / t_ref:.3f}")
+    cost = rows[1]["ratio"] / rows[0]["ratio"] - 1
+    print(f"RTS costs {100 * cost:+.1f} % per frame ({a.threads} threads; the issue allows +20 %)")
+    vga = Sensor(load_config(extra=RTS_ON), seed=0).expose("photo")
+    vga.frame(0)
+    t0 = time.perf_counter()
+    vga.frame(1_000_000)
+    far = time.perf_counter() - t0
+    print(f"frame 1 000 000 alone at 640 x 480 with RTS: {1e3 * far:.1f} ms")
+    if a.json:
+        Path(a.json).write_text(json.dumps({**cpu(), "threads": a.threads, "frames": a.frames, "rows": rows,
+                                            "cost": cost, "frame_1e6_vga_ms": 1e3 * far}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
