@@ -11,14 +11,13 @@ import time
 
 import numpy as np
 import pytest
+from conftest import Z, assert_close, cli, quiet_config
 from scipy import stats
 
 from cmosnoise import Sensor
 from cmosnoise.engine import kernel, telegraph
 from cmosnoise.engine.telegraph import Telegraphs
 from cmosnoise.model.stages import random_telegraph
-
-from conftest import Z, assert_close, cli, quiet_config
 
 KEY = (0x1234, 0x5678)
 
