@@ -131,7 +131,7 @@ def _compiled(inline: str):
 
     plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
             (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
-            (telegraph, ["decay", "one_minus_exp", "transition", "bridge", "_uniform", "frame_states", "inside", "occupancy"]),
+            (telegraph, ["decay", "one_minus", "transition", "_bridge_weights", "bridge", "midpoint", "_uniform", "frame_states", "inside", "occupancy"]),
             (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
                         "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
     for module, names in plan:

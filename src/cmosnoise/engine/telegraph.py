@@ -10,7 +10,7 @@ leaves state 0 at rate ``up = 1 / tau_low`` and state 1 at rate
 
 with the stationary law ``pi1 = up / s = tau_high / (tau_low + tau_high)``.
 Each is a sum of non-negative terms and ``1 - d`` is taken without
-cancellation (:func:`one_minus_exp`), so a trap of any speed keeps its
+cancellation (:func:`one_minus`), so a trap of any speed keeps its
 precision.
 
 **Random access** (docs/model.md section 6b). Frames are ``dt`` apart; frame
@@ -111,20 +111,30 @@ def decay(x):
     return exp(0.0 - where(x > _DECAY_FLOOR, _DECAY_FLOOR, x))
 
 
-def one_minus_exp(x):
-    """``1 - exp(-x)`` for ``x >= 0``, without the cancellation of the subtraction at small ``x``."""
+def one_minus(x, d):
+    """``1 - d`` for ``d = exp(-x)``, ``x >= 0``, without the subtraction's cancellation at small ``x``."""
     series = x * (1.0 - x * (0.5 - x * (1.0 / 6.0)))
-    return where(x < _SERIES_BELOW, series, 1.0 - decay(x))
+    return where(x < _SERIES_BELOW, series, 1.0 - d)
 
 
 def transition(up, down, t):
-    """The chain's transition law over ``t`` seconds: (P(0->1), P(0->0), P(1->0), P(1->1))."""
+    """The chain's transition law over ``t`` seconds: (P(0->1), P(0->0), P(1->0), P(1->1)); one exp."""
     s = up + down
     pi1 = up / s
     pi0 = down / s
-    q = one_minus_exp(s * t)
-    d = decay(s * t)
+    x = s * t
+    d = decay(x)
+    q = one_minus(x, d)
     return pi1 * q, pi0 + pi1 * d, pi0 * q, pi1 + pi0 * d
+
+
+def _bridge_weights(x, y, a, b, u):
+    """The bridge's draw from the transition laws ``a`` (to the time asked) and ``b`` (from it to the end)."""
+    a01, a00, a10, a11 = a
+    b01, b00, b10, b11 = b
+    w1 = where(x > 0.5, a11, a01) * where(y > 0.5, b11, b10)
+    w0 = where(x > 0.5, a10, a00) * where(y > 0.5, b01, b00)
+    return where(u * (w0 + w1) < w1, 1.0, 0.0)
 
 
 def bridge(x, y, up, down, t1, t2, u):
@@ -132,15 +142,13 @@ def bridge(x, y, up, down, t1, t2, u):
 
     ``P(1 | x, y) = P_t1(x -> 1) P_t2(1 -> y) / P_t1+t2(x -> y)``; ``t2 = 0`` gives ``y``.
     """
-    a01, a00, a10, a11 = transition(up, down, t1)
-    b01, b00, b10, b11 = transition(up, down, t2)
-    to1 = where(x > 0.5, a11, a01)
-    to0 = where(x > 0.5, a10, a00)
-    from1 = where(y > 0.5, b11, b10)
-    from0 = where(y > 0.5, b01, b00)
-    w1 = to1 * from1
-    w0 = to0 * from0
-    return where(u * (w0 + w1) < w1, 1.0, 0.0)
+    return _bridge_weights(x, y, transition(up, down, t1), transition(up, down, t2), u)
+
+
+def midpoint(x, y, up, down, h, u):
+    """:func:`bridge` at the middle of an interval ``2 h`` long (one transition law for both halves)."""
+    half = transition(up, down, h)
+    return _bridge_weights(x, y, half, half, u)
 
 
 def _uniform(index, node, sequence, word, k0, k1):
@@ -172,7 +180,7 @@ def frame_states(frame: int, up, down, dt: float, index, slot, sequence, k0, k1)
         half = half // 2
         mid = lo + half
         h = float(half) * dt
-        m = bridge(lo_state, hi_state, up, down, h, h, _uniform(index, np.uint64(mid), seq, node_word, k0, k1))
+        m = midpoint(lo_state, hi_state, up, down, h, _uniform(index, np.uint64(mid), seq, node_word, k0, k1))
         if frame < mid:
             hi_state = m
         else:
