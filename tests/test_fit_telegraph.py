@@ -1,0 +1,83 @@
+"""The random telegraph fit: found pixels, amplitudes and dwell times from a dark stack, and its round trip.
+
+The coverage over 20 sensors (#29: ppm within its binomial interval, medians within 10 %, 95 % intervals
+holding the truth at least 17 times in 20) is benchmarks/fit_telegraph_coverage.py's; here one sensor, whose
+every check is a property of the fit that a regression breaks.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from cmosnoise import Sensor
+from cmosnoise.analysis import fit_telegraph
+
+#: a sensor whose traps are read without CDS (levels held over frames), amplitudes well above the read noise and
+#: dwell times of a few frames, so that every trap switches many times in the stack
+CONFIG = {"sensor": {"width": 192, "height": 128, "frame_rate_hz": 30},
+          "exposure": {"integration_time_s": 0.01},
+          "source_follower": {"rts": {"enabled": True, "ppm": 3000, "cds": False,
+                                      "amplitude_e": {"median": 20, "sigma_log": 0.3},
+                                      "tau_capture_s": {"min_s": 0.15, "max_s": 0.35},
+                                      "tau_emission_s": {"min_s": 0.15, "max_s": 0.35}}}}
+FRAMES = 600
+
+
+def stack(config, seed):
+    sensor = Sensor(config, seed=seed)
+    return sensor, np.stack(list(sensor.expose("flat:0").frames(FRAMES)))
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    sensor, frames = stack(CONFIG, 5)
+    return sensor, fit_telegraph.fit(frames, sensor.transfer.gain_dn_per_e, 1 / 30)
+
+
+def test_the_fit_finds_exactly_the_trap_pixels_and_their_amplitudes(fitted):
+    """Every trap pixel and no other (the flicker tail's noisy but white pixels included: the default config
+    has them); each amplitude within 5 standard errors of its level difference (se of two level means over
+    their frames: sigma sqrt(1/n0 + 1/n1) >= sigma sqrt(4 / F), in e-)."""
+    sensor, r = fitted
+    traps = sensor.fixed_pattern.traps
+    assert sorted(r["pixels"]) == traps.pixels.tolist()
+    truth = dict(zip(traps.index.tolist(), traps.size))
+    sigma_e = r["noise_dn"] / sensor.transfer.gain_dn_per_e
+    for p, a in zip(r["pixels"], r["amplitude_e"]):
+        # the levels' means have se sigma sqrt(1/n0 + 1/n1); n0, n1 >= F/8 here (occupancy 0.3 to 0.7)
+        assert abs(a - truth[p]) <= 5 * sigma_e * math.sqrt(16 / FRAMES) + 0.5 / sensor.transfer.gain_dn_per_e, p
+
+
+def test_dwell_times_per_pixel_are_unbiased_and_the_ppm_interval_holds_the_truth(fitted):
+    """The ratio of the estimated to the true dwell time, over the pixels found, has mean 1 within 5 se (its
+    sample std over sqrt(n)); the Clopper-Pearson interval holds the configured ppm."""
+    sensor, r = fitted
+    traps = sensor.fixed_pattern.traps
+    low = dict(zip(traps.index.tolist(), traps.tau_low_s))
+    high = dict(zip(traps.index.tolist(), traps.tau_high_s))
+    for name, truth in (("tau_low_s", low), ("tau_high_s", high)):
+        ratio = np.array(r[name]) / np.array([truth[p] for p in r["pixels"]])
+        assert abs(ratio.mean() - 1) <= 5 * ratio.std(ddof=1) / math.sqrt(ratio.size), (name, ratio.mean())
+    lo, hi = r["ppm_ci95"]
+    assert lo <= CONFIG["source_follower"]["rts"]["ppm"] <= hi
+
+
+def test_round_trip_a_sensor_made_from_the_fit_fits_alike(fitted):
+    """The fitted section, simulated on a sensor of another seed, fits again to medians within each other's
+    95 % intervals and a ppm within the first fit's interval."""
+    sensor, first = fitted
+    sec = fit_telegraph.section(first)
+    config = {**CONFIG, "source_follower": {"rts": sec}}
+    again_sensor, frames = stack(config, 6)
+    again = fit_telegraph.fit(frames, again_sensor.transfer.gain_dn_per_e, 1 / 30)
+    lo, hi = first["ppm_ci95"]
+    assert lo <= again["ppm"] <= hi or again["ppm_ci95"][0] <= first["ppm"] <= again["ppm_ci95"][1]
+    for name in ("amplitude_e", "tau_low_s", "tau_high_s"):
+        a, b = first[f"median_{name}_ci95"], again[f"median_{name}_ci95"]
+        assert a[0] <= b[1] and b[0] <= a[1], (name, a, b)
+
+
+def test_a_short_stack_is_refused_in_one_line():
+    with pytest.raises(ValueError, match="at least 50"):
+        fit_telegraph.fit(np.zeros((10, 4, 4)), 1.0, 0.03)
