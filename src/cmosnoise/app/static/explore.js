@@ -86,7 +86,8 @@ function buildPanel() {
   const keys = S.meta.fields.filter((f) => !SKIP.test(f.key));
   const parents = new Set(keys.map((f) => f.key.split(".").slice(0, -1).join(".")));
   const sections = {};
-  const quick = ["seed", "sensor.iso", "sensor.gain_db", "sensor.temperature_c", "exposure.integration_time_s", "adc.full_scale_e"];
+  const quick = ["seed", "sensor.iso", "sensor.gain_db", "sensor.temperature_c", "exposure.integration_time_s", "adc.full_scale_e",
+                 "source_follower.rts.enabled", "dark_current.rts.enabled", "sensor.frame_rate_hz"];  // RTS: press play
   const add = (section, f, key) => {
     if (!sections[section]) {
       const d = document.createElement("details");
