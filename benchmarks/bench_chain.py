@@ -72,6 +72,24 @@ def numpy_reference(mean_e: np.ndarray, k_gain: float):
     return reference
 
 
+def stage_costs(cases, frames: int, repeats: int, size=(1920, 1080)) -> list[dict]:
+    """Each case ``(label, configuration extra)`` at ``size``: ms a frame of the ``photo`` scene and its ratio to
+    :func:`numpy_reference`, timed alternately with it (the first case is the baseline others are read against)."""
+    from cmosnoise import Sensor, load_config
+
+    rows = []
+    for label, extra in cases:
+        sensor = Sensor(load_config(extra={**extra, "sensor": {**extra.get("sensor", {}), "width": size[0],
+                                                               "height": size[1]}}), seed=0)
+        shot = sensor.expose("photo")
+        shot.frame(0)  # compile
+        ref = numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)
+        t, t_ref = against_reference(shot.frame, frames, repeats, ref, max(frames // 4, 2))
+        rows.append({"label": label, "ms": 1e3 * t, "ref_ms": 1e3 * t_ref, "ratio": t / t_ref})
+        print(f"{label}: {1e3 * t:.1f} ms/frame, reference {1e3 * t_ref:.1f} ms, ratio {t / t_ref:.3f}")
+    return rows
+
+
 def cpu() -> dict:
     """The processor the ratios belong to: its model and the widest vectors numba compiles for here.
 

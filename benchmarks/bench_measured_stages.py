@@ -17,9 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from bench_chain import against_reference, cpu, numpy_reference  # noqa: E402
-
-from cmosnoise import Sensor, load_config  # noqa: E402
+from bench_chain import cpu, stage_costs  # noqa: E402
 
 ALL_ON = {
     "pixel_offset": {"enabled": True, "sigma_e": 3.0, "tail": {"ppm_above": 200, "threshold_e": 20, "max_e": 200}},
@@ -39,17 +37,8 @@ def main() -> None:
     import numba
 
     numba.set_num_threads(a.threads)
-    size = {"sensor": {"width": 1920, "height": 1080}}
-    rows = []
-    for label, extra in (("every measured-sensor stage off (the default)", {}),
-                         ("offsets, cell black levels, nonlinearity, Tukey-lambda read noise on", ALL_ON)):
-        sensor = Sensor(load_config(extra={**size, **extra}), seed=0)
-        shot = sensor.expose("photo")
-        shot.frame(0)  # compile
-        ref = numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)
-        t, t_ref = against_reference(shot.frame, a.frames, a.repeats, ref, max(a.frames // 4, 2))
-        rows.append({"label": label, "ms": 1e3 * t, "ref_ms": 1e3 * t_ref, "ratio": t / t_ref})
-        print(f"{label}: {1e3 * t:.1f} ms/frame, reference {1e3 * t_ref:.1f} ms, ratio {t / t_ref:.3f}")
+    rows = stage_costs((("every measured-sensor stage off (the default)", {}),
+                         ("offsets, cell black levels, nonlinearity, Tukey-lambda read noise on", ALL_ON)), a.frames, a.repeats)
     cost = rows[1]["ratio"] / rows[0]["ratio"] - 1
     print(f"the stages cost {100 * cost:+.1f} % per frame ({a.threads} threads)")
     if a.json:

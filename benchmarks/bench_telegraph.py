@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from bench_chain import against_reference, cpu, numpy_reference  # noqa: E402
+from bench_chain import cpu, stage_costs  # noqa: E402
 
 from cmosnoise import Sensor, load_config  # noqa: E402
 
@@ -39,17 +39,8 @@ def main() -> None:
     import numba
 
     numba.set_num_threads(a.threads)
-    rows = []
-    for label, extra in (("without RTS (the default)", {}),
-                         ("1000 ppm source-follower RTS pixels and 100 ppm blinking pixels", RTS_ON)):
-        sensor = Sensor(load_config(extra={**extra, "sensor": {**extra.get("sensor", {}), "width": 1920,
-                                                               "height": 1080}}), seed=0)
-        shot = sensor.expose("photo")
-        shot.frame(0)  # compile
-        ref = numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)
-        t, t_ref = against_reference(shot.frame, a.frames, a.repeats, ref, max(a.frames // 4, 2))
-        rows.append({"label": label, "ms": 1e3 * t, "ref_ms": 1e3 * t_ref, "ratio": t / t_ref})
-        print(f"{label}: {1e3 * t:.1f} ms/frame, reference {1e3 * t_ref:.1f} ms, ratio {t / t_ref:.3f}")
+    rows = stage_costs((("without RTS (the default)", {}),
+                         ("1000 ppm source-follower RTS pixels and 100 ppm blinking pixels", RTS_ON)), a.frames, a.repeats)
     cost = rows[1]["ratio"] / rows[0]["ratio"] - 1
     print(f"RTS costs {100 * cost:+.1f} % per frame ({a.threads} threads; the issue allows +20 %)")
     vga = Sensor(load_config(extra=RTS_ON), seed=0).expose("photo")

@@ -148,6 +148,18 @@ def std_se_with_noise(true_var: float, noise_var: float, n: int) -> float:
     return float(np.sqrt(2 / (n - 1)) * (true_var + noise_var) / (2 * np.sqrt(true_var)))
 
 
+def on_threads(n: int, fn):
+    """``fn()`` with numba's parallel loops on ``n`` threads (the thread count restored after)."""
+    import numba
+
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(n)
+        return fn()
+    finally:
+        numba.set_num_threads(threads)
+
+
 # ------------------------------------------------------------------ the command line
 @dataclass
 class CliResult:

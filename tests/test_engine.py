@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import assert_close, on_threads
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
@@ -140,16 +140,9 @@ needs_numba = pytest.mark.skipif(not kernel.AVAILABLE, reason="numba not install
 @pytest.mark.parametrize("extra", [{}, {"shot_noise": {"gaussian_above_e": 100.0}}, {"adc": {"enabled": False}}],
                          ids=["default", "normal-approx", "adc-off"])
 def test_kernel_equals_the_numpy_implementation_on_any_threads_and_tiling(extra):
-    import numba
-
     shot = _full_chain(**extra).expose("photo")
     reference = shot.frame(3, detail=True)  # the NumPy implementation, stage by stage
-    threads = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        one = shot.frame(3)
-    finally:
-        numba.set_num_threads(threads)
+    one = on_threads(1, lambda: shot.frame(3))
     full = shot.frame(3)
     np.testing.assert_array_equal(full, reference.raw)
     np.testing.assert_array_equal(one, full)

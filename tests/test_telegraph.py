@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import Z, assert_close, cli, quiet_config
+from conftest import Z, assert_close, cli, on_threads, quiet_config
 from scipy import stats
 
 from cmosnoise import Sensor
@@ -242,8 +242,6 @@ def test_frames_with_rts_equal_the_numpy_specification_crops_and_far_frames_incl
 
 
 def test_frame_a_million_alone_equals_it_in_a_sequence_and_does_not_depend_on_threads():
-    import numba
-
     sensor = rts_sensor()
     shot = sensor.expose("flat:0.2")
     run = sensor.capture("flat:0.2", frames=3, first_frame=999_999)
@@ -251,13 +249,7 @@ def test_frame_a_million_alone_equals_it_in_a_sequence_and_does_not_depend_on_th
     alone = shot.frame(1_000_000)
     assert np.array_equal(alone, run[1])
     assert time.perf_counter() - t0 < 30  # a sanity bound only: the speed is benchmarks/bench_telegraph.py's
-    threads = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        one = shot.frame(1_000_000)
-    finally:
-        numba.set_num_threads(threads)
-    assert np.array_equal(one, alone)
+    assert np.array_equal(on_threads(1, lambda: shot.frame(1_000_000)), alone)
 
 
 def test_with_rts_off_frames_are_unchanged_and_a_ppm_change_moves_only_the_affected_pixels():
