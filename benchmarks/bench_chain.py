@@ -72,6 +72,22 @@ def numpy_reference(mean_e: np.ndarray, k_gain: float):
     return reference
 
 
+def cost_arguments(doc: str, json_help: str = "also write the results here"):
+    """The command line of a stage-cost benchmark (--frames, --repeats, --threads, --json), numba's threads set."""
+    import argparse
+
+    import numba
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--json", help=json_help)
+    a = ap.parse_args()
+    numba.set_num_threads(a.threads)
+    return a
+
+
 def stage_costs(cases, frames: int, repeats: int, size=(1920, 1080)) -> list[dict]:
     """Each case ``(label, configuration extra)`` at ``size``: ms a frame of the ``photo`` scene and its ratio to
     :func:`numpy_reference`, timed alternately with it (the first case is the baseline others are read against)."""

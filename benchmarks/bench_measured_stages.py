@@ -10,14 +10,13 @@ ratio of the two ratios is the stages' cost, free of a shared machine's slow spe
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from bench_chain import cpu, stage_costs  # noqa: E402
+from bench_chain import cost_arguments, cpu, stage_costs  # noqa: E402
 
 ALL_ON = {
     "pixel_offset": {"enabled": True, "sigma_e": 3.0, "tail": {"ppm_above": 200, "threshold_e": 20, "max_e": 200}},
@@ -28,15 +27,7 @@ ALL_ON = {
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--frames", type=int, default=20)
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--json", help="also write the results here (docs/numbers/measured_stages.json feeds the README)")
-    a = ap.parse_args()
-    import numba
-
-    numba.set_num_threads(a.threads)
+    a = cost_arguments(__doc__, "also write the results here (docs/numbers/measured_stages.json feeds the README)")
     rows = stage_costs((("every measured-sensor stage off (the default)", {}),
                          ("offsets, cell black levels, nonlinearity, Tukey-lambda read noise on", ALL_ON)), a.frames, a.repeats)
     cost = rows[1]["ratio"] / rows[0]["ratio"] - 1

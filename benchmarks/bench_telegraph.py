@@ -10,7 +10,6 @@ alternately with it, so the ratio of the two ratios is RTS's cost, free of a sha
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -18,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from bench_chain import cpu, stage_costs  # noqa: E402
+from bench_chain import cost_arguments, cpu, stage_costs  # noqa: E402
 
 from cmosnoise import Sensor, load_config  # noqa: E402
 
@@ -30,15 +29,7 @@ RTS_ON = {
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--frames", type=int, default=20)
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--json", help="also write the results here")
-    a = ap.parse_args()
-    import numba
-
-    numba.set_num_threads(a.threads)
+    a = cost_arguments(__doc__, "also write the results here (docs/numbers/telegraph_cost.json feeds the README)")
     rows = stage_costs((("without RTS (the default)", {}),
                          ("1000 ppm source-follower RTS pixels and 100 ppm blinking pixels", RTS_ON)), a.frames, a.repeats)
     cost = rows[1]["ratio"] / rows[0]["ratio"] - 1

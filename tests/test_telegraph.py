@@ -7,7 +7,6 @@ so a statistic at fixed frames is a mean of independent values.
 """
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from scipy import stats
 from cmosnoise import Sensor
 from cmosnoise.engine import kernel, telegraph
 from cmosnoise.engine.telegraph import Telegraphs
+from cmosnoise.errors import CmosnoiseError
 from cmosnoise.model.stages import random_telegraph
 
 KEY = (0x1234, 0x5678)
@@ -132,7 +132,9 @@ def test_a_fast_trap_is_three_level_and_a_slow_one_is_zero_after_cds_but_held_wi
     slow = levels(chains(n, *slow_taus, size=a, first=n), [77], dt, cds=tau)[0]
     frac = 2 * pi1 * (1 - pi1) * (1 - math.exp(-s * tau))
     hits = int(np.sum(slow != 0))
-    assert abs(hits - n * frac) <= Z * math.sqrt(n * frac * (1 - frac)) + 1, (hits, n * frac)
+    # n frac is 0.02: the binomial's own quantiles at the two-sided Z level, not its normal approximation
+    alpha = stats.norm.sf(Z)
+    assert stats.binom.ppf(alpha, n, frac) <= hits <= stats.binom.isf(alpha, n, frac), (hits, n * frac)
     held = levels(chains(n, *slow_taus, size=a, first=n), [77, 78], dt)
     assert set(np.unique(held)) <= {0.0, a}
     same = np.mean(held[0] == held[1])
@@ -236,19 +238,20 @@ def test_frames_with_rts_equal_the_numpy_specification_crops_and_far_frames_incl
         assert np.abs(whole.contributions["dark_current_rts"]).max() > 0
         part = (5, 40, 17, 90)
         assert np.array_equal(shot.frame(k, region=part), whole.raw[5:40, 17:90])
-    total = sum(v.astype(np.float64) for name, v in whole.contributions.items()
-                if name not in ("quantization", "black_level", "read_noise"))
-    assert np.allclose(total, whole.electrons, atol=1e-2)
+    parts = [v.astype(np.float64) for name, v in whole.contributions.items()
+             if name not in ("quantization", "black_level", "read_noise")]
+    # each part is float32, rounded by at most half an ulp of its magnitude; the electrons too
+    bound = sum(np.spacing(np.abs(v).astype(np.float32)).astype(np.float64) / 2 for v in parts)
+    bound = bound + np.spacing(np.abs(whole.electrons).astype(np.float32)) / 2
+    assert np.all(np.abs(sum(parts) - whole.electrons) <= bound)
 
 
 def test_frame_a_million_alone_equals_it_in_a_sequence_and_does_not_depend_on_threads():
     sensor = rts_sensor()
     shot = sensor.expose("flat:0.2")
     run = sensor.capture("flat:0.2", frames=3, first_frame=999_999)
-    t0 = time.perf_counter()
-    alone = shot.frame(1_000_000)
+    alone = shot.frame(1_000_000)  # its speed is benchmarks/bench_telegraph.py's, not a timed test's
     assert np.array_equal(alone, run[1])
-    assert time.perf_counter() - t0 < 30  # a sanity bound only: the speed is benchmarks/bench_telegraph.py's
     assert np.array_equal(on_threads(1, lambda: shot.frame(1_000_000)), alone)
 
 
@@ -281,3 +284,11 @@ def test_bad_rts_settings_get_one_line_and_exit_2(tmp_path, setting, words):
     lines = [line for line in r.stderr.strip().splitlines() if line.strip()]
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in r.stderr, r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_another_exposure_of_the_same_sensor_meets_the_same_timing_check():
+    """Sensor.with_exposure skips what nothing implies, but not the frame timing an exposure meets."""
+    sensor = rts_sensor()  # 30 frames/s
+    assert sensor.with_exposure(integration_time_s=0.02).config.exposure.integration_time_s == 0.02
+    with pytest.raises(CmosnoiseError, match="frame_rate_hz"):
+        sensor.with_exposure(integration_time_s=0.1)

@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from ..engine import telegraph as telegraph_chain
 from ..model.sensor import Exposure, Sensor
 from ..model.units import e_per_s_to_aa
 from . import noise_budget, white_pixels
@@ -170,10 +171,10 @@ def telegraph(sensor: Sensor, frame_period_s: float) -> dict | None:
     if fp.traps is not None and c.source_follower.enabled:
         t = fp.traps
         rts = c.source_follower.rts
-        s = t.up + t.down
         pi1 = t.occupancy
-        if rts.cds:
-            seen = 2 * pi1 * (1 - pi1) * -np.expm1(-s * rts.cds_interval_s)
+        if rts.cds:  # P(X(tau) != X(0)) in the stationary chain
+            p01, _, p10, _ = telegraph_chain.transition(t.up, t.down, rts.cds_interval_s)
+            seen = (1 - pi1) * p01 + pi1 * p10
         else:
             seen = np.minimum(pi1, 1 - pi1)
         out["source_follower"] = {

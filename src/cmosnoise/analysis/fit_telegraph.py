@@ -68,8 +68,8 @@ def candidates(frames: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def two_levels(series: np.ndarray, seed: int = 0):
-    """A two-state Gaussian HMM of one pixel's series (DN): (low level, high level, within sigma, p01, p10, log
-    likelihood) with state 1 the higher level, or None where it does not converge to two states."""
+    """A two-state Gaussian HMM of one pixel's series (DN): (low level, high level, within sigma, p01, p10) with
+    state 1 the higher level."""
     from hmmlearn.hmm import GaussianHMM
 
     x = series.astype(np.float64).reshape(-1, 1)
@@ -85,7 +85,7 @@ def two_levels(series: np.ndarray, seed: int = 0):
     order = np.argsort(means)
     t = model.transmat_[np.ix_(order, order)]
     sigma = math.sqrt(float(np.ravel(model.covars_)[0]))
-    return float(means[order[0]]), float(means[order[1]]), sigma, float(t[0, 1]), float(t[1, 0]), float(model.score(x))
+    return float(means[order[0]]), float(means[order[1]]), sigma, float(t[0, 1]), float(t[1, 0])
 
 
 def rates(p01: float, p10: float, dt: float) -> tuple[float, float]:
@@ -136,10 +136,7 @@ def fit(frames: np.ndarray, gain_dn_per_e: float, frame_period_s: float, seed: i
     flat = frames.reshape(f, -1)
     found, amp, low, high = [], [], [], []
     for p in cand:
-        got = two_levels(flat[:, p], seed)
-        if got is None:
-            continue
-        lo, hi, sigma, p01, p10, _ = got
+        lo, hi, sigma, p01, p10 = two_levels(flat[:, p], seed)
         if hi - lo < SEPARATION * sigma or p01 <= 0 or p10 <= 0:
             continue
         t_low, t_high = rates(p01, p10, frame_period_s)

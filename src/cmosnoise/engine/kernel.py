@@ -699,7 +699,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
 
 def trap_values(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.ndarray]:
     """(pixel index, what the trap adds in e-) of each trap of ``plan`` inside ``region`` in frame ``frame``
-    (random_telegraph.trap_output, compiled; the NumPy one where numba is not installed)."""
+    (random_telegraph.trap_output, compiled)."""
     traps = plan.traps.within(region, plan.shape[1])
     out = np.empty(traps.index.size)
     k0, k1 = (np.uint64(w) for w in plan.trap_key)
@@ -729,10 +729,6 @@ def plus_charge(mean_e: np.ndarray, index: np.ndarray, extra: np.ndarray) -> np.
 def sparse_rows(index: np.ndarray, values: np.ndarray, region, cols: int):
     """Per-pixel values at sorted pixel indices inside ``region``, by region row: (row pointers (h + 1,) int64,
     region columns int64, values)."""
-    r0, r1, c0, c1 = region
-    if index.size == 0:
-        return np.zeros(r1 - r0 + 1, np.int64), _DUMMY_COL, values if values.size else values[:0]
-    i = index.astype(np.int64)
-    r, c = i // cols - r0, i % cols - c0
-    ptr = np.searchsorted(r, np.arange(r1 - r0 + 1)).astype(np.int64)
-    return ptr, np.ascontiguousarray(c), np.ascontiguousarray(values)
+    r, c = telegraph.positions(index, region, cols)
+    ptr = np.searchsorted(r, np.arange(region[1] - region[0] + 1)).astype(np.int64)
+    return ptr, (np.ascontiguousarray(c) if c.size else _DUMMY_COL), np.ascontiguousarray(values)

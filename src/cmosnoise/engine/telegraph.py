@@ -87,10 +87,15 @@ class Telegraphs:
 
     def within(self, region: tuple[int, int, int, int], cols: int) -> "Telegraphs":
         """Those of the pixels in ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide."""
-        r0, r1, c0, c1 = region
-        r, c = self.index // np.uint64(cols), self.index % np.uint64(cols)
-        keep = (r >= r0) & (r < r1) & (c >= c0) & (c < c1)
+        r, c = positions(self.index, region, cols)
+        keep = (r >= 0) & (r < region[1] - region[0]) & (c >= 0) & (c < region[3] - region[2])
         return Telegraphs(*(a[keep] for a in (self.index, self.slot, self.size, self.tau_low_s, self.tau_high_s)))
+
+
+def positions(index: np.ndarray, region: tuple[int, int, int, int], cols: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where the pixels ``index`` (``r * cols + c``) sit relative to ``region``'s corner: (rows, cols) int64."""
+    i = np.asarray(index).astype(np.int64)
+    return i // cols - region[0], i % cols - region[2]
 
 
 #: frames 0 .. 2**LEVELS are reachable: the frame counter's whole 32-bit range, plus one

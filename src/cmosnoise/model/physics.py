@@ -15,6 +15,7 @@ from ..config import Config
 from ..errors import CmosnoiseError
 from .heavy_tail import HeavyTail, UnreachablePpm
 from .stages.dark_current import Point
+from .stages.random_telegraph import check as _check_timing
 from .stages.source_follower import flicker_model as _flicker_model
 from .units import aa_to_e_per_s, na_per_cm2_to_e_per_s
 
@@ -190,9 +191,7 @@ def resolve_prnu(config: Config) -> Config:
 
 def check_timing(config: Config) -> None:
     """What random telegraph noise needs of the frame timing (:func:`.stages.random_telegraph.check`)."""
-    from .stages.random_telegraph import check
-
     try:
-        check(config)
+        _check_timing(config)
     except ValueError as exc:
         raise _invalid(str(exc)) from None

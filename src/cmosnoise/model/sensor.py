@@ -28,7 +28,7 @@ import numpy as np
 from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
 from ..engine import kernel
-from ..engine.telegraph import per_pixel
+from ..engine.telegraph import per_pixel, positions
 from ..errors import CmosnoiseError
 from . import footprint
 from . import scene as scene_mod
@@ -413,7 +413,7 @@ class Exposure:
                 frame_black_sigma_dn=float(c.black_level.frame_sigma_dn),
                 read_noise=((c.read_noise.distribution, float(c.read_noise.scale_dn), float(c.read_noise.shape))
                             if c.read_noise.enabled else None),
-                traps=fp.traps if c.source_follower.enabled else None,
+                traps=fp.traps,
                 trap_key=stream_key(c.seed, "source_follower_rts"),
                 cds_interval_s=c.source_follower.rts.cds_interval_s if c.source_follower.rts.cds else None,
                 blinkers=fp.blinkers, blink_key=stream_key(c.seed, "dark_current_rts"),
@@ -448,15 +448,11 @@ class Exposure:
             extra = random_telegraph.blink_charge(pixels, k, self.sequence, plan.frame_period_s, plan.exposure_s,
                                                   plan.blink_key)
             means = kernel.plus_charge(plan.blink_mean_e, pixels.index, extra)
-            at = at_blink = _local(pixels.index, region, s.shape[1])
-            if plan.blink_noisy:
-                noisy = noisy.copy()
-                blinking = means - noisy[at]
-                noisy[at] = means
-            else:
-                exact = exact.copy()
-                blinking = means - exact[at]
-                exact[at] = means
+            at_blink = positions(pixels.index, region, s.shape[1])
+            patched = (noisy if plan.blink_noisy else exact).copy()
+            blinking = means - patched[at_blink]
+            patched[at_blink] = means
+            noisy, exact = (patched, exact) if plan.blink_noisy else (noisy, patched)
         n = shot_noise.collect(noisy, exact, c.sensor.full_well_e, stream("shot_noise") if noisy is not None else None,
                                c.shot_noise.gaussian_above_e, index)
         collected = n
@@ -474,7 +470,7 @@ class Exposure:
             inside = plan.traps.within(region, s.shape[1])
             pixels, traps = per_pixel(inside.index, random_telegraph.trap_output(
                 inside, k, self.sequence, plan.frame_period_s, plan.cds_interval_s, plan.trap_key))
-            at = _local(pixels, region, s.shape[1])
+            at = positions(pixels, region, s.shape[1])
             n[at] = n[at] + traps
         if c.row_noise.enabled:
             rown = row_noise.temporal(rows, s.spec.row_sigma_e, stream("row_noise"))
@@ -494,12 +490,15 @@ class Exposure:
             keep["crosstalk"] = self.photo_mean_e[win] - self.after_prnu_e[win]
             if self.dark_mean_e is not None:
                 keep["dark_current"] = self.dark_mean_e[win]
+            def sparse(at, values):  # a map of the region, zero but at ``at``
+                out = np.zeros(n.shape, np.float32)
+                out[at] = values
+                return out
+
             mean = self.mean_charge_e[win]
             if blinking is not None:
-                rts = np.zeros(n.shape, np.float32)
-                rts[at_blink] = blinking
-                keep["dark_current_rts"] = rts
-                mean = mean + rts
+                keep["dark_current_rts"] = sparse(at_blink, blinking)
+                mean = mean + keep["dark_current_rts"]
             keep["shot_noise"] = (collected - mean).astype(np.float32)
             if converted is not collected:
                 keep["nonlinearity"] = (converted - collected).astype(np.float32)
@@ -508,9 +507,7 @@ class Exposure:
             if c.source_follower.enabled:
                 keep["source_follower"] = sfn.astype(np.float32)
             if traps is not None:
-                rts = np.zeros(n.shape, np.float32)
-                rts[at] = traps
-                keep["source_follower_rts"] = rts
+                keep["source_follower_rts"] = sparse(at, traps)
             if c.row_noise.enabled:
                 keep["row_noise"] = np.broadcast_to(rown, n.shape).astype(np.float32)
             if c.column_noise.enabled:
@@ -593,12 +590,6 @@ class Exposure:
         """(raw, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
         for k in range(first, first + n):
             yield self._render(k)
-
-
-def _local(index: np.ndarray, region: tuple[int, int, int, int], cols: int) -> tuple[np.ndarray, np.ndarray]:
-    """Where the pixels ``index`` (``r * cols + c``, inside ``region``) sit in the region's arrays: (rows, cols)."""
-    i = index.astype(np.int64)
-    return i // cols - region[0], i % cols - region[2]
 
 
 def _as_spec(config) -> SensorSpec:

@@ -131,7 +131,9 @@ class SensorSpec:
 
     def with_config(self, config: Config) -> "SensorSpec":
         """This spec with ``config`` in place of its own, where ``config`` differs only in what implies nothing
-        (the exposure, the run, the scene, the processing): nothing is solved again."""
+        (the exposure, the run, the scene, the processing): nothing is solved again; the frame timing an
+        exposure meets is checked (:func:`physics.check_timing`)."""
+        physics.check_timing(config)
         return SensorSpec(config, self.dark_points, self.flicker, self.prnu_seen_per_sigma, self.transfer,
                           self.offsets, self.nonlinearity)
 
