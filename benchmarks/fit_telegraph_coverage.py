@@ -57,7 +57,8 @@ def main() -> None:
     summary = {key: sum(r[key] for r in rows) for key in rows[0] if isinstance(rows[0][key], bool)}
     print(f"of {len(rows)} sensors: {summary}")
     if a.json:
-        Path(a.json).write_text(json.dumps({"truth": truth, "ppm_band": ppm_band, "rows": rows, "summary": summary},
+        Path(a.json).write_text(json.dumps({"truth": truth, "ppm_band": ppm_band, "frames": FRAMES, "rows": rows,
+                                            "summary": summary},
                                            indent=1))
 
 

@@ -361,6 +361,32 @@ def render_measured_stages(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_telegraph_cost(d: dict) -> str:
+    lines = [f"Measured with `python benchmarks/bench_telegraph.py --frames {d['frames']}` ({d['cpu']}, "
+             f"{d['vectors']} vectors, numba threads {d['threads']}; 1920 x 1080 photo frame, each ratio to the NumPy "
+             "reference timed alternately with it):", "",
+             "| frame kernel | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| {r['label']} | {r['ms']:.1f} | {r['ref_ms']:.1f} | {r['ratio']:.3f} |")
+    lines += ["", f"Random telegraph noise costs {100 * d['cost']:+.0f} % per frame; frame 1 000 000 made alone at "
+                  f"640 x 480 with it takes {d['frame_1e6_vga_ms']:.1f} ms."]
+    return "\n".join(lines)
+
+
+def render_telegraph_fit(d: dict) -> str:
+    n = len(d["rows"])
+    s = d["summary"]
+    lines = [f"Measured with `python benchmarks/fit_telegraph_coverage.py` ({n} sensors of 256 x 256, "
+             f"{d['frames']} dark frames each; how many of the {n} sensors meet each check):", "",
+             "| | ppm | median amplitude | median tau_low | median tau_high |", "|---|---|---|---|---|",
+             f"| within the configured ppm's binomial interval | {s['ppm_in_band']} | | | |",
+             f"| median within 10 % of the law's | | {s['amplitude_e_within_10pct']} | {s['tau_low_s_within_10pct']} | "
+             f"{s['tau_high_s_within_10pct']} |",
+             f"| 95 % interval holds the truth | {s['ppm_covered']} | {s['amplitude_e_covered']} | "
+             f"{s['tau_low_s_covered']} | {s['tau_high_s_covered']} |"]
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -377,6 +403,8 @@ SECTIONS = {
     "fit_speed": (None, render_fit_speed),
     "fit_coverage": (None, render_fit_coverage),
     "measured_stages": (None, render_measured_stages),
+    "telegraph_cost": (None, render_telegraph_cost),
+    "telegraph_fit": (None, render_telegraph_fit),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -388,7 +416,9 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
               "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"],
               "fit_coverage": ["fit_coverage.py", "--json", "fit_coverage.json"],
-              "measured_stages": ["bench_measured_stages.py", "--json", "measured_stages.json"]}
+              "measured_stages": ["bench_measured_stages.py", "--json", "measured_stages.json"],
+              "telegraph_cost": ["bench_telegraph.py", "--json", "telegraph_cost.json"],
+              "telegraph_fit": ["fit_telegraph_coverage.py", "--json", "telegraph_fit.json"]}
 SLOW = {"sweep_fig9"}
 
 

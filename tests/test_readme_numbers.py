@@ -67,6 +67,25 @@ def test_speed_data_has_every_row_the_issue_asks_for(name, vectors):
         assert abs(r["ratio"] - r["ms"] / r["ref_ms"]) <= 1e-9 * r["ratio"], r
 
 
+@pytest.mark.parametrize("name", ["measured_stages", "telegraph_cost"])
+def test_stage_cost_data_is_self_consistent(name):
+    """A stage-cost table (benchmarks/, not re-run here): each ratio is its row's time over the reference timed
+    beside it, and the cost is the ratio of the two ratios; a hand edit or a partial re-measurement breaks it."""
+    data = numbers.load(name)
+    for r in data["rows"]:
+        assert abs(r["ratio"] - r["ms"] / r["ref_ms"]) <= 1e-9 * r["ratio"], r
+    off, on = data["rows"]
+    assert abs(data["cost"] - (on["ratio"] / off["ratio"] - 1)) <= 1e-9
+
+
+def test_the_telegraph_fit_summary_counts_its_rows():
+    """The fit's coverage table (benchmarks/fit_telegraph_coverage.py, minutes): each count is the number of its
+    sensors' rows that passed."""
+    data = numbers.load("telegraph_fit")
+    for key, count in data["summary"].items():
+        assert count == sum(bool(r[key]) for r in data["rows"]), key
+
+
 def test_the_fig9_sweep_shows_what_the_paper_shows():
     """Stored by `compute sweep_fig9` (a few minutes, too slow for the suite): the README's claims hold for
     the stored data, so a re-measurement that breaks them fails here. More couplets at 5 MP than at VGA and
