@@ -350,27 +350,24 @@ def render_fit_coverage(d: dict) -> str:
     return "\n".join(lines)
 
 
-def render_measured_stages(d: dict) -> str:
-    lines = [f"Measured with `python benchmarks/bench_measured_stages.py --frames {d['frames']}` ({d['cpu']}, "
-             f"{d['vectors']} vectors, numba threads {d['threads']}; 1920 x 1080 photo frame, each ratio to the NumPy "
-             "reference timed alternately with it):", "",
+def _stage_cost_table(d: dict, script: str) -> list[str]:
+    """A stage-cost benchmark's table (bench_measured_stages.py, bench_telegraph.py): its rows against the reference."""
+    lines = [f"Measured with `python benchmarks/{script} --frames {d['frames']}` ({d['cpu']}, {d['vectors']} vectors, "
+             f"numba threads {d['threads']}; 1920 x 1080 photo frame, each ratio to the NumPy reference timed "
+             "alternately with it):", "",
              "| frame kernel | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|"]
-    for r in d["rows"]:
-        lines.append(f"| {r['label']} | {r['ms']:.1f} | {r['ref_ms']:.1f} | {r['ratio']:.3f} |")
-    lines += ["", f"The stages together cost {100 * d['cost']:+.0f} % per frame."]
-    return "\n".join(lines)
+    return lines + [f"| {r['label']} | {r['ms']:.1f} | {r['ref_ms']:.1f} | {r['ratio']:.3f} |" for r in d["rows"]]
+
+
+def render_measured_stages(d: dict) -> str:
+    return "\n".join(_stage_cost_table(d, "bench_measured_stages.py")
+                     + ["", f"The stages together cost {100 * d['cost']:+.0f} % per frame."])
 
 
 def render_telegraph_cost(d: dict) -> str:
-    lines = [f"Measured with `python benchmarks/bench_telegraph.py --frames {d['frames']}` ({d['cpu']}, "
-             f"{d['vectors']} vectors, numba threads {d['threads']}; 1920 x 1080 photo frame, each ratio to the NumPy "
-             "reference timed alternately with it):", "",
-             "| frame kernel | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|"]
-    for r in d["rows"]:
-        lines.append(f"| {r['label']} | {r['ms']:.1f} | {r['ref_ms']:.1f} | {r['ratio']:.3f} |")
-    lines += ["", f"Random telegraph noise costs {100 * d['cost']:+.0f} % per frame; frame 1 000 000 made alone at "
-                  f"640 x 480 with it takes {d['frame_1e6_vga_ms']:.1f} ms."]
-    return "\n".join(lines)
+    return "\n".join(_stage_cost_table(d, "bench_telegraph.py")
+                     + ["", f"Random telegraph noise costs {100 * d['cost']:+.0f} % per frame; frame 1 000 000 made "
+                            f"alone at 640 x 480 with it takes {d['frame_1e6_vga_ms']:.1f} ms."])
 
 
 def render_telegraph_fit(d: dict) -> str:
