@@ -549,6 +549,93 @@ class ReadNoiseSection(Section):
         return v
 
 
+class LineDefects(Section):
+    """Bad columns (or rows): each line is bad at its rate, with one of three kinds (docs/model.md stage 15)."""
+
+    offset_ppm: float = Field(0.0, ge=0, lt=1e6, description="parts per million of the lines with a fixed offset")
+    offset_e: tuple[float, float] = Field((20.0, 100.0), description="offset's size, uniform between the two, e- "
+                                          "(its sign random)")
+    gain_ppm: float = Field(0.0, ge=0, lt=1e6, description="parts per million of the lines with a gain error")
+    gain: tuple[float, float] = Field((0.7, 0.9), description="the line's gain on its pixels' charge, uniform between "
+                                      "the two (below 1: a dim line)")
+    stuck_ppm: float = Field(0.0, ge=0, lt=1e6, description="parts per million of the lines stuck at a code")
+    stuck_levels: list[float] = Field([0.0, 1.0], min_length=1, description="codes a stuck line reads, as fractions "
+                                      "of the ADC's top code (one picked at random)")
+
+    @model_validator(mode="after")
+    def _check(self):
+        _check_defect_ranges(self, ("offset_e", 0.0), ("gain", 0.0))
+        _check_levels(self.stuck_levels, "stuck_levels")
+        if self.offset_ppm + self.gain_ppm + self.stuck_ppm >= 1e6:
+            raise ValueError(f"offset_ppm + gain_ppm + stuck_ppm = {self.offset_ppm + self.gain_ppm + self.stuck_ppm:g}"
+                             " must be below 1e6")
+        return self
+
+
+class ClusterDefects(Section):
+    """Clusters of hot pixels: 2 or more adjacent pixels with a large extra dark current (stage 15)."""
+
+    ppm: float = Field(0.0, ge=0, lt=1e6, description="clusters per million pixels")
+    size_weights: list[float] = Field([0.5, 0.25, 0.15, 0.1], min_length=1, max_length=30,
+                                      description="relative weights of the sizes 2, 3, 4, ...: a cluster's pixel count")
+    rate_e_per_s: float = Field(5000.0, gt=0, le=1e9, description="extra dark current of each pixel of a cluster, e-/s")
+
+    @field_validator("size_weights")
+    @classmethod
+    def _weights(cls, v):
+        if any(w < 0 for w in v) or sum(v) <= 0:
+            raise ValueError(f"size_weights = {v}: weights must be >= 0 and not all 0")
+        return v
+
+
+class SensorDefectsSection(Section):
+    """Manufacturing defects (stage 15), a fixed pattern at rates in ppm; off: every frame as without the stage.
+
+    Dead pixels collect no charge; stuck pixels read a fixed code; low- and
+    high-gain pixels scale their charge; clusters are 2 or more adjacent hot
+    pixels; bad columns and rows carry an offset, a gain error or a stuck code.
+    Drawn per pixel (per line) from the stage's counter-based key, so any tile
+    is the same tile of the whole sensor.
+    """
+
+    enabled: bool = False
+    dead_ppm: float = Field(0.0, ge=0, lt=1e6, description="parts per million of dead pixels (no charge)")
+    stuck_ppm: float = Field(0.0, ge=0, lt=1e6, description="parts per million of pixels stuck at a code")
+    stuck_levels: list[float] = Field([0.0, 1.0], min_length=1, description="codes a stuck pixel reads, as fractions "
+                                      "of the ADC's top code (one picked at random per pixel)")
+    low_gain_ppm: float = Field(0.0, ge=0, lt=1e6, description="parts per million of low-gain pixels")
+    low_gain: tuple[float, float] = Field((0.2, 0.8), description="a low-gain pixel's factor on its charge, uniform "
+                                          "between the two")
+    high_gain_ppm: float = Field(0.0, ge=0, lt=1e6, description="parts per million of high-gain pixels")
+    high_gain: tuple[float, float] = Field((1.25, 2.0), description="a high-gain pixel's factor on its charge, "
+                                           "uniform between the two")
+    clusters: ClusterDefects = Field(default_factory=ClusterDefects)
+    columns: LineDefects = Field(default_factory=LineDefects)
+    rows: LineDefects = Field(default_factory=LineDefects)
+
+    @model_validator(mode="after")
+    def _check(self):
+        _check_defect_ranges(self, ("low_gain", 0.0), ("high_gain", 0.0))
+        _check_levels(self.stuck_levels, "stuck_levels")
+        total = self.dead_ppm + self.stuck_ppm + self.low_gain_ppm + self.high_gain_ppm
+        if total >= 1e6:
+            raise ValueError(f"dead_ppm + stuck_ppm + low_gain_ppm + high_gain_ppm = {total:g} must be below 1e6")
+        return self
+
+
+def _check_defect_ranges(section, *names) -> None:
+    for name, lowest in names:
+        lo, hi = getattr(section, name)
+        if not lowest <= lo <= hi:
+            raise ValueError(f"{name} = [{lo:g}, {hi:g}]: give [low, high] with {lowest:g} <= low <= high")
+
+
+def _check_levels(levels, name) -> None:
+    bad = [v for v in levels if not 0.0 <= v <= 1.0]
+    if bad:
+        raise ValueError(f"{name} = {levels}: each level is a fraction of the top code, 0 to 1")
+
+
 class GainRow(Section):
     """One gain setting of a camera (docs/model.md stage 9b): its system gain K and what else changes with it.
 
@@ -599,6 +686,7 @@ class Config(Section):
     nonlinearity: NonlinearitySection = Field(default_factory=NonlinearitySection)
     black_level: BlackLevelSection = Field(default_factory=BlackLevelSection)
     read_noise: ReadNoiseSection = Field(default_factory=ReadNoiseSection)
+    defects: SensorDefectsSection = Field(default_factory=SensorDefectsSection)
     gain_table: list[GainRow] = Field(default_factory=list, description="the camera's gain settings (ISO or dB): "
                                       "sensor.iso or sensor.gain_db picks one")
     processing: ProcessingSection = Field(default_factory=ProcessingSection)

@@ -38,7 +38,7 @@ import numpy as np
 from ..engine.telegraph import Telegraphs
 from .seeds import fixed_key, fixed_rng, pixel_index
 from .spec import SensorSpec
-from .stages import column_noise, dark_current, pixel_offset, prnu, random_telegraph, row_noise, source_follower
+from .stages import column_noise, dark_current, defects, pixel_offset, prnu, random_telegraph, row_noise, source_follower
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,7 @@ class FixedPattern:
     pixel_offset: np.ndarray | None = None  #: per-pixel offset, e-, (rows, cols) float32
     traps: Telegraphs | None = None  #: the source follower's random telegraph traps (sizes: amplitudes, e-)
     blinkers: Telegraphs | None = None  #: blinking white pixels (sizes: rate steps at the temperature, e-/s)
+    defects: defects.Defects | None = None  #: dead, stuck, gain pixels, hot clusters, bad lines (stage 15)
 
 
 def dependencies(spec: SensorSpec) -> dict[str, object]:
@@ -80,6 +81,7 @@ def dependencies(spec: SensorSpec) -> dict[str, object]:
         "pixel_offset": (c.pixel_offset.enabled, spec.offsets),
         "traps": (sf.enabled, sf.rts),
         "blinkers": (c.dark_current.enabled, c.dark_current.rts, c.sensor.temperature_c, c.dark_current.tail_doubling_c),
+        "defects": c.defects,
     }
 
 
@@ -218,6 +220,8 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None, executor=None) -> 
         scale = random_telegraph.step_scale(d.rts.reference_temperature_c, c.sensor.temperature_c, d.tail_doubling_c)
         maps["blinkers"] = held("blinkers", lambda: random_telegraph.draw_blinkers(
             d.rts, scale, fixed_key(seed, "dark_current_rts"), shape))
+    if c.defects.enabled:
+        maps["defects"] = held("defects", lambda: defects.draw(c.defects, fixed_key(seed, "defects"), shape))
     if isinstance(maps.get("dark_rate"), Future):
         maps["dark_rate"] = maps["dark_rate"].result()
     return FixedPattern(**maps)

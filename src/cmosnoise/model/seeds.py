@@ -38,6 +38,7 @@ STAGE_IDS = {
     "read_noise": 12,
     "source_follower_rts": 13,
     "dark_current_rts": 14,
+    "defects": 15,
 }
 
 

@@ -42,6 +42,7 @@ from .stages import (
     column_noise,
     crosstalk,
     dark_current,
+    defects,
     prnu,
     random_telegraph,
     read_noise,
@@ -248,6 +249,7 @@ class Sensor:
             "read_noise": c.read_noise.enabled,
             "source_follower_rts": self.fixed_pattern.traps is not None,
             "dark_current_rts": self.fixed_pattern.blinkers is not None,
+            "defects": self.fixed_pattern.defects is not None,
         }
 
     # ------------------------------------------------------------ scene
@@ -358,11 +360,19 @@ class Exposure:
             self.dark_mean_e = cached(
                 cache, "dark_mean", (sensor.seed, sensor.shape, deps["dark_rate"], ex.integration_time_s),
                 lambda: dark_current.mean_charge(sensor.fixed_pattern.dark_rate, ex.integration_time_s))
+        #: the mean photo- and dark charge a pixel collects, with the defects of stage 15 (the same arrays as
+        #: photo_mean_e and dark_mean_e without them)
+        self.collected_photo_e, self.collected_dark_e = self.photo_mean_e, self.dark_mean_e
+        d = sensor.fixed_pattern.defects
+        if d is not None and d.has_charge_effect:
+            self.collected_photo_e, self.collected_dark_e = defects.collected(
+                self.photo_mean_e, self.dark_mean_e, d, (0, sensor.shape[0], 0, sensor.shape[1]),
+                ex.integration_time_s)
         # what shot noise acts on, and what enters as its mean
         noisy, exact = [], []
-        (noisy if c.shot_noise.enabled else exact).append(self.photo_mean_e)
-        if self.dark_mean_e is not None:
-            (noisy if c.dark_current.shot_noise else exact).append(self.dark_mean_e)
+        (noisy if c.shot_noise.enabled else exact).append(self.collected_photo_e)
+        if self.collected_dark_e is not None:
+            (noisy if c.dark_current.shot_noise else exact).append(self.collected_dark_e)
         self._noisy_e = sum(noisy[1:], noisy[0]) if noisy else None
         self._exact_e = sum(exact[1:], exact[0]) if exact else None
         self._plan: kernel.FramePlan | None = None
@@ -370,10 +380,10 @@ class Exposure:
 
     @property
     def mean_charge_e(self) -> np.ndarray:
-        """Expected collected charge before the full-well clip: photo + dark (e-)."""
-        if self.dark_mean_e is None:
-            return self.photo_mean_e
-        return self.photo_mean_e + self.dark_mean_e
+        """Expected collected charge before the full-well clip: photo + dark (e-), with the defects."""
+        if self.collected_dark_e is None:
+            return self.collected_photo_e
+        return self.collected_photo_e + self.collected_dark_e
 
     @property
     def frame_period_s(self) -> float:
@@ -392,6 +402,8 @@ class Exposure:
             cn = c.column_noise
             cols = s.shape[1]
 
+            rows_on, row_sigma, row_offset, columns_on, col_offset = self._readout_lines()
+
             def col(a, fill):
                 return np.full(cols, fill) if a is None else a.ravel().astype(np.float64)
 
@@ -401,11 +413,11 @@ class Exposure:
                 noisy_e=self._noisy_e, exact_e=self._exact_e,
                 normal_above_e=c.shot_noise.gaussian_above_e if c.shot_noise.gaussian_above_e is not None else np.inf,
                 sf_sigma_e=s.source_follower_sigma if c.source_follower.enabled else None,
-                row_sigma_e=s.spec.row_sigma_e if c.row_noise.enabled else None,
-                row_offset_e=(np.zeros(s.shape[0]) if fp.row_offset is None else fp.row_offset.ravel().astype(np.float64)),
-                col_sigma_e=col(fp.column_sigma, 0.0) if cn.enabled else None,
-                col_offset_e=col(fp.vfpn, 0.0) if cn.enabled else None,
-                col_gain=col(fp.column_gain, 1.0) if cn.enabled else None,
+                row_sigma_e=row_sigma if rows_on else None,
+                row_offset_e=row_offset,
+                col_sigma_e=col(fp.column_sigma, 0.0) if columns_on else None,
+                col_offset_e=col_offset if columns_on else None,
+                col_gain=col(fp.column_gain, 1.0) if columns_on else None,
                 adc=(t.gain_dn_per_e, t.black_level_dn, t.max_code) if c.adc.enabled else None,
                 nonlinearity=s.spec.nonlinearity_on("charge"),
                 offset_e=fp.pixel_offset,
@@ -421,6 +433,24 @@ class Exposure:
                 blink_noisy=bool(c.dark_current.shot_noise),
             )
         return self._plan
+
+    def _readout_lines(self) -> tuple[bool, float, np.ndarray, bool, np.ndarray]:
+        """(rows on, row sigma e-, row offsets (rows,) float64, columns on, column offsets (cols,) float64): the
+        fixed row and column offsets with the offset lines of stage 15 in them; a stage off runs with sigma 0
+        when an offset line needs it."""
+        s = self.sensor
+        c = s.config
+        fp = s.fixed_pattern
+        rows, cols = s.shape
+        row_offset = np.zeros(rows) if fp.row_offset is None else fp.row_offset.ravel().astype(np.float64)
+        col_offset = np.zeros(cols) if fp.vfpn is None else fp.vfpn.ravel().astype(np.float64)
+        rows_on, columns_on = c.row_noise.enabled, c.column_noise.enabled
+        if fp.defects is not None:
+            lines_r, lines_c = defects.line_offsets(fp.defects)
+            on_r, on_c = fp.defects.has_offsets
+            row_offset, col_offset = row_offset + lines_r, col_offset + lines_c
+            rows_on, columns_on = rows_on or on_r, columns_on or on_c
+        return rows_on, (s.spec.row_sigma_e if c.row_noise.enabled else 0.0), row_offset, columns_on, col_offset
 
     def _electrons(self, k: int, region: tuple[int, int, int, int], keep: dict | None) -> np.ndarray:
         """Charge at the ADC input in frame ``k`` (e-, float64) of ``region``, stage by stage.
@@ -472,17 +502,15 @@ class Exposure:
                 inside, k, self.sequence, plan.frame_period_s, plan.cds_interval_s, plan.trap_key))
             at = positions(pixels, region, s.shape[1])
             n[at] = n[at] + traps
-        if c.row_noise.enabled:
-            rown = row_noise.temporal(rows, s.spec.row_sigma_e, stream("row_noise"))
-            if fp.row_offset is not None:
-                rown = rown + fp.row_offset[r0:r1]
+        rows_on, row_sigma, row_offset, columns_on, col_offset = self._readout_lines()
+        if rows_on:
+            rown = row_noise.temporal(rows, row_sigma, stream("row_noise")) + row_offset[r0:r1, None]
             n = n + rown
         before_columns = n
-        if c.column_noise.enabled:
-            offset = fp.vfpn[:, c0:c1] if fp.vfpn is not None else None
+        if columns_on:
+            offset = col_offset[None, c0:c1]
             if fp.column_sigma is not None:
-                ct = column_noise.temporal(fp.column_sigma, cols, stream("column_noise"))
-                offset = ct if offset is None else offset + ct
+                offset = offset + column_noise.temporal(fp.column_sigma, cols, stream("column_noise"))
             n = column_noise.apply(n, fp.column_gain[:, c0:c1] if fp.column_gain is not None else None, offset)
         if keep is not None:
             keep["perfect"] = self.perfect_e[win]
@@ -508,11 +536,24 @@ class Exposure:
                 keep["source_follower"] = sfn.astype(np.float32)
             if traps is not None:
                 keep["source_follower_rts"] = sparse(at, traps)
-            if c.row_noise.enabled:
+            if rows_on:
                 keep["row_noise"] = np.broadcast_to(rown, n.shape).astype(np.float32)
-            if c.column_noise.enabled:
+            if columns_on:
                 keep["column_noise"] = (n - before_columns).astype(np.float32)
+            if fp.defects is not None:  # stage 15: the change of the mean charge and the offset lines
+                part = np.zeros(n.shape, np.float32)
+                if self.collected_photo_e is not self.photo_mean_e:
+                    part = (self.mean_charge_e[win] - self._mean_without_defects()[win]).astype(np.float32)
+                lines_r, lines_c = defects.line_offsets(fp.defects)
+                lines = (lines_r[r0:r1, None] + lines_c[None, c0:c1]).astype(np.float32)
+                if lines.any():
+                    keep["row_noise"] = keep.get("row_noise", 0) - np.broadcast_to(lines_r[r0:r1, None], n.shape)
+                    keep["column_noise"] = keep.get("column_noise", 0) - np.broadcast_to(lines_c[None, c0:c1], n.shape)
+                keep["defects"] = part + lines
         return n
+
+    def _mean_without_defects(self) -> np.ndarray:
+        return self.photo_mean_e if self.dark_mean_e is None else self.photo_mean_e + self.dark_mean_e
 
     def _region(self, region) -> tuple[int, int, int, int]:
         return region_of(region, self.sensor.shape)
@@ -547,7 +588,7 @@ class Exposure:
         if keep is None and kernel.AVAILABLE:
             raw, e = kernel.render(self.plan(), k, region, electrons)
             timings["frame_kernel"] += time.perf_counter() - t0
-            return raw, e
+            return self._stick(raw, region, None), e
         e = self._electrons(k, region, keep)
         t = self.sensor.transfer
         if self.sensor.config.adc.enabled:
@@ -561,7 +602,22 @@ class Exposure:
         else:
             raw = e.astype(np.float32)
         timings["frame_numpy"] += time.perf_counter() - t0
-        return raw, e.astype(np.float32)
+        return self._stick(raw, region, keep), e.astype(np.float32)
+
+    def _stick(self, raw: np.ndarray, region, keep: dict | None) -> np.ndarray:
+        """``raw`` with its stuck pixels and lines (stage 15); ``keep`` gets what they changed, in e-."""
+        d = self.sensor.fixed_pattern.defects
+        if d is None or not d.has_stuck:
+            return raw
+        s = self.sensor
+        adc_on = s.config.adc.enabled
+        before = raw.copy() if keep is not None else None
+        raw = defects.stick(raw, d, region, s.transfer.max_code if adc_on else s.config.sensor.full_well_e)
+        if keep is not None:
+            t = s.transfer
+            change = t.to_electrons(raw) - t.to_electrons(before) if adc_on else raw - before
+            keep["stuck"] = change.astype(np.float32)
+        return raw
 
     def frame(self, k: int, detail: bool = False, region=None):
         """Frame ``k``: raw (rows, cols) uint16 DN (float32 e- with the ADC off), or a :class:`FrameDetail`.
@@ -577,7 +633,7 @@ class Exposure:
         if not detail:
             return raw
         if self.sensor.config.adc.enabled:
-            after = sum(keep.get(part, 0.0) for part in ("black_level", "read_noise"))
+            after = sum(keep.get(part, 0.0) for part in ("black_level", "read_noise", "stuck"))
             keep["quantization"] = (self.sensor.transfer.to_electrons(raw) - electrons - after).astype(np.float32)
         return FrameDetail(_frame_index(k), raw, electrons, keep)
 

@@ -44,11 +44,14 @@ MAX_TRAPS = 4
 _CHUNK = 1 << 20
 
 
-def affected(ppm: float, key: tuple[int, int], shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """The pixels whose selection uniform is below ``ppm * 1e-6``: (index uint64, that uniform), ascending."""
+def affected(ppm: float, key: tuple[int, int], shape: tuple[int, int], word: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels whose selection uniform is below ``ppm * 1e-6``: (index uint64, that uniform), ascending.
+
+    Pixel ``i``'s uniform is the first of Philox block (i, ``word``, 0, 0) under ``key``.
+    """
     rows, cols = shape
     total = rows * cols
-    stream = Stream(key, 0, 0)
+    stream = Stream(key, word, 0)
     p = ppm * 1e-6
     found, draws = [], []
     for start in range(0, total, _CHUNK):

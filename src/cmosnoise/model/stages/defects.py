@@ -1,0 +1,290 @@
+"""Stage 15, manufacturing defects: dead, stuck, low- and high-gain pixels, hot clusters, bad columns and rows.
+
+A fixed pattern at rates in parts per million, each pixel (or line) drawn
+from Philox under the stage's fixed key (docs/model.md section 1), so a tile
+of the pattern is the same tile of the whole sensor:
+
+- pixel ``i``'s kind from the first uniform of block (i, 0, 0, 0): below
+  ``dead_ppm 1e-6`` dead, then stuck, low gain, high gain, in that order of
+  the cumulative rates; its level or factor from block (i, 1, 0, 0);
+- a cluster starts at pixel ``i`` when block (i, 2, 0, 0)'s first uniform is
+  below ``clusters.ppm 1e-6``; its size from block (i, 3, 0, 0) by the size
+  weights; it grows by adding, at try ``j``, the neighbour (up, down, left or
+  right) of a member, both from block (i, 4 + j, 0, 0), until it has its size;
+- column ``c`` from blocks (c, 5, 0, 0) (kind) and (c, 6, 0, 0) (size, sign);
+  row ``r`` from (r, 7, 0, 0) and (r, 8, 0, 0).
+
+What each does (all fixed; the temporal noise acts on them as on any pixel):
+
+- a dead pixel collects no charge (photo and dark); a low- or high-gain
+  pixel, and every pixel of a gain line, collects ``factor`` times its charge
+  (before shot noise);
+- a cluster's pixels are hot: each adds ``rate_e_per_s`` times the
+  integration time to its dark charge;
+- an offset line adds its offset (e-) at the readout, with the fixed row and
+  column offsets (stages 7 and 8);
+- a stuck pixel or line reads ``round(level * top code)`` whatever it
+  collected (with the ADC off: ``level * full well`` e-).
+
+The kind codes are bits, so a pixel that is two things carries both in the
+ground truth's mask (:mod:`cmosnoise.model.truth`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...engine.philox import uniform_pair
+from .random_telegraph import affected
+
+#: kind bits (the defect mask's, :data:`cmosnoise.model.truth.MASK_BITS`)
+CLUSTER, DEAD, STUCK, LOW_GAIN, HIGH_GAIN, BAD_COLUMN, BAD_ROW = 4, 8, 16, 32, 64, 128, 256
+#: a line's kind
+LINE_OFFSET, LINE_GAIN, LINE_STUCK = 1, 2, 3
+#: tries a cluster gets to grow per pixel of its size (at a corner some neighbours are outside)
+_TRIES_PER_PIXEL = 16
+_WORD_PIXEL, _WORD_PIXEL_VALUE, _WORD_CLUSTER, _WORD_CLUSTER_SIZE, _WORD_GROW = 0, 1, 2, 3, 4
+_WORD_COLUMN, _WORD_ROW = 5, 7  # and + 1: the line's size and sign
+#: the largest cluster size the words can hold (the growth words after _WORD_GROW must not reach the column's)
+MAX_CLUSTER = 30
+
+
+@dataclass(frozen=True)
+class Lines:
+    """Bad columns or rows: their indices (int64, ascending), kinds (LINE_*), and values (offset e-, gain factor, or
+    stuck level as a fraction of the top code)."""
+
+    index: np.ndarray
+    kind: np.ndarray
+    value: np.ndarray
+
+    def of(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
+        """(indices, values) of the lines of one kind."""
+        keep = self.kind == kind
+        return self.index[keep], self.value[keep]
+
+
+@dataclass(frozen=True)
+class Defects:
+    """A sensor's defects. Pixels are addressed ``r * cols + c`` (uint64, ascending).
+
+    ``pixel_kind`` holds DEAD, STUCK, LOW_GAIN or HIGH_GAIN; ``pixel_value`` the
+    stuck level (fraction of the top code) or the gain factor (0 for dead).
+    ``cluster_index`` the hot pixels of every cluster, ``cluster_id`` the
+    index of the pixel each cluster started from, ``cluster_sizes`` each
+    cluster's size (in order of their start).
+    """
+
+    shape: tuple[int, int]
+    pixel_index: np.ndarray
+    pixel_kind: np.ndarray
+    pixel_value: np.ndarray
+    cluster_index: np.ndarray
+    cluster_id: np.ndarray
+    cluster_sizes: np.ndarray
+    hot_e_per_s: float
+    columns: Lines
+    rows: Lines
+
+    @property
+    def nbytes(self) -> int:
+        arrays = (self.pixel_index, self.pixel_kind, self.pixel_value, self.cluster_index, self.cluster_id,
+                  self.columns.index, self.columns.value, self.rows.index, self.rows.value)
+        return sum(a.nbytes for a in arrays)
+
+    def kind_of(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
+        """(pixel indices, values) of the pixel defects of one kind."""
+        keep = self.pixel_kind == kind
+        return self.pixel_index[keep], self.pixel_value[keep]
+
+    @property
+    def has_charge_effect(self) -> bool:
+        """Whether a pixel's mean charge changes (dead, gain pixels or lines, clusters)."""
+        return bool(np.any(self.pixel_kind != STUCK) or self.cluster_index.size
+                    or np.any(self.columns.kind == LINE_GAIN) or np.any(self.rows.kind == LINE_GAIN))
+
+    @property
+    def has_offsets(self) -> tuple[bool, bool]:
+        """(rows, columns): whether any line carries an offset."""
+        return bool(np.any(self.rows.kind == LINE_OFFSET)), bool(np.any(self.columns.kind == LINE_OFFSET))
+
+    @property
+    def has_stuck(self) -> bool:
+        return bool(np.any(self.pixel_kind == STUCK) or np.any(self.columns.kind == LINE_STUCK)
+                    or np.any(self.rows.kind == LINE_STUCK))
+
+
+def _pick(levels, u: np.ndarray) -> np.ndarray:
+    """One of ``levels`` per uniform, each with probability 1 / len(levels)."""
+    levels = np.asarray(levels, np.float64)
+    return levels[np.minimum((u * levels.size).astype(np.int64), levels.size - 1)]
+
+
+def _between(bounds, u: np.ndarray) -> np.ndarray:
+    lo, hi = bounds
+    return lo + u * (hi - lo)
+
+
+def _lines(section, key: tuple[int, int], count: int, word: int) -> Lines:
+    ppm = (section.offset_ppm, section.gain_ppm, section.stuck_ppm)
+    index, u = affected(sum(ppm), key, (1, count), word)
+    cuts = np.cumsum(ppm) * 1e-6
+    kind = 1 + np.searchsorted(cuts, u, side="right")  # u < cuts[0]: offset, < cuts[1]: gain, else stuck
+    kind = np.minimum(kind, LINE_STUCK).astype(np.uint8)
+    k0, k1 = (np.uint64(w) for w in key)
+    zero = np.zeros(index.shape, np.uint64)
+    a1, a2 = uniform_pair(index, zero + np.uint64(word + 1), zero, zero, k0, k1)
+    value = np.where(kind == LINE_OFFSET, _between(section.offset_e, a1) * np.where(a2 < 0.5, -1.0, 1.0),
+                     np.where(kind == LINE_GAIN, _between(section.gain, a1), _pick(section.stuck_levels, a1)))
+    return Lines(index.astype(np.int64), kind, value.astype(np.float64))
+
+
+def cluster_size(weights, u: np.ndarray) -> np.ndarray:
+    """Cluster sizes (2, 3, ...) from uniforms by the relative ``weights`` of sizes 2, 3, ... (inverse CDF)."""
+    w = np.asarray(weights, np.float64)
+    cdf = np.cumsum(w) / w.sum()
+    return 2 + np.minimum(np.searchsorted(cdf, u, side="right"), w.size - 1)
+
+
+def _grow(seed: int, size: int, shape: tuple[int, int], k0, k1) -> list[int]:
+    """The pixels of the cluster that starts at ``seed``: it grows by a random neighbour of a random member."""
+    rows, cols = shape
+    members = [int(seed)]
+    tries = np.arange(_TRIES_PER_PIXEL * size, dtype=np.uint64)
+    zero = np.zeros(tries.shape, np.uint64)
+    u_member, u_dir = uniform_pair(zero + np.uint64(seed), zero + np.uint64(_WORD_GROW), tries, zero, k0, k1)
+    steps = ((-1, 0), (1, 0), (0, -1), (0, 1))
+    for a, b in zip(u_member, u_dir):
+        if len(members) == size:
+            break
+        r, c = divmod(members[min(int(a * len(members)), len(members) - 1)], cols)
+        dr, dc = steps[min(int(b * 4), 3)]
+        r, c = r + dr, c + dc
+        if 0 <= r < rows and 0 <= c < cols and r * cols + c not in members:
+            members.append(r * cols + c)
+    return members
+
+
+def draw(section, key: tuple[int, int], shape: tuple[int, int]) -> Defects:
+    """The defects of a ``defects`` section on a sensor of ``shape`` = (rows, cols)."""
+    rows, cols = shape
+    k0, k1 = (np.uint64(w) for w in key)
+    s = section
+    ppm = (s.dead_ppm, s.stuck_ppm, s.low_gain_ppm, s.high_gain_ppm)
+    index, u = affected(sum(ppm), key, shape, _WORD_PIXEL)
+    cuts = np.cumsum(ppm) * 1e-6
+    which = np.minimum(np.searchsorted(cuts, u, side="right"), 3)
+    kind = np.array([DEAD, STUCK, LOW_GAIN, HIGH_GAIN], np.uint8)[which]
+    zero = np.zeros(index.shape, np.uint64)
+    a1, _ = uniform_pair(index, zero + np.uint64(_WORD_PIXEL_VALUE), zero, zero, k0, k1)
+    value = np.select([kind == DEAD, kind == STUCK, kind == LOW_GAIN],
+                      [np.zeros_like(a1), _pick(s.stuck_levels, a1), _between(s.low_gain, a1)],
+                      _between(s.high_gain, a1))
+    seeds, _ = affected(s.clusters.ppm, key, shape, _WORD_CLUSTER)
+    zero = np.zeros(seeds.shape, np.uint64)
+    su, _ = uniform_pair(seeds, zero + np.uint64(_WORD_CLUSTER_SIZE), zero, zero, k0, k1)
+    sizes = cluster_size(s.clusters.size_weights, su)
+    members, ids, grown_sizes = [], [], []
+    for seed, size in zip(seeds, sizes):
+        grown = _grow(int(seed), int(size), shape, k0, k1)
+        members += grown
+        ids += [int(seed)] * len(grown)
+        grown_sizes.append(len(grown))
+    # two clusters that touch share their pixels once (the first to start keeps them)
+    members, first = np.unique(np.asarray(members, np.uint64), return_index=True)
+    return Defects(
+        shape=(rows, cols), pixel_index=index, pixel_kind=kind, pixel_value=value.astype(np.float64),
+        cluster_index=members, cluster_id=np.asarray(ids, np.int64)[first],
+        cluster_sizes=np.asarray(grown_sizes, np.int64), hot_e_per_s=float(s.clusters.rate_e_per_s),
+        columns=_lines(s.columns, key, cols, _WORD_COLUMN), rows=_lines(s.rows, key, rows, _WORD_ROW))
+
+
+def _inside(index: np.ndarray, region: tuple[int, int, int, int], cols: int) -> tuple[np.ndarray, ...]:
+    """(local rows, local cols, which) of the pixels ``index`` that lie in ``region``."""
+    i = np.asarray(index).astype(np.int64)
+    r, c = i // cols - region[0], i % cols - region[2]
+    keep = (r >= 0) & (r < region[1] - region[0]) & (c >= 0) & (c < region[3] - region[2])
+    return r[keep], c[keep], keep
+
+
+def _lines_inside(lines: Lines, kind: int, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+    index, value = lines.of(kind)
+    keep = (index >= lo) & (index < hi)
+    return index[keep] - lo, value[keep]
+
+
+def collected(photo_e: np.ndarray, dark_e: np.ndarray | None, defects: Defects, region: tuple[int, int, int, int],
+              exposure_s: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """The mean photo- and dark charge of ``region`` with the defects (new arrays; the inputs are kept).
+
+    Parameters
+    ----------
+    photo_e, dark_e : ndarray, (rows, cols) float32
+        The region's mean photo-charge and dark charge without defects, e- (``dark_e`` None: no dark current).
+    defects : Defects
+    region : (row0, row1, col0, col1)
+        Where ``photo_e`` sits on the sensor.
+    exposure_s : float
+        The integration time, s (a hot pixel's charge is its rate times it).
+
+    Returns
+    -------
+    photo, dark : ndarray, (rows, cols) float32
+        Gain lines, then gain and dead pixels, scale both; a cluster's pixels
+        add their hot charge to ``dark`` (made of zeros when ``dark_e`` is None
+        and a cluster falls in the region). Each pixel sees the same
+        operations in the same order whatever the region, so a tile is the
+        same tile of the whole.
+    """
+    r0, r1, c0, c1 = region
+    cols = defects.shape[1]
+    out = [photo_e.copy(), None if dark_e is None else dark_e.copy()]
+    for a in out:
+        if a is None:
+            continue
+        at, g = _lines_inside(defects.rows, LINE_GAIN, r0, r1)
+        a[at, :] *= g[:, None].astype(np.float32)
+        at, g = _lines_inside(defects.columns, LINE_GAIN, c0, c1)
+        a[:, at] *= g[None, :].astype(np.float32)
+        gains = defects.pixel_kind != STUCK
+        r, c, keep = _inside(defects.pixel_index[gains], region, cols)
+        a[r, c] *= defects.pixel_value[gains][keep].astype(np.float32)
+    r, c, _ = _inside(defects.cluster_index, region, cols)
+    if r.size:
+        if out[1] is None:
+            out[1] = np.zeros_like(out[0])
+        out[1][r, c] += np.float32(defects.hot_e_per_s * exposure_s)
+    return out[0], out[1]
+
+
+def line_offsets(defects: Defects) -> tuple[np.ndarray, np.ndarray]:
+    """The offset lines' offsets at the readout, e-: (per row (rows,), per column (cols,)) float64, 0 elsewhere."""
+    rows, cols = defects.shape
+    out = []
+    for lines, n in ((defects.rows, rows), (defects.columns, cols)):
+        a = np.zeros(n)
+        at, v = lines.of(LINE_OFFSET)
+        a[at] = v
+        out.append(a)
+    return out[0], out[1]
+
+
+def stick(raw: np.ndarray, defects: Defects, region: tuple[int, int, int, int], top: float) -> np.ndarray:
+    """``raw`` (the region's frame) with the stuck rows, then columns, then pixels at ``round(level * top)``
+    (uint16 raw) or ``level * top`` (float raw: the ideal readout's e-). Changes ``raw`` in place; returns it."""
+    r0, r1, c0, c1 = region
+
+    def value(level):
+        v = np.asarray(level) * top
+        return np.rint(v) if raw.dtype.kind == "u" else v
+
+    at, lv = _lines_inside(defects.rows, LINE_STUCK, r0, r1)
+    raw[at, :] = value(lv)[:, None]
+    at, lv = _lines_inside(defects.columns, LINE_STUCK, c0, c1)
+    raw[:, at] = value(lv)[None, :]
+    index, lv = defects.kind_of(STUCK)
+    r, c, keep = _inside(index, region, defects.shape[1])
+    raw[r, c] = value(lv[keep])
+    return raw
