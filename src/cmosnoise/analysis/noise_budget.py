@@ -141,7 +141,8 @@ def _clipped_normal(m: np.ndarray, v: np.ndarray, top: float) -> tuple[np.ndarra
     return mean, np.maximum(second - mean * mean, 0.0), 1 - cdf
 
 
-def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
+def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None,
+                    exposure=None, codes: bool = False) -> dict:
     """Per-pixel expected value and temporal variance at the ADC input (e-), with the full-well and ADC clips.
 
     ``photo_e`` is the mean photo-charge per pixel (a scene); without it, a
@@ -162,15 +163,32 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     an error of up to about 3 % of the temporal noise (+ 0.3 e- of the top
     code's quantization), 2 points of the top-code fraction and 4 % of the
     fixed pattern (tests/test_readout.py measures it).
+
+    Given an ``exposure`` (a :class:`~cmosnoise.model.sensor.Exposure` of
+    ``sensor``), its mean charges are taken instead, with the defects of
+    stage 15 (gain, dead and hot pixels, offset lines) and the random
+    telegraph pixels at their stationary means (a blinking pixel's step times
+    its time high, a trap's amplitude times its occupancy where CDS is off).
+
+    ``codes``: near the ADC's top, ``mean`` is the quantizer's expectation
+    ``E[min(round(black + K X), top code)]`` referred back to e- (exact for
+    each of the two normal components), and ``quantized`` marks those pixels
+    (the others' means are the charge's, for :func:`~cmosnoise.model.stages.adc.expected_code`).
     """
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
-    if photo_e is None:
+    if exposure is not None:
+        photo = exposure.collected_photo_e.astype(np.float64)
+        dark = exposure.collected_dark_e.astype(np.float64) if exposure.collected_dark_e is not None else 0.0
+        if fp.blinkers is not None:
+            dark = dark + _stationary(fp.blinkers, c.exposure.integration_time_s, sensor.shape)
+    elif photo_e is None:
         photo = signal_e * sensor.flat_response
     else:
         photo = np.asarray(photo_e, np.float64)
-    dark = (fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0)
+    if exposure is None:
+        dark = (fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0)
     shape = sensor.shape
     mean_n = np.broadcast_to(photo + dark, shape)
     shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
@@ -183,9 +201,14 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
     col_read = fp.column_sigma.astype(np.float64) ** 2 if fp.column_sigma is not None else 0.0  # after it
     row_off = fp.row_offset.astype(np.float64) if fp.row_offset is not None else 0.0
+    col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
+    if exposure is not None:  # the fixed row and column offsets with the offset lines
+        _, _, lines_r, _, lines_c = exposure.readout_lines()
+        row_off, col_off = lines_r[:, None], lines_c[None, :]
+        if fp.traps is not None and not c.source_follower.rts.cds:
+            row_off = row_off + _stationary(fp.traps, 1.0, shape)
     if fp.pixel_offset is not None:  # with the row offsets: before the column gain
         row_off = row_off + fp.pixel_offset.astype(np.float64)
-    col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
     if c.adc.enabled:  # after the gain, in DN: referred to e-
         col_read = col_read + sum(after_gain_variances(sensor).values())
         cells = np.asarray(c.black_level.channel_offsets_dn, np.float64).reshape(2, 2)
@@ -200,7 +223,7 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     # only pixels within 10 sigma of a clip need the clipped moments (a few, unless the scene is near saturation)
     near = (mean_n + 10 * np.sqrt(shot) + 1 >= fw) | (mean + 10 * np.sqrt(var) + 1 >= top)
     if not near.any():
-        return {"mean": mean, "var": var, "p_full_well": None, "p_top": None}
+        return {"mean": mean, "var": var, "p_full_well": None, "p_top": None, "quantized": None}
     idx = np.nonzero(near)
 
     def at(a):
@@ -214,6 +237,16 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     m_c, v_c, q_c = _clipped_normal((fw + ro) * g + co, rd * g * g + cr, top)  # clipped at the full well
     m_u, v_u, q_u = _clipped_normal((m_below + ro) * g + co, (v_below + rd) * g * g + cr, top)
     m = p_fw * m_c + (1 - p_fw) * m_u
+    quantized = None
+    if codes and c.adc.enabled:
+        e_c, at_c = _top_code((fw + ro) * g + co, rd * g * g + cr, t)
+        e_u, at_u = _top_code((m_below + ro) * g + co, (v_below + rd) * g * g + cr, t)
+        both = at_c | at_u  # either component within reach of the top code: the code expectation for both
+        e_c = np.where(at_c, e_c, (t.black_level_dn + t.gain_dn_per_e * ((fw + ro) * g + co)))
+        e_u = np.where(at_u, e_u, (t.black_level_dn + t.gain_dn_per_e * ((m_below + ro) * g + co)))
+        m = np.where(both, ((p_fw * e_c + (1 - p_fw) * e_u) - t.black_level_dn) / t.gain_dn_per_e, m)
+        quantized = np.zeros(shape, bool)
+        quantized[idx] = both
     second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
     mean[idx] = m
     var[idx] = np.maximum(second - m**2, 0.0)
@@ -221,7 +254,7 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     p_full[idx] = p_fw
     p_top = np.zeros(shape)
     p_top[idx] = p_fw * q_c + (1 - p_fw) * q_u
-    return {"mean": mean, "var": var, "p_full_well": p_full, "p_top": p_top}
+    return {"mean": mean, "var": var, "p_full_well": p_full, "p_top": p_top, "quantized": quantized}
 
 
 def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
@@ -275,6 +308,34 @@ def _may_clip(sensor: Sensor, signal_e: float, photo_e: np.ndarray | None) -> bo
     col_read = top_of(fp.column_sigma) ** 2 if fp.column_sigma is not None else 0.0
     var = (shot + read) * max(g_hi * g_hi, g_lo * g_lo) + col_read
     return mean + 10 * math.sqrt(var) + 1 >= top
+
+
+def _top_code(m: np.ndarray, v: np.ndarray, t) -> tuple[np.ndarray, np.ndarray]:
+    """``E[min(round(Y), top)]`` for Y ~ Normal(black + K m, K^2 v) where the top code is within 10 sigma (and 2
+    codes), DN; and where that is. ``top - sum_{j >= 1} P(round(Y) <= top - j)``: exact for a normal Y."""
+    mu = t.black_level_dn + t.gain_dn_per_e * m
+    sd = t.gain_dn_per_e * np.sqrt(np.maximum(v, 0.0))
+    top = float(t.max_code)
+    near = top - mu < 10 * sd + 2
+    out = np.zeros(mu.shape)
+    if near.any():
+        mu_n, sd_n = mu[near], sd[near]
+        noiseless = sd_n == 0
+        acc = np.zeros(mu_n.shape)
+        span = int(np.ceil(np.max(np.where(noiseless, 0.0, top - mu_n + 10 * sd_n)))) + 2
+        safe = np.where(noiseless, 1.0, sd_n)
+        for j in range(1, max(span, 1) + 1):
+            acc += _cdf((top - j + 0.5 - mu_n) / safe)
+        out[near] = np.where(noiseless, np.minimum(np.rint(mu_n), top), top - acc)
+    return out, near
+
+
+def _stationary(signals, scale: float, shape: tuple[int, int]) -> np.ndarray:
+    """Each pixel's stationary mean of its random telegraph signals, ``scale`` times size times occupancy,
+    as a map (rows, cols) float64."""
+    out = np.zeros(shape[0] * shape[1])
+    np.add.at(out, signals.index.astype(np.int64), signals.size * signals.occupancy * scale)
+    return out.reshape(shape)
 
 
 def _cdf(a):

@@ -402,7 +402,7 @@ class Exposure:
             cn = c.column_noise
             cols = s.shape[1]
 
-            rows_on, row_sigma, row_offset, columns_on, col_offset = self._readout_lines()
+            rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
 
             def col(a, fill):
                 return np.full(cols, fill) if a is None else a.ravel().astype(np.float64)
@@ -434,7 +434,7 @@ class Exposure:
             )
         return self._plan
 
-    def _readout_lines(self) -> tuple[bool, float, np.ndarray, bool, np.ndarray]:
+    def readout_lines(self) -> tuple[bool, float, np.ndarray, bool, np.ndarray]:
         """(rows on, row sigma e-, row offsets (rows,) float64, columns on, column offsets (cols,) float64): the
         fixed row and column offsets with the offset lines of stage 15 in them; a stage off runs with sigma 0
         when an offset line needs it."""
@@ -502,7 +502,7 @@ class Exposure:
                 inside, k, self.sequence, plan.frame_period_s, plan.cds_interval_s, plan.trap_key))
             at = positions(pixels, region, s.shape[1])
             n[at] = n[at] + traps
-        rows_on, row_sigma, row_offset, columns_on, col_offset = self._readout_lines()
+        rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
         if rows_on:
             rown = row_noise.temporal(rows, row_sigma, stream("row_noise")) + row_offset[r0:r1, None]
             n = n + rown

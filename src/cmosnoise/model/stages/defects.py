@@ -27,7 +27,7 @@ What each does (all fixed; the temporal noise acts on them as on any pixel):
   collected (with the ADC off: ``level * full well`` e-).
 
 The kind codes are bits, so a pixel that is two things carries both in the
-ground truth's mask (:mod:`cmosnoise.model.truth`).
+ground truth's mask (:mod:`cmosnoise.analysis.ground_truth`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import numpy as np
 from ...engine.philox import uniform_pair
 from .random_telegraph import affected
 
-#: kind bits (the defect mask's, :data:`cmosnoise.model.truth.MASK_BITS`)
+#: kind bits (the defect mask's, :data:`cmosnoise.analysis.ground_truth.MASK_BITS`)
 CLUSTER, DEAD, STUCK, LOW_GAIN, HIGH_GAIN, BAD_COLUMN, BAD_ROW = 4, 8, 16, 32, 64, 128, 256
 #: a line's kind
 LINE_OFFSET, LINE_GAIN, LINE_STUCK = 1, 2, 3
@@ -271,14 +271,17 @@ def line_offsets(defects: Defects) -> tuple[np.ndarray, np.ndarray]:
     return out[0], out[1]
 
 
-def stick(raw: np.ndarray, defects: Defects, region: tuple[int, int, int, int], top: float) -> np.ndarray:
+def stick(raw: np.ndarray, defects: Defects, region: tuple[int, int, int, int], top: float,
+          rounded: bool | None = None) -> np.ndarray:
     """``raw`` (the region's frame) with the stuck rows, then columns, then pixels at ``round(level * top)``
-    (uint16 raw) or ``level * top`` (float raw: the ideal readout's e-). Changes ``raw`` in place; returns it."""
+    (``rounded``; default: for an unsigned-integer ``raw``, a code) or ``level * top`` (the ideal readout's e-).
+    Changes ``raw`` in place; returns it."""
     r0, r1, c0, c1 = region
+    rounded = raw.dtype.kind == "u" if rounded is None else rounded
 
     def value(level):
         v = np.asarray(level) * top
-        return np.rint(v) if raw.dtype.kind == "u" else v
+        return np.rint(v) if rounded else v
 
     at, lv = _lines_inside(defects.rows, LINE_STUCK, r0, r1)
     raw[at, :] = value(lv)[:, None]

@@ -1,0 +1,180 @@
+"""Ground truth of a simulated frame, defined once: the perfect image, the expected raw, and the defect mask.
+
+What a denoiser, a defect corrector or an ISP pipeline is scored against
+(docs/model.md, "Ground truth"):
+
+- **perfect image**: the mean photo-electrons of the scene on an ideal
+  pixel (stage 1: no PRNU, crosstalk, dark current or defects), e-; and the
+  same through the ideal ADC: ``black level + K min(perfect, full well)``,
+  clipped to the code range, not rounded (DN, float32). A denoiser that
+  also undoes the fixed pattern aims at it.
+- **expected raw**: what infinitely many frames of this sensor average to,
+  DN (float32): every fixed pattern (PRNU, crosstalk, dark current, pixel,
+  row and column offsets, column gains, the black level's cell offsets,
+  defects, the random telegraph pixels at their stationary means), no
+  temporal noise, the full-well and ADC clips and the quantizer included
+  (:func:`cmosnoise.analysis.noise_budget.clipped_moments`). A denoiser
+  that keeps the fixed pattern (a temporal-noise remover) aims at it. With
+  the ADC off, e-.
+- **each stage's contribution** to one frame: ``exposure.frame(k,
+  detail=True).contributions`` (e-, they add up to the electrons at the ADC
+  input); it runs the stages one by one, so it costs more than a frame.
+- **the defect mask**: uint16 bits, one per kind (:data:`MASK_BITS`). A
+  pixel that is two things has both bits.
+
+The perfect image, the expected raw and the mask together cost about one
+frame's time (``benchmarks/bench_dataset.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import cfa as cfa_mod
+from ..model.sensor import Exposure, region_of
+from ..model.stages import defects as defects_mod
+from ..model.stages.adc import expected_code
+from . import noise_budget
+from .white_pixels import couplet_pairs
+
+#: the defect mask's bits
+MASK_BITS = {
+    "white": 1,  #: dark current above the white-pixel threshold
+    "couplet": 2,  #: a white pixel with a white same-colour neighbour
+    "cluster": defects_mod.CLUSTER,  #: a pixel of a hot cluster (stage 15)
+    "dead": defects_mod.DEAD,
+    "stuck": defects_mod.STUCK,
+    "low_gain": defects_mod.LOW_GAIN,
+    "high_gain": defects_mod.HIGH_GAIN,
+    "bad_column": defects_mod.BAD_COLUMN,  #: any kind: offset, gain or stuck
+    "bad_row": defects_mod.BAD_ROW,
+    "telegraph": 512,  #: a source-follower random telegraph pixel (stage 6b)
+    "blinking": 1024,  #: a blinking white pixel (stage 4b)
+}
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The ground truth of one exposure over a region (arrays (rows, cols))."""
+
+    perfect_e: np.ndarray  #: mean photo-electrons of the perfect image, e-, float32
+    perfect_dn: np.ndarray  #: the perfect image through the ideal ADC, DN, float32 (e- with the ADC off)
+    expected_raw: np.ndarray  #: what infinitely many frames average to, DN, float32 (e- with the ADC off)
+    mask: np.ndarray  #: the defect mask, uint16 bits of MASK_BITS
+    white_threshold_e_per_s: float | None  #: the dark current above which a pixel is white (None: no dark current)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"perfect_e": self.perfect_e, "perfect_dn": self.perfect_dn, "expected_raw": self.expected_raw,
+                "mask": self.mask}
+
+
+def white_threshold(sensor, threshold_e_per_s: float | None = None) -> float | None:
+    """The white-pixel threshold, e-/s: the one given, else the dark-current model's own (its nearest
+    characterization point's tail threshold), else 10 times the mean dark current; None without dark current."""
+    state = sensor.dark_state
+    if state is None:
+        return None
+    if threshold_e_per_s is not None:
+        return float(threshold_e_per_s)
+    if state.threshold is not None:
+        return float(state.threshold)
+    return 10.0 * float(sensor.dark_rate.mean())
+
+
+def mask(sensor, region=None, white_threshold_e_per_s: float | None = None) -> np.ndarray:
+    """The defect mask of ``region`` (uint16 bits of :data:`MASK_BITS`): white pixels above the threshold
+    (:func:`white_threshold`) and their couplets, the defects of stage 15, the random telegraph pixels."""
+    rows, cols = sensor.shape
+    r0, r1, c0, c1 = region_of(region, sensor.shape)
+    out = np.zeros((r1 - r0, c1 - c0), np.uint16)
+    fp = sensor.fixed_pattern
+    thr = white_threshold(sensor, white_threshold_e_per_s)
+    if fp.dark_rate is not None:
+        # couplets need the same-colour neighbours 2 pixels beyond the region (an even margin keeps the CFA phase)
+        m0, m1, n0, n1 = max(r0 - 2, 0), min(r1 + 2, rows), max(c0 - 2, 0), min(c1 + 2, cols)
+        white = fp.dark_rate[m0:m1, n0:n1] > thr
+        couplet = np.zeros_like(white)
+        pairs = couplet_pairs(white, _phase(sensor.cfa, m0, n0))
+        couplet[pairs[:, :, 0].ravel(), pairs[:, :, 1].ravel()] = True
+        inner = (slice(r0 - m0, r1 - m0), slice(c0 - n0, c1 - n0))
+        out[white[inner]] |= MASK_BITS["white"]
+        out[couplet[inner]] |= MASK_BITS["couplet"]
+
+    def mark(index, bit):
+        i = np.asarray(index).astype(np.int64)
+        r, c = i // cols - r0, i % cols - c0
+        keep = (r >= 0) & (r < r1 - r0) & (c >= 0) & (c < c1 - c0)
+        out[r[keep], c[keep]] |= np.uint16(bit)
+
+    d = fp.defects
+    if d is not None:
+        for kind in (defects_mod.DEAD, defects_mod.STUCK, defects_mod.LOW_GAIN, defects_mod.HIGH_GAIN):
+            mark(d.kind_of(kind)[0], kind)
+        mark(d.cluster_index, MASK_BITS["cluster"])
+        at = d.columns.index[(d.columns.index >= c0) & (d.columns.index < c1)] - c0
+        out[:, at] |= np.uint16(MASK_BITS["bad_column"])
+        at = d.rows.index[(d.rows.index >= r0) & (d.rows.index < r1)] - r0
+        out[at, :] |= np.uint16(MASK_BITS["bad_row"])
+    if fp.traps is not None:
+        mark(fp.traps.index, MASK_BITS["telegraph"])
+    if fp.blinkers is not None:
+        mark(fp.blinkers.index, MASK_BITS["blinking"])
+    return out
+
+
+def _phase(pattern: str, r0: int, c0: int) -> str:
+    """The CFA pattern of a crop that starts at (r0, c0)."""
+    if cfa_mod.is_mono(pattern):
+        return pattern
+    grid = [[pattern[0], pattern[1]], [pattern[2], pattern[3]]]
+    return "".join(grid[(r0 + i) % 2][(c0 + j) % 2] for i in (0, 1) for j in (0, 1))
+
+
+def expected_raw(exposure: Exposure) -> np.ndarray:
+    """What infinitely many frames of ``exposure`` average to, (rows, cols) float32: DN (e- with the ADC off).
+
+    The charge's mean with every fixed pattern, through the clips as normal
+    approximations (:func:`~cmosnoise.analysis.noise_budget.clipped_moments`,
+    where they are exact below the clips), then the quantizer's expectation
+    (:func:`~cmosnoise.model.stages.adc.expected_code`: exact for a normal
+    noise, and ``rint`` without noise); stuck pixels and lines read their
+    code. Not followed: the nonlinearity's curvature (its first order, the
+    curve at the mean, is not applied either: leave the nonlinearity off for
+    an exact expectation).
+    """
+    sensor = exposure.sensor
+    c = sensor.config
+    t = sensor.transfer
+    mo = noise_budget.clipped_moments(sensor, exposure=exposure, codes=True)
+    if c.adc.enabled:
+        mean_dn = t.black_level_dn + t.gain_dn_per_e * mo["mean"]
+        sigma_dn = t.gain_dn_per_e * np.sqrt(mo["var"])
+        code = expected_code(mean_dn, sigma_dn)
+        if mo["quantized"] is not None:  # near the top code: already the quantizer's expectation
+            code = np.where(mo["quantized"], mean_dn, code)
+        out = np.clip(code, 0, t.max_code).astype(np.float32)
+        top = t.max_code
+    else:
+        out = mo["mean"].astype(np.float32)
+        top = c.sensor.full_well_e
+    if sensor.fixed_pattern.defects is not None and sensor.fixed_pattern.defects.has_stuck:
+        defects_mod.stick(out, sensor.fixed_pattern.defects, (0, sensor.shape[0], 0, sensor.shape[1]), top,
+                          rounded=c.adc.enabled)
+    return out
+
+
+def truth(exposure: Exposure, white_threshold_e_per_s: float | None = None) -> Truth:
+    """The ground truth of ``exposure``: perfect image (e-, DN), expected raw and defect mask."""
+    sensor = exposure.sensor
+    c = sensor.config
+    t = sensor.transfer
+    perfect = exposure.perfect_e.astype(np.float32)
+    if c.adc.enabled:
+        ideal = t.black_level_dn + t.gain_dn_per_e * np.minimum(perfect.astype(np.float64), c.sensor.full_well_e)
+        perfect_dn = np.clip(ideal, 0, t.max_code).astype(np.float32)
+    else:
+        perfect_dn = np.minimum(perfect, np.float32(c.sensor.full_well_e))
+    return Truth(perfect, perfect_dn, expected_raw(exposure), mask(sensor, None, white_threshold_e_per_s),
+                 white_threshold(sensor, white_threshold_e_per_s))
