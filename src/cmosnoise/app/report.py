@@ -129,7 +129,8 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
     # ---- images
     t = sensor.transfer
     white = processor.white_above_black
-    perfect_rgb = scene_mod.render(c.scene.source, sensor.shape, c.scene.scale, c.scene.fit)
+    perfect_rgb = scene_mod.render(c.scene.source, sensor.shape, c.scene.scale, c.scene.fit, c.scene.window,
+                                   c.scene.source_size)
     raw_view = encode_srgb8((raw0.astype(np.float32) - t.black_level_dn) / white)
     perfect = encode_srgb8(perfect_rgb if not processor.mono else perfect_rgb @ scene_mod.LUMINANCE)
     step = _overview_step(sensor.shape)

@@ -47,6 +47,19 @@ class SceneSection(Section):
     fit: Literal["crop", "stretch"] = Field(
         "crop", description="aspect mismatch: crop the scene's centre to the sensor's aspect, or stretch it"
     )
+    window: Optional[tuple[int, int]] = Field(
+        None, description="(row, col): take the sensor's size of the source at this corner, at the source's own "
+                          "resolution (no resampling); null: the whole source fitted to the sensor")
+    source_size: Optional[tuple[int, int]] = Field(
+        None, description="(rows, cols) a built-in scene is drawn at before the window is taken; null: the sensor's")
+
+    @field_validator("window", "source_size")
+    @classmethod
+    def _non_negative(cls, v, info):
+        if v is not None and (min(v) < 0 or max(v) > 10**6 or (info.field_name == "source_size" and min(v) < 1)):
+            raise ValueError(f"{info.field_name} = {list(v)}: give two whole numbers, "
+                             f"{'1' if info.field_name == 'source_size' else '0'} to 1000000")
+        return v
 
 
 #: the last frame number: the frame is one 32-bit word of the random numbers' counter (docs/model.md section 1)

@@ -305,8 +305,30 @@ def is_builtin(source: str) -> bool:
     return head in ("flat", "steps") or (low == head and low in ("photo", "ramp", "colorchecker", "zoneplate", "siemens", "spot"))
 
 
-def render(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
-    """The scene ``source`` as linear RGB at the sensor's ``shape``, (rows, cols, 3), float64."""
+def render(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
+           window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None) -> np.ndarray:
+    """The scene ``source`` as linear RGB at the sensor's ``shape``, (rows, cols, 3), float64.
+
+    With ``window = (row, col)``: the ``shape`` of the source at that corner, at the source's own resolution
+    (an image's pixels; a built-in drawn at ``source_size``, default ``shape``), not resampled.
+    """
+    if window is None:
+        return _fitted(source, shape, scale, fit)
+    size = tuple(source_size) if source_size is not None else tuple(shape)
+    name = source.strip().lower() if isinstance(source, str) else ""
+    if name and name != "photo" and is_builtin(name):
+        img = _fitted(source, size, scale, fit)
+    else:
+        img = load_file(bundled_photo_path() if name == "photo" else source, scale)
+    r, c = window
+    if r + shape[0] > img.shape[0] or c + shape[1] > img.shape[1]:
+        raise CmosnoiseError(f"scene.window = [{r}, {c}]: a {shape[0]} x {shape[1]} window there leaves the source "
+                             f"({img.shape[0]} x {img.shape[1]}); the corner must be at most "
+                             f"[{img.shape[0] - shape[0]}, {img.shape[1] - shape[1]}]")
+    return np.ascontiguousarray(img[r:r + shape[0], c:c + shape[1]], dtype=np.float64)
+
+
+def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
     if not isinstance(source, str) or not source:
         raise CmosnoiseError(f"scene.source = {source!r}: give a built-in ({', '.join(BUILTINS)}) or an image path")
     name = source.strip()

@@ -264,7 +264,7 @@ class Sensor:
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            rgb = scene_mod.render(scene, self.shape, c.scene.scale, c.scene.fit)
+            rgb = scene_mod.render(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size)
         else:
             try:
                 rgb = np.asarray(scene, dtype=np.float64)
@@ -296,7 +296,8 @@ class Sensor:
         if self.cache is None or not isinstance(scene, str):
             return Exposure(self, self.scene_signal(scene), sequence)
         c = self.config
-        signal_parts = (scene, self.shape, self.cfa, list(self.spec.channel_responsivity), c.scene.scale, c.scene.fit)
+        signal_parts = (scene, self.shape, self.cfa, list(self.spec.channel_responsivity), c.scene.scale, c.scene.fit,
+                        c.scene.window, c.scene.source_size)
         signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))
         return Exposure(self, signal, sequence, signal_parts)
 
