@@ -449,6 +449,67 @@ def presets():
         typer.echo(f"{name:24s} {desc[0] if desc else ''}")
 
 
+@app.command()
+def dataset(
+    ctx: typer.Context,
+    samples: int = typer.Option(..., "--samples", "-n", min=1, max=10**9, help="how many samples"),
+    crop: str = typer.Option("512", "--crop", help="sample size: SIZE or HEIGHTxWIDTH, even (the CFA cell kept)"),
+    out: Path = typer.Option(Path("cmosnoise-dataset"), "--out", "-o", help="output folder"),
+    format_: str = typer.Option("hdf5", "--format", help="hdf5 (chunked, compressed shards), npz or fits"),
+    camera: Optional[List[str]] = typer.Option(None, "--camera", "--preset", "-p", help="a preset (sony-imx900; "
+                                               "sony-a7s2@iso=1600 for one setting) or a virtual camera family (led, "
+                                               "eld, eld:nikon-d850); repeatable: each sample picks one (default: led)"),
+    images: Optional[Path] = typer.Option(None, "--images", help="a folder of images to crop (default: the built-in "
+                                          "scenes)"),
+    light: str = typer.Option("50:5000", "--light", help="charge at the scene's white, LOW:HIGH e- (log-uniform)"),
+    exposure: Optional[str] = typer.Option(None, "--exposure", help="integration time LOW:HIGH s (log-uniform; "
+                                           "default: each camera's)"),
+    temperature: Optional[str] = typer.Option(None, "--temperature", help="LOW:HIGH C (uniform; default: each "
+                                              "camera's)"),
+    set_: Optional[List[str]] = SetOpt,
+    white_threshold: Optional[float] = typer.Option(None, "--white-threshold", min=0, help="dark current above "
+                                                    "which the mask calls a pixel white, e-/s (default: the model's)"),
+    seed: int = typer.Option(0, "--seed", min=0, max=2**62, help="the data set's seed: sample i depends on (seed, i)"),
+    shard_size: int = typer.Option(64, "--shard-size", min=1, max=100000, help="samples per shard file"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="make the shards on an existing Dask scheduler"),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="make the shards on a "
+                                          "LocalCluster of this many processes (default: here, one process)"),
+    resume: bool = typer.Option(False, "--resume", help="complete the data set in --out: make its missing shards"),
+    overwrite: bool = OverwriteOpt,
+):
+    """Training and test data: noisy raw crops with their ground truth (expected raw, perfect image, defect mask)."""
+    from . import dataset as ds
+
+    def pair(text: str | None, option: str):
+        if text is None:
+            return None
+        lo, sep, hi = text.partition(":")
+        try:
+            return (float(lo), float(hi if sep else lo))
+        except ValueError:
+            raise CmosnoiseError(f"{option} {text!r}: give LOW:HIGH (or one number)") from None
+
+    size = crop.lower().split("x")
+    try:
+        shape = (int(size[0]), int(size[-1]))
+    except ValueError:
+        raise CmosnoiseError(f"--crop {crop!r}: give SIZE or HEIGHTxWIDTH in pixels, e.g. 512 or 256x384") from None
+    sources = ds.image_sources(images) if images is not None else ds.BUILTIN_SCENES
+    recipe = ds.Recipe(samples=samples, crop=shape, seed=seed, cameras=tuple(camera or ("led",)), sources=sources,
+                       light_e=pair(light, "--light"), integration_time_s=pair(exposure, "--exposure"),
+                       temperature_c=pair(temperature, "--temperature"), overrides=tuple(set_ or ()),
+                       white_threshold_e_per_s=white_threshold, shard_size=shard_size, format=format_.lower())
+    show = err_console.is_terminal and _level(ctx) >= 0
+    with Progress(TextColumn("[bold]dataset"), BarColumn(), MofNCompleteColumn(), TextColumn("samples"),
+                  TimeRemainingColumn(), console=err_console, disable=not show) as bar:
+        task = bar.add_task("samples", total=samples)
+        ds.build(recipe, out, resume=resume, overwrite=overwrite, scheduler=scheduler, workers=workers,
+                 progress=lambda done, total: bar.update(task, completed=done, total=total),
+                 say=lambda m: _say(ctx, m))
+    _say(ctx, f"wrote {samples} sample(s) of {shape[0]} x {shape[1]} in {recipe.shards()} {recipe.format} shard(s) "
+              f"to {out}/ (dataset.json names them)")
+
+
 @app.command("config")
 def config_cmd(
     config: Optional[Path] = ConfigOpt,

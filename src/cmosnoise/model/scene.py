@@ -314,12 +314,20 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
     """
     if window is None:
         return _fitted(source, shape, scale, fit)
-    size = tuple(source_size) if source_size is not None else tuple(shape)
+    return window_of(source_image(source, source_size or shape, scale, fit), window, shape)
+
+
+def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
+    """The whole source at its own resolution, linear RGB (rows, cols, 3) float64: an image file's (or the bundled
+    photo's) pixels, or a built-in drawn at ``size``. What :func:`render` takes a window of."""
     name = source.strip().lower() if isinstance(source, str) else ""
     if name and name != "photo" and is_builtin(name):
-        img = _fitted(source, size, scale, fit)
-    else:
-        img = load_file(bundled_photo_path() if name == "photo" else source, scale)
+        return _fitted(source, tuple(size), scale, fit)
+    return load_file(bundled_photo_path() if name == "photo" else source, scale)
+
+
+def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) -> np.ndarray:
+    """The ``shape`` of ``img`` at the corner ``window = (row, col)``, float64, or a one-line error where it leaves it."""
     r, c = window
     if r + shape[0] > img.shape[0] or c + shape[1] > img.shape[1]:
         raise CmosnoiseError(f"scene.window = [{r}, {c}]: a {shape[0]} x {shape[1]} window there leaves the source "

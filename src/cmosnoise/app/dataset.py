@@ -1,0 +1,509 @@
+"""Training and test data: noisy raw frames with their ground truth, over a distribution of cameras and scenes.
+
+A data set is a :class:`Recipe` (how many samples, the crop, the cameras,
+the scenes, the light, exposure and temperature ranges, the seed) and the
+samples it implies. Sample ``i`` depends on nothing but (recipe, ``i``): its
+settings come from a generator keyed by (seed, i) (:func:`settings`), its
+sensor instance is seeded from it, and its frame and truth are those of
+:class:`~cmosnoise.Sensor` with that configuration. So any shard can be made
+alone, on any process or Dask worker, and an interrupted set is completed by
+making the shards that are missing (``--resume``).
+
+Each sample records its full configuration (``config``, YAML): ``cmosnoise
+simulate --config`` with it gives the same raw frame, bit for bit.
+
+Output formats (:data:`FORMATS`):
+
+- ``hdf5`` (h5py; the default): one file per shard, each array chunked per
+  sample and compressed (gzip with the byte shuffle). HDF5 rather than zarr:
+  one file per shard (no tree of small files for a file system or a copy to
+  walk), read by every language and by MATLAB and IDL, and h5py's API has been
+  stable for a decade (zarr's changed with its version 3). Times are not
+  written into the file: the same shard is the same bytes.
+- ``npz``: one NumPy zip per shard, for small sets (entries dated 1980, so
+  the bytes too are the same).
+- ``fits`` (astropy): one FITS file per shard, an image extension per array
+  and a table of the settings, for astronomy users.
+
+Arrays per shard (n samples of H x W): ``raw`` uint16 (the noisy frame),
+``expected_raw`` and ``perfect_dn`` float32 (DN), ``mask`` uint16 (the
+defect bits of :data:`cmosnoise.analysis.ground_truth.MASK_BITS`), and the
+settings of each sample as columns (:data:`COLUMNS`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+import zipfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+
+from .._version import __version__
+from ..analysis import ground_truth
+from ..config import load_config
+from ..config import virtual_cameras
+from ..config.loading import deep_merge, preset_names
+from ..engine.samplers import SCHEME_VERSION
+from ..errors import CmosnoiseError
+from ..model import scene as scene_mod
+from ..model.sensor import Sensor
+
+FORMATS = {"hdf5": ".h5", "npz": ".npz", "fits": ".fits"}
+#: image files a --images folder may hold
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy", ".bmp", ".webp")
+#: built-in scenes a set draws from when no --images are given (drawn at BUILTIN_SIZE)
+BUILTIN_SCENES = ("photo", "colorchecker", "zoneplate", "siemens", "ramp")
+BUILTIN_SIZE = 1024
+#: the arrays of a sample
+ARRAYS = ("raw", "expected_raw", "perfect_dn", "mask")
+#: each sample's settings, as columns: name -> numpy dtype ("str": text)
+COLUMNS = {
+    "sample": "int64", "camera": "str", "mode": "str", "iso": "float64", "gain_db": "float64",
+    "k_dn_per_e": "float64", "black_level_dn": "float64", "white_level_dn": "float64", "cfa": "str",
+    "light_e": "float64", "integration_time_s": "float64", "temperature_c": "float64", "seed": "int64",
+    "source": "str", "window_row": "int64", "window_col": "int64", "config": "str",
+}
+_MANIFEST = "dataset.json"
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """What a data set is made of. Ranges are (low, high); a range of None keeps each camera's own value.
+
+    ``cameras`` holds preset names (``sony-imx900``: a random row of its gain
+    table per sample; ``sony-imx900@gain_db=3`` or ``sony-a7s2@iso=1600``: that
+    setting) and virtual camera families (``led``, ``eld``, ``eld:nikon-d850``,
+    :mod:`cmosnoise.config.virtual_cameras`), each picked with equal
+    probability. ``sources`` are image paths or built-in scene names.
+    ``light_e`` is the charge at the scene's white (e-), log-uniform;
+    ``integration_time_s`` log-uniform; ``temperature_c`` uniform.
+    ``overrides`` are ``--set`` texts applied to every sample last.
+    """
+
+    samples: int
+    crop: tuple[int, int]
+    seed: int = 0
+    cameras: tuple[str, ...] = ("led",)
+    sources: tuple[str, ...] = BUILTIN_SCENES
+    light_e: tuple[float, float] = (50.0, 5000.0)
+    integration_time_s: tuple[float, float] | None = None
+    temperature_c: tuple[float, float] | None = None
+    overrides: tuple[str, ...] = ()
+    white_threshold_e_per_s: float | None = None
+    shard_size: int = 64
+    format: str = "hdf5"
+
+    def shards(self) -> int:
+        return math.ceil(self.samples / self.shard_size)
+
+    def shard_range(self, shard: int) -> range:
+        return range(shard * self.shard_size, min(self.samples, (shard + 1) * self.shard_size))
+
+    def shard_name(self, shard: int) -> str:
+        return f"shard-{shard:05d}{FORMATS[self.format]}"
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> "Recipe":
+        data = json.loads(text)
+        for k in ("crop", "cameras", "sources", "light_e", "integration_time_s", "temperature_c", "overrides"):
+            if data.get(k) is not None:
+                data[k] = tuple(data[k])
+        return cls(**data)
+
+
+def check(recipe: Recipe) -> Recipe:
+    """``recipe`` if every part is usable; raises CmosnoiseError naming the first that is not (before any work)."""
+    r = recipe
+    if not 1 <= r.samples <= 10**9:
+        raise CmosnoiseError(f"--samples {r.samples}: give 1 to 1000000000")
+    if len(r.crop) != 2 or min(r.crop) < 2 or max(r.crop) > 30000 or any(c % 2 for c in r.crop):
+        raise CmosnoiseError(f"--crop {r.crop}: give an even size from 2 to 30000 (the CFA's 2 x 2 cell kept whole)")
+    if r.format not in FORMATS:
+        raise CmosnoiseError(f"--format {r.format!r}: choose one of {', '.join(FORMATS)} (zarr is not offered: "
+                             "HDF5 holds the same chunked, compressed arrays in one file per shard)")
+    if not 1 <= r.shard_size <= 100000:
+        raise CmosnoiseError(f"--shard-size {r.shard_size}: give 1 to 100000 samples per shard")
+    for name, rng, lo in (("--light", r.light_e, 1e-3), ("--exposure", r.integration_time_s, 1e-7)):
+        if rng is not None and not lo <= rng[0] <= rng[1] <= 1e8:
+            raise CmosnoiseError(f"{name} {rng[0]:g}:{rng[1]:g}: give LOW:HIGH with {lo:g} <= LOW <= HIGH")
+    if r.temperature_c is not None and not -60 <= r.temperature_c[0] <= r.temperature_c[1] <= 150:
+        raise CmosnoiseError(f"--temperature {r.temperature_c[0]:g}:{r.temperature_c[1]:g}: give LOW:HIGH in C, "
+                             "-60 <= LOW <= HIGH <= 150")
+    if not r.cameras:
+        raise CmosnoiseError("--camera: give at least one preset or virtual camera family")
+    presets = preset_names()
+    for cam in r.cameras:
+        name, _, gain = cam.partition("@")
+        if name in virtual_cameras.FAMILIES:
+            if gain:
+                raise CmosnoiseError(f"--camera {cam!r}: a virtual camera family takes no @setting")
+            continue
+        if name not in presets:
+            raise CmosnoiseError(f"--camera {cam!r}: not a preset ({', '.join(presets)}) or a virtual camera family "
+                                 f"({', '.join(virtual_cameras.FAMILIES)})")
+        if gain:
+            _gain_update(cam)
+    if not r.sources:
+        raise CmosnoiseError("--images: the folder holds no images (" + ", ".join(IMAGE_SUFFIXES) + ")")
+    settings(r, 0)  # the first sample's configuration: a bad --set or a crop larger than a source says so now
+    return r
+
+
+def _gain_update(cam: str) -> dict:
+    _, _, gain = cam.partition("@")
+    key, _, value = gain.partition("=")
+    if key not in ("iso", "gain_db"):
+        raise CmosnoiseError(f"--camera {cam!r}: give the setting as @iso=VALUE or @gain_db=VALUE")
+    try:
+        return {key: float(value)}
+    except ValueError:
+        raise CmosnoiseError(f"--camera {cam!r}: {value!r} is not a number") from None
+
+
+def image_sources(folder: str | Path) -> tuple[str, ...]:
+    """The image files of ``folder`` (sorted by name), as the sources of a recipe."""
+    p = Path(folder)
+    if not p.is_dir():
+        raise CmosnoiseError(f"--images {str(folder)!r} is not a folder of images")
+    return tuple(str(f) for f in sorted(p.iterdir()) if f.suffix.lower() in IMAGE_SUFFIXES and f.is_file())
+
+
+@dataclass
+class Sources:
+    """Each source's whole image at its own resolution, read once per process (a worker's own)."""
+
+    images: dict = field(default_factory=dict)
+
+    def image(self, source: str) -> np.ndarray:
+        if source not in self.images:
+            self.images[source] = scene_mod.source_image(source, (BUILTIN_SIZE, BUILTIN_SIZE))
+        return self.images[source]
+
+
+@dataclass(frozen=True)
+class SampleSettings:
+    """What sample ``index`` is: its configuration (the sensor, seed, scene window, exposure) and its columns."""
+
+    index: int
+    config: object
+    columns: dict
+
+
+def _rng(recipe: Recipe, index: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence(recipe.seed, spawn_key=(0x7DA7A5E7, index)))
+
+
+def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> SampleSettings:
+    """Sample ``index``'s settings, from a generator keyed by (recipe seed, index) alone."""
+    sources = sources or Sources()
+    rng = _rng(recipe, index)
+    cam = recipe.cameras[int(rng.integers(len(recipe.cameras)))]
+    name, _, gain = cam.partition("@")
+    updates: dict = {}
+    preset = None
+    if name in virtual_cameras.FAMILIES:
+        camera, updates = virtual_cameras.sample(name, rng)
+    else:
+        preset, camera = name, name
+        base = load_config(preset=preset)
+        if gain:
+            updates["sensor"] = _gain_update(cam)
+        elif base.gain_table:
+            row = base.gain_table[int(rng.integers(len(base.gain_table)))]
+            key = "iso" if row.iso is not None else "gain_db"
+            updates["sensor"] = {key: getattr(row, key)}
+    source = recipe.sources[int(rng.integers(len(recipe.sources)))]
+    img = sources.image(source)
+    h, w = recipe.crop
+    if img.shape[0] < h or img.shape[1] < w:
+        raise CmosnoiseError(f"--crop {h}x{w}: the source {source!r} is {img.shape[0]} x {img.shape[1]}; give a "
+                             "smaller crop or larger images")
+    row = 2 * int(rng.integers((img.shape[0] - h) // 2 + 1))  # even corners: the CFA phase of the source kept
+    col = 2 * int(rng.integers((img.shape[1] - w) // 2 + 1))
+    light = math.exp(rng.uniform(math.log(recipe.light_e[0]), math.log(recipe.light_e[1])))
+    base = load_config(preset=preset, extra=updates)
+    t = base.exposure.integration_time_s
+    if recipe.integration_time_s is not None:
+        t = math.exp(rng.uniform(*(math.log(v) for v in recipe.integration_time_s)))
+    temp = base.sensor.temperature_c
+    if recipe.temperature_c is not None:
+        temp = float(rng.uniform(*recipe.temperature_c))
+    seed = int(rng.integers(0, 2**62))
+    sample = {
+        "seed": seed,
+        "sensor": {"width": w, "height": h, "temperature_c": temp},
+        "scene": {"source": source, "window": [row, col],
+                  **({"source_size": [BUILTIN_SIZE, BUILTIN_SIZE]} if scene_mod.is_builtin(source) else {})},
+        "exposure": {"integration_time_s": t, "peak_rate_e_per_s": light / t},
+        "run": {"frames": 1, "first_frame": 0},
+    }
+    merged = deep_merge(updates, sample)
+    try:
+        config = load_config(preset=preset, extra=merged, overrides=list(recipe.overrides))
+    except CmosnoiseError as exc:
+        raise CmosnoiseError(f"sample {index} ({camera}): {exc}") from None
+    sensor = config.sensor
+    gain_row = next((r for r in config.gain_table
+                     if (sensor.iso is not None and r.iso == sensor.iso)
+                     or (sensor.gain_db is not None and r.gain_db == sensor.gain_db)), None)
+    columns = {"sample": index, "camera": camera, "mode": (gain_row.mode or "") if gain_row else "",
+               "iso": sensor.iso if sensor.iso is not None else math.nan,
+               "gain_db": sensor.gain_db if sensor.gain_db is not None else math.nan,
+               "cfa": sensor.cfa, "light_e": light, "integration_time_s": t, "temperature_c": temp, "seed": seed,
+               "source": source, "window_row": row, "window_col": col}
+    return SampleSettings(index, config, columns)
+
+
+def make_sample(recipe: Recipe, index: int, sources: Sources | None = None) -> tuple[dict, dict]:
+    """(arrays, columns) of sample ``index``: the noisy raw and its truths (:data:`ARRAYS`), and its settings."""
+    sources = sources or Sources()
+    st = settings(recipe, index, sources)
+    c = st.config
+    sensor = Sensor(c)
+    img = scene_mod.window_of(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape)
+    shot = sensor.expose(img)
+    raw = shot.frame(0)
+    truth = ground_truth.truth(shot, recipe.white_threshold_e_per_s)
+    t = sensor.transfer
+    columns = {**st.columns, "k_dn_per_e": t.gain_dn_per_e, "black_level_dn": t.black_level_dn,
+               "white_level_dn": float(sensor.white_dn), "config": c.to_yaml()}
+    arrays = {"raw": raw, "expected_raw": truth.expected_raw, "perfect_dn": truth.perfect_dn, "mask": truth.mask}
+    return arrays, columns
+
+
+# ------------------------------------------------------------------ shards
+def shard_bytes(recipe_json: str, shard: int) -> bytes:
+    """Shard ``shard`` of the recipe, as the bytes of its file (made in memory: a Dask task returns them)."""
+    recipe = Recipe.from_json(recipe_json)
+    sources = Sources()
+    made = [make_sample(recipe, i, sources) for i in recipe.shard_range(shard)]
+    arrays = {k: np.stack([a[k] for a, _ in made]) for k in ARRAYS}
+    columns = {k: [c[k] for _, c in made] for k in COLUMNS}
+    return {"hdf5": _hdf5, "npz": _npz, "fits": _fits}[recipe.format](arrays, columns, recipe)
+
+
+def _column_array(name: str, values: list) -> np.ndarray:
+    kind = COLUMNS[name]
+    return np.array([str(v) for v in values]) if kind == "str" else np.array(values, dtype=kind)
+
+
+def _attrs(recipe: Recipe) -> dict:
+    return {"cmosnoise": __version__, "scheme_version": SCHEME_VERSION, "recipe": recipe.to_json(),
+            "mask_bits": json.dumps(ground_truth.MASK_BITS)}
+
+
+def _hdf5(arrays: dict, columns: dict, recipe: Recipe) -> bytes:
+    import h5py
+
+    bio = io.BytesIO()
+    with h5py.File(bio, "w", track_order=True) as f:
+        for k, v in _attrs(recipe).items():
+            f.attrs[k] = v
+        for k in ARRAYS:
+            a = arrays[k]
+            f.create_dataset(k, data=a, chunks=(1, *a.shape[1:]), compression="gzip", compression_opts=4,
+                             shuffle=True, track_times=False)
+        g = f.create_group("settings", track_order=True)
+        for k in COLUMNS:
+            a = _column_array(k, columns[k])
+            if a.dtype.kind == "U":
+                g.create_dataset(k, data=a.astype(object), dtype=h5py.string_dtype(), track_times=False)
+            else:
+                g.create_dataset(k, data=a, track_times=False)
+    return bio.getvalue()
+
+
+def _npz(arrays: dict, columns: dict, recipe: Recipe) -> bytes:
+    bio = io.BytesIO()
+    entries = {**arrays, **{f"settings.{k}": _column_array(k, v) for k, v in columns.items()},
+               **{f"attrs.{k}": np.array(str(v)) for k, v in _attrs(recipe).items()}}
+    with zipfile.ZipFile(bio, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, a in entries.items():
+            info = zipfile.ZipInfo(name + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            with z.open(info, "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asarray(a), allow_pickle=False)
+    return bio.getvalue()
+
+
+def _fits(arrays: dict, columns: dict, recipe: Recipe) -> bytes:
+    from astropy.io import fits
+
+    primary = fits.PrimaryHDU()
+    for k, v in _attrs(recipe).items():
+        if k != "recipe":  # a FITS card holds 68 characters: the recipe is in the table's header as COMMENT lines
+            primary.header[k[:8].upper()] = str(v)
+    hdus = [primary] + [fits.ImageHDU(arrays[k], name=k.upper()) for k in ARRAYS]
+    cols = []
+    for k in COLUMNS:
+        a = _column_array(k, columns[k])
+        fmt = f"{max(1, max(len(s.encode()) for s in a))}A" if a.dtype.kind == "U" else {"int64": "K", "float64": "D"}[COLUMNS[k]]
+        cols.append(fits.Column(name=k, format=fmt, array=a))
+    table = fits.BinTableHDU.from_columns(cols, name="SETTINGS")
+    for i in range(0, len(recipe.to_json()), 64):
+        table.header.add_comment(recipe.to_json()[i:i + 64])
+    hdus.append(table)
+    bio = io.BytesIO()
+    fits.HDUList(hdus).writeto(bio)
+    return bio.getvalue()
+
+
+def read_shard(path: str | Path) -> tuple[dict, dict]:
+    """(arrays, columns) of a shard file of any format."""
+    p = Path(path)
+    if p.suffix == ".h5":
+        import h5py
+
+        with h5py.File(p, "r") as f:
+            arrays = {k: f[k][()] for k in ARRAYS}
+            columns = {k: _decoded(f["settings"][k][()]) for k in COLUMNS}
+        return arrays, columns
+    if p.suffix == ".npz":
+        with np.load(p, allow_pickle=False) as z:
+            return {k: z[k] for k in ARRAYS}, {k: z[f"settings.{k}"] for k in COLUMNS}
+    if p.suffix == ".fits":
+        from astropy.io import fits
+
+        with fits.open(p) as h:
+            arrays = {k: np.asarray(h[k.upper()].data) for k in ARRAYS}
+            t = h["SETTINGS"].data
+            return arrays, {k: np.asarray(t[k]) for k in COLUMNS}
+    raise CmosnoiseError(f"{str(path)!r} is not a shard (.h5, .npz or .fits)")
+
+
+def _decoded(a: np.ndarray) -> np.ndarray:
+    return np.array([v.decode() if isinstance(v, bytes) else v for v in a]) if a.dtype.kind == "O" else a
+
+
+# ------------------------------------------------------------------ the folder
+def _write(folder: Path, name: str, data: bytes) -> None:
+    tmp = folder / f".{name}.tmp-{os.getpid()}"
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, folder / name)
+
+
+def _manifest(recipe: Recipe) -> str:
+    return json.dumps({"cmosnoise": __version__, "scheme_version": SCHEME_VERSION, "recipe": json.loads(recipe.to_json()),
+                       "shards": [recipe.shard_name(s) for s in range(recipe.shards())],
+                       "arrays": list(ARRAYS), "columns": list(COLUMNS), "mask_bits": ground_truth.MASK_BITS},
+                      indent=1, sort_keys=True) + "\n"
+
+
+def missing(recipe: Recipe, folder: Path) -> list[int]:
+    """The shards of ``recipe`` that ``folder`` does not hold yet."""
+    return [s for s in range(recipe.shards()) if not (folder / recipe.shard_name(s)).is_file()]
+
+
+def _mode(out: Path, recipe: Recipe, resume: bool, overwrite: bool) -> str:
+    if not (out.is_dir() and any(out.iterdir())):
+        return "new"
+    if resume:
+        old = (out / _MANIFEST).read_text() if (out / _MANIFEST).is_file() else None
+        if old != _manifest(recipe):
+            raise CmosnoiseError(f"--resume: {str(out)!r} holds another data set (its {_MANIFEST} differs); resume "
+                                 "with the same options")
+        return "resume"
+    if not overwrite:
+        raise CmosnoiseError(f"--out {str(out)!r} already exists and is not empty; give --resume to complete that "
+                             "data set, --overwrite to start again, or another folder")
+    return "replace"
+
+
+def _shards_here(recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, bytes]]:
+    recipe_json = recipe.to_json()
+    for s in todo:
+        yield s, shard_bytes(recipe_json, s)
+
+
+def _shards_on(client, recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, bytes]]:
+    from distributed import as_completed
+
+    recipe_json = recipe.to_json()
+    futures = {client.submit(shard_bytes, recipe_json, s, pure=False, retries=2): s for s in todo}
+    for future in as_completed(futures):
+        try:
+            data = future.result()
+        except CmosnoiseError:
+            raise
+        except Exception as exc:
+            first = (str(exc).strip().splitlines() or [""])[0][:200]
+            raise CmosnoiseError(f"a dataset task failed: {type(exc).__name__}: {first}") from None
+        future.release()
+        yield futures[future], data
+
+
+def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool = False,
+          scheduler: str | None = None, workers: int | None = None,
+          progress: Callable[[int, int], None] | None = None, say: Callable[[str], None] = lambda m: None) -> Path:
+    """Make the data set ``recipe`` in ``out``: ``dataset.json`` and its shards (each written whole, under a
+    temporary name first). ``resume`` makes only the missing shards of the same recipe. ``workers`` or
+    ``scheduler``: the shards are made on Dask (a LocalCluster of processes, or that scheduler); the bytes
+    are the same."""
+    from ..io.output import OutputFolder
+    from .sweep import _close, connect
+
+    check(recipe)
+    out = Path(out)
+    folder = OutputFolder(out, overwrite=True)  # its checks on the name and place; creates nothing
+    mode = _mode(out, recipe, resume, overwrite)
+    try:
+        with contextlib.ExitStack() as stack:
+            if mode == "replace":
+                work = stack.enter_context(folder)
+            else:
+                stack.enter_context(folder.lock)
+                mode = _mode(out, recipe, resume, overwrite)
+                work = out
+                work.mkdir(parents=True, exist_ok=True)
+                for stale in work.glob(".shard-*.tmp-*"):  # a shard an interrupted run had not finished
+                    stale.unlink()
+            if mode != "resume":
+                _write(work, _MANIFEST, _manifest(recipe).encode())
+            todo = missing(recipe, work) if mode == "resume" else list(range(recipe.shards()))
+            total = recipe.samples
+            done = total - sum(len(recipe.shard_range(s)) for s in todo)
+            if progress:
+                progress(done, total)
+            if mode == "resume":
+                say(f"--resume: {recipe.shards() - len(todo)} of {recipe.shards()} shard(s) already made; "
+                    f"making {len(todo)}")
+            if todo and (workers is not None or scheduler is not None):
+                client, cluster = connect(scheduler, workers, say)
+                stack.callback(_close, client, cluster)
+                made = _shards_on(client, recipe, todo)
+            else:
+                made = _shards_here(recipe, todo)
+            for s, data in made:
+                _write(work, recipe.shard_name(s), data)
+                done += len(recipe.shard_range(s))
+                if progress:
+                    progress(done, total)
+    except OSError as exc:
+        raise CmosnoiseError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from None
+    return out
+
+
+def read(folder: str | Path) -> Iterator[tuple[dict, dict]]:
+    """Every shard of a data set folder in order: (arrays, columns)."""
+    folder = Path(folder)
+    manifest = json.loads((folder / _MANIFEST).read_text())
+    for name in manifest["shards"]:
+        yield read_shard(folder / name)
+
+
+def sample_config_text(columns: dict, i: int) -> str:
+    """Sample ``i``'s configuration (YAML) from a shard's columns: ``cmosnoise simulate --config`` reads it."""
+    return str(columns["config"][i])
