@@ -306,18 +306,24 @@ def _hdf5(arrays: dict, columns: dict, recipe: Recipe) -> bytes:
     import h5py
 
     bio = io.BytesIO()
-    with h5py.File(bio, "w", track_order=True) as f:
+    # text as fixed-length UTF-8, never variable-length: HDF5 keeps those in a global heap whose unused space it
+    # does not clear, so the same shard would not always be the same bytes
+    # and no chunk cache, each array flushed as it is written: the file's layout (where each chunk lands) is then
+    # the order of the writes, not the caches' eviction order (which varied from process to process)
+    with h5py.File(bio, "w", track_order=True, rdcc_nbytes=0) as f:
         for k, v in _attrs(recipe).items():
-            f.attrs[k] = v
+            f.attrs[k] = np.bytes_(str(v).encode())
         for k in ARRAYS:
             a = arrays[k]
             f.create_dataset(k, data=a, chunks=(1, *a.shape[1:]), compression="gzip", compression_opts=4,
                              shuffle=True, track_times=False)
+            f.flush()
         g = f.create_group("settings", track_order=True)
         for k in COLUMNS:
             a = _column_array(k, columns[k])
             if a.dtype.kind == "U":
-                g.create_dataset(k, data=a.astype(object), dtype=h5py.string_dtype(), track_times=False)
+                raw = [v.encode() for v in a]
+                g.create_dataset(k, data=np.array(raw, dtype=f"S{max(1, max(map(len, raw)))}"), track_times=False)
             else:
                 g.create_dataset(k, data=a, track_times=False)
     return bio.getvalue()
@@ -382,7 +388,7 @@ def read_shard(path: str | Path) -> tuple[dict, dict]:
 
 
 def _decoded(a: np.ndarray) -> np.ndarray:
-    return np.array([v.decode() if isinstance(v, bytes) else v for v in a]) if a.dtype.kind == "O" else a
+    return np.array([v.decode() for v in a]) if a.dtype.kind == "S" else a
 
 
 # ------------------------------------------------------------------ the folder
