@@ -50,7 +50,7 @@ _MODULES = {
     "white_pixels": "analysis.white_pixels", "figures_of_merit": "analysis.figures_of_merit",
     "emva_evaluation": "analysis.emva_evaluation", "emva_files": "analysis.emva_files",
     "fixed_pattern": "model.fixed_pattern", "spec": "model.spec",
-    "plots": "app.plots", "sweep": "app.sweep",
+    "plots": "app.plots", "sweep": "app.sweep", "dataset": "app.dataset", "ground_truth": "analysis.ground_truth",
 }
 
 __all__ = ["CmosnoiseError", "__version__", *_NAMES, *_MODULES]

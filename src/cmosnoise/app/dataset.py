@@ -121,7 +121,7 @@ class Recipe:
         return cls(**data)
 
 
-def check(recipe: Recipe) -> Recipe:
+def check(recipe: Recipe, sources: "Sources | None" = None) -> Recipe:
     """``recipe`` if every part is usable; raises CmosnoiseError naming the first that is not (before any work)."""
     r = recipe
     if not 1 <= r.samples <= 10**9:
@@ -155,7 +155,7 @@ def check(recipe: Recipe) -> Recipe:
             _gain_update(cam)
     if not r.sources:
         raise CmosnoiseError("--images: the folder holds no images (" + ", ".join(IMAGE_SUFFIXES) + ")")
-    settings(r, 0)  # the first sample's configuration: a bad --set or a crop larger than a source says so now
+    settings(r, 0, sources)  # the first sample's configuration: a bad --set or a crop larger than a source says so now
     return r
 
 
@@ -180,7 +180,11 @@ def image_sources(folder: str | Path) -> tuple[str, ...]:
 
 @dataclass
 class Sources:
-    """Each source's whole image at its own resolution, read once per process (a worker's own)."""
+    """Each source's whole image at its own resolution, read once per process (a worker's own).
+
+    ``images`` may be given arrays under names of their own (``array:0``, ...): linear RGB (rows, cols, 3) or a
+    clean raw mosaic (rows, cols) in [0, 1] of the white, its CFA phase at (0, 0) the sensor's.
+    """
 
     images: dict = field(default_factory=dict)
 
@@ -264,15 +268,19 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     return SampleSettings(index, config, columns)
 
 
-def make_sample(recipe: Recipe, index: int, sources: Sources | None = None) -> tuple[dict, dict]:
-    """(arrays, columns) of sample ``index``: the noisy raw and its truths (:data:`ARRAYS`), and its settings."""
+def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, frame: int = 0) -> tuple[dict, dict]:
+    """(arrays, columns) of sample ``index``: the noisy raw and its truths (:data:`ARRAYS`), and its settings.
+
+    ``frame``: which frame of the sample's sensor is the noisy raw (0 in a data set; another frame is fresh
+    temporal noise on the same sensor, scene and truth).
+    """
     sources = sources or Sources()
     st = settings(recipe, index, sources)
     c = st.config
     sensor = Sensor(c)
     img = scene_mod.window_of(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape)
     shot = sensor.expose(img)
-    raw = shot.frame(0)
+    raw = shot.frame(frame)
     truth = ground_truth.truth(shot, recipe.white_threshold_e_per_s)
     t = sensor.transfer
     columns = {**st.columns, "k_dn_per_e": t.gain_dn_per_e, "black_level_dn": t.black_level_dn,

@@ -61,4 +61,10 @@ try:
 except ImportError:  # pragma: no cover - exercised where numba is missing
     numba = None
 
+if numba is not None and not os.environ.get("NUMBA_THREADING_LAYER") and numba.config.THREADING_LAYER == "default":
+    # a fork-safe threading layer (TBB, a non-GNU OpenMP, or numba's own workqueue): a process that has run the
+    # kernel may fork (a PyTorch DataLoader's workers, multiprocessing's default on Linux). GNU OpenMP, which
+    # numba would take where libgomp is present (PyTorch brings one), ends every forked child.
+    numba.config.THREADING_LAYER = "forksafe"
+
 __all__ = ["numba", "host_features", "vectors"]

@@ -1,0 +1,154 @@
+"""PyTorch datasets that synthesize noisy raw samples on the fly, with their ground truth.
+
+The samples are those of :mod:`cmosnoise.app.dataset` (the same recipe and
+index give the same bits as a data set's shard), made when a
+``DataLoader`` asks for them. Reached as ``cmosnoise.torch`` (the optional
+extra ``pip install 'cmosnoise[torch]'``).
+
+A sample is a dict of tensors:
+
+- ``noisy``, ``expected``, ``perfect``: the noisy raw, the expected raw and
+  the perfect image, packed by colour (R, G, G, B: (4, H/2, W/2); a
+  monochrome sensor (1, H, W)) and normalized, ``(DN - black) / (white -
+  black)`` (float32);
+- ``mask``: the defect bits, packed alike (int32);
+- ``raw``: the noisy raw as it is, (H, W) int32 DN;
+- ``meta``: the sample's settings (camera, K, black and white level, light, ...), a dict.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset, IterableDataset, get_worker_info
+
+from ..model import cfa as cfa_mod
+from . import dataset as ds
+
+
+def pack(a: np.ndarray, pattern: str) -> np.ndarray:
+    """(H, W) -> (4, H/2, W/2) in the order R, G, G, B of ``pattern`` (monochrome: (1, H, W))."""
+    if cfa_mod.is_mono(pattern):
+        return a[None]
+    planes = [a[0::2, 0::2], a[0::2, 1::2], a[1::2, 0::2], a[1::2, 1::2]]  # in the pattern's order
+    greens = [i for i, ch in enumerate(pattern) if ch == "G"]
+    order = [pattern.index("R"), greens[0], greens[1], pattern.index("B")]
+    return np.stack([planes[i] for i in order])
+
+
+def to_tensors(arrays: dict, columns: dict) -> dict:
+    """A sample's arrays and columns as :mod:`cmosnoise.torch` gives them."""
+    black, white = columns["black_level_dn"], columns["white_level_dn"]
+    scale = 1.0 / (white - black)
+    pattern = columns["cfa"]
+
+    def norm(a):
+        return torch.from_numpy(np.ascontiguousarray(pack((a.astype(np.float32) - np.float32(black))
+                                                          * np.float32(scale), pattern)))
+
+    meta = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in columns.items()}
+    return {"noisy": norm(arrays["raw"]), "expected": norm(arrays["expected_raw"]), "perfect": norm(arrays["perfect_dn"]),
+            "mask": torch.from_numpy(np.ascontiguousarray(pack(arrays["mask"].astype(np.int32), pattern))),
+            "raw": torch.from_numpy(arrays["raw"].astype(np.int32)), "meta": meta}
+
+
+def collate(batch: list[dict]) -> dict:
+    """A batch: each tensor stacked along a new first axis, ``meta`` kept as a list of the samples' dicts."""
+    out = {k: torch.stack([b[k] for b in batch]) for k in batch[0] if k != "meta"}
+    out["meta"] = [b["meta"] for b in batch]
+    return out
+
+
+def _recipe(samples, crop, cameras, images, seed, light_e, integration_time_s, temperature_c, overrides,
+            white_threshold_e_per_s) -> tuple[ds.Recipe, ds.Sources]:
+    sources = ds.Sources()
+    names = []
+    for i, item in enumerate(images if images is not None else ds.BUILTIN_SCENES):
+        if isinstance(item, str):
+            names.append(item)
+        else:
+            name = f"array:{i}"
+            sources.images[name] = np.asarray(item, np.float64)
+            names.append(name)
+    crop = (crop, crop) if isinstance(crop, int) else tuple(crop)
+    recipe = ds.Recipe(samples=samples, crop=crop, seed=seed, cameras=tuple(cameras), sources=tuple(names),
+                       light_e=tuple(light_e), integration_time_s=integration_time_s and tuple(integration_time_s),
+                       temperature_c=temperature_c and tuple(temperature_c), overrides=tuple(overrides),
+                       white_threshold_e_per_s=white_threshold_e_per_s)
+    return ds.check(recipe, sources), sources
+
+
+class NoisyRawDataset(Dataset):
+    """A map-style dataset of ``samples`` noisy raw crops with their truth, made on the fly.
+
+    Parameters
+    ----------
+    samples : int
+        Its length.
+    crop : int or (int, int)
+        Sample size in pixels, even.
+    cameras : sequence of str
+        Presets (``sony-imx900``, ``sony-a7s2@iso=1600``) and virtual camera families (``led``, ``eld``,
+        ``eld:nikon-d850``), as ``cmosnoise dataset --camera``.
+    images : sequence, optional
+        Image paths, or arrays: linear RGB (rows, cols, 3), or clean raw mosaics (rows, cols) in [0, 1] of the
+        white with the sensor's CFA phase at (0, 0) (a user's own clean raws). Default: the built-in scenes.
+    seed : int
+        Sample ``i`` depends on (seed, i) alone.
+    light_e, integration_time_s, temperature_c, overrides, white_threshold_e_per_s
+        As ``cmosnoise dataset``'s --light, --exposure, --temperature, --set, --white-threshold.
+    fresh_noise : bool
+        False: the same sample for the same index in every epoch. True: epoch ``e`` (:meth:`set_epoch`) draws
+        frame ``e`` of each sample's sensor: new temporal noise, the same scene, sensor and truth.
+    """
+
+    def __init__(self, samples: int, crop=512, cameras=("led",), images=None, seed: int = 0,
+                 light_e=(50.0, 5000.0), integration_time_s=None, temperature_c=None, overrides=(),
+                 white_threshold_e_per_s=None, fresh_noise: bool = False):
+        self.recipe, self.sources = _recipe(samples, crop, cameras, images, seed, light_e, integration_time_s,
+                                            temperature_c, overrides, white_threshold_e_per_s)
+        self.fresh_noise = fresh_noise
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        """The epoch about to start (with ``fresh_noise``, its frames are new noise)."""
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.recipe.samples
+
+    def sample(self, index: int) -> tuple[dict, dict]:
+        """(arrays, columns) of sample ``index`` as a data set's shard holds them."""
+        if not 0 <= index < len(self):
+            raise IndexError(f"index {index} is outside 0 .. {len(self) - 1}")
+        return ds.make_sample(self.recipe, index, self.sources, self.epoch if self.fresh_noise else 0)
+
+    def __getitem__(self, index: int) -> dict:
+        return to_tensors(*self.sample(int(index)))
+
+
+class NoisyRawIterableDataset(IterableDataset):
+    """The same samples as :class:`NoisyRawDataset`, streamed in order; ``batch_size`` samples at a time go to
+    one ``DataLoader`` worker, in turn, so batches of that size are the same for any number of workers.
+
+    ``samples=None`` streams without end. Other parameters as :class:`NoisyRawDataset`.
+    """
+
+    def __init__(self, samples: int | None = None, batch_size: int = 1, **kwargs):
+        self.inner = NoisyRawDataset(samples if samples is not None else 2**62, **kwargs)
+        self.batch_size = int(batch_size)
+        self.endless = samples is None
+
+    def set_epoch(self, epoch: int) -> None:
+        self.inner.set_epoch(epoch)
+
+    def __iter__(self):
+        info = get_worker_info()
+        worker, workers = (info.id, info.num_workers) if info is not None else (0, 1)
+        total = len(self.inner)
+        batches = math.ceil(total / self.batch_size)
+        for b in range(worker, batches, workers):
+            for i in range(b * self.batch_size, min(total, (b + 1) * self.batch_size)):
+                yield self.inner[i]
