@@ -47,8 +47,7 @@ import numpy as np
 
 from .._version import __version__
 from ..analysis import ground_truth
-from ..config import load_config
-from ..config import virtual_cameras
+from ..config import load_config, virtual_cameras
 from ..config.loading import deep_merge, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError

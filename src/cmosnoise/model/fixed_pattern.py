@@ -38,7 +38,16 @@ import numpy as np
 from ..engine.telegraph import Telegraphs
 from .seeds import fixed_key, fixed_rng, pixel_index
 from .spec import SensorSpec
-from .stages import column_noise, dark_current, defects, pixel_offset, prnu, random_telegraph, row_noise, source_follower
+from .stages import (
+    column_noise,
+    dark_current,
+    defects,
+    pixel_offset,
+    prnu,
+    random_telegraph,
+    row_noise,
+    source_follower,
+)
 
 
 @dataclass(frozen=True)

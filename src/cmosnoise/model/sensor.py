@@ -400,7 +400,6 @@ class Exposure:
             c = s.config
             fp = s.fixed_pattern
             keys = np.array([stream_key(c.seed, st) for st in TEMPORAL_STAGES], dtype=np.uint64)
-            cn = c.column_noise
             cols = s.shape[1]
 
             rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
