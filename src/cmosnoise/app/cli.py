@@ -510,6 +510,34 @@ def dataset(
               f"to {out}/ (dataset.json names them)")
 
 
+@app.command()
+def evaluate(
+    ctx: typer.Context,
+    data: Path = typer.Option(..., "--data", help="a data set folder (cmosnoise dataset)"),
+    method: Optional[List[str]] = typer.Option(None, "--method", "-m", help="none, median, dark-map, gaussian, or "
+                                               "your module:function (raw in, raw out); repeatable (default: the "
+                                               "four built-ins)"),
+    outputs: Optional[Path] = typer.Option(None, "--outputs", help="a folder of your method's outputs, "
+                                           "sample_NNNNNN.npy or .tif, scored beside the methods"),
+    target: str = typer.Option("expected", "--target", help="expected (the expected raw: the fixed pattern kept) or "
+                               "perfect (the perfect image)"),
+    out: Path = typer.Option(Path("cmosnoise-evaluation"), "--out", "-o", help="output folder"),
+    overwrite: bool = OverwriteOpt,
+):
+    """Score denoisers and defect correctors on a data set: PSNR, SSIM and defects left, beside baselines."""
+    from . import evaluate as ev
+
+    methods = list(method) if method else (["none"] if outputs is not None else list(ev.BASELINES))
+    show = err_console.is_terminal and _level(ctx) >= 0
+    with Progress(TextColumn("[bold]evaluate"), BarColumn(), MofNCompleteColumn(), TextColumn("samples"),
+                  TimeRemainingColumn(), console=err_console, disable=not show) as bar:
+        task = bar.add_task("samples", total=None)
+        ev.run(data, methods, out, outputs, target, overwrite,
+               progress=lambda done, total: bar.update(task, completed=done, total=total))
+    _say(ctx, f"scored {', '.join(methods + (['outputs'] if outputs is not None else []))} on {data}: "
+              f"{out}/report.html, scores.csv, summary.csv")
+
+
 @app.command("config")
 def config_cmd(
     config: Optional[Path] = ConfigOpt,

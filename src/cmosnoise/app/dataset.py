@@ -283,7 +283,7 @@ def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, fram
     truth = ground_truth.truth(shot, recipe.white_threshold_e_per_s)
     t = sensor.transfer
     columns = {**st.columns, "k_dn_per_e": t.gain_dn_per_e, "black_level_dn": t.black_level_dn,
-               "white_level_dn": float(sensor.white_dn), "config": c.to_yaml()}
+               "white_level_dn": float(t.max_code), "config": c.to_yaml()}
     arrays = {"raw": raw, "expected_raw": truth.expected_raw, "perfect_dn": truth.perfect_dn, "mask": truth.mask}
     return arrays, columns
 
@@ -517,6 +517,8 @@ def read(folder: str | Path) -> Iterator[tuple[dict, dict]]:
         yield read_shard(folder / name)
 
 
-def sample_config_text(columns: dict, i: int) -> str:
-    """Sample ``i``'s configuration (YAML) from a shard's columns: ``cmosnoise simulate --config`` reads it."""
-    return str(columns["config"][i])
+def load_sample_config(text: str):
+    """A sample's configuration from its ``config`` column (YAML; ``cmosnoise simulate --config`` reads it too)."""
+    from ..config.loading import load_yaml_text
+
+    return load_config(extra=load_yaml_text(str(text)))

@@ -1,0 +1,257 @@
+"""``cmosnoise evaluate``: score denoisers and defect correctors on a generated data set, beside baselines.
+
+A method is a built-in baseline (:data:`BASELINES`), a Python callable
+``module:function`` (raw in, raw out: ``f(raw)`` or ``f(raw, meta)`` with
+the sample's settings), or the outputs a method already wrote
+(``--outputs DIR``: ``sample_NNNNNN.npy`` or ``.tif``, one per sample). Each
+method runs on every sample of the set; the scores come from
+:mod:`cmosnoise.analysis.scoring`: PSNR and SSIM against the truth, and
+defects left by kind. Written: ``scores.csv`` (a row per sample and
+method), ``summary.csv`` (per method, camera, mode and light level),
+plots, and ``report.html`` (self-contained).
+"""
+
+from __future__ import annotations
+
+import html
+import importlib
+import inspect
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .._version import __version__
+from ..analysis import scoring
+from ..errors import CmosnoiseError
+from ..isp import calibration
+from ..isp import defects as isp_defects
+from . import dataset as ds
+from . import plots
+
+#: the built-in methods: name -> what it is
+BASELINES = {
+    "none": "the noisy frame itself (what every method must beat)",
+    "median": "the single-defect corrector of a typical ISP: a pixel outside its same-colour neighbours' range by "
+              "6 robust sigmas is replaced by their median (isp.defects.correct_isolated)",
+    "dark-map": "a defect map from 8 dark frames of the sample's sensor (6 robust sigmas above the master dark's "
+                "median); mapped pixels replaced by their healthy same-colour neighbours' median "
+                "(isp.defects.correct_with_map)",
+    "gaussian": "a Gaussian blur of each CFA colour plane, sigma 1 plane pixel (scipy.ndimage): a plain denoiser",
+}
+#: light levels the summary groups samples by, e- at the scene's white
+LIGHT_BINS = (0, 100, 1000, math.inf)
+#: dark frames the dark-map baseline averages
+DARK_FRAMES = 8
+
+
+def _user_method(spec: str) -> Callable:
+    module, _, name = spec.partition(":")
+    if not module or not name:
+        raise CmosnoiseError(f"--method {spec!r}: give a built-in ({', '.join(BASELINES)}) or module:function")
+    if "" not in sys.path:
+        sys.path.insert(0, "")  # a module in the current folder, as `python -m` finds it
+    try:
+        fn = getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as exc:
+        raise CmosnoiseError(f"--method {spec!r}: cannot load it ({type(exc).__name__}: {exc})") from None
+    if not callable(fn):
+        raise CmosnoiseError(f"--method {spec!r} is not callable")
+    try:
+        takes_meta = len(inspect.signature(fn).parameters) >= 2
+    except (TypeError, ValueError):
+        takes_meta = False
+    return (lambda raw, meta: fn(raw, meta)) if takes_meta else (lambda raw, meta: fn(raw))
+
+
+def _gaussian(raw: np.ndarray, meta: dict) -> np.ndarray:
+    from scipy.ndimage import gaussian_filter
+
+    out = raw.astype(np.float64)
+    step = 1 if meta["cfa"] == "none" else 2
+    for i in range(step):
+        for j in range(step):
+            out[i::step, j::step] = gaussian_filter(out[i::step, j::step], 1.0, mode="reflect")
+    return out
+
+
+def _median(raw: np.ndarray, meta: dict) -> np.ndarray:
+    return isp_defects.correct_isolated(raw.astype(np.float64), meta["cfa"])[0]
+
+
+def _dark_map(raw: np.ndarray, meta: dict) -> np.ndarray:
+    from ..model.sensor import Sensor
+
+    sensor = Sensor(ds.load_sample_config(meta["config"]))
+    dark = calibration.master_dark(sensor.dark_frames(DARK_FRAMES)) - meta["black_level_dn"]
+    return isp_defects.correct_with_map(raw.astype(np.float64), meta["cfa"], isp_defects.defect_map(dark))
+
+
+def method(spec: str) -> Callable:
+    """The callable ``(raw, meta) -> output`` of a --method."""
+    return {"none": lambda raw, meta: raw.astype(np.float64), "median": _median, "dark-map": _dark_map,
+            "gaussian": _gaussian}.get(spec) or _user_method(spec)
+
+
+def _read_output(folder: Path, index: int) -> np.ndarray:
+    for suffix in (".npy", ".tif", ".tiff"):
+        p = folder / f"sample_{index:06d}{suffix}"
+        if p.is_file():
+            if suffix == ".npy":
+                return np.load(p, allow_pickle=False)
+            import tifffile
+
+            return tifffile.imread(p)
+    raise CmosnoiseError(f"--outputs {str(folder)!r} has no sample_{index:06d}.npy or .tif")
+
+
+def score(data: str | Path, methods: list[str], outputs: str | Path | None = None, target: str = "expected",
+          progress: Callable[[int, int], None] | None = None):
+    """Every method on every sample of the data set ``data``: a pandas DataFrame, a row per (sample, method)."""
+    import pandas as pd
+
+    data = Path(data)
+    if not (data / "dataset.json").is_file():
+        raise CmosnoiseError(f"--data {str(data)!r} is not a data set (no dataset.json): make one with cmosnoise dataset")
+    if target not in ("expected", "perfect"):
+        raise CmosnoiseError(f"--target {target!r}: expected (the expected raw) or perfect (the perfect image)")
+    runs = {m: method(m) for m in methods}
+    if outputs is not None:
+        outputs = Path(outputs)
+        if not outputs.is_dir():
+            raise CmosnoiseError(f"--outputs {str(outputs)!r} is not a folder")
+        runs["outputs"] = lambda raw, meta: _read_output(outputs, meta["sample"])
+    total = json.loads((data / "dataset.json").read_text())["recipe"]["samples"]
+    rows, done = [], 0
+    for arrays, columns in ds.read(data):
+        for i in range(len(arrays["raw"])):
+            meta = {k: (v[i].item() if isinstance(v[i], np.generic) else v[i]) for k, v in columns.items()}
+            raw = arrays["raw"][i]
+            if target == "expected":  # the expected raw without its defects
+                truth = scoring.defect_free(arrays["expected_raw"][i], arrays["mask"][i], meta["cfa"])
+            else:
+                truth = arrays["perfect_dn"][i]
+            for name, run in runs.items():
+                try:
+                    out = np.asarray(run(raw, meta), np.float64)
+                except CmosnoiseError:
+                    raise
+                except Exception as exc:
+                    raise CmosnoiseError(f"method {name!r} failed on sample {meta['sample']}: "
+                                         f"{type(exc).__name__}: {exc}") from None
+                if out.shape != raw.shape:
+                    raise CmosnoiseError(f"method {name!r} returned shape {out.shape} for sample {meta['sample']}; "
+                                         f"a raw frame is {raw.shape}")
+                row = {"sample": meta["sample"], "method": name, "camera": meta["camera"], "mode": meta["mode"],
+                       "iso": meta["iso"], "gain_db": meta["gain_db"], "k_dn_per_e": meta["k_dn_per_e"],
+                       "light_e": meta["light_e"],
+                       **scoring.image_scores(out, truth, meta["black_level_dn"], meta["white_level_dn"])}
+                left = scoring.defects_left(raw, out, arrays["expected_raw"][i], arrays["mask"][i], meta["cfa"])
+                for kind, v in left.items():
+                    row[f"{kind}_visible"], row[f"{kind}_left"] = v["visible"], v["left"]
+                rows.append(row)
+            done += 1
+            if progress:
+                progress(done, total)
+    return pd.DataFrame(rows)
+
+
+def summarize(scores):
+    """Per method, camera, mode and light level: mean PSNR and SSIM, and the defects visible and left by kind."""
+    s = scores.copy()
+    s["light"] = _light_bin(s["light_e"])
+    counts = [c for c in s.columns if c.endswith("_visible") or c.endswith("_left")]
+    g = s.groupby(["method", "camera", "mode", "light"], sort=True, dropna=False)
+    out = g.agg(samples=("sample", "count"), psnr_db=("psnr_db", "mean"), ssim=("ssim", "mean"),
+                **{c: (c, "sum") for c in counts}).reset_index()
+    return out
+
+
+def _light_bin(light):
+    import pandas as pd
+
+    labels = [f"{lo:g}-{hi:g} e-" if math.isfinite(hi) else f">{lo:g} e-" for lo, hi in zip(LIGHT_BINS, LIGHT_BINS[1:])]
+    return pd.cut(light, LIGHT_BINS, labels=labels, right=False).astype(str)
+
+
+def _plots(scores) -> dict[str, bytes]:
+    out = {}
+    fig, ax = plots.figure(figsize=(6.4, 3.8))
+    for name, g in scores.groupby("method", sort=False):
+        g = g.sort_values("light_e")
+        ax.semilogx(g["light_e"], g["psnr_db"], "o", ms=4, alpha=0.7, label=name)
+    ax.set_xlabel("light at the scene's white (e-)")
+    ax.set_ylabel("PSNR against the truth (dB)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    out["psnr_vs_light.png"] = plots.to_png_bytes(fig)
+    fig, ax = plots.figure(figsize=(6.4, 3.4))
+    methods = list(dict.fromkeys(scores["method"]))
+    kinds = list(scoring.KINDS)
+    width = 0.8 / max(1, len(methods))
+    for j, name in enumerate(methods):
+        g = scores[scores["method"] == name]
+        frac = [g[f"{k}_left"].sum() / max(1, g[f"{k}_visible"].sum()) for k in kinds]
+        ax.bar(np.arange(len(kinds)) + j * width, frac, width, label=name)
+    ax.set_xticks(np.arange(len(kinds)) + 0.4 - width / 2, kinds)
+    ax.set_ylabel("visible defects left (fraction)")
+    ax.set_ylim(0, 1.05)
+    ax.legend(fontsize=8)
+    out["defects_left.png"] = plots.to_png_bytes(fig)
+    return out
+
+
+def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target: str) -> str:
+    manifest = json.loads((Path(data) / "dataset.json").read_text())
+    r = manifest["recipe"]
+    per_method = scores.groupby("method", sort=False).agg(
+        psnr_db=("psnr_db", "mean"), ssim=("ssim", "mean"),
+        **{c: (c, "sum") for c in scores.columns if c.endswith("_visible") or c.endswith("_left")})
+
+    def table(df) -> str:
+        head = "".join(f"<th>{html.escape(str(c))}</th>" for c in [df.index.name or "", *df.columns])
+        body = "".join("<tr>" + f"<td>{html.escape(str(i))}</td>" + "".join(
+            f"<td class='num'>{v:.4g}</td>" if isinstance(v, (float, np.floating)) else f"<td>{html.escape(str(v))}</td>"
+            for v in row) + "</tr>" for i, row in zip(df.index, df.itertuples(index=False)))
+        return f"<table><tr>{head}</tr>{body}</table>"
+
+    methods = "".join(f"<li><b>{html.escape(m)}</b>: {html.escape(BASELINES.get(m, 'your method'))}</li>"
+                      for m in per_method.index)
+    figs = "".join(f"<figure><img src='{plots.data_uri(png)}' alt='{html.escape(name)}'>"
+                   f"<figcaption>{html.escape(name)}</figcaption></figure>" for name, png in pictures.items())
+    css = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}table{border-collapse:collapse;"
+           "font-size:13px;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 6px}td.num{text-align:right}"
+           "figure{display:inline-block;margin:.5em}img{max-width:520px}")
+    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>cmosnoise evaluation</title>"
+            f"<style>{css}</style></head><body><h1>cmosnoise evaluation</h1>"
+            f"<p>cmosnoise {__version__}; data set {html.escape(str(data))}: {r['samples']} samples of "
+            f"{r['crop'][0]} x {r['crop'][1]}, cameras {html.escape(', '.join(r['cameras']))}, light "
+            f"{r['light_e'][0]:g} to {r['light_e'][1]:g} e-. PSNR and SSIM against the "
+            f"{'expected raw without its defects (the fixed pattern kept)' if target == 'expected' else 'perfect image'}; a defect is "
+            f"visible when the noisy frame departs from its healthy neighbours by {scoring.Z_VISIBLE:g} robust "
+            f"sigmas, left when the output still does.</p><h2>Methods</h2><ul>{methods}</ul>"
+            f"<h2>Per method</h2>{table(per_method)}<h2>Plots</h2>{figs}"
+            f"<h2>Per method, camera, mode and light level</h2>{table(summary.set_index('method'))}</body></html>")
+
+
+def run(data: str | Path, methods: list[str], out: str | Path, outputs: str | Path | None = None,
+        target: str = "expected", overwrite: bool = False, progress=None) -> Path:
+    """Score ``methods`` on the data set ``data``; write scores.csv, summary.csv, the plots and report.html to ``out``."""
+    from ..io.output import OutputFolder
+
+    folder = OutputFolder(out, overwrite=overwrite)
+    for m in methods:  # every method loads before any work
+        method(m)
+    scores = score(data, methods, outputs, target, progress)
+    summary = summarize(scores)
+    pictures = _plots(scores)
+    with folder as tmp:
+        scores.to_csv(tmp / "scores.csv", index=False)
+        summary.to_csv(tmp / "summary.csv", index=False)
+        for name, png in pictures.items():
+            (tmp / name).write_bytes(png)
+        (tmp / "report.html").write_text(report_html(scores, summary, pictures, Path(data), target))
+    return Path(out)

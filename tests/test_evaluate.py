@@ -1,0 +1,78 @@
+"""cmosnoise evaluate: the baselines where they stand (the median corrector leaves couplets and clusters, the
+dark-map corrector removes them), a user's callable and a folder of outputs scored alike, the report written."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import cli
+
+from cmosnoise.app import dataset as ds
+
+WORST = ["--camera", "paper-fig9-vga", "--light", "200:2000", "--set", "exposure.integration_time_s=0.1",
+         "--set", "defects.enabled=true", "--set", "defects.clusters.ppm=3000", "--set", "defects.dead_ppm=2000"]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("eval") / "d"
+    r = cli("-q", "dataset", "-n", "6", "--crop", "128", *WORST, "--out", folder)
+    assert r.returncode == 0, r.stderr
+    return folder
+
+
+def totals(folder):
+    s = pd.read_csv(folder / "scores.csv")
+    return s.groupby("method").sum(numeric_only=True), s
+
+
+def test_median_leaves_couplets_and_clusters_and_the_dark_map_removes_them(data, tmp_path):
+    r = cli("-q", "evaluate", "--data", data, "--out", tmp_path / "e")
+    assert r.returncode == 0, r.stderr
+    t, s = totals(tmp_path / "e")
+    assert set(s["method"]) == {"none", "median", "dark-map", "gaussian"} and len(s) == 4 * 6
+    assert t.loc["none", "couplets_visible"] > 0 and t.loc["none", "clusters_visible"] > 20
+    assert t.loc["none", "couplets_left"] == t.loc["none", "couplets_visible"]  # doing nothing leaves every one
+    # the paper's Fig. 9 point, per kind: the median corrector keeps couplets and most clusters ...
+    assert t.loc["median", "couplets_left"] > 0
+    assert t.loc["median", "clusters_left"] > 0.3 * t.loc["median", "clusters_visible"]
+    # ... and removes most single defects; the dark-map corrector removes couplets and clusters
+    assert t.loc["median", "singles_left"] < 0.2 * t.loc["median", "singles_visible"]
+    assert t.loc["dark-map", "couplets_left"] == 0 and t.loc["dark-map", "clusters_left"] == 0
+    means = s.groupby("method")["psnr_db"].mean()
+    assert means["dark-map"] > means["median"] > means["none"]
+    html = (tmp_path / "e" / "report.html").read_text()
+    assert "data:image/png;base64," in html and "dark-map" in html and "http" not in html.replace("http-equiv", "")
+    summary = pd.read_csv(tmp_path / "e" / "summary.csv")
+    assert {"method", "camera", "light", "psnr_db", "ssim", "clusters_left"} <= set(summary.columns)
+
+
+def test_a_callable_and_a_folder_of_outputs_are_scored_alike(data, tmp_path):
+    (tmp_path / "mine.py").write_text("import numpy as np\n"
+                                      "def identity(raw):\n    return raw\n")
+    outs = tmp_path / "outs"
+    outs.mkdir()
+    for arrays, columns in ds.read(data):
+        for i, index in enumerate(columns["sample"]):
+            np.save(outs / f"sample_{int(index):06d}.npy", arrays["raw"][i])
+    r = cli("-q", "evaluate", "--data", data, "--method", "mine:identity", "--method", "none", "--outputs", outs,
+            "--out", tmp_path / "e", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    _, s = totals(tmp_path / "e")
+    cols = ["psnr_db", "ssim", "singles_left", "couplets_left", "clusters_left"]
+    by = {m: g.sort_values("sample")[cols].to_numpy() for m, g in s.groupby("method")}
+    assert np.array_equal(by["mine:identity"], by["none"]) and np.array_equal(by["outputs"], by["none"])
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--method", "nosuchmodule:f"], "cannot load it"),
+    (["--method", "median", "--target", "best"], "--target"),
+])
+def test_bad_input_is_one_line(data, tmp_path, args, needle):
+    r = cli("evaluate", "--data", data, *args, "--out", tmp_path / "e")
+    assert r.returncode == 2 and needle in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "e").exists()
+
+
+def test_not_a_data_set(tmp_path):
+    r = cli("evaluate", "--data", tmp_path, "--out", tmp_path / "e")
+    assert r.returncode == 2 and "not a data set" in r.stderr
