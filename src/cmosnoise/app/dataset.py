@@ -186,6 +186,12 @@ class Sources:
     """
 
     images: dict = field(default_factory=dict)
+    presets: dict = field(default_factory=dict)  #: the presets' configurations, loaded once
+
+    def preset(self, name: str | None):
+        if name not in self.presets:
+            self.presets[name] = load_config(preset=name)
+        return self.presets[name]
 
     def image(self, source: str) -> np.ndarray:
         if source not in self.images:
@@ -218,7 +224,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
         camera, updates = virtual_cameras.sample(name, rng)
     else:
         preset, camera = name, name
-        base = load_config(preset=preset)
+        base = sources.preset(preset)
         if gain:
             updates["sensor"] = _gain_update(cam)
         elif base.gain_table:
@@ -234,7 +240,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     row = 2 * int(rng.integers((img.shape[0] - h) // 2 + 1))  # even corners: the CFA phase of the source kept
     col = 2 * int(rng.integers((img.shape[1] - w) // 2 + 1))
     light = math.exp(rng.uniform(math.log(recipe.light_e[0]), math.log(recipe.light_e[1])))
-    base = load_config(preset=preset, extra=updates)
+    base = sources.preset(preset)  # a gain row or a virtual camera changes neither the exposure nor the temperature
     t = base.exposure.integration_time_s
     if recipe.integration_time_s is not None:
         t = math.exp(rng.uniform(*(math.log(v) for v in recipe.integration_time_s)))

@@ -310,7 +310,7 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
     """The scene ``source`` as linear RGB at the sensor's ``shape``, (rows, cols, 3), float64.
 
     With ``window = (row, col)``: the ``shape`` of the source at that corner, at the source's own resolution
-    (an image's pixels; a built-in drawn at ``source_size``, default ``shape``), not resampled.
+    (an image file's pixels; a built-in, the photo included, drawn at ``source_size``, default ``shape``).
     """
     if window is None:
         return _fitted(source, shape, scale, fit)
@@ -318,12 +318,11 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
 
 
 def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
-    """The whole source at its own resolution, linear RGB (rows, cols, 3) float64: an image file's (or the bundled
-    photo's) pixels, or a built-in drawn at ``size``. What :func:`render` takes a window of."""
-    name = source.strip().lower() if isinstance(source, str) else ""
-    if name and name != "photo" and is_builtin(name):
+    """The whole source, linear RGB (rows, cols, 3) float64: an image file's own pixels, or a built-in (the
+    bundled photo included) drawn at ``size``. What :func:`render` takes a window of."""
+    if is_builtin(source):
         return _fitted(source, tuple(size), scale, fit)
-    return load_file(bundled_photo_path() if name == "photo" else source, scale)
+    return load_file(source, scale)
 
 
 def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) -> np.ndarray:

@@ -1,0 +1,134 @@
+"""Training samples with their truth per second, next to getframes 2.6.1's pair generator and a NumPy reference,
+and the memory of a large set.
+
+    python benchmarks/bench_dataset.py [--samples 40] [--crop 512] [--repeats 3] [--memory 10000]
+
+Each sample is a 512 x 512 crop: its own sensor instance (set-up), one noisy
+frame, and its truth (expected raw, perfect image, defect mask), as
+``cmosnoise dataset`` makes them (``make_sample``; writing the shards is
+timed separately, end to end with ``cmosnoise dataset``). Cameras: ``led``
+(LED's virtual cameras: shot noise, Tukey-lambda read noise, row noise,
+black-level offsets, as the learned-denoising literature) and
+``sony-imx900`` (the whole chain: PRNU, dark current, source follower,
+pixel offsets, nonlinearity). One worker is this process on one thread
+(``numba.set_num_threads(1)``); two workers are two processes of one thread
+each, the samples split between them.
+
+Beside them, timed in the same run and alternately:
+
+- getframes 2.6.1, ``getframes.dataset.pairs`` on its ``zwo_asi2600mm``
+  preset cut to 512 x 512 (``precision="float32"``), random star fields: a raw
+  frame and its truth (the noise-free electrons) per pair;
+- the NumPy reference: a Poisson draw, Gaussian read noise and quantization
+  on the same mean image, and that mean as the truth.
+
+``--memory N`` also makes an N-sample set (64 x 64 crops, hdf5) with
+``cmosnoise dataset`` in a child process, and one of N / 10 samples, and
+prints both peak resident sizes: flat in N when the shards stream.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+
+def _one_thread():
+    import numba
+
+    numba.set_num_threads(1)
+
+
+def ours(recipe_json: str, indices: list[int]) -> int:
+    from cmosnoise.app import dataset as ds
+
+    _one_thread()
+    recipe = ds.Recipe.from_json(recipe_json)
+    sources = ds.Sources()
+    for i in indices:
+        ds.make_sample(recipe, i, sources)
+    return len(indices)
+
+
+def getframes_pairs(n: int, crop: int) -> float:
+    import getframes as gf
+
+    cam = gf.Camera.from_preset("zwo_asi2600mm", precision="float32").with_config(resolution=(crop, crop))
+    scenes = gf.dataset.random_star_fields(n=n + 1, shape=cam.resolution, seed=0)
+    it = iter(gf.dataset.pairs(camera=cam, scenes=scenes, exposure=1.0, seed=1))
+    next(it)  # its first pair pays for the set-up
+    t0 = time.perf_counter()
+    for _ in it:
+        pass
+    return n / (time.perf_counter() - t0)
+
+
+def numpy_reference(n: int, crop: int) -> float:
+    rng = np.random.default_rng(0)
+    mean = rng.uniform(10, 3000, (crop, crop))
+    t0 = time.perf_counter()
+    for _ in range(n):
+        raw = np.clip(np.rint((rng.poisson(mean) + rng.normal(0, 2.0, mean.shape)) * 0.4 + 64), 0, 4095)
+        raw.astype(np.uint16), mean.astype(np.float32)
+    return n / (time.perf_counter() - t0)
+
+
+def rate(recipe_json: str, n: int, workers: int) -> float:
+    if workers == 1:
+        ours(recipe_json, [0])  # compile, the sources read
+        t0 = time.perf_counter()
+        ours(recipe_json, list(range(1, n + 1)))
+        return n / (time.perf_counter() - t0)
+    with ProcessPoolExecutor(workers) as pool:
+        list(pool.map(ours, [recipe_json] * workers, [[0]] * workers))  # each worker warm
+        t0 = time.perf_counter()
+        list(pool.map(ours, [recipe_json] * workers, [list(range(1 + w, n + 1, workers)) for w in range(workers)]))
+        return n / (time.perf_counter() - t0)
+
+
+def peak_rss_mb(samples: int) -> float:
+    code = ("import resource, sys\nfrom cmosnoise.app.cli import run\n"
+            f"code = run(['-q', 'dataset', '-n', '{samples}', '--crop', '64', '--camera', 'led', '--out', sys.argv[1]])\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)\n")
+    with tempfile.TemporaryDirectory() as tmp:
+        r = subprocess.run([sys.executable, "-c", code, os.path.join(tmp, "d")], capture_output=True, text=True,
+                           check=True)
+    return float(r.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--samples", type=int, default=40)
+    ap.add_argument("--crop", type=int, default=512)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--memory", type=int, default=0, help="also the peak memory of an N-sample set and of N / 10")
+    a = ap.parse_args()
+    from cmosnoise.app import dataset as ds
+
+    print(f"{a.crop} x {a.crop} samples with truth per second (best of {a.repeats}; {os.cpu_count()} cores)")
+    print(f"{'':34s}{'samples/s':>10s}{'per core':>10s}{'x getframes/core':>18s}{'x NumPy ref':>13s}")
+    gf = max(getframes_pairs(a.samples, a.crop) for _ in range(a.repeats))
+    ref = max(numpy_reference(a.samples, a.crop) for _ in range(a.repeats))
+    print(f"{'getframes 2.6.1 pairs (1 process)':34s}{gf:10.1f}{gf:10.1f}{1.0:18.2f}{gf / ref:13.2f}")
+    print(f"{'NumPy reference (1 process)':34s}{ref:10.1f}{ref:10.1f}{ref / gf:18.2f}{1.0:13.2f}")
+    for camera in ("led", "sony-imx900"):
+        recipe = ds.Recipe(samples=a.samples + 1, crop=(a.crop, a.crop), cameras=(camera,), seed=1).to_json()
+        for workers in (1, 2):
+            r = max(rate(recipe, a.samples, workers) for _ in range(a.repeats))
+            print(f"{f'cmosnoise {camera}, {workers} worker(s)':34s}{r:10.1f}{r / workers:10.1f}"
+                  f"{r / workers / gf:18.2f}{r / ref:13.2f}")
+    if a.memory:
+        small, large = peak_rss_mb(a.memory // 10), peak_rss_mb(a.memory)
+        print(f"peak memory of cmosnoise dataset, 64 x 64 crops: {a.memory // 10} samples {small:.0f} MB, "
+              f"{a.memory} samples {large:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
