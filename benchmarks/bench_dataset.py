@@ -109,7 +109,9 @@ def main() -> None:
     ap.add_argument("--crop", type=int, default=512)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--memory", type=int, default=0, help="also the peak memory of an N-sample set and of N / 10")
+    ap.add_argument("--json", help="also write the rows here (docs/readme_numbers.py section dataset_speed)")
     a = ap.parse_args()
+    rows = []
     from cmosnoise.app import dataset as ds
 
     print(f"{a.crop} x {a.crop} samples with truth per second (best of {a.repeats}; {os.cpu_count()} cores)")
@@ -118,16 +120,29 @@ def main() -> None:
     ref = max(numpy_reference(a.samples, a.crop) for _ in range(a.repeats))
     print(f"{'getframes 2.6.1 pairs (1 process)':34s}{gf:10.1f}{gf:10.1f}{1.0:18.2f}{gf / ref:13.2f}")
     print(f"{'NumPy reference (1 process)':34s}{ref:10.1f}{ref:10.1f}{ref / gf:18.2f}{1.0:13.2f}")
+    rows += [{"label": "getframes 2.6.1 pairs", "workers": 1, "per_s": gf},
+             {"label": "NumPy reference", "workers": 1, "per_s": ref}]
     for camera in ("led", "sony-imx900"):
         recipe = ds.Recipe(samples=a.samples + 1, crop=(a.crop, a.crop), cameras=(camera,), seed=1).to_json()
         for workers in (1, 2):
             r = max(rate(recipe, a.samples, workers) for _ in range(a.repeats))
             print(f"{f'cmosnoise {camera}, {workers} worker(s)':34s}{r:10.1f}{r / workers:10.1f}"
                   f"{r / workers / gf:18.2f}{r / ref:13.2f}")
+            rows.append({"label": f"cmosnoise {camera}", "workers": workers, "per_s": r})
     if a.memory:
         small, large = peak_rss_mb(a.memory // 10), peak_rss_mb(a.memory)
         print(f"peak memory of cmosnoise dataset, 64 x 64 crops: {a.memory // 10} samples {small:.0f} MB, "
               f"{a.memory} samples {large:.0f} MB")
+    if a.json:
+        import json
+        import platform
+
+        with open(a.json, "w") as fh:
+            json.dump({"command": "python benchmarks/bench_dataset.py " + " ".join(sys.argv[1:-2]),
+                       "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
+                       "crop": a.crop, "samples": a.samples, "rows": rows,
+                       **({"memory": {"samples": [a.memory // 10, a.memory], "peak_mb": [small, large]}}
+                          if a.memory else {})}, fh, indent=2)
 
 
 if __name__ == "__main__":

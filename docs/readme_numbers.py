@@ -384,6 +384,62 @@ def render_telegraph_fit(d: dict) -> str:
     return "\n".join(lines)
 
 
+DATASET_SAMPLE = ["-q", "dataset", "-n", "1", "--crop", "256", "--camera", "sony-imx900@gain_db=3", "--light",
+                  "300:300", "--seed", "2", "--set", "defects.enabled=true", "--set", "defects.dead_ppm=300",
+                  "--set", "defects.clusters.ppm=200", "--set", "defects.columns.offset_ppm=8000",
+                  "--set", "dark_current.points.0.tail={ppm_above: 2000, threshold_e_per_s: 30, max_e_per_s: 20000}",
+                  "--set", "exposure.integration_time_s=0.05"]
+
+
+def _dataset_sample(tmp: str):
+    from cmosnoise.app import cli
+    from cmosnoise.app import dataset as ds
+
+    assert cli.run([*DATASET_SAMPLE, "--out", f"{tmp}/d"]) == 0
+    return next(ds.read(f"{tmp}/d"))
+
+
+def compute_dataset_sample() -> dict:
+    """One sample of `cmosnoise dataset` (the IMX900 in its high conversion gain, with defects): what it holds."""
+    import tempfile
+
+    import numpy as np
+
+    from cmosnoise.analysis import ground_truth as gt
+    from cmosnoise.analysis import scoring
+
+    with tempfile.TemporaryDirectory() as tmp:
+        arrays, columns = _dataset_sample(tmp)
+    raw, expected, mask = arrays["raw"][0], arrays["expected_raw"][0], arrays["mask"][0]
+    clean = scoring.defect_free(expected, mask, str(columns["cfa"][0]))
+    black, white = float(columns["black_level_dn"][0]), float(columns["white_level_dn"][0])
+    return {"command": "cmosnoise " + " ".join(DATASET_SAMPLE[1:]) + " --out d", "camera": str(columns["camera"][0]),
+            "mode": str(columns["mode"][0]), "k_dn_per_e": float(columns["k_dn_per_e"][0]),
+            "light_e": float(columns["light_e"][0]),
+            "psnr_db": scoring.image_scores(raw, clean, black, white)["psnr_db"],
+            "mask": {k: int(np.sum((mask & v) > 0)) for k, v in gt.MASK_BITS.items()}}
+
+
+def render_dataset_sample(d: dict) -> str:
+    kinds = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in d["mask"].items() if v)
+    return (f"The sample above: `{d['command']}`, the {d['camera']} in its {d['mode']} mode (K {d['k_dn_per_e']:g} "
+            f"DN/e-) at {d['light_e']:.0f} e- at the scene's white. The noisy frame is {d['psnr_db']:.1f} dB from the "
+            f"expected raw without its defects; the mask marks {kinds} pixels.")
+
+
+def render_dataset_speed(d: dict) -> str:
+    gf = d["rows"][0]["per_s"]
+    lines = [f"Measured with `{d['command']}` ({d['machine']}), {d['crop']} x {d['crop']} samples with their truth:", "",
+             "| | workers | samples / s | per core against getframes |", "|---|---|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| {r['label']} | {r['workers']} | {r['per_s']:.1f} | {r['per_s'] / r['workers'] / gf:.2f} |")
+    if "memory" in d:
+        m = d["memory"]
+        lines += ["", f"Peak memory of `cmosnoise dataset` (64 x 64 crops): {m['peak_mb'][0]:.0f} MB for "
+                      f"{m['samples'][0]} samples, {m['peak_mb'][1]:.0f} MB for {m['samples'][1]}."]
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -402,6 +458,8 @@ SECTIONS = {
     "measured_stages": (None, render_measured_stages),
     "telegraph_cost": (None, render_telegraph_cost),
     "telegraph_fit": (None, render_telegraph_fit),
+    "dataset_sample": (compute_dataset_sample, render_dataset_sample),
+    "dataset_speed": (None, render_dataset_speed),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -415,7 +473,8 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "fit_coverage": ["fit_coverage.py", "--json", "fit_coverage.json"],
               "measured_stages": ["bench_measured_stages.py", "--json", "measured_stages.json"],
               "telegraph_cost": ["bench_telegraph.py", "--json", "telegraph_cost.json"],
-              "telegraph_fit": ["fit_telegraph_coverage.py", "--json", "telegraph_fit.json"]}
+              "telegraph_fit": ["fit_telegraph_coverage.py", "--json", "telegraph_fit.json"],
+              "dataset_speed": ["bench_dataset.py", "--memory", "10000", "--json", "dataset_speed.json"]}
 SLOW = {"sweep_fig9"}
 
 
@@ -473,6 +532,46 @@ def images() -> None:
             else:
                 shutil.copyfile(f"{tmp}/f/{src}", out / name)
         shutil.copyfile(f"{tmp}/c/photon_transfer.png", out / "photon_transfer.png")
+        dataset_picture(*_dataset_sample(tmp), out / "dataset_sample.png")
+
+
+def dataset_picture(arrays: dict, columns: dict, path: Path) -> None:
+    """The README's picture of a data set sample: noisy raw, expected raw, perfect image (each as its 2 x 2 cells'
+    means, so the CFA's grid does not show), and the defect mask, a colour per kind."""
+    import numpy as np
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    from cmosnoise.analysis import ground_truth as gt
+    from cmosnoise.app import plots
+
+    def cells(a):
+        a = a.astype(np.float64)
+        return (a[0::2, 0::2] + a[0::2, 1::2] + a[1::2, 0::2] + a[1::2, 1::2]) / 4
+
+    black = float(columns["black_level_dn"][0])
+    top = float(np.percentile(cells(arrays["expected_raw"][0]), 99.5))
+    fig, axes = plots.figure(1, 4, figsize=(13, 3.7))
+    for ax, key, title in zip(axes, ("raw", "expected_raw", "perfect_dn"),
+                              ("noisy raw (what the sensor gives)", "expected raw (the fixed pattern kept)",
+                               "perfect image (an ideal pixel)")):
+        ax.imshow(cells(arrays[key][0]), cmap="gray", vmin=black, vmax=top, interpolation="nearest")
+        ax.set_title(title, fontsize=9)
+    mask = arrays["mask"][0]
+    kinds = [(k, v) for k, v in gt.MASK_BITS.items() if np.any(mask & v)]
+    shown = np.zeros(mask.shape, int)
+    for i, (_, bit) in enumerate(kinds, start=1):
+        shown[(mask & bit) > 0] = i
+    colours = ["black", "#ff4040", "#ffd000", "#40a0ff", "#40ff80", "#ff80ff", "#ffffff", "#ff9020", "#a0a0ff"]
+    axes[3].imshow(shown, cmap=ListedColormap(colours[:len(kinds) + 1]), vmin=0, vmax=len(kinds),
+                   interpolation="nearest")
+    axes[3].set_title("defect mask (full resolution)", fontsize=9)
+    axes[3].legend(handles=[Patch(color=colours[i + 1], label=k.replace("_", " ")) for i, (k, _) in enumerate(kinds)],
+                   fontsize=7, loc="lower left", framealpha=0.8)
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    path.write_bytes(plots.to_png_bytes(fig, dpi=90))
 
 
 def main(argv: list[str]) -> int:
