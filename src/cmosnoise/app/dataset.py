@@ -51,6 +51,7 @@ from ..config import load_config, virtual_cameras
 from ..config.loading import deep_merge, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError
+from ..io.output import resumable_mode
 from ..model import scene as scene_mod
 from ..model.sensor import Sensor
 
@@ -427,18 +428,7 @@ def missing(recipe: Recipe, folder: Path) -> list[int]:
 
 
 def _mode(out: Path, recipe: Recipe, resume: bool, overwrite: bool) -> str:
-    if not (out.is_dir() and any(out.iterdir())):
-        return "new"
-    if resume:
-        old = (out / _MANIFEST).read_text() if (out / _MANIFEST).is_file() else None
-        if old != _manifest(recipe):
-            raise CmosnoiseError(f"--resume: {str(out)!r} holds another data set (its {_MANIFEST} differs); resume "
-                                 "with the same options")
-        return "resume"
-    if not overwrite:
-        raise CmosnoiseError(f"--out {str(out)!r} already exists and is not empty; give --resume to complete that "
-                             "data set, --overwrite to start again, or another folder")
-    return "replace"
+    return resumable_mode(out, _MANIFEST, _manifest(recipe), resume, overwrite, "data set")
 
 
 def _shards_here(recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, bytes]]:

@@ -32,7 +32,7 @@ import yaml
 
 from ..config.loading import load_yaml_text
 from ..errors import CmosnoiseError
-from ..io.output import OutputFolder
+from ..io.output import OutputFolder, resumable_mode
 
 #: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
 DEFECT_TOLERANCE_E = 150.0
@@ -648,18 +648,7 @@ def _write_plan(folder: Path, p: Plan) -> None:
 
 def _mode(out: Path, p: Plan, resume: bool, overwrite: bool) -> str:
     """"new" (no folder, or an empty one), "resume" (the same sweep's folder, --resume) or "replace" (--overwrite)."""
-    if not (out.is_dir() and any(out.iterdir())):
-        return "new"
-    if resume:
-        old = (out / "sweep.yaml").read_text() if (out / "sweep.yaml").is_file() else None
-        if old != _plan_text(p):
-            raise CmosnoiseError(f"--resume: {str(out)!r} holds another sweep (its sweep.yaml differs); "
-                                 "resume with the same options")
-        return "resume"
-    if not overwrite:
-        raise CmosnoiseError(f"--out {str(out)!r} already exists and is not empty; give --resume to continue that "
-                             "sweep, --overwrite to start again, or another folder")
-    return "replace"
+    return resumable_mode(out, "sweep.yaml", _plan_text(p), resume, overwrite, "sweep")
 
 
 def sweep_from_yaml(path: Path) -> dict:

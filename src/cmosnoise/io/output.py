@@ -362,3 +362,22 @@ def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def resumable_mode(out: Path, record: str, expected: str, resume: bool, overwrite: bool, what: str) -> str:
+    """How a resumable job (a sweep, a data set) treats ``out``: "new" (no folder, or an empty one), "resume"
+    (``resume``, and the folder's ``record`` file holds ``expected``: the same job) or "replace" (``overwrite``).
+    Anything else is a one-line refusal naming ``what`` the folder holds."""
+    out = Path(out)
+    if not (out.is_dir() and any(out.iterdir())):
+        return "new"
+    if resume:
+        old = (out / record).read_text() if (out / record).is_file() else None
+        if old != expected:
+            raise CmosnoiseError(f"--resume: {str(out)!r} holds another {what} (its {record} differs); resume with the "
+                                 "same options")
+        return "resume"
+    if not overwrite:
+        raise CmosnoiseError(f"--out {str(out)!r} already exists and is not empty; give --resume to continue that "
+                             f"{what}, --overwrite to start again, or another folder")
+    return "replace"
