@@ -76,3 +76,13 @@ def test_bad_input_is_one_line(data, tmp_path, args, needle):
 def test_not_a_data_set(tmp_path):
     r = cli("evaluate", "--data", tmp_path, "--out", tmp_path / "e")
     assert r.returncode == 2 and "not a data set" in r.stderr
+
+
+def test_bm3d_denoises_better_than_the_noisy_frame(tmp_path):
+    folder = tmp_path / "d"
+    assert cli("-q", "dataset", "-n", "2", "--crop", "48", "--camera", "sony-imx900@gain_db=3", "--light",
+               "100:100", "--out", folder).returncode == 0
+    r = cli("-q", "evaluate", "--data", folder, "--method", "none", "--method", "bm3d", "--out", tmp_path / "e")
+    assert r.returncode == 0, r.stderr
+    means = pd.read_csv(tmp_path / "e" / "scores.csv").groupby("method")["psnr_db"].mean()
+    assert means["bm3d"] > means["none"] + 1.0

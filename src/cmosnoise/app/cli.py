@@ -514,9 +514,9 @@ def dataset(
 def evaluate(
     ctx: typer.Context,
     data: Path = typer.Option(..., "--data", help="a data set folder (cmosnoise dataset)"),
-    method: Optional[List[str]] = typer.Option(None, "--method", "-m", help="none, median, dark-map, gaussian, or "
-                                               "your module:function (raw in, raw out); repeatable (default: the "
-                                               "four built-ins)"),
+    method: Optional[List[str]] = typer.Option(None, "--method", "-m", help="none, median, dark-map, gaussian, bm3d, "
+                                               "or your module:function (raw in, raw out); repeatable (default: "
+                                               "the first four)"),
     outputs: Optional[Path] = typer.Option(None, "--outputs", help="a folder of your method's outputs, "
                                            "sample_NNNNNN.npy or .tif, scored beside the methods"),
     target: str = typer.Option("expected", "--target", help="expected (the expected raw: the fixed pattern kept) or "
@@ -527,7 +527,7 @@ def evaluate(
     """Score denoisers and defect correctors on a data set: PSNR, SSIM and defects left, beside baselines."""
     from . import evaluate as ev
 
-    methods = list(method) if method else (["none"] if outputs is not None else list(ev.BASELINES))
+    methods = list(method) if method else (["none"] if outputs is not None else list(ev.DEFAULT_METHODS))
     show = err_console.is_terminal and _level(ctx) >= 0
     with Progress(TextColumn("[bold]evaluate"), BarColumn(), MofNCompleteColumn(), TextColumn("samples"),
                   TimeRemainingColumn(), console=err_console, disable=not show) as bar:
