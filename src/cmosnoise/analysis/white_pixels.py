@@ -47,12 +47,23 @@ def _pair_starts(mask: np.ndarray, pattern: str) -> list[tuple[tuple[int, int], 
 
 
 def couplet_pairs(mask: np.ndarray, pattern: str) -> np.ndarray:
-    """Coordinates of every couplet: array (n, 2, 2) of ((r1, c1), (r2, c2))."""
+    """Coordinates of every couplet: array (n, 2, 2) of ((r1, c1), (r2, c2)), offset by offset, each offset's in
+    row-major order of their first pixel.
+
+    From the white pixels' coordinates (one pass over the map, then work in their number): which CFA positions
+    may start a pair along each offset is :func:`_pair_starts` of one 2 x 2 cell (the CFA repeats every 2).
+    """
     mask = np.asarray(mask, dtype=bool)
+    rows, cols = mask.shape
+    r, c = np.nonzero(mask)
+    index = r.astype(np.int64) * cols + c
     pairs = []
-    for (dr, dc), start in _pair_starts(mask, pattern):
-        r, c = np.nonzero(_shifted_pairs(start, mask, dr, dc))
-        pairs.append(np.stack([np.stack([r, c], -1), np.stack([r + dr, c + dc], -1)], 1))
+    for (dr, dc), start in _pair_starts(np.ones((2, 2), bool), pattern):
+        ok = start[r % 2, c % 2] & (r + dr < rows) & (c + dc >= 0) & (c + dc < cols)
+        rs, cs = r[ok], c[ok]
+        hit = np.isin((rs + dr).astype(np.int64) * cols + cs + dc, index)
+        rs, cs = rs[hit], cs[hit]
+        pairs.append(np.stack([np.stack([rs, cs], -1), np.stack([rs + dr, cs + dc], -1)], 1))
     return np.concatenate(pairs) if pairs else np.zeros((0, 2, 2), int)
 
 
