@@ -175,6 +175,37 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     each of the two normal components), and ``quantized`` marks those pixels
     (the others' means are the charge's, for :func:`~cmosnoise.model.stages.adc.expected_code`).
     """
+    terms = readout_terms(sensor, signal_e, photo_e, exposure)
+    shape = sensor.shape
+    mean_n, shot, read, col_read = terms["mean_n"], terms["shot"], terms["read"], terms["col_read"]
+    row_off, col_off, gain = terms["row_off"], terms["col_off"], terms["gain"]
+    mean = np.broadcast_to((mean_n + row_off) * gain + col_off, shape).copy()
+    var = np.broadcast_to((shot + read) * (gain * gain) + col_read, shape).copy()
+    # only pixels within 10 sigma of a clip need the clipped moments (a few, unless the scene is near saturation)
+    near = (mean_n + 10 * np.sqrt(shot) + 1 >= terms["fw"]) | (mean + 10 * np.sqrt(var) + 1 >= terms["top"])
+    if not near.any():
+        return {"mean": mean, "var": var, "p_full_well": None, "p_top": None, "quantized": None}
+    idx = np.nonzero(near)
+    part = near_moments(sensor, terms, idx, codes)
+    mean[idx] = part["mean"]
+    var[idx] = part["var"]
+    p_full = np.zeros(shape)
+    p_full[idx] = part["p_full_well"]
+    p_top = np.zeros(shape)
+    p_top[idx] = part["p_top"]
+    quantized = None
+    if part["quantized"] is not None:
+        quantized = np.zeros(shape, bool)
+        quantized[idx] = part["quantized"]
+    return {"mean": mean, "var": var, "p_full_well": p_full, "p_top": p_top, "quantized": quantized}
+
+
+def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None, exposure=None) -> dict:
+    """The terms :func:`clipped_moments` combines, each as it comes (a scalar, per row (rows, 1), per column
+    (1, cols) or per pixel; never expanded): the mean charge ``mean_n`` and its shot variance ``shot``, the
+    read variance before the column gain ``read`` and after it ``col_read`` (e-^2), the offsets before the
+    column gain ``row_off`` and after it ``col_off`` (e-), the column ``gain``; the full well ``fw`` and the
+    top code's charge ``top`` (e-)."""
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
@@ -192,10 +223,8 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     shape = sensor.shape
     mean_n = np.broadcast_to(photo + dark, shape)
     shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
-    fw = c.sensor.full_well_e
     # the top code's charge (values within half a code of it round to it)
     top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
-    # the other terms as they come: per pixel, (rows, 1) or (1, cols); broadcast, never expanded
     read = sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0  # before the column gain, e-^2
     if c.source_follower.enabled:
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
@@ -217,19 +246,22 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
 
             col_off = col_off + black_map(cells, (0, shape[0], 0, shape[1])) / t.gain_dn_per_e
     gain = fp.column_gain.astype(np.float64) if fp.column_gain is not None else 1.0
-    g2 = gain * gain
-    mean = np.broadcast_to((mean_n + row_off) * gain + col_off, shape).copy()
-    var = np.broadcast_to((shot + read) * g2 + col_read, shape).copy()
-    # only pixels within 10 sigma of a clip need the clipped moments (a few, unless the scene is near saturation)
-    near = (mean_n + 10 * np.sqrt(shot) + 1 >= fw) | (mean + 10 * np.sqrt(var) + 1 >= top)
-    if not near.any():
-        return {"mean": mean, "var": var, "p_full_well": None, "p_top": None, "quantized": None}
-    idx = np.nonzero(near)
+    return {"mean_n": mean_n, "shot": shot, "read": read, "col_read": col_read, "row_off": row_off,
+            "col_off": col_off, "gain": gain, "fw": float(c.sensor.full_well_e), "top": top}
+
+
+def near_moments(sensor: Sensor, terms: dict, idx: tuple, codes: bool = False) -> dict:
+    """:func:`clipped_moments` at the pixels ``idx`` (a tuple of row and column index arrays) near a clip."""
+    c = sensor.config
+    t = sensor.transfer
+    shape = sensor.shape
+    fw, top = terms["fw"], terms["top"]
 
     def at(a):
         return np.broadcast_to(np.asarray(a, np.float64), shape)[idx]
 
-    mn, sh, rd, cr, ro, co, g = (at(a) for a in (mean_n, shot, read, col_read, row_off, col_off, gain))
+    mn, sh, rd, cr, ro, co, g = (at(terms[k]) for k in ("mean_n", "shot", "read", "col_read", "row_off", "col_off",
+                                                        "gain"))
     # the charge: N ~ Normal(mn, sh), clipped at the full well with probability p_fw
     p_fw = 1.0 - _cdf((fw - mn) / np.sqrt(np.maximum(sh, 1e-300)))
     m_below, v_below = _truncated_below(mn, sh, fw)  # N given N < FW
@@ -241,20 +273,13 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     if codes and c.adc.enabled:
         e_c, at_c = _top_code((fw + ro) * g + co, rd * g * g + cr, t)
         e_u, at_u = _top_code((m_below + ro) * g + co, (v_below + rd) * g * g + cr, t)
-        both = at_c | at_u  # either component within reach of the top code: the code expectation for both
+        quantized = at_c | at_u  # either component within reach of the top code: the code expectation for both
         e_c = np.where(at_c, e_c, (t.black_level_dn + t.gain_dn_per_e * ((fw + ro) * g + co)))
         e_u = np.where(at_u, e_u, (t.black_level_dn + t.gain_dn_per_e * ((m_below + ro) * g + co)))
-        m = np.where(both, ((p_fw * e_c + (1 - p_fw) * e_u) - t.black_level_dn) / t.gain_dn_per_e, m)
-        quantized = np.zeros(shape, bool)
-        quantized[idx] = both
+        m = np.where(quantized, ((p_fw * e_c + (1 - p_fw) * e_u) - t.black_level_dn) / t.gain_dn_per_e, m)
     second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
-    mean[idx] = m
-    var[idx] = np.maximum(second - m**2, 0.0)
-    p_full = np.zeros(shape)
-    p_full[idx] = p_fw
-    p_top = np.zeros(shape)
-    p_top[idx] = p_fw * q_c + (1 - p_fw) * q_u
-    return {"mean": mean, "var": var, "p_full_well": p_full, "p_top": p_top, "quantized": quantized}
+    return {"mean": m, "var": np.maximum(second - m**2, 0.0), "p_full_well": p_fw, "p_top": p_fw * q_c + (1 - p_fw) * q_u,
+            "quantized": quantized}
 
 
 def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None) -> dict:
