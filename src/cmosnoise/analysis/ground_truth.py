@@ -22,8 +22,8 @@ What a denoiser, a defect corrector or an ISP pipeline is scored against
 - **the defect mask**: uint16 bits, one per kind (:data:`MASK_BITS`). A
   pixel that is two things has both bits.
 
-The perfect image, the expected raw and the mask together cost about one
-frame's time (``benchmarks/bench_dataset.py``).
+The perfect image, the expected raw and the mask together cost 0.9 to 1.9
+frames' time (measured at 512 x 512, VGA and 1080p).
 """
 
 from __future__ import annotations
