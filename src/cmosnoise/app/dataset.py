@@ -48,7 +48,7 @@ import numpy as np
 from .._version import __version__
 from ..analysis import ground_truth
 from ..config import load_config, virtual_cameras
-from ..config.loading import deep_merge, preset_names
+from ..config.loading import deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError
 from ..io.output import resumable_mode
@@ -188,11 +188,18 @@ class Sources:
 
     images: dict = field(default_factory=dict)
     presets: dict = field(default_factory=dict)  #: the presets' configurations, loaded once
+    preset_texts: dict = field(default_factory=dict)  #: the presets' files as data, read once
 
     def preset(self, name: str | None):
         if name not in self.presets:
-            self.presets[name] = load_config(preset=name)
+            self.presets[name] = load_config(extra=self.preset_data(name))
         return self.presets[name]
+
+    def preset_data(self, name: str | None) -> dict:
+        """A preset file's data (``{}`` for None): what ``load_config(preset=name)`` merges first."""
+        if name not in self.preset_texts:
+            self.preset_texts[name] = preset_data(name) if name else {}
+        return self.preset_texts[name]
 
     def image(self, source: str) -> np.ndarray:
         if source not in self.images:
@@ -259,7 +266,8 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     }
     merged = deep_merge(updates, sample)
     try:
-        config = load_config(preset=preset, extra=merged, overrides=list(recipe.overrides))
+        # the preset's data merged under the sample's, as load_config(preset=...) does, without reading the file
+        config = load_config(extra=deep_merge(sources.preset_data(preset), merged), overrides=list(recipe.overrides))
     except CmosnoiseError as exc:
         raise CmosnoiseError(f"sample {index} ({camera}): {exc}") from None
     sensor = config.sensor
