@@ -30,6 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -104,6 +105,20 @@ def stage_costs(cases, frames: int, repeats: int, size=(1920, 1080)) -> list[dic
         rows.append({"label": label, "ms": 1e3 * t, "ref_ms": 1e3 * t_ref, "ratio": t / t_ref})
         print(f"{label}: {1e3 * t:.1f} ms/frame, reference {1e3 * t_ref:.1f} ms, ratio {t / t_ref:.3f}")
     return rows
+
+
+def stage_cost(a, off: str, on: str, extra: dict) -> tuple[list[dict], float]:
+    """A stage's cost per frame: the rows of :func:`stage_costs` for the default chain (``off``) and with ``extra``
+    (``on``), and the ratio of their ratios less 1."""
+    rows = stage_costs(((off, {}), (on, extra)), a.frames, a.repeats)
+    return rows, rows[1]["ratio"] / rows[0]["ratio"] - 1
+
+
+def save_cost(a, rows: list[dict], cost: float, **more) -> None:
+    """Write a stage-cost measurement to ``--json`` (when given): the CPU, threads, frames, rows and cost."""
+    if a.json:
+        Path(a.json).write_text(json.dumps({**cpu(), "threads": a.threads, "frames": a.frames, "rows": rows,
+                                            "cost": cost, **more}, indent=1))
 
 
 def cpu() -> dict:

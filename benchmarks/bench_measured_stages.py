@@ -10,13 +10,12 @@ ratio of the two ratios is the stages' cost, free of a shared machine's slow spe
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from bench_chain import cost_arguments, cpu, stage_costs  # noqa: E402
+from bench_chain import cost_arguments, save_cost, stage_cost  # noqa: E402
 
 ALL_ON = {
     "pixel_offset": {"enabled": True, "sigma_e": 3.0, "tail": {"ppm_above": 200, "threshold_e": 20, "max_e": 200}},
@@ -28,13 +27,10 @@ ALL_ON = {
 
 def main() -> None:
     a = cost_arguments(__doc__, "also write the results here (docs/numbers/measured_stages.json feeds the README)")
-    rows = stage_costs((("every measured-sensor stage off (the default)", {}),
-                         ("offsets, cell black levels, nonlinearity, Tukey-lambda read noise on", ALL_ON)), a.frames, a.repeats)
-    cost = rows[1]["ratio"] / rows[0]["ratio"] - 1
+    rows, cost = stage_cost(a, "every measured-sensor stage off (the default)",
+                            "offsets, cell black levels, nonlinearity, Tukey-lambda read noise on", ALL_ON)
     print(f"the stages cost {100 * cost:+.1f} % per frame ({a.threads} threads)")
-    if a.json:
-        Path(a.json).write_text(json.dumps({**cpu(), "threads": a.threads, "frames": a.frames, "rows": rows,
-                                            "cost": cost}, indent=1))
+    save_cost(a, rows, cost)
 
 
 if __name__ == "__main__":

@@ -10,14 +10,13 @@ alternately with it, so the ratio of the two ratios is RTS's cost, free of a sha
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from bench_chain import cost_arguments, cpu, stage_costs  # noqa: E402
+from bench_chain import cost_arguments, save_cost, stage_cost  # noqa: E402
 
 from cmosnoise import Sensor, load_config  # noqa: E402
 
@@ -30,9 +29,8 @@ RTS_ON = {
 
 def main() -> None:
     a = cost_arguments(__doc__, "also write the results here (docs/numbers/telegraph_cost.json feeds the README)")
-    rows = stage_costs((("without RTS (the default)", {}),
-                         ("1000 ppm source-follower RTS pixels and 100 ppm blinking pixels", RTS_ON)), a.frames, a.repeats)
-    cost = rows[1]["ratio"] / rows[0]["ratio"] - 1
+    rows, cost = stage_cost(a, "without RTS (the default)",
+                            "1000 ppm source-follower RTS pixels and 100 ppm blinking pixels", RTS_ON)
     print(f"RTS costs {100 * cost:+.1f} % per frame ({a.threads} threads; the issue allows +20 %)")
     vga = Sensor(load_config(extra=RTS_ON), seed=0).expose("photo")
     vga.frame(0)
@@ -40,9 +38,7 @@ def main() -> None:
     vga.frame(1_000_000)
     far = time.perf_counter() - t0
     print(f"frame 1 000 000 alone at 640 x 480 with RTS: {1e3 * far:.1f} ms")
-    if a.json:
-        Path(a.json).write_text(json.dumps({**cpu(), "threads": a.threads, "frames": a.frames, "rows": rows,
-                                            "cost": cost, "frame_1e6_vga_ms": 1e3 * far}, indent=1))
+    save_cost(a, rows, cost, frame_1e6_vga_ms=1e3 * far)
 
 
 if __name__ == "__main__":

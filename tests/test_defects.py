@@ -95,6 +95,19 @@ def test_a_region_and_the_numpy_path_equal_the_whole_frame(off):
     assert np.abs(parts - detail.electrons).max() < 12 * 2e4 * 2.0**-24
 
 
+def test_offset_columns_alone_give_no_row_part_and_their_own():
+    cfg = {"defects": {"enabled": True, "columns": {"offset_ppm": 50000}}, "row_noise": {"enabled": False},
+           "column_noise": {"enabled": False}}
+    shot = Sensor(cfg).expose("photo")
+    detail = shot.frame(1, detail=True)
+    at, offset = shot.sensor.fixed_pattern.defects.columns.of(defects.LINE_OFFSET)
+    assert at.size > 0 and "row_noise" not in detail.contributions
+    np.testing.assert_array_equal(detail.contributions["column_noise"], 0.0)  # the column stage ran at sigma 0
+    np.testing.assert_array_equal(detail.contributions["defects"][:, at], np.broadcast_to(
+        offset.astype(np.float32), (shot.sensor.shape[0], at.size)))
+    assert np.array_equal(detail.raw, shot.frame(1))
+
+
 def test_each_defect_does_what_it_says():
     cfg = quiet_config(defects=ALL, shot_noise={"enabled": True})
     sensor = Sensor(cfg)

@@ -1,6 +1,7 @@
 """The ground truth is what it claims: frames average to the expected raw, the mask is the defects placed."""
 
 import numpy as np
+import pytest
 from conftest import Z
 
 from cmosnoise import Sensor
@@ -71,6 +72,18 @@ def test_the_mask_is_the_defects_placed():
     assert np.array_equal((m & gt.MASK_BITS["white"]) > 0, white)
     # a region's mask is that region of the whole one (couplets across its edge included)
     assert np.array_equal(gt.mask(sensor, (13, 61, 7, 90)), m[13:61, 7:90])
+
+
+@pytest.mark.parametrize("over", [{}, {"exposure": {"integration_time_s": 0.03, "peak_rate_e_per_s": 6e5}},
+                                  {"read_noise": {"enabled": True, "distribution": "normal", "scale_dn": 0.3}}])
+def test_the_compiled_pass_gives_the_numpy_paths_bits(over, monkeypatch):
+    """The pixels far from a clip take one compiled pass (ground_truth._far_pixels); without numba the NumPy
+    functions make every pixel. The same bits: clips reached (a bright ramp), and below 1 DN of noise (the
+    quantizer's sum over codes)."""
+    shot = small(**over).expose("ramp")
+    compiled = gt.expected_raw(shot)
+    monkeypatch.setattr(gt, "_far_pixels", None)
+    assert np.array_equal(compiled, gt.expected_raw(shot))
 
 
 def test_the_perfect_image_is_the_scene_on_an_ideal_pixel():

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..engine.telegraph import in_region
 from ..model import cfa as cfa_mod
 from ..model.sensor import Exposure, region_of
 from ..model.stages import defects as defects_mod
@@ -66,10 +67,6 @@ class Truth:
     mask: np.ndarray  #: the defect mask, uint16 bits of MASK_BITS
     white_threshold_e_per_s: float | None  #: the dark current above which a pixel is white (None: no dark current)
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {"perfect_e": self.perfect_e, "perfect_dn": self.perfect_dn, "expected_raw": self.expected_raw,
-                "mask": self.mask}
-
 
 def white_threshold(sensor, threshold_e_per_s: float | None = None) -> float | None:
     """The white-pixel threshold, e-/s: the one given, else the dark-current model's own (its nearest
@@ -97,17 +94,15 @@ def mask(sensor, region=None, white_threshold_e_per_s: float | None = None) -> n
         m0, m1, n0, n1 = max(r0 - 2, 0), min(r1 + 2, rows), max(c0 - 2, 0), min(c1 + 2, cols)
         white = fp.dark_rate[m0:m1, n0:n1] > thr
         couplet = np.zeros_like(white)
-        pairs = couplet_pairs(white, _phase(sensor.cfa, m0, n0))
+        pairs = couplet_pairs(white, cfa_mod.crop_pattern(sensor.cfa, m0, n0))
         couplet[pairs[:, :, 0].ravel(), pairs[:, :, 1].ravel()] = True
         inner = (slice(r0 - m0, r1 - m0), slice(c0 - n0, c1 - n0))
         out[white[inner]] |= MASK_BITS["white"]
         out[couplet[inner]] |= MASK_BITS["couplet"]
 
     def mark(index, bit):
-        i = np.asarray(index).astype(np.int64)
-        r, c = i // cols - r0, i % cols - c0
-        keep = (r >= 0) & (r < r1 - r0) & (c >= 0) & (c < c1 - c0)
-        out[r[keep], c[keep]] |= np.uint16(bit)
+        r, c, _ = in_region(index, (r0, r1, c0, c1), cols)
+        out[r, c] |= np.uint16(bit)
 
     d = fp.defects
     if d is not None:
@@ -123,14 +118,6 @@ def mask(sensor, region=None, white_threshold_e_per_s: float | None = None) -> n
     if fp.blinkers is not None:
         mark(fp.blinkers.index, MASK_BITS["blinking"])
     return out
-
-
-def _phase(pattern: str, r0: int, c0: int) -> str:
-    """The CFA pattern of a crop that starts at (r0, c0)."""
-    if cfa_mod.is_mono(pattern):
-        return pattern
-    grid = [[pattern[0], pattern[1]], [pattern[2], pattern[3]]]
-    return "".join(grid[(r0 + i) % 2][(c0 + j) % 2] for i in (0, 1) for j in (0, 1))
 
 
 def expected_raw(exposure: Exposure) -> np.ndarray:
@@ -162,20 +149,10 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
                     float(t.max_code), out, near)
         if near.any():
             idx = np.nonzero(near)
-            part = noise_budget.near_moments(sensor, terms, idx, codes=True)
-            mean_dn = t.black_level_dn + t.gain_dn_per_e * part["mean"]
-            code = expected_code(mean_dn, t.gain_dn_per_e * np.sqrt(part["var"]))
-            code = np.where(part["quantized"], mean_dn, code)
-            out[idx] = np.clip(code, 0, t.max_code).astype(np.float32)
+            out[idx] = _codes(noise_budget.near_moments(sensor, terms, idx, codes=True), t)
         top = t.max_code
     elif c.adc.enabled:
-        mo = noise_budget.clipped_moments(sensor, exposure=exposure, codes=True)
-        mean_dn = t.black_level_dn + t.gain_dn_per_e * mo["mean"]
-        sigma_dn = t.gain_dn_per_e * np.sqrt(mo["var"])
-        code = expected_code(mean_dn, sigma_dn)
-        if mo["quantized"] is not None:  # near the top code: already the quantizer's expectation
-            code = np.where(mo["quantized"], mean_dn, code)
-        out = np.clip(code, 0, t.max_code).astype(np.float32)
+        out = _codes(noise_budget.clipped_moments(sensor, exposure=exposure, codes=True), t)
         top = t.max_code
     else:
         out = noise_budget.clipped_moments(sensor, exposure=exposure)["mean"].astype(np.float32)
@@ -184,6 +161,16 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
         defects_mod.stick(out, sensor.fixed_pattern.defects, (0, sensor.shape[0], 0, sensor.shape[1]), top,
                           rounded=c.adc.enabled)
     return out
+
+
+def _codes(moments: dict, t) -> np.ndarray:
+    """The expected codes (float32) of the charge's clipped ``moments`` (mean, var e-; ``quantized``: where the
+    mean is already the quantizer's expectation near the top code, referred to e-)."""
+    mean_dn = t.black_level_dn + t.gain_dn_per_e * moments["mean"]
+    code = expected_code(mean_dn, t.gain_dn_per_e * np.sqrt(moments["var"]))
+    if moments["quantized"] is not None:
+        code = np.where(moments["quantized"], mean_dn, code)
+    return np.clip(code, 0, t.max_code).astype(np.float32)
 
 
 def _compile_far_pixels():

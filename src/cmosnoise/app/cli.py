@@ -100,6 +100,17 @@ def _run_overrides(scene, frames, first_frame, seed, process=None, dark_frames=N
     return extra
 
 
+@contextlib.contextmanager
+def _counting(ctx: typer.Context, label: str, unit: str = ""):
+    """A progress bar on stderr (a terminal, not -q) for a job that reports ``progress(done, total)``: yields that
+    callback."""
+    columns = [TextColumn(f"[bold]{label}"), BarColumn(), MofNCompleteColumn(), *([TextColumn(unit)] if unit else []),
+               TimeRemainingColumn()]
+    with Progress(*columns, console=err_console, disable=not (err_console.is_terminal and _level(ctx) >= 0)) as bar:
+        task = bar.add_task(label, total=None)
+        yield lambda done, total: bar.update(task, completed=done, total=total)
+
+
 def _progress_factory(enabled: Optional[bool], pixels: int):
     def factory(n: int):
         show = enabled if enabled is not None else (err_console.is_terminal and n * pixels >= 5_000_000)
@@ -345,14 +356,7 @@ def sweep(
         vary, instances, frames, scene, spec = opts["vary"], opts["instances"], opts["frames"], opts["scene"], opts["specs"]
     else:
         base = _sensor(config, preset, set_).config
-    show = err_console.is_terminal and _level(ctx) >= 0
-    with Progress(TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  console=err_console, disable=not show) as bar:
-        task = bar.add_task("instances", total=None)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
+    with _counting(ctx, "sweep") as progress:
         df = sw.run(base, vary or [], instances, out, frames, scene, spec, scheduler, workers, resume, overwrite,
                     progress=progress, say=lambda m: _say(ctx, m), metrics=metric)
     points = df["point"].nunique()
@@ -452,7 +456,8 @@ def presets():
 @app.command()
 def dataset(
     ctx: typer.Context,
-    samples: int = typer.Option(..., "--samples", "-n", min=1, max=10**9, help="how many samples"),
+    samples: int = typer.Option(..., "--samples", "-n", min=1, max=10**9,  # dataset.MAX_SAMPLES (not imported here)
+                                help="how many samples"),
     crop: str = typer.Option("512", "--crop", help="sample size: SIZE or HEIGHTxWIDTH, even (the CFA cell kept)"),
     out: Path = typer.Option(Path("cmosnoise-dataset"), "--out", "-o", help="output folder"),
     format_: str = typer.Option("hdf5", "--format", help="hdf5 (chunked, compressed shards), npz or fits"),
@@ -499,13 +504,9 @@ def dataset(
                        light_e=pair(light, "--light"), integration_time_s=pair(exposure, "--exposure"),
                        temperature_c=pair(temperature, "--temperature"), overrides=tuple(set_ or ()),
                        white_threshold_e_per_s=white_threshold, shard_size=shard_size, format=format_.lower())
-    show = err_console.is_terminal and _level(ctx) >= 0
-    with Progress(TextColumn("[bold]dataset"), BarColumn(), MofNCompleteColumn(), TextColumn("samples"),
-                  TimeRemainingColumn(), console=err_console, disable=not show) as bar:
-        task = bar.add_task("samples", total=samples)
+    with _counting(ctx, "dataset", "samples") as progress:
         ds.build(recipe, out, resume=resume, overwrite=overwrite, scheduler=scheduler, workers=workers,
-                 progress=lambda done, total: bar.update(task, completed=done, total=total),
-                 say=lambda m: _say(ctx, m))
+                 progress=progress, say=lambda m: _say(ctx, m))
     _say(ctx, f"wrote {samples} sample(s) of {shape[0]} x {shape[1]} in {recipe.shards()} {recipe.format} shard(s) "
               f"to {out}/ (dataset.json names them)")
 
@@ -528,12 +529,8 @@ def evaluate(
     from . import evaluate as ev
 
     methods = list(method) if method else (["none"] if outputs is not None else list(ev.DEFAULT_METHODS))
-    show = err_console.is_terminal and _level(ctx) >= 0
-    with Progress(TextColumn("[bold]evaluate"), BarColumn(), MofNCompleteColumn(), TextColumn("samples"),
-                  TimeRemainingColumn(), console=err_console, disable=not show) as bar:
-        task = bar.add_task("samples", total=None)
-        ev.run(data, methods, out, outputs, target, overwrite,
-               progress=lambda done, total: bar.update(task, completed=done, total=total))
+    with _counting(ctx, "evaluate", "samples") as progress:
+        ev.run(data, methods, out, outputs, target, overwrite, progress=progress)
     _say(ctx, f"scored {', '.join(methods + (['outputs'] if outputs is not None else []))} on {data}: "
               f"{out}/report.html, scores.csv, summary.csv")
 

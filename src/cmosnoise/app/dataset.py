@@ -37,7 +37,6 @@ import contextlib
 import io
 import json
 import math
-import os
 import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -51,7 +50,7 @@ from ..config import load_config, virtual_cameras
 from ..config.loading import deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError
-from ..io.output import resumable_mode
+from ..io.output import atomic_file, resumable_mode
 from ..model import scene as scene_mod
 from ..model.sensor import Sensor
 
@@ -71,6 +70,8 @@ COLUMNS = {
     "source": "str", "window_row": "int64", "window_col": "int64", "config": "str",
 }
 _MANIFEST = "dataset.json"
+#: the most samples a data set (or a stream) holds
+MAX_SAMPLES = 10**9
 
 
 @dataclass(frozen=True)
@@ -124,8 +125,8 @@ class Recipe:
 def check(recipe: Recipe, sources: "Sources | None" = None) -> Recipe:
     """``recipe`` if every part is usable; raises CmosnoiseError naming the first that is not (before any work)."""
     r = recipe
-    if not 1 <= r.samples <= 10**9:
-        raise CmosnoiseError(f"--samples {r.samples}: give 1 to 1000000000")
+    if not 1 <= r.samples <= MAX_SAMPLES:
+        raise CmosnoiseError(f"--samples {r.samples}: give 1 to {MAX_SAMPLES}")
     if len(r.crop) != 2 or min(r.crop) < 2 or max(r.crop) > 30000 or any(c % 2 for c in r.crop):
         raise CmosnoiseError(f"--crop {r.crop}: give an even size from 2 to 30000 (the CFA's 2 x 2 cell kept whole)")
     if r.format not in FORMATS:
@@ -227,12 +228,14 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     cam = recipe.cameras[int(rng.integers(len(recipe.cameras)))]
     name, _, gain = cam.partition("@")
     updates: dict = {}
-    preset = None
-    if name in virtual_cameras.FAMILIES:
+    virtual = name in virtual_cameras.FAMILIES
+    preset = None if virtual else name
+    # its exposure and temperature are the sample's defaults (a gain row or a virtual camera changes neither)
+    base = sources.preset(preset)
+    if virtual:
         camera, updates = virtual_cameras.sample(name, rng)
     else:
-        preset, camera = name, name
-        base = sources.preset(preset)
+        camera = name
         if gain:
             updates["sensor"] = _gain_update(cam)
         elif base.gain_table:
@@ -248,7 +251,6 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     row = 2 * int(rng.integers((img.shape[0] - h) // 2 + 1))  # even corners: the CFA phase of the source kept
     col = 2 * int(rng.integers((img.shape[1] - w) // 2 + 1))
     light = math.exp(rng.uniform(math.log(recipe.light_e[0]), math.log(recipe.light_e[1])))
-    base = sources.preset(preset)  # a gain row or a virtual camera changes neither the exposure nor the temperature
     t = base.exposure.integration_time_s
     if recipe.integration_time_s is not None:
         t = math.exp(rng.uniform(*(math.log(v) for v in recipe.integration_time_s)))
@@ -415,12 +417,8 @@ def _decoded(a: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------ the folder
 def _write(folder: Path, name: str, data: bytes) -> None:
-    tmp = folder / f".{name}.tmp-{os.getpid()}"
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, folder / name)
+    with atomic_file(folder / name) as tmp:
+        tmp.write_bytes(data)
 
 
 def _manifest(recipe: Recipe) -> str:
@@ -448,16 +446,12 @@ def _shards_here(recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, bytes]]
 def _shards_on(client, recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, bytes]]:
     from distributed import as_completed
 
+    from .sweep import task_result
+
     recipe_json = recipe.to_json()
     futures = {client.submit(shard_bytes, recipe_json, s, pure=False, retries=2): s for s in todo}
     for future in as_completed(futures):
-        try:
-            data = future.result()
-        except CmosnoiseError:
-            raise
-        except Exception as exc:
-            first = (str(exc).strip().splitlines() or [""])[0][:200]
-            raise CmosnoiseError(f"a dataset task failed: {type(exc).__name__}: {first}") from None
+        data = task_result(future, "a dataset task")
         future.release()
         yield futures[future], data
 
@@ -470,7 +464,7 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
     ``scheduler``: the shards are made on Dask (a LocalCluster of processes, or that scheduler); the bytes
     are the same."""
     from ..io.output import OutputFolder
-    from .sweep import _close, connect
+    from .sweep import connect, disconnect
 
     check(recipe)
     out = Path(out)
@@ -485,7 +479,7 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
                 mode = _mode(out, recipe, resume, overwrite)
                 work = out
                 work.mkdir(parents=True, exist_ok=True)
-                for stale in work.glob(".shard-*.tmp-*"):  # a shard an interrupted run had not finished
+                for stale in work.glob(".shard-*.tmp"):  # a shard an interrupted run had not finished
                     stale.unlink()
             if mode != "resume":
                 _write(work, _MANIFEST, _manifest(recipe).encode())
@@ -499,7 +493,7 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
                     f"making {len(todo)}")
             if todo and (workers is not None or scheduler is not None):
                 client, cluster = connect(scheduler, workers, say)
-                stack.callback(_close, client, cluster)
+                stack.callback(disconnect, client, cluster)
                 made = _shards_on(client, recipe, todo)
             else:
                 made = _shards_here(recipe, todo)

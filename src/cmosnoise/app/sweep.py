@@ -428,13 +428,7 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
         running = as_completed([submit(x) for x in itertools.islice(queue, window)])
         finished = len(done)
         for future in running:
-            try:
-                rec = future.result()
-            except CmosnoiseError:
-                raise
-            except Exception as exc:  # a worker's failure past its retries: one line, not Dask's traceback
-                first = (str(exc).strip().splitlines() or [""])[0][:200]
-                raise CmosnoiseError(f"a sweep task failed: {type(exc).__name__}: {first}") from None
+            rec = task_result(future, "a sweep task")
             future.release()
             if "error" in rec:
                 shown = ", ".join(f"{k}={v}" for k, v in p.points[rec["point"]].items())
@@ -598,7 +592,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
                 mode = _mode(out, p, resume, overwrite)  # again, under the lock: another run may have written
                 work = out
             client, cluster = connect(scheduler, workers, say)
-            stack.callback(_close, client, cluster)
+            stack.callback(disconnect, client, cluster)
             try:
                 if mode != "resume":
                     work.mkdir(parents=True, exist_ok=True)
@@ -617,7 +611,19 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     return df
 
 
-def _close(client, cluster) -> None:
+def task_result(future, what: str):
+    """A Dask future's result; a worker's failure past its retries as one line naming ``what``, not Dask's
+    traceback."""
+    try:
+        return future.result()
+    except CmosnoiseError:
+        raise
+    except Exception as exc:
+        first = (str(exc).strip().splitlines() or [""])[0][:200]
+        raise CmosnoiseError(f"{what} failed: {type(exc).__name__}: {first}") from None
+
+
+def disconnect(client, cluster) -> None:
     """Close the Dask client and cluster without their shutdown chatter (closed streams, cancelled heartbeats)."""
     import logging
 

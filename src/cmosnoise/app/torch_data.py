@@ -133,13 +133,12 @@ class NoisyRawIterableDataset(IterableDataset):
     """The same samples as :class:`NoisyRawDataset`, streamed in order; ``batch_size`` samples at a time go to
     one ``DataLoader`` worker, in turn, so batches of that size are the same for any number of workers.
 
-    ``samples=None`` streams without end. Other parameters as :class:`NoisyRawDataset`.
+    ``samples=None`` streams the most a data set holds, 10^9. Other parameters as :class:`NoisyRawDataset`.
     """
 
     def __init__(self, samples: int | None = None, batch_size: int = 1, **kwargs):
-        self.inner = NoisyRawDataset(samples if samples is not None else 2**62, **kwargs)
+        self.inner = NoisyRawDataset(samples if samples is not None else ds.MAX_SAMPLES, **kwargs)
         self.batch_size = int(batch_size)
-        self.endless = samples is None
 
     def set_epoch(self, epoch: int) -> None:
         self.inner.set_epoch(epoch)

@@ -87,8 +87,7 @@ class Telegraphs:
 
     def within(self, region: tuple[int, int, int, int], cols: int) -> "Telegraphs":
         """Those of the pixels in ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide."""
-        r, c = positions(self.index, region, cols)
-        keep = (r >= 0) & (r < region[1] - region[0]) & (c >= 0) & (c < region[3] - region[2])
+        _, _, keep = in_region(self.index, region, cols)
         return Telegraphs(*(a[keep] for a in (self.index, self.slot, self.size, self.tau_low_s, self.tau_high_s)))
 
 
@@ -96,6 +95,13 @@ def positions(index: np.ndarray, region: tuple[int, int, int, int], cols: int) -
     """Where the pixels ``index`` (``r * cols + c``) sit relative to ``region``'s corner: (rows, cols) int64."""
     i = np.asarray(index).astype(np.int64)
     return i // cols - region[0], i % cols - region[2]
+
+
+def in_region(index: np.ndarray, region: tuple[int, int, int, int], cols: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, cols relative to ``region``'s corner, which) of the pixels ``index`` that lie in ``region``."""
+    r, c = positions(index, region, cols)
+    keep = (r >= 0) & (r < region[1] - region[0]) & (c >= 0) & (c < region[3] - region[2])
+    return r[keep], c[keep], keep
 
 
 #: frames 0 .. 2**LEVELS are reachable: the frame counter's whole 32-bit range, plus one

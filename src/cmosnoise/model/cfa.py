@@ -29,6 +29,13 @@ def tile(pattern: str) -> np.ndarray:
     return np.array([CHANNEL_INDEX[c] for c in pattern], dtype=np.int8).reshape(2, 2)
 
 
+def crop_pattern(pattern: str, row: int, col: int) -> str:
+    """The pattern of a crop whose corner is pixel (``row``, ``col``) of a sensor of ``pattern``."""
+    if is_mono(pattern):
+        return pattern
+    return "".join(pattern[2 * ((row + i) % 2) + (col + j) % 2] for i in (0, 1) for j in (0, 1))
+
+
 def channel_map(pattern: str, shape: tuple[int, int]) -> np.ndarray:
     """Channel index (0, 1, 2) of every pixel, shape ``shape``; all 1 for mono."""
     rows, cols = shape

@@ -544,12 +544,15 @@ class Exposure:
                 part = np.zeros(n.shape, np.float32)
                 if self.collected_photo_e is not self.photo_mean_e:
                     part = (self.mean_charge_e[win] - self._mean_without_defects()[win]).astype(np.float32)
-                lines_r, lines_c = defects.line_offsets(fp.defects)
-                lines = (lines_r[r0:r1, None] + lines_c[None, c0:c1]).astype(np.float32)
-                if lines.any():
-                    keep["row_noise"] = keep.get("row_noise", 0) - np.broadcast_to(lines_r[r0:r1, None], n.shape)
-                    keep["column_noise"] = keep.get("column_noise", 0) - np.broadcast_to(lines_c[None, c0:c1], n.shape)
-                keep["defects"] = part + lines
+                # the offset lines ran with the row and column stages: their part moves from those stages' to this
+                lines_r, lines_c = (a[lo:hi] for a, (lo, hi) in zip(defects.line_offsets(fp.defects),
+                                                                    ((r0, r1), (c0, c1))))
+                on_r, on_c = fp.defects.has_offsets
+                if on_r:
+                    keep["row_noise"] = keep["row_noise"] - lines_r[:, None].astype(np.float32)
+                if on_c:
+                    keep["column_noise"] = keep["column_noise"] - lines_c[None, :].astype(np.float32)
+                keep["defects"] = part + (lines_r[:, None] + lines_c[None, :]).astype(np.float32)
         return n
 
     def _mean_without_defects(self) -> np.ndarray:

@@ -10,7 +10,7 @@ of the pattern is the same tile of the whole sensor:
 - a cluster starts at pixel ``i`` when block (i, 2, 0, 0)'s first uniform is
   below ``clusters.ppm 1e-6``; its size from block (i, 3, 0, 0) by the size
   weights; it grows by adding, at try ``j``, the neighbour (up, down, left or
-  right) of a member, both from block (i, 4 + j, 0, 0), until it has its size;
+  right) of a member, both from block (i, 4, j, 0), until it has its size;
 - column ``c`` from blocks (c, 5, 0, 0) (kind) and (c, 6, 0, 0) (size, sign);
   row ``r`` from (r, 7, 0, 0) and (r, 8, 0, 0).
 
@@ -32,11 +32,13 @@ ground truth's mask (:mod:`cmosnoise.analysis.ground_truth`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from ...engine.philox import uniform_pair
+from ...engine.telegraph import in_region
 from .random_telegraph import affected
 
 #: kind bits (the defect mask's, :data:`cmosnoise.analysis.ground_truth.MASK_BITS`)
@@ -47,8 +49,6 @@ LINE_OFFSET, LINE_GAIN, LINE_STUCK = 1, 2, 3
 _TRIES_PER_PIXEL = 16
 _WORD_PIXEL, _WORD_PIXEL_VALUE, _WORD_CLUSTER, _WORD_CLUSTER_SIZE, _WORD_GROW = 0, 1, 2, 3, 4
 _WORD_COLUMN, _WORD_ROW = 5, 7  # and + 1: the line's size and sign
-#: the largest cluster size the words can hold (the growth words after _WORD_GROW must not reach the column's)
-MAX_CLUSTER = 30
 
 
 @dataclass(frozen=True)
@@ -90,28 +90,29 @@ class Defects:
 
     @property
     def nbytes(self) -> int:
-        arrays = (self.pixel_index, self.pixel_kind, self.pixel_value, self.cluster_index, self.cluster_id,
-                  self.columns.index, self.columns.value, self.rows.index, self.rows.value)
-        return sum(a.nbytes for a in arrays)
+        parts = [getattr(self, f.name) for f in fields(self)] + [getattr(lines, f.name) for lines in (self.columns, self.rows)
+                                                                 for f in fields(lines)]
+        return sum(a.nbytes for a in parts if isinstance(a, np.ndarray))
 
     def kind_of(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
         """(pixel indices, values) of the pixel defects of one kind."""
         keep = self.pixel_kind == kind
         return self.pixel_index[keep], self.pixel_value[keep]
 
-    @property
+    @functools.cached_property
     def has_charge_effect(self) -> bool:
         """Whether a pixel's mean charge changes (dead, gain pixels or lines, clusters)."""
         return bool(np.any(self.pixel_kind != STUCK) or self.cluster_index.size
                     or np.any(self.columns.kind == LINE_GAIN) or np.any(self.rows.kind == LINE_GAIN))
 
-    @property
+    @functools.cached_property
     def has_offsets(self) -> tuple[bool, bool]:
         """(rows, columns): whether any line carries an offset."""
         return bool(np.any(self.rows.kind == LINE_OFFSET)), bool(np.any(self.columns.kind == LINE_OFFSET))
 
-    @property
+    @functools.cached_property
     def has_stuck(self) -> bool:
+        """Whether a pixel or a line reads a stuck code (asked every frame: worked out once)."""
         return bool(np.any(self.pixel_kind == STUCK) or np.any(self.columns.kind == LINE_STUCK)
                     or np.any(self.rows.kind == LINE_STUCK))
 
@@ -201,14 +202,6 @@ def draw(section, key: tuple[int, int], shape: tuple[int, int]) -> Defects:
         columns=_lines(s.columns, key, cols, _WORD_COLUMN), rows=_lines(s.rows, key, rows, _WORD_ROW))
 
 
-def _inside(index: np.ndarray, region: tuple[int, int, int, int], cols: int) -> tuple[np.ndarray, ...]:
-    """(local rows, local cols, which) of the pixels ``index`` that lie in ``region``."""
-    i = np.asarray(index).astype(np.int64)
-    r, c = i // cols - region[0], i % cols - region[2]
-    keep = (r >= 0) & (r < region[1] - region[0]) & (c >= 0) & (c < region[3] - region[2])
-    return r[keep], c[keep], keep
-
-
 def _lines_inside(lines: Lines, kind: int, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
     index, value = lines.of(kind)
     keep = (index >= lo) & (index < hi)
@@ -249,9 +242,9 @@ def collected(photo_e: np.ndarray, dark_e: np.ndarray | None, defects: Defects, 
         at, g = _lines_inside(defects.columns, LINE_GAIN, c0, c1)
         a[:, at] *= g[None, :].astype(np.float32)
         gains = defects.pixel_kind != STUCK
-        r, c, keep = _inside(defects.pixel_index[gains], region, cols)
+        r, c, keep = in_region(defects.pixel_index[gains], region, cols)
         a[r, c] *= defects.pixel_value[gains][keep].astype(np.float32)
-    r, c, _ = _inside(defects.cluster_index, region, cols)
+    r, c, _ = in_region(defects.cluster_index, region, cols)
     if r.size:
         if out[1] is None:
             out[1] = np.zeros_like(out[0])
@@ -288,6 +281,6 @@ def stick(raw: np.ndarray, defects: Defects, region: tuple[int, int, int, int], 
     at, lv = _lines_inside(defects.columns, LINE_STUCK, c0, c1)
     raw[:, at] = value(lv)[None, :]
     index, lv = defects.kind_of(STUCK)
-    r, c, keep = _inside(index, region, defects.shape[1])
+    r, c, keep = in_region(index, region, defects.shape[1])
     raw[r, c] = value(lv[keep])
     return raw
