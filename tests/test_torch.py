@@ -93,3 +93,9 @@ def test_without_torch_cmosnoise_imports_and_cmosnoise_torch_says_how_to_install
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "pip install 'cmosnoise[torch]'" in r.stdout
+
+
+def test_a_stream_without_a_length_starts_and_gives_the_datasets_samples():
+    stream = NoisyRawIterableDataset(batch_size=2, **KW)
+    first = next(iter(stream))
+    assert torch.equal(first["noisy"], NoisyRawDataset(1, **KW)[0]["noisy"])
