@@ -7,7 +7,7 @@ column gain and column term, and the ADC, in one loop, parallel over rows.
 The arithmetic is that of :mod:`.samplers` and the stage modules, in the same
 order, so the result equals the NumPy implementation bit for bit; the
 helpers of :mod:`.fdmath` and :mod:`.samplers` are compiled from their own
-source (see :func:`_compiled`), not copied. Where numba is not installed,
+source (see :func:`compile_helpers`), not copied. Where numba is not installed,
 :func:`render` falls back to the NumPy implementation (slower, same bits).
 
 numba's own ``np.random`` keeps per-thread state inside a parallel loop, so
@@ -93,18 +93,30 @@ class FramePlan:
 
 
 # ------------------------------------------------------------------ compiled helpers
-def _compiled(inline: str):
-    """The helpers of fdmath, philox and samplers compiled by numba from their own source.
+#: the helpers compiled from their own source, module by module, callees first
+HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
+           (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
+           (telegraph, ["decay", "one_minus", "transition", "_bridge_weights", "bridge", "midpoint", "_uniform",
+                        "frame_states", "inside", "occupancy"]),
+           (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept",
+                       "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
+
+
+def compile_helpers(jit, numpy=np, skip=()) -> dict:
+    """The helpers of fdmath, philox, telegraph and samplers compiled by ``jit`` from their own source.
 
     Each function is re-created with its module's globals, where the exact
     array helpers (``frexp``, ``ldexp``, ``where``) are replaced by their
-    scalar forms and every callee by its compiled version. ``inline``:
-    numba's ``"always"`` for the hot loops (inlined into numba's IR before
-    typing: LLVM then vectorizes them, at a cost in compile time), or
-    ``"never"`` for the rare paths (a call each; a tenth of the compile time).
-    The bits are the same either way: inlining does not change IEEE arithmetic.
+    scalar forms and every callee by its compiled version. ``jit`` is the
+    target's decorator: numba's ``njit`` for the CPU (``inline="always"``
+    for the hot loops: inlined into numba's IR before typing, so LLVM
+    vectorizes them; ``"never"`` for the rare paths), or ``cuda.jit(device=True)``
+    for the GPU (:mod:`.cuda_kernel`). ``numpy`` stands for ``np`` in their
+    sources: the CUDA target has no scalar ufuncs and passes a namespace of
+    scalar equivalents (the same IEEE results). ``skip``: names the target
+    cannot compile (the GPU has no ``occupancy``: it allocates). Inlining does
+    not change IEEE arithmetic, so the bits are the same either way.
     """
-    jit = numba.njit(inline=inline, fastmath=False, error_model="numpy")
     space: dict = {}
 
     def where(c, a, b):
@@ -122,27 +134,21 @@ def _compiled(inline: str):
         m = np.uint64((bits & np.uint64(0x000FFFFFFFFFFFFF)) | np.uint64(0x3FE0000000000000)).view(np.float64)
         return m, e
 
-    scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": np.floor}
+    scalar = {"frexp": jit(frexp), "ldexp": jit(ldexp), "where": jit(where), "floor": numpy.floor, "np": numpy}
 
-    def compile_as(module, name, as_name, **bind):
-        g = {**module.__dict__, **scalar, **space, **bind}
-        f = getattr(module, name)
-        space[as_name] = jit(types.FunctionType(f.__code__, g, as_name, f.__defaults__))
-
-    plan = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
-            (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
-            (telegraph, ["decay", "one_minus", "transition", "_bridge_weights", "bridge", "midpoint", "_uniform", "frame_states", "inside", "occupancy"]),
-            (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject",
-                        "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
-    for module, names in plan:
+    for module, names in HELPERS:
         for name in names:
-            compile_as(module, name, name)
+            if name in skip:
+                continue
+            f = getattr(module, name)
+            g = {**module.__dict__, **scalar, **space}
+            space[name] = jit(types.FunctionType(f.__code__, g, name, f.__defaults__))
     return space
 
 
 if numba is not None:
-    _h = _compiled("always")
-    _cold = _compiled("never")  # for the tries past the vectorized ones, a few pixels in 10 000
+    _h = compile_helpers(numba.njit(inline="always", fastmath=False, error_model="numpy"))
+    _cold = compile_helpers(numba.njit(inline="never", fastmath=False, error_model="numpy"))  # for the tries past the vectorized ones, a few pixels in 10 000
     _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_ptrs_try = (
         _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_try"))
     _uniform_pair, _normal_from, _exp, _log = _h["uniform_pair"], _h["normal_from"], _h["exp"], _h["log"]

@@ -1,0 +1,215 @@
+"""The device side of :mod:`.cuda_kernel`: its device functions and kernels, for numba's CUDA target.
+
+Imported only when a GPU (or numba's CUDA simulator) is asked for: importing
+it compiles the helpers' sources for the device (:func:`.kernel.compile_helpers`);
+each kernel compiles at its first launch, inside
+:func:`.cuda_kernel.strict_arithmetic`. The kernels refer to ``cuda`` as a
+module global, as numba's simulator needs to run them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import cuda
+
+from . import kernel, samplers
+from .cuda_kernel import scalar_numpy
+
+npx = scalar_numpy(cuda)  #: what ``np`` stands for in the helpers on the device
+dev = cuda.jit(device=True, fastmath=False)
+h = kernel.compile_helpers(dev, numpy=npx, skip=("occupancy",))
+uniform_pair, normal_from, exp_ = h["uniform_pair"], h["normal_from"], h["exp"]
+ptrs_constants, ptrs_try, tukey_lambda_cell = h["ptrs_constants"], h["ptrs_try"], h["tukey_lambda_cell"]
+frame_states, inside = h["frame_states"], h["inside"]
+inv_max, ptrs_from = samplers.INVERSION_MAX, samplers.PTRS_FROM
+floor, rint = npx.floor, npx.rint
+
+
+@dev
+def normal(index, frame, seq, k0, k1):
+    """A row's, a column's or a frame's normal (kernel._normal)."""
+    u1, u2 = uniform_pair(np.uint64(index), frame, seq, np.uint64(0), k0, k1)
+    return normal_from(u1, u2)
+
+
+@dev
+def poisson_one(m, index, frame, seq, k0, k1, normal_above):
+    """One pixel's count (kernel._poisson_one: samplers.Stream.poisson_or_normal for one pixel)."""
+    u1, u2 = uniform_pair(index, frame, seq, np.uint64(0), k0, k1)
+    if m > normal_above:
+        return max(rint(m + math.sqrt(m) * normal_from(u1, u2)), 0.0)
+    if m >= ptrs_from:
+        loglam, a, b, invalpha, vr = ptrs_constants(m)
+        attempt = np.uint64(0)
+        while True:
+            if attempt > 0:
+                u1, u2 = uniform_pair(index, frame, seq, attempt, k0, k1)
+            attempt += np.uint64(1)
+            k, ok = ptrs_try(m, loglam, a, b, invalpha, vr, u1, u2)
+            if ok:
+                return k
+    p = exp_(-m)  # samplers.poisson_inversion
+    total = p
+    k = 0.0
+    while u1 > total and k < inv_max:
+        k = k + 1.0
+        p = p * m / k
+        total = total + p
+    return k
+
+
+@dev
+def find(ptr, col, r, c):
+    """Where column ``c`` of row ``r`` sits in a row-sorted sparse list (``ptr`` by row, ``col`` sorted within a
+    row), or -1."""
+    lo = ptr[r]
+    hi = ptr[r + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if col[mid] < c:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo if (lo < ptr[r + 1] and col[lo] == c) else -1
+
+
+@cuda.jit(fastmath=False)
+def lines(frames, corners, h, w, seq, keys, has_row, row_sigma, row_offset, has_col, col_sigma, col_offset, black,
+          cell_offsets, frame_black_sigma, rowval, colterm, cell_black):
+    """Each item's row terms (B, h), column terms (B, w) and black level per 2 x 2 cell (B, 4)."""
+    t, b = cuda.grid(2)
+    if b >= frames.size or t >= h + w + 4:
+        return
+    fr = np.uint64(frames[b])
+    sq = np.uint64(seq)
+    if t < h:
+        if has_row:
+            r = corners[b, 0] + t
+            rowval[b, t] = row_sigma * normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
+    elif t < h + w:
+        if has_col:
+            c = corners[b, 1] + (t - h)
+            colterm[b, t - h] = col_offset[c] + col_sigma[c] * normal(c, fr, sq, keys[3, 0], keys[3, 1])
+    else:
+        q = t - h - w
+        err = frame_black_sigma * normal(0, fr, sq, keys[4, 0], keys[4, 1]) if frame_black_sigma > 0.0 else 0.0
+        cell_black[b, q] = (black + cell_offsets[q]) + err
+
+
+@cuda.jit(fastmath=False)
+def trap_values(frames, seq, up, down, size, index, slot, dt, interval, cds, k0, k1, out):
+    """What each trap adds in each item's frame (e-), (B, traps): kernel._trap_values."""
+    t, b = cuda.grid(2)
+    if b >= frames.size or t >= up.size:
+        return
+    frame = frames[b]
+    sq = np.uint64(seq)
+    x, y = frame_states(frame, up[t], down[t], dt, index[t], slot[t], sq, k0, k1)
+    if cds:
+        sig = inside(frame, x, y, up[t], down[t], dt, interval, index[t], slot[t], sq, k0, k1)
+        out[b, t] = size[t] * (sig - x)
+    else:
+        out[b, t] = size[t] * x
+
+
+@cuda.jit(fastmath=False)
+def pixel_sums(first, values, out):
+    """Per pixel, its traps' values summed in slot order (telegraph.per_pixel), (B, pixels)."""
+    p, b = cuda.grid(2)
+    if b >= values.shape[0] or p >= out.shape[1]:
+        return
+    s = values[b, first[p]]
+    for e in range(first[p] + 1, first[p + 1]):
+        s = s + values[b, e]
+    out[b, p] = s
+
+
+@cuda.jit(fastmath=False)
+def pixels(noisy, exact, flags, normal_above, full_well, sf, rowval, colterm, gain, keys, frames, corners, seq,
+           h, w, cols, k_adc, cell_black, top, nl_table, nl_scale, nl_a, nl_b, nl_c, offset, read_kind, read_scale,
+           read_table, rts_ptr, rts_col, rts_sum, blink_ptr, blink_col, blink_mean, out_dn, out_e):
+    """Every stage of one pixel of one item (kernel._render_rows, in its order): grid (columns, rows, items)."""
+    j, i, b = cuda.grid(3)
+    if j >= w or i >= h or b >= frames.size:
+        return
+    has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
+        flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
+    has_nl, has_offset, has_read = flags[7], flags[8], flags[9]
+    has_rts, has_blink, blink_exact = flags[10], flags[11], flags[12]
+    r = corners[b, 0] + i
+    c = corners[b, 1] + j
+    fr = np.uint64(frames[b])
+    sq = np.uint64(seq)
+    index = np.uint64(r * cols + c)
+    blink = find(blink_ptr, blink_col, r, c) if has_blink else -1
+    n = 0.0
+    if has_noisy:
+        m = np.float64(noisy[r, c])
+        if blink >= 0 and not blink_exact:  # stage 4b: a blinking pixel's count at this frame's mean
+            m = np.float64(blink_mean[b, blink])
+        n = poisson_one(m, index, fr, sq, keys[0, 0], keys[0, 1], normal_above)
+    if has_exact:
+        if blink >= 0 and blink_exact:  # stage 4b: a blinking pixel's mean dark charge of this frame
+            n = n + np.float64(blink_mean[b, blink])
+        else:
+            n = n + np.float64(exact[r, c])
+    n = min(n, full_well)
+    if has_nl:  # stage 5b (nonlinearity.Curve.apply)
+        if nl_table.size > 2:
+            q = n * nl_scale
+            t = np.int64(min(floor(q), np.float64(nl_table.size - 2)))
+            lo = nl_table[t]
+            n = lo + (q - t) * (nl_table[t + 1] - lo)
+        else:
+            sx = n * nl_scale
+            n = n * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
+    if has_sf:
+        u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[1, 0], keys[1, 1])
+        noise = np.float64(sf[r, c]) * normal_from(u1, u2)
+        if has_offset:
+            n = (n + np.float64(offset[r, c])) + noise
+        else:
+            n = n + noise
+    elif has_offset:  # stage 5c
+        n = n + np.float64(offset[r, c])
+    if has_rts:  # stage 6b
+        e = find(rts_ptr, rts_col, r, c)
+        if e >= 0:
+            n = n + rts_sum[b, e]
+    if has_row:
+        n = n + rowval[b, i]
+    if has_col:
+        n = n * gain[c] + colterm[b, j]
+    if want_e:
+        out_e[b, i, j] = np.float32(n)
+    if adc_on:
+        v = n * k_adc + cell_black[b, 2 * (r & 1) + (c & 1)]
+        if has_read:  # stage 9a
+            if read_kind == 0:
+                u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[5, 0], keys[5, 1])
+                noise = read_scale * normal_from(u1, u2)
+            else:
+                u, _ = uniform_pair(index, fr, sq, np.uint64(0), keys[5, 0], keys[5, 1])
+                kf, wt = tukey_lambda_cell(u)
+                k = np.int64(kf)
+                lo = read_table[k]
+                q = lo + wt * (read_table[k + 1] - lo)
+                noise = read_scale * (-q if u > 0.5 else q)
+            v = v + noise
+        v = rint(v)
+        out_dn[b, i, j] = np.uint16(min(max(v, 0.0), top))
+
+
+@cuda.jit(fastmath=False)
+def stick(where, value, corners, out):
+    """Stuck pixels (stage 15): ``out[b]`` at each item's pixels ``where`` (full-frame (row, col)) inside it."""
+    s, b = cuda.grid(2)
+    if b >= out.shape[0] or s >= value.size:
+        return
+    i = where[s, 0] - corners[b, 0]
+    j = where[s, 1] - corners[b, 1]
+    if 0 <= i < out.shape[1] and 0 <= j < out.shape[2]:
+        out[b, i, j] = value[s]
+
