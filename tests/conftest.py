@@ -29,6 +29,11 @@ elif not os.environ.get("NUMBA_CACHE_DIR"):
     # that imports a test module (benchmarks/fit_coverage.py)
     atexit.register(shutil.rmtree, SESSION_CACHE, True)
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
+# numba's CUDA simulator stands in for a GPU (set before numba is imported, here and in every child): the GPU
+# kernel's tests (test_cuda.py) and `--device cuda` then run on any machine. CMOSNOISE_TEST_GPU=1 runs them on the
+# machine's real GPU instead.
+if not os.environ.get("CMOSNOISE_TEST_GPU"):
+    os.environ.setdefault("NUMBA_ENABLE_CUDASIM", "1")
 # numba's target as the package sets it (engine/jit.py: the host's full vector width), before a test module
 # imports numba itself: this process and its children then key the compile cache alike
 import numpy as np  # noqa: E402

@@ -134,6 +134,8 @@ def _progress_factory(enabled: Optional[bool], pixels: int):
 ConfigOpt = typer.Option(None, "--config", "-c", help="YAML configuration file")
 PresetOpt = typer.Option(None, "--preset", "-p", help="start from a preset (see `cmosnoise presets`)")
 SetOpt = typer.Option(None, "--set", "-s", help="override one key, e.g. --set prnu.sigma_pct=2 (repeatable)")
+DeviceOpt = typer.Option("cpu", "--device", help="where frames are made: cpu, or cuda (an NVIDIA GPU: pip install "
+                         "'cmosnoise[cuda]'); the same bits")
 OverwriteOpt = typer.Option(False, "--overwrite", help="replace an existing non-empty output folder as a whole (else refused)")
 
 
@@ -153,6 +155,7 @@ def simulate(
     format_: Optional[List[str]] = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
     report: bool = typer.Option(False, "--report", help="also write report.html (self-contained run report)"),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
+    device: str = DeviceOpt,
     overwrite: bool = OverwriteOpt,
 ):
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
@@ -175,7 +178,7 @@ def simulate(
 
     try:
         summary = run_simulate(spec, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height),
-                               phase=phase, overwrite=overwrite)
+                               phase=phase, overwrite=overwrite, device=device)
     finally:
         if status is not None:
             status.stop()

@@ -27,7 +27,7 @@ from ..analysis import figures_of_merit as fom
 from ..analysis import noise_budget
 from ..analysis.run_stats import RunStats
 from ..config import Config, ProcessingSection, load_config, merge_updates
-from ..engine import kernel
+from ..engine import cuda_kernel, kernel
 from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
@@ -38,12 +38,12 @@ from ..isp import calibration
 from ..isp.process import Processor, read_dark
 from ..model import footprint
 from ..model.raw_info import RawInfo
-from ..model.sensor import Sensor
+from ..model.sensor import DEVICES, Sensor
 from ..model.spec import SensorSpec, resolve
 
 
 def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
-             phase: Callable[[str], None] | None = None, overwrite: bool = False) -> dict:
+             phase: Callable[[str], None] | None = None, overwrite: bool = False, device: str = "cpu") -> dict:
     """Run the simulation of ``config`` and write the results into ``out``; returns the summary.
 
     ``progress``, if given, is called with the frame count and returns a
@@ -51,7 +51,8 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     ``phase``, if given, is told what the run does after the frames (it can
     take seconds at 5 MP): ``"summary"`` (with the pictures), ``"report"``.
     An existing non-empty ``out`` is replaced as a whole with ``overwrite``,
-    else refused (:class:`~cmosnoise.io.output.OutputFolder`).
+    else refused (:class:`~cmosnoise.io.output.OutputFolder`). ``device``:
+    where frames are made (``"cpu"`` or ``"cuda"``, :class:`~cmosnoise.model.sensor.Sensor`; the same bits).
     """
     phase = phase or (lambda _name: None)
 
@@ -62,6 +63,10 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     config = spec.config
     if config.run.dng and not config.adc.enabled:
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
+    if device not in DEVICES:
+        raise CmosnoiseError(f"device = {device!r}: expected one of {', '.join(DEVICES)}")
+    if device == "cuda":
+        cuda_kernel.check()  # before anything is drawn or written
     footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
     folder.check_space(output_bytes(config))
@@ -71,7 +76,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     with folder as tmp, ThreadPoolExecutor(2, thread_name_prefix="cmosnoise-aside") as aside:
         t_start = time.perf_counter()
         aside.submit(kernel.preload)
-        sensor = Sensor(spec, executor=aside)  # the dark-current map drawn aside too
+        sensor = Sensor(spec, executor=aside, device=device)  # the dark-current map drawn aside too
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
         transfer = sensor.transfer
@@ -130,7 +135,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
             sensor.cfa, transfer.black_level_dn, transfer.bits, transfer.gain_dn_per_e,
             first_frame=first, seed=config.seed, cmosnoise_version=__version__,
             scene_white_dn=info.white_dn, channel_responsivity=list(info.responsivity),
-            crosstalk_kernel_pct=info.crosstalk_kernel_pct, generator=generator_info(),
+            crosstalk_kernel_pct=info.crosstalk_kernel_pct, generator=generator_info(device),
             units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)",
         )
         cm = progress(n) if progress else contextlib.nullcontext(lambda: None)
@@ -211,7 +216,7 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
     at_dark = noise_budget.budget(sensor, 0.0)
     return {
         "cmosnoise_version": __version__,
-        "generator": generator_info(),
+        "generator": generator_info(sensor.device),
         "seed": c.seed,
         "scene": c.scene.source,
         "frames": n,

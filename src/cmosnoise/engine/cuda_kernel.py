@@ -228,7 +228,8 @@ class DevicePlan:
 
     def nbytes(self) -> int:
         """Bytes this plan holds on the device."""
-        arrays = [v for v in vars(self).values() if hasattr(v, "__cuda_array_interface__")]
+        arrays = [a for v in vars(self).values() for a in (v if isinstance(v, tuple) else (v,))
+                  if hasattr(a, "copy_to_host")]
         return int(sum(a.nbytes for a in arrays))
 
     def render(self, frames, corners=None, shape=None, electrons: bool = False, stream=0):

@@ -565,8 +565,9 @@ def _version_of(package: str) -> str | None:
         return None
 
 
-def generator_info() -> dict:
-    """What made the random numbers, for every output's metadata (docs/model.md section 1)."""
+def generator_info(device: str = "cpu") -> dict:
+    """What made the random numbers, for every output's metadata (docs/model.md section 1); ``device``: where the
+    frames were made (``"cuda"``: the GPU kernel, the same bits)."""
     return {
         "scheme": "philox4x32-10; counter (index, frame, sequence, try); Box-Muller normals; "
                   "Poisson by inversion below 10, PTRS from 10",
@@ -575,7 +576,7 @@ def generator_info() -> dict:
         "numba": numba.__version__ if numba is not None else None,
         # the fixed maps' quantiles are scipy's (docs/reproducibility.md); read without importing scipy
         "scipy": _version_of("scipy"),
-        "frame_kernel": "numba" if AVAILABLE else "numpy",
+        "frame_kernel": "numba-cuda" if device == "cuda" else "numba" if AVAILABLE else "numpy",
     }
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
-from ..engine import kernel
+from ..engine import cuda_kernel, kernel
 from ..engine.telegraph import per_pixel, positions
 from ..errors import CmosnoiseError
 from . import footprint
@@ -70,6 +70,9 @@ class FrameDetail:
     contributions: dict[str, np.ndarray]
 
 
+#: where frames are made: the CPU kernel, or an NVIDIA GPU (engine/cuda_kernel)
+DEVICES = ("cpu", "cuda")
+
 class Sensor:
     """A simulated sensor: a configuration, a seed, and the fixed pattern drawn from them.
 
@@ -86,10 +89,21 @@ class Sensor:
     executor : concurrent.futures.Executor, optional
         Where the dark-current map is drawn while this thread draws the others (the maps are independent,
         each from its own stream, so the bits are the same; NumPy releases the GIL for most of the work).
+    device : {"cpu", "cuda"}
+        Where frames are made: the CPU kernel (the default), or an NVIDIA GPU through numba's CUDA target
+        (``pip install cmosnoise[cuda]``), with the same bits. A one-line error where no GPU is present.
+        :meth:`Exposure.frames_on_device` keeps the frames on the GPU.
     """
 
     def __init__(self, config: SensorSpec | Config | dict | str | Path | None = None, seed: int | None = None, *,
-                 fixed_pattern: FixedPattern | None = None, cache: PatternCache | None = None, executor=None):
+                 fixed_pattern: FixedPattern | None = None, cache: PatternCache | None = None, executor=None,
+                 device: str = "cpu"):
+        if device not in DEVICES:
+            raise CmosnoiseError(f"device = {device!r}: expected one of {', '.join(DEVICES)}")
+        if device == "cuda":
+            cuda_kernel.check()
+        #: where frames are made: "cpu" or "cuda"
+        self.device = device
         spec = _as_spec(config)
         if seed is not None:
             seed = _whole(seed, "seed")
@@ -121,7 +135,7 @@ class Sensor:
             updates["peak_rate_photons_per_s"] = None
         exposure = build_section(ExposureSection, {**self.config.exposure.model_dump(), **updates}, "exposure")
         spec = self.spec.with_config(self.config.model_copy(update={"exposure": exposure}))
-        other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache)
+        other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache, device=self.device)
         other.timings = self.timings
         return other
 
@@ -377,6 +391,7 @@ class Exposure:
         self._noisy_e = sum(noisy[1:], noisy[0]) if noisy else None
         self._exact_e = sum(exact[1:], exact[0]) if exact else None
         self._plan: kernel.FramePlan | None = None
+        self._device_plan = None
         timings["expose"] += time.perf_counter() - t0
 
     @property
@@ -588,6 +603,11 @@ class Exposure:
         region = self._region(region)
         timings = self.sensor.timings
         t0 = time.perf_counter()
+        if keep is None and self.sensor.device == "cuda":
+            raw, e = self.frames_on_device([k], region, electrons=electrons)
+            raw, e = raw.copy_to_host()[0], (e.copy_to_host()[0] if e is not None else None)
+            timings["frame_kernel"] += time.perf_counter() - t0
+            return raw, e
         if keep is None and kernel.AVAILABLE:
             raw, e = kernel.render(self.plan(), k, region, electrons)
             timings["frame_kernel"] += time.perf_counter() - t0
@@ -606,6 +626,44 @@ class Exposure:
             raw = e.astype(np.float32)
         timings["frame_numpy"] += time.perf_counter() - t0
         return self._stick(raw, region, keep), e.astype(np.float32)
+
+    def device_plan(self) -> "cuda_kernel.DevicePlan":
+        """This exposure's :meth:`plan` on the GPU, with its stuck pixels (uploaded once, then reused)."""
+        if self._device_plan is None:
+            cuda_kernel.check()
+            s = self.sensor
+            d = s.fixed_pattern.defects
+            stuck = None
+            if d is not None and d.has_stuck:
+                adc_on = s.config.adc.enabled
+                stuck = defects.stuck_pixels(d, s.transfer.max_code if adc_on else s.config.sensor.full_well_e,
+                                             rounded=adc_on)
+            self._device_plan = cuda_kernel.DevicePlan(self.plan(), stuck)
+        return self._device_plan
+
+    def frames_on_device(self, frames, region=None, corners=None, electrons: bool = False):
+        """A batch of frames made on the GPU, left there: (raw, electrons or None), device arrays (B, h, w).
+
+        Parameters
+        ----------
+        frames : int or sequence of int
+            Frame numbers, one per item of the batch.
+        region : (row0, row1, col0, col1), optional
+            The rectangle of every item (default the whole frame); with ``corners``, only its size counts.
+        corners : array_like (B, 2), optional
+            Each item's top-left pixel (a batch of crops of this exposure at different places).
+        electrons : bool
+            Also the charge at the ADC input, float32 e-.
+
+        Every item equals ``frame(k, region=...)`` bit for bit. The arrays
+        expose ``__cuda_array_interface__``: ``torch.as_tensor(raw, device="cuda")`` or ``cupy.asarray(raw)``
+        takes them without a copy; ``raw.copy_to_host()`` brings them back.
+        """
+        frames = [_frame_index(k) for k in np.atleast_1d(np.asarray(frames, dtype=object)).tolist()]
+        r0, r1, c0, c1 = self._region(region)
+        if corners is None:
+            corners = np.tile([r0, c0], (len(frames), 1))
+        return self.device_plan().render(frames, corners, (r1 - r0, c1 - c0), electrons)
 
     def _stick(self, raw: np.ndarray, region, keep: dict | None) -> np.ndarray:
         """``raw`` with its stuck pixels and lines (stage 15); ``keep`` gets what they changed, in e-."""

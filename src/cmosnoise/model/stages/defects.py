@@ -284,3 +284,28 @@ def stick(raw: np.ndarray, defects: Defects, region: tuple[int, int, int, int], 
     r, c, keep = in_region(index, region, defects.shape[1])
     raw[r, c] = value(lv[keep])
     return raw
+
+
+def stuck_pixels(defects: Defects, top: float, rounded: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Every stuck pixel of the whole sensor once, with the value :func:`stick` gives it: (flat pixel index (n,)
+    int64, value (n,) float64: ``round(level * top)`` if ``rounded``, else ``level * top``).
+
+    Rows, then columns, then pixels, the later winning where they meet, as
+    :func:`stick` sets them; for a kernel that sets them in parallel (the GPU's).
+    """
+    rows, cols = defects.shape
+
+    def value(level):
+        v = np.asarray(level, np.float64) * top
+        return np.rint(v) if rounded else v
+
+    at, lv = _lines_inside(defects.rows, LINE_STUCK, 0, rows)
+    parts = [((at[:, None] * cols + np.arange(cols)).ravel(), np.repeat(value(lv), cols))]
+    at, lv = _lines_inside(defects.columns, LINE_STUCK, 0, cols)
+    parts.append(((np.arange(rows)[:, None] * cols + at).ravel(), np.tile(value(lv), rows)))
+    index, lv = defects.kind_of(STUCK)
+    parts.append((np.asarray(index, np.int64), value(lv)))
+    index = np.concatenate([p[0] for p in parts]).astype(np.int64)
+    values = np.concatenate([p[1] for p in parts])
+    last = index.size - 1 - np.unique(index[::-1], return_index=True)[1]  # each pixel's last setting
+    return index[last], values[last]

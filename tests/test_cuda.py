@@ -1,0 +1,218 @@
+"""The frame kernel on the GPU (engine/cuda_kernel): the CPU kernel's bits, every stage, crops and batches.
+
+Where no GPU is present (CI), numba's CUDA simulator runs the same kernel source (conftest sets
+NUMBA_ENABLE_CUDASIM before numba is imported), so small frames: the simulator runs each pixel as Python.
+CMOSNOISE_TEST_GPU=1 runs the same tests on a real GPU, at 1920 x 1080 (benchmarks/gpu_check.py adds every
+preset at 1080p, 100 frames, and the speed).
+"""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from conftest import cli
+
+from cmosnoise import Sensor, load_config
+from cmosnoise.engine import cuda_kernel
+from cmosnoise.errors import CmosnoiseError
+
+SIMULATED = cuda_kernel.simulated()
+#: frame size: small in the simulator (a few seconds a frame), 1080p on a GPU
+WIDTH, HEIGHT = (64, 48) if SIMULATED else (1920, 1080)
+
+#: every stage on, each population dense enough to meet a 64 x 48 frame many times
+EVERY = {"sensor": {"frame_rate_hz": 30}, "column_noise": {"gain_sigma_pct": 1.0}, "row_noise": {"fixed_sigma_e": 0.5},
+         "pixel_offset": {"enabled": True, "sigma_e": 4.0, "tail": {"ppm_above": 20000, "threshold_e": 20, "max_e": 200}},
+         "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.2, 0.6]},
+         "black_level": {"channel_offsets_dn": [1.5, -0.5, 0.25, 2.0], "frame_sigma_dn": 0.3},
+         "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.2, "shape": -0.05},
+         "source_follower": {"rts": {"enabled": True, "ppm": 30000, "traps_per_pixel": "poisson",
+                                     "tau_capture_s": {"min_s": 1e-6, "max_s": 1e-3},
+                                     "tau_emission_s": {"min_s": 1e-6, "max_s": 1e-3}}},
+         "dark_current": {"rts": {"enabled": True, "ppm": 30000, "tau_low_s": {"min_s": 0.05, "max_s": 5},
+                                  "tau_high_s": {"min_s": 0.05, "max_s": 5}}},
+         "defects": {"enabled": True, "dead_ppm": 5000, "stuck_ppm": 5000, "low_gain_ppm": 5000,
+                     "high_gain_ppm": 5000, "clusters": {"ppm": 2000},
+                     "columns": {"offset_ppm": 20000, "gain_ppm": 20000, "stuck_ppm": 20000},
+                     "rows": {"offset_ppm": 20000, "gain_ppm": 20000, "stuck_ppm": 20000}}}
+
+
+def _merged(*parts: dict) -> dict:
+    out: dict = {}
+    for part in parts:
+        for k, v in part.items():
+            out[k] = {**out.get(k, {}), **v} if isinstance(v, dict) else v
+    return out
+
+
+def _pair(config: dict | None = None, preset: str | None = None, seed: int = 5, scene: str = "photo"):
+    """The same exposure on the CPU and on the GPU."""
+    size = {"sensor": {"width": WIDTH, "height": HEIGHT}}
+    cfg = load_config(preset=preset, extra=_merged(config or {}, size))
+    return (Sensor(cfg, seed=seed).expose(scene), Sensor(cfg, seed=seed, device="cuda").expose(scene))
+
+
+VARIANTS = {
+    "every-stage": EVERY,
+    # the blinking pixels' dark charge without shot noise, a measured nonlinearity table, the normal approximation
+    "exact-dark-table-normal": _merged(EVERY, {"dark_current": {"shot_noise": False},
+                                               "nonlinearity": {"linearity_error_pct": None,
+                                                                "curve_e": [[0, 0], [3000, 2950], [9000, 8500],
+                                                                            [20000, 18000]]},
+                                               "shot_noise": {"gaussian_above_e": 200.0},
+                                               "read_noise": {"distribution": "normal"}}),
+    "adc-off": _merged(EVERY, {"adc": {"enabled": False}}),
+}
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_every_stage_on_equals_the_cpu_kernel_bit_for_bit_with_electrons_and_far_frames(name):
+    cpu, gpu = _pair(VARIANTS[name])
+    frames = [0, 3, 1_000_000] if SIMULATED else list(range(8)) + [4_000_000_000]
+    raw, electrons = gpu.frames_on_device(frames, electrons=True)
+    raw, electrons = raw.copy_to_host(), electrons.copy_to_host()
+    fp = cpu.sensor.fixed_pattern
+    assert fp.traps.index.size > 20 and fp.blinkers.index.size > 20 and fp.defects.has_stuck  # each one met
+    for b, k in enumerate(frames):
+        expected, expected_e = cpu._render(k)  # the CPU kernel, stuck pixels set
+        np.testing.assert_array_equal(raw[b], expected, err_msg=f"frame {k}")
+        np.testing.assert_array_equal(electrons[b], expected_e, err_msg=f"frame {k}")
+
+
+@pytest.mark.parametrize("preset", ["sony-a7s2", "sony-imx900", "sony-imx571", "paper-fig11-full", None])
+def test_each_preset_equals_the_cpu_kernel(preset):
+    cpu, gpu = _pair(preset=preset, seed=9)
+    for k in (0, 2):
+        np.testing.assert_array_equal(gpu.frame(k), cpu.frame(k), err_msg=f"{preset} frame {k}")
+
+
+def test_a_batch_of_crops_at_different_corners_equals_the_crops_of_the_whole_frames():
+    cpu, gpu = _pair(EVERY, seed=7)
+    h, w = HEIGHT // 2, WIDTH // 3
+    corners = [(0, 0), (HEIGHT - h, WIDTH - w), (HEIGHT // 3, WIDTH // 2 - 1), (1, 1)]
+    frames = [4, 4, 9, 2]
+    raw, _ = gpu.frames_on_device(frames, region=(0, h, 0, w), corners=corners)
+    raw = raw.copy_to_host()
+    for b, ((r, c), k) in enumerate(zip(corners, frames)):
+        np.testing.assert_array_equal(raw[b], cpu.frame(k)[r:r + h, c:c + w], err_msg=f"item {b}")
+    # a region through frame(): the same bits as the CPU's region
+    np.testing.assert_array_equal(gpu.frame(9, region=(3, h + 3, 5, w + 5)), cpu.frame(9, region=(3, h + 3, 5, w + 5)))
+
+
+def test_the_device_arrays_are_the_cuda_array_interface_and_the_plan_is_uploaded_once():
+    _, gpu = _pair(seed=3)
+    raw, e = gpu.frames_on_device(1)
+    assert e is None and raw.shape == (1, HEIGHT, WIDTH) and raw.dtype == np.uint16
+    if not SIMULATED:  # the simulator's arrays live on the host and have no such interface
+        face = raw.__cuda_array_interface__
+        assert face["shape"] == (1, HEIGHT, WIDTH) and face["typestr"] == "<u2"
+    plan = gpu.device_plan()
+    gpu.frames_on_device([2, 3])
+    assert gpu.device_plan() is plan and plan.nbytes() > 0
+
+
+def test_bad_device_and_bad_batches_get_one_line():
+    with pytest.raises(CmosnoiseError, match="device = 'gpu': expected one of cpu, cuda"):
+        Sensor({}, device="gpu")
+    _, gpu = _pair(seed=3)
+    with pytest.raises(CmosnoiseError, match="frame = -1"):
+        gpu.frames_on_device([0, -1])
+    with pytest.raises(ValueError, match="do not fit"):
+        gpu.frames_on_device([0], region=(0, 8, 0, 8), corners=[(HEIGHT - 4, 0)])
+
+
+def test_without_a_gpu_device_cuda_is_one_line_and_exit_2():
+    """Outside the simulator on this machine (no GPU, no driver): the command line names the device and what to do."""
+    if not SIMULATED:
+        pytest.skip("this machine has a GPU")  # pragma: no cover - CMOSNOISE_TEST_GPU=1 on a GPU machine
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
+    r = subprocess.run([sys.executable, "-m", "cmosnoise", "simulate", "--device", "cuda", "--frames", "1",
+                        "--set", "sensor.width=32", "--set", "sensor.height=16", "--out", "unused"],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "device = 'cuda'" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_simulate_with_device_cuda_writes_the_cpu_runs_frames(tmp_path):
+    common = ["-q", "simulate", "--frames", "2", "--set", f"sensor.width={WIDTH}", "--set", f"sensor.height={HEIGHT}"]
+    assert cli(*common, "--out", tmp_path / "cpu").returncode == 0
+    r = cli(*common, "--device", "cuda", "--out", tmp_path / "gpu")
+    assert r.returncode == 0, r.stderr
+    import tifffile
+
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "gpu" / "raw.tiff"), tifffile.imread(tmp_path / "cpu" / "raw.tiff"))
+    summary = json.loads((tmp_path / "gpu" / "summary.json").read_text())
+    assert summary["generator"]["frame_kernel"] == "numba-cuda"
+
+
+# ------------------------------------------------------------------ no multiply-add contraction
+_PTX_PROBE = textwrap.dedent('''
+    """Compile each kernel of one every-stage batch to PTX for compute 9.0 (NVVM only: no GPU needed), with and
+    without strict_arithmetic, and count the float64 multiply-adds."""
+    import json, sys, types
+    import numba
+    import numba.cuda.dispatcher as dispatcher
+    from numba import cuda
+    # device functions ask the current GPU for its compute capability; there is none: say 9.0
+    dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=(9, 0))
+    import numpy as np
+    from cmosnoise import Sensor
+    from cmosnoise.engine import cuda_device, cuda_kernel
+
+    calls = []
+
+    class Launch:
+        def __init__(self, name):
+            self.name = name
+        def __getitem__(self, config):
+            return lambda *args: calls.append((self.name, args))
+
+    class Host:  # the launches' arrays, on the host: the same numba types as device arrays
+        @staticmethod
+        def to_device(a, stream=0):
+            return np.array(a)
+        @staticmethod
+        def device_array(shape, dtype, stream=0):
+            return np.zeros(shape, dtype)
+
+    fake = types.SimpleNamespace(cuda=Host, **{n: Launch(n) for n in ("lines", "trap_values", "pixel_sums",
+                                                                       "pixels", "stick")})
+    cuda_kernel.check = lambda: None
+    cuda_kernel.kernels = lambda: fake
+    shot = Sensor(json.loads(sys.argv[1]), seed=5).expose("photo")
+    shot.frames_on_device([0, 1], electrons=True)
+    out = {}
+    for name, args in calls:
+        sig = tuple(numba.typeof(a) for a in args)
+        fn = getattr(cuda_device, name).py_func
+        loose, _ = cuda.compile_ptx(fn, sig, cc=(9, 0))
+        with cuda_kernel.strict_arithmetic():
+            strict, _ = cuda.compile_ptx(fn, sig, cc=(9, 0))
+        out[name] = {"loose_fma": loose.count("fma.rn.f64"), "strict_fma": strict.count("fma.rn.f64"),
+                     "strict_mul_rn": strict.count("mul.rn.f64"), "strict_plain_mul": strict.count("mul.f64")}
+    print(json.dumps(out))
+''')
+
+
+def test_nvvm_compiles_the_kernels_without_multiply_add_contraction():
+    """NVVM contracts ``a * b + c`` into ``fma`` unless told ``-fma=0``: compiled as launched (PTX for compute
+    9.0, NVVM alone), every kernel under strict_arithmetic has no float64 ``fma`` and rounds each product on its
+    own (``mul.rn``, which ptxas does not fuse); the same kernels compiled without it contract (the check can
+    fail). Run outside the simulator: NVVM itself compiles."""
+    import json
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
+    cfg = _merged(EVERY, {"sensor": {"width": 64, "height": 48}})
+    r = subprocess.run([sys.executable, "-c", _PTX_PROBE, json.dumps(cfg)], capture_output=True, text=True,
+                       env=env, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    counts = json.loads(r.stdout.strip().splitlines()[-1])
+    assert set(counts) == {"lines", "trap_values", "pixel_sums", "pixels", "stick"}
+    for name, c in counts.items():
+        assert c["strict_fma"] == 0 and c["strict_plain_mul"] == 0, (name, c)
+    assert counts["pixels"]["strict_mul_rn"] > 50 and counts["pixels"]["loose_fma"] > 50, counts["pixels"]
+    assert counts["lines"]["loose_fma"] > 0 and counts["trap_values"]["loose_fma"] > 0
