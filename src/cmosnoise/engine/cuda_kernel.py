@@ -137,6 +137,33 @@ def kernels():
     return cuda_device
 
 
+def as_device_array(value, name: str = "array"):
+    """A GPU array as numba's device array, without a copy: anything with ``__cuda_array_interface__``, or (through
+    PyTorch, where installed) with ``__dlpack__``; a numba device array as it is."""
+    cuda = _cuda()
+    if hasattr(value, "copy_to_host"):  # numba's own (the simulator's too)
+        return value
+    if not hasattr(value, "__cuda_array_interface__") and hasattr(value, "__dlpack__"):
+        try:
+            import torch
+
+            value = torch.from_dlpack(value)
+        except ImportError:
+            raise CmosnoiseError(f"{name}: a DLPack array is read through PyTorch, which is not installed; pass "
+                                 "an array with __cuda_array_interface__ (CuPy, PyTorch, numba)") from None
+    if not hasattr(value, "__cuda_array_interface__"):
+        raise CmosnoiseError(f"{name}: expected an array on the GPU (__cuda_array_interface__ or __dlpack__), got "
+                             f"{type(value).__name__}")
+    return cuda.as_cuda_array(value)
+
+
+def to_torch(array):
+    """A device array as a PyTorch CUDA tensor over the same memory (no copy)."""
+    import torch
+
+    return torch.as_tensor(array, device="cuda")
+
+
 def _rows_of(index: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """A sorted list of pixel indices as row pointers over the whole frame (rows + 1,) and columns, int64."""
     rows, cols = shape
@@ -225,6 +252,34 @@ class DevicePlan:
                                col=plan.col_gain is not None, adc=plan.adc is not None,
                                nl=plan.nonlinearity is not None, offset=plan.offset_e is not None,
                                read=plan.adc is not None and plan.read_noise is not None)
+
+    def with_means(self, noisy_e=None, exact_e=None) -> "DevicePlan":
+        """This plan with the mean charge (the scene) taken from arrays already on the GPU, without a copy.
+
+        Parameters
+        ----------
+        noisy_e, exact_e : GPU array (rows, cols) float32, e-, optional
+            The mean charge shot noise acts on, and that entering without it (the plan's ``noisy_e`` and
+            ``exact_e``): anything with ``__cuda_array_interface__`` (a PyTorch or CuPy tensor, a numba device
+            array), or a DLPack capsule's owner where PyTorch can read it. None keeps the plan's own; each must be
+            given where the plan has one (the plan's stages decide which exist).
+
+        The arrays are read, never copied or kept beyond the plan.
+        """
+        import copy
+
+        other = copy.copy(self)
+        for name, value in (("noisy_e", noisy_e), ("exact_e", exact_e)):
+            if value is None:
+                continue
+            if getattr(self.plan, name) is None:
+                raise CmosnoiseError(f"{name}: this plan has no {name} (its stages put the charge elsewhere)")
+            arr = as_device_array(value, name)
+            if arr.shape != self.plan.shape or np.dtype(arr.dtype) != np.float32:
+                raise CmosnoiseError(f"{name}: expected a float32 array of {self.plan.shape}, got {arr.dtype} "
+                                     f"{tuple(arr.shape)}")
+            setattr(other, "noisy" if name == "noisy_e" else "exact", arr)
+        return other
 
     def nbytes(self) -> int:
         """Bytes this plan holds on the device."""

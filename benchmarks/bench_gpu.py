@@ -1,0 +1,212 @@
+"""The GPU kernel on a real NVIDIA GPU: the CPU kernel's bits, then frames per second.
+
+    python benchmarks/bench_gpu.py [--json results.json] [--quick]
+
+**Bits.** A 1920 x 1080 frame of every preset (and of the default sensor, and
+of every stage on) from the GPU equals the CPU kernel's, and 100 frames of the
+default sensor made in one batch equal the CPU's frame by frame; the batch
+of crops at random corners equals the crops of the whole frames; the frames
+handed to PyTorch share the GPU's memory (no copy).
+
+**Speed** at 1920 x 1080 and 3840 x 2160, the default sensor and every stage
+on: the GPU kernel alone (a batch of frames made on the device and left
+there, timed between two device synchronizations), end to end to host memory
+(the batch copied back), the CPU kernel on this machine's cores and the NumPy
+reference of benchmarks/bench_chain.py, timed in the same run. And 512 x 512
+training crops with their truth: random crops of fresh frames of one
+exposure, made in batches on the GPU, with the truth's crops (expected raw,
+mask) cut from that exposure's truth, which is made once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_chain import cpu as cpu_info  # noqa: E402
+from bench_chain import numpy_reference  # noqa: E402
+
+from cmosnoise import Sensor, load_config  # noqa: E402
+from cmosnoise.analysis import ground_truth  # noqa: E402
+from cmosnoise.config.loading import preset_names  # noqa: E402
+from cmosnoise.engine import cuda_kernel, kernel  # noqa: E402
+
+#: every stage on at realistic rates (the tests' EVERY is denser, to meet a 64 x 48 frame)
+EVERY = {"sensor": {"frame_rate_hz": 30}, "column_noise": {"gain_sigma_pct": 1.0}, "row_noise": {"fixed_sigma_e": 0.5},
+         "pixel_offset": {"enabled": True, "sigma_e": 4.0, "tail": {"ppm_above": 200, "threshold_e": 20, "max_e": 200}},
+         "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.2, 0.6]},
+         "black_level": {"channel_offsets_dn": [1.5, -0.5, 0.25, 2.0], "frame_sigma_dn": 0.3},
+         "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.2, "shape": -0.05},
+         "source_follower": {"rts": {"enabled": True, "ppm": 1000}},
+         "dark_current": {"rts": {"enabled": True, "ppm": 50}},
+         "defects": {"enabled": True}}
+
+
+def sized(extra: dict | None, width: int, height: int) -> dict:
+    out = {k: dict(v) if isinstance(v, dict) else v for k, v in (extra or {}).items()}
+    out["sensor"] = {**out.get("sensor", {}), "width": width, "height": height}
+    return out
+
+
+def pair(extra, width, height, preset=None, seed=3):
+    cfg = load_config(preset=preset, extra=sized(extra, width, height))
+    return Sensor(cfg, seed=seed).expose("photo"), Sensor(cfg, seed=seed, device="cuda").expose("photo")
+
+
+def check_bits(quick: bool) -> dict:
+    out = {}
+    cases = [("default", None, None), ("every-stage", EVERY, None)]
+    cases += [(name, None, name) for name in preset_names()]
+    for name, extra, preset in cases:
+        cpu, gpu = pair(extra, 1920, 1080, preset)
+        frames = [0, 1, 4_000_000_000]
+        raw, e = gpu.frames_on_device(frames, electrons=True)
+        raw, e = raw.copy_to_host(), e.copy_to_host()
+        same = all(np.array_equal(raw[b], cpu._render(k)[0]) and np.array_equal(e[b], cpu._render(k)[1])
+                   for b, k in enumerate(frames))
+        out[f"1080p {name}: 3 frames, raw and electrons"] = same
+        print(f"bits {name}: {same}", flush=True)
+    cpu, gpu = pair(None, 1920, 1080)
+    n = 20 if quick else 100
+    raw = gpu.frames_on_device(list(range(n)))[0].copy_to_host()
+    out[f"1080p default: {n} frames in one batch"] = all(np.array_equal(raw[k], cpu.frame(k)) for k in range(n))
+    rng = np.random.default_rng(1)
+    corners = np.stack([rng.integers(0, 1080 - 512, 16), rng.integers(0, 1920 - 512, 16)], axis=1)
+    frames = rng.integers(0, 1000, 16)
+    cpu, gpu = pair(EVERY, 1920, 1080)
+    crops = gpu.frames_on_device(frames, region=(0, 512, 0, 512), corners=corners)[0].copy_to_host()
+    out["512 x 512 crops of every stage at 16 random corners and frames"] = all(
+        np.array_equal(crops[b], cpu.frame(int(k), region=(r, r + 512, c, c + 512)))
+        for b, (k, (r, c)) in enumerate(zip(frames, corners)))
+    try:
+        import torch
+
+        raw = gpu.frames_on_device([0, 1])[0]
+        t = cuda_kernel.to_torch(raw)
+        out["torch tensor shares the frames' memory"] = (t.data_ptr() == raw.__cuda_array_interface__["data"][0]
+                                                         and t.is_cuda and tuple(t.shape) == raw.shape)
+        mean = torch.as_tensor(gpu.plan().noisy_e, device="cuda")
+        again = gpu.device_plan().with_means(noisy_e=mean).render([0, 1])[0].copy_to_host()
+        out["a torch tensor as the mean charge gives the same frames"] = bool(np.array_equal(again, raw.copy_to_host()))
+    except ImportError:
+        out["torch"] = "not installed"
+    return out
+
+
+def timed(fn, repeats: int) -> float:
+    """Median seconds of ``fn()`` over ``repeats`` calls, after one warm-up."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def speed(width: int, height: int, name: str, extra, batch: int, repeats: int) -> dict:
+    cuda = cuda_kernel.kernels().cuda
+    cpu, gpu = pair(extra, width, height)
+    plan = gpu.device_plan()
+    frames = iter(range(10**9))
+
+    def kernel_alone():
+        plan.render([next(frames) for _ in range(batch)])
+        cuda.synchronize()
+
+    def to_host():
+        raw, _ = plan.render([next(frames) for _ in range(batch)])
+        raw.copy_to_host()
+
+    t_gpu = timed(kernel_alone, repeats) / batch
+    t_host = timed(to_host, repeats) / batch
+    cpu_plan = cpu.plan()
+    t_cpu = timed(lambda: kernel.render(cpu_plan, next(frames)), 3)
+    reference = numpy_reference(cpu.photo_mean_e, cpu.sensor.transfer.gain_dn_per_e)
+    t_ref = timed(lambda: reference(0), 3)
+    row = {"size": f"{width} x {height}", "sensor": name, "batch": batch,
+           "gpu_kernel_fps": 1 / t_gpu, "gpu_to_host_fps": 1 / t_host, "cpu_kernel_fps": 1 / t_cpu,
+           "numpy_reference_fps": 1 / t_ref, "gpu_over_cpu": t_cpu / t_gpu,
+           "gpu_pixels_per_s": width * height / t_gpu, "device_plan_mb": plan.nbytes() / 2**20}
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def training_crops(batch: int, repeats: int) -> dict:
+    """512 x 512 crops with truth per second: fresh frames of one exposure at random corners, in batches."""
+    cuda = cuda_kernel.kernels().cuda
+    cpu, gpu = pair(EVERY, 3840, 2160)
+    t0 = time.perf_counter()
+    truth = ground_truth.truth(cpu)
+    t_truth = time.perf_counter() - t0
+    expected = cuda.to_device(np.ascontiguousarray(truth.expected_raw.astype(np.float32)))
+    mask = cuda.to_device(np.ascontiguousarray(truth.mask))
+    plan = gpu.device_plan()
+    rng = np.random.default_rng(0)
+    frames = iter(range(10**9))
+
+    def one_batch():
+        corners = np.stack([rng.integers(0, 2160 - 512, batch) & ~1, rng.integers(0, 3840 - 512, batch) & ~1], axis=1)
+        raw, _ = plan.render([next(frames) for _ in range(batch)], corners, (512, 512))
+        # the truth's crops on the device (views: a training step reads them in place)
+        crops = [(expected[r:r + 512, c:c + 512], mask[r:r + 512, c:c + 512]) for r, c in corners]
+        cuda.synchronize()
+        return raw, crops
+
+    t = timed(one_batch, repeats) / batch
+    row = {"what": "512 x 512 crops with truth (every stage on, one 3840 x 2160 exposure)", "batch": batch,
+           "samples_per_s": 1 / t, "truth_once_s": t_truth}
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", type=Path, help="also write the results here")
+    ap.add_argument("--quick", action="store_true", help="fewer frames and repeats")
+    ap.add_argument("--skip-bits", action="store_true")
+    a = ap.parse_args()
+    cuda_kernel.check()
+    import numba
+
+    doc = {"device": cuda_kernel.describe(), "host": {**cpu_info(), "cores": os.cpu_count(),
+                                                       "python": platform.python_version()},
+           "numba_cuda": getattr(__import__("numba.cuda", fromlist=["x"]), "__version__", None) or _version("numba-cuda"),
+           "numba": numba.__version__}
+    print(json.dumps(doc), flush=True)
+    t0 = time.perf_counter()
+    doc["bits"] = {} if a.skip_bits else check_bits(a.quick)
+    doc["bits_s"] = time.perf_counter() - t0
+    repeats = 3 if a.quick else 10
+    doc["speed"] = [speed(1920, 1080, "default", None, 32, repeats), speed(1920, 1080, "every stage", EVERY, 32, repeats),
+                    speed(3840, 2160, "default", None, 8, repeats), speed(3840, 2160, "every stage", EVERY, 8, repeats)]
+    doc["training"] = training_crops(256, repeats)
+    if a.json:
+        a.json.write_text(json.dumps(doc, indent=1))
+    print("\nbits:", "all equal" if all(v is True for v in doc["bits"].values()) else doc["bits"])
+    print(f"{'size':>12} {'sensor':>12} {'GPU kernel':>11} {'GPU->host':>10} {'CPU kernel':>11} {'NumPy ref':>10}")
+    for r in doc["speed"]:
+        print(f"{r['size']:>12} {r['sensor']:>12} {r['gpu_kernel_fps']:>11.0f} {r['gpu_to_host_fps']:>10.0f} "
+              f"{r['cpu_kernel_fps']:>11.1f} {r['numpy_reference_fps']:>10.1f}")
+    print(f"training crops: {doc['training']['samples_per_s']:.0f} / s")
+
+
+def _version(name: str):
+    from importlib import metadata
+
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+if __name__ == "__main__":
+    main()
