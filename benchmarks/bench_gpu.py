@@ -140,10 +140,32 @@ def speed(width: int, height: int, name: str, extra, batch: int, repeats: int) -
     return row
 
 
-def training_crops(batch: int, repeats: int) -> dict:
+def blocks(repeats: int) -> list[dict]:
+    """The pixel kernel's threads per block against its speed (1080p, default sensor), and its registers."""
+    cuda = cuda_kernel.kernels().cuda
+    _, gpu = pair(None, 1920, 1080)
+    plan = gpu.device_plan()
+    rows = []
+    for block in (64, 128, 256, 512):
+        plan.block = block
+
+        def run():
+            plan.render(list(range(32)))
+            cuda.synchronize()
+
+        rows.append({"block": block, "gpu_kernel_fps": 32 / timed(run, repeats)})
+    plan.block = cuda_kernel.BLOCK
+    regs = cuda_kernel.kernels().pixels.get_regs_per_thread()
+    for r in rows:
+        r["registers"] = regs
+        print(json.dumps(r), flush=True)
+    return rows
+
+
+def training_crops(name: str, extra, batch: int, repeats: int) -> dict:
     """512 x 512 crops with truth per second: fresh frames of one exposure at random corners, in batches."""
     cuda = cuda_kernel.kernels().cuda
-    cpu, gpu = pair(EVERY, 3840, 2160)
+    cpu, gpu = pair(extra, 3840, 2160)
     t0 = time.perf_counter()
     truth = ground_truth.truth(cpu)
     t_truth = time.perf_counter() - t0
@@ -162,7 +184,7 @@ def training_crops(batch: int, repeats: int) -> dict:
         return raw, crops
 
     t = timed(one_batch, repeats) / batch
-    row = {"what": "512 x 512 crops with truth (every stage on, one 3840 x 2160 exposure)", "batch": batch,
+    row = {"what": f"512 x 512 crops with truth ({name}, one 3840 x 2160 exposure)", "batch": batch,
            "samples_per_s": 1 / t, "truth_once_s": t_truth}
     print(json.dumps(row), flush=True)
     return row
@@ -188,7 +210,8 @@ def main() -> None:
     repeats = 3 if a.quick else 10
     doc["speed"] = [speed(1920, 1080, "default", None, 32, repeats), speed(1920, 1080, "every stage", EVERY, 32, repeats),
                     speed(3840, 2160, "default", None, 8, repeats), speed(3840, 2160, "every stage", EVERY, 8, repeats)]
-    doc["training"] = training_crops(256, repeats)
+    doc["blocks"] = blocks(repeats)
+    doc["training"] = [training_crops("default", None, 256, repeats), training_crops("every stage", EVERY, 256, repeats)]
     if a.json:
         a.json.write_text(json.dumps(doc, indent=1))
     print("\nbits:", "all equal" if all(v is True for v in doc["bits"].values()) else doc["bits"])
@@ -196,7 +219,10 @@ def main() -> None:
     for r in doc["speed"]:
         print(f"{r['size']:>12} {r['sensor']:>12} {r['gpu_kernel_fps']:>11.0f} {r['gpu_to_host_fps']:>10.0f} "
               f"{r['cpu_kernel_fps']:>11.1f} {r['numpy_reference_fps']:>10.1f}")
-    print(f"training crops: {doc['training']['samples_per_s']:.0f} / s")
+    for r in doc["training"]:
+        print(f"{r['what']}: {r['samples_per_s']:.0f} / s")
+    print("threads per block:", ", ".join(f"{r['block']}: {r['gpu_kernel_fps']:.0f} fps" for r in doc["blocks"]),
+          f"({doc['blocks'][0]['registers']} registers a thread)")
 
 
 def _version(name: str):

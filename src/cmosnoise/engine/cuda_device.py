@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import cuda
 
-from . import kernel, samplers
+from . import kernel, samplers, telegraph
 from .cuda_kernel import scalar_numpy
 
 npx = scalar_numpy(cuda)  #: what ``np`` stands for in the helpers on the device
@@ -22,7 +22,7 @@ dev = cuda.jit(device=True, fastmath=False)
 h = kernel.compile_helpers(dev, numpy=npx, skip=("occupancy",))
 uniform_pair, normal_from, exp_ = h["uniform_pair"], h["normal_from"], h["exp"]
 ptrs_constants, ptrs_try, tukey_lambda_cell = h["ptrs_constants"], h["ptrs_try"], h["tukey_lambda_cell"]
-frame_states, inside = h["frame_states"], h["inside"]
+frame_states, inside, transition = h["frame_states"], h["inside"], h["transition"]
 inv_max, ptrs_from = samplers.INVERSION_MAX, samplers.PTRS_FROM
 floor, rint = npx.floor, npx.rint
 
@@ -58,6 +58,83 @@ def poisson_one(m, index, frame, seq, k0, k1, normal_above):
         p = p * m / k
         total = total + p
     return k
+
+
+MAX_EVENTS = int(telegraph.MAX_EVENTS)
+_OCCUPANCY_WORD = np.uint64(telegraph.OCCUPANCY << 4)
+
+
+@dev
+def _occupancy_uniform(index, node, seq, word0, j, k0, k1):
+    """The j-th uniform of a blinking pixel's occupancy draws (telegraph.occupancy's ``uni``)."""
+    u1, u2 = uniform_pair(index, node, seq, word0 | np.uint64((j // 2) << 8), k0, k1)
+    return u1 if j % 2 == 0 else u2
+
+
+@dev
+def _r_n(mun, a, b, pi0, pi1):
+    """R^n[a, b] given mu^n (telegraph.occupancy's ``r_n``)."""
+    pib = pi1 if b == 1 else pi0
+    return pib + mun * ((1.0 if a == b else 0.0) - pib)
+
+
+@dev
+def occupancy(frame, x, y, up, down, t, index, slot, seq, k0, k1):
+    """telegraph.occupancy on the device, step for step: the same draws and arithmetic, its two arrays local
+    (MAX_EVENTS long) and the event times sorted by insertion (numpy's sort gives the same sorted values)."""
+    lam = max(up, down)
+    s = up + down
+    pi0 = down / s
+    pi1 = up / s
+    mu = 1.0 - s / lam
+    xi = 1 if x > 0.5 else 0
+    yi = 1 if y > 0.5 else 0
+    word0 = slot | _OCCUPANCY_WORD
+    node = np.uint64(frame)
+    a01, a00, a10, a11 = transition(up, down, t)
+    p_end = (a00 if yi == 0 else a01) if xi == 0 else (a10 if yi == 0 else a11)
+    m = lam * t
+    u = _occupancy_uniform(index, node, seq, word0, 0, k0, k1)
+    p = exp_(0.0 - m)
+    n = 0
+    mun = 1.0
+    total = p * _r_n(mun, xi, yi, pi0, pi1) / p_end
+    while u > total and n < MAX_EVENTS:
+        n += 1
+        p = p * m / n
+        mun = mun * mu
+        total = total + p * _r_n(mun, xi, yi, pi0, pi1) / p_end
+    if n == 0:
+        return t if xi == 1 else 0.0
+    powers = cuda.local.array(MAX_EVENTS + 1, np.float64)
+    times = cuda.local.array(MAX_EVENTS, np.float64)
+    powers[0] = 1.0
+    for i in range(n):
+        powers[i + 1] = powers[i] * mu
+    for i in range(n):
+        v = _occupancy_uniform(index, node, seq, word0, 1 + i, k0, k1) * t
+        q = i
+        while q > 0 and times[q - 1] > v:
+            times[q] = times[q - 1]
+            q -= 1
+        times[q] = v
+    state = xi
+    last = 0.0
+    busy = 0.0
+    for i in range(n):
+        ti = times[i]
+        if state == 1:
+            busy = busy + (ti - last)
+        last = ti
+        left = n - 1 - i
+        step1 = (up / lam) if state == 0 else (1.0 - down / lam)
+        step0 = (1.0 - up / lam) if state == 0 else (down / lam)
+        w1 = step1 * _r_n(powers[left], 1, yi, pi0, pi1)
+        w0 = step0 * _r_n(powers[left], 0, yi, pi0, pi1)
+        state = 1 if _occupancy_uniform(index, node, seq, word0, 1 + n + i, k0, k1) * (w0 + w1) < w1 else 0
+    if state == 1:
+        busy = busy + (t - last)
+    return busy
 
 
 @dev
@@ -115,6 +192,19 @@ def trap_values(frames, seq, up, down, size, index, slot, dt, interval, cds, k0,
 
 
 @cuda.jit(fastmath=False)
+def blink_values(frames, seq, up, down, size, index, slot, dt, exposure, k0, k1, out):
+    """Each blinking pixel's extra dark charge in each item's frame (e-), (B, pixels): kernel._blink_values."""
+    t, b = cuda.grid(2)
+    if b >= frames.size or t >= up.size:
+        return
+    frame = frames[b]
+    sq = np.uint64(seq)
+    x, y = frame_states(frame, up[t], down[t], dt, index[t], slot[t], sq, k0, k1)
+    end = inside(frame, x, y, up[t], down[t], dt, exposure, index[t], slot[t], sq, k0, k1)
+    out[b, t] = size[t] * occupancy(frame, x, end, up[t], down[t], exposure, index[t], slot[t], sq, k0, k1)
+
+
+@cuda.jit(fastmath=False)
 def pixel_sums(first, values, out):
     """Per pixel, its traps' values summed in slot order (telegraph.per_pixel), (B, pixels)."""
     p, b = cuda.grid(2)
@@ -129,7 +219,7 @@ def pixel_sums(first, values, out):
 @cuda.jit(fastmath=False)
 def pixels(noisy, exact, flags, normal_above, full_well, sf, rowval, colterm, gain, keys, frames, corners, seq,
            h, w, cols, k_adc, cell_black, top, nl_table, nl_scale, nl_a, nl_b, nl_c, offset, read_kind, read_scale,
-           read_table, rts_ptr, rts_col, rts_sum, blink_ptr, blink_col, blink_mean, out_dn, out_e):
+           read_table, rts_ptr, rts_col, rts_sum, blink_ptr, blink_col, blink_extra, out_dn, out_e):
     """Every stage of one pixel of one item (kernel._render_rows, in its order): grid (columns, rows, items)."""
     j, i, b = cuda.grid(3)
     if j >= w or i >= h or b >= frames.size:
@@ -145,14 +235,18 @@ def pixels(noisy, exact, flags, normal_above, full_well, sf, rowval, colterm, ga
     index = np.uint64(r * cols + c)
     blink = find(blink_ptr, blink_col, r, c) if has_blink else -1
     n = 0.0
+    blink_mean = 0.0
+    if blink >= 0:  # stage 4b: a blinking pixel's mean charge of this frame, float32 (kernel.plus_charge)
+        held = exact[r, c] if blink_exact else noisy[r, c]
+        blink_mean = np.float64(np.float32(np.float64(held) + blink_extra[b, blink]))
     if has_noisy:
         m = np.float64(noisy[r, c])
-        if blink >= 0 and not blink_exact:  # stage 4b: a blinking pixel's count at this frame's mean
-            m = np.float64(blink_mean[b, blink])
+        if blink >= 0 and not blink_exact:  # a blinking pixel's count at this frame's mean
+            m = blink_mean
         n = poisson_one(m, index, fr, sq, keys[0, 0], keys[0, 1], normal_above)
     if has_exact:
-        if blink >= 0 and blink_exact:  # stage 4b: a blinking pixel's mean dark charge of this frame
-            n = n + np.float64(blink_mean[b, blink])
+        if blink >= 0 and blink_exact:  # a blinking pixel's mean dark charge of this frame
+            n = n + blink_mean
         else:
             n = n + np.float64(exact[r, c])
     n = min(n, full_well)

@@ -20,9 +20,9 @@ uploaded once (:class:`DevicePlan`); a batch of frames, or of crops at
 different corners of the same exposure, is one launch, and the frames stay
 on the device until asked for. A row's and a column's normals and each
 frame's black level are drawn once per frame by a small kernel before the
-pixels. The random telegraph traps' states are drawn on the device; the
-blinking pixels' dark charge (a handful of pixels, an allocation per draw)
-on the host, by the CPU kernel, and uploaded with the batch.
+pixels, and so are the random telegraph traps' states and the blinking
+pixels' dark charge, per item (:func:`.cuda_device.occupancy`: telegraph's
+occupancy with its two arrays local to the thread).
 
 Where ``NUMBA_ENABLE_CUDASIM=1`` is set before numba is imported, the same
 kernels run in numba's CUDA simulator (slow, pure Python: small frames), and
@@ -190,6 +190,8 @@ class DevicePlan:
         check()
         self.k = kernels()
         cuda = self.k.cuda
+        #: threads per block of the pixel kernel
+        self.block = BLOCK
         self.plan = plan
         rows, cols = plan.shape
 
@@ -236,11 +238,15 @@ class DevicePlan:
             self.rts_ptr, self.rts_col = up(ptr), up(col)
         else:
             self.rts_ptr, self.rts_col = up(empty_ptr), up(np.zeros(1, np.int64))
-        # blinking pixels (stage 4b): their pixels; each item's mean charge comes from the host
+        # blinking pixels (stage 4b): one a pixel, sorted
         self.blinkers = plan.blinkers if plan.blinkers is not None and plan.blinkers.index.size else None
         if self.blinkers is not None:
-            pix = np.unique(self.blinkers.index)
-            self.blink_ptr, self.blink_col = (up(a) for a in _rows_of(pix, plan.shape))
+            t = self.blinkers
+            if np.any(np.diff(t.index.astype(np.int64)) <= 0):
+                raise ValueError("blinkers: expected one blinking pixel per pixel, sorted")
+            self.blink_ptr, self.blink_col = (up(a) for a in _rows_of(t.index, plan.shape))
+            self.blink_arrays = tuple(up(a) for a in (t.up, t.down, t.size, t.index.astype(np.uint64),
+                                                      t.slot.astype(np.uint64)))
         else:
             self.blink_ptr, self.blink_col = up(empty_ptr), up(np.zeros(1, np.int64))
         self.stuck = None
@@ -346,14 +352,14 @@ class DevicePlan:
                 npix = self.rts_col.size
                 rts_sum = cuda.device_array((n, npix), np.float64, stream=stream)
                 self.k.pixel_sums[((npix + 127) // 128, n), (128, 1), stream](self.trap_first, values, rts_sum)
-            blink_mean = cuda.device_array((1, 1), np.float32, stream=stream)
+            blink_extra = cuda.device_array((1, 1), np.float64, stream=stream)
             if self.blinkers is not None:
-                whole = (0, rows, 0, cols)
-                means = np.stack([kernel.blink_means(plan, int(fr), whole)[1] for fr in frames])
-                pix = self.blinkers.index
-                # the kernel's per-pixel values: each blinking pixel once (a pixel blinks with one population)
-                keep = np.r_[True, pix[1:] != pix[:-1]]
-                blink_mean = cuda.to_device(np.ascontiguousarray(means[:, keep]), stream=stream)
+                t = self.blinkers
+                blink_extra = cuda.device_array((n, t.index.size), np.float64, stream=stream)
+                k0, k1 = (np.uint64(v) for v in plan.blink_key)
+                self.k.blink_values[((t.index.size + 127) // 128, n), (128, 1), stream](
+                    d_frames, np.uint64(plan.sequence), *self.blink_arrays, float(plan.frame_period_s),
+                    float(plan.exposure_s), k0, k1, blink_extra)
             out_dn = cuda.device_array((n, h, w) if adc_on else (1, 1, 1), np.uint16, stream=stream)
             want_e = electrons or not adc_on
             out_e = cuda.device_array((n, h, w) if want_e else (1, 1, 1), np.float32, stream=stream)
@@ -361,13 +367,13 @@ class DevicePlan:
                               f["offset"], f["read"], self.traps is not None, self.blinkers is not None,
                               not plan.blink_noisy])
             a, b_, c_ = self.nl_abc
-            grid = ((w + BLOCK - 1) // BLOCK, h, n)
-            self.k.pixels[grid, (BLOCK, 1, 1), stream](
+            grid = ((w + self.block - 1) // self.block, h, n)
+            self.k.pixels[grid, (self.block, 1, 1), stream](
                 self.noisy, self.exact, cuda.to_device(flags, stream=stream), float(plan.normal_above_e),
                 float(plan.full_well_e), self.sf, rowval, colterm, self.col_gain, self.keys, d_frames, d_corners,
                 plan.sequence, h, w, cols, float(k_adc), cell_black, float(top), self.nl, float(self.nl_scale), a, b_, c_,
                 self.offset, self.read_kind, float(self.read_scale), self.read_table, self.rts_ptr, self.rts_col,
-                rts_sum, self.blink_ptr, self.blink_col, blink_mean, out_dn, out_e)
+                rts_sum, self.blink_ptr, self.blink_col, blink_extra, out_dn, out_e)
             raw = out_dn if adc_on else out_e
             if self.stuck is not None:
                 where, value = self.stuck
