@@ -61,6 +61,7 @@ def poisson_one(m, index, frame, seq, k0, k1, normal_above):
 
 
 MAX_EVENTS = int(telegraph.MAX_EVENTS)
+_POWERS = MAX_EVENTS + 1  # a local array's length must be a constant, not an expression
 _OCCUPANCY_WORD = np.uint64(telegraph.OCCUPANCY << 4)
 
 
@@ -106,7 +107,7 @@ def occupancy(frame, x, y, up, down, t, index, slot, seq, k0, k1):
         total = total + p * _r_n(mun, xi, yi, pi0, pi1) / p_end
     if n == 0:
         return t if xi == 1 else 0.0
-    powers = cuda.local.array(MAX_EVENTS + 1, np.float64)
+    powers = cuda.local.array(_POWERS, np.float64)
     times = cuda.local.array(MAX_EVENTS, np.float64)
     powers[0] = 1.0
     for i in range(n):
