@@ -155,7 +155,8 @@ def blocks(repeats: int) -> list[dict]:
 
         rows.append({"block": block, "gpu_kernel_fps": 32 / timed(run, repeats)})
     plan.block = cuda_kernel.BLOCK
-    regs = cuda_kernel.kernels().pixels.get_regs_per_thread()
+    regs = cuda_kernel.kernels().pixels.get_regs_per_thread()  # {signature: registers}, or one number
+    regs = max(regs.values()) if isinstance(regs, dict) else regs
     for r in rows:
         r["registers"] = regs
         print(json.dumps(r), flush=True)
@@ -214,7 +215,7 @@ def main() -> None:
     doc["training"] = [training_crops("default", None, 256, repeats), training_crops("every stage", EVERY, 256, repeats)]
     if a.json:
         a.json.write_text(json.dumps(doc, indent=1))
-    print("\nbits:", "all equal" if all(v is True for v in doc["bits"].values()) else doc["bits"])
+    print("\nbits:", "all equal" if all(v is True for v in doc["bits"].values()) else doc["bits"], list(doc["bits"]))
     print(f"{'size':>12} {'sensor':>12} {'GPU kernel':>11} {'GPU->host':>10} {'CPU kernel':>11} {'NumPy ref':>10}")
     for r in doc["speed"]:
         print(f"{r['size']:>12} {r['sensor']:>12} {r['gpu_kernel_fps']:>11.0f} {r['gpu_to_host_fps']:>10.0f} "
