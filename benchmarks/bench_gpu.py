@@ -179,10 +179,10 @@ def training_crops(name: str, extra, batch: int, repeats: int) -> dict:
     def one_batch():
         corners = np.stack([rng.integers(0, 2160 - 512, batch) & ~1, rng.integers(0, 3840 - 512, batch) & ~1], axis=1)
         raw, _ = plan.render([next(frames) for _ in range(batch)], corners, (512, 512))
-        # the truth's crops on the device (views: a training step reads them in place)
-        crops = [(expected[r:r + 512, c:c + 512], mask[r:r + 512, c:c + 512]) for r, c in corners]
+        # the truth's crops at the same corners, one launch each: (batch, 512, 512) on the device
+        truths = cuda_kernel.crops(expected, corners, (512, 512)), cuda_kernel.crops(mask, corners, (512, 512))
         cuda.synchronize()
-        return raw, crops
+        return raw, truths
 
     t = timed(one_batch, repeats) / batch
     row = {"what": f"512 x 512 crops with truth ({name}, one 3840 x 2160 exposure)", "batch": batch,
@@ -196,6 +196,7 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="also write the results here")
     ap.add_argument("--quick", action="store_true", help="fewer frames and repeats")
     ap.add_argument("--skip-bits", action="store_true")
+    ap.add_argument("--only-training", action="store_true", help="the training crops alone")
     a = ap.parse_args()
     cuda_kernel.check()
     import numba
@@ -205,10 +206,14 @@ def main() -> None:
            "numba_cuda": getattr(__import__("numba.cuda", fromlist=["x"]), "__version__", None) or _version("numba-cuda"),
            "numba": numba.__version__}
     print(json.dumps(doc), flush=True)
+    repeats = 3 if a.quick else 10
+    if a.only_training:
+        for row in (training_crops("default", None, 256, repeats), training_crops("every stage", EVERY, 256, repeats)):
+            print(f"{row['what']}: {row['samples_per_s']:.0f} / s")
+        return
     t0 = time.perf_counter()
     doc["bits"] = {} if a.skip_bits else check_bits(a.quick)
     doc["bits_s"] = time.perf_counter() - t0
-    repeats = 3 if a.quick else 10
     doc["speed"] = [speed(1920, 1080, "default", None, 32, repeats), speed(1920, 1080, "every stage", EVERY, 32, repeats),
                     speed(3840, 2160, "default", None, 8, repeats), speed(3840, 2160, "every stage", EVERY, 8, repeats)]
     doc["blocks"] = blocks(repeats)

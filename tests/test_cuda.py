@@ -216,3 +216,15 @@ def test_nvvm_compiles_the_kernels_without_multiply_add_contraction():
         assert c["strict_fma"] == 0 and c["strict_plain_mul"] == 0, (name, c)
     assert counts["pixels"]["strict_mul_rn"] > 50 and counts["pixels"]["loose_fma"] > 50, counts["pixels"]
     assert all(counts[k]["loose_fma"] > 0 for k in ("lines", "trap_values", "blink_values"))
+
+
+def test_crops_of_a_map_on_the_device_are_the_maps_crops():
+    """The truth of a batch of crops: one launch cuts the same corners out of an exposure's map."""
+    rng = np.random.default_rng(0)
+    source = rng.random((HEIGHT, WIDTH)).astype(np.float32)
+    corners = [(0, 0), (HEIGHT - 10, WIDTH - 12), (5, 3)]
+    out = cuda_kernel.crops(source, corners, (10, 12)).copy_to_host()
+    for b, (r, c) in enumerate(corners):
+        np.testing.assert_array_equal(out[b], source[r:r + 10, c:c + 12])
+    with pytest.raises(ValueError, match="do not fit"):
+        cuda_kernel.crops(source, [(HEIGHT - 5, 0)], (10, 12))

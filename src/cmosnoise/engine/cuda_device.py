@@ -308,3 +308,11 @@ def stick(where, value, corners, out):
     if 0 <= i < out.shape[1] and 0 <= j < out.shape[2]:
         out[b, i, j] = value[s]
 
+
+
+@cuda.jit(fastmath=False)
+def gather(source, corners, out):
+    """``out[b] = source[r:r + h, c:c + w]`` at each item's corner ``(r, c) = corners[b]``: (B, h, w)."""
+    j, i, b = cuda.grid(3)
+    if b < out.shape[0] and i < out.shape[1] and j < out.shape[2]:
+        out[b, i, j] = source[corners[b, 0] + i, corners[b, 1] + j]

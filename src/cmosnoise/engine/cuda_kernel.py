@@ -157,6 +157,31 @@ def as_device_array(value, name: str = "array"):
     return cuda.as_cuda_array(value)
 
 
+def crops(source, corners, shape: tuple[int, int]):
+    """A batch of crops of one array on the GPU, in one launch: device array (B, h, w) of ``source``'s dtype.
+
+    Parameters
+    ----------
+    source : GPU array (rows, cols) (see :func:`as_device_array`), or a NumPy array (uploaded first)
+        A map of the exposure: its truth (expected raw, mask), a mean charge.
+    corners : array_like (B, 2)
+        Each crop's top-left pixel, as :meth:`DevicePlan.render` takes them (the frames' crops match).
+    shape : (h, w)
+    """
+    k = kernels()
+    cuda = k.cuda
+    src = cuda.to_device(np.ascontiguousarray(source)) if isinstance(source, np.ndarray) else as_device_array(source)
+    corners = np.asarray(corners, np.int64).reshape(-1, 2)
+    h, w = int(shape[0]), int(shape[1])
+    rows, cols = src.shape
+    if corners.size == 0 or corners.min() < 0 or (corners[:, 0] + h).max() > rows or (corners[:, 1] + w).max() > cols:
+        raise ValueError(f"crops of {h} x {w} at corners {corners.tolist()[:4]}... do not fit in {rows} x {cols}")
+    out = cuda.device_array((corners.shape[0], h, w), src.dtype)
+    with strict_arithmetic():
+        k.gather[((w + BLOCK - 1) // BLOCK, h, corners.shape[0]), (BLOCK, 1, 1)](src, cuda.to_device(corners), out)
+    return out
+
+
 def to_torch(array):
     """A device array as a PyTorch CUDA tensor over the same memory (no copy)."""
     import torch
