@@ -176,11 +176,20 @@ def lines(frames, corners, h, w, seq, keys, has_row, row_sigma, row_offset, has_
         cell_black[b, q] = (black + cell_offsets[q]) + err
 
 
+@dev
+def _inside_item(index, corners, b, h, w, cols):
+    """Whether pixel ``index`` lies inside item ``b`` (``h`` x ``w`` at ``corners[b]``)."""
+    r = np.int64(index // np.uint64(cols)) - corners[b, 0]
+    c = np.int64(index % np.uint64(cols)) - corners[b, 1]
+    return 0 <= r < h and 0 <= c < w
+
+
 @cuda.jit(fastmath=False)
-def trap_values(frames, seq, up, down, size, index, slot, dt, interval, cds, k0, k1, out):
-    """What each trap adds in each item's frame (e-), (B, traps): kernel._trap_values."""
+def trap_values(frames, corners, h, w, cols, seq, up, down, size, index, slot, dt, interval, cds, k0, k1, out):
+    """What each trap adds in each item's frame (e-), (B, traps): kernel._trap_values; only for the traps inside
+    the item (the others are never read)."""
     t, b = cuda.grid(2)
-    if b >= frames.size or t >= up.size:
+    if b >= frames.size or t >= up.size or not _inside_item(index[t], corners, b, h, w, cols):
         return
     frame = frames[b]
     sq = np.uint64(seq)
@@ -193,10 +202,11 @@ def trap_values(frames, seq, up, down, size, index, slot, dt, interval, cds, k0,
 
 
 @cuda.jit(fastmath=False)
-def blink_values(frames, seq, up, down, size, index, slot, dt, exposure, k0, k1, out):
-    """Each blinking pixel's extra dark charge in each item's frame (e-), (B, pixels): kernel._blink_values."""
+def blink_values(frames, corners, h, w, cols, seq, up, down, size, index, slot, dt, exposure, k0, k1, out):
+    """Each blinking pixel's extra dark charge in each item's frame (e-), (B, pixels): kernel._blink_values; only
+    for the pixels inside the item (``h`` x ``w`` at its corner; the others are never read)."""
     t, b = cuda.grid(2)
-    if b >= frames.size or t >= up.size:
+    if b >= frames.size or t >= up.size or not _inside_item(index[t], corners, b, h, w, cols):
         return
     frame = frames[b]
     sq = np.uint64(seq)
@@ -206,10 +216,10 @@ def blink_values(frames, seq, up, down, size, index, slot, dt, exposure, k0, k1,
 
 
 @cuda.jit(fastmath=False)
-def pixel_sums(first, values, out):
-    """Per pixel, its traps' values summed in slot order (telegraph.per_pixel), (B, pixels)."""
+def pixel_sums(first, index, corners, h, w, cols, values, out):
+    """Per pixel inside each item, its traps' values summed in slot order (telegraph.per_pixel), (B, pixels)."""
     p, b = cuda.grid(2)
-    if b >= values.shape[0] or p >= out.shape[1]:
+    if b >= values.shape[0] or p >= out.shape[1] or not _inside_item(index[first[p]], corners, b, h, w, cols):
         return
     s = values[b, first[p]]
     for e in range(first[p] + 1, first[p + 1]):

@@ -372,18 +372,21 @@ class DevicePlan:
                 k0, k1 = (np.uint64(v) for v in plan.trap_key)
                 cds = plan.cds_interval_s is not None
                 self.k.trap_values[((t.index.size + 127) // 128, n), (128, 1), stream](
-                    d_frames, np.uint64(plan.sequence), *self.trap_arrays, float(plan.frame_period_s),
+                    d_frames, d_corners, h, w, cols, np.uint64(plan.sequence), *self.trap_arrays,
+                    float(plan.frame_period_s),
                     float(plan.cds_interval_s or 0.0), cds, k0, k1, values)
                 npix = self.rts_col.size
                 rts_sum = cuda.device_array((n, npix), np.float64, stream=stream)
-                self.k.pixel_sums[((npix + 127) // 128, n), (128, 1), stream](self.trap_first, values, rts_sum)
+                self.k.pixel_sums[((npix + 127) // 128, n), (128, 1), stream](
+                    self.trap_first, self.trap_arrays[3], d_corners, h, w, cols, values, rts_sum)
             blink_extra = cuda.device_array((1, 1), np.float64, stream=stream)
             if self.blinkers is not None:
                 t = self.blinkers
                 blink_extra = cuda.device_array((n, t.index.size), np.float64, stream=stream)
                 k0, k1 = (np.uint64(v) for v in plan.blink_key)
                 self.k.blink_values[((t.index.size + 127) // 128, n), (128, 1), stream](
-                    d_frames, np.uint64(plan.sequence), *self.blink_arrays, float(plan.frame_period_s),
+                    d_frames, d_corners, h, w, cols, np.uint64(plan.sequence), *self.blink_arrays,
+                    float(plan.frame_period_s),
                     float(plan.exposure_s), k0, k1, blink_extra)
             out_dn = cuda.device_array((n, h, w) if adc_on else (1, 1, 1), np.uint16, stream=stream)
             want_e = electrons or not adc_on
