@@ -228,3 +228,35 @@ def test_crops_of_a_map_on_the_device_are_the_maps_crops():
         np.testing.assert_array_equal(out[b], source[r:r + 10, c:c + 12])
     with pytest.raises(ValueError, match="do not fit"):
         cuda_kernel.crops(source, [(HEIGHT - 5, 0)], (10, 12))
+
+
+def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_path):
+    from cmosnoise.app import dataset as ds
+    from cmosnoise.app import sweep as sw
+
+    recipe = ds.Recipe(samples=2, crop=(32, 48), seed=4, cameras=("led",), sources=ds.BUILTIN_SCENES, shard_size=2)
+    assert ds.shard_bytes(recipe.to_json(), 0, "cuda") == ds.shard_bytes(recipe.to_json(), 0)
+    cfg = {"sensor": {"width": 48, "height": 32}}
+    base = load_config(extra=cfg)
+    assert sw.run_instance(base.model_dump(), "flat:0.3", 2, 17, device="cuda") == \
+        sw.run_instance(base.model_dump(), "flat:0.3", 2, 17)
+    with pytest.raises(CmosnoiseError, match="--device 'tpu'"):
+        sw.run(base, [], 1, tmp_path / "s", device="tpu")
+
+
+def test_the_torch_dataset_on_the_gpu_gives_the_cpus_tensors():
+    from cmosnoise.torch import NoisyRawDataset
+
+    cpu = NoisyRawDataset(3, crop=(32, 48), seed=2)
+    gpu = NoisyRawDataset(3, crop=(32, 48), seed=2, device="cuda")
+    for i in range(3):
+        a, b = cpu[i], gpu[i]
+        assert b["noisy"].device.type == ("cpu" if SIMULATED else "cuda")
+        for key in ("noisy", "expected", "perfect", "mask", "raw"):
+            assert a[key].dtype == b[key].dtype and torch_equal(a[key], b[key].cpu()), (i, key)
+
+
+def torch_equal(a, b) -> bool:
+    import torch
+
+    return bool(torch.equal(a, b))

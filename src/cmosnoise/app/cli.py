@@ -345,6 +345,7 @@ def sweep(
     resume: bool = typer.Option(False, "--resume", help="continue the sweep in --out: skip the rows results.csv already holds"),
     overwrite: bool = OverwriteOpt,
     from_: Optional[Path] = typer.Option(None, "--from", help="rerun a sweep.yaml (its base configuration, grid, instances and spec)"),
+    device: str = DeviceOpt,
     out: Path = typer.Option(Path("cmosnoise-sweep"), "--out", "-o", help="output folder"),
 ):
     """Parameter studies and yield over many sensor instances, on Dask (a LocalCluster, or --scheduler)."""
@@ -361,7 +362,7 @@ def sweep(
         base = _sensor(config, preset, set_).config
     with _counting(ctx, "sweep") as progress:
         df = sw.run(base, vary or [], instances, out, frames, scene, spec, scheduler, workers, resume, overwrite,
-                    progress=progress, say=lambda m: _say(ctx, m), metrics=metric)
+                    progress=progress, say=lambda m: _say(ctx, m), metrics=metric, device=device)
     points = df["point"].nunique()
     msg = f"wrote {len(df)} row(s) ({points} point(s) x {instances} instance(s)) to {out}/results.csv, summary.csv, plots, index.html"
     if "pass" in df:
@@ -483,6 +484,7 @@ def dataset(
     workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="make the shards on a "
                                           "LocalCluster of this many processes (default: here, one process)"),
     resume: bool = typer.Option(False, "--resume", help="complete the data set in --out: make its missing shards"),
+    device: str = DeviceOpt,
     overwrite: bool = OverwriteOpt,
 ):
     """Training and test data: noisy raw crops with their ground truth (expected raw, perfect image, defect mask)."""
@@ -509,7 +511,7 @@ def dataset(
                        white_threshold_e_per_s=white_threshold, shard_size=shard_size, format=format_.lower())
     with _counting(ctx, "dataset", "samples") as progress:
         ds.build(recipe, out, resume=resume, overwrite=overwrite, scheduler=scheduler, workers=workers,
-                 progress=progress, say=lambda m: _say(ctx, m))
+                 progress=progress, say=lambda m: _say(ctx, m), device=device)
     _say(ctx, f"wrote {samples} sample(s) of {shape[0]} x {shape[1]} in {recipe.shards()} {recipe.format} shard(s) "
               f"to {out}/ (dataset.json names them)")
 

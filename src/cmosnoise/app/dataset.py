@@ -284,19 +284,22 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     return SampleSettings(index, config, columns)
 
 
-def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, frame: int = 0) -> tuple[dict, dict]:
+def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, frame: int = 0,
+                device: str = "cpu", on_device: bool = False) -> tuple[dict, dict]:
     """(arrays, columns) of sample ``index``: the noisy raw and its truths (:data:`ARRAYS`), and its settings.
 
     ``frame``: which frame of the sample's sensor is the noisy raw (0 in a data set; another frame is fresh
-    temporal noise on the same sensor, scene and truth).
+    temporal noise on the same sensor, scene and truth). ``device``: where the frame is made (the same bits);
+    ``on_device`` (with ``device="cuda"``): the raw is left on the GPU, a device array (the truths are made on the
+    host either way).
     """
     sources = sources or Sources()
     st = settings(recipe, index, sources)
     c = st.config
-    sensor = Sensor(c)
+    sensor = Sensor(c, device=device)
     img = scene_mod.window_of(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape)
     shot = sensor.expose(img)
-    raw = shot.frame(frame)
+    raw = shot.frames_on_device([frame])[0][0] if on_device else shot.frame(frame)
     truth = ground_truth.truth(shot, recipe.white_threshold_e_per_s)
     t = sensor.transfer
     columns = {**st.columns, "k_dn_per_e": t.gain_dn_per_e, "black_level_dn": t.black_level_dn,
@@ -306,11 +309,11 @@ def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, fram
 
 
 # ------------------------------------------------------------------ shards
-def shard_bytes(recipe_json: str, shard: int) -> bytes:
+def shard_bytes(recipe_json: str, shard: int, device: str = "cpu") -> bytes:
     """Shard ``shard`` of the recipe, as the bytes of its file (made in memory: a Dask task returns them)."""
     recipe = Recipe.from_json(recipe_json)
     sources = Sources()
-    made = [make_sample(recipe, i, sources) for i in recipe.shard_range(shard)]
+    made = [make_sample(recipe, i, sources, device=device) for i in recipe.shard_range(shard)]
     arrays = {k: np.stack([a[k] for a, _ in made]) for k in ARRAYS}
     columns = {k: [c[k] for _, c in made] for k in COLUMNS}
     return {"hdf5": _hdf5, "npz": _npz, "fits": _fits}[recipe.format](arrays, columns, recipe)
@@ -437,19 +440,19 @@ def _mode(out: Path, recipe: Recipe, resume: bool, overwrite: bool) -> str:
     return resumable_mode(out, _MANIFEST, _manifest(recipe), resume, overwrite, "data set")
 
 
-def _shards_here(recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, bytes]]:
+def _shards_here(recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterator[tuple[int, bytes]]:
     recipe_json = recipe.to_json()
     for s in todo:
-        yield s, shard_bytes(recipe_json, s)
+        yield s, shard_bytes(recipe_json, s, device)
 
 
-def _shards_on(client, recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, bytes]]:
+def _shards_on(client, recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterator[tuple[int, bytes]]:
     from distributed import as_completed
 
     from .sweep import task_result
 
     recipe_json = recipe.to_json()
-    futures = {client.submit(shard_bytes, recipe_json, s, pure=False, retries=2): s for s in todo}
+    futures = {client.submit(shard_bytes, recipe_json, s, device, pure=False, retries=2): s for s in todo}
     for future in as_completed(futures):
         data = task_result(future, "a dataset task")
         future.release()
@@ -458,15 +461,17 @@ def _shards_on(client, recipe: Recipe, todo: list[int]) -> Iterator[tuple[int, b
 
 def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool = False,
           scheduler: str | None = None, workers: int | None = None,
-          progress: Callable[[int, int], None] | None = None, say: Callable[[str], None] = lambda m: None) -> Path:
+          progress: Callable[[int, int], None] | None = None, say: Callable[[str], None] = lambda m: None,
+          device: str = "cpu") -> Path:
     """Make the data set ``recipe`` in ``out``: ``dataset.json`` and its shards (each written whole, under a
     temporary name first). ``resume`` makes only the missing shards of the same recipe. ``workers`` or
     ``scheduler``: the shards are made on Dask (a LocalCluster of processes, or that scheduler); the bytes
-    are the same."""
+    are the same. ``device``: where the frames are made (``"cuda"``: the GPU; the same bytes)."""
     from ..io.output import OutputFolder
-    from .sweep import connect, disconnect
+    from .sweep import _check_device, connect, disconnect
 
     check(recipe)
+    _check_device(device)
     out = Path(out)
     folder = OutputFolder(out, overwrite=True)  # its checks on the name and place; creates nothing
     mode = _mode(out, recipe, resume, overwrite)
@@ -494,9 +499,9 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
             if todo and (workers is not None or scheduler is not None):
                 client, cluster = connect(scheduler, workers, say)
                 stack.callback(disconnect, client, cluster)
-                made = _shards_on(client, recipe, todo)
+                made = _shards_on(client, recipe, todo, device)
             else:
-                made = _shards_here(recipe, todo)
+                made = _shards_here(recipe, todo, device)
             for s, data in made:
                 _write(work, recipe.shard_name(s), data)
                 done += len(recipe.shard_range(s))

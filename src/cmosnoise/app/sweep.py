@@ -167,11 +167,12 @@ METRICS = ("mean_e", "temporal_noise_e", "temporal_noise_predicted_e", "snr_db_a
            "couplets_expected_random", "residual_defects", "couplets_after_correction")
 
 
-def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=None) -> dict:
+def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=None, device: str = "cpu") -> dict:
     """The metrics of one sensor instance: a dict of numbers (what a Dask task returns).
 
     ``cache`` (a :class:`~cmosnoise.model.fixed_pattern.PatternCache`) lends the maps that another point of
     the same seed drew with the same inputs (the worker's own cache); the numbers are the same without it.
+    ``device``: where the frames are made (``"cuda"``: the worker's GPU; the same numbers).
     """
     from ..analysis import figures_of_merit as fom
     from ..analysis import white_pixels
@@ -182,7 +183,7 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     from ..model.sensor import Sensor
 
     cfg = Config.model_validate(config_data)
-    sensor = Sensor(cfg, seed=seed, cache=cache)
+    sensor = Sensor(cfg, seed=seed, cache=cache, device=device)
     shot = sensor.expose(scene)
     t = sensor.transfer
     k = t.gain_dn_per_e
@@ -242,7 +243,7 @@ def _worker_cache():
     return cache
 
 
-def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int) -> dict:
+def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int, device: str = "cpu") -> dict:
     """What a worker runs: one instance, tagged with its point and instance.
 
     An error of the input (a :class:`CmosnoiseError`) is returned as
@@ -250,7 +251,7 @@ def _task(config_data: dict, scene: str, frames: int, point: int, instance: int,
     traceback; the sweep stops with the one line instead.
     """
     try:
-        metrics = run_instance(config_data, scene, frames, seed, _worker_cache())
+        metrics = run_instance(config_data, scene, frames, seed, _worker_cache(), device)
     except CmosnoiseError as exc:
         return {"point": point, "instance": instance, "error": " ".join(str(exc).split())}
     return {"point": point, "instance": instance, "seed": seed, **metrics}
@@ -397,8 +398,10 @@ def _done_rows(path: Path, columns: list[str]) -> set[tuple[int, int]]:
     return done
 
 
-def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable[[int, int], None] | None = None) -> Path:
-    """Run every (point, instance) not yet in ``out/results.csv`` on ``client``; rows are appended as tasks finish."""
+def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable[[int, int], None] | None = None,
+            device: str = "cpu") -> Path:
+    """Run every (point, instance) not yet in ``out/results.csv`` on ``client``; rows are appended as tasks finish
+    (``device``: where each worker makes the frames)."""
     from distributed import as_completed
 
     results = out / "results.csv"
@@ -422,7 +425,7 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
         def submit(item):
             i, j = item
             return client.submit(_task, p.configs[i], p.scene, p.frames, i, j, instance_seed(p.base.seed, j),
-                                 pure=False, retries=2)
+                                 device, pure=False, retries=2)
 
         queue = iter(todo)
         running = as_completed([submit(x) for x in itertools.islice(queue, window)])
@@ -559,12 +562,13 @@ Rows: results.csv; per point: summary.csv; the sweep itself: sweep.yaml.</p>
 def run(base, vary: list[str], instances: int, out: str | Path | None = None, frames: int = 2, scene: str | None = None,
         specs: list[str] | None = None, scheduler: str | None = None, workers: int | None = None, resume: bool = False,
         overwrite: bool = False, progress=None, say: Callable[[str], None] = lambda m: None,
-        metrics: list[str] | None = None):
+        metrics: list[str] | None = None, device: str = "cpu"):
     """The Python API: run a sweep and return ``results.csv`` as a pandas DataFrame (sorted by point and instance).
 
     ``base`` is a Config (or anything :class:`~cmosnoise.Sensor` takes as a
     configuration); ``vary`` holds ``--vary`` texts. Without ``out`` the
-    files go to a temporary folder that is removed afterwards.
+    files go to a temporary folder that is removed afterwards. ``device``: where
+    the workers make the frames (``"cuda"``: their GPU, numba's CUDA target; the same numbers).
     """
     import shutil
     import tempfile
@@ -574,6 +578,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     from ..model.sensor import _as_spec
 
     base = _as_spec(base).config
+    _check_device(device)
     p = plan(base, vary, instances, frames, scene, specs, metrics)
     tmp = None
     if out is None:
@@ -597,7 +602,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
                 if mode != "resume":
                     work.mkdir(parents=True, exist_ok=True)
                     _write_plan(work, p)
-                execute(p, work, client, mode == "resume", progress)
+                execute(p, work, client, mode == "resume", progress, device)
             except BaseException:
                 if mode == "new" and not (out / "results.csv").exists():
                     shutil.rmtree(out, ignore_errors=True)
@@ -609,6 +614,17 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     if tmp is not None:
         tmp.cleanup()
     return df
+
+
+def _check_device(device: str) -> None:
+    """A one-line error for a device that is not one, or a GPU this machine lacks (before any worker starts)."""
+    from ..engine import cuda_kernel
+    from ..model.sensor import DEVICES
+
+    if device not in DEVICES:
+        raise CmosnoiseError(f"--device {device!r}: expected one of {', '.join(DEVICES)}")
+    if device == "cuda":
+        cuda_kernel.check()
 
 
 def task_result(future, what: str):

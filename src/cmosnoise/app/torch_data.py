@@ -24,6 +24,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
+from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
 from . import dataset as ds
 
@@ -38,20 +39,40 @@ def pack(a: np.ndarray, pattern: str) -> np.ndarray:
     return np.stack([planes[i] for i in order])
 
 
-def to_tensors(arrays: dict, columns: dict) -> dict:
-    """A sample's arrays and columns as :mod:`cmosnoise.torch` gives them."""
+def to_tensors(arrays: dict, columns: dict, device=None) -> dict:
+    """A sample's arrays and columns as :mod:`cmosnoise.torch` gives them, on ``device`` (a torch device; default
+    the CPU). A raw still on the GPU (a device array) becomes a tensor over its memory, without a copy; the
+    normalization and packing are the same float32 operations on either device (the same bits)."""
     black, white = columns["black_level_dn"], columns["white_level_dn"]
     scale = 1.0 / (white - black)
     pattern = columns["cfa"]
 
+    def tensor(a):
+        if hasattr(a, "copy_to_host"):  # the GPU kernel's frame
+            from ..engine import cuda_kernel
+
+            if cuda_kernel.simulated():  # numba's simulator keeps it on the host
+                return torch.from_numpy(a.copy_to_host()).to(device)
+            return cuda_kernel.to_torch(a).to(device)
+        return torch.from_numpy(np.ascontiguousarray(a)).to(device)
+
+    def planes(t):  # pack() on a tensor
+        if cfa_mod.is_mono(pattern):
+            return t[None]
+        parts = [t[0::2, 0::2], t[0::2, 1::2], t[1::2, 0::2], t[1::2, 1::2]]
+        greens = [i for i, ch in enumerate(pattern) if ch == "G"]
+        return torch.stack([parts[i] for i in (pattern.index("R"), greens[0], greens[1], pattern.index("B"))])
+
     def norm(a):
-        return torch.from_numpy(np.ascontiguousarray(pack((a.astype(np.float32) - np.float32(black))
-                                                          * np.float32(scale), pattern)))
+        t = tensor(a).to(torch.float32)
+        return planes((t - torch.tensor(black, dtype=torch.float32, device=t.device))
+                      * torch.tensor(scale, dtype=torch.float32, device=t.device)).contiguous()
 
     meta = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in columns.items()}
+    raw = tensor(arrays["raw"])
     return {"noisy": norm(arrays["raw"]), "expected": norm(arrays["expected_raw"]), "perfect": norm(arrays["perfect_dn"]),
-            "mask": torch.from_numpy(np.ascontiguousarray(pack(arrays["mask"].astype(np.int32), pattern))),
-            "raw": torch.from_numpy(arrays["raw"].astype(np.int32)), "meta": meta}
+            "mask": planes(tensor(arrays["mask"]).to(torch.int32)).contiguous(),
+            "raw": raw.to(torch.int32), "meta": meta}
 
 
 def collate(batch: list[dict]) -> dict:
@@ -102,15 +123,22 @@ class NoisyRawDataset(Dataset):
     fresh_noise : bool
         False: the same sample for the same index in every epoch. True: epoch ``e`` (:meth:`set_epoch`) draws
         frame ``e`` of each sample's sensor: new temporal noise, the same scene, sensor and truth.
+    device : {"cpu", "cuda"}
+        ``"cuda"``: each frame is made by the GPU kernel and stays there, and the tensors live on the GPU (the
+        same values; in numba's CUDA simulator, on the CPU). Use it with ``num_workers=0`` (one process holds the
+        GPU).
     """
 
     def __init__(self, samples: int, crop=512, cameras=("led",), images=None, seed: int = 0,
                  light_e=(50.0, 5000.0), integration_time_s=None, temperature_c=None, overrides=(),
-                 white_threshold_e_per_s=None, fresh_noise: bool = False):
+                 white_threshold_e_per_s=None, fresh_noise: bool = False, device: str = "cpu"):
         self.recipe, self.sources = _recipe(samples, crop, cameras, images, seed, light_e, integration_time_s,
                                             temperature_c, overrides, white_threshold_e_per_s)
         self.fresh_noise = fresh_noise
         self.epoch = 0
+        if device not in ("cpu", "cuda"):
+            raise CmosnoiseError(f"device = {device!r}: expected cpu or cuda")
+        self.device = device
 
     def set_epoch(self, epoch: int) -> None:
         """The epoch about to start (with ``fresh_noise``, its frames are new noise)."""
@@ -123,10 +151,16 @@ class NoisyRawDataset(Dataset):
         """(arrays, columns) of sample ``index`` as a data set's shard holds them."""
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} is outside 0 .. {len(self) - 1}")
-        return ds.make_sample(self.recipe, index, self.sources, self.epoch if self.fresh_noise else 0)
+        return ds.make_sample(self.recipe, index, self.sources, self.epoch if self.fresh_noise else 0,
+                              device=self.device, on_device=self.device == "cuda")
 
     def __getitem__(self, index: int) -> dict:
-        return to_tensors(*self.sample(int(index)))
+        target = None
+        if self.device == "cuda":
+            from ..engine import cuda_kernel
+
+            target = "cpu" if cuda_kernel.simulated() else "cuda"
+        return to_tensors(*self.sample(int(index)), device=target)
 
 
 class NoisyRawIterableDataset(IterableDataset):
