@@ -440,6 +440,27 @@ def render_dataset_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_gpu_speed(d: dict) -> str:
+    lines = [f"Measured with `{d['command']}` on one {d['device']} (numba-cuda {d['numba_cuda']}, numba {d['numba']}; "
+             f"host: {d['host']['cpu']}, {d['host']['cores']} cores, {d['host']['vectors']}). Frames per second, the "
+             "CPU kernel and the NumPy reference timed in the same run on that host:", "",
+             "| frame | sensor | GPU kernel (frames left on the GPU) | GPU, copied to host memory | CPU kernel "
+             "(all cores) | NumPy reference | GPU kernel / CPU kernel |", "|---|---|---|---|---|---|---|"]
+    for r in d["speed"]:
+        lines.append(f"| {r['size']} | {r['sensor']} | {_int(round(r['gpu_kernel_fps']))} | "
+                     f"{_int(round(r['gpu_to_host_fps']))} | {r['cpu_kernel_fps']:.0f} | {r['numpy_reference_fps']:.1f} | "
+                     f"{r['gpu_over_cpu']:.0f} |")
+    lines += ["", "| training data | samples / s |", "|---|---|"]
+    for r in d["training"]:
+        lines.append(f"| {r['what']}, batches of {r['batch']} | {_int(round(r['samples_per_s']))} |")
+    ok = all(v is True for v in d["bits"].values())
+    lines += ["", f"Bit for bit equal to the CPU kernel in the same run ({'every check' if ok else 'NOT every check'}): "
+              + "; ".join(d["bits"]) + "."]
+    if d.get("training_note"):
+        lines += ["", f"The training rows were {d['training_note']}."]
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -460,6 +481,7 @@ SECTIONS = {
     "telegraph_fit": (None, render_telegraph_fit),
     "dataset_sample": (compute_dataset_sample, render_dataset_sample),
     "dataset_speed": (None, render_dataset_speed),
+    "gpu_speed": (None, render_gpu_speed),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -474,7 +496,9 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "measured_stages": ["bench_measured_stages.py", "--json", "measured_stages.json"],
               "telegraph_cost": ["bench_telegraph.py", "--json", "telegraph_cost.json"],
               "telegraph_fit": ["fit_telegraph_coverage.py", "--json", "telegraph_fit.json"],
-              "dataset_speed": ["bench_dataset.py", "--memory", "10000", "--json", "dataset_speed.json"]}
+              "dataset_speed": ["bench_dataset.py", "--memory", "10000", "--json", "dataset_speed.json"],
+              # on a machine with an NVIDIA GPU and cmosnoise[cuda]
+              "gpu_speed": ["bench_gpu.py", "--json", "gpu_speed.json"]}
 SLOW = {"sweep_fig9"}
 
 
