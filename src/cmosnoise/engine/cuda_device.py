@@ -9,21 +9,18 @@ module global, as numba's simulator needs to run them.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import cuda
 
-from . import kernel, samplers, telegraph
+from . import kernel, telegraph
 from .cuda_kernel import scalar_numpy
 
 npx = scalar_numpy(cuda)  #: what ``np`` stands for in the helpers on the device
 dev = cuda.jit(device=True, fastmath=False)
-h = kernel.compile_helpers(dev, numpy=npx, skip=("occupancy",))
-uniform_pair, normal_from, exp_ = h["uniform_pair"], h["normal_from"], h["exp"]
-ptrs_constants, ptrs_try, tukey_lambda_cell = h["ptrs_constants"], h["ptrs_try"], h["tukey_lambda_cell"]
-frame_states, inside, transition = h["frame_states"], h["inside"], h["transition"]
-inv_max, ptrs_from = samplers.INVERSION_MAX, samplers.PTRS_FROM
+h = kernel.compile_helpers(dev, numpy=npx, skip=("occupancy",))  # it allocates: the device's form is below
+uniform_pair, normal_from = h["uniform_pair"], h["normal_from"]
+poisson_one, tukey_lambda_cell = h["poisson_one"], h["tukey_lambda_cell"]
+frame_states, inside = h["frame_states"], h["inside"]
 floor, rint = npx.floor, npx.rint
 
 
@@ -34,108 +31,36 @@ def normal(index, frame, seq, k0, k1):
     return normal_from(u1, u2)
 
 
-@dev
-def poisson_one(m, index, frame, seq, k0, k1, normal_above):
-    """One pixel's count (kernel._poisson_one: samplers.Stream.poisson_or_normal for one pixel)."""
-    u1, u2 = uniform_pair(index, frame, seq, np.uint64(0), k0, k1)
-    if m > normal_above:
-        return max(rint(m + math.sqrt(m) * normal_from(u1, u2)), 0.0)
-    if m >= ptrs_from:
-        loglam, a, b, invalpha, vr = ptrs_constants(m)
-        attempt = np.uint64(0)
-        while True:
-            if attempt > 0:
-                u1, u2 = uniform_pair(index, frame, seq, attempt, k0, k1)
-            attempt += np.uint64(1)
-            k, ok = ptrs_try(m, loglam, a, b, invalpha, vr, u1, u2)
-            if ok:
-                return k
-    p = exp_(-m)  # samplers.poisson_inversion
-    total = p
-    k = 0.0
-    while u1 > total and k < inv_max:
-        k = k + 1.0
-        p = p * m / k
-        total = total + p
-    return k
-
-
 MAX_EVENTS = int(telegraph.MAX_EVENTS)
 _POWERS = MAX_EVENTS + 1  # a local array's length must be a constant, not an expression
 _OCCUPANCY_WORD = np.uint64(telegraph.OCCUPANCY << 4)
-
-
-@dev
-def _occupancy_uniform(index, node, seq, word0, j, k0, k1):
-    """The j-th uniform of a blinking pixel's occupancy draws (telegraph.occupancy's ``uni``)."""
-    u1, u2 = uniform_pair(index, node, seq, word0 | np.uint64((j // 2) << 8), k0, k1)
-    return u1 if j % 2 == 0 else u2
-
-
-@dev
-def _r_n(mun, a, b, pi0, pi1):
-    """R^n[a, b] given mu^n (telegraph.occupancy's ``r_n``)."""
-    pib = pi1 if b == 1 else pi0
-    return pib + mun * ((1.0 if a == b else 0.0) - pib)
+occupancy_uniform, occupancy_events, occupancy_walk = (h[k] for k in ("occupancy_uniform", "occupancy_events",
+                                                                      "occupancy_walk"))
 
 
 @dev
 def occupancy(frame, x, y, up, down, t, index, slot, seq, k0, k1):
-    """telegraph.occupancy on the device, step for step: the same draws and arithmetic, its two arrays local
-    (MAX_EVENTS long) and the event times sorted by insertion (numpy's sort gives the same sorted values)."""
-    lam = max(up, down)
-    s = up + down
-    pi0 = down / s
-    pi1 = up / s
-    mu = 1.0 - s / lam
-    xi = 1 if x > 0.5 else 0
-    yi = 1 if y > 0.5 else 0
+    """telegraph.occupancy on the device: its two parts compiled from telegraph's source, its arrays local to the
+    thread (MAX_EVENTS long) and the event times sorted by insertion (numpy's sort gives the same sorted values)."""
     word0 = slot | _OCCUPANCY_WORD
     node = np.uint64(frame)
-    a01, a00, a10, a11 = transition(up, down, t)
-    p_end = (a00 if yi == 0 else a01) if xi == 0 else (a10 if yi == 0 else a11)
-    m = lam * t
-    u = _occupancy_uniform(index, node, seq, word0, 0, k0, k1)
-    p = exp_(0.0 - m)
-    n = 0
-    mun = 1.0
-    total = p * _r_n(mun, xi, yi, pi0, pi1) / p_end
-    while u > total and n < MAX_EVENTS:
-        n += 1
-        p = p * m / n
-        mun = mun * mu
-        total = total + p * _r_n(mun, xi, yi, pi0, pi1) / p_end
+    n = occupancy_events(x, y, up, down, t, occupancy_uniform(index, node, seq, word0, 0, k0, k1))
     if n == 0:
-        return t if xi == 1 else 0.0
+        return t if x > 0.5 else 0.0
+    mu = 1.0 - (up + down) / max(up, down)
     powers = cuda.local.array(_POWERS, np.float64)
     times = cuda.local.array(MAX_EVENTS, np.float64)
     powers[0] = 1.0
     for i in range(n):
         powers[i + 1] = powers[i] * mu
     for i in range(n):
-        v = _occupancy_uniform(index, node, seq, word0, 1 + i, k0, k1) * t
+        v = occupancy_uniform(index, node, seq, word0, 1 + i, k0, k1) * t
         q = i
         while q > 0 and times[q - 1] > v:
             times[q] = times[q - 1]
             q -= 1
         times[q] = v
-    state = xi
-    last = 0.0
-    busy = 0.0
-    for i in range(n):
-        ti = times[i]
-        if state == 1:
-            busy = busy + (ti - last)
-        last = ti
-        left = n - 1 - i
-        step1 = (up / lam) if state == 0 else (1.0 - down / lam)
-        step0 = (1.0 - up / lam) if state == 0 else (down / lam)
-        w1 = step1 * _r_n(powers[left], 1, yi, pi0, pi1)
-        w0 = step0 * _r_n(powers[left], 0, yi, pi0, pi1)
-        state = 1 if _occupancy_uniform(index, node, seq, word0, 1 + n + i, k0, k1) * (w0 + w1) < w1 else 0
-    if state == 1:
-        busy = busy + (t - last)
-    return busy
+    return occupancy_walk(x, y, up, down, t, n, powers, times, index, node, seq, word0, k0, k1)
 
 
 @dev

@@ -97,9 +97,10 @@ class FramePlan:
 HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
            (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
            (telegraph, ["decay", "one_minus", "transition", "_bridge_weights", "bridge", "midpoint", "_uniform",
-                        "frame_states", "inside", "occupancy"]),
+                        "frame_states", "inside", "occupancy_uniform", "occupancy_r_n", "occupancy_events",
+                        "occupancy_walk", "occupancy"]),
            (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept",
-                       "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try"])]
+                       "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try", "poisson_one"])]
 
 
 def compile_helpers(jit, numpy=np, skip=()) -> dict:
@@ -199,22 +200,8 @@ if numba is not None:
             end = _inside(frame, x, y, up[t], down[t], dt, exposure, index[t], slot[t], seq, k0, k1)
             out[t] = size[t] * _occupancy(frame, x, end, up[t], down[t], exposure, index[t], slot[t], seq, k0, k1)
 
-    @numba.njit(**_JIT)
-    def _poisson_one(m, index, frame, seq, k0, k1, normal_above):
-        """One pixel's count as samplers.Stream.poisson_or_normal draws it (a blinking pixel's mean of this frame)."""
-        u1, u2 = _cold_uniform_pair(index, frame, seq, np.uint64(0), k0, k1)
-        if m > normal_above:
-            return max(np.rint(m + np.sqrt(m) * _cold_normal_from(u1, u2)), 0.0)
-        if m >= _PTRS_FROM:
-            return _ptrs_from(m, index, frame, seq, k0, k1, np.uint64(0))
-        p = _cold_exp(-m)  # samplers.poisson_inversion
-        total = p
-        k = 0.0
-        while u1 > total and k < _INV_MAX:
-            k = k + 1.0
-            p = p * m / k
-            total = total + p
-        return k
+    #: one pixel's count (samplers.poisson_one: a blinking pixel's mean of this frame), a call
+    _poisson_one = _cold["poisson_one"]
 
     #: a try the branch-free pass leaves undecided (its log test met a count past the loggam table)
     _REDO = -2.0

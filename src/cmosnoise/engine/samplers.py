@@ -190,6 +190,32 @@ def ptrs_try(lam, loglam, a, b, invalpha, vr, u1, u2):
     return k, quick | (~reject & ptrs_log_accept(lam, loglam, a, b, invalpha, k, us, V))
 
 
+def poisson_one(m, index, frame, sequence, k0, k1, normal_above):
+    """One pixel's count as :meth:`Stream.poisson_or_normal` draws it, for scalars: the compiled kernels' (CPU and
+    GPU) form of the same draw (the rounded normal above ``normal_above``, PTRS from 10, else inversion)."""
+    u1, u2 = uniform_pair(index, frame, sequence, np.uint64(0), k0, k1)
+    if m > normal_above:
+        return max(np.rint(m + np.sqrt(m) * normal_from(u1, u2)), 0.0)
+    if m >= PTRS_FROM:
+        loglam, a, b, invalpha, vr = ptrs_constants(m)
+        attempt = np.uint64(0)
+        while True:
+            if attempt > 0:
+                u1, u2 = uniform_pair(index, frame, sequence, attempt, k0, k1)
+            attempt += np.uint64(1)
+            k, ok = ptrs_try(m, loglam, a, b, invalpha, vr, u1, u2)
+            if ok:
+                return k
+    p = exp(-m)  # poisson_inversion, one pixel
+    total = p
+    k = 0.0
+    while u1 > total and k < INVERSION_MAX:
+        k = k + 1.0
+        p = p * m / k
+        total = total + p
+    return k
+
+
 @dataclass(frozen=True)
 class Stream:
     """The temporal random numbers of one stage in one frame of one frame series.

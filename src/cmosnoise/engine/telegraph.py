@@ -214,56 +214,48 @@ MAX_EVENTS = 2000
 MAX_RATE_TIME = 500.0
 
 
-def occupancy(frame, x, y, up: float, down: float, t: float, index, slot, sequence, k0, k1) -> float:
-    """Time (s) a chain in state ``x`` at 0 and ``y`` at ``t`` spends in state 1 over ``[0, t]``: one trap, scalars.
+def occupancy_uniform(index, node, sequence, word0, j, k0, k1):
+    """The j-th uniform of a pixel's occupancy draws (two a Philox block)."""
+    u1, u2 = uniform_pair(index, node, sequence, word0 | np.uint64((j // 2) << 8), k0, k1)
+    return u1 if j % 2 == 0 else u2
 
-    Exact, by uniformization (Hobolth and Stone 2009): with ``lam = max(up,
-    down)`` the chain is a discrete chain ``R = I + Q / lam`` stepped at the
-    events of a Poisson process of rate ``lam``. Given both ends, the count
-    ``n`` of events has ``P(n) ~ Pois(n; lam t) R^n[x, y]``; the event times
-    are ``n`` sorted uniforms; the states between them are the discrete
-    bridge. ``R^n[x, y] = pi_y + mu^n (delta_xy - pi_y)``,
-    ``mu = 1 - (up + down) / lam``.
-    """
+
+def occupancy_r_n(mun, a, b, pi0, pi1):
+    """``R^n[a, b]`` of the uniformized chain, given ``mu^n`` (the stationary law ``(pi0, pi1)``)."""
+    pib = pi1 if b == 1 else pi0
+    return pib + mun * ((1.0 if a == b else 0.0) - pib)
+
+
+def occupancy_events(x, y, up: float, down: float, t: float, u: float) -> int:
+    """:func:`occupancy`'s event count ``n`` given both ends, by inversion at ``u`` (at most :data:`MAX_EVENTS`)."""
     lam = max(up, down)
     s = up + down
-    pi = (down / s, up / s)
+    pi0, pi1 = down / s, up / s
     mu = 1.0 - s / lam
-    xi, yi = int(x > 0.5), int(y > 0.5)
-    word0 = slot | np.uint64(OCCUPANCY << 4)
-    node, seq = np.uint64(frame), np.uint64(sequence)
-
-    def uni(j):  # the j-th uniform of this pixel's occupancy draws
-        u1, u2 = uniform_pair(index, node, seq, word0 | np.uint64((j // 2) << 8), k0, k1)
-        return u1 if j % 2 == 0 else u2
-
-    def r_n(mun, a, b):  # R^n[a, b], given mu^n (powers by repeated products: the same bits everywhere)
-        return pi[b] + mun * ((1.0 if a == b else 0.0) - pi[b])
-
+    xi, yi = (1 if x > 0.5 else 0), (1 if y > 0.5 else 0)
     a01, a00, a10, a11 = transition(up, down, t)
-    p_end = (a00, a01, a10, a11)[2 * xi + yi]
+    p_end = (a00 if yi == 0 else a01) if xi == 0 else (a10 if yi == 0 else a11)
     m = lam * t
-    u = uni(0)
     p = exp(0.0 - m)  # Pois(0; m); m <= MAX_RATE_TIME
     n = 0
     mun = 1.0
-    total = p * r_n(mun, xi, yi) / p_end
+    total = p * occupancy_r_n(mun, xi, yi, pi0, pi1) / p_end
     while u > total and n < MAX_EVENTS:
         n += 1
         p = p * m / n
         mun = mun * mu
-        total = total + p * r_n(mun, xi, yi) / p_end
-    if n == 0:
-        return t if xi == 1 else 0.0
-    powers = np.empty(n + 1)
-    powers[0] = 1.0
-    for i in range(n):
-        powers[i + 1] = powers[i] * mu
-    times = np.empty(n)
-    for i in range(n):
-        times[i] = uni(1 + i) * t
-    times.sort()
-    state = xi
+        total = total + p * occupancy_r_n(mun, xi, yi, pi0, pi1) / p_end
+    return n
+
+
+def occupancy_walk(x, y, up: float, down: float, t: float, n: int, powers, times, index, node, sequence, word0,
+                   k0, k1) -> float:
+    """:func:`occupancy`'s time in state 1, given ``n`` events at the sorted ``times`` (``powers[i] = mu**i``)."""
+    lam = max(up, down)
+    s = up + down
+    pi0, pi1 = down / s, up / s
+    yi = 1 if y > 0.5 else 0
+    state = 1 if x > 0.5 else 0
     last = 0.0
     busy = 0.0
     for i in range(n):
@@ -275,12 +267,43 @@ def occupancy(frame, x, y, up: float, down: float, t: float, index, slot, sequen
         # R[state, 1] R^left[1, y] against R[state, 0] R^left[0, y]
         step1 = (up / lam) if state == 0 else (1.0 - down / lam)
         step0 = (1.0 - up / lam) if state == 0 else (down / lam)
-        w1 = step1 * r_n(powers[left], 1, yi)
-        w0 = step0 * r_n(powers[left], 0, yi)
-        state = 1 if uni(1 + n + i) * (w0 + w1) < w1 else 0
+        w1 = step1 * occupancy_r_n(powers[left], 1, yi, pi0, pi1)
+        w0 = step0 * occupancy_r_n(powers[left], 0, yi, pi0, pi1)
+        u = occupancy_uniform(index, node, sequence, word0, 1 + n + i, k0, k1)
+        state = 1 if u * (w0 + w1) < w1 else 0
     if state == 1:
         busy = busy + (t - last)
     return busy
+
+
+def occupancy(frame, x, y, up: float, down: float, t: float, index, slot, sequence, k0, k1) -> float:
+    """Time (s) a chain in state ``x`` at 0 and ``y`` at ``t`` spends in state 1 over ``[0, t]``: one trap, scalars.
+
+    Exact, by uniformization (Hobolth and Stone 2009): with ``lam = max(up,
+    down)`` the chain is a discrete chain ``R = I + Q / lam`` stepped at the
+    events of a Poisson process of rate ``lam``. Given both ends, the count
+    ``n`` of events has ``P(n) ~ Pois(n; lam t) R^n[x, y]``
+    (:func:`occupancy_events`); the event times are ``n`` sorted uniforms;
+    the states between them are the discrete bridge (:func:`occupancy_walk`).
+    ``R^n[x, y] = pi_y + mu^n (delta_xy - pi_y)``, ``mu = 1 - (up + down) / lam``.
+    The GPU's form (``cuda_device.occupancy``) calls the same two parts with
+    arrays of its own.
+    """
+    word0 = slot | np.uint64(OCCUPANCY << 4)
+    node, seq = np.uint64(frame), np.uint64(sequence)
+    n = occupancy_events(x, y, up, down, t, occupancy_uniform(index, node, seq, word0, 0, k0, k1))
+    if n == 0:
+        return t if x > 0.5 else 0.0
+    mu = 1.0 - (up + down) / max(up, down)
+    powers = np.empty(n + 1)
+    powers[0] = 1.0
+    for i in range(n):
+        powers[i + 1] = powers[i] * mu
+    times = np.empty(n)
+    for i in range(n):
+        times[i] = occupancy_uniform(index, node, seq, word0, 1 + i, k0, k1) * t
+    times.sort()
+    return occupancy_walk(x, y, up, down, t, n, powers, times, index, node, seq, word0, k0, k1)
 
 
 def per_pixel(index: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
