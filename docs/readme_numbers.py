@@ -458,6 +458,12 @@ def render_gpu_speed(d: dict) -> str:
               + "; ".join(d["bits"]) + "."]
     if d.get("training_note"):
         lines += ["", f"The training rows were {d['training_note']}."]
+    if d.get("later_quick_run"):
+        q = d["later_quick_run"]
+        speeds = ", ".join(f"{_int(round(r['gpu_kernel_fps']))} ({r['size']}, {r['sensor']})" for r in q["speed"])
+        crops = " and ".join(_int(round(r["samples_per_s"])) for r in q["training"])
+        lines += ["", f"A later run, {q['what']}: GPU kernel {speeds} frames/s; training crops {crops} a second "
+                      "(default, every stage): the training rate moves by a sixth between runs."]
     return "\n".join(lines)
 
 
