@@ -5,7 +5,10 @@
 - :mod:`.samplers`: normal (Box-Muller) and Poisson (inversion, PTRS) on those
   uniforms, vectorized with NumPy: the specification, and :class:`Stream`;
 - :mod:`.kernel`: the same arithmetic fused into one numba loop over a frame
-  or a region of it, parallel over rows.
+  or a region of it, parallel over rows;
+- :mod:`.cuda_kernel` (and :mod:`.cuda_device`, its kernels): the same chain
+  on an NVIDIA GPU, one thread per pixel, batches of frames or crops, the
+  same bits.
 
 Nothing here knows about configurations or sensors: arrays and numbers in,
 arrays out.
