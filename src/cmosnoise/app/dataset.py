@@ -52,7 +52,7 @@ from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError
 from ..io.output import atomic_file, resumable_mode
 from ..model import scene as scene_mod
-from ..model.sensor import Sensor
+from ..model.sensor import Sensor, check_device
 
 FORMATS = {"hdf5": ".h5", "npz": ".npz", "fits": ".fits"}
 #: image files a --images folder may hold
@@ -468,10 +468,10 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
     ``scheduler``: the shards are made on Dask (a LocalCluster of processes, or that scheduler); the bytes
     are the same. ``device``: where the frames are made (``"cuda"``: the GPU; the same bytes)."""
     from ..io.output import OutputFolder
-    from .sweep import _check_device, connect, disconnect
+    from .sweep import connect, disconnect
 
     check(recipe)
-    _check_device(device)
+    check_device(device, "--device")
     out = Path(out)
     folder = OutputFolder(out, overwrite=True)  # its checks on the name and place; creates nothing
     mode = _mode(out, recipe, resume, overwrite)

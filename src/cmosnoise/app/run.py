@@ -27,7 +27,7 @@ from ..analysis import figures_of_merit as fom
 from ..analysis import noise_budget
 from ..analysis.run_stats import RunStats
 from ..config import Config, ProcessingSection, load_config, merge_updates
-from ..engine import cuda_kernel, kernel
+from ..engine import kernel
 from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
@@ -38,7 +38,7 @@ from ..isp import calibration
 from ..isp.process import Processor, read_dark
 from ..model import footprint
 from ..model.raw_info import RawInfo
-from ..model.sensor import DEVICES, Sensor
+from ..model.sensor import Sensor, check_device
 from ..model.spec import SensorSpec, resolve
 
 
@@ -63,10 +63,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     config = spec.config
     if config.run.dng and not config.adc.enabled:
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
-    if device not in DEVICES:
-        raise CmosnoiseError(f"device = {device!r}: expected one of {', '.join(DEVICES)}")
-    if device == "cuda":
-        cuda_kernel.check()  # before anything is drawn or written
+    check_device(device)  # before anything is drawn or written
     footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
     folder.check_space(output_bytes(config))

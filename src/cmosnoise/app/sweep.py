@@ -575,10 +575,10 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
 
     import pandas as pd
 
-    from ..model.sensor import _as_spec
+    from ..model.sensor import _as_spec, check_device
 
     base = _as_spec(base).config
-    _check_device(device)
+    check_device(device, "--device")
     p = plan(base, vary, instances, frames, scene, specs, metrics)
     tmp = None
     if out is None:
@@ -614,17 +614,6 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     if tmp is not None:
         tmp.cleanup()
     return df
-
-
-def _check_device(device: str) -> None:
-    """A one-line error for a device that is not one, or a GPU this machine lacks (before any worker starts)."""
-    from ..engine import cuda_kernel
-    from ..model.sensor import DEVICES
-
-    if device not in DEVICES:
-        raise CmosnoiseError(f"--device {device!r}: expected one of {', '.join(DEVICES)}")
-    if device == "cuda":
-        cuda_kernel.check()
 
 
 def task_result(future, what: str):

@@ -24,19 +24,21 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
+from ..model.sensor import check_device
 from . import dataset as ds
 
 
-def pack(a: np.ndarray, pattern: str) -> np.ndarray:
-    """(H, W) -> (4, H/2, W/2) in the order R, G, G, B of ``pattern`` (monochrome: (1, H, W))."""
+def pack(a, pattern: str):
+    """(H, W) -> (4, H/2, W/2) in the order R, G, G, B of ``pattern`` (monochrome: (1, H, W)); a NumPy array or a
+    tensor (on any device), returned as the same kind."""
     if cfa_mod.is_mono(pattern):
         return a[None]
     planes = [a[0::2, 0::2], a[0::2, 1::2], a[1::2, 0::2], a[1::2, 1::2]]  # in the pattern's order
     greens = [i for i, ch in enumerate(pattern) if ch == "G"]
     order = [pattern.index("R"), greens[0], greens[1], pattern.index("B")]
-    return np.stack([planes[i] for i in order])
+    stack = torch.stack if isinstance(a, torch.Tensor) else np.stack
+    return stack([planes[i] for i in order])
 
 
 def to_tensors(arrays: dict, columns: dict, device=None) -> dict:
@@ -56,22 +58,15 @@ def to_tensors(arrays: dict, columns: dict, device=None) -> dict:
             return cuda_kernel.to_torch(a).to(device)
         return torch.from_numpy(np.ascontiguousarray(a)).to(device)
 
-    def planes(t):  # pack() on a tensor
-        if cfa_mod.is_mono(pattern):
-            return t[None]
-        parts = [t[0::2, 0::2], t[0::2, 1::2], t[1::2, 0::2], t[1::2, 1::2]]
-        greens = [i for i, ch in enumerate(pattern) if ch == "G"]
-        return torch.stack([parts[i] for i in (pattern.index("R"), greens[0], greens[1], pattern.index("B"))])
-
     def norm(a):
         t = tensor(a).to(torch.float32)
-        return planes((t - torch.tensor(black, dtype=torch.float32, device=t.device))
-                      * torch.tensor(scale, dtype=torch.float32, device=t.device)).contiguous()
+        return pack((t - torch.tensor(black, dtype=torch.float32, device=t.device))
+                    * torch.tensor(scale, dtype=torch.float32, device=t.device), pattern).contiguous()
 
     meta = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in columns.items()}
     raw = tensor(arrays["raw"])
     return {"noisy": norm(arrays["raw"]), "expected": norm(arrays["expected_raw"]), "perfect": norm(arrays["perfect_dn"]),
-            "mask": planes(tensor(arrays["mask"]).to(torch.int32)).contiguous(),
+            "mask": pack(tensor(arrays["mask"]).to(torch.int32), pattern).contiguous(),
             "raw": raw.to(torch.int32), "meta": meta}
 
 
@@ -136,8 +131,7 @@ class NoisyRawDataset(Dataset):
                                             temperature_c, overrides, white_threshold_e_per_s)
         self.fresh_noise = fresh_noise
         self.epoch = 0
-        if device not in ("cpu", "cuda"):
-            raise CmosnoiseError(f"device = {device!r}: expected cpu or cuda")
+        check_device(device)
         self.device = device
 
     def set_epoch(self, epoch: int) -> None:

@@ -38,7 +38,7 @@ import types
 import numpy as np
 
 from ..errors import CmosnoiseError
-from . import kernel, samplers
+from . import kernel
 from .jit import numba
 
 #: threads per block of the pixel kernel (along a row: coalesced loads of the maps and stores of the frame)
@@ -236,19 +236,9 @@ class DevicePlan:
         self.col_gain = up(plan.col_gain, np.float64) if plan.col_gain is not None else dummy1
         self.keys = up(plan.keys, np.uint64)
         self.cell_offsets = up(np.asarray(plan.cell_offsets_dn, np.float64))
-        self.nl, self.nl_scale, self.nl_abc = np.zeros(2), 0.0, (0.0, 0.0, 0.0)
-        curve = plan.nonlinearity
-        if curve is not None:  # nonlinearity.Curve.apply's constants (as kernel.render takes them)
-            if curve.coefficients is not None:
-                self.nl_scale, self.nl_abc = 1.0 / curve.full_well_e, tuple(float(v) for v in curve.coefficients)
-            else:
-                self.nl, self.nl_scale = np.asarray(curve.table, np.float64), (curve.table.size - 1) / curve.full_well_e
-        self.nl = up(self.nl)
-        self.read_kind, self.read_scale, read_table = 0, 0.0, np.zeros(2)
-        if plan.read_noise is not None:
-            kind, self.read_scale, shape = plan.read_noise
-            if kind != "normal":
-                self.read_kind, read_table = 1, samplers.tukey_lambda_table(float(shape))
+        nl, self.nl_scale, self.nl_abc = kernel.curve_constants(plan)
+        self.nl = up(nl, np.float64)
+        self.read_kind, self.read_scale, read_table = kernel.read_constants(plan)
         self.read_table = up(read_table)
         empty_ptr = np.zeros(rows + 1, np.int64)
         # traps (stage 6b): sorted by pixel, then slot; their pixels as a row-sorted list
@@ -278,11 +268,6 @@ class DevicePlan:
         if stuck is not None and stuck[0].size:
             index = np.asarray(stuck[0], np.int64)
             self.stuck = (up(np.stack([index // cols, index % cols], axis=1)), up(np.asarray(stuck[1], np.float64)))
-        self.flags_base = dict(noisy=plan.noisy_e is not None, exact=plan.exact_e is not None,
-                               sf=plan.sf_sigma_e is not None, row=plan.row_sigma_e is not None,
-                               col=plan.col_gain is not None, adc=plan.adc is not None,
-                               nl=plan.nonlinearity is not None, offset=plan.offset_e is not None,
-                               read=plan.adc is not None and plan.read_noise is not None)
 
     def with_means(self, noisy_e=None, exact_e=None) -> "DevicePlan":
         """This plan with the mean charge (the scene) taken from arrays already on the GPU, without a copy.
@@ -352,19 +337,19 @@ class DevicePlan:
         h, w = (rows, cols) if shape is None else (int(shape[0]), int(shape[1]))
         if h < 1 or w < 1 or corners.min() < 0 or (corners[:, 0] + h).max() > rows or (corners[:, 1] + w).max() > cols:
             raise ValueError(f"regions of {h} x {w} at corners {corners.tolist()[:4]}... do not fit in {rows} x {cols}")
-        f = self.flags_base
-        adc_on = f["adc"]
+        flags = kernel.switches(plan, electrons, self.traps is not None, self.blinkers is not None)
+        has_row, has_col, adc_on, want_e = (bool(flags[i]) for i in (3, 4, 5, 6))
         d_frames, d_corners = cuda.to_device(frames, stream=stream), cuda.to_device(corners, stream=stream)
-        rowval = cuda.device_array((n, h) if f["row"] else (1, 1), np.float64, stream=stream)
-        colterm = cuda.device_array((n, w) if f["col"] else (1, 1), np.float64, stream=stream)
+        rowval = cuda.device_array((n, h) if has_row else (1, 1), np.float64, stream=stream)
+        colterm = cuda.device_array((n, w) if has_col else (1, 1), np.float64, stream=stream)
         cell_black = cuda.device_array((n, 4), np.float64, stream=stream)
         k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
         with strict_arithmetic():
             span = h + w + 4
             self.k.lines[((span + 63) // 64, n), (64, 1), stream](
-                d_frames, d_corners, h, w, plan.sequence, self.keys, f["row"], float(plan.row_sigma_e or 0.0),
-                self.row_offset, f["col"], self.col_sigma, self.col_offset, float(black), self.cell_offsets, float(plan.frame_black_sigma_dn),
-                rowval, colterm, cell_black)
+                d_frames, d_corners, h, w, plan.sequence, self.keys, has_row, float(plan.row_sigma_e or 0.0),
+                self.row_offset, has_col, self.col_sigma, self.col_offset, float(black), self.cell_offsets,
+                float(plan.frame_black_sigma_dn), rowval, colterm, cell_black)
             rts_sum = cuda.device_array((1, 1), np.float64, stream=stream)
             if self.traps is not None:
                 t = self.traps
@@ -373,8 +358,7 @@ class DevicePlan:
                 cds = plan.cds_interval_s is not None
                 self.k.trap_values[((t.index.size + 127) // 128, n), (128, 1), stream](
                     d_frames, d_corners, h, w, cols, np.uint64(plan.sequence), *self.trap_arrays,
-                    float(plan.frame_period_s),
-                    float(plan.cds_interval_s or 0.0), cds, k0, k1, values)
+                    float(plan.frame_period_s), float(plan.cds_interval_s or 0.0), cds, k0, k1, values)
                 npix = self.rts_col.size
                 rts_sum = cuda.device_array((n, npix), np.float64, stream=stream)
                 self.k.pixel_sums[((npix + 127) // 128, n), (128, 1), stream](
@@ -386,20 +370,16 @@ class DevicePlan:
                 k0, k1 = (np.uint64(v) for v in plan.blink_key)
                 self.k.blink_values[((t.index.size + 127) // 128, n), (128, 1), stream](
                     d_frames, d_corners, h, w, cols, np.uint64(plan.sequence), *self.blink_arrays,
-                    float(plan.frame_period_s),
-                    float(plan.exposure_s), k0, k1, blink_extra)
+                    float(plan.frame_period_s), float(plan.exposure_s), k0, k1, blink_extra)
             out_dn = cuda.device_array((n, h, w) if adc_on else (1, 1, 1), np.uint16, stream=stream)
-            want_e = electrons or not adc_on
             out_e = cuda.device_array((n, h, w) if want_e else (1, 1, 1), np.float32, stream=stream)
-            flags = np.array([f["noisy"], f["exact"], f["sf"], f["row"], f["col"], adc_on, want_e, f["nl"],
-                              f["offset"], f["read"], self.traps is not None, self.blinkers is not None,
-                              not plan.blink_noisy])
             a, b_, c_ = self.nl_abc
             grid = ((w + self.block - 1) // self.block, h, n)
             self.k.pixels[grid, (self.block, 1, 1), stream](
                 self.noisy, self.exact, cuda.to_device(flags, stream=stream), float(plan.normal_above_e),
                 float(plan.full_well_e), self.sf, rowval, colterm, self.col_gain, self.keys, d_frames, d_corners,
-                plan.sequence, h, w, cols, float(k_adc), cell_black, float(top), self.nl, float(self.nl_scale), a, b_, c_,
+                plan.sequence, h, w, cols, float(k_adc), cell_black, float(top), self.nl, float(self.nl_scale),
+                a, b_, c_,
                 self.offset, self.read_kind, float(self.read_scale), self.read_table, self.rts_ptr, self.rts_col,
                 rts_sum, self.blink_ptr, self.blink_col, blink_extra, out_dn, out_e)
             raw = out_dn if adc_on else out_e

@@ -625,6 +625,39 @@ def preload() -> bool:
     return True
 
 
+def switches(plan: FramePlan, electrons: bool, traps: bool, blinkers: bool) -> np.ndarray:
+    """The kernels' switches, (_FLAGS,) bool, in the order the CPU's and the GPU's pixel loops read them: noisy,
+    exact, source follower, row, column, ADC, electrons out, nonlinearity, offset, read noise, traps (``traps``:
+    some in the frame's region), blinking pixels (likewise), blinking pixels' dark charge without shot noise."""
+    adc_on = plan.adc is not None
+    return np.array([plan.noisy_e is not None, plan.exact_e is not None, plan.sf_sigma_e is not None,
+                     plan.row_sigma_e is not None, plan.col_gain is not None, adc_on, electrons or not adc_on,
+                     plan.nonlinearity is not None, plan.offset_e is not None, adc_on and plan.read_noise is not None,
+                     traps, blinkers, not plan.blink_noisy])
+
+
+def curve_constants(plan: FramePlan) -> tuple[np.ndarray, float, tuple[float, float, float]]:
+    """The charge-to-voltage curve (stage 5b) as the kernels take it, nonlinearity.Curve.apply's constants:
+    (table, or a 2-long dummy for the cubic; the scale of the charge; the cubic's three coefficients)."""
+    curve = plan.nonlinearity
+    if curve is None:
+        return _DUMMY_NL, 0.0, (0.0, 0.0, 0.0)
+    if curve.coefficients is not None:
+        return _DUMMY_NL, 1.0 / curve.full_well_e, tuple(float(v) for v in curve.coefficients)
+    return curve.table, (curve.table.size - 1) / curve.full_well_e, (0.0, 0.0, 0.0)
+
+
+def read_constants(plan: FramePlan) -> tuple[int, float, np.ndarray]:
+    """The read noise (stage 9a) as the kernels take it: (0 normal or 1 Tukey-lambda, scale DN, the Tukey-lambda
+    quantile table or a 2-long dummy)."""
+    if plan.read_noise is None:
+        return 0, 0.0, _DUMMY_NL
+    kind, scale, shape = plan.read_noise
+    if kind == "normal":
+        return 0, float(scale), _DUMMY_NL
+    return 1, float(scale), samplers.tukey_lambda_table(float(shape))
+
+
 def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
     """Frame ``frame`` of ``plan``: (raw, electrons or None).
 
@@ -651,24 +684,11 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
     if plan.blinkers is not None:
         pixels, means = blink_means(plan, frame, (r0, r1, c0, c1))
         blink_ptr, blink_col, blink_mean = sparse_rows(pixels, means, (r0, r1, c0, c1), cols)
-    flags = np.array([plan.noisy_e is not None, plan.exact_e is not None, plan.sf_sigma_e is not None,
-                      plan.row_sigma_e is not None, plan.col_gain is not None, adc_on, electrons or not adc_on,
-                      plan.nonlinearity is not None, plan.offset_e is not None,
-                      adc_on and plan.read_noise is not None, rts_val.size > 0 and plan.traps is not None,
-                      blink_mean.size > 0 and plan.blinkers is not None, not plan.blink_noisy])
+    flags = switches(plan, electrons, rts_val.size > 0 and plan.traps is not None,
+                     blink_mean.size > 0 and plan.blinkers is not None)
     k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
-    nl, nl_scale, (nl_a, nl_b, nl_c) = _DUMMY_NL, 0.0, (0.0, 0.0, 0.0)
-    curve = plan.nonlinearity
-    if curve is not None:  # nonlinearity.Curve.apply's constants
-        if curve.coefficients is not None:
-            nl_scale, (nl_a, nl_b, nl_c) = 1.0 / curve.full_well_e, curve.coefficients
-        else:
-            nl, nl_scale = curve.table, (curve.table.size - 1) / curve.full_well_e
-    read_kind, read_scale, read_table = 0, 0.0, _DUMMY_NL
-    if plan.read_noise is not None:
-        kind, read_scale, shape = plan.read_noise
-        if kind != "normal":
-            read_kind, read_table = 1, samplers.tukey_lambda_table(float(shape))
+    nl, nl_scale, (nl_a, nl_b, nl_c) = curve_constants(plan)
+    read_kind, read_scale, read_table = read_constants(plan)
     first = _needs_compile()
     t0 = time.perf_counter()
     _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,

@@ -73,6 +73,16 @@ class FrameDetail:
 #: where frames are made: the CPU kernel, or an NVIDIA GPU (engine/cuda_kernel)
 DEVICES = ("cpu", "cuda")
 
+
+def check_device(device: str, name: str = "device") -> None:
+    """A one-line :class:`CmosnoiseError` for a device that is not one of :data:`DEVICES`, or a GPU this machine
+    lacks; ``name`` is how the caller's user gave it (``--device``)."""
+    if device not in DEVICES:
+        given = f"{name} {device!r}" if name.startswith("--") else f"{name} = {device!r}"  # as an option, or a value
+        raise CmosnoiseError(f"{given}: expected one of {', '.join(DEVICES)}")
+    if device == "cuda":
+        cuda_kernel.check()
+
 class Sensor:
     """A simulated sensor: a configuration, a seed, and the fixed pattern drawn from them.
 
@@ -98,10 +108,7 @@ class Sensor:
     def __init__(self, config: SensorSpec | Config | dict | str | Path | None = None, seed: int | None = None, *,
                  fixed_pattern: FixedPattern | None = None, cache: PatternCache | None = None, executor=None,
                  device: str = "cpu"):
-        if device not in DEVICES:
-            raise CmosnoiseError(f"device = {device!r}: expected one of {', '.join(DEVICES)}")
-        if device == "cuda":
-            cuda_kernel.check()
+        check_device(device)
         #: where frames are made: "cpu" or "cuda"
         self.device = device
         spec = _as_spec(config)
@@ -630,7 +637,6 @@ class Exposure:
     def device_plan(self) -> "cuda_kernel.DevicePlan":
         """This exposure's :meth:`plan` on the GPU, with its stuck pixels (uploaded once, then reused)."""
         if self._device_plan is None:
-            cuda_kernel.check()
             s = self.sensor
             d = s.fixed_pattern.defects
             stuck = None
