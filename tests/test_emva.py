@@ -41,9 +41,18 @@ def test_emva_dsnu_column_part_is_the_vfpn_and_pixel_part_the_dcnu():
     # against the instance's own offsets only the column-mean noise remains: se of var(o + e) - w
     se_var = np.sqrt((4 * realized * col_noise + 2 * col_noise**2) / cols)
     assert_close(col_e**2, realized, se_var, "DSNU column part vs this sensor's offsets")
-    # pixel part: the DCNU map; errors from the averaged temporal noise's cross term with it
-    # and from the column-variance estimate it is separated from
-    se_pix = np.hypot(np.sqrt(4 * dcnu_var * temporal_var / frames / (rows * cols)), se_var)
+    # pixel part: the DCNU map; errors from the averaged temporal noise's cross term with it, from the temporal
+    # variance estimated in the stack and subtracted, and from the column-variance estimate it is separated from.
+    # Pixel i's temporal variance v_i holds its own dark shot noise (its mean dark charge d_i): the white pixels
+    # carry both the largest offsets and the largest noise, so the sums run pixel by pixel, not over means.
+    # cross term: sum_i 2 (d_i - mean) e_i / N with Var(e_i) = v_i / L; estimate: sum_i s_i^2 / (N L), Var(s_i^2)
+    # = 2 v_i^2 / (L - 1) for normal e (the Poisson excess adds v_i / L, below 1 % here).
+    d_e = sensor.fixed_pattern.dark_rate.astype(np.float64) * t_int
+    v = temporal_var - d_e.mean() + d_e
+    n = rows * cols
+    se_cross = np.sqrt(4 * np.sum((d_e - d_e.mean()) ** 2 * v) / frames) / n
+    se_resid = np.sqrt(np.sum(2 * v**2 / (frames - 1))) / (frames * n)
+    se_pix = np.sqrt(se_cross**2 + se_resid**2 + se_var**2)
     assert_close((d["pixel"] / k) ** 2, dcnu_var, se_pix, "DSNU pixel part")
     # no fixed row component is configured: the row part is zero within the noise of row means
     se_row = np.sqrt(2 / (rows - 1)) * (dcnu_var + temporal_var / frames) / cols

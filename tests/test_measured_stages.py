@@ -238,11 +238,12 @@ def test_fit_recovers_tukey_lambda_read_noise_and_pixel_offsets(tmp_path):
 def test_a_sensor_without_dark_current_fits(tmp_path):
     """With dark current off, the fitted body mean is noise about 0 and was below 0 for this seed: the fit once
     failed there ("mean_e_per_s = -0.0062: should be >= 0"); now the point is left out, said so, and the fitted
-    sensor has no dark current."""
+    sensor has no dark current. (Seed 4: the fitted mean is -0.024 e-/s under generator scheme 2; seed 3 gave a
+    negative one under scheme 1.)"""
     import yaml
 
     doc = _measured_and_fitted(tmp_path, ["sensor.width=256", "sensor.height=192", "sensor.cfa=none",
-                                          "dark_current.enabled=false"], seed=3)
+                                          "dark_current.enabled=false"], seed=4)
     assert doc["parameters"]["dark_current[25 C].mean_e_per_s"]["value"] <= 0
     assert "no dark current seen" in doc["not_fitted"]["dark_current at 25 C"]
     assert not yaml.safe_load((tmp_path / "fit" / "config.yaml").read_text())["dark_current"]["enabled"]

@@ -38,15 +38,13 @@ def test_a_stages_fixed_pattern_does_not_depend_on_other_stages():
     assert Sensor(load_config(extra={**base, "prnu": {"enabled": False}}), seed=5).fixed_pattern.prnu_gain is None
 
 
-def test_fixed_pattern_drawn_with_an_executor_is_the_same():
-    """The dark-current map drawn in another thread (as a run does) is bit for bit the one drawn in line."""
-    from concurrent.futures import ThreadPoolExecutor
+def test_fixed_pattern_on_one_thread_is_the_pattern_on_two():
+    """Every fixed map (compiled, parallel over rows) is the same bits on any thread count."""
+    from conftest import on_threads
 
     cfg = load_config(extra={"sensor": {"width": 64, "height": 48, "temperature_c": 50}})
-    a = Sensor(cfg, seed=9).fixed_pattern
-    with ThreadPoolExecutor(2) as pool:
-        b = Sensor(cfg, seed=9, executor=pool).fixed_pattern
-    assert isinstance(b.dark_rate, np.ndarray)
+    a = on_threads(1, lambda: Sensor(cfg, seed=9).fixed_pattern)
+    b = on_threads(2, lambda: Sensor(cfg, seed=9).fixed_pattern)
     for name in ("dark_rate", "prnu_gain", "flicker_sigma", "column_sigma", "vfpn"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
     assert a.dark_state == b.dark_state

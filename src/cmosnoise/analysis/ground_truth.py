@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..engine.jit import ONE_LAUNCH
 from ..engine.telegraph import in_region
 from ..model import cfa as cfa_mod
 from ..model.sensor import Exposure, region_of
@@ -145,8 +146,9 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
         near = np.zeros(shape, np.bool_)
         parts = [np.broadcast_to(np.asarray(terms[k], np.float64), shape)
                  for k in ("mean_n", "shot", "read", "col_read", "row_off", "col_off", "gain")]
-        _far_pixels(*parts, terms["fw"], terms["top"], float(t.gain_dn_per_e), float(t.black_level_dn),
-                    float(t.max_code), out, near)
+        with ONE_LAUNCH:
+            _far_pixels(*parts, terms["fw"], terms["top"], float(t.gain_dn_per_e), float(t.black_level_dn),
+                        float(t.max_code), out, near)
         if near.any():
             idx = np.nonzero(near)
             out[idx] = _codes(noise_budget.near_moments(sensor, terms, idx, codes=True), t)

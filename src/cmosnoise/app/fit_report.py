@@ -172,9 +172,10 @@ def build(doc: dict, result: dict, cfg) -> str:
                  "" if r["agree"] is None else ("yes" if r["agree"] else "no")) for r in doc["round_trip"]]
         parts.append("<h2>Round trip</h2><p>The measurement made again from the fitted configuration (same stacks, "
                      "exposure times, temperatures, frame counts and flat levels) and fitted the same way. "
-                     "\"Intervals overlap\" compares the two 95 % intervals.</p>"
+                     "\"Agree\": the two values differ by no more than chance allows, judged over every parameter "
+                     "together (one false alarm in 100 fits of a right model).</p>"
                      + _table(rows, ["parameter", "fit of the measured frames", "fit of the simulated frames",
-                                     "intervals overlap"], digits=5))
+                                     "agree"], digits=5))
     if doc.get("settings"):
         keys = ["system_gain_K_dn_per_e", "read_noise.shape", "read_noise.scale_dn", "source_follower.thermal_sigma_e",
                 "row_noise.sigma_e", "black_level_dn"]

@@ -67,13 +67,13 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
     folder.check_space(output_bytes(config))
-    # Two more threads take work nothing waits for: loading the compiled kernel and drawing the dark-current
-    # map while this thread draws the other fixed-pattern maps, and frame 0's pictures while the summary is
-    # built (PNG encoding and most of NumPy's work release the GIL).
+    # Two more threads take work nothing waits for: loading the compiled kernel while this thread draws the
+    # fixed pattern, and frame 0's pictures while the summary is built (PNG encoding and most of NumPy's work
+    # release the GIL; the compiled loops take turns, engine.jit.ONE_LAUNCH).
     with folder as tmp, ThreadPoolExecutor(2, thread_name_prefix="cmosnoise-aside") as aside:
         t_start = time.perf_counter()
         aside.submit(kernel.preload)
-        sensor = Sensor(spec, executor=aside, device=device)  # the dark-current map drawn aside too
+        sensor = Sensor(spec, device=device)
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
         transfer = sensor.transfer

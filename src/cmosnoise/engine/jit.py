@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 
 
 def host_features() -> str | None:
@@ -67,4 +68,9 @@ if numba is not None and not os.environ.get("NUMBA_THREADING_LAYER") and numba.c
     # numba would take where libgomp is present (PyTorch brings one), ends every forked child.
     numba.config.THREADING_LAYER = "forksafe"
 
-__all__ = ["numba", "host_features", "vectors"]
+#: held around every launch of the package's parallel loops: one launch at a time in a process. The fork-safe
+#: workqueue layer aborts the whole process when two threads launch parallel loops at once (a run's aside thread,
+#: the explorer's figure thread beside its pictures, a Dask worker's threads); the loops use every core anyway.
+ONE_LAUNCH = threading.RLock()
+
+__all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH"]

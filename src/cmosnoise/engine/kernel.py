@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import fdmath, philox, samplers, telegraph
-from .jit import numba  # None where numba is not installed
+from . import fdmath, fixed_maps, philox, samplers, telegraph
+from .jit import ONE_LAUNCH, numba  # None where numba is not installed
 
 _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
 
@@ -100,7 +100,8 @@ HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
                         "frame_states", "inside", "occupancy_uniform", "occupancy_r_n", "occupancy_events",
                         "occupancy_walk", "occupancy"]),
            (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept",
-                       "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try", "poisson_one"])]
+                       "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try", "poisson_one"]),
+           (fixed_maps, ["ppf_cell", "heavy_tail_value", "two_point", "normal_value"])]
 
 
 def compile_helpers(jit, numpy=np, skip=()) -> dict:
@@ -543,6 +544,67 @@ if numba is not None:
                          blink_mean, out_dn, out_e)
 
 
+if numba is not None:
+    _ppf_cell, _heavy_tail_value, _two_point, _normal_value = (
+        _h[name] for name in ("ppf_cell", "heavy_tail_value", "two_point", "normal_value"))
+    _Z64, _ONE64 = np.uint64(0), np.uint64(1)
+
+    @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
+    def _normal_map(out, r0, c0, cols, k0, k1, mean, sigma, low):
+        """fixed_maps.normal_map, compiled: a rectangle of a normal map, parallel over its rows."""
+        for i in numba.prange(out.shape[0]):
+            base = np.uint64(r0 + i) * cols + np.uint64(c0)
+            for j in range(out.shape[1]):
+                u1, u2 = _uniform_pair(base + np.uint64(j), _Z64, _Z64, _Z64, k0, k1)
+                out[i, j] = np.float32(_normal_value(u1, u2, mean, sigma, low))
+
+    @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
+    def _heavy_tail_map(out, r0, c0, cols, k0, k1, start, step, last, tables, params, w, body_scale, tail_scale,
+                        two):
+        """fixed_maps.heavy_tail_map, compiled: a rectangle of a heavy-tailed map, parallel over its rows.
+
+        Per row, a branch-free pass (block 0, the body's cell: vectorized), then the table reads and the tail;
+        block 1 (the tail magnitude) is drawn only for the tail's members (the bits as if drawn for all).
+        """
+        bs = 1.0 if two else body_scale
+        ts = 1.0 if two else tail_scale
+        width = out.shape[1]
+        top = max(params[0, 0], params[1, 0]) if two else params[0, 0]
+        for i in numba.prange(out.shape[0]):
+            node = np.empty(width)
+            weight = np.empty(width)
+            member = np.empty(width)
+            base = np.uint64(r0 + i) * cols + np.uint64(c0)
+            for j in range(width):
+                u_body, u_member = _uniform_pair(base + np.uint64(j), _Z64, _Z64, _Z64, k0, k1)
+                node[j], weight[j] = _ppf_cell(u_body, start, step, last)
+                member[j] = u_member
+            for j in range(width):
+                u_tail = 0.5  # read only by the tail's members
+                if member[j] < top:
+                    u_tail, _ = _uniform_pair(base + np.uint64(j), _Z64, _Z64, _ONE64, k0, k1)
+                k = int(node[j])
+                v = _heavy_tail_value(tables[0, k], tables[0, k + 1], weight[j], member[j], u_tail, bs, params[0, 0],
+                                      params[0, 1], ts)
+                if two:
+                    v1 = _heavy_tail_value(tables[1, k], tables[1, k + 1], weight[j], member[j], u_tail, 1.0,
+                                           params[1, 0], params[1, 1], 1.0)
+                    v = _two_point(v, v1, params[0, 2], params[1, 2], w)
+                out[i, j] = np.float32(v)
+
+
+def fixed_map_kernels() -> dict:
+    """The compiled loops of :mod:`.fixed_maps` (say so once when they are compiled rather than loaded)."""
+    if not (_normal_map.signatures or _heavy_tail_map.signatures):
+        try:
+            cached = bool(_heavy_tail_map._cache._cache_file._load_index())
+        except Exception:  # numba's internals moved: no word
+            cached = True
+        if not cached:
+            _logger.info("compiling the fixed-pattern loops for this machine (once; a few seconds) ...")
+    return {"normal": _normal_map, "heavy_tail": _heavy_tail_map}
+
+
 def _version_of(package: str) -> str | None:
     from importlib import metadata
 
@@ -691,19 +753,20 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
     read_kind, read_scale, read_table = read_constants(plan)
     first = _needs_compile()
     t0 = time.perf_counter()
-    _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
-            plan.exact_e if plan.exact_e is not None else _DUMMY2, flags, float(plan.normal_above_e),
-            float(plan.full_well_e), plan.sf_sigma_e if plan.sf_sigma_e is not None else _DUMMY2,
-            float(plan.row_sigma_e or 0.0), plan.row_offset_e if plan.row_offset_e is not None else _DUMMY1,
-            plan.col_sigma_e if plan.col_sigma_e is not None else _DUMMY1,
-            plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
-            plan.col_gain if plan.col_gain is not None else _DUMMY1,
-            plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, float(k_adc), float(black), float(top),
-            plan.loggam_table, nl, float(nl_scale), nl_a, nl_b, nl_c,
-            plan.offset_e if plan.offset_e is not None else _DUMMY2,
-            np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),
-            read_kind, float(read_scale), read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col, blink_mean,
-            out_dn, out_e)
+    with ONE_LAUNCH:
+        _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
+                plan.exact_e if plan.exact_e is not None else _DUMMY2, flags, float(plan.normal_above_e),
+                float(plan.full_well_e), plan.sf_sigma_e if plan.sf_sigma_e is not None else _DUMMY2,
+                float(plan.row_sigma_e or 0.0), plan.row_offset_e if plan.row_offset_e is not None else _DUMMY1,
+                plan.col_sigma_e if plan.col_sigma_e is not None else _DUMMY1,
+                plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
+                plan.col_gain if plan.col_gain is not None else _DUMMY1,
+                plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, float(k_adc), float(black), float(top),
+                plan.loggam_table, nl, float(nl_scale), nl_a, nl_b, nl_c,
+                plan.offset_e if plan.offset_e is not None else _DUMMY2,
+                np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),
+                read_kind, float(read_scale), read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col, blink_mean,
+                out_dn, out_e)
     elapsed = time.perf_counter() - t0
     if first and elapsed > 2.0:  # a cache load takes well under a second; this was a compile
         _logger.info(f"compiled the frame kernel in {elapsed:.0f} s; later runs reuse it")
@@ -718,8 +781,9 @@ def trap_values(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.nda
     out = np.empty(traps.index.size)
     k0, k1 = (np.uint64(w) for w in plan.trap_key)
     cds = plan.cds_interval_s is not None
-    _trap_values(int(frame), np.uint64(plan.sequence), traps.up, traps.down, traps.size, traps.index, traps.slot,
-                 float(plan.frame_period_s), float(plan.cds_interval_s or 0.0), cds, k0, k1, out)
+    with ONE_LAUNCH:
+        _trap_values(int(frame), np.uint64(plan.sequence), traps.up, traps.down, traps.size, traps.index, traps.slot,
+                     float(plan.frame_period_s), float(plan.cds_interval_s or 0.0), cds, k0, k1, out)
     return traps.index, out
 
 
@@ -729,8 +793,9 @@ def blink_means(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.nda
     pixels = plan.blinkers.within(region, plan.shape[1])
     extra = np.empty(pixels.index.size)
     k0, k1 = (np.uint64(w) for w in plan.blink_key)
-    _blink_values(int(frame), np.uint64(plan.sequence), pixels.up, pixels.down, pixels.size, pixels.index,
-                  pixels.slot, float(plan.frame_period_s), float(plan.exposure_s), k0, k1, extra)
+    with ONE_LAUNCH:
+        _blink_values(int(frame), np.uint64(plan.sequence), pixels.up, pixels.down, pixels.size, pixels.index,
+                      pixels.slot, float(plan.frame_period_s), float(plan.exposure_s), k0, k1, extra)
     return pixels.index, plus_charge(plan.blink_mean_e, pixels.index, extra)
 
 

@@ -1,7 +1,10 @@
 """A sensor instance's fixed pattern: every map drawn once from the seed, what each map reads, and a cache.
 
 Each map is a pure function of the seed, the sensor's size and a few parts of
-the configuration; :func:`dependencies` is the one table of those parts.
+the configuration; :func:`dependencies` is the one table of those parts. Each
+is addressed per pixel (per row, per column: :mod:`cmosnoise.engine.fixed_maps`),
+so :func:`draw` makes the maps of any rectangle (a tile) alone, equal to that
+rectangle of the whole sensor's.
 :func:`draw` draws every map of a :class:`~cmosnoise.model.spec.SensorSpec`;
 given a :class:`PatternCache`, it takes each map from the cache when a
 sensor of the same seed and size with the same inputs drew it before, so
@@ -18,9 +21,7 @@ what it reads (:mod:`cmosnoise.model.sensor` asks for them):
 - the dark mean: the dark-current map times the integration time - not the scene;
 - each pixel's source-follower sigma (flicker map, thermal sigma).
 
-So a temperature move redraws the dark map alone (from the kept variates;
-between two characterization points, from their kept log-maps) and reuses
-the photo mean.
+So a temperature move redraws the dark map alone and reuses the photo mean.
 """
 
 from __future__ import annotations
@@ -29,14 +30,13 @@ import hashlib
 import json
 import threading
 from collections import OrderedDict
-from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from ..engine.telegraph import Telegraphs
-from .seeds import fixed_key, fixed_rng, pixel_index
+from .seeds import fixed_key, pixel_index
 from .spec import SensorSpec
 from .stages import (
     column_noise,
@@ -165,86 +165,84 @@ def cached(cache: PatternCache | None, name: str, parts: tuple, make: Callable[[
     return make() if cache is None else cache.get(name, parts, make)
 
 
-def draw(spec: SensorSpec, cache: PatternCache | None = None, executor=None) -> FixedPattern:
-    """Every fixed-pattern map of ``spec``, each from its own stream of the seed.
+def draw(spec: SensorSpec, cache: PatternCache | None = None,
+         region: tuple[int, int, int, int] | None = None) -> FixedPattern:
+    """Every fixed-pattern map of ``spec`` over ``region``, each from its own counter-based stream of the seed.
 
     Parameters
     ----------
     spec : SensorSpec
         The resolved sensor.
     cache : PatternCache, optional
-        Maps of the same seed and size with unchanged :func:`dependencies` are taken from it (and new ones
-        put in it). The dark map is then made from the kept variates of :class:`dark_current.DarkDraws`.
-    executor : concurrent.futures.Executor, optional
-        Where the dark-current map is drawn while this thread draws the others (each map has its own stream,
-        so the bits are the same).
+        Maps of the same seed, size and region with unchanged :func:`dependencies` are taken from it (and new
+        ones put in it).
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the sensor to make the maps of (a tile; the whole sensor if omitted). Every map is
+        addressed per pixel, row or column (:mod:`cmosnoise.engine.fixed_maps`), so a tile's maps are that
+        rectangle of the whole sensor's, bit for bit. Row maps then cover the tile's rows, column maps its
+        columns. The telegraph populations and the defects are drawn for the whole sensor (they are sparse).
     """
     c = spec.config
     shape, seed = spec.shape, spec.seed
+    rows, cols = shape
+    region = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
+    r0, r1, c0, c1 = region
+    if not (0 <= r0 < r1 <= rows and 0 <= c0 < c1 <= cols):
+        raise ValueError(f"region {region} is not a rectangle of the {rows} x {cols} sensor")
     deps = dependencies(spec)
 
-    def held(name, make):
-        return cached(cache, name, (seed, shape, deps[name]), make)
+    def held(name, make, whole=False):
+        return cached(cache, name, (seed, shape, None if whole else region, deps[name]), make)
 
     maps: dict = {}
     if c.prnu.enabled:
-        maps["prnu_gain"] = held("prnu_gain", lambda: prnu.gain_map(shape, c.prnu.sigma_pct, fixed_rng(seed, "prnu")))
+        maps["prnu_gain"] = held("prnu_gain", lambda: prnu.gain_map(region, cols, c.prnu.sigma_pct,
+                                                                      fixed_key(seed, "prnu")))
     if c.dark_current.enabled:
         d = c.dark_current
         state = dark_current.at_temperature(list(spec.dark_points), c.sensor.temperature_c, d.doubling_c,
                                             d.tail_doubling_c)
         maps["dark_state"] = state
-        if cache is None:
-            args = (state, shape, fixed_rng(seed, "dark_current"))
-            maps["dark_rate"] = (executor.submit(dark_current.rate_map, *args) if executor is not None
-                                 else dark_current.rate_map(*args))
-        else:
-            kept = cache.get("dark_draws", (seed, shape),
-                             lambda: dark_current.DarkDraws.draw(shape, fixed_rng(seed, "dark_current")))
 
-            def log_map(model):  # a point's own log-map: each kept as a product of its own
-                return cache.get("dark_point_log", (seed, shape, model),
-                                 lambda: dark_current.point_log_rates(model, kept.u, kept.cells))
+        def dark():
+            return dark_current.rate_map(state, region, cols, fixed_key(seed, "dark_current"))
 
-            maps["dark_rate"] = held("dark_rate", lambda: dark_current.rate_map(state, shape, kept=kept,
-                                                                                 log_map=log_map))
-    rows, cols = shape
+        maps["dark_rate"] = held("dark_rate", dark)
     sf = c.source_follower
     if sf.enabled and sf.flicker.enabled:
         maps["flicker_sigma"] = held("flicker_sigma", lambda: source_follower.flicker_sigma_map(
-            spec.flicker, shape, fixed_rng(seed, "source_follower")))
+            spec.flicker, region, cols, fixed_key(seed, "source_follower")))
     if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
-        maps["row_offset"] = held("row_offset", lambda: row_noise.fixed_offsets(rows, c.row_noise.fixed_sigma_e,
-                                                                                 fixed_rng(seed, "row_noise")))
+        maps["row_offset"] = held("row_offset", lambda: row_noise.fixed_offsets(r0, r1, c.row_noise.fixed_sigma_e,
+                                                                                 fixed_key(seed, "row_noise")))
     if c.column_noise.enabled:
-        maps["column_sigma"], maps["vfpn"], maps["column_gain"] = held("column", lambda: _column_maps(c, cols))
+        maps["column_sigma"], maps["vfpn"], maps["column_gain"] = held("column", lambda: _column_maps(c, c0, c1))
     if c.pixel_offset.enabled and (spec.offsets.sigma_e > 0 or spec.offsets.tail_fraction > 0):
         maps["pixel_offset"] = held("pixel_offset", lambda: pixel_offset.offset_map(
-            spec.offsets, fixed_key(seed, "pixel_offset"), pixel_index((0, rows, 0, cols), cols)))
+            spec.offsets, fixed_key(seed, "pixel_offset"), pixel_index(region, cols)))
     if sf.enabled and sf.rts.enabled:
         maps["traps"] = held("traps", lambda: random_telegraph.draw_traps(
-            sf.rts, fixed_key(seed, "source_follower_rts"), shape))
+            sf.rts, fixed_key(seed, "source_follower_rts"), shape), whole=True)
     d = c.dark_current
     if d.enabled and d.rts.enabled:
         scale = random_telegraph.step_scale(d.rts.reference_temperature_c, c.sensor.temperature_c, d.tail_doubling_c)
         maps["blinkers"] = held("blinkers", lambda: random_telegraph.draw_blinkers(
-            d.rts, scale, fixed_key(seed, "dark_current_rts"), shape))
+            d.rts, scale, fixed_key(seed, "dark_current_rts"), shape), whole=True)
     if c.defects.enabled:
-        maps["defects"] = held("defects", lambda: defects.draw(c.defects, fixed_key(seed, "defects"), shape))
-    if isinstance(maps.get("dark_rate"), Future):
-        maps["dark_rate"] = maps["dark_rate"].result()
+        maps["defects"] = held("defects", lambda: defects.draw(c.defects, fixed_key(seed, "defects"), shape),
+                               whole=True)
     return FixedPattern(**maps)
 
 
-def _column_maps(c, cols: int) -> tuple:
-    """(temporal sigma, VFPN offsets, gains) of the columns, each None where off."""
+def _column_maps(c, col0: int, col1: int) -> tuple:
+    """(temporal sigma, VFPN offsets, gains) of columns ``col0`` to ``col1``, each None where off."""
     cn, seed = c.column_noise, c.seed
     sigma = vfpn = gain = None
     if cn.temporal.enabled:
-        sigma = column_noise.temporal_sigma_map(cols, cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e,
-                                                fixed_rng(seed, "column_noise", 0))
+        sigma = column_noise.temporal_sigma_map(col0, col1, cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e,
+                                                fixed_key(seed, "column_noise", 0))
     if cn.vfpn_sigma_e > 0:
-        vfpn = column_noise.vfpn_offsets(cols, cn.vfpn_sigma_e, fixed_rng(seed, "column_noise", 1))
+        vfpn = column_noise.vfpn_offsets(col0, col1, cn.vfpn_sigma_e, fixed_key(seed, "column_noise", 1))
     if cn.gain_sigma_pct > 0:
-        gain = column_noise.gain_map(cols, cn.gain_sigma_pct, fixed_rng(seed, "column_noise", 2))
+        gain = column_noise.gain_map(col0, col1, cn.gain_sigma_pct, fixed_key(seed, "column_noise", 2))
     return sigma, vfpn, gain

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .distributions import tabulated_ppf
+from ..engine import fixed_maps
+from .distributions import LOGIT_GRID, ppf_table, tabulated_ppf
 
 # Gauss-Legendre nodes and weights on [0, 1] for the integrals of the body's sf (numpy's, not scipy.integrate:
 # making a sensor must not import scipy.integrate, a third of a second)
@@ -155,6 +156,13 @@ class HeavyTail:
         if self.tail_fraction > 0 and self.tail_max > 0:
             v += np.where(u_member < self.tail_fraction, u_tail * self.tail_max, 0.0)
         return v
+
+    def map(self, region: tuple[int, int, int, int], cols: int, key: tuple[int, int]) -> np.ndarray:
+        """The map of this law over ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide, float32,
+        addressed per pixel under the fixed ``key`` (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`: the
+        variates of :meth:`values` from the pixel's own Philox blocks, the same tabulated quantile)."""
+        return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID,
+                                         [(ppf_table(self.body), self.tail_fraction, self.tail_max, 0.0)])
 
     def rvs(self, size, random_state: np.random.Generator) -> np.ndarray:
         """Independent draws (each pixel its own variates)."""

@@ -1,11 +1,11 @@
 """Random streams keyed by what they are for (docs/model.md section 1).
 
 A sensor instance is a configuration plus a seed. Each stage draws its fixed
-pattern from a generator keyed by ``(seed, FIXED, stage, part)`` and its
-temporal noise from a counter-based stream keyed by ``(seed, TEMPORAL,
-stage)`` with counter (pixel, frame, sequence, try). So frame ``k`` is the
-same whether frames are made one by one, in chunks, out of order, cropped or
-on different machines, and switching one stage on or off, or changing one
+pattern from a counter-based stream keyed by ``(seed, FIXED, stage, part)``
+with counter (pixel, 0, 0, block), and its temporal noise from one keyed by
+``(seed, TEMPORAL, stage)`` with counter (pixel, frame, sequence, try). So frame ``k``, and any
+rectangle of any fixed map, is the same whether made one by one, in chunks,
+out of order, cropped, in tiles or on different machines, and switching one stage on or off, or changing one
 parameter, leaves every other random number unchanged.
 """
 
@@ -54,24 +54,17 @@ def pixel_index(region: tuple[int, int, int, int], cols: int) -> np.ndarray:
             + np.arange(c0, c1, dtype=np.uint64)[None, :])
 
 
-def fixed_rng(seed: int, stage: str, part: int = 0) -> np.random.Generator:
-    """Generator for a stage's fixed pattern; the same for every frame.
+def fixed_key(seed: int, stage: str, part: int = 0) -> tuple[int, int]:
+    """The two 32-bit key words of a stage's fixed map ``part``, from ``(seed, FIXED, stage, 2**31 + part)``.
 
-    ``part`` separates the fixed maps of one stage (e.g. column sigma,
-    VFPN offsets, column gains), so switching one off leaves the others.
+    A map drawn from it is addressed per pixel (or per row, per column), as
+    the temporal noise: pixel ``i``'s value depends on (seed, stage, part, i)
+    alone, so any rectangle of the map is made without the rest
+    (:mod:`cmosnoise.engine.fixed_maps`). ``part`` separates the maps of one
+    stage (e.g. column sigma, VFPN offsets, column gains), so switching one
+    off leaves the others.
     """
-    ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage], part))
-    return np.random.Generator(np.random.PCG64(ss))
-
-
-def fixed_key(seed: int, stage: str) -> tuple[int, int]:
-    """The two 32-bit key words of a stage's counter-based fixed map, from ``(seed, FIXED, stage)``.
-
-    A map drawn from it is addressed per pixel, as the temporal noise: pixel
-    ``i``'s value depends on (seed, stage, i) alone, so a tile of the map can
-    be made without the rest.
-    """
-    ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage], 2**31))
+    ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage], 2**31 + part))
     k0, k1 = ss.generate_state(2, np.uint32)
     return int(k0), int(k1)
 

@@ -27,15 +27,14 @@ import numpy as np
 
 from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
-from ..engine import cuda_kernel, kernel
+from ..engine import cuda_kernel, fixed_maps, kernel
 from ..engine.telegraph import per_pixel, positions
 from ..errors import CmosnoiseError
 from . import footprint
 from . import scene as scene_mod
 from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
-from .heavy_tail import variates
 from .raw_info import RawInfo
-from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_rng, pixel_index, stream_key, temporal_stream
+from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_key, pixel_index, stream_key, temporal_stream
 from .spec import SensorSpec, resolve
 from .stages import (
     adc,
@@ -96,9 +95,6 @@ class Sensor:
     cache : PatternCache, optional
         Fixed-pattern maps and exposure products kept between sensors (:mod:`.fixed_pattern`): a map
         whose inputs a cached sensor of the same seed and size shared is taken from it, bit for bit.
-    executor : concurrent.futures.Executor, optional
-        Where the dark-current map is drawn while this thread draws the others (the maps are independent,
-        each from its own stream, so the bits are the same; NumPy releases the GIL for most of the work).
     device : {"cpu", "cuda"}
         Where frames are made: the CPU kernel (the default), or an NVIDIA GPU through numba's CUDA target
         (``pip install cmosnoise[cuda]``), with the same bits. A one-line error where no GPU is present.
@@ -106,7 +102,7 @@ class Sensor:
     """
 
     def __init__(self, config: SensorSpec | Config | dict | str | Path | None = None, seed: int | None = None, *,
-                 fixed_pattern: FixedPattern | None = None, cache: PatternCache | None = None, executor=None,
+                 fixed_pattern: FixedPattern | None = None, cache: PatternCache | None = None,
                  device: str = "cpu"):
         check_device(device)
         #: where frames are made: "cpu" or "cuda"
@@ -124,7 +120,7 @@ class Sensor:
         self.cache = cache
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
-        self._fixed = fixed_pattern if fixed_pattern is not None else draw(spec, cache, executor)
+        self._fixed = fixed_pattern if fixed_pattern is not None else draw(spec, cache)
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
         self.timings["fixed_pattern"] += time.perf_counter() - t0
@@ -205,8 +201,15 @@ class Sensor:
         c = self.config
         if not c.dark_current.enabled:
             return 0.0
-        return dark_current.cooling_fraction(list(self.spec.dark_points),
-                                             lambda: variates(self.shape, fixed_rng(c.seed, "dark_current")))
+        rows, cols = self.shape
+        key = fixed_key(c.seed, "dark_current")
+        step = max(1, fixed_maps.BAND_PIXELS // cols)
+
+        def bands():  # the map's own variates, a row band at a time
+            for r in range(0, rows, step):
+                yield fixed_maps.variates((r, min(rows, r + step), 0, cols), cols, key)
+
+        return dark_current.cooling_fraction(list(self.spec.dark_points), bands)
 
     @property
     def flicker_model(self):

@@ -13,24 +13,30 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...engine import fixed_maps
 from ...engine.samplers import Stream
 from ..distributions import gumbel
 
+# Each fixed column map covers columns ``col0`` to ``col1`` (the whole map: 0 to cols); column ``c``'s value comes
+# from its own counter under the map's fixed key (cmosnoise.engine.fixed_maps.lines), so any span is made alone.
 
-def temporal_sigma_map(cols: int, gumbel_loc_e: float, gumbel_scale_e: float, rng: np.random.Generator) -> np.ndarray:
-    """Fixed per-column temporal sigma (e-), shape (1, cols), float32, >= 0."""
-    s = gumbel(gumbel_loc_e, gumbel_scale_e).ppf(rng.random(cols))
+
+def temporal_sigma_map(col0: int, col1: int, gumbel_loc_e: float, gumbel_scale_e: float,
+                       key: tuple[int, int]) -> np.ndarray:
+    """Fixed per-column temporal sigma (e-), shape (1, col1 - col0), float32, >= 0."""
+    s = gumbel(gumbel_loc_e, gumbel_scale_e).ppf(fixed_maps.lines(col0, col1, key, "uniform"))
     return np.maximum(s, 0.0).astype(np.float32)[None, :]
 
 
-def vfpn_offsets(cols: int, vfpn_sigma_e: float, rng: np.random.Generator) -> np.ndarray:
-    """Fixed per-column offsets (e-), shape (1, cols), float32."""
-    return (vfpn_sigma_e * rng.standard_normal(cols)).astype(np.float32)[None, :]
+def vfpn_offsets(col0: int, col1: int, vfpn_sigma_e: float, key: tuple[int, int]) -> np.ndarray:
+    """Fixed per-column offsets (e-), shape (1, col1 - col0), float32."""
+    return (vfpn_sigma_e * fixed_maps.lines(col0, col1, key)).astype(np.float32)[None, :]
 
 
-def gain_map(cols: int, gain_sigma_pct: float, rng: np.random.Generator) -> np.ndarray:
-    """Fixed per-column gain, dimensionless, shape (1, cols), float32, clipped at 0."""
-    return np.maximum(1.0 + gain_sigma_pct / 100.0 * rng.standard_normal(cols), 0.0).astype(np.float32)[None, :]
+def gain_map(col0: int, col1: int, gain_sigma_pct: float, key: tuple[int, int]) -> np.ndarray:
+    """Fixed per-column gain, dimensionless, shape (1, col1 - col0), float32, clipped at 0."""
+    g = 1.0 + gain_sigma_pct / 100.0 * fixed_maps.lines(col0, col1, key)
+    return np.maximum(g, 0.0).astype(np.float32)[None, :]
 
 
 def temporal(sigma: np.ndarray, columns: np.ndarray, stream: Stream) -> np.ndarray:

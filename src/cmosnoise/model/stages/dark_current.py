@@ -18,8 +18,9 @@ temperature ``T``:
   temperature coefficient).
 
 Every pixel has fixed uniform variates (body quantile, tail membership, tail
-magnitude) drawn once from the sensor's seed, so a pixel keeps its rank and a
-white pixel stays white when the sensor warms up. Rates are e-/s per pixel.
+magnitude) from its own counter under the stage's fixed key, so a pixel keeps
+its rank and a white pixel stays white when the sensor warms up, and any
+rectangle of the map is made alone. Rates are e-/s per pixel.
 """
 
 from __future__ import annotations
@@ -30,9 +31,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...engine import fixed_maps
+from ..distributions import LOGIT_GRID, ppf_cells, ppf_table, tabulated_ppf
 from ..distributions import body as body_dist
-from ..distributions import ppf_cells, tabulated_ppf
-from ..heavy_tail import HeavyTail, variates
+from ..heavy_tail import HeavyTail
 
 
 @dataclass(frozen=True)
@@ -102,27 +104,20 @@ class DarkState:
             raise ValueError("between two characterization points the DCNU is a per-pixel interpolation, not one model")
         return HeavyTail(body_dist(self.family, self.mean, self.std), self.tail_fraction, self.tail_max)
 
-    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None,
-               log_map=None) -> np.ndarray:
-        """Rates (e-/s, float64) of pixels with these fixed uniform variates.
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None) -> np.ndarray:
+        """Rates (e-/s, float64) of pixels with these fixed uniform variates, by NumPy (for studies over
+        variates: the expected ppm, the cooling fraction; the map itself is :func:`rate_map`).
 
-        ``cells``: ``ppf_cells(u_body)`` if known. ``log_map(model)``, if
-        given, returns :func:`point_log_rates` of a characterization point's
-        model for these variates, kept from an earlier call (the same bits):
-        between two points the map is then one exponential of two kept maps.
+        ``cells``: ``ppf_cells(u_body)`` if known.
         """
         if not self.between:
             body = np.maximum(tabulated_ppf(self.lo.body, u_body, cells), 0.0) * self.body_scale
             if self.lo.tail_fraction > 0 and self.lo.tail_max > 0:
                 body += np.where(u_member < self.lo.tail_fraction, u_tail * self.lo.tail_max * self.tail_scale, 0.0)
             return body
-        if log_map is None:
-            u = (u_body, u_member, u_tail)
-            cells = cells if cells is not None else ppf_cells(u_body)  # both points' bodies at the same quantiles
-
-            def log_map(model):
-                return point_log_rates(model, u, cells)
-        return np.exp((1.0 - self.w) * log_map(self.lo) + self.w * log_map(self.hi))
+        u = (u_body, u_member, u_tail)
+        cells = cells if cells is not None else ppf_cells(u_body)  # both points' bodies at the same quantiles
+        return np.exp((1.0 - self.w) * point_log_rates(self.lo, u, cells) + self.w * point_log_rates(self.hi, u, cells))
 
     def expected_ppm_above(self, threshold: float | None = None) -> float | None:
         """Expected ppm of pixels above ``threshold`` (default: the state's own), e-/s.
@@ -200,45 +195,30 @@ def point_log_rates(model: HeavyTail, u: np.ndarray, cells=None) -> np.ndarray:
     return np.log(np.maximum(model.values(*u, cells), RATE_FLOOR * float(model.body.mean())))
 
 
-@dataclass(frozen=True)
-class DarkDraws:
-    """A sensor's fixed dark-current variates and where their body quantiles fall in the quantile tables.
+def rate_map(state: DarkState, region: tuple[int, int, int, int], cols: int, key: tuple[int, int]) -> np.ndarray:
+    """Fixed dark-current map at ``state``'s temperature over ``region = (row0, row1, col0, col1)`` of a sensor
+    ``cols`` wide, e-/s per pixel, float32 (>= 0), from the stage's fixed ``key``.
 
-    They depend on the seed and the size only, not on the temperature or the
-    points: interactive use keeps them to make the map at another temperature
-    without drawing or locating them again.
+    Addressed per pixel (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`): each pixel's variates, and so
+    its rank and its tail membership, are the same at every temperature; between two points its rate is
+    log-linear between its own rates there (floored at ``RATE_FLOOR`` times each point's body mean).
     """
-
-    u: np.ndarray  #: (3, rows, cols): body quantile, tail membership, tail magnitude
-    cells: tuple  #: ``ppf_cells(u[0])``
-
-    @classmethod
-    def draw(cls, shape: tuple[int, int], rng: np.random.Generator) -> "DarkDraws":
-        u = variates(shape, rng)
-        return cls(u, ppf_cells(u[0]))
-
-    @property
-    def nbytes(self) -> int:
-        return self.u.nbytes + sum(a.nbytes for a in self.cells)
-
-
-def rate_map(state: DarkState, shape: tuple[int, int], rng: np.random.Generator | None = None,
-             kept: DarkDraws | None = None, log_map=None) -> np.ndarray:
-    """Fixed dark-current map at ``state``'s temperature, e-/s per pixel, float32 (>= 0).
-
-    ``kept`` is this sensor's :class:`DarkDraws` (then ``rng`` is not used), ``log_map`` as in
-    :meth:`DarkState.values`: the same map, bit for bit.
-    """
-    if kept is None:
-        return state.values(*variates(shape, rng), log_map=log_map).astype(np.float32)
-    return state.values(*kept.u, cells=kept.cells, log_map=log_map).astype(np.float32)
+    if state.between:
+        points = [(ppf_table(m.body), m.tail_fraction, m.tail_max, RATE_FLOOR * float(m.body.mean()))
+                  for m in (state.lo, state.hi)]
+        return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, points, w=state.w)
+    m = state.lo
+    return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, [(ppf_table(m.body), m.tail_fraction, m.tail_max,
+                                                                      0.0)],
+                                     body_scale=state.body_scale, tail_scale=state.tail_scale)
 
 
 def cooling_fraction(points: list[Point], draw_variates) -> float:
     """Fraction of pixels whose rate drops from one characterization point to the next warmer one.
 
-    ``draw_variates()`` returns the pixels' fixed uniforms, shape (3, ...);
-    it is called only when some pixel can cool, since with ordered points
+    ``draw_variates()`` returns the pixels' fixed uniforms, shape (3, ...), or an iterable of such arrays
+    (row bands, so that a large sensor is never held as variates at once); it is called only when some pixel
+    can cool, since with ordered points
     (every quantile of each warmer point above the colder one's, tails no
     smaller) the answer is 0 without looking at pixels. A user's points can
     break that, and the run summary says so.
@@ -249,12 +229,16 @@ def cooling_fraction(points: list[Point], draw_variates) -> float:
     models = [p.model() for p in pts]
     if all(_dominates(b, a) for a, b in zip(models[:-1], models[1:])):
         return 0.0
-    u = draw_variates()
-    rates = [m.values(*u) for m in models]
-    cools = np.zeros(u.shape[1:], bool)
-    for lo, hi in zip(rates[:-1], rates[1:]):
-        cools |= hi < lo
-    return float(cools.mean())
+    bands = draw_variates()
+    cooling = total = 0
+    for u in [bands] if isinstance(bands, np.ndarray) else bands:
+        rates = [m.values(*u) for m in models]
+        cools = np.zeros(u.shape[1:], bool)
+        for lo, hi in zip(rates[:-1], rates[1:]):
+            cools |= hi < lo
+        cooling += int(cools.sum())
+        total += cools.size
+    return cooling / max(total, 1)
 
 
 def _dominates(hot: HeavyTail, cold: HeavyTail) -> bool:

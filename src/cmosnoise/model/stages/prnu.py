@@ -2,27 +2,37 @@
 
 Each pixel's responsivity is ``g ~ Normal(1, sigma_pct / 100)``, clipped at 0,
 drawn once per sensor instance and applied to the mean photo-electrons. As in
-the paper (Section V-B) the PRNU is independent of the signal level.
+the paper (Section V-B) the PRNU is independent of the signal level. The map
+is addressed per pixel (:mod:`cmosnoise.engine.fixed_maps`): any rectangle of
+it is made alone.
 """
 
 import numpy as np
 
+from ...engine import fixed_maps
 
-def gain_map(shape: tuple[int, int], sigma_pct: float, rng: np.random.Generator) -> np.ndarray:
-    """Fixed PRNU gain map, dimensionless, mean 1, std ``sigma_pct`` % (before clipping at 0).
+
+def gain_map(region: tuple[int, int, int, int], cols: int, sigma_pct: float, key: tuple[int, int]) -> np.ndarray:
+    """Fixed PRNU gain over ``region``, dimensionless, mean 1, std ``sigma_pct`` % (before clipping at 0).
 
     Parameters
     ----------
-    shape : (rows, cols)
+    region : (row0, row1, col0, col1)
+        The rectangle to make (the whole map: ``(0, rows, 0, cols)``).
+    cols : int
+        The sensor's width (a pixel's address is ``r * cols + c``).
     sigma_pct : float
         PRNU as a percentage of the signal, >= 0.
-    rng : numpy.random.Generator
-        The sensor's fixed-pattern stream for this stage.
+    key : (int, int)
+        The stage's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+
+    Returns
+    -------
+    (row1 - row0, col1 - col0) float32
     """
     if sigma_pct < 0:
         raise ValueError(f"sigma_pct must be >= 0, got {sigma_pct}")
-    g = 1.0 + (sigma_pct / 100.0) * rng.standard_normal(shape, dtype=np.float32)
-    return np.maximum(g, 0.0, out=g)
+    return fixed_maps.normal_map(region, cols, key, 1.0, sigma_pct / 100.0, 0.0)
 
 
 def apply(mean_e: np.ndarray, gain: np.ndarray) -> np.ndarray:

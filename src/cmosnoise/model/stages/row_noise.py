@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...engine import fixed_maps
 from ...engine.samplers import Stream
 
 
-def fixed_offsets(rows: int, fixed_sigma_e: float, rng: np.random.Generator) -> np.ndarray:
-    """Fixed per-row offsets (e-), shape (rows, 1), float32."""
-    return (fixed_sigma_e * rng.standard_normal((rows, 1))).astype(np.float32)
+def fixed_offsets(row0: int, row1: int, fixed_sigma_e: float, key: tuple[int, int]) -> np.ndarray:
+    """Fixed offsets (e-) of rows ``row0`` to ``row1``, shape (row1 - row0, 1), float32; row ``r``'s from its own
+    counter under the map's fixed ``key`` (:func:`cmosnoise.engine.fixed_maps.lines`)."""
+    return (fixed_sigma_e * fixed_maps.lines(row0, row1, key)).astype(np.float32)[:, None]
 
 
 def temporal(rows: np.ndarray, sigma_e: float, stream: Stream) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 from ...engine.samplers import Stream
 from ..distributions import gumbel
-from ..heavy_tail import HeavyTail, variates
+from ..heavy_tail import HeavyTail
 
 
 @functools.lru_cache(maxsize=64)
@@ -35,9 +35,11 @@ def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float |
     return HeavyTail.from_ppm(b, ppm_above, threshold_e, max_e)
 
 
-def flicker_sigma_map(model: HeavyTail, shape: tuple[int, int], rng: np.random.Generator) -> np.ndarray:
-    """Fixed per-pixel flicker sigma (e-), float32, from the sensor's fixed stream."""
-    return model.values(*variates(shape, rng)).astype(np.float32)
+def flicker_sigma_map(model: HeavyTail, region: tuple[int, int, int, int], cols: int,
+                      key: tuple[int, int]) -> np.ndarray:
+    """Fixed per-pixel flicker sigma (e-) over ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide,
+    float32, from the stage's fixed ``key``: :meth:`HeavyTail.map`."""
+    return model.map(region, cols, key)
 
 
 def total_sigma(thermal_sigma_e: float, flicker_sigma: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:

@@ -1,0 +1,214 @@
+"""Fixed-pattern maps addressed per pixel: any rectangle of a map made alone (docs/model.md section 1).
+
+A fixed map's value at pixel ``i = r * cols + c`` (or at row ``r``, column
+``c`` for a line map) comes from the Philox blocks at counter
+``(i, 0, 0, block)`` under the map's own fixed key
+(:func:`cmosnoise.model.seeds.fixed_key`), and from nothing else. So a tile,
+a crop or a viewport of a map is computed without the rest of the sensor, bit
+for bit the same rectangle of the whole map, on any thread count, CPU or GPU,
+and the set-up costs the same per pixel at any size.
+
+Two kinds of per-pixel map cover every stage's:
+
+- **a normal map** (PRNU gain): ``max(mean + sigma z, low)`` with ``z`` the
+  Box-Muller normal of block 0;
+- **a heavy-tailed map** (dark current, flicker sigma; docs/model.md
+  section 4): a body quantile ``u_b`` and a tail membership ``u_m`` from
+  block 0, a tail magnitude ``u_t`` from block 1; the body's quantile
+  function read from its table on a grid uniform in ``logit(u)``
+  (:func:`cmosnoise.model.distributions.ppf_table`), linear between nodes;
+  ``max(body, 0) * body_scale + (u_m < fraction ? u_t * tail_max * tail_scale : 0)``.
+  Between two characterization points, each pixel's rate is
+  ``exp((1 - w) ln max(v_lo, floor_lo) + w ln max(v_hi, floor_hi))`` of its two
+  points' values (the same variates).
+
+The functions :func:`ppf_cell`, :func:`heavy_tail_value`, :func:`two_point`
+and :func:`normal_value` are written once, on scalars or NumPy arrays: the
+NumPy path (``engine="numpy"``) runs them over arrays, row band by row band,
+and is the specification; the compiled path (:mod:`.kernel` compiles the same
+sources) runs them pixel by pixel in a parallel loop and must give the same
+bits (``tests/test_fixed_maps.py``). Logs and exps are :mod:`.fdmath`'s, so
+the bits do not depend on the platform's libm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .fdmath import exp, floor, log, where
+from .jit import ONE_LAUNCH, numba
+from .philox import uniform_pair
+from .samplers import Stream, normal_from
+
+_ZERO = np.uint64(0)
+_ONE = np.uint64(1)
+#: the NumPy path's row bands hold about this many pixels (its temporaries: some tens of bytes a pixel)
+BAND_PIXELS = 1 << 18
+
+
+def ppf_cell(u, start, step, last):
+    """Where an open uniform ``u`` falls on the grid uniform in ``logit(u)`` (``start + j step``, ``j = 0 .. last``):
+    (the node below, held as float; the weight of the next node), clipped to the grid's ends."""
+    pos = (log(u / (1.0 - u)) - start) / step
+    pos = where(pos < 0.0, 0.0, where(pos > last, last, pos))
+    i = floor(pos)
+    i = where(i > last - 1.0, last - 1.0, i)
+    return i, pos - i
+
+
+def heavy_tail_value(lo, hi, w, u_member, u_tail, body_scale, fraction, tail_max, tail_scale):
+    """A heavy-tailed map's value from its body's two table nodes ``lo``, ``hi`` and the weight ``w`` of ``hi``."""
+    body = lo * (1.0 - w) + hi * w
+    body = where(body > 0.0, body, 0.0) * body_scale
+    return body + where(u_member < fraction, u_tail * tail_max * tail_scale, 0.0)
+
+
+def two_point(v_lo, v_hi, floor_lo, floor_hi, w):
+    """A pixel's rate between two characterization points: log-linear between its rates there, each floored."""
+    a = log(where(v_lo > floor_lo, v_lo, floor_lo))
+    b = log(where(v_hi > floor_hi, v_hi, floor_hi))
+    return exp((1.0 - w) * a + w * b)
+
+
+def normal_value(u1, u2, mean, sigma, low):
+    """A normal map's value: ``max(mean + sigma z, low)``, z by Box-Muller from (u1, u2)."""
+    v = mean + sigma * normal_from(u1, u2)
+    return where(v > low, v, low)
+
+
+def _check(region, cols):
+    r0, r1, c0, c1 = (int(v) for v in region)
+    if not (0 <= r0 <= r1 and 0 <= c0 <= c1 <= cols):
+        raise ValueError(f"region {tuple(region)} is not inside a sensor {cols} columns wide")
+    return r0, r1, c0, c1
+
+
+def _bands(region):
+    r0, r1, c0, c1 = region
+    step = max(1, BAND_PIXELS // max(1, c1 - c0))
+    for a in range(r0, r1, step):
+        yield a, min(r1, a + step)
+
+
+def _index(r0, r1, c0, c1, cols):
+    return (np.arange(r0, r1, dtype=np.uint64)[:, None] * np.uint64(cols)
+            + np.arange(c0, c1, dtype=np.uint64)[None, :])
+
+
+def _key(key):
+    return np.uint64(key[0]), np.uint64(key[1])
+
+
+def _blocks(index, k0, k1):
+    u_body, u_member = uniform_pair(index, _ZERO, _ZERO, _ZERO, k0, k1)
+    u_tail, _ = uniform_pair(index, _ZERO, _ZERO, _ONE, k0, k1)
+    return u_body, u_member, u_tail
+
+
+def variates(region, cols: int, key: tuple[int, int]) -> np.ndarray:
+    """A heavy-tailed map's fixed uniforms over ``region``: (3, rows, cols) float64 of (body quantile, tail
+    membership, tail magnitude), what :func:`heavy_tail_map` reads (NumPy; for studies over a sensor's pixels)."""
+    r0, r1, c0, c1 = _check(region, cols)
+    k0, k1 = _key(key)
+    return np.stack(_blocks(_index(r0, r1, c0, c1, cols), k0, k1))
+
+
+def lines(start: int, stop: int, key: tuple[int, int], kind: str = "normal") -> np.ndarray:
+    """A line map's draws (rows or columns ``start`` to ``stop``): standard normals or open uniforms, float64.
+
+    Line ``j``'s draw comes from the block at counter (j, 0, 0, 0) of the map's key, as a pixel's.
+    """
+    stream = Stream(key, 0, 0)
+    index = np.arange(start, stop, dtype=np.uint64)
+    return stream.normal(index) if kind == "normal" else stream.uniforms(index)[0]
+
+
+def normal_map(region, cols: int, key: tuple[int, int], mean: float, sigma: float, low: float = -np.inf,
+               engine: str = "auto") -> np.ndarray:
+    """``max(mean + sigma z, low)`` per pixel over ``region = (row0, row1, col0, col1)`` of a sensor ``cols``
+    wide, (rows, cols) float32 (rounded from float64 once).
+
+    ``engine``: "numpy" (the specification), "compiled", or "auto" (compiled where numba is present).
+    """
+    region = _check(region, cols)
+    out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
+    k0, k1 = _key(key)
+    if _compiled(engine):
+        with ONE_LAUNCH:
+            _kernels()["normal"](out, region[0], region[2], np.uint64(cols), k0, k1, float(mean), float(sigma),
+                                 float(low))
+        return out
+    for a, b in _bands(region):
+        u1, u2 = uniform_pair(_index(a, b, region[2], region[3], cols), _ZERO, _ZERO, _ZERO, k0, k1)
+        out[a - region[0]:b - region[0]] = normal_value(u1, u2, mean, sigma, low)
+    return out
+
+
+def heavy_tail_map(region, cols: int, key: tuple[int, int], grid: tuple[float, float, int], points,
+                   w: float = 0.0, body_scale: float = 1.0, tail_scale: float = 1.0,
+                   engine: str = "auto") -> np.ndarray:
+    """A heavy-tailed map over ``region`` of a sensor ``cols`` wide, (rows, cols) float32.
+
+    Parameters
+    ----------
+    region : (row0, row1, col0, col1)
+    cols : int
+        The whole sensor's width (pixel ``(r, c)``'s address is ``r * cols + c``).
+    key : (int, int)
+        The map's fixed key.
+    grid : (start, step, last)
+        The logit grid every table is tabulated on.
+    points : sequence of one or two (table, fraction, tail_max, floor)
+        One: the map at a point (or scaled from it by ``body_scale`` and ``tail_scale``). Two: each pixel
+        log-linear between its values at the two points (weight ``w`` of the second; scales not applied).
+        ``table``: the body's quantiles on the grid, (last + 1,) float64; ``floor``: the rate floor before the
+        log (two points only).
+    engine : {"auto", "numpy", "compiled"}
+    """
+    region = _check(region, cols)
+    out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
+    k0, k1 = _key(key)
+    start, step, last = float(grid[0]), float(grid[1]), float(grid[2])
+    tables = np.ascontiguousarray([np.asarray(p[0], np.float64) for p in points])
+    params = np.array([[p[1], p[2], p[3]] for p in points], np.float64)  # fraction, tail_max, floor
+    two = len(points) == 2
+    if not two:
+        tables = np.concatenate([tables, tables])
+        params = np.concatenate([params, params])
+    if _compiled(engine):
+        with ONE_LAUNCH:
+            _kernels()["heavy_tail"](out, region[0], region[2], np.uint64(cols), k0, k1, start, step, last, tables,
+                                     params, float(w), float(body_scale), float(tail_scale), two)
+        return out
+    for a, b in _bands(region):
+        u_body, u_member, u_tail = _blocks(_index(a, b, region[2], region[3], cols), k0, k1)
+        i, wc = ppf_cell(u_body, start, step, last)
+        k = i.astype(np.int64)
+        values = []
+        for t in range(2 if two else 1):
+            bs, ts = (1.0, 1.0) if two else (body_scale, tail_scale)
+            values.append(heavy_tail_value(tables[t][k], tables[t][k + 1], wc, u_member, u_tail, bs,
+                                           params[t, 0], params[t, 1], ts))
+        v = two_point(values[0], values[1], params[0, 2], params[1, 2], w) if two else values[0]
+        out[a - region[0]:b - region[0]] = v
+    return out
+
+
+def _compiled(engine: str) -> bool:
+    if engine not in ("auto", "numpy", "compiled"):
+        raise ValueError(f"engine must be 'auto', 'numpy' or 'compiled', got {engine!r}")
+    if engine == "compiled" and numba is None:
+        raise RuntimeError("the compiled fixed-pattern loops need numba")
+    return engine == "compiled" or (engine == "auto" and numba is not None)
+
+
+_KERNELS: dict = {}
+
+
+def _kernels() -> dict:
+    """The compiled loops (made on first use, loaded from numba's on-disk cache when there)."""
+    if not _KERNELS:
+        from . import kernel
+
+        _KERNELS.update(kernel.fixed_map_kernels())
+    return _KERNELS
