@@ -311,3 +311,27 @@ def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path
     assert child.stdout.strip() == repr(kernel._render.targetctx.codegen().magic_tuple()), child.stdout + child.stderr
     if shared:
         assert kernel.preload(), "this process keys numba's cache unlike its children: the suite would compile twice"
+
+
+def test_numba_imported_first_still_gets_the_full_vector_width_or_says_it_did_not():
+    """`import numba` before cmosnoise: the vector width is still chosen (numba's CPU target reads its features
+    when it first compiles); where numba had compiled already, vectors() says the 256-bit tuning it got."""
+    import os
+    import subprocess
+    import sys
+
+    from cmosnoise.engine.jit import host_features
+
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CPU_FEATURES", "NUMBA_CPU_NAME")}
+    avx512 = "+avx512f" in (host_features() or "").split(",")
+    first = ("import numba\nimport cmosnoise.engine.jit as j\n"
+             "print(j.vectors() + '|' + str(numba.config.CPU_FEATURES))\n")
+    out = subprocess.run([sys.executable, "-c", first], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    vectors, features = out.stdout.strip().split("|")
+    if avx512:
+        assert vectors == "AVX-512" and features.endswith("-prefer-256-bit"), out.stdout
+    late = ("import numba\nnumba.njit(lambda x: x + 1)(1)\nimport cmosnoise.engine.jit as j\nprint(j.vectors())\n")
+    out = subprocess.run([sys.executable, "-c", late], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == ("AVX-512 (256-bit preferred)" if avx512 else vectors), out.stdout

@@ -6,8 +6,8 @@ from conftest import Z, assert_close, quiet_config, smoothed_std_se
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
-from cmosnoise.model.spec import resolve
 from cmosnoise.model.seeds import fixed_key
+from cmosnoise.model.spec import resolve
 from cmosnoise.model.stages.prnu import gain_map
 
 

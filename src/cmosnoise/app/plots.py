@@ -11,6 +11,8 @@ import io
 
 import numpy as np
 
+from ..io.output import png_bytes
+
 _FIGURE_KEYS = ("figsize", "dpi", "facecolor", "edgecolor", "layout")
 
 
@@ -30,9 +32,7 @@ def to_png_bytes(fig, dpi: int = 100) -> bytes:
 
 
 def image_png_bytes(img: np.ndarray) -> bytes:
-    import imageio.v3 as iio
-
-    return iio.imwrite("<bytes>", img, extension=".png")
+    return png_bytes(img)
 
 
 def data_uri(png: bytes) -> str:

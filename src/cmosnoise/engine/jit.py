@@ -6,11 +6,14 @@ Philox blocks, the PTRS quick test, Box-Muller) run faster with 512-bit
 vectors: on the development machine ``benchmarks/bench_chain.py`` put the
 1080p kernel at 0.40 of its NumPy reference on one thread and 0.21 on two
 before, 0.32 and 0.18 after (``NUMBA_CPU_FEATURES`` set to the host's plain
-features, and a cache folder of its own, measures the before). So, before
-numba is first imported in a process, and unless ``NUMBA_CPU_NAME`` or
-``NUMBA_CPU_FEATURES`` is already set, this sets ``NUMBA_CPU_FEATURES`` to
-the host's own features plus ``-prefer-256-bit`` where the host has
-AVX-512; elsewhere it changes nothing. Child processes (worker pools, the
+features, and a cache folder of its own, measures the before). So, unless
+``NUMBA_CPU_NAME`` or ``NUMBA_CPU_FEATURES`` is already set, this sets
+``NUMBA_CPU_FEATURES`` (and, where numba was imported first, its
+``config.CPU_FEATURES``, which numba reads when it first compiles) to the
+host's own features plus ``-prefer-256-bit`` where the host has AVX-512;
+elsewhere it changes nothing. Where numba had already compiled something
+before cmosnoise was imported, it is too late: :func:`vectors` says so, and
+the frame kernel's compile message with it. Child processes (worker pools, the
 tests' command lines) inherit it, so every process keys numba's on-disk
 cache the same way.
 
@@ -39,20 +42,35 @@ def host_features() -> str | None:
         return None
 
 
+#: set when numba had compiled something before cmosnoise was imported: the vector width was numba's default then
+TOO_LATE = False
+
+
 def vectors() -> str:
-    """The widest vectors numba compiles for in this process: ``"AVX-512"``, ``"AVX2"`` or ``"SSE/other"``."""
+    """The widest vectors numba compiles for in this process: ``"AVX-512"``, ``"AVX-512 (256-bit preferred)"``
+    (numba had compiled before cmosnoise was imported, with LLVM's default tuning), ``"AVX2"`` or ``"SSE/other"``."""
     features = set((os.environ.get("NUMBA_CPU_FEATURES") or host_features() or "").split(","))
-    return "AVX-512" if "+avx512f" in features else "AVX2" if "+avx2" in features else "SSE/other"
+    if "+avx512f" in features:
+        return "AVX-512 (256-bit preferred)" if TOO_LATE or "-prefer-256-bit" not in features else "AVX-512"
+    return "AVX2" if "+avx2" in features else "SSE/other"
 
 
 def _widest_vectors() -> None:
-    if "numba" in sys.modules or os.environ.get("NUMBA_CPU_NAME") or os.environ.get("NUMBA_CPU_FEATURES"):
-        return  # too late to change, or the user's choice
+    global TOO_LATE
+    if os.environ.get("NUMBA_CPU_NAME") or os.environ.get("NUMBA_CPU_FEATURES"):
+        return  # the user's choice
     features = host_features()
-    if features is None:  # leave numba's defaults
+    if features is None or "+avx512f" not in features.split(","):  # leave numba's defaults
         return
-    if "+avx512f" in features.split(","):
-        os.environ["NUMBA_CPU_FEATURES"] = features + ",-prefer-256-bit"
+    wanted = features + ",-prefer-256-bit"
+    if "numba" in sys.modules:  # imported first: its CPU target reads the features when it first compiles
+        from numba.core import registry
+
+        if "_toplevel_target_context" in vars(registry.cpu_target):  # it has compiled already: too late
+            TOO_LATE = True
+            return
+        sys.modules["numba"].config.CPU_FEATURES = wanted
+    os.environ["NUMBA_CPU_FEATURES"] = wanted
 
 
 _widest_vectors()

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import fdmath, fixed_maps, philox, samplers, telegraph
+from . import fdmath, fixed_maps, jit, philox, samplers, telegraph
 from .jit import ONE_LAUNCH, numba  # None where numba is not installed
 
 _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
@@ -595,13 +595,8 @@ if numba is not None:
 
 def fixed_map_kernels() -> dict:
     """The compiled loops of :mod:`.fixed_maps` (say so once when they are compiled rather than loaded)."""
-    if not (_normal_map.signatures or _heavy_tail_map.signatures):
-        try:
-            cached = bool(_heavy_tail_map._cache._cache_file._load_index())
-        except Exception:  # numba's internals moved: no word
-            cached = True
-        if not cached:
-            _logger.info("compiling the fixed-pattern loops for this machine (once; a few seconds) ...")
+    if not (_normal_map.signatures or _heavy_tail_map.signatures) and not _cached_for_this_machine(_heavy_tail_map):
+        _logger.info("compiling the fixed-pattern loops for this machine (once; a few seconds) ...")
     return {"normal": _normal_map, "heavy_tail": _heavy_tail_map}
 
 
@@ -643,17 +638,26 @@ _DUMMY_F32 = np.zeros(1, np.float32)
 _FLAGS = 13
 
 
-def _needs_compile() -> bool:
-    """Whether this process has yet to compile or load the kernel; says so first when nothing is cached."""
-    if numba is None or _render.signatures:
-        return False
+def _cached_for_this_machine(dispatcher) -> bool:
+    """Whether numba's on-disk cache holds a compile of ``dispatcher`` for this machine and vector width (any
+    argument types); True where numba's internals cannot say (nothing is announced then)."""
     try:
-        cached = bool(_render._cache._cache_file._load_index())  # numba's on-disk cache of this kernel
-    except Exception:  # numba's internals moved: say it after the fact instead (see render)
+        index = dispatcher._cache._cache_file._load_index()  # {(signature, magic tuple, ...): file}
+        magic = dispatcher.targetctx.codegen().magic_tuple()
+        return any(key[1] == magic for key in index)
+    except Exception:  # numba's internals moved
         return True
-    if not cached:
-        _logger.info("compiling the frame kernel for this machine (once; about half a minute) ...")
-    return True
+
+
+def _needs_compile() -> int:
+    """How many variants of the kernel this process holds (-1 without numba); says first that it compiles when
+    nothing is cached for this machine and vector width."""
+    if numba is None:
+        return -1
+    held = len(_render.signatures)
+    if not held and not _cached_for_this_machine(_render):
+        _logger.info(f"compiling the frame kernel for this machine ({jit.vectors()}; once; about half a minute) ...")
+    return held
 
 
 def preload() -> bool:
@@ -751,7 +755,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
     k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
     nl, nl_scale, (nl_a, nl_b, nl_c) = curve_constants(plan)
     read_kind, read_scale, read_table = read_constants(plan)
-    first = _needs_compile()
+    held = _needs_compile()
     t0 = time.perf_counter()
     with ONE_LAUNCH:
         _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
@@ -768,8 +772,9 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
                 read_kind, float(read_scale), read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col, blink_mean,
                 out_dn, out_e)
     elapsed = time.perf_counter() - t0
-    if first and elapsed > 2.0:  # a cache load takes well under a second; this was a compile
-        _logger.info(f"compiled the frame kernel in {elapsed:.0f} s; later runs reuse it")
+    if len(_render.signatures) > held and elapsed > 2.0:  # a cache load takes well under a second: a compile
+        what = "the frame kernel" if held == 0 else "a variant of the frame kernel for these switches' types"
+        _logger.info(f"compiled {what} in {elapsed:.0f} s ({jit.vectors()}); later runs reuse it")
     raw = out_dn if adc_on else out_e
     return raw, (out_e if electrons or not adc_on else None)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import io
 import json
 import logging
 import os
@@ -331,11 +332,22 @@ def atomic_file(path: str | Path):
         raise
 
 
+def png_bytes(image: np.ndarray, compress_level: int = 6) -> bytes:
+    """An 8-bit picture (rows, cols) or (rows, cols, 3|4) as PNG bytes.
+
+    Pillow directly, with the format named: it loads its five common plugins, not all 45 of them, as imageio's
+    Pillow plugin does (0.2 s of every run).
+    """
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", compress_level=compress_level)
+    return buf.getvalue()
+
+
 def write_png(path: str | Path, image: np.ndarray) -> None:
     """An 8-bit picture as PNG, zlib level 1: a 1080p picture in about 0.15 s instead of 0.9 s, some 10 % larger."""
-    import imageio.v3 as iio
-
-    iio.imwrite(path, image, extension=".png", compress_level=1)
+    Path(path).write_bytes(png_bytes(image, compress_level=1))
 
 
 def write_json(path: str | Path, obj) -> None:
