@@ -53,8 +53,11 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
-    g2 = float(np.mean(fp.column_gain.astype(np.float64) ** 2)) if fp.column_gain is not None else 1.0
-    dark_e = float(fp.dark_rate.mean()) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0
+    stat = sensor.map_statistic
+    g2 = (stat("mean_square:column_gain", lambda: np.mean(fp.column_gain.astype(np.float64) ** 2))
+          if fp.column_gain is not None else 1.0)
+    dark_e = (stat("mean:dark_rate", lambda: fp.dark_rate.mean()) * c.exposure.integration_time_s
+              if fp.dark_rate is not None else 0.0)
     slope2 = transfer_slope(sensor, signal_e + dark_e) ** 2
     out: dict[str, float] = {}
     if c.shot_noise.enabled:
@@ -64,11 +67,11 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
     if c.source_follower.enabled:
         out["thermal"] = c.source_follower.thermal_sigma_e**2 * g2
         if fp.flicker_sigma is not None:
-            out["flicker"] = float(np.mean(fp.flicker_sigma.astype(np.float64) ** 2)) * g2
+            out["flicker"] = stat("mean_square:flicker_sigma", lambda: np.mean(fp.flicker_sigma.astype(np.float64) ** 2)) * g2
     if c.row_noise.enabled:
         out["row"] = sensor.spec.row_sigma_e**2 * g2
     if fp.column_sigma is not None:
-        out["column"] = float(np.mean(fp.column_sigma.astype(np.float64) ** 2))
+        out["column"] = stat("mean_square:column_sigma", lambda: np.mean(fp.column_sigma.astype(np.float64) ** 2))
     if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
         out.update(after_gain_variances(sensor))
         out["quantization"] = 1.0 / (12.0 * t.gain_dn_per_e**2)
@@ -98,21 +101,25 @@ def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, flo
     fp = sensor.fixed_pattern
     const: dict[str, float] = {}
     per_s2: dict[str, float] = {}
+
+    def var(name):  # a fixed map's variance, once per sensor
+        return sensor.map_statistic("var:" + name, lambda: np.var(getattr(fp, name).astype(np.float64)))
+
     if fp.dark_rate is not None:
-        const["dcnu"] = float(np.var(fp.dark_rate.astype(np.float64))) * c.exposure.integration_time_s**2
+        const["dcnu"] = var("dark_rate") * c.exposure.integration_time_s**2
     if fp.row_offset is not None:
-        const["row_fixed"] = float(np.var(fp.row_offset.astype(np.float64)))
+        const["row_fixed"] = var("row_offset")
     if fp.vfpn is not None:
-        const["vfpn"] = float(np.var(fp.vfpn.astype(np.float64)))
+        const["vfpn"] = var("vfpn")
     if fp.pixel_offset is not None:
-        const["pixel_offset"] = float(np.var(fp.pixel_offset.astype(np.float64)))
+        const["pixel_offset"] = var("pixel_offset")
     offsets = np.asarray(c.black_level.channel_offsets_dn, np.float64)
     if c.adc.enabled and offsets.any():  # the four cell positions, equally many pixels each (the frame error: temporal)
         const["black_level_cells"] = float(np.var(offsets)) / sensor.transfer.gain_dn_per_e**2
     if fp.prnu_gain is not None or c.crosstalk.enabled:
-        per_s2["prnu"] = float(np.var(sensor.flat_response))  # after crosstalk, as frames show it
+        per_s2["prnu"] = sensor.map_statistic("var:flat_response", lambda: np.var(sensor.flat_response))  # after crosstalk
     if fp.column_gain is not None:
-        per_s2["column_gain"] = float(np.var(fp.column_gain.astype(np.float64)))
+        per_s2["column_gain"] = var("column_gain")
     return const, per_s2
 
 

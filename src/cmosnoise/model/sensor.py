@@ -21,7 +21,7 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -123,6 +123,7 @@ class Sensor:
         self._fixed = fixed_pattern if fixed_pattern is not None else draw(spec, cache)
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
+        self._statistics: dict[str, float] = {}
         self.timings["fixed_pattern"] += time.perf_counter() - t0
 
     def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
@@ -140,7 +141,16 @@ class Sensor:
         spec = self.spec.with_config(self.config.model_copy(update={"exposure": exposure}))
         other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache, device=self.device)
         other.timings = self.timings
+        other._statistics = self._statistics  # of the fixed maps: the same at any exposure
         return other
+
+    def map_statistic(self, name: str, compute: Callable[[], float]) -> float:
+        """A statistic of this sensor's fixed maps (a map's mean, variance, mean square), computed by ``compute()``
+        once and kept: the noise budget, the summary and the explorer ask for the same ones many times, and each
+        is a pass over every pixel. ``name`` says which; the value is what ``compute()`` returns, bit for bit."""
+        if name not in self._statistics:
+            self._statistics[name] = float(compute())
+        return self._statistics[name]
 
     # ------------------------------------------------------------ fixed pattern, read-only
     @property
