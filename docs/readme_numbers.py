@@ -467,6 +467,17 @@ def render_gpu_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_setup_speed(d: dict) -> str:
+    lines = [f"Measured with `python benchmarks/bench_setup.py --sizes 1,12,50 --json docs/numbers/setup_speed.json` "
+             f"({d['threads']} threads; the fastest of 3):", "",
+             "| sensor | pixels | set-up | per pixel | frames' worth | set-up peak / maps kept |", "|---|---|---|---|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| {r['width']} x {r['height']} | {r['pixels'] / 1e6:.1f} MP | {r['setup_s']:.2f} s | "
+                     f"{r['setup_ns_per_pixel']:.1f} ns | {r['frames_worth']:.2f} | "
+                     f"{r['setup_peak_bytes'] / 2**20:.0f} / {r['maps_bytes'] / 2**20:.0f} MiB |")
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -488,6 +499,7 @@ SECTIONS = {
     "dataset_sample": (compute_dataset_sample, render_dataset_sample),
     "dataset_speed": (None, render_dataset_speed),
     "gpu_speed": (None, render_gpu_speed),
+    "setup_speed": (None, render_setup_speed),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -504,7 +516,8 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "telegraph_fit": ["fit_telegraph_coverage.py", "--json", "telegraph_fit.json"],
               "dataset_speed": ["bench_dataset.py", "--memory", "10000", "--json", "dataset_speed.json"],
               # on a machine with an NVIDIA GPU and cmosnoise[cuda]
-              "gpu_speed": ["bench_gpu.py", "--json", "gpu_speed.json"]}
+              "gpu_speed": ["bench_gpu.py", "--json", "gpu_speed.json"],
+              "setup_speed": ["bench_setup.py", "--sizes", "1,12,50", "--json", "setup_speed.json"]}
 SLOW = {"sweep_fig9"}
 
 
