@@ -168,13 +168,19 @@ def simulate(
     show = progress if progress is not None else (err_console.is_terminal
                                                   and cfg.run.frames * cfg.sensor.width * cfg.sensor.height >= 5_000_000)
     status = err_console.status("") if show else None
-    texts = {"summary": "writing preview.png and measuring the summary (noise budget, white pixels)",
+    texts = {"set-up": "drawing the fixed pattern", "scene": "rendering the scene and its mean charge",
+             "dark": f"averaging {cfg.processing.dark_frames} dark frames into a master dark",
+             "summary": "writing preview.png and measuring the summary (noise budget, white pixels)",
              "report": "writing report.html"}
 
-    def phase(name: str) -> None:  # a spinner for what comes after the frames' progress bar
-        if status is not None:
-            status.update(f"[bold]{texts.get(name, name)}")
-            status.start()
+    def phase(name: str) -> None:  # a spinner for what comes before and after the frames' progress bar
+        if status is None:
+            return
+        if name == "frames":  # the frames' own progress bar takes over
+            status.stop()
+            return
+        status.update(f"[bold]{texts.get(name, name)}")
+        status.start()
 
     try:
         summary = run_simulate(spec, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height),

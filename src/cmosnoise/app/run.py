@@ -48,8 +48,9 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
 
     ``progress``, if given, is called with the frame count and returns a
     context manager whose value is called once per frame (``advance()``).
-    ``phase``, if given, is told what the run does after the frames (it can
-    take seconds at 5 MP): ``"summary"`` (with the pictures), ``"report"``.
+    ``phase``, if given, is told what the run does outside the frames' progress (each can take seconds on a
+    large sensor): ``"set-up"`` (the fixed pattern), ``"scene"`` (the mean charge), ``"dark"`` (a master
+    dark's frames), ``"frames"`` (the progress bar takes over), ``"summary"`` (with the pictures), ``"report"``.
     An existing non-empty ``out`` is replaced as a whole with ``overwrite``,
     else refused (:class:`~cmosnoise.io.output.OutputFolder`). ``device``:
     where frames are made (``"cpu"`` or ``"cuda"``, :class:`~cmosnoise.model.sensor.Sensor`; the same bits).
@@ -73,7 +74,9 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     with folder as tmp, ThreadPoolExecutor(2, thread_name_prefix="cmosnoise-aside") as aside:
         t_start = time.perf_counter()
         aside.submit(kernel.preload)
+        phase("set-up")
         sensor = Sensor(spec, device=device)
+        phase("scene")
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
         transfer = sensor.transfer
@@ -83,6 +86,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         master = None
         t0 = time.perf_counter()
         if proc_cfg.dark_frames > 0:
+            phase("dark")
             master = calibration.master_dark(sensor.dark_frames(proc_cfg.dark_frames))
             write_float_tiff(tmp / "master_dark.tiff", master, {"frames": proc_cfg.dark_frames, **asdict(info)})
         t_dark = time.perf_counter() - t0
@@ -135,6 +139,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
             crosstalk_kernel_pct=info.crosstalk_kernel_pct, generator=generator_info(device),
             units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)",
         )
+        phase("frames")
         cm = progress(n) if progress else contextlib.nullcontext(lambda: None)
         try:
             with cm as advance:
