@@ -133,3 +133,29 @@ def test_line_maps_are_addressed_by_their_line():
     np.testing.assert_array_equal(fixed_maps.lines(7, 19, key), fixed_maps.lines(0, 40, key)[7:19])
     z = fixed_maps.lines(0, 50000, key)
     assert stats.kstest(z, "norm").pvalue > 1e-6
+
+
+@pytest.mark.parametrize("kind", ["one point", "scaled", "two points"])
+def test_the_values_of_a_sensors_variates_are_its_map_before_rounding(kind):
+    """What studies over a sensor's pixels read (the variates, then values(); e.g. the cooling fraction) is the
+    map itself: one inversion for both."""
+    region, cols, key = (2, 40, 3, 77), 90, fixed_key(6, "dark_current")
+    scales = dict(body_scale=1.7, tail_scale=1.3) if kind == "scaled" else {}
+    pts = _grid_points(kind == "two points")
+    u = fixed_maps.variates(region, cols, key)
+    values = fixed_maps.heavy_tail_values(*u, LOGIT_GRID, pts, w=0.35, **scales)
+    np.testing.assert_array_equal(_bits(values.astype(np.float32)),
+                                  _bits(fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, pts, w=0.35, **scales)))
+
+
+@pytest.mark.parametrize("family", ["logistic", "lognormal", "gamma", "inverse_gaussian"])
+def test_the_tabulated_quantile_is_within_1e_6_of_scipys(family):
+    """The body's quantile read from its logit table, linear between nodes (8193 nodes over logit 30 to -30,
+    a step of 0.0073 in logit: the interpolation error of a smooth quantile is h^2/8 of its curvature there,
+    below 1e-6 relative for these families), against scipy.stats' ppf clipped at 0 (as the maps are) from 1e-12
+    to 1 - 1e-12; where the quantile crosses 0, 1e-6 of the body's std (12) instead."""
+    b = body(family, 50.0, 12.0)
+    u = np.r_[1e-12, 1e-9, 1e-6, (np.arange(20000) + 0.5) / 20000, 1 - 1e-6, 1 - 1e-9]
+    law = HeavyTail(b, 0.0, 0.0)
+    np.testing.assert_allclose(law.values(u, np.ones_like(u), np.zeros_like(u)), np.maximum(b.scipy.ppf(u), 0.0),
+                               rtol=1e-6, atol=12e-6)

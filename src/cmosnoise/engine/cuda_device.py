@@ -109,6 +109,15 @@ def _inside_item(index, corners, b, h, w, cols):
     return 0 <= r < h and 0 <= c < w
 
 
+@dev
+def _states_at(frame, seq, t, up, down, dt, index, slot, k0, k1):
+    """Chain ``t``'s (frame, sequence word, state at the frame's start, state at its end): what both telegraph
+    kernels start from."""
+    sq = np.uint64(seq)
+    x, y = frame_states(frame, up[t], down[t], dt, index[t], slot[t], sq, k0, k1)
+    return frame, sq, x, y
+
+
 @cuda.jit(fastmath=False)
 def trap_values(frames, corners, h, w, cols, seq, up, down, size, index, slot, dt, interval, cds, k0, k1, out):
     """What each trap adds in each item's frame (e-), (B, traps): kernel._trap_values; only for the traps inside
@@ -116,9 +125,7 @@ def trap_values(frames, corners, h, w, cols, seq, up, down, size, index, slot, d
     t, b = cuda.grid(2)
     if b >= frames.size or t >= up.size or not _inside_item(index[t], corners, b, h, w, cols):
         return
-    frame = frames[b]
-    sq = np.uint64(seq)
-    x, y = frame_states(frame, up[t], down[t], dt, index[t], slot[t], sq, k0, k1)
+    frame, sq, x, y = _states_at(frames[b], seq, t, up, down, dt, index, slot, k0, k1)
     if cds:
         sig = inside(frame, x, y, up[t], down[t], dt, interval, index[t], slot[t], sq, k0, k1)
         out[b, t] = size[t] * (sig - x)
@@ -133,9 +140,7 @@ def blink_values(frames, corners, h, w, cols, seq, up, down, size, index, slot, 
     t, b = cuda.grid(2)
     if b >= frames.size or t >= up.size or not _inside_item(index[t], corners, b, h, w, cols):
         return
-    frame = frames[b]
-    sq = np.uint64(seq)
-    x, y = frame_states(frame, up[t], down[t], dt, index[t], slot[t], sq, k0, k1)
+    frame, sq, x, y = _states_at(frames[b], seq, t, up, down, dt, index, slot, k0, k1)
     end = inside(frame, x, y, up[t], down[t], dt, exposure, index[t], slot[t], sq, k0, k1)
     out[b, t] = size[t] * occupancy(frame, x, end, up[t], down[t], exposure, index[t], slot[t], sq, k0, k1)
 

@@ -83,14 +83,19 @@ def _check(region, cols):
     return r0, r1, c0, c1
 
 
-def _bands(region):
+def bands(region):
+    """The row bands ``(row0, row1)`` of ``region = (row0, row1, col0, col1)`` that hold about ``BAND_PIXELS``
+    pixels each: how a NumPy pass over a large region keeps its temporaries small."""
     r0, r1, c0, c1 = region
     step = max(1, BAND_PIXELS // max(1, c1 - c0))
     for a in range(r0, r1, step):
         yield a, min(r1, a + step)
 
 
-def _index(r0, r1, c0, c1, cols):
+def pixel_index(region: tuple[int, int, int, int], cols: int) -> np.ndarray:
+    """The address of each pixel of ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide: ``r * cols + c``,
+    (rows, cols) uint64, the counter word a pixel's random numbers are drawn at."""
+    r0, r1, c0, c1 = region
     return (np.arange(r0, r1, dtype=np.uint64)[:, None] * np.uint64(cols)
             + np.arange(c0, c1, dtype=np.uint64)[None, :])
 
@@ -110,7 +115,7 @@ def variates(region, cols: int, key: tuple[int, int]) -> np.ndarray:
     membership, tail magnitude), what :func:`heavy_tail_map` reads (NumPy; for studies over a sensor's pixels)."""
     r0, r1, c0, c1 = _check(region, cols)
     k0, k1 = _key(key)
-    return np.stack(_blocks(_index(r0, r1, c0, c1, cols), k0, k1))
+    return np.stack(_blocks(pixel_index((r0, r1, c0, c1), cols), k0, k1))
 
 
 def lines(start: int, stop: int, key: tuple[int, int], kind: str = "normal") -> np.ndarray:
@@ -138,10 +143,25 @@ def normal_map(region, cols: int, key: tuple[int, int], mean: float, sigma: floa
             _kernels()["normal"](out, region[0], region[2], np.uint64(cols), k0, k1, float(mean), float(sigma),
                                  float(low))
         return out
-    for a, b in _bands(region):
-        u1, u2 = uniform_pair(_index(a, b, region[2], region[3], cols), _ZERO, _ZERO, _ZERO, k0, k1)
+    for a, b in bands(region):
+        u1, u2 = uniform_pair(pixel_index((a, b, region[2], region[3]), cols), _ZERO, _ZERO, _ZERO, k0, k1)
         out[a - region[0]:b - region[0]] = normal_value(u1, u2, mean, sigma, low)
     return out
+
+
+def heavy_tail_values(u_body, u_member, u_tail, grid: tuple[float, float, int], points, w: float = 0.0,
+                      body_scale: float = 1.0, tail_scale: float = 1.0) -> np.ndarray:
+    """A heavy-tailed map's values for given variates (open uniforms, arrays of any one shape), float64, by NumPy:
+    the specification :func:`heavy_tail_map` follows (parameters as there), and what studies over a sensor's
+    variates read (:func:`variates`: the same values as the map, before its rounding to float32)."""
+    start, step, last = (float(v) for v in grid)
+    i, wc = ppf_cell(np.asarray(u_body, np.float64), start, step, last)
+    k = i.astype(np.int64)
+    two = len(points) == 2
+    bs, ts = (1.0, 1.0) if two else (body_scale, tail_scale)
+    values = [heavy_tail_value(table[k], table[k + 1], wc, u_member, u_tail, bs, fraction, tail_max, ts)
+              for table, fraction, tail_max, _ in points]
+    return two_point(values[0], values[1], points[0][3], points[1][3], w) if two else values[0]
 
 
 def heavy_tail_map(region, cols: int, key: tuple[int, int], grid: tuple[float, float, int], points,
@@ -168,29 +188,18 @@ def heavy_tail_map(region, cols: int, key: tuple[int, int], grid: tuple[float, f
     region = _check(region, cols)
     out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
     k0, k1 = _key(key)
-    start, step, last = float(grid[0]), float(grid[1]), float(grid[2])
-    tables = np.ascontiguousarray([np.asarray(p[0], np.float64) for p in points])
-    params = np.array([[p[1], p[2], p[3]] for p in points], np.float64)  # fraction, tail_max, floor
-    two = len(points) == 2
-    if not two:
-        tables = np.concatenate([tables, tables])
-        params = np.concatenate([params, params])
     if _compiled(engine):
+        two = len(points) == 2
+        tables = np.ascontiguousarray([np.asarray(p[0], np.float64) for p in points] * (1 if two else 2))
+        params = np.array([p[1:] for p in points] * (1 if two else 2), np.float64)  # fraction, tail_max, floor
+        start, step, last = (float(v) for v in grid)
         with ONE_LAUNCH:
             _kernels()["heavy_tail"](out, region[0], region[2], np.uint64(cols), k0, k1, start, step, last, tables,
                                      params, float(w), float(body_scale), float(tail_scale), two)
         return out
-    for a, b in _bands(region):
-        u_body, u_member, u_tail = _blocks(_index(a, b, region[2], region[3], cols), k0, k1)
-        i, wc = ppf_cell(u_body, start, step, last)
-        k = i.astype(np.int64)
-        values = []
-        for t in range(2 if two else 1):
-            bs, ts = (1.0, 1.0) if two else (body_scale, tail_scale)
-            values.append(heavy_tail_value(tables[t][k], tables[t][k + 1], wc, u_member, u_tail, bs,
-                                           params[t, 0], params[t, 1], ts))
-        v = two_point(values[0], values[1], params[0, 2], params[1, 2], w) if two else values[0]
-        out[a - region[0]:b - region[0]] = v
+    for a, b in bands(region):
+        u = _blocks(pixel_index((a, b, region[2], region[3]), cols), k0, k1)
+        out[a - region[0]:b - region[0]] = heavy_tail_values(*u, grid, points, w, body_scale, tail_scale)
     return out
 
 

@@ -226,7 +226,7 @@ def body(family: str, mean: float, std: float) -> Frozen:
     """Frozen distribution of ``family`` with the given mean and std.
 
     The same arguments give the same (read-only) object, so its quantile
-    table (:func:`tabulated_ppf`) is made once per process.
+    table (:func:`ppf_table`) is made once per process.
     """
     if std <= 0:
         raise ValueError(f"std must be > 0, got {std}")
@@ -257,36 +257,17 @@ _LOGIT_GRID = np.linspace(-30.0, 30.0, 8193)
 LOGIT_GRID = (float(_LOGIT_GRID[0]), float(_LOGIT_GRID[1] - _LOGIT_GRID[0]), len(_LOGIT_GRID) - 1)
 
 
-def ppf_cells(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where each ``q`` falls in the logit grid of :func:`tabulated_ppf`: (cell index, weight), the same for
-    every distribution, so several distributions at the same quantiles share one computation."""
-    # the grid is uniform in logit(q): find the cell by arithmetic, not search
-    t0, step, last = LOGIT_GRID
-    pos = np.clip((special.logit(q) - t0) / step, 0.0, float(last))
-    i = np.minimum(pos.astype(np.intp), last - 1)
-    return i, pos - i
-
-
 def ppf_table(dist) -> np.ndarray:
-    """``dist.ppf`` on the 8193 quantiles of the logit grid (from 1e-13 to 1 - 1e-13), float64, made once per
-    distribution (it is frozen: its table never changes); what :func:`tabulated_ppf` and the fixed maps read."""
+    """``dist.ppf`` on 8193 quantiles evenly spaced in ``logit(q)`` (from 1e-13 to 1 - 1e-13), float64, made once
+    per distribution (it is frozen: its table never changes).
+
+    The fixed maps interpolate it linearly in logit space
+    (:func:`cmosnoise.engine.fixed_maps.ppf_cell`): relative error below 1e-6 for these families, where some
+    scipy ppfs (the inverse Gaussian's) take seconds per million values.
+    """
     xg = getattr(dist, "_cmosnoise_ppf_table", None)
     if xg is None:
         xg = np.asarray(dist.ppf(special.expit(_LOGIT_GRID)), np.float64)
         xg.flags.writeable = False
         dist._cmosnoise_ppf_table = xg
     return xg
-
-
-def tabulated_ppf(dist, q: np.ndarray, cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """``dist.ppf(q)`` for many ``q`` at once, fast and monotone in ``q``.
-
-    The exact ppf is evaluated on 8193 quantiles evenly spaced in
-    ``logit(q)`` (from 1e-13 to 1 - 1e-13) and interpolated linearly in
-    logit space; relative error below 1e-6 for these families. Some scipy
-    ppfs (the inverse Gaussian's) take seconds per million values.
-    ``cells`` is ``ppf_cells(q)`` when already known.
-    """
-    xg = ppf_table(dist)
-    i, w = cells if cells is not None else ppf_cells(q)
-    return xg[i] * (1.0 - w) + xg[i + 1] * w

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..engine import fixed_maps
-from .distributions import LOGIT_GRID, ppf_table, tabulated_ppf
+from .distributions import LOGIT_GRID, ppf_table
 
 # Gauss-Legendre nodes and weights on [0, 1] for the integrals of the body's sf (numpy's, not scipy.integrate:
 # making a sensor must not import scipy.integrate, a third of a second)
@@ -143,26 +143,27 @@ class HeavyTail:
         """Expected parts per million above ``threshold``."""
         return float(self.sf(threshold)) * 1e6
 
-    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None) -> np.ndarray:
-        """Values from fixed uniform variates (one triple per pixel), float64.
+    @property
+    def point(self) -> tuple:
+        """This law as the fixed maps take it: (the body's quantile table, tail fraction, tail max, floor 0)."""
+        return ppf_table(self.body), self.tail_fraction, self.tail_max, 0.0
+
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray) -> np.ndarray:
+        """Values from fixed open uniform variates (one triple per pixel), float64.
 
         ``u_body`` is the pixel's body quantile, ``u_member < tail_fraction``
         puts it in the tail, ``u_tail`` is where in the tail. The same
         variates under other parameters give the same ranks in the body and
         nested tail sets (a larger fraction adds pixels, never removes them).
-        ``cells`` is ``distributions.ppf_cells(u_body)`` when already known.
+        The inversion is the map's (:func:`cmosnoise.engine.fixed_maps.heavy_tail_values`).
         """
-        v = np.maximum(tabulated_ppf(self.body, u_body, cells), 0.0)
-        if self.tail_fraction > 0 and self.tail_max > 0:
-            v += np.where(u_member < self.tail_fraction, u_tail * self.tail_max, 0.0)
-        return v
+        return fixed_maps.heavy_tail_values(u_body, u_member, u_tail, LOGIT_GRID, [self.point])
 
     def map(self, region: tuple[int, int, int, int], cols: int, key: tuple[int, int]) -> np.ndarray:
         """The map of this law over ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide, float32,
-        addressed per pixel under the fixed ``key`` (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`: the
-        variates of :meth:`values` from the pixel's own Philox blocks, the same tabulated quantile)."""
-        return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID,
-                                         [(ppf_table(self.body), self.tail_fraction, self.tail_max, 0.0)])
+        addressed per pixel under the fixed ``key``: :meth:`values` of the pixels' own variates
+        (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`)."""
+        return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, [self.point])
 
     def rvs(self, size, random_state: np.random.Generator) -> np.ndarray:
         """Independent draws (each pixel its own variates)."""
@@ -172,8 +173,8 @@ class HeavyTail:
 def variates(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
     """The fixed uniforms of a heavy-tailed map: array (3, *shape) of (body quantile, tail membership, tail magnitude).
 
-    Drawn once per sensor instance from the stage's fixed stream; passed to
-    :meth:`HeavyTail.values`, the same variates under other parameters keep
-    every pixel's rank.
+    Open uniforms, ``(m + 0.5) 2**-52`` as the counter-based maps' (never 0 or 1, where the quantile's logit
+    has no value); passed to :meth:`HeavyTail.values`, the same variates under other parameters keep every
+    pixel's rank. (A sensor's own variates: :func:`cmosnoise.engine.fixed_maps.variates`.)
     """
-    return rng.random((3, *shape))
+    return (rng.integers(0, 2**52, (3, *shape)) + 0.5) * 2.0**-52

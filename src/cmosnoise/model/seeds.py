@@ -3,14 +3,16 @@
 A sensor instance is a configuration plus a seed. Each stage draws its fixed
 pattern from a counter-based stream keyed by ``(seed, FIXED, stage, part)``
 with counter (pixel, 0, 0, block), and its temporal noise from one keyed by
-``(seed, TEMPORAL, stage)`` with counter (pixel, frame, sequence, try). So frame ``k``, and any
-rectangle of any fixed map, is the same whether made one by one, in chunks,
-out of order, cropped, in tiles or on different machines, and switching one stage on or off, or changing one
-parameter, leaves every other random number unchanged.
+``(seed, TEMPORAL, stage)`` with counter (pixel, frame, sequence, try). So
+frame ``k``, and any rectangle of any fixed map, is the same whether made one
+by one, in chunks, out of order, cropped, in tiles or on different machines,
+and switching one stage on or off, or changing one parameter, leaves every
+other random number unchanged.
 """
 
 import numpy as np
 
+from ..engine.fixed_maps import pixel_index  # noqa: F401 - the address of a pixel, where the stages look for it
 from ..engine.samplers import Stream
 
 FIXED = 0
@@ -44,14 +46,6 @@ STAGE_IDS = {
 
 #: the stages with temporal noise, in the engine's key order
 TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level", "read_noise")
-
-
-def pixel_index(region: tuple[int, int, int, int], cols: int) -> np.ndarray:
-    """The address of each pixel of ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide: ``r * cols + c``,
-    (rows, cols) uint64, the counter word a pixel's random numbers are drawn at."""
-    r0, r1, c0, c1 = region
-    return (np.arange(r0, r1, dtype=np.uint64)[:, None] * np.uint64(cols)
-            + np.arange(c0, c1, dtype=np.uint64)[None, :])
 
 
 def fixed_key(seed: int, stage: str, part: int = 0) -> tuple[int, int]:

@@ -213,11 +213,10 @@ class Sensor:
             return 0.0
         rows, cols = self.shape
         key = fixed_key(c.seed, "dark_current")
-        step = max(1, fixed_maps.BAND_PIXELS // cols)
 
         def bands():  # the map's own variates, a row band at a time
-            for r in range(0, rows, step):
-                yield fixed_maps.variates((r, min(rows, r + step), 0, cols), cols, key)
+            for r0, r1 in fixed_maps.bands((0, rows, 0, cols)):
+                yield fixed_maps.variates((r0, r1, 0, cols), cols, key)
 
         return dark_current.cooling_fraction(list(self.spec.dark_points), bands)
 

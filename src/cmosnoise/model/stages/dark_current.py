@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...engine import fixed_maps
-from ..distributions import LOGIT_GRID, ppf_cells, ppf_table, tabulated_ppf
+from ..distributions import LOGIT_GRID
 from ..distributions import body as body_dist
 from ..heavy_tail import HeavyTail
 
@@ -104,20 +104,19 @@ class DarkState:
             raise ValueError("between two characterization points the DCNU is a per-pixel interpolation, not one model")
         return HeavyTail(body_dist(self.family, self.mean, self.std), self.tail_fraction, self.tail_max)
 
-    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray, cells=None) -> np.ndarray:
-        """Rates (e-/s, float64) of pixels with these fixed uniform variates, by NumPy (for studies over
-        variates: the expected ppm, the cooling fraction; the map itself is :func:`rate_map`).
+    def inversion(self) -> dict:
+        """How the map is made from a pixel's variates at this temperature, as
+        :func:`cmosnoise.engine.fixed_maps.heavy_tail_values` takes it: the point and its scales, or the two
+        points (each rate floored at ``RATE_FLOOR`` times its point's body mean) and the weight of the warmer."""
+        if self.between:
+            return {"points": [(*m.point[:3], RATE_FLOOR * float(m.body.mean())) for m in (self.lo, self.hi)],
+                    "w": self.w}
+        return {"points": [self.lo.point], "body_scale": self.body_scale, "tail_scale": self.tail_scale}
 
-        ``cells``: ``ppf_cells(u_body)`` if known.
-        """
-        if not self.between:
-            body = np.maximum(tabulated_ppf(self.lo.body, u_body, cells), 0.0) * self.body_scale
-            if self.lo.tail_fraction > 0 and self.lo.tail_max > 0:
-                body += np.where(u_member < self.lo.tail_fraction, u_tail * self.lo.tail_max * self.tail_scale, 0.0)
-            return body
-        u = (u_body, u_member, u_tail)
-        cells = cells if cells is not None else ppf_cells(u_body)  # both points' bodies at the same quantiles
-        return np.exp((1.0 - self.w) * point_log_rates(self.lo, u, cells) + self.w * point_log_rates(self.hi, u, cells))
+    def values(self, u_body: np.ndarray, u_member: np.ndarray, u_tail: np.ndarray) -> np.ndarray:
+        """Rates (e-/s, float64) of pixels with these fixed open uniform variates: the map's inversion, by NumPy
+        (for studies over variates: the expected ppm, the cooling fraction; the map itself is :func:`rate_map`)."""
+        return fixed_maps.heavy_tail_values(u_body, u_member, u_tail, LOGIT_GRID, **self.inversion())
 
     def expected_ppm_above(self, threshold: float | None = None) -> float | None:
         """Expected ppm of pixels above ``threshold`` (default: the state's own), e-/s.
@@ -189,12 +188,6 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     )
 
 
-def point_log_rates(model: HeavyTail, u: np.ndarray, cells=None) -> np.ndarray:
-    """``ln`` of a characterization point's own map for the variates ``u`` (3, ...), each rate floored at
-    RATE_FLOOR times the point's body mean first: what the interpolation between two points reads, float64."""
-    return np.log(np.maximum(model.values(*u, cells), RATE_FLOOR * float(model.body.mean())))
-
-
 def rate_map(state: DarkState, region: tuple[int, int, int, int], cols: int, key: tuple[int, int]) -> np.ndarray:
     """Fixed dark-current map at ``state``'s temperature over ``region = (row0, row1, col0, col1)`` of a sensor
     ``cols`` wide, e-/s per pixel, float32 (>= 0), from the stage's fixed ``key``.
@@ -203,14 +196,7 @@ def rate_map(state: DarkState, region: tuple[int, int, int, int], cols: int, key
     its rank and its tail membership, are the same at every temperature; between two points its rate is
     log-linear between its own rates there (floored at ``RATE_FLOOR`` times each point's body mean).
     """
-    if state.between:
-        points = [(ppf_table(m.body), m.tail_fraction, m.tail_max, RATE_FLOOR * float(m.body.mean()))
-                  for m in (state.lo, state.hi)]
-        return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, points, w=state.w)
-    m = state.lo
-    return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, [(ppf_table(m.body), m.tail_fraction, m.tail_max,
-                                                                      0.0)],
-                                     body_scale=state.body_scale, tail_scale=state.tail_scale)
+    return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, **state.inversion())
 
 
 def cooling_fraction(points: list[Point], draw_variates) -> float:
