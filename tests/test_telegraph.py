@@ -292,3 +292,54 @@ def test_another_exposure_of_the_same_sensor_meets_the_same_timing_check():
     assert sensor.with_exposure(integration_time_s=0.02).config.exposure.integration_time_s == 0.02
     with pytest.raises(CmosnoiseError, match="frame_rate_hz"):
         sensor.with_exposure(integration_time_s=0.1)
+
+
+# ------------------------------------------------------------------ the noise budget
+def budget_sensor(cds: bool) -> Sensor:
+    """Only the random telegraph pixels move between frames' contributions: traps with dwell times near the CDS
+    interval (10 us), blinking pixels of 0.05 to 2 s over a 20 ms exposure, the dark current without shot noise
+    (a blinking pixel's contribution is then its step times its time high)."""
+    cfg = quiet_config(
+        sensor={"width": 96, "height": 64, "frame_rate_hz": 30},
+        exposure={"integration_time_s": 0.02},
+        source_follower={"enabled": True, "rts": {"enabled": True, "ppm": 60000, "traps_per_pixel": "poisson", "cds": cds,
+                                                  "tau_capture_s": {"min_s": 2e-6, "max_s": 1e-4},
+                                                  "tau_emission_s": {"min_s": 2e-6, "max_s": 1e-4}}},
+        dark_current={"enabled": True, "shot_noise": False,
+                      "rts": {"enabled": True, "ppm": 60000, "tau_low_s": {"min_s": 0.05, "max_s": 2},
+                              "tau_high_s": {"min_s": 0.05, "max_s": 2}}})
+    return Sensor(cfg, seed=5)
+
+
+@pytest.mark.parametrize("cds", [True, False])
+def test_the_noise_budget_holds_the_variance_and_mean_the_random_telegraph_pixels_show(cds):
+    """The budget's ``rts_traps`` and ``rts_blinking`` lines are the array means of each pixel's stationary
+    variance (trap_moments, blink_moments); frames 1000 apart (33 s: every chain forgets, e^(-33 s / 2 s) < 1e-7)
+    are independent, so each pixel's mean square deviation from its stationary mean over F frames, summed over
+    pixels, estimates the summed variance with the standard error sqrt(sum_i Var((x_i - mu_i)^2) / F) (the
+    variances estimated from the sample); the summed frame means estimate the summed stationary means likewise."""
+    from cmosnoise.analysis import noise_budget
+
+    sensor = budget_sensor(cds)
+    n = sensor.shape[0] * sensor.shape[1]
+    shot = sensor.expose("flat:0")
+    frames = [shot.frame(1000 * k, detail=True).contributions for k in range(60)]
+    tv = noise_budget.temporal_variances(sensor, 0.0)
+    fv = noise_budget.fixed_pattern_variances(sensor, 0.0)
+    moments = noise_budget.telegraph_moments(sensor, maps=True)
+    for part, line in (("source_follower_rts", "traps"), ("dark_current_rts", "blinking")):
+        _, mean, var = moments[line]
+        x = np.stack([c[part].astype(np.float64) for c in frames])  # (F, rows, cols)
+        f = x.shape[0]
+        dev = (x - mean) ** 2
+        assert_close(dev.mean(axis=0).sum(), var.sum(), math.sqrt(dev.var(axis=0, ddof=1).sum() / f),
+                     f"{line}: summed temporal variance")
+        assert_close(x.mean(axis=0).sum(), mean.sum(), math.sqrt(x.var(axis=0, ddof=1).sum() / f),
+                     f"{line}: summed stationary mean")
+        name = "rts_" + line
+        assert tv[name] == pytest.approx(var.sum() / n, rel=1e-12)  # no column gain, no nonlinearity here
+        fixed = "rts_level" if line == "traps" else "rts_blinking"
+        if line == "traps" and cds:
+            assert fixed not in fv and not mean.any()  # CDS takes the level away
+        else:
+            assert fv[fixed] == pytest.approx(np.var(mean), rel=1e-9)

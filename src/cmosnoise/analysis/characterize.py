@@ -171,7 +171,9 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
     fp = sensor.fixed_pattern
     k = t.gain_dn_per_e
     tv = noise_budget.temporal_variances(sensor, 0.0)
-    read_var = sum(v for name, v in tv.items() if name not in ("dark_shot", "quantization", "photon_shot"))
+    # the readout's variance (random telegraph traps included); a blinking pixel's is the dark current's
+    read_var = sum(v for name, v in tv.items()
+                   if name not in ("dark_shot", "quantization", "photon_shot", "rts_blinking"))
     sat_e = sensor.saturation_e
     s = sensor.with_exposure(1.0, 1.0)
     shot = s.expose("flat:1.0")
@@ -180,6 +182,9 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
         signal = signal * fp.column_gain
     qe = float(signal.mean()) * (c.sensor.qe_mean() or 1.0)  # photo-electrons collected per photon
     dark = np.zeros(sensor.shape) if fp.dark_rate is None else fp.dark_rate.astype(np.float64)
+    blinking = noise_budget.telegraph_moments(sensor, maps=True).get("blinking")
+    if blinking is not None:  # a blinking pixel's mean rate: its step times its time high
+        dark = dark + blinking[1] / c.exposure.integration_time_s
     def expected_dark_at(texp_s):
         """The expected dark image (e-) at ``texp_s``, with the clips and the quantizer's pattern."""
         mo = noise_budget.clipped_moments(sensor.with_exposure(texp_s), 0.0)

@@ -10,7 +10,12 @@ column sigmas, column gains, dark-current map)::
 with ``d`` the mean dark charge (its shot noise), ``f'`` the
 nonlinearity's slope at ``mu + d`` (1 without one), ``g_c`` the column
 gains, the read noise after the gain and the frame's black-level error in DN,
-and quantization (1/12 DN^2), referred to e-. Fixed pattern noise is
+and quantization (1/12 DN^2), referred to e-. The random telegraph pixels
+(stages 6b and 4b, where on) add their stationary variances, averaged over
+the array (:func:`telegraph_moments`): a trap's ``2 A^2 pi0 pi1 (1 -
+e^-s tau)`` through CDS (``A^2 pi0 pi1`` without), a blinking pixel's rate
+step times the variance of its time high over the exposure, with its
+shot noise. Fixed pattern noise is
 listed apart: DSNU (dark-current map, pixel offsets, row and column offsets,
 the black level's cell offsets) and PRNU, the
 PRNU as the photo-charge shows it, after crosstalk has averaged neighbouring
@@ -70,6 +75,14 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
             out["flicker"] = stat("mean_square:flicker_sigma", lambda: np.mean(fp.flicker_sigma.astype(np.float64) ** 2)) * g2
     if c.row_noise.enabled:
         out["row"] = sensor.spec.row_sigma_e**2 * g2
+    n = sensor.shape[0] * sensor.shape[1]
+    rts = telegraph_moments(sensor)
+    if "traps" in rts:  # before the column gain, as the source follower's
+        out["rts_traps"] = float(rts["traps"][2].sum()) / n * g2
+    if "blinking" in rts:  # a dark charge: through the transfer, with its shot noise where the dark current has it
+        _, mean, var = rts["blinking"]
+        shot = float(mean.sum()) if c.dark_current.shot_noise else 0.0
+        out["rts_blinking"] = (float(var.sum()) + shot) / n * g2 * slope2
     if fp.column_sigma is not None:
         out["column"] = stat("mean_square:column_sigma", lambda: np.mean(fp.column_sigma.astype(np.float64) ** 2))
     if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
@@ -113,6 +126,12 @@ def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, flo
         const["vfpn"] = var("vfpn")
     if fp.pixel_offset is not None:
         const["pixel_offset"] = var("pixel_offset")
+    rts = telegraph_moments(sensor)
+    n = sensor.shape[0] * sensor.shape[1]
+    if "traps" in rts and not c.source_follower.rts.cds:  # the held level's mean: a pixel offset of its own
+        const["rts_level"] = _sparse_variance(rts["traps"][1], n)
+    if "blinking" in rts:
+        const["rts_blinking"] = _sparse_variance(rts["blinking"][1], n)
     offsets = np.asarray(c.black_level.channel_offsets_dn, np.float64)
     if c.adc.enabled and offsets.any():  # the four cell positions, equally many pixels each (the frame error: temporal)
         const["black_level_cells"] = float(np.var(offsets)) / sensor.transfer.gain_dn_per_e**2
@@ -216,33 +235,38 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
+    shape = sensor.shape
+    rts = telegraph_moments(sensor, maps=True)
     if exposure is not None:
         photo = exposure.collected_photo_e.astype(np.float64)
         dark = exposure.collected_dark_e.astype(np.float64) if exposure.collected_dark_e is not None else 0.0
-        if fp.blinkers is not None:
-            dark = dark + _stationary(fp.blinkers, c.exposure.integration_time_s, sensor.shape)
     elif photo_e is None:
         photo = signal_e * sensor.flat_response
     else:
         photo = np.asarray(photo_e, np.float64)
     if exposure is None:
         dark = (fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0)
-    shape = sensor.shape
+    blink_var = 0.0
+    if "blinking" in rts:  # its mean with the dark charge; the variance of its time high with the charge's
+        dark = dark + rts["blinking"][1]
+        blink_var = rts["blinking"][2]
     mean_n = np.broadcast_to(photo + dark, shape)
-    shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
+    shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0) + blink_var
     # the top code's charge (values within half a code of it round to it)
     top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
     read = sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0  # before the column gain, e-^2
     if c.source_follower.enabled:
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
+    if "traps" in rts:
+        read = read + rts["traps"][2]
     col_read = fp.column_sigma.astype(np.float64) ** 2 if fp.column_sigma is not None else 0.0  # after it
     row_off = fp.row_offset.astype(np.float64) if fp.row_offset is not None else 0.0
     col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
     if exposure is not None:  # the fixed row and column offsets with the offset lines
         _, _, lines_r, _, lines_c = exposure.readout_lines()
         row_off, col_off = lines_r[:, None], lines_c[None, :]
-        if fp.traps is not None and not c.source_follower.rts.cds:
-            row_off = row_off + _stationary(fp.traps, 1.0, shape)
+    if "traps" in rts and not c.source_follower.rts.cds:  # the held level's stationary mean
+        row_off = row_off + rts["traps"][1]
     if fp.pixel_offset is not None:  # with the row offsets: before the column gain
         row_off = row_off + fp.pixel_offset.astype(np.float64)
     if c.adc.enabled:  # after the gain, in DN: referred to e-
@@ -373,12 +397,41 @@ def _top_code(m: np.ndarray, v: np.ndarray, t) -> tuple[np.ndarray, np.ndarray]:
     return out, near
 
 
-def _stationary(signals, scale: float, shape: tuple[int, int]) -> np.ndarray:
-    """Each pixel's stationary mean of its random telegraph signals, ``scale`` times size times occupancy,
-    as a map (rows, cols) float64."""
-    out = np.zeros(shape[0] * shape[1])
-    np.add.at(out, signals.index.astype(np.int64), signals.size * signals.occupancy * scale)
-    return out.reshape(shape)
+def telegraph_moments(sensor: Sensor, maps: bool = False) -> dict:
+    """The random telegraph pixels' stationary moments at the sensor's exposure, per pixel (several traps summed).
+
+    ``traps`` (stage 6b, where on) and ``blinking`` (4b), each (pixels, mean e-, variance e-^2) as
+    :func:`~cmosnoise.model.stages.random_telegraph.trap_moments` and ``blink_moments`` give them, or with ``maps``
+    the mean and the variance as (rows, cols) float64 maps (pixels None). Empty with both stages off.
+    """
+    from ..engine.telegraph import per_pixel
+    from ..model.stages import random_telegraph as rt
+
+    fp, c = sensor.fixed_pattern, sensor.config
+    out = {}
+    parts = []
+    if fp.traps is not None and c.source_follower.enabled:
+        cds = c.source_follower.rts.cds_interval_s if c.source_follower.rts.cds else None
+        parts.append(("traps", fp.traps, rt.trap_moments(fp.traps, cds)))
+    if fp.blinkers is not None:
+        parts.append(("blinking", fp.blinkers, rt.blink_moments(fp.blinkers, c.exposure.integration_time_s)))
+    for name, signals, (mean, var) in parts:
+        pixels, m = per_pixel(signals.index, mean)
+        _, v = per_pixel(signals.index, var)
+        if maps:
+            m_map, v_map = np.zeros(sensor.shape[0] * sensor.shape[1]), np.zeros(sensor.shape[0] * sensor.shape[1])
+            m_map[pixels.astype(np.int64)] = m
+            v_map[pixels.astype(np.int64)] = v
+            out[name] = (None, m_map.reshape(sensor.shape), v_map.reshape(sensor.shape))
+        else:
+            out[name] = (pixels, m, v)
+    return out
+
+
+def _sparse_variance(values: np.ndarray, n: int) -> float:
+    """The variance over ``n`` pixels of a map that is ``values`` at a few of them and 0 elsewhere."""
+    mean = float(values.sum()) / n
+    return max(float((values * values).sum()) / n - mean * mean, 0.0)
 
 
 def _cdf(a):

@@ -139,6 +139,42 @@ def blink_charge(pixels: Telegraphs, frame: int, sequence: int, dt: float, expos
     return pixels.size * busy.reshape(pixels.index.shape)
 
 
+def trap_moments(traps: Telegraphs, cds_interval_s: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Each trap's stationary mean (e-) and temporal variance (e-^2) in a frame, (n,) float64 each.
+
+    With CDS (``cds_interval_s``): ``A (X(tau) - X(0))`` has mean 0 and
+    variance ``A^2 P(X(tau) != X(0)) = 2 A^2 pi0 pi1 (1 - e^(-s tau))``;
+    without (``None``): the level ``A X`` has mean ``A pi1`` and variance
+    ``A^2 pi0 pi1``, its frames correlated over the dwell times.
+    """
+    pi1 = traps.occupancy
+    pi0 = 1.0 - pi1
+    a2 = traps.size * traps.size
+    if cds_interval_s is None:
+        return traps.size * pi1, a2 * pi0 * pi1
+    p01, _, p10, _ = telegraph.transition(traps.up, traps.down, cds_interval_s)
+    return np.zeros(traps.size.shape), a2 * (pi0 * p01 + pi1 * p10)
+
+
+def blink_moments(pixels: Telegraphs, exposure_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each blinking pixel's extra dark charge over an exposure ``T``: stationary mean (e-) and the variance of
+    its rate's time high (e-^2, before the charge's own shot noise), (n,) float64 each.
+
+    ``step pi1 T`` and ``step^2 Var(time high) = 2 step^2 pi0 pi1 T^2 (x - 1 + e^-x) / x^2`` with ``x = s T``
+    (the occupation time of a stationary two-state chain; ``T^2 pi0 pi1`` when ``x`` is 0, the level held over
+    the exposure; ``2 T pi0 pi1 / s`` when large).
+    """
+    pi1 = pixels.occupancy
+    pi0 = 1.0 - pi1
+    x = (pixels.up + pixels.down) * exposure_s
+    # (x - 1 + e^-x) / x^2 by its series where the difference cancels (relative error under x**4 / 720 there)
+    small = x < 1e-4
+    xs = np.where(small, 1.0, x)
+    shape = np.where(small, 0.5 - x / 6.0 + x * x / 24.0 - x**3 / 120.0, (xs + np.expm1(-xs)) / (xs * xs))
+    step = pixels.size
+    return step * pi1 * exposure_s, 2.0 * step * step * pi0 * pi1 * exposure_s**2 * shape
+
+
 def frame_period_s(frame_rate_hz: float | None, exposure_s: float) -> float:
     """Seconds from one frame's start to the next: ``1 / frame_rate_hz``, or the exposure (frames back to back)."""
     return exposure_s if frame_rate_hz is None else 1.0 / frame_rate_hz
