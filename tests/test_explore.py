@@ -322,3 +322,52 @@ def test_a_cameras_gain_table_gives_an_iso_menu(app_page):
     page.select_option('#fields select[data-key="sensor.iso"]', "2000")
     _wait_rendered(page, "A", before)
     assert page.evaluate("() => S.panes.A.config.sensor.iso") == 2000
+
+
+def test_the_play_view_shows_random_telegraph_pixels_flip_and_blink(app_page, server, tmp_path):
+    """Pane B with both random telegraph stages on (traps read without CDS, large amplitudes; blinking pixels with
+    a large step), pane A without: with common random numbers B - A is zero except at those pixels, and frame by
+    frame (what play steps through) their difference takes two or more levels. The difference view changes from
+    frame to frame; a screenshot of it is kept beside the test's files."""
+    page = app_page
+    page.set_viewport_size({"width": 1440, "height": 900})
+    page.click("#editB")
+    for key in ("source_follower.rts.enabled", "dark_current.rts.enabled"):
+        page.check(f'#fields input[type=checkbox][data-key="{key}"]')
+        _settle(page)
+    # in its section's closed panel: set as the checkbox's own change would
+    page.eval_on_selector('#fields input[type=checkbox][data-key="source_follower.rts.cds"]',
+                          "e => { e.checked = false; e.dispatchEvent(new Event('change')); }")
+    for key, value in (("source_follower.rts.ppm", 20000), ("source_follower.rts.amplitude_e.median", 60),
+                       ("dark_current.rts.ppm", 20000), ("dark_current.rts.step_e_per_s.median", 5000),
+                       ("dark_current.rts.tau_low_s.min_s", 0.01), ("dark_current.rts.tau_high_s.min_s", 0.01),
+                       ("dark_current.rts.tau_low_s.max_s", 0.1), ("dark_current.rts.tau_high_s.max_s", 0.1)):
+        _set(page, key, value, kind="number")
+    page.select_option("#mode", "diff")
+    _settle(page)
+    assert page.evaluate("() => S.panes.B.config.source_follower.rts.cds") is False
+    digests = []
+    for frame in range(3):  # as the play button does: the frame number moves, both panes are made again
+        page.eval_on_selector("#frame", f"e => {{ e.value = {frame}; e.dispatchEvent(new Event('change')); }}")
+        _settle(page)
+        digests.append(_pixels(page, "canvasDiff"))
+        if frame == 1:
+            page.screenshot(path=str(tmp_path / "rts_difference_frame1.png"))
+    assert len(set(digests)) == 3, "the difference view does not change from frame to frame"
+    diffs = []
+    for frame in range(8):
+        raws = []
+        for pane in "AB":
+            body = page.evaluate(f"JSON.stringify({{config: S.panes.{pane}.config, scene: S.panes.{pane}.scene, "
+                                 f"frame: {frame}}})")
+            status, data, _ = _post(server + "api/raw", body.encode(), {"Content-Type": "application/json"})
+            assert status == 200
+            raws.append(np.load(io.BytesIO(data)).astype(np.int64))
+        diffs.append(raws[1] - raws[0])
+    d = np.stack(diffs)  # (frames, rows, cols)
+    moved = np.any(d != 0, axis=0)
+    n = moved.size
+    # both populations at 2 % each: about 4 % of the pixels differ somewhere (Binomial: far inside 1 % .. 8 %)
+    assert 0.01 * n < moved.sum() < 0.08 * n, moved.sum() / n
+    levels = np.array([np.unique(d[:, r, c]).size for r, c in zip(*np.nonzero(moved))])
+    assert np.mean(levels >= 2) > 0.5  # they flip and blink: most take two or more values over 8 frames

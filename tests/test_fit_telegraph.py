@@ -83,3 +83,54 @@ def test_round_trip_a_sensor_made_from_the_fit_fits_alike(fitted):
 def test_a_short_stack_is_refused_in_one_line():
     with pytest.raises(ValueError, match="at least 50"):
         fit_telegraph.fit(np.zeros((10, 4, 4)), 1.0, 0.03)
+
+
+# ------------------------------------------------------------------ cmosnoise fit
+def test_cmosnoise_fit_finds_the_random_telegraph_pixels_of_a_measurement_and_its_round_trip_agrees(tmp_path):
+    """``measure`` writes a 300-frame dark stack with its frame period; ``fit`` reads it again, finds the trap
+    pixels (ppm interval holding the sensor's own count, Clopper-Pearson), puts a ``source_follower.rts`` section
+    in config.yaml, leaves those pixels out of the pixel offsets and the source follower (else their held levels
+    come back twice: a pixel-offset tail of about the traps' ppm in the round trip), and its round trip agrees."""
+    import yaml
+
+    from cmosnoise import load_config
+    from cmosnoise.app import fitting
+
+    rts = {"enabled": True, "ppm": 3000, "cds": False, "amplitude_e": {"median": 20, "sigma_log": 0.3},
+           "tau_capture_s": {"min_s": 0.01, "max_s": 0.03}, "tau_emission_s": {"min_s": 0.01, "max_s": 0.03}}
+    cfg = load_config(extra={"sensor": {"width": 192, "height": 128}, "source_follower": {"rts": rts}})
+    manifest = fitting.write_measurement(cfg, tmp_path / "m", long_frames=300)
+    assert yaml.safe_load(manifest.read_text())["stacks"][0]["frame_period_s"] == 0.005
+    doc = fitting.run(manifest, load_config(), tmp_path / "fit", False)
+    truth = Sensor(cfg).fixed_pattern.traps.pixels.size * 1e6 / (192 * 128)
+    p = doc["parameters"]
+    lo, hi = p["source_follower.rts.ppm"]["ci95"]
+    assert lo <= truth <= hi, (truth, lo, hi)
+    assert "0.005 s apart (the manifest's)" in p["source_follower.rts.ppm"]["method"]
+    for name in ("amplitude_e", "tau_low_s", "tau_high_s"):
+        assert p[f"source_follower.rts.median_{name}"]["ci95"] is not None
+    fitted = yaml.safe_load((tmp_path / "fit" / "config.yaml").read_text())["source_follower"]["rts"]
+    assert fitted["enabled"] and fitted["cds"] is False
+    # the pixel offsets and the flicker tail without the trap pixels: tails of at most a few pixels' ppm
+    assert p.get("pixel_offset.tail.ppm_above", {"value": 0})["value"] < 500
+    doc = fitting.run(manifest, load_config(), tmp_path / "fit2", False, with_round_trip=True)
+    rows = {r["parameter"]: r for r in doc["round_trip"]}
+    assert all(rows[f"source_follower.rts.{n}"]["agree"] for n in
+               ("ppm", "median_amplitude_e", "median_tau_low_s", "median_tau_high_s")), doc["round_trip"]
+
+
+def test_a_measurement_without_random_telegraph_pixels_fits_none_and_a_short_stack_says_why(tmp_path):
+    import yaml
+
+    from cmosnoise import load_config
+    from cmosnoise.app import fitting
+
+    cfg = load_config(extra={"sensor": {"width": 96, "height": 64}})
+    manifest = fitting.write_measurement(cfg, tmp_path / "m", long_frames=60)
+    doc = fitting.run(manifest, cfg, tmp_path / "fit", False, with_round_trip=False)
+    assert doc["parameters"]["source_follower.rts.ppm"]["value"] == 0
+    assert not yaml.safe_load((tmp_path / "fit" / "config.yaml").read_text())["source_follower"]["rts"]["enabled"]
+    short = fitting.write_measurement(cfg, tmp_path / "s", long_frames=20)
+    doc = fitting.run(short, cfg, tmp_path / "fit_short", False, with_round_trip=False)
+    assert "source_follower.rts.ppm" not in doc["parameters"]
+    assert "at least 50 frames" in doc["not_fitted"]["source_follower.rts"]

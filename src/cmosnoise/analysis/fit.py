@@ -17,6 +17,8 @@ PRNU, column gain mismatch                 a flat stack (>= 2 frames; 16+ recomm
                                            and a dark stack at its exposure time
 crosstalk (per colour with a CFA)          a spot stack: single lit pixels, 3 or more apart, and a dark
                                            stack at its exposure time
+random telegraph pixels (ppm, amplitude,   the long dark stack with >= 50 frames (read a second time, whole),
+dwell times)                               its frame period (the manifest's ``frame_period_s``)
 =========================================  ===================================================================
 
 Every parameter is reported as ``{value, ci95, method}``; one that the data
@@ -34,13 +36,17 @@ from ..errors import CmosnoiseError
 from ..estimators import Z95, robust_centre
 from ..model import physics
 from ..model.spec import resolve
-from . import fit_dark, fit_photo, fit_readout, white_pixels
+from . import fit_dark, fit_photo, fit_readout, fit_telegraph, white_pixels
 from .fit_readout import centred_series, sigma_from_variance
 
 #: a dark pixel's mean counts for its dark current only below this fraction of the way from black to saturation
 DARK_FIT_LIMIT = 0.9
 #: the shortest long dark stack the readout fits accept
 MIN_READOUT_FRAMES = 4
+#: the shortest dark stack the random telegraph fit reads (a pixel's series must show both levels many times)
+MIN_TELEGRAPH_FRAMES = 50
+#: the most memory the random telegraph fit's frames may take (the middle rows that fit are read where more)
+TELEGRAPH_BYTES = 1 << 30
 
 
 def _p(value, ci95=None, method: str = "", **extra) -> dict:
@@ -198,6 +204,14 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     else:
         not_fitted["full_well_e"] = "the flat levels do not reach saturation (the variance never turns down); add brighter flats"
 
+    # ---------------------------------------------------------------- random telegraph pixels: the longest dark stack
+    longs = [d for d in ds.of_kind("dark") if d.n >= MIN_READOUT_FRAMES]
+    telegraph: dict = {}
+    rts_pixels = None
+    if longs:  # first: their held levels are neither pixel offsets nor the source follower's noise, so those leave them out
+        st = max(longs, key=lambda d: (d.n, -d.exposure_s))
+        rts_pixels = _telegraph(st, k, P, not_fitted, seed, telegraph, plots)
+
     # ---------------------------------------------------------------- dark current at each temperature
     dark_maps: dict[float, np.ndarray] = {}
     slope_var: dict[float, np.ndarray] = {}
@@ -239,7 +253,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         res["exposures_s"] = sorted(set(float(x) for x in t))
         if T == t_ref:  # the pixel offsets: each pixel's intercept, at the reference temperature
             off = fit_dark.pixel_offsets([d.mean for d in ok], list(t), [d.pixel_var for d in ok], [d.n for d in ok],
-                                         k, limit)
+                                         k, limit, exclude=rts_pixels)
             where = (f"each pixel's dark intercept over {len(ok)} exposure times, rows and columns taken out "
                      f"(temporal noise {off['noise_e']:.3g} e- rms): {off['method']}, {off['pixels']} pixels")
             P["pixel_offset.sigma_e"] = _p(off["sigma_e"]["value"], off["sigma_e"]["ci95"], where)
@@ -287,15 +301,13 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         not_fitted["dark_current.doubling_c, tail_doubling_c"] = "needs dark current at 2 or more temperatures"
 
     # ---------------------------------------------------------------- readout: the longest dark stack
-    longs = [d for d in ds.of_kind("dark") if d.n >= MIN_READOUT_FRAMES]
     if not longs:
         n_max = max((d.n for d in ds.of_kind("dark")), default=0)
         not_fitted["source_follower, row_noise, column_noise (temporal, vfpn)"] = (
             f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
     else:
-        st = max(longs, key=lambda d: (d.n, -d.exposure_s))
         _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed,
-                 not_fitted)
+                 not_fitted, exclude=rts_pixels)
 
     # ---------------------------------------------------------------- crosstalk from spots
     spots = [(sp, _dark_at(ds, sp)) for sp in ds.of_kind("spot")]
@@ -340,6 +352,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     _include_gain_uncertainty(P, ptc["rel_se"])
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
             "_nonlinearity": nonlin if nonlin is not None and nonlin["bent"] else None,
+            "_telegraph": telegraph,
             "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
                      "temperatures": temps, "source": ds.source, "input": ds.kind},
             "_maps": dark_maps}
@@ -371,8 +384,45 @@ def _with_crosstalk(base, P: dict):
     return base if xt is None else merge_updates(base, {"crosstalk": xt})
 
 
+def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, plots: dict) -> np.ndarray | None:
+    """Random telegraph pixels of the long dark stack ``st`` (:mod:`.fit_telegraph`): its parameters into ``P``,
+    the ``source_follower.rts`` section into ``out["section"]`` (None where none was found: off), the series of
+    the three pixels of largest amplitude into ``plots["telegraph"]`` (with their levels). Returns the
+    pixels found (flat indices of the whole frame), or None where the stack is too short or cannot be read again."""
+    if st.n < MIN_TELEGRAPH_FRAMES or st.reread is None:
+        not_fitted["source_follower.rts"] = (f"needs a dark stack of at least {MIN_TELEGRAPH_FRAMES} frames read a "
+                                             f"second time (the longest has {st.n}): kept at the base configuration's")
+        return None
+    frames, (r0, r1) = st.series(TELEGRAPH_BYTES)
+    rows, cols = st.shape
+    r = fit_telegraph.fit(frames, k, st.period_s, seed)
+    if r["pixels"]:
+        show = np.argsort(r["amplitude_e"])[::-1][:3]
+        flat = frames.reshape(st.n, -1)
+        plots["telegraph"] = {"period_s": st.period_s, "series": [flat[:, r["pixels"][i]].copy() for i in show],
+                              "levels": [r["levels_dn"][i] for i in show],
+                              "pixels": [divmod(r["pixels"][i] + r0 * cols, cols) for i in show]}
+    del frames
+    given = "the manifest's" if st.frame_period_s is not None else "frames back to back: the exposure time"
+    where = (f"{st.n} dark frames at {st.exposure_s:g} s, {st.period_s:g} s apart ({given}), "
+             + ("every row" if (r0, r1) == (0, rows) else f"rows {r0} to {r1 - 1} (memory)") + ": "
+             f"{r['candidates']} pixels with a held, excess variance; those a two-state hidden Markov model gives two "
+             f"levels {fit_telegraph.SEPARATION:g} sigma apart")
+    P["source_follower.rts.ppm"] = _p(r["ppm"], r["ppm_ci95"], where + " (Clopper-Pearson interval)",
+                                      pixels=len(r["pixels"]))
+    if r["pixels"]:
+        for name, what in (("amplitude_e", "distance of the two levels, e-"),
+                           ("tau_low_s", "mean dwell time in the lower level (capture), s"),
+                           ("tau_high_s", "mean dwell time in the higher level (emission), s")):
+            P[f"source_follower.rts.median_{name}"] = _p(r[f"median_{name}"], r[f"median_{name}_ci95"],
+                                                         f"median over the pixels found of the {what}; bootstrap interval")
+    out["section"] = fit_telegraph.section(r, cds=False)
+    found = np.asarray(r["pixels"], np.int64)
+    return found + r0 * cols  # the series' rows start at r0
+
+
 def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int,
-             not_fitted: dict) -> None:
+             not_fitted: dict, exclude: np.ndarray | None = None) -> None:
     """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``; the
     read noise's shape (Tukey-lambda) where the pixels' noise is not normal, and the black level's error per
     frame. What cannot be fitted goes to ``not_fitted``."""
@@ -393,7 +443,19 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     tail = base.source_follower.flicker.tail
     thr = tail.threshold_e if tail is not None else 4 * base.source_follower.flicker.gumbel_loc_e
     q = 1 / (12 * k * k)  # the quantizer's variance, e-^2; its fourth cumulant -1.2 q^2, the dark charge's its mean
-    r = fit_readout.fit_source_follower(s2, known, n, thr, seed=seed, kappa4=dark_var - 1.2 * q * q, known_var=known_var)
+    kappa4 = dark_var - 1.2 * q * q
+    if exclude is not None and exclude.size:
+        keep = np.ones(rows * cols, bool)
+        keep[exclude] = False
+
+        def kept(a):
+            return a if np.ndim(a) == 0 else np.broadcast_to(a, (rows, cols)).ravel()[keep]
+
+        s2_fit, known_fit, kappa4, known_var = kept(s2), kept(known), kept(kappa4), (
+            None if known_var is None else kept(known_var))
+    else:
+        s2_fit, known_fit = s2, known
+    r = fit_readout.fit_source_follower(s2_fit, known_fit, n, thr, seed=seed, kappa4=kappa4, known_var=known_var)
     f = r["fit"]
     where = (f"{n} frames at {st.exposure_s:g} s: per-pixel variances (chi-square, {n - 1} dof), marginal maximum "
              f"likelihood over all {r['pixels']} pixels (in {f.n_used} classes of equal variance), interval from the scores; {how}")
@@ -555,12 +617,19 @@ def fitted_config(base, result: dict):
         u["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
                              "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
                                           "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+    if "section" in result.get("_telegraph", {}):  # random telegraph pixels: those found, or none (off)
+        sec = result["_telegraph"]["section"]
+        u.setdefault("source_follower", {})["rts"] = sec if sec is not None else {"enabled": False}
     if nl_update is not None:
         u["nonlinearity"] = nl_update
     if "read_noise.shape" in P and "source_follower" in u:
         # the pixels' noise is the read noise after the gain, Tukey-lambda: it takes the source follower's place
         u["read_noise"] = {"enabled": True, "distribution": "tukey_lambda", "shape": v("read_noise.shape"),
                            "scale_dn": v("read_noise.scale_dn")}
+        if (result.get("_telegraph") or {}).get("section") is not None:
+            result["not_fitted"]["source_follower.rts"] = (
+                "random telegraph pixels were found, but the read noise after the gain takes the source follower's "
+                "place (its traps with it): left out")
         u["source_follower"] = {"enabled": False}
     black_level: dict = {}
     if "black_level.channel_offsets_dn" in P:

@@ -207,7 +207,7 @@ def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], g
 
 
 def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_vars_dn2: list[np.ndarray],
-                  frames: list[int], gain_dn_per_e: float, limit_dn: float) -> dict:
+                  frames: list[int], gain_dn_per_e: float, limit_dn: float, exclude: np.ndarray | None = None) -> dict:
     """The pixel offsets (docs/model.md stage 5c) from each pixel's dark intercept over exposure time.
 
     Each pixel's dark mean is a line in exposure time: its intercept is the
@@ -228,7 +228,8 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     pixels more than 5 body sigmas (with the noise) above it are the tail,
     counted with an exact binomial interval against what the body puts there.
     Pixels that reach ``limit_dn`` in any stack are left out (a white pixel
-    bends its own line).
+    bends its own line), and the pixels ``exclude`` (flat indices: random
+    telegraph pixels, whose level in a stack is where their traps happened to be).
 
     Each 2 x 2 cell position's mean intercept (less the four's mean) is the
     black level's offset of that CFA position (``cells_dn``, with standard
@@ -246,6 +247,8 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     stack = np.stack([np.asarray(m, np.float64) for m in means_dn])
     usable = np.all(stack < limit_dn, axis=0)
     rows, cols = stack.shape[1:]
+    if exclude is not None and exclude.size:
+        usable.ravel()[exclude] = False
     shrink = own_share(rows, cols)  # what taking out the rows' and columns' means leaves of a pixel's variance
 
     def intercepts(idx):

@@ -122,7 +122,8 @@ def fit(frames: np.ndarray, gain_dn_per_e: float, frame_period_s: float, seed: i
     Returns
     -------
     dict
-        ``pixels`` (flat indices found), ``amplitude_e``, ``tau_low_s``, ``tau_high_s`` (one per pixel), ``ppm``
+        ``pixels`` (flat indices found), ``amplitude_e``, ``tau_low_s``, ``tau_high_s``, ``levels_dn`` (the
+        two levels, DN) (one per pixel), ``ppm``
         with ``ppm_ci95`` (Clopper-Pearson), ``median_amplitude_e``, ``median_tau_low_s``,
         ``median_tau_high_s`` each with a ``..._ci95`` (bootstrap over the pixels), ``candidates`` and
         ``noise_dn`` (the array's temporal sigma).
@@ -134,13 +135,14 @@ def fit(frames: np.ndarray, gain_dn_per_e: float, frame_period_s: float, seed: i
     cand, sigma0 = candidates(frames)
     f = frames.shape[0]
     flat = frames.reshape(f, -1)
-    found, amp, low, high = [], [], [], []
+    found, amp, low, high, levels = [], [], [], [], []
     for p in cand:
         lo, hi, sigma, p01, p10 = two_levels(flat[:, p], seed)
         if hi - lo < SEPARATION * sigma or p01 <= 0 or p10 <= 0:
             continue
         t_low, t_high = rates(p01, p10, frame_period_s)
         found.append(int(p))
+        levels.append((lo, hi))
         amp.append((hi - lo) / gain_dn_per_e)
         low.append(t_low)
         high.append(t_high)
@@ -148,7 +150,7 @@ def fit(frames: np.ndarray, gain_dn_per_e: float, frame_period_s: float, seed: i
     k = len(found)
     ci = stats.binomtest(k, n).proportion_ci(0.95, method="exact")
     rng = np.random.default_rng(seed)
-    out = {"pixels": found, "amplitude_e": amp, "tau_low_s": low, "tau_high_s": high,
+    out = {"pixels": found, "amplitude_e": amp, "tau_low_s": low, "tau_high_s": high, "levels_dn": levels,
            "ppm": 1e6 * k / n, "ppm_ci95": [1e6 * ci.low, 1e6 * ci.high], "candidates": int(cand.size),
            "noise_dn": math.sqrt(sigma0), "frames": f}
     for name, values in (("amplitude_e", amp), ("tau_low_s", low), ("tau_high_s", high)):

@@ -5,7 +5,8 @@ photon-transfer curve; the dark-current map at each temperature with the
 chosen family and the tail threshold (the paper's Figs. 5 and 6) and the
 table of every family's log-likelihood and AIC; the per-pixel temporal noise
 (Fig. 7) with what the fitted source follower predicts for the same
-estimator; the per-column noise; the PRNU residual. Then the white pixels
+estimator; the per-column noise; the random telegraph pixels' series with
+their two levels; the PRNU residual. Then the white pixels
 and couplets against random placement, the round trip, and what was not
 fitted.
 """
@@ -109,6 +110,25 @@ def prnu_plot(x: np.ndarray, pct: float) -> bytes:
     return plots.to_png_bytes(fig)
 
 
+def telegraph_plot(d: dict, frames: int = 150) -> bytes:
+    """Random telegraph pixels in time: each shown pixel's dark series (DN, its first ``frames`` frames) in a panel
+    of its own, with the two levels the fit gave it."""
+    n = len(d["series"])
+    fig, axes = plots.figure(n, 1, figsize=(7.0, 1.3 + 1.2 * n), sharex=True, squeeze=False)
+    for i, (series, (lo, hi), (r, c)) in enumerate(zip(d["series"], d["levels"], d["pixels"])):
+        ax = axes[i, 0]
+        x = series[:frames]
+        ax.step(np.arange(x.size) * d["period_s"], x, where="post", lw=0.8, color=f"C{i}")
+        for level in (lo, hi):
+            ax.axhline(level, color="0.3", ls=":", lw=0.8)
+        ax.set_ylabel("DN")
+        ax.set_title(f"pixel ({r}, {c}): levels {lo:.1f} and {hi:.1f} DN", fontsize=9, loc="left")
+    axes[-1, 0].set_xlabel(f"time, s (frame number x the frame period, {d['period_s']:g} s)")
+    fig.suptitle("Random telegraph pixels of the long dark stack (dotted: the fitted levels)", fontsize=10)
+    fig.subplots_adjust(hspace=0.5)
+    return plots.to_png_bytes(fig)
+
+
 def _fmt_ci(p: dict) -> str:
     ci = p.get("ci95")
     return "" if not ci else f"{ci[0]:.4g} to {ci[1]:.4g}"
@@ -163,6 +183,12 @@ def build(doc: dict, result: dict, cfg) -> str:
                                         "sqrt(column-mean variance less the pixels' share), e- rms", False),
                             "Each column's temporal noise and the fitted Gumbel"))
         parts.append("<h2>Readout noise</h2><div class='row'>" + "".join(figs) + "</div>")
+    if "telegraph" in pl:
+        parts.append("<h2>Random telegraph pixels</h2><div class='row'>"
+                     + _figure(telegraph_plot(pl["telegraph"]),
+                               "The dark series of the pixels with the largest amplitudes, and the two levels the "
+                               "hidden Markov model found: a trap (or a blinking pixel) held over frames. These "
+                               "pixels are left out of the pixel offsets and the source follower's fit") + "</div>")
     if "prnu" in pl:
         parts.append("<h2>PRNU</h2><div class='row'>"
                      + _figure(prnu_plot(pl["prnu"]["residual"], P["prnu.measured_pct"]["value"]),

@@ -24,6 +24,7 @@ from ..analysis import fit as fitting
 from ..io import stacks
 from ..io.output import OutputFolder, write_json
 from ..model.sensor import Sensor
+from ..model.stages import random_telegraph
 from ..model.spec import resolve
 from . import fit_report
 
@@ -32,16 +33,20 @@ ROUND_TRIP_FRAME0 = 10_000_000
 
 
 def simulate_like(ds, cfg, k_measured: float, seed: int = 0) -> stacks.Dataset:
-    """The measurement ``ds`` made again with the sensor ``cfg``: each stack with its kind, exposure, temperature, frames."""
+    """The measurement ``ds`` made again with the sensor ``cfg``: each stack with its kind, exposure, temperature,
+    frames and frame period (a stack that gives one is made at that frame rate; its frames can be read again)."""
     sensors: dict = {}
     out = []
     frame = ROUND_TRIP_FRAME0
     for st in ds.stacks:
         T = st.temperature_c if st.temperature_c is not None else cfg.sensor.temperature_c
-        if T not in sensors:
-            sensors[T] = Sensor(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"temperature_c": T})}), seed=seed)
-        s = sensors[T]
+        rate = None if st.frame_period_s is None else 1.0 / st.frame_period_s
         t = max(st.exposure_s, 1e-9)
+        if (T, rate) not in sensors:  # at a frame rate, the sensor's own exposure is the stack's (the timing check)
+            sensor = cfg.sensor.model_copy(update={"temperature_c": T, "frame_rate_hz": rate})
+            exposure = cfg.exposure if rate is None else cfg.exposure.model_copy(update={"integration_time_s": t})
+            sensors[T, rate] = Sensor(cfg.model_copy(update={"sensor": sensor, "exposure": exposure}), seed=seed)
+        s = sensors[T, rate]
         if st.kind == "dark":
             ex = s.with_exposure(t).expose("flat:0")
         elif st.kind == "spot":
@@ -52,11 +57,15 @@ def simulate_like(ds, cfg, k_measured: float, seed: int = 0) -> stacks.Dataset:
             dark_e = float(np.mean(s.dark_rate)) * t if s.dark_rate is not None else 0.0
             photo_e = max((float(st.mean.mean()) - black) / k_measured - dark_e, 0.0)
             ex = s.with_exposure(t, photo_e / t).expose("flat:1.0")
-        # the stack's own frame numbers, bound now (the generator runs after ``frame`` has moved on)
-        frames = (ex.frame(k) for k in range(frame, frame + st.n))
+
+        def frames(ex=ex, first=frame, n=st.n):  # the stack's own frame numbers, bound now
+            return (ex.frame(k) for k in range(first, first + n))
+
         frame += st.n
-        out.append(stacks.reduce_stack(frames, kind=st.kind, exposure_s=st.exposure_s, temperature_c=st.temperature_c,
-                                       level=st.level, photons=st.photons))
+        reduced = stacks.reduce_stack(frames(), kind=st.kind, exposure_s=st.exposure_s, temperature_c=st.temperature_c,
+                                      level=st.level, photons=st.photons, frame_period_s=st.frame_period_s)
+        reduced.reread = frames
+        out.append(reduced)
     return stacks.Dataset(out, ds.shape, ds.bits, cfg.sensor.cfa, None, "simulated from the fitted configuration", ds.kind)
 
 
@@ -229,7 +238,7 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
     """A lab's measurement of the sensor ``cfg``, simulated, as ``.npy`` stacks and a manifest (what ``fit`` reads).
 
     At each temperature: a ``long_frames`` dark stack at 5 ms (the readout
-    noise) and 8-frame dark stacks at ``dark_times`` (the dark current),
+    noise, the random telegraph pixels; with its frame period) and 8-frame dark stacks at ``dark_times`` (the dark current),
     and on a cool sensor, as a lab would, at those times lengthened until the
     body's mean dark signal is 200 e- at the longest (:func:`dark_exposures`),
     so the dark signal stands above the read noise. At
@@ -257,8 +266,10 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
     t_flat = 0.005
     for j, T in enumerate(temperatures):
         s = Sensor(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"temperature_c": T})}), seed=seed)
+        # the long stack's frame period: its random telegraph pixels' dwell times are counted in it
         save(f"dark_{T:g}C_{t_flat:g}s.npy", s.with_exposure(t_flat).expose("flat:0"), long_frames,
-             kind="dark", exposure_s=t_flat, temperature_c=T)
+             kind="dark", exposure_s=t_flat, temperature_c=T,
+             frame_period_s=random_telegraph.frame_period_s(cfg.sensor.frame_rate_hz, t_flat))
         for t in dark_exposures(s, dark_times):
             save(f"dark_{T:g}C_{t:g}s.npy", s.with_exposure(t).expose("flat:0"), 8, kind="dark", exposure_s=t,
                  temperature_c=T)

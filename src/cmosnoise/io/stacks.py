@@ -17,6 +17,12 @@ them:
         - {kind: dark, exposure_s: 0.01, temperature_c: 25, files: [dark_10ms.tif]}
         - {kind: flat, exposure_s: 0.01, temperature_c: 25, level: 0.4, files: ["flat_04/*.dng"]}
         - {kind: spot, exposure_s: 0.01, temperature_c: 25, files: [spots.tif]}   # crosstalk
+        - {kind: dark, exposure_s: 0.005, frame_period_s: 0.0333, files: [dark_100.tif]}  # random telegraph
+
+  ``frame_period_s`` (seconds from one frame's start to the next; default:
+  the exposure time, frames back to back) puts the random telegraph fit's
+  dwell times in seconds; it reads the longest dark stack of 50 frames or
+  more a second time, whole.
 
   Files are multi-page TIFF, ``.npy`` (2-D, or 3-D with frames first) or
   DNG (one frame each, read by LibRaw through rawpy; its CFA, black level
@@ -36,7 +42,7 @@ import glob
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator, Literal, Optional
+from typing import Callable, Iterator, Literal, Optional
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -62,6 +68,8 @@ class StackEntry(BaseModel):
     photons: Optional[float] = Field(None, ge=0, le=1e12, description="photons per pixel during the exposure (flats)")
     iso: Optional[float] = Field(None, gt=0, le=1e7, description="the camera's gain setting (ISO) the stack was taken at")
     gain_db: Optional[float] = Field(None, ge=-60, le=120, description="the camera's gain setting (dB) the stack was taken at")
+    frame_period_s: Optional[float] = Field(None, gt=0, le=3600, description="seconds from one frame's start to the "
+                                            "next (random telegraph dwell times); default: the exposure time")
     files: list[str] = Field(min_length=1, description="files or globs, relative to the manifest")
 
 
@@ -95,10 +103,37 @@ class StackStats:
     pixel_m4: Optional[np.ndarray] = None  #: (rows, cols) float64, per-pixel fourth central moment (ddof 0), as pixel_var
     iso: Optional[float] = None  #: the gain setting the stack was taken at (ISO), when the manifest says
     gain_db: Optional[float] = None  #: or in dB
+    frame_period_s: Optional[float] = None  #: seconds from one frame's start to the next, when the manifest says
+    #: the stack's frames again, one at a time (a fit that needs the whole series: random telegraph pixels)
+    reread: Optional[Callable[[], Iterator[np.ndarray]]] = field(default=None, repr=False)
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.mean.shape
+
+    @property
+    def period_s(self) -> float:
+        """Seconds from one frame's start to the next: the manifest's, or the exposure (frames back to back)."""
+        return self.frame_period_s if self.frame_period_s is not None else max(self.exposure_s, 1e-9)
+
+    def series(self, max_bytes: int) -> tuple[np.ndarray, tuple[int, int]]:
+        """The stack's frames, (n, rows, cols) float32, read again; where they would take more than ``max_bytes``,
+        the middle rows that fit (at least 2). Returns (frames, (first row, last row + 1))."""
+        if self.reread is None:
+            raise CmosnoiseError("this stack's frames cannot be read again")
+        rows, cols = self.shape
+        keep = int(min(rows, max(2, max_bytes // max(4 * cols * self.n, 1))))
+        r0 = (rows - keep) // 2
+        out = np.empty((self.n, keep, cols), np.float32)
+        i = 0
+        for f in self.reread():
+            if i >= self.n:
+                break
+            out[i] = np.asarray(f)[r0:r0 + keep]
+            i += 1
+        if i != self.n:
+            raise CmosnoiseError(f"the stack held {self.n} frames when reduced and {i} when read again")
+        return out, (r0, r0 + keep)
 
 
 def reduce_stack(frames: Iterator[np.ndarray], **info) -> StackStats:
@@ -261,7 +296,9 @@ def _stack(paths: list[Path], meta: _Meta, **info) -> StackStats:
     def frames():
         for p in paths:
             yield from _checked(_frames_of(p, meta), p)
-    return reduce_stack(frames(), files=[str(p) for p in paths], **info)
+    stats = reduce_stack(frames(), files=[str(p) for p in paths], **info)
+    stats.reread = frames
+    return stats
 
 
 def _read_text(path: Path, what: str) -> str:
@@ -367,7 +404,8 @@ def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
             temp = temperature_c
         name = f"stacks.{i} ({e.kind}, {e.exposure_s:g} s)"
         stacks.append(_stack(paths, meta, name=name, kind=e.kind, exposure_s=e.exposure_s, temperature_c=temp,
-                             level=e.level, photons=e.photons, iso=e.iso, gain_db=e.gain_db))
+                             level=e.level, photons=e.photons, iso=e.iso, gain_db=e.gain_db,
+                             frame_period_s=e.frame_period_s))
     shapes = sorted({s.shape for s in stacks})
     if len(shapes) > 1:
         raise CmosnoiseError(f"manifest {str(path)!r}: the stacks have different frame sizes "

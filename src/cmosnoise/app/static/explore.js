@@ -98,7 +98,7 @@ function buildPanel() {
       sections[section] = d;
       box.appendChild(d);
     }
-    sections[section].appendChild(fieldRow(f, key, cfg));
+    sections[section].appendChild(fieldRow(f, key, cfg, section === "quick"));
   };
   for (const k of quick) { const f = keys.find((x) => x.key === k); if (f) add("quick", f, k); }
   for (const f of keys) {
@@ -123,14 +123,16 @@ function buildPanel() {
   }
 }
 
-function fieldRow(f, key, cfg) {
+function fieldRow(f, key, cfg, whole = false) {
   const row = document.createElement("div");
   row.className = "field";
   row.dataset.key = key;
   const name = document.createElement("span");
   name.className = "name";
   const unit = unitOf(key);
-  name.textContent = key.split(".").slice(-2).join(".").replace(/^\d+\./, "") + (unit ? ` [${unit}]` : "");
+  // in its section the last two parts name a key; among the quick settings (from several sections) the whole key
+  const label = whole ? key : key.split(".").slice(-2).join(".").replace(/^\d+\./, "");
+  name.textContent = label + (unit ? ` [${unit}]` : "");
   name.title = `${key}: ${f.description}${f.limits ? " (" + f.limits + ")" : ""}; default ${JSON.stringify(f.default)}`;
   row.appendChild(name);
   const value = getPath(cfg, key);
