@@ -24,8 +24,8 @@ from ..analysis import fit as fitting
 from ..io import stacks
 from ..io.output import OutputFolder, write_json
 from ..model.sensor import Sensor
-from ..model.stages import random_telegraph
 from ..model.spec import resolve
+from ..model.stages import random_telegraph
 from . import fit_report
 
 #: the frame numbers the round trip's stacks start from (each stack its own range: no shared noise)
