@@ -210,7 +210,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     rts_pixels = None
     if longs:  # first: their held levels are neither pixel offsets nor the source follower's noise, so those leave them out
         st = max(longs, key=lambda d: (d.n, -d.exposure_s))
-        rts_pixels = _telegraph(st, k, P, not_fitted, seed, telegraph, plots)
+        rts_pixels = _telegraph(st, k, P, not_fitted, seed, telegraph, plots, base.source_follower.rts.cds_interval_s)
 
     # ---------------------------------------------------------------- dark current at each temperature
     dark_maps: dict[float, np.ndarray] = {}
@@ -384,9 +384,11 @@ def _with_crosstalk(base, P: dict):
     return base if xt is None else merge_updates(base, {"crosstalk": xt})
 
 
-def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, plots: dict) -> np.ndarray | None:
+def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, plots: dict,
+               cds_interval_s: float = 1e-5) -> np.ndarray | None:
     """Random telegraph pixels of the long dark stack ``st`` (:mod:`.fit_telegraph`): its parameters into ``P``,
-    the ``source_follower.rts`` section into ``out["section"]`` (None where none was found: off), the series of
+    the ``source_follower.rts`` section into ``out["section"]`` (None where none was found: off; the held or the
+    three-level pixels, whichever are more; a three-level pixel's CDS interval ``cds_interval_s``), the series of
     the three pixels of largest amplitude into ``plots["telegraph"]`` (with their levels). Returns the
     pixels found (flat indices of the whole frame), or None where the stack is too short or cannot be read again."""
     if st.n < MIN_TELEGRAPH_FRAMES or st.reread is None:
@@ -396,12 +398,13 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
     frames, (r0, r1) = st.series(TELEGRAPH_BYTES)
     rows, cols = st.shape
     r = fit_telegraph.fit(frames, k, st.period_s, seed)
-    if r["pixels"]:
-        show = np.argsort(r["amplitude_e"])[::-1][:3]
+    shown = r["three_level"] if len(r["three_level"]["pixels"]) > len(r["pixels"]) else r
+    if shown["pixels"]:
+        show = np.argsort(shown["amplitude_e"])[::-1][:3]
         flat = frames.reshape(st.n, -1)
-        plots["telegraph"] = {"period_s": st.period_s, "series": [flat[:, r["pixels"][i]].copy() for i in show],
-                              "levels": [r["levels_dn"][i] for i in show],
-                              "pixels": [divmod(r["pixels"][i] + r0 * cols, cols) for i in show]}
+        plots["telegraph"] = {"period_s": st.period_s, "series": [flat[:, shown["pixels"][i]].copy() for i in show],
+                              "levels": [shown["levels_dn"][i] for i in show],
+                              "pixels": [divmod(shown["pixels"][i] + r0 * cols, cols) for i in show]}
     del frames
     given = "the manifest's" if st.frame_period_s is not None else "frames back to back: the exposure time"
     where = (f"{st.n} dark frames at {st.exposure_s:g} s, {st.period_s:g} s apart ({given}), "
@@ -416,8 +419,27 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
                            ("tau_high_s", "mean dwell time in the higher level (emission), s")):
             P[f"source_follower.rts.median_{name}"] = _p(r[f"median_{name}"], r[f"median_{name}_ci95"],
                                                          f"median over the pixels found of the {what}; bootstrap interval")
-    out["section"] = fit_telegraph.section(r, cds=False)
-    found = np.asarray(r["pixels"], np.int64)
+    three = r["three_level"]
+    P["source_follower.rts.cds_ppm"] = _p(three["ppm"], three["ppm_ci95"], (
+        f"{st.n} dark frames: of {three['candidates']} pixels with an excess variance white in time, those a "
+        f"symmetric three-level mixture (a trap through CDS: -A, 0, +A) fits {fit_telegraph.SEPARATION:g} sigma apart "
+        "and better than one normal at 5 sigma (Clopper-Pearson interval)"), pixels=len(three["pixels"]))
+    if three["pixels"]:
+        P["source_follower.rts.cds_median_amplitude_e"] = _p(three["median_amplitude_e"], three["median_amplitude_e_ci95"],
+                                                             "median over the three-level pixels of A, e-; bootstrap interval")
+        P["source_follower.rts.cds_median_switching"] = _p(
+            three["median_switching"], three["median_switching_ci95"],
+            "median over the three-level pixels of the fraction of frames at -A or +A, 2 pi0 pi1 (1 - exp(-s tau)); "
+            "bootstrap interval")
+    cds = len(three["pixels"]) > len(r["pixels"])
+    if r["pixels"] and three["pixels"]:
+        kept, left = ("three-level (CDS)", "held") if cds else ("held", "three-level (CDS)")
+        not_fitted["source_follower.rts"] = (
+            f"both held ({len(r['pixels'])}) and three-level ({len(three['pixels'])}) pixels were found; one "
+            f"source_follower.rts section holds one readout: the {kept} ones are in the configuration, the {left} "
+            "ones are not")
+    out["section"] = fit_telegraph.section(r, cds=cds, cds_interval_s=cds_interval_s)
+    found = np.asarray(r["pixels"] + three["pixels"], np.int64)
     return found + r0 * cols  # the series' rows start at r0
 
 

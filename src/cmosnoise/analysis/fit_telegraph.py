@@ -22,11 +22,22 @@ sampled two-state chain: ``p01 + p10 = 1 - exp(-s dt)``,
 interval; the medians of the amplitudes and dwell times have percentile
 bootstrap intervals over the pixels found (fixed seed).
 
+**Three levels (a trap seen through CDS).** A frame shows ``A (X(tau) -
+X(0))``: ``-A``, 0 or ``+A``, each frame nearly independent of the last, so
+the pixel has an excess variance but no lag-1 correlation. Those pixels get
+a symmetric three-component normal mixture (levels ``mu - A``, ``mu``,
+``mu + A``, weights ``q / 2``, ``1 - q``, ``q / 2``, one sigma), fitted by
+expectation-maximization; one counts when ``A`` is at least SEPARATION
+sigmas, the mixture beats one normal by the likelihood-ratio test at the Z
+level (chi-square, 2 degrees of freedom) and each side level holds at least
+:data:`MIN_SIDE_FRAMES` frames' worth. ``q = P(X(tau) != X(0)) = 2 pi0 pi1
+(1 - e^(-s tau))`` is what the frames tell of the dwell times (not each one:
+a trap much slower than the CDS interval is invisible, one much faster is
+three-level at ``q = 2 pi0 pi1``).
+
 Detection limits: a pixel whose levels are less than SEPARATION sigmas apart
 is not found, nor one that does not switch both ways within the stack (a
-dwell time much longer than the stack). A trap seen through CDS (three
-levels, each frame nearly independent) is not a two-level pixel; its
-change is counted among the candidates only.
+dwell time much longer than the stack).
 """
 
 from __future__ import annotations
@@ -42,16 +53,19 @@ SEPARATION = 3.0
 Z = 5.0
 #: bootstrap resamples of the medians' intervals
 BOOTSTRAP = 2000
+#: a three-level pixel's side levels must each hold at least this many frames' worth (q F / 2)
+MIN_SIDE_FRAMES = 2.0
 
 
-def candidates(frames: np.ndarray) -> tuple[np.ndarray, float]:
-    """Pixels whose series is not white noise at the array's level: (flat indices, sigma0^2 DN^2).
+def candidates(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Pixels whose series is not white noise at the array's level: (held, white, sigma0^2 DN^2), flat indices.
 
     ``frames``: (F, rows, cols) dark frames, DN. A candidate's temporal
     variance exceeds the array's median variance ``sigma0^2`` at the Z level
-    (``(F - 1) v / sigma0^2`` against chi-square(F - 1)), and its lag-1
-    autocorrelation exceeds ``Z / sqrt(F)`` (white noise: Normal(0, 1 / F)).
-    A level held over frames is both; a noisy but white pixel is not the second.
+    (``(F - 1) v / sigma0^2`` against chi-square(F - 1)). ``held``: those whose
+    lag-1 autocorrelation also exceeds ``Z / sqrt(F)`` (white noise: Normal(0,
+    1 / F)): a level held over frames. ``white``: the others (a trap seen
+    through CDS, or a noisy but Gaussian pixel).
     """
     f = frames.shape[0]
     var = np.empty(frames.shape[1:])
@@ -63,8 +77,52 @@ def candidates(frames: np.ndarray) -> tuple[np.ndarray, float]:
         lag1[r] = (x[1:] * x[:-1]).sum(axis=0) / np.maximum((x * x).sum(axis=0), 1e-300)
     sigma0 = float(np.median(var))
     limit = stats.chi2.isf(stats.norm.sf(Z), f - 1) / (f - 1)
-    held = (var.ravel() > limit * max(sigma0, 1e-12)) & (lag1.ravel() > Z / math.sqrt(f))
-    return np.flatnonzero(held), sigma0
+    excess = var.ravel() > limit * max(sigma0, 1e-12)
+    held = lag1.ravel() > Z / math.sqrt(f)
+    return np.flatnonzero(excess & held), np.flatnonzero(excess & ~held), sigma0
+
+
+def three_levels(series: np.ndarray, iterations: int = 300, tol: float = 1e-7):
+    """Symmetric three-level normal mixtures of pixels' series, by expectation-maximization, all pixels at once.
+
+    ``series``: (F,) or (F, P) DN. Returns (centre, A, sigma, q, log-likelihood gain over one normal), each (P,)
+    (scalars for one series); iterates until no pixel's log-likelihood rises by more than ``tol`` of itself."""
+    x = np.asarray(series, np.float64)
+    one_series = x.ndim == 1
+    x = x.reshape(x.shape[0], -1)
+    f = x.shape[0]
+    mu = np.median(x, axis=0)
+    sigma = np.maximum(1.4826 * np.median(np.abs(x - mu), axis=0), 1e-6)
+    hi, lo = np.percentile(x, [97.5, 2.5], axis=0)
+    a = np.maximum(np.maximum(hi - mu, mu - lo), 3 * sigma)
+    q = np.full(mu.shape, 0.2)
+    j = np.array([-1.0, 0.0, 1.0])
+    last = np.full(mu.shape, -np.inf)
+    sx = x.sum(axis=0)
+    for _ in range(iterations):
+        w = np.stack([q / 2, 1 - q, q / 2], axis=-1)  # (P, 3)
+        z = (x[:, :, None] - mu[:, None] - j * a[:, None]) / sigma[:, None]  # (F, P, 3)
+        logp = np.log(np.maximum(w, 1e-300)) - 0.5 * z * z - np.log(sigma * math.sqrt(2 * math.pi))[:, None]
+        top = logp.max(axis=2, keepdims=True)
+        mix = top[..., 0] + np.log(np.exp(logp - top).sum(axis=2))  # (F, P)
+        loglik = mix.sum(axis=0)
+        r = np.exp(logp - mix[..., None])  # responsibilities
+        side = r[..., 0] + r[..., 2]
+        sign = r[..., 2] - r[..., 0]
+        q = np.clip(side.mean(axis=0), 1e-9, 1 - 1e-9)
+        # centre and amplitude by weighted least squares: sum r (x - mu - j a)^2 least
+        s_sign, s_side, s_sx = sign.sum(axis=0), side.sum(axis=0), (sign * x).sum(axis=0)
+        det = np.maximum(f * s_side - s_sign**2, 1e-12)
+        mu = (s_side * sx - s_sign * s_sx) / det
+        a = np.abs((f * s_sx - s_sign * sx) / det)
+        res = x[:, :, None] - mu[:, None] - j * a[:, None]
+        sigma = np.maximum(np.sqrt((r * res * res).sum(axis=(0, 2)) / f), 1e-6)
+        if np.all(loglik - last < tol * np.abs(loglik)):
+            break
+        last = loglik
+    one = -0.5 * f * (np.log(2 * math.pi * np.maximum(x.var(axis=0), 1e-300)) + 1)
+    out = (mu, a, sigma, q, loglik - one)
+    return tuple(float(v[0]) for v in out) if one_series else out
 
 
 def two_levels(series: np.ndarray, seed: int = 0):
@@ -126,13 +184,15 @@ def fit(frames: np.ndarray, gain_dn_per_e: float, frame_period_s: float, seed: i
         two levels, DN) (one per pixel), ``ppm``
         with ``ppm_ci95`` (Clopper-Pearson), ``median_amplitude_e``, ``median_tau_low_s``,
         ``median_tau_high_s`` each with a ``..._ci95`` (bootstrap over the pixels), ``candidates`` and
-        ``noise_dn`` (the array's temporal sigma).
+        ``noise_dn`` (the array's temporal sigma); ``three_level``: the pixels a trap shows through CDS, with
+        ``pixels``, ``amplitude_e``, ``switching`` (q, the fraction of frames at a side level), ``levels_dn``,
+        ``ppm``, ``ppm_ci95``, ``median_amplitude_e`` and ``median_switching`` with their ``..._ci95``.
     """
     frames = np.asarray(frames)
     if frames.ndim != 3 or frames.shape[0] < 50:
         raise ValueError(f"a random telegraph fit needs a stack of at least 50 consecutive dark frames, got shape "
                          f"{frames.shape}")
-    cand, sigma0 = candidates(frames)
+    cand, white, sigma0 = candidates(frames)
     f = frames.shape[0]
     flat = frames.reshape(f, -1)
     found, amp, low, high, levels = [], [], [], [], []
@@ -147,27 +207,56 @@ def fit(frames: np.ndarray, gain_dn_per_e: float, frame_period_s: float, seed: i
         low.append(t_low)
         high.append(t_high)
     n = flat.shape[1]
-    k = len(found)
-    ci = stats.binomtest(k, n).proportion_ci(0.95, method="exact")
     rng = np.random.default_rng(seed)
     out = {"pixels": found, "amplitude_e": amp, "tau_low_s": low, "tau_high_s": high, "levels_dn": levels,
-           "ppm": 1e6 * k / n, "ppm_ci95": [1e6 * ci.low, 1e6 * ci.high], "candidates": int(cand.size),
-           "noise_dn": math.sqrt(sigma0), "frames": f}
+           **_ppm(len(found), n), "candidates": int(cand.size), "noise_dn": math.sqrt(sigma0), "frames": f}
     for name, values in (("amplitude_e", amp), ("tau_low_s", low), ("tau_high_s", high)):
         out[f"median_{name}"], out[f"median_{name}_ci95"] = _median_interval(np.asarray(values, float), rng)
+    # three-level pixels (a trap through CDS): white in time, a side level either way
+    lr_limit = stats.chi2.isf(stats.norm.sf(Z), 2)
+    tri, tri_amp, tri_q, tri_levels = [], [], [], []
+    for start in range(0, white.size, 256):  # a block of pixels at a time (bounds the mixture's memory)
+        block = white[start:start + 256]
+        mus, amps, sigmas, qs, gains = three_levels(flat[:, block])
+        for p, mu, a, sigma, q, gain in zip(block, mus, amps, sigmas, qs, gains):
+            if a < SEPARATION * sigma or 2 * gain < lr_limit or q * f / 2 < MIN_SIDE_FRAMES:
+                continue
+            tri.append(int(p))
+            tri_amp.append(float(a) / gain_dn_per_e)
+            tri_q.append(float(q))
+            tri_levels.append((float(mu - a), float(mu), float(mu + a)))
+    three = {"pixels": tri, "amplitude_e": tri_amp, "switching": tri_q, "levels_dn": tri_levels,
+             **_ppm(len(tri), n), "candidates": int(white.size)}
+    for name, values in (("amplitude_e", tri_amp), ("switching", tri_q)):
+        three[f"median_{name}"], three[f"median_{name}_ci95"] = _median_interval(np.asarray(values, float), rng)
+    out["three_level"] = three
     return out
 
 
-def section(result: dict, cds: bool = False) -> dict | None:
+def _ppm(k: int, n: int) -> dict:
+    ci = stats.binomtest(k, n).proportion_ci(0.95, method="exact")
+    return {"ppm": 1e6 * k / n, "ppm_ci95": [1e6 * ci.low, 1e6 * ci.high]}
+
+
+def section(result: dict, cds: bool | None = None, cds_interval_s: float = 1e-5) -> dict | None:
     """A ``source_follower.rts`` section from :func:`fit` (None where no pixel was found).
 
-    Amplitudes: lognormal, the median and the standard deviation of the logs
-    of those found. Dwell times: log-uniform, its ends from the 10th and 90th
-    percentiles of the logs (``q = a + p (b - a)`` for a uniform on
-    ``[a, b]``), clipped to positive times. ``cds``: what the data's readout
-    does (a held level is what a readout without CDS shows).
+    ``cds``: False for the held levels (what a readout without CDS shows, and
+    a blinking pixel), True for the three-level pixels (traps through CDS,
+    ``cds_interval_s`` apart: the data's readout, which the frames do not tell),
+    None for the population with more pixels. Amplitudes: lognormal, the
+    median and the standard deviation of the logs of those found. Dwell times:
+    log-uniform, its ends from the 10th and 90th percentiles of the logs
+    (``q = a + p (b - a)`` for a uniform on ``[a, b]``), clipped to positive
+    times. A three-level pixel's two dwell times are not told apart: each is
+    the time ``t`` that gives its switching fraction with equal dwell times,
+    ``q = (1 - e^(-2 tau / t)) / 2``, and both laws are the same.
     """
-    if not result["pixels"]:
+    three = result.get("three_level") or {"pixels": []}
+    if cds is None:
+        cds = len(three["pixels"]) > len(result["pixels"])
+    found = three if cds else result
+    if not found["pixels"]:
         return None
 
     def log_uniform(values):
@@ -178,9 +267,12 @@ def section(result: dict, cds: bool = False) -> dict | None:
         a = q10 - 0.1 * width
         return {"min_s": float(np.exp(a)), "max_s": float(np.exp(a + width))}
 
-    logs = np.log(np.asarray(result["amplitude_e"], float))
-    return {"enabled": True, "ppm": float(result["ppm"]), "traps_per_pixel": "one",
-            "amplitude_e": {"distribution": "lognormal", "median": float(np.exp(np.median(logs))),
-                            "sigma_log": float(logs.std(ddof=1)) if logs.size > 1 else 0.0},
-            "tau_capture_s": log_uniform(result["tau_low_s"]), "tau_emission_s": log_uniform(result["tau_high_s"]),
-            "cds": cds}
+    logs = np.log(np.asarray(found["amplitude_e"], float))
+    out = {"enabled": True, "ppm": float(found["ppm"]), "traps_per_pixel": "one",
+           "amplitude_e": {"distribution": "lognormal", "median": float(np.exp(np.median(logs))),
+                           "sigma_log": float(logs.std(ddof=1)) if logs.size > 1 else 0.0}, "cds": bool(cds)}
+    if cds:
+        q = np.minimum(np.asarray(found["switching"], float), 0.49)
+        equal = log_uniform(-2 * cds_interval_s / np.log1p(-2 * q))
+        return {**out, "tau_capture_s": equal, "tau_emission_s": dict(equal), "cds_interval_s": cds_interval_s}
+    return {**out, "tau_capture_s": log_uniform(result["tau_low_s"]), "tau_emission_s": log_uniform(result["tau_high_s"])}

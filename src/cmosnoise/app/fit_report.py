@@ -115,14 +115,14 @@ def telegraph_plot(d: dict, frames: int = 150) -> bytes:
     of its own, with the two levels the fit gave it."""
     n = len(d["series"])
     fig, axes = plots.figure(n, 1, figsize=(7.0, 1.3 + 1.2 * n), sharex=True, squeeze=False)
-    for i, (series, (lo, hi), (r, c)) in enumerate(zip(d["series"], d["levels"], d["pixels"])):
+    for i, (series, levels, (r, c)) in enumerate(zip(d["series"], d["levels"], d["pixels"])):
         ax = axes[i, 0]
         x = series[:frames]
         ax.step(np.arange(x.size) * d["period_s"], x, where="post", lw=0.8, color=f"C{i}")
-        for level in (lo, hi):
+        for level in levels:
             ax.axhline(level, color="0.3", ls=":", lw=0.8)
         ax.set_ylabel("DN")
-        ax.set_title(f"pixel ({r}, {c}): levels {lo:.1f} and {hi:.1f} DN", fontsize=9, loc="left")
+        ax.set_title(f"pixel ({r}, {c}): levels {', '.join(f'{v:.1f}' for v in levels)} DN", fontsize=9, loc="left")
     axes[-1, 0].set_xlabel(f"time, s (frame number x the frame period, {d['period_s']:g} s)")
     fig.suptitle("Random telegraph pixels of the long dark stack (dotted: the fitted levels)", fontsize=10)
     fig.subplots_adjust(hspace=0.5)
@@ -186,8 +186,9 @@ def build(doc: dict, result: dict, cfg) -> str:
     if "telegraph" in pl:
         parts.append("<h2>Random telegraph pixels</h2><div class='row'>"
                      + _figure(telegraph_plot(pl["telegraph"]),
-                               "The dark series of the pixels with the largest amplitudes, and the two levels the "
-                               "hidden Markov model found: a trap (or a blinking pixel) held over frames. These "
+                               "The dark series of the pixels with the largest amplitudes and their fitted levels: two "
+                               "(a trap or a blinking pixel held over frames, by a hidden Markov model) or three (a "
+                               "trap through CDS, by a three-level mixture). These "
                                "pixels are left out of the pixel offsets and the source follower's fit") + "</div>")
     if "prnu" in pl:
         parts.append("<h2>PRNU</h2><div class='row'>"
