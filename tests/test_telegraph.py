@@ -326,9 +326,12 @@ def test_the_noise_budget_holds_the_variance_and_mean_the_random_telegraph_pixel
     frames = [shot.frame(1000 * k, detail=True).contributions for k in range(60)]
     tv = noise_budget.temporal_variances(sensor, 0.0)
     fv = noise_budget.fixed_pattern_variances(sensor, 0.0)
-    moments = noise_budget.telegraph_moments(sensor, maps=True)
+    moments = noise_budget.telegraph_moments(sensor)
     for part, line in (("source_follower_rts", "traps"), ("dark_current_rts", "blinking")):
-        _, mean, var = moments[line]
+        pixels, m, v = moments[line]
+        mean, var = np.zeros(n), np.zeros(n)  # as maps: every pixel's stationary mean and variance
+        mean[pixels.astype(np.int64)], var[pixels.astype(np.int64)] = m, v
+        mean, var = mean.reshape(sensor.shape), var.reshape(sensor.shape)
         x = np.stack([c[part].astype(np.float64) for c in frames])  # (F, rows, cols)
         f = x.shape[0]
         dev = (x - mean) ** 2

@@ -181,10 +181,10 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
     if fp.column_gain is not None:
         signal = signal * fp.column_gain
     qe = float(signal.mean()) * (c.sensor.qe_mean() or 1.0)  # photo-electrons collected per photon
-    dark = np.zeros(sensor.shape) if fp.dark_rate is None else fp.dark_rate.astype(np.float64)
-    blinking = noise_budget.telegraph_moments(sensor, maps=True).get("blinking")
+    dark_mean = 0.0 if fp.dark_rate is None else float(fp.dark_rate.astype(np.float64).mean())
+    blinking = noise_budget.telegraph_moments(sensor).get("blinking")
     if blinking is not None:  # a blinking pixel's mean rate: its step times its time high
-        dark = dark + blinking[1] / c.exposure.integration_time_s
+        dark_mean += float(blinking[1].sum()) / (sensor.shape[0] * sensor.shape[1] * c.exposure.integration_time_s)
     def expected_dark_at(texp_s):
         """The expected dark image (e-) at ``texp_s``, with the clips and the quantizer's pattern."""
         mo = noise_budget.clipped_moments(sensor.with_exposure(texp_s), 0.0)
@@ -216,8 +216,8 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
         "saturation_capacity_e": sat_e,
         "snr_max": math.sqrt(sat_e),
         "dynamic_range_db": 20 * math.log10(sat_e / qe / u_p_min),
-        "dark_current_mean_e_per_s": float(dark.mean()),
-        "dark_current_var_e_per_s": float(dark.mean()) if c.dark_current.shot_noise else 0.0,
+        "dark_current_mean_e_per_s": dark_mean,
+        "dark_current_var_e_per_s": dark_mean if c.dark_current.shot_noise else 0.0,
         "dsnu_e": math.sqrt(max(sp["total"], 0.0)),
         "dsnu_column_e": math.sqrt(max(sp["column"], 0.0)),
         "prnu_pct": 100 * float(signal.std(ddof=1) / signal.mean()),

@@ -398,7 +398,8 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
     frames, (r0, r1) = st.series(TELEGRAPH_BYTES)
     rows, cols = st.shape
     r = fit_telegraph.fit(frames, k, st.period_s, seed)
-    shown = r["three_level"] if len(r["three_level"]["pixels"]) > len(r["pixels"]) else r
+    cds = fit_telegraph.through_cds(r)  # the population the configuration gets, and the report shows
+    shown = r["three_level"] if cds else r
     if shown["pixels"]:
         show = np.argsort(shown["amplitude_e"])[::-1][:3]
         flat = frames.reshape(st.n, -1)
@@ -431,7 +432,6 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
             three["median_switching"], three["median_switching_ci95"],
             "median over the three-level pixels of the fraction of frames at -A or +A, 2 pi0 pi1 (1 - exp(-s tau)); "
             "bootstrap interval")
-    cds = len(three["pixels"]) > len(r["pixels"])
     if r["pixels"] and three["pixels"]:
         kept, left = ("three-level (CDS)", "held") if cds else ("held", "three-level (CDS)")
         not_fitted["source_follower.rts"] = (

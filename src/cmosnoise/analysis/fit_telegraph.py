@@ -87,11 +87,9 @@ def candidates(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
 def three_levels(series: np.ndarray, iterations: int = 300, tol: float = 1e-7):
     """Symmetric three-level normal mixtures of pixels' series, by expectation-maximization, all pixels at once.
 
-    ``series``: (F,) or (F, P) DN. Returns (centre, A, sigma, q, log-likelihood gain over one normal), each (P,)
-    (scalars for one series); iterates until no pixel's log-likelihood rises by more than ``tol`` of itself."""
+    ``series``: (F, P) DN. Returns (centre, A, sigma, q, log-likelihood gain over one normal), each (P,);
+    iterates until no pixel's log-likelihood rises by more than ``tol`` of itself."""
     x = np.asarray(series, np.float64)
-    one_series = x.ndim == 1
-    x = x.reshape(x.shape[0], -1)
     f = x.shape[0]
     mu = np.median(x, axis=0)
     sigma = np.maximum(1.4826 * np.median(np.abs(x - mu), axis=0), 1e-6)
@@ -123,8 +121,7 @@ def three_levels(series: np.ndarray, iterations: int = 300, tol: float = 1e-7):
             break
         last = loglik
     one = -0.5 * f * (np.log(2 * math.pi * np.maximum(x.var(axis=0), 1e-300)) + 1)
-    out = (mu, a, sigma, q, loglik - one)
-    return tuple(float(v[0]) for v in out) if one_series else out
+    return mu, a, sigma, q, loglik - one
 
 
 def two_levels(series: np.ndarray, seed: int = 0):
@@ -240,13 +237,19 @@ def _ppm(k: int, n: int) -> dict:
     return {"ppm": 1e6 * k / n, "ppm_ci95": [1e6 * ci.low, 1e6 * ci.high]}
 
 
+def through_cds(result: dict) -> bool:
+    """Whether :func:`fit` found more three-level pixels (traps through CDS) than held ones: the population a
+    ``source_follower.rts`` section (one readout) describes."""
+    return len(result["three_level"]["pixels"]) > len(result["pixels"])
+
+
 def section(result: dict, cds: bool | None = None, cds_interval_s: float = 1e-5) -> dict | None:
     """A ``source_follower.rts`` section from :func:`fit` (None where no pixel was found).
 
     ``cds``: False for the held levels (what a readout without CDS shows, and
     a blinking pixel), True for the three-level pixels (traps through CDS,
     ``cds_interval_s`` apart: the data's readout, which the frames do not tell),
-    None for the population with more pixels. Amplitudes: lognormal, the
+    None for the population with more pixels (:func:`through_cds`). Amplitudes: lognormal, the
     median and the standard deviation of the logs of those found. Dwell times:
     log-uniform, its ends from the 10th and 90th percentiles of the logs
     (``q = a + p (b - a)`` for a uniform on ``[a, b]``), clipped to positive
@@ -254,10 +257,9 @@ def section(result: dict, cds: bool | None = None, cds_interval_s: float = 1e-5)
     the time ``t`` that gives its switching fraction with equal dwell times,
     ``q = (1 - e^(-2 tau / t)) / 2``, and both laws are the same.
     """
-    three = result.get("three_level") or {"pixels": []}
     if cds is None:
-        cds = len(three["pixels"]) > len(result["pixels"])
-    found = three if cds else result
+        cds = through_cds(result)
+    found = result["three_level"] if cds else result
     if not found["pixels"]:
         return None
 

@@ -236,7 +236,8 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
     fp = sensor.fixed_pattern
     t = sensor.transfer
     shape = sensor.shape
-    rts = telegraph_moments(sensor, maps=True)
+    rts = {name: (_pixel_map(p, m, shape), _pixel_map(p, v, shape))  # (mean, variance) maps
+           for name, (p, m, v) in telegraph_moments(sensor).items()}
     if exposure is not None:
         photo = exposure.collected_photo_e.astype(np.float64)
         dark = exposure.collected_dark_e.astype(np.float64) if exposure.collected_dark_e is not None else 0.0
@@ -248,8 +249,8 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
         dark = (fp.dark_rate.astype(np.float64) * c.exposure.integration_time_s if fp.dark_rate is not None else 0.0)
     blink_var = 0.0
     if "blinking" in rts:  # its mean with the dark charge; the variance of its time high with the charge's
-        dark = dark + rts["blinking"][1]
-        blink_var = rts["blinking"][2]
+        dark = dark + rts["blinking"][0]
+        blink_var = rts["blinking"][1]
     mean_n = np.broadcast_to(photo + dark, shape)
     shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0) + blink_var
     # the top code's charge (values within half a code of it round to it)
@@ -258,7 +259,7 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
     if c.source_follower.enabled:
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
     if "traps" in rts:
-        read = read + rts["traps"][2]
+        read = read + rts["traps"][1]
     col_read = fp.column_sigma.astype(np.float64) ** 2 if fp.column_sigma is not None else 0.0  # after it
     row_off = fp.row_offset.astype(np.float64) if fp.row_offset is not None else 0.0
     col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
@@ -266,7 +267,7 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
         _, _, lines_r, _, lines_c = exposure.readout_lines()
         row_off, col_off = lines_r[:, None], lines_c[None, :]
     if "traps" in rts and not c.source_follower.rts.cds:  # the held level's stationary mean
-        row_off = row_off + rts["traps"][1]
+        row_off = row_off + rts["traps"][0]
     if fp.pixel_offset is not None:  # with the row offsets: before the column gain
         row_off = row_off + fp.pixel_offset.astype(np.float64)
     if c.adc.enabled:  # after the gain, in DN: referred to e-
@@ -397,35 +398,34 @@ def _top_code(m: np.ndarray, v: np.ndarray, t) -> tuple[np.ndarray, np.ndarray]:
     return out, near
 
 
-def telegraph_moments(sensor: Sensor, maps: bool = False) -> dict:
+def telegraph_moments(sensor: Sensor) -> dict:
     """The random telegraph pixels' stationary moments at the sensor's exposure, per pixel (several traps summed).
 
-    ``traps`` (stage 6b, where on) and ``blinking`` (4b), each (pixels, mean e-, variance e-^2) as
-    :func:`~cmosnoise.model.stages.random_telegraph.trap_moments` and ``blink_moments`` give them, or with ``maps``
-    the mean and the variance as (rows, cols) float64 maps (pixels None). Empty with both stages off.
+    ``traps`` (stage 6b, where on) and ``blinking`` (4b), each (pixels uint64, mean e-, variance e-^2) as
+    :func:`~cmosnoise.model.stages.random_telegraph.trap_moments` and ``blink_moments`` give them. Empty with
+    both stages off.
     """
     from ..engine.telegraph import per_pixel
     from ..model.stages import random_telegraph as rt
 
     fp, c = sensor.fixed_pattern, sensor.config
     out = {}
-    parts = []
     if fp.traps is not None and c.source_follower.enabled:
         cds = c.source_follower.rts.cds_interval_s if c.source_follower.rts.cds else None
-        parts.append(("traps", fp.traps, rt.trap_moments(fp.traps, cds)))
+        out["traps"] = (fp.traps, rt.trap_moments(fp.traps, cds))
     if fp.blinkers is not None:
-        parts.append(("blinking", fp.blinkers, rt.blink_moments(fp.blinkers, c.exposure.integration_time_s)))
-    for name, signals, (mean, var) in parts:
+        out["blinking"] = (fp.blinkers, rt.blink_moments(fp.blinkers, c.exposure.integration_time_s))
+    for name, (signals, (mean, var)) in out.items():
         pixels, m = per_pixel(signals.index, mean)
-        _, v = per_pixel(signals.index, var)
-        if maps:
-            m_map, v_map = np.zeros(sensor.shape[0] * sensor.shape[1]), np.zeros(sensor.shape[0] * sensor.shape[1])
-            m_map[pixels.astype(np.int64)] = m
-            v_map[pixels.astype(np.int64)] = v
-            out[name] = (None, m_map.reshape(sensor.shape), v_map.reshape(sensor.shape))
-        else:
-            out[name] = (pixels, m, v)
+        out[name] = (pixels, m, per_pixel(signals.index, var)[1])
     return out
+
+
+def _pixel_map(pixels: np.ndarray, values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A (rows, cols) float64 map that is ``values`` at the flat indices ``pixels`` and 0 elsewhere."""
+    out = np.zeros(shape[0] * shape[1])
+    out[pixels.astype(np.int64)] = values
+    return out.reshape(shape)
 
 
 def _sparse_variance(values: np.ndarray, n: int) -> float:
