@@ -365,6 +365,47 @@ def test_summary_reports_dark_current_figures(tmp_path):
     assert d["map_median_e_per_s"] < d["map_mean_e_per_s"]  # the tail pulls the mean up
 
 
+def test_a_fixed_white_threshold_counts_at_every_temperature_against_the_same_rate(tmp_path):
+    """dark_current.white_threshold_* (--white-threshold) replaces the nearest point's tail threshold in every count;
+    without it each temperature counts against its own point's (100 e-/s at 25 C, 1560 e-/s = 250 aA at 65 C)."""
+    from cmosnoise.analysis import figures_of_merit as fom
+
+    shape = (400, 500)
+    n = shape[0] * shape[1]
+    for t, own in ((25, 100.0), (65, aa_to_e_per_s(250))):
+        default = Sensor(load_config(overrides=[f"sensor.temperature_c={t}", f"sensor.width={shape[1]}",
+                                                f"sensor.height={shape[0]}"]), seed=3)
+        fixed = Sensor(load_config(overrides=[f"sensor.temperature_c={t}", f"sensor.width={shape[1]}",
+                                              f"sensor.height={shape[0]}", "dark_current.white_threshold_aA=250"]), seed=3)
+        d, f = fom.dark_current(default), fom.dark_current(fixed)
+        assert d["threshold_e_per_s"] == pytest.approx(own) and f"({t:g} C)" in d["threshold_source"]
+        assert f["threshold_e_per_s"] == pytest.approx(aa_to_e_per_s(250))
+        assert f["threshold_source"] == "fixed by dark_current.white_threshold_aA = 250"
+        np.testing.assert_array_equal(default.dark_rate, fixed.dark_rate)  # the map is the same: only the count moves
+        assert f["map"]["white_pixels"] == int((fixed.dark_rate > aa_to_e_per_s(250)).sum())
+        # the count is Binomial(n, p) with p the model's exceedance at the fixed threshold: within Z of its sd
+        p = f["ppm_expected"] / 1e6
+        assert abs(f["map"]["white_pixels"] - n * p) <= Z * np.sqrt(n * p * (1 - p)) + 1
+    # the same unit converted: e-/s and aA give the same count; two units at once are refused
+    a = Sensor(load_config(overrides=["dark_current.white_threshold_e_per_s=500"]), seed=1)
+    assert fom.dark_map(a)["threshold_e_per_s"] == 500
+    with pytest.raises(CmosnoiseError, match="white_threshold once"):
+        load_config(overrides=["dark_current.white_threshold_e_per_s=500", "dark_current.white_threshold_aA=80"])
+    # on the command line, with the unit; the summary and the line say which threshold counted
+    r = cli("simulate", "--set", "sensor.width=64", "--set", "sensor.height=48", "--white-threshold", "250aA",
+            "--frames", "1", "--out", tmp_path / "o")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())["dark_current"]
+    assert summary["threshold_aA"] == pytest.approx(250) and summary["threshold_source"].startswith("fixed")
+    assert "white pixels:" in r.stdout and "fixed by dark_current.white_threshold_aA = 250" in r.stdout
+    r = cli("simulate", "--set", "sensor.width=64", "--set", "sensor.height=48", "--frames", "1",
+            "--out", tmp_path / "d")
+    assert "nearest characterization point's (25 C) tail threshold; --white-threshold fixes one" in r.stdout
+    for bad in ("12x", "-3", "nan", "250 mA"):
+        r = cli("simulate", "--white-threshold", bad, "--out", tmp_path / "bad")
+        assert r.returncode == 2 and "--white-threshold" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
 def test_readme_white_pixel_snippet_runs_on_what_tifffile_reads(tmp_path):
     """The README's Python snippet, on a real run's raw.tiff (a (frames, rows, cols) stack)."""
     import tifffile

@@ -129,6 +129,36 @@ def test_resume_finishes_an_interrupted_sweep_with_the_same_rows(tmp_path):
     assert r.returncode == 2 and "another sweep" in r.stderr
 
 
+def test_a_yield_study_over_a_list_item_runs_in_one_command(tmp_path):
+    """The white-pixel target of one characterization point, varied in one sweep (a list item, by its index): the
+    yield on the default flat field falls with the ppm, and each point's rows are those of a sweep with the value
+    set (--set), as the shell loop of sweeps gave them."""
+    from scipy import stats
+
+    vga = ["--preset", "paper-fig9-vga", "--set", "sensor.temperature_c=65", "--set", "sensor.width=320",
+           "--set", "sensor.height=240", "--instances", "20", "--spec", "couplets_after_correction<=0", "--workers", "2"]
+    r = cli("sweep", *vga, "--vary", "dark_current.points.0.tail.ppm_above=1000,4000", "--out", tmp_path / "y")
+    assert r.returncode == 0, r.stderr
+    assert "scene: flat:0.5 (the yield study's default" in r.stdout  # which scene, and why
+    index = (tmp_path / "y" / "index.html").read_text()
+    assert "scene flat:0.5" in index and "the yield study&#x27;s default" in index
+    summary = pd.read_csv(tmp_path / "y" / "summary.csv")
+    assert summary["dark_current.points.0.tail.ppm_above"].tolist() == [1000, 4000]
+    passed = (summary["yield"] * 20).round().astype(int).tolist()
+    assert passed[0] == 20  # expected couplets at 1000 ppm: 0.3 per instance, and the corrector removes them
+    # falling: one-sided Fisher exact test of the two pass counts at 1 % (20 of 20 against 14 of 20 gives 0.01)
+    assert stats.fisher_exact([[passed[0], 20 - passed[0]], [passed[1], 20 - passed[1]]], "greater").pvalue < 0.05
+    both = _sorted(tmp_path / "y" / "results.csv")
+    r = cli("sweep", *vga, "--set", "dark_current.points.0.tail.ppm_above=4000", "--scene", "flat:0.5",
+            "--out", tmp_path / "one")
+    assert r.returncode == 0, r.stderr
+    one = _sorted(tmp_path / "one" / "results.csv")
+    metrics = [*sw.METRICS, "pass"]
+    pd.testing.assert_frame_equal(both[both["point"] == 1][metrics].reset_index(drop=True), one[metrics])
+    r = cli("sweep", *SMALL, "--vary", "dark_current.points.5.tail.ppm_above=10,20", "--out", tmp_path / "bad")
+    assert r.returncode == 2 and "dark_current.points has 3 item(s)" in r.stderr
+
+
 def test_python_api_returns_a_dataframe():
     cfg = load_config(extra={"sensor": {"width": 64, "height": 48}})
     df = sw.run(cfg, ["prnu.sigma_pct=1,2"], instances=2, scene="flat:0.5", workers=1)

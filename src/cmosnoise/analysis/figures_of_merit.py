@@ -34,6 +34,26 @@ from . import noise_budget, white_pixels
 __all__ = ["temporal_noise", "key_figures", "dark_map", "dark_current", "frame0_white_pixels", "telegraph", "pane"]
 
 
+#: each figure's name and unit as the docs and the pages show them ({level}: the signal, e-, of a per-level figure)
+FIGURE_NAMES = {
+    "saturation_e": "saturation (e-)",
+    "dark_temporal_noise_e": "dark temporal noise (e- rms)",
+    "dynamic_range": "dynamic range (ratio)",
+    "dynamic_range_db": "dynamic range (dB)",
+    "snr_temporal_db_at_signal_e": "SNR, temporal, at {level} e- (dB)",
+    "snr_total_db_at_signal_e": "SNR with fixed pattern, at {level} e- (dB)",
+    "mean_e_per_s": "dark current, map mean (e-/s)",
+    "threshold_e_per_s": "white-pixel threshold (e-/s)",
+    "threshold_aA": "white-pixel threshold (aA)",
+    "threshold_source": "white-pixel threshold from",
+    "threshold": "white-pixel threshold (e-/s)",
+    "white_pixels": "white pixels (above the threshold)",
+    "ppm": "white pixels (ppm)",
+    "couplets": "couplets (white pixels side by side)",
+    "couplets_expected_random": "couplets expected at random",
+}
+
+
 def temporal_noise(stats: dict, gain_dn_per_e: float) -> dict:
     """Temporal noise from a :meth:`RunStats.result` (``var(frame k - frame k-1) / 2`` over the pixels).
 
@@ -73,14 +93,15 @@ def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
 def dark_map(sensor: Sensor) -> dict | None:
     """The dark-current map's mean and white pixels (None with dark current off).
 
-    ``mean_e_per_s``, ``threshold_e_per_s`` (the nearest characterization
-    point's, or None) and, with a threshold, :func:`white_pixels.report`'s
+    ``mean_e_per_s``, ``threshold_e_per_s`` (``dark_current.white_threshold_*``, else the nearest
+    characterization point's, or None), ``threshold_source`` (which) and, with a threshold, :func:`white_pixels.report`'s
     ``ppm``, ``white_pixels``, ``couplets`` and ``couplets_expected_random``.
     """
     state, rate = sensor.dark_state, sensor.dark_rate
     if state is None:
         return None
-    out = {"mean_e_per_s": float(rate.mean()), "threshold_e_per_s": state.threshold}
+    out = {"mean_e_per_s": float(rate.mean()), "threshold_e_per_s": state.threshold,
+           "threshold_source": state.threshold_source}
     if state.threshold is not None:
         rep = white_pixels.report(rate, state.threshold, sensor.cfa)
         out.update({k: rep[k] for k in rep if isinstance(rep[k], (int, float))})
@@ -115,6 +136,7 @@ def dark_current(sensor: Sensor, shot: Exposure | None = None, electrons0: np.nd
         thr = state.threshold
         out["threshold_e_per_s"] = thr
         out["threshold_aA"] = e_per_s_to_aa(thr)
+        out["threshold_source"] = state.threshold_source
         out["ppm_expected"] = state.expected_ppm_above()
         out["map"] = white_pixels.report(rate, thr, sensor.cfa)
         if shot is not None and electrons0 is not None:

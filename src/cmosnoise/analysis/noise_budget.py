@@ -43,6 +43,30 @@ if TYPE_CHECKING:
     from ..model.sensor import Sensor
 
 
+#: each source's name as the docs and the pages show it (the budget's keys are short JSON names)
+SOURCE_NAMES = {
+    "photon_shot": "photon shot noise",
+    "dark_shot": "dark-current shot noise",
+    "thermal": "source follower, thermal (white)",
+    "flicker": "source follower, flicker (1/f)",
+    "row": "row noise",
+    "column": "column noise",
+    "rts_traps": "random telegraph traps",
+    "rts_blinking": "blinking (dark-current RTS) pixels",
+    "quantization": "quantization",
+    "read_after_gain": "read noise after the gain",
+    "black_level_frame": "black level, frame to frame",
+    "dcnu": "DCNU (dark-current non-uniformity)",
+    "row_fixed": "row offsets",
+    "vfpn": "column offsets (VFPN)",
+    "pixel_offset": "pixel offsets (DSNU at zero exposure)",
+    "rts_level": "random telegraph held levels",
+    "black_level_cells": "black level per CFA channel",
+    "prnu": "PRNU",
+    "column_gain": "column gains",
+}
+
+
 def transfer_slope(sensor: Sensor, charge_e: float) -> float:
     """The nonlinearity's slope (output e- per collected e-) at ``charge_e``; 1 without one (stage 5b).
 

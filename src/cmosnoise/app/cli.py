@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import re
 import signal
 import sys
 import threading
@@ -39,6 +40,33 @@ app = typer.Typer(
     add_completion=False,
 )
 err_console = Console(stderr=True)
+
+
+_WHITE_UNITS = {"": "e_per_s", "e-/s": "e_per_s", "e/s": "e_per_s", "aa": "aA"}
+
+
+def _white_threshold(text: str) -> tuple[float, str]:
+    """``--white-threshold``: (value, unit of a ``dark_current.white_threshold_*`` key) from a number of e-/s or a
+    number with its unit (``1560e-/s``, ``250aA``)."""
+    m = re.fullmatch(r"\s*([-+]?[0-9.]+(?:[eE][-+]?\d+)?)\s*(e-/s|e/s|aA|aa|AA)?\s*", text)
+    unit = _WHITE_UNITS.get((m.group(2) or "").lower()) if m else None
+    try:
+        value = float(m.group(1)) if m else math.nan
+    except ValueError:
+        value = math.nan
+    if unit is None or not (math.isfinite(value) and value >= 0):
+        raise CmosnoiseError(f"--white-threshold {text!r}: give a dark current of 0 or more in e-/s or aA, e.g. "
+                             "1560 (e-/s), 1560e-/s or 250aA")
+    return value, unit
+
+
+def white_threshold_set(text: str | None) -> list[str]:
+    """``--white-threshold`` as a ``--set`` of ``dark_current.white_threshold_e_per_s`` or ``..._aA`` (none without
+    one)."""
+    if text is None:
+        return []
+    value, unit = _white_threshold(text)
+    return [f"dark_current.white_threshold_{unit}={value!r}"]
 
 
 def _version(value: bool):
@@ -136,6 +164,9 @@ PresetOpt = typer.Option(None, "--preset", "-p", help="start from a preset (see 
 SetOpt = typer.Option(None, "--set", "-s", help="override one key, e.g. --set prnu.sigma_pct=2 (repeatable)")
 DeviceOpt = typer.Option("cpu", "--device", help="where frames are made: cpu, or cuda (an NVIDIA GPU: pip install "
                          "'cmosnoise[cuda]'); the same bits")
+WhiteThresholdOpt = typer.Option(None, "--white-threshold", help="count white pixels above this dark current at "
+                                 "every temperature: e-/s, or with its unit, e.g. 1560e-/s or 250aA (default: the "
+                                 "nearest characterization point's tail threshold)")
 OverwriteOpt = typer.Option(False, "--overwrite", help="replace an existing non-empty output folder as a whole (else refused)")
 
 
@@ -155,13 +186,14 @@ def simulate(
     format_: Optional[List[str]] = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
     report: bool = typer.Option(False, "--report", help="also write report.html (self-contained run report)"),
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
+    white_threshold: Optional[str] = WhiteThresholdOpt,
     device: str = DeviceOpt,
     overwrite: bool = OverwriteOpt,
 ):
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
     from .run import simulate as run_simulate
 
-    spec = _sensor(config, preset, set_, _run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
+    spec = _sensor(config, preset, [*(set_ or []), *white_threshold_set(white_threshold)], _run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
     cfg = spec.config
     if _level(ctx) < 0:
         progress = False
@@ -195,6 +227,11 @@ def simulate(
         f"wrote {summary['frames']} frame(s) {cfg.sensor.height}x{cfg.sensor.width} {cfg.sensor.cfa} to {out}/ "
         f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {summary['timings_s']['per_frame'] * 1000:.1f} ms/frame)"
     )
+    dc = summary.get("dark_current") or {}
+    if "map" in dc:
+        _say(ctx, f"white pixels: {dc['map']['white_pixels']} in the dark-current map ({dc['map']['ppm']:.0f} ppm) above "
+                  f"{dc['threshold_e_per_s']:.4g} e-/s ({dc['threshold_aA']:.4g} aA), threshold: {dc['threshold_source']}"
+                  + ("" if dc["threshold_source"].startswith("fixed") else "; --white-threshold fixes one"))
     for warning in summary.get("warnings", []):
         _say(ctx, f"warning: {warning}")
     if "note" in summary["processing"]:
@@ -317,13 +354,14 @@ def explore(
     port: int = typer.Option(8765, "--port", min=1, max=65535, help="TCP port"),
     host: str = typer.Option("127.0.0.1", "--host", help="address to listen on (default loopback only; another is reachable by others)"),
     no_browser: bool = typer.Option(False, "--no-browser", help="do not open the page in a browser"),
+    white_threshold: Optional[str] = WhiteThresholdOpt,
 ):
     """A local web page: two sensors side by side, every parameter, the picture follows at once."""
     import socket
 
     from .explore import serve
 
-    cfg = _sensor(config, preset, set_).config
+    cfg = _sensor(config, preset, [*(set_ or []), *white_threshold_set(white_threshold)]).config
     try:
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         with socket.socket(family, socket.SOCK_STREAM) as probe:
@@ -351,6 +389,7 @@ def sweep(
     resume: bool = typer.Option(False, "--resume", help="continue the sweep in --out: skip the rows results.csv already holds"),
     overwrite: bool = OverwriteOpt,
     from_: Optional[Path] = typer.Option(None, "--from", help="rerun a sweep.yaml (its base configuration, grid, instances and spec)"),
+    white_threshold: Optional[str] = WhiteThresholdOpt,
     device: str = DeviceOpt,
     out: Path = typer.Option(Path("cmosnoise-sweep"), "--out", "-o", help="output folder"),
 ):
@@ -362,10 +401,10 @@ def sweep(
             opts = sw.sweep_from_yaml(from_)
         except (OSError, KeyError, TypeError, ValueError) as exc:
             raise CmosnoiseError(f"--from {str(from_)!r} is not a sweep.yaml: {exc}") from None
-        base = _sensor(None, None, None, opts["base"]).config  # a full configuration, merged over the defaults, checked
+        base = _sensor(None, None, white_threshold_set(white_threshold), opts["base"]).config  # merged over the defaults, checked
         vary, instances, frames, scene, spec = opts["vary"], opts["instances"], opts["frames"], opts["scene"], opts["specs"]
     else:
-        base = _sensor(config, preset, set_).config
+        base = _sensor(config, preset, [*(set_ or []), *white_threshold_set(white_threshold)]).config
     with _counting(ctx, "sweep") as progress:
         df = sw.run(base, vary or [], instances, out, frames, scene, spec, scheduler, workers, resume, overwrite,
                     progress=progress, say=lambda m: _say(ctx, m), metrics=metric, device=device)
@@ -482,8 +521,9 @@ def dataset(
     temperature: Optional[str] = typer.Option(None, "--temperature", help="LOW:HIGH C (uniform; default: each "
                                               "camera's)"),
     set_: Optional[List[str]] = SetOpt,
-    white_threshold: Optional[float] = typer.Option(None, "--white-threshold", min=0, help="dark current above "
-                                                    "which the mask calls a pixel white, e-/s (default: the model's)"),
+    white_threshold: Optional[str] = typer.Option(None, "--white-threshold", help="dark current above which the "
+                                                  "mask calls a pixel white: e-/s, or with its unit, e.g. 1560e-/s or "
+                                                  "250aA (default: the model's)"),
     seed: int = typer.Option(0, "--seed", min=0, max=2**62, help="the data set's seed: sample i depends on (seed, i)"),
     shard_size: int = typer.Option(64, "--shard-size", min=1, max=100000, help="samples per shard file"),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="make the shards on an existing Dask scheduler"),
@@ -511,10 +551,16 @@ def dataset(
     except ValueError:
         raise CmosnoiseError(f"--crop {crop!r}: give SIZE or HEIGHTxWIDTH in pixels, e.g. 512 or 256x384") from None
     sources = ds.image_sources(images) if images is not None else ds.BUILTIN_SCENES
+    white_e_per_s = None
+    if white_threshold is not None:
+        from ..model.units import aa_to_e_per_s
+
+        value, unit = _white_threshold(white_threshold)
+        white_e_per_s = aa_to_e_per_s(value) if unit == "aA" else value
     recipe = ds.Recipe(samples=samples, crop=shape, seed=seed, cameras=tuple(camera or ("led",)), sources=sources,
                        light_e=pair(light, "--light"), integration_time_s=pair(exposure, "--exposure"),
                        temperature_c=pair(temperature, "--temperature"), overrides=tuple(set_ or ()),
-                       white_threshold_e_per_s=white_threshold, shard_size=shard_size, format=format_.lower())
+                       white_threshold_e_per_s=white_e_per_s, shard_size=shard_size, format=format_.lower())
     with _counting(ctx, "dataset", "samples") as progress:
         ds.build(recipe, out, resume=resume, overwrite=overwrite, scheduler=scheduler, workers=workers,
                  progress=progress, say=lambda m: _say(ctx, m), device=device)

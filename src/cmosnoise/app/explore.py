@@ -185,7 +185,11 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
 
     @errors
     async def meta(request: Request):
+        from ..analysis.figures_of_merit import FIGURE_NAMES
+        from ..analysis.noise_budget import SOURCE_NAMES
+
         return JSONResponse({"fields": fields(), "presets": preset_names(), "scenes": list(scene_mod.BUILTINS),
+                             "names": {"figures": FIGURE_NAMES, "budget": SOURCE_NAMES},
                              "base": bench.base.model_dump(mode="json"), "scene": bench.scene,
                              "limits": {"upload_mb": MAX_UPLOAD / 1e6, "sensor_mp": MAX_SENSOR_PIXELS / 1e6}})
 

@@ -103,7 +103,9 @@ def noise_budget_bars(ax, dark: dict, scene: dict) -> None:
     ax.barh(y - 0.2, [dark["temporal_rms_e"].get(n, 0) for n in names], 0.4, label="dark")
     ax.barh(y + 0.2, [scene["temporal_rms_e"].get(n, 0) for n in names], 0.4,
             label=f"scene mean ({scene['signal_e']:.0f} e-)")
-    ax.set_yticks(y, names)
+    from ..analysis.noise_budget import SOURCE_NAMES
+
+    ax.set_yticks(y, [SOURCE_NAMES.get(n, n) for n in names])
     ax.invert_yaxis()
     ax.set_xlabel("temporal noise [e- rms]")
     ax.set_title("Noise budget")

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from .._version import __version__
-from ..analysis import white_pixels
+from ..analysis import noise_budget, white_pixels
 from ..isp.reconstruction import encode_srgb8
 from ..model import scene as scene_mod
 from . import plots
@@ -118,6 +118,7 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
     if dc and "map" in dc:
         rows += [
             (f"ppm above {dc['threshold_aA']:.0f} aA ({dc['threshold_e_per_s']:.0f} e-/s), map", dc["map"]["ppm"], "ppm"),
+            ("white-pixel threshold from", dc["threshold_source"], ""),
             ("ppm above threshold, configured", dc["ppm_expected"], "ppm"),
             ("white pixels (map) / couplets / couplets expected at random",
              f"{dc['map']['white_pixels']} / {dc['map']['couplets']} / {dc['map']['couplets_expected_random']:.1f}", ""),
@@ -151,10 +152,12 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
     # ---- noise budget
     nb = summary["noise_budget"]
     names = sorted(set(nb["dark"]["temporal_rms_e"]) | set(nb["scene_mean"]["temporal_rms_e"]))
-    rows = [(n, nb["dark"]["temporal_rms_e"].get(n, 0.0), nb["scene_mean"]["temporal_rms_e"].get(n, 0.0)) for n in names]
+    label = noise_budget.SOURCE_NAMES.get
+    rows = [(label(n, n), nb["dark"]["temporal_rms_e"].get(n, 0.0), nb["scene_mean"]["temporal_rms_e"].get(n, 0.0))
+            for n in names]
     rows.append(("total (temporal)", nb["dark"]["temporal_total_e"], nb["scene_mean"]["temporal_total_e"]))
     fp_names = sorted(set(nb["dark"]["fixed_pattern_rms_e"]) | set(nb["scene_mean"]["fixed_pattern_rms_e"]))
-    rows += [(f"fixed pattern: {n}", nb["dark"]["fixed_pattern_rms_e"].get(n, 0.0), nb["scene_mean"]["fixed_pattern_rms_e"].get(n, 0.0)) for n in fp_names]
+    rows += [(f"fixed pattern: {label(n, n)}", nb["dark"]["fixed_pattern_rms_e"].get(n, 0.0), nb["scene_mean"]["fixed_pattern_rms_e"].get(n, 0.0)) for n in fp_names]
     fig, ax = plots.figure(figsize=(6.4, 3.6))
     plots.noise_budget_bars(ax, nb["dark"], nb["scene_mean"])
     parts.append("<h2>Noise budget</h2><div class='row'>"

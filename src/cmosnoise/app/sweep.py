@@ -36,6 +36,8 @@ from ..io.output import OutputFolder, resumable_mode
 
 #: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
 DEFECT_TOLERANCE_E = 150.0
+#: the scene of a yield study (--spec) without --scene: a flat field at half the peak rate
+YIELD_SCENE = "flat:0.5"
 #: tasks in flight at once: the scheduler's memory does not grow with the sweep
 BATCH_PER_WORKER = 4
 SPEC_RE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(<=|>=|==|!=|<|>)\s*([-+0-9.eE]+|inf|-inf)\s*$")
@@ -106,29 +108,24 @@ def grid(axes: list[Axis]) -> list[dict]:
     return points
 
 
-def _nested(point: dict) -> dict:
-    out: dict = {}
-    for key, value in point.items():
-        node = out
-        parts = key.split(".")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = value
-    return out
-
-
 def point_config(base, point: dict):
-    """The base configuration with a point's values, validated (physics included)."""
-    from ..config.loading import merge_updates
+    """The base configuration with a point's values, validated (physics included); a number in a key indexes a
+    list (``dark_current.points.0.tail.ppm_above``), as ``--set`` does."""
+    from ..config.loading import with_values
     from ..model.spec import resolve
 
-    if any(re.search(r"\.\d+(\.|$)", k) for k in point):
-        raise CmosnoiseError("--vary: list items (points.0...) cannot be varied; vary a whole section instead")
     try:
-        return resolve(merge_updates(base, _nested(point))).config
+        return resolve(with_values(base, point)).config
     except CmosnoiseError as exc:
+        if str(exc).startswith("--vary"):  # the key itself (a list index out of range): no point to name
+            raise
         shown = ", ".join(f"{k}={v}" for k, v in point.items())
         raise CmosnoiseError(f"sweep point {shown}: {str(exc)}") from None
+
+
+def is_flat_scene(scene: str) -> bool:
+    """Whether ``scene`` is the built-in flat field (``flat`` or ``flat:LEVEL``)."""
+    return scene.strip().lower().split(":")[0] == "flat"
 
 
 def instance_seed(root_seed: int, instance: int) -> int:
@@ -269,6 +266,7 @@ class Plan:
     scene: str
     specs: list[Spec]
     plot_metrics: tuple[str, ...] = METRICS
+    scene_why: str = ""  #: why this scene (the index and the command line say it)
 
     @property
     def keys(self) -> list[str]:
@@ -300,7 +298,18 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
     points = grid(axes) if axes else [{}]
     checked = [point_config(base, p) for p in points]
     configs = [c.model_dump(mode="json") for c in checked]
-    scene = scene or base.scene.source
+    parsed_specs = [parse_spec(s) for s in specs or []]
+    if scene:
+        why = "given with --scene"
+    elif parsed_specs:
+        scene, why = YIELD_SCENE, ("the yield study's default: a flat field, so that no detail of a picture "
+                                   "counts as a defect; --scene picks another")
+    else:
+        scene, why = base.scene.source, "the configuration's scene.source"
+    if not is_flat_scene(scene) and "residual_defects" in (metrics or METRICS):
+        why += ("; residual_defects and couplets_after_correction count what processing leaves beyond "
+                f"{DEFECT_TOLERANCE_E:g} e- of the expected signal, and on a scene with detail that includes the detail: "
+                "use a flat scene (flat:0.5) for defect yield")
     from ..model import footprint
     from ..model import scene as scene_mod
 
@@ -321,8 +330,8 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
         except CmosnoiseError as exc:
             shown = ", ".join(f"{k}={v}" for k, v in point.items())
             raise CmosnoiseError(f"sweep point {shown}: {exc}" if shown else str(exc)) from None
-    return Plan(base, axes, points, configs, instances, frames, scene, [parse_spec(s) for s in specs or []],
-                tuple(metrics) if metrics else METRICS)
+    return Plan(base, axes, points, configs, instances, frames, scene, parsed_specs,
+                tuple(metrics) if metrics else METRICS, why)
 
 
 def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -500,7 +509,7 @@ def _plots(p: Plan, summary, out: Path) -> list[str]:
     others = p.axes[1:]
     groups = list(itertools.product(*(a.values for a in others))) if others else [()]
     names = []
-    metrics = [m for m in p.plot_metrics if f"{m}_mean" in summary] + (["yield"] if p.specs else [])
+    metrics = (["yield"] if p.specs else []) + [m for m in p.plot_metrics if f"{m}_mean" in summary]  # the yield first
     for m in metrics:
         fig = Figure(figsize=(6.4, 4.2), dpi=100)
         ax = fig.add_subplot()
@@ -536,7 +545,7 @@ def _plots(p: Plan, summary, out: Path) -> list[str]:
             ax.legend(fontsize=8)
         fig.tight_layout()
         name = f"{m}.png"
-        fig.savefig(out / name)
+        fig.savefig(out / name, bbox_inches="tight")  # long key names and labels are kept whole
         names.append(name)
     return names
 
@@ -545,15 +554,19 @@ def _index(p: Plan, summary, plots: list[str], out: Path) -> None:
     import html
 
     varied = ", ".join(" & ".join(a.keys) for a in p.axes) or "nothing (one point)"
-    table = summary[[c for c in summary.columns if c in ("point", *p.keys, "instances", "yield", "yield_lo", "yield_hi")
-                     or c.endswith("_mean")]].to_html(index=False, float_format=lambda v: f"{v:.4g}", border=0)
+    shown = summary[[c for c in summary.columns if c in ("point", *p.keys, "instances", "yield", "yield_lo", "yield_hi")
+                     or c.endswith("_mean")]]
+    shown = shown.rename(columns=lambda c: re.sub(r"([_.])", "\\1\u200b", c))  # long names break at _ and ., not mid-word
+    table = shown.to_html(index=False, float_format=lambda v: f"{v:.4g}", border=0)
     imgs = "\n".join(f'<figure><img src="{html.escape(n)}" alt="{html.escape(n)}"></figure>' for n in plots)
     (out / "index.html").write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>cmosnoise sweep</title>
-<style>body{{font:14px system-ui,sans-serif;margin:20px}}figure{{display:inline-block;margin:6px}}
-table{{border-collapse:collapse}}td,th{{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right}}</style></head><body>
-<h1>cmosnoise sweep</h1><p>Varied: {html.escape(varied)}; {p.instances} instance(s) per point; scene {html.escape(p.scene)}.
+<style>body{{font:14px system-ui,sans-serif;margin:20px}}figure{{display:inline-block;margin:4px;width:600px;max-width:100%;vertical-align:top}}
+.table{{overflow-x:auto;max-width:100%}}table{{border-collapse:collapse}}
+td,th{{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right}}th{{max-width:10em;font-weight:600}}img{{width:100%;height:auto}}</style></head><body>
+<h1>cmosnoise sweep</h1><p>Varied: {html.escape(varied)}; {p.instances} instance(s) per point; scene {html.escape(p.scene)}
+({html.escape(p.scene_why)}).
 Rows: results.csv; per point: summary.csv; the sweep itself: sweep.yaml.</p>
-{table}
+<div class="table">{table}</div>
 {imgs}
 </body></html>
 """)
@@ -580,6 +593,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     base = _as_spec(base).config
     check_device(device, "--device")
     p = plan(base, vary, instances, frames, scene, specs, metrics)
+    say(f"scene: {p.scene} ({p.scene_why})")
     tmp = None
     if out is None:
         tmp = tempfile.TemporaryDirectory(prefix="cmosnoise-sweep-")

@@ -61,40 +61,56 @@ def apply_overrides(data: dict, overrides: list[str], defaults: dict | None = No
     out = copy.deepcopy(data)
     for text in overrides:
         path, value = parse_override(text)
-        node, default = out, defaults
-        for i, p in enumerate(path):
-            last = i == len(path) - 1
-            key = _index(node, p, text, path[: i + 1]) if isinstance(node, list) else p
-            if default is not None:
-                try:
-                    default = default[key]
-                except (KeyError, IndexError, TypeError):
-                    default = None
-            if last:
-                if isinstance(node, list) and key == len(node):
-                    node.append(value)
-                else:
-                    node[key] = value
-                break
-            nxt = node[key] if (isinstance(node, dict) and key in node) or (isinstance(node, list) and key < len(node)) else None
-            if not isinstance(nxt, (dict, list)):
-                nxt = copy.deepcopy(default) if isinstance(default, list) else {}  # only lists: a dict stays sparse
-                if isinstance(node, list) and key == len(node):
-                    node.append(nxt)
-                else:
-                    node[key] = nxt
-            node = nxt
+        _apply(out, path, value, defaults, f"--set {text!r}")
     return out
+
+
+def apply_values(data: dict, values: dict[str, Any], defaults: dict | None = None, where: str = "--vary") -> dict:
+    """``data`` with each dotted key of ``values`` set, as :func:`apply_overrides` does (list items by their index:
+    ``dark_current.points.0.tail.ppm_above``); ``where`` names the option in errors."""
+    out = copy.deepcopy(data)
+    for key, value in values.items():
+        path = key.split(".")
+        if any(not p for p in path):
+            raise CmosnoiseError(f"{where} {key!r}: the key must be a dotted path such as prnu.sigma_pct")
+        _apply(out, path, copy.deepcopy(value), defaults, f"{where} {key}")
+    return out
+
+
+def _apply(out: dict, path: list[str], value: Any, defaults: dict | None, text: str) -> None:
+    node, default = out, defaults
+    for i, p in enumerate(path):
+        last = i == len(path) - 1
+        key = _index(node, p, text, path[: i + 1]) if isinstance(node, list) else p
+        if default is not None:
+            try:
+                default = default[key]
+            except (KeyError, IndexError, TypeError):
+                default = None
+        if last:
+            if isinstance(node, list) and key == len(node):
+                node.append(value)
+            else:
+                node[key] = value
+            return
+        nxt = node[key] if (isinstance(node, dict) and key in node) or (isinstance(node, list) and key < len(node)) else None
+        if not isinstance(nxt, (dict, list)):
+            nxt = copy.deepcopy(default) if isinstance(default, list) else {}  # only lists: a dict stays sparse
+            if isinstance(node, list) and key == len(node):
+                node.append(nxt)
+            else:
+                node[key] = nxt
+        node = nxt
 
 
 def _index(node: list, part: str, text: str, path: list[str]) -> int:
     try:
         k = int(part)
     except ValueError:
-        raise CmosnoiseError(f"--set {text!r}: {'.'.join(path[:-1])} is a list; index it with a number, e.g. "
+        raise CmosnoiseError(f"{text}: {'.'.join(path[:-1])} is a list; index it with a number, e.g. "
                              f"{'.'.join(path[:-1])}.0") from None
     if not 0 <= k <= len(node):
-        raise CmosnoiseError(f"--set {text!r}: {'.'.join(path[:-1])} has {len(node)} item(s); "
+        raise CmosnoiseError(f"{text}: {'.'.join(path[:-1])} has {len(node)} item(s); "
                              f"use an index from 0 to {len(node) - 1} (or {len(node)} to append)")
     return k
 
@@ -234,6 +250,13 @@ def load_config(
     if overrides:
         data = apply_overrides(data, overrides, Config().model_dump(mode="json"))
     return _validate(data)
+
+
+def with_values(config: Config, values: dict[str, Any], where: str = "--vary") -> Config:
+    """A new schema-valid configuration: ``config`` with each dotted key of ``values`` set (list items by their
+    index), every value ``config`` set kept (as :func:`merge_updates`)."""
+    data = config.model_dump(mode="json", exclude_unset=True)
+    return _validate(apply_values(data, values, Config().model_dump(mode="json"), where))
 
 
 def merge_updates(config: Config, updates: dict) -> Config:

@@ -386,6 +386,17 @@ class DarkCurrentSection(Section):
     points: list[DarkPoint] = Field(default_factory=lambda: [DarkPoint(**p) for p in _default_dark_points()], min_length=1,
                                     description="characterization points (one or more temperatures)")
     rts: DarkCurrentRtsSection = Field(default_factory=DarkCurrentRtsSection)
+    white_threshold_e_per_s: Optional[float] = Field(
+        None, ge=0, le=1e9, description="count white pixels above this rate, e-/s per pixel, at every temperature "
+        "(null: the nearest characterization point's tail threshold)")
+    white_threshold_aA: Optional[float] = Field(None, ge=0, le=1e8, description="the white-pixel threshold, aA per pixel")
+    white_threshold_nA_per_cm2: Optional[float] = Field(None, ge=0, le=1e9, description="the white-pixel threshold, "
+                                                        "nA/cm^2 (needs sensor.pixel_pitch_um)")
+
+    @model_validator(mode="after")
+    def _white_units(self):
+        _one_of(self, "white_threshold", required=False)
+        return self
 
     @field_validator("points")
     @classmethod

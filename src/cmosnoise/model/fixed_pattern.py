@@ -36,6 +36,7 @@ from typing import Callable
 import numpy as np
 
 from ..engine.telegraph import Telegraphs
+from . import physics
 from .seeds import fixed_key, pixel_index
 from .spec import SensorSpec
 from .stages import (
@@ -201,7 +202,7 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
     if c.dark_current.enabled:
         d = c.dark_current
         state = dark_current.at_temperature(list(spec.dark_points), c.sensor.temperature_c, d.doubling_c,
-                                            d.tail_doubling_c)
+                                            d.tail_doubling_c, physics.white_threshold(c))
         maps["dark_state"] = state
 
         def dark():

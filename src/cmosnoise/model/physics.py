@@ -112,6 +112,17 @@ def nonlinearity_curve(config: Config):
 MIN_CV, MAX_CV = 1e-6, 1e3
 
 
+def white_threshold(config: Config) -> tuple[float, str] | None:
+    """The fixed white-pixel threshold of ``config`` in e-/s and the key that gave it, or None (each temperature
+    then counts against its nearest characterization point's tail threshold)."""
+    d = config.dark_current
+    rate = rate_e_per_s(d, "white_threshold", config.sensor.pixel_pitch_um)
+    if rate is None:
+        return None
+    unit = next(u for u, _ in _RATE_CONVERSIONS if getattr(d, f"white_threshold_{u}") is not None)
+    return rate, f"dark_current.white_threshold_{unit} = {getattr(d, f'white_threshold_{unit}'):g}"
+
+
 def dark_points(config: Config) -> list[Point]:
     """The dark-current characterization points in e-/s; raises on an invalid body or unreachable ppm."""
     pitch = config.sensor.pixel_pitch_um

@@ -87,7 +87,8 @@ function buildPanel() {
   const parents = new Set(keys.map((f) => f.key.split(".").slice(0, -1).join(".")));
   const sections = {};
   const quick = ["seed", "sensor.iso", "sensor.gain_db", "sensor.temperature_c", "exposure.integration_time_s", "adc.full_scale_e",
-                 "source_follower.rts.enabled", "dark_current.rts.enabled", "sensor.frame_rate_hz"];  // RTS: press play
+                 "dark_current.white_threshold_e_per_s", "source_follower.rts.enabled", "dark_current.rts.enabled",
+                 "sensor.frame_rate_hz"];  // RTS: press play
   const add = (section, f, key) => {
     if (!sections[section]) {
       const d = document.createElement("details");
@@ -373,6 +374,9 @@ function figures(p) {
     showFigures(p, await resp.json());
   }, 500);   // once the slider rests: the figures never take the CPU from the next picture
 }
+// the figures' names and units (the server's FIGURE_NAMES and SOURCE_NAMES: one table for the docs and the pages)
+const figName = (k, level) => { const n = (S.meta.names || {}).figures || {}; return n[k] ? n[k].replace("{level}", level) : (level ? `${k} ${level}` : k); };
+const sourceName = (k) => ((S.meta.names || {}).budget || {})[k] || k;
 const fmt = (v, d = 3) => (v == null ? "-" : typeof v === "number" ? Number(v.toPrecision(d)).toLocaleString("en") : String(v));
 function showFigures(p, d) {
   const box = $("figures" + p);
@@ -384,10 +388,10 @@ function showFigures(p, d) {
   title.textContent = `${p}: key figures`;
   box.appendChild(title);
   for (const [k, v] of Object.entries(kf)) {
-    if (typeof v === "object" && v !== null) { for (const [k2, v2] of Object.entries(v)) row(`${k} ${k2}`, fmt(v2)); }
-    else row(k, fmt(v));
+    if (typeof v === "object" && v !== null) { for (const [k2, v2] of Object.entries(v)) row(figName(k, k2), fmt(v2)); }
+    else row(figName(k), fmt(v));
   }
-  if (d.dark) for (const [k, v] of Object.entries(d.dark)) row(`dark: ${k}`, fmt(v));
+  if (d.dark) for (const [k, v] of Object.entries(d.dark)) if (k !== "threshold") row(figName(k), fmt(v));  // threshold: = threshold_e_per_s
   box.appendChild(t);
   const b = d.budget || {};
   const h = document.createElement("strong");
@@ -398,7 +402,7 @@ function showFigures(p, d) {
   const top = Math.max(1e-9, ...all.map((x) => x[1]));
   for (const [k, v, cls] of all) {
     const r = bars.insertRow();
-    r.insertCell().textContent = k + (cls ? " (fixed)" : "");
+    r.insertCell().textContent = sourceName(k) + (cls ? " (fixed)" : "");
     const c = r.insertCell(); const bar = document.createElement("span");
     bar.className = "bar " + cls; bar.style.width = `${Math.round(260 * v / top)}px`; c.appendChild(bar);
     const n = r.insertCell(); n.className = "v"; n.textContent = fmt(v);

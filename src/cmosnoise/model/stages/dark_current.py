@@ -86,12 +86,14 @@ class DarkState:
     std: float  #: body std, e-/s
     tail_fraction: float
     tail_max: float  #: e-/s
-    threshold: float | None  #: the nearest point's white-pixel threshold, e-/s
+    threshold: float | None  #: the white-pixel threshold every count uses, e-/s (see ``threshold_source``)
     lo: HeavyTail | None = None
     hi: HeavyTail | None = None
     w: float = 0.0
     body_scale: float = 1.0
     tail_scale: float = 1.0
+    #: where ``threshold`` comes from: a fixed key, or the characterization point it was taken from
+    threshold_source: str = ""
 
     @property
     def between(self) -> bool:
@@ -156,25 +158,39 @@ def _log_lerp(a: float, b: float, w: float) -> float:
     return math.exp((1 - w) * math.log(a) + w * math.log(b))
 
 
-def at_temperature(points: list[Point], temperature_c: float, doubling_c: float = 7.0, tail_doubling_c: float = 10.0) -> DarkState:
-    """The DCNU parameters at ``temperature_c`` from the characterization ``points``."""
+def at_temperature(points: list[Point], temperature_c: float, doubling_c: float = 7.0, tail_doubling_c: float = 10.0,
+                   white_threshold: tuple[float, str] | None = None) -> DarkState:
+    """The DCNU parameters at ``temperature_c`` from the characterization ``points``.
+
+    ``white_threshold``: (e-/s, where it comes from), the threshold every white-pixel count uses at any
+    temperature; without it, the nearest characterization point's tail threshold (which moves with the
+    temperature: 100 e-/s at 25 C and 1560 e-/s at 65 C by default, so counts at two temperatures then differ in
+    their threshold as well as in the dark current). The map is the same either way.
+    """
     pts = sorted(points, key=lambda p: p.temperature_c)
     models = [p.model() for p in pts]
     t = temperature_c
     nearest = min(range(len(pts)), key=lambda i: (abs(pts[i].temperature_c - t), -pts[i].temperature_c))
+    near = pts[nearest]
+    if white_threshold is not None:
+        count = {"threshold": white_threshold[0], "threshold_source": f"fixed by {white_threshold[1]}"}
+    elif near.threshold is not None:
+        count = {"threshold": near.threshold,
+                 "threshold_source": f"the nearest characterization point's ({near.temperature_c:g} C) tail threshold"}
+    else:
+        count = {"threshold": None, "threshold_source": "none: no characterization point has a tail threshold"}
     at_point = [k for k, p in enumerate(pts) if p.temperature_c == t]
     if at_point or t <= pts[0].temperature_c or t >= pts[-1].temperature_c:
         i = at_point[0] if at_point else (0 if t <= pts[0].temperature_c else len(pts) - 1)
         p, m = pts[i], models[i]
         sb = 2.0 ** ((t - p.temperature_c) / doubling_c)
         st = 2.0 ** ((t - p.temperature_c) / tail_doubling_c)
-        return DarkState(t, p.family, p.mean * sb, p.std * sb, m.tail_fraction, m.tail_max * st, p.threshold,
-                         lo=m, body_scale=sb, tail_scale=st)
+        return DarkState(t, p.family, p.mean * sb, p.std * sb, m.tail_fraction, m.tail_max * st, lo=m, body_scale=sb,
+                         tail_scale=st, **count)
     j = next(k for k in range(1, len(pts)) if pts[k].temperature_c >= t)
     a, b = pts[j - 1], pts[j]
     w = (t - a.temperature_c) / (b.temperature_c - a.temperature_c)
     ma, mb = models[j - 1], models[j]
-    near = pts[nearest]
     family = a.family if a.family == b.family else f"{a.family} to {b.family}"
     return DarkState(
         t,
@@ -183,8 +199,7 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
         _log_lerp(a.std, b.std, w),
         (1 - w) * ma.tail_fraction + w * mb.tail_fraction,
         _log_lerp(ma.tail_max, mb.tail_max, w),
-        near.threshold,
-        lo=ma, hi=mb, w=w,
+        lo=ma, hi=mb, w=w, **count,
     )
 
 
