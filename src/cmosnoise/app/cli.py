@@ -60,6 +60,16 @@ def _white_threshold(text: str) -> tuple[float, str]:
     return value, unit
 
 
+def _white_e_per_s(text: str | None) -> float | None:
+    """``--white-threshold`` in e-/s (None without one)."""
+    if text is None:
+        return None
+    from ..model.units import aa_to_e_per_s
+
+    value, unit = _white_threshold(text)
+    return aa_to_e_per_s(value) if unit == "aA" else value
+
+
 def white_threshold_set(text: str | None) -> list[str]:
     """``--white-threshold`` as a ``--set`` of ``dark_current.white_threshold_e_per_s`` or ``..._aA`` (none without
     one)."""
@@ -416,6 +426,39 @@ def sweep(
 
 
 @app.command()
+def compare(
+    ctx: typer.Context,
+    run_a: Path = typer.Argument(..., help="a cmosnoise simulate output folder"),
+    run_b: Path = typer.Argument(..., help="another one"),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="also write compare.txt, compare.json and "
+                                       "compare.html (the previews side by side and their difference) here"),
+    instances: int = typer.Option(8, "--instances", help="further instances of each run that "
+                                  "measure each figure's sampling error"),
+    white_threshold: Optional[str] = typer.Option(None, "--white-threshold", help="count both runs' white pixels "
+                                                  "above this dark current: e-/s, or 1560e-/s, 250aA (default: "
+                                                  "run A's threshold)"),
+    overwrite: bool = OverwriteOpt,
+):
+    """Two runs side by side: key figures, noise budget and white pixels, each difference against sampling error."""
+    from . import compare as cmp
+
+    with _counting(ctx, "compare", "instances") as progress:
+        def factory(total: int):
+            done = [0]
+
+            def advance():
+                done[0] += 1
+                progress(done[0], total)
+            return advance
+
+        result = cmp.run(run_a, run_b, out, instances, _white_e_per_s(white_threshold), overwrite, factory)
+    if _level(ctx) >= 0:
+        typer.echo(cmp.text_table(result), nl=False)
+    if out is not None:
+        _say(ctx, f"wrote compare.txt, compare.json and compare.html to {out}/")
+
+
+@app.command()
 def fit(
     ctx: typer.Context,
     frames_from: Path = typer.Option(..., "--frames-from", help="a manifest .yaml of stacks, or an EMVA 1288 descriptor (file or folder)"),
@@ -551,12 +594,7 @@ def dataset(
     except ValueError:
         raise CmosnoiseError(f"--crop {crop!r}: give SIZE or HEIGHTxWIDTH in pixels, e.g. 512 or 256x384") from None
     sources = ds.image_sources(images) if images is not None else ds.BUILTIN_SCENES
-    white_e_per_s = None
-    if white_threshold is not None:
-        from ..model.units import aa_to_e_per_s
-
-        value, unit = _white_threshold(white_threshold)
-        white_e_per_s = aa_to_e_per_s(value) if unit == "aA" else value
+    white_e_per_s = _white_e_per_s(white_threshold)
     recipe = ds.Recipe(samples=samples, crop=shape, seed=seed, cameras=tuple(camera or ("led",)), sources=sources,
                        light_e=pair(light, "--light"), integration_time_s=pair(exposure, "--exposure"),
                        temperature_c=pair(temperature, "--temperature"), overrides=tuple(set_ or ()),
