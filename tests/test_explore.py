@@ -305,6 +305,9 @@ def test_another_host_is_served_only_when_asked_and_with_a_warning():
         with pytest.raises(urllib.error.HTTPError) as info:
             urllib.request.urlopen(req, timeout=10)
         assert info.value.code == 400
+        stop_process(proc)  # SIGTERM: a server stops; it had nothing to write, and does not say it wrote nothing
+        rest = proc.stdout.read()
+        assert "cmosnoise: stopped (SIGTERM)" in rest and "nothing was written" not in rest, rest
     finally:
         stop_process(proc)
 

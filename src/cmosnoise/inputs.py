@@ -160,6 +160,15 @@ def _from_shape(shape: tuple[int, ...]) -> tuple[int, int, int]:
     return shape[-2], shape[-1], planes
 
 
+def decoder_message(exc: Exception) -> str:
+    """An image decoder's failure in one line; imageio's "Could not find a backend" (with its stray backticks)
+    said as what it means."""
+    first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    if "Could not find a backend" in first:
+        return "no image reader knows its format (give a PNG, JPEG, TIFF or another picture Pillow reads, or a .npy array)"
+    return first
+
+
 def check_image_pixels(path: str | Path, what: str, max_pixels: int, max_plane_pixels: int | None = None,
                        hint: str = "") -> tuple[int, int, int]:
     """Refuse an image whose frames or pages hold more than ``max_pixels`` pixels in all (or one plane more
@@ -171,8 +180,7 @@ def check_image_pixels(path: str | Path, what: str, max_pixels: int, max_plane_p
     except CmosnoiseError:
         raise
     except Exception as exc:
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise CmosnoiseError(f"{what} {str(p)!r} cannot be read as an image: {first}") from None
+        raise CmosnoiseError(f"{what} {str(p)!r} cannot be read as an image: {decoder_message(exc)}") from None
     if max_plane_pixels is not None and rows * cols > max_plane_pixels:
         raise CmosnoiseError(f"{what} {str(p)!r} has a {cols} x {rows} frame; at most {max_plane_pixels / 1e6:g} "
                              f"megapixels a frame are read{hint}")

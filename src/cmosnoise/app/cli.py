@@ -235,7 +235,8 @@ def simulate(
     _say(
         ctx,
         f"wrote {summary['frames']} frame(s) {cfg.sensor.height}x{cfg.sensor.width} {cfg.sensor.cfa} to {out}/ "
-        f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {summary['timings_s']['per_frame'] * 1000:.1f} ms/frame)"
+        f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {summary['timings_s']['frame_s'] * 1000:.1f} "
+        f"ms/frame after {summary['timings_s']['set_up']:.2f} s of set-up)"
     )
     dc = summary.get("dark_current") or {}
     if "map" in dc:
@@ -682,15 +683,32 @@ def run(argv: list[str] | None = None) -> int:
         return 1
     except Terminated as exc:
         name = "Ctrl-C" if exc.signum == signal.SIGINT else signal.Signals(exc.signum).name
-        print(f"cmosnoise: interrupted ({name}); nothing was written", file=sys.stderr)
+        print(f"cmosnoise: {_stopped(argv)} ({name}){_unwritten(argv)}", file=sys.stderr)
         return 128 + exc.signum
     except (KeyboardInterrupt, typer.Abort):
-        print("cmosnoise: interrupted; nothing was written", file=sys.stderr)
+        print(f"cmosnoise: {_stopped(argv)}{_unwritten(argv)}", file=sys.stderr)
         return 130
     finally:
         sys.unraisablehook = unraisable
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+#: commands that write no output folder: a signal stops them, it does not cut a result short
+_NO_OUTPUT = ("explore", "presets", "config")
+
+
+def _command(argv) -> str | None:
+    args = sys.argv[1:] if argv is None else argv
+    return next((a for a in args if not a.startswith("-")), None)
+
+
+def _stopped(argv) -> str:
+    return "stopped" if _command(argv) == "explore" else "interrupted"
+
+
+def _unwritten(argv) -> str:
+    return "" if _command(argv) in _NO_OUTPUT else "; nothing was written"
 
 
 @contextlib.contextmanager

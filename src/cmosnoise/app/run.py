@@ -113,8 +113,11 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
                 write_png(tmp / "processed.png", processed)
             return pre_view, processed, t
 
+        stamps: list[float] = []  # when each frame was made: the steady time per frame, apart from the set-up
+
         def frames(advance):
             nonlocal t_process
+            stamps.append(time.perf_counter())
             for k, (raw, electrons) in enumerate(shot.frames_with_electrons(n, first), start=first):
                 stats.update(raw, electrons)
                 if not frame0:
@@ -130,6 +133,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
                         rendered0.append(picture)  # frame 0's processed picture, reused below
                     t_process += time.perf_counter() - tp
                 advance()
+                stamps.append(time.perf_counter())
                 yield raw
 
         meta = raw_metadata(
@@ -158,6 +162,11 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
         t_summary = time.perf_counter() - t0  # the summary's own time counts in the run's total
         summary["timings_s"]["summary"] = round(t_summary, 6)
+        # frame 0 waits for the compiled kernel (compiled on a machine's first run): the steady time per frame is
+        # that of the frames after it; what frame 0 took beyond it counts as set-up
+        steady = (stamps[-1] - stamps[1]) / (n - 1) if n > 1 else stamps[-1] - stamps[0]
+        summary["timings_s"]["frame_s"] = round(steady, 6)
+        summary["timings_s"]["set_up"] = round(max(t_frames - n * steady, 0.0), 6)
         summary["timings_s"]["total"] = round(t_frames + t_summary, 6)
         pre_view, processed, t = job.result()
         t_process += t

@@ -229,8 +229,7 @@ def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MA
     except CmosnoiseError:
         raise
     except Exception as exc:  # any decoder failure is the file's fault
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {first}") from None
+        raise CmosnoiseError(f"scene {name!r} cannot be read as an image: {inputs.decoder_message(exc)}") from None
     a = np.asarray(a)
     if a.size == 0:
         raise CmosnoiseError(f"scene {name!r} is empty")
