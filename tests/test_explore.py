@@ -141,6 +141,12 @@ def test_a_slider_changes_the_picture_and_an_invalid_value_keeps_it(app_page):
     assert "greater than or equal to 0" in msg
     assert "invalid" in page.inner_text("#statusA")
     assert _pixels(page, "canvasA") == moved  # the last valid picture stays
+    # and the URL keeps the last valid state: a shared link opens the picture that is shown, not the error
+    state = page.evaluate("JSON.parse(decodeURIComponent(escape(atob(location.hash.slice(1).replace(/-/g, '+')"
+                          ".replace(/_/g, '/')))))")
+    thermal = page.evaluate("S.panes.A.config.source_follower.thermal_sigma_e")
+    assert state["A"]["source_follower"]["thermal_sigma_e"] == thermal and "prnu" not in state["A"]
+    assert page.evaluate("S.panes.A.config.prnu.sigma_pct") == -5  # the field keeps what was typed, to correct
 
 
 def test_zoom_and_pan_stay_locked_and_the_url_keeps_the_view(app_page, server):
@@ -310,6 +316,33 @@ def test_another_host_is_served_only_when_asked_and_with_a_warning():
         assert "cmosnoise: stopped (SIGTERM)" in rest and "nothing was written" not in rest, rest
     finally:
         stop_process(proc)
+
+
+@pytest.mark.parametrize("width, height", [(1280, 800), (1440, 900), (1920, 1080)])
+def test_both_panes_and_their_key_figures_show_without_scrolling(app_page, tmp_path, width, height):
+    """A laptop's and a desktop's window: the panes side by side, each with its key figures (named, with units)
+    above the fold, nothing wider than the window. The screenshots are kept beside the test's files."""
+    page = app_page
+    page.set_viewport_size({"width": width, "height": height})
+    page.reload()
+    _wait_rendered(page, "A")
+    _wait_rendered(page, "B")
+    _wait(page, "document.querySelectorAll('#figuresA table tr').length > 10 && "
+                "document.querySelectorAll('#figuresB table tr').length > 10")
+    page.screenshot(path=str(tmp_path / f"explore_{width}x{height}.png"))
+    box = page.evaluate("""() => {
+        const r = (e) => e.getBoundingClientRect();
+        const rows = (p) => [...document.querySelectorAll(`#figures${p} table`)[0].rows];
+        return {A: r(document.getElementById('canvasA')), B: r(document.getElementById('canvasB')),
+                lastA: r(rows('A').at(-1)).bottom, lastB: r(rows('B').at(-1)).bottom,
+                names: rows('A').map((row) => row.cells[0].textContent),
+                scrollWidth: document.documentElement.scrollWidth};
+    }""")
+    assert box["A"]["top"] == box["B"]["top"] and box["A"]["right"] <= box["B"]["left"]  # side by side
+    assert box["B"]["right"] <= width and box["scrollWidth"] <= width
+    assert max(box["A"]["bottom"], box["B"]["bottom"], box["lastA"], box["lastB"]) <= height
+    assert "dynamic range (dB)" in box["names"] and "SNR with fixed pattern, at 100 e- (dB)" in box["names"]
+    assert not [n for n in box["names"] if "_" in n]  # no JSON names
 
 
 def test_a_cameras_gain_table_gives_an_iso_menu(app_page):

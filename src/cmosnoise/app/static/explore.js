@@ -11,6 +11,7 @@ const S = {
   drawnAt: { A: 0, B: 0 },              // performance.now() when each pane's newest picture reached its canvas
   images: { A: null, B: null },         // last good picture of each pane: {bitmap, region, step, couplets}
   client: Math.random().toString(36).slice(2),
+  valid: { A: null, B: null },          // each pane's last {config, scene} the server drew: what the URL keeps
 };
 const $ = (id) => document.getElementById(id);
 const clone = (x) => JSON.parse(JSON.stringify(x));
@@ -51,10 +52,10 @@ function merge(a, d) {
 }
 
 // ------------------------------------------------------------------ the URL holds the state
-function saveUrl() {
-  const base = S.meta.base;
-  const st = { A: diff(base, S.panes.A.config) || {}, B: diff(base, S.panes.B.config) || {},
-    sa: S.panes.A.scene, sb: S.panes.B.scene, v: S.view, m: S.mode, f: S.frame, z: S.zoom, x: S.cx, y: S.cy,
+function saveUrl() {                  // an invalid value stays out of the URL: a pane is kept as it was last drawn
+  const base = S.meta.base, A = S.valid.A || S.panes.A, B = S.valid.B || S.panes.B;
+  const st = { A: diff(base, A.config) || {}, B: diff(base, B.config) || {},
+    sa: A.scene, sb: B.scene, v: S.view, m: S.mode, f: S.frame, z: S.zoom, x: S.cx, y: S.cy,
     c: S.couplets ? 1 : 0 };
   const text = btoa(unescape(encodeURIComponent(JSON.stringify(st)))).replace(/\+/g, "-").replace(/\//g, "_").replace(/=+$/, "");
   history.replaceState(null, "", "#" + text);
@@ -246,6 +247,18 @@ function showErrors(errors, pane) {
 // ------------------------------------------------------------------ rendering
 function sensorSize() { const c = S.panes.A.config.sensor; return { rows: c.height, cols: c.width }; }
 function canvasFor(p) { return $("canvas" + p); }
+// both panes side by side at any width from 1280 pixels, their key figures below them above the fold
+const CANVAS_MAX = [640, 420];
+function layout() {
+  const box = $("pictures"), gap = 10;
+  const avail = box.clientWidth - 16 - gap;                // #pictures' padding, the gap between the panes
+  const w = Math.max(240, Math.min(CANVAS_MAX[0], Math.floor(avail / 2)));
+  const h = Math.round(w * CANVAS_MAX[1] / CANVAS_MAX[0]);
+  const wasFit = !S.zoom || (S.panes.A && Math.abs(S.zoom - fitZoom()) < 1e-9);
+  for (const p of ["A", "B"]) { canvasFor(p).width = w; canvasFor(p).height = h; $("figures" + p).style.width = `${w}px`; }
+  canvasFor("Diff").width = 2 * w + gap; canvasFor("Diff").height = h;
+  if (wasFit) S.zoom = null;
+}
 function fitZoom() {
   const c = canvasFor("A"), { rows, cols } = sensorSize();
   return Math.min(c.width / cols, c.height / rows);
@@ -311,6 +324,8 @@ async function render(p) {
   if (seq !== S.seq[p]) return;
   S.images[p] = { bitmap, region: info.region, step: info.step, couplets: info.couplets || [] };
   S.shown[p] = seq;
+  S.valid[p] = { config: clone(body.config), scene: body.scene };
+  saveUrl();
   $("status" + p).textContent = `frame ${S.frame}, ${info.ms} ms on the server`;
   $("status" + p).classList.remove("bad");
   showErrors({}, p);
@@ -391,7 +406,13 @@ function showFigures(p, d) {
     if (typeof v === "object" && v !== null) { for (const [k2, v2] of Object.entries(v)) row(figName(k, k2), fmt(v2)); }
     else row(figName(k), fmt(v));
   }
-  if (d.dark) for (const [k, v] of Object.entries(d.dark)) if (k !== "threshold") row(figName(k), fmt(v));  // threshold: = threshold_e_per_s
+  if (d.dark) {
+    for (const [k, v] of Object.entries(d.dark)) {
+      if (k === "threshold" || k === "threshold_source") continue;       // threshold: = threshold_e_per_s
+      row(figName(k), fmt(v));
+      if (k === "threshold_e_per_s") t.rows[t.rows.length - 1].title = `from ${d.dark.threshold_source}`;
+    }
+  }
   box.appendChild(t);
   const b = d.budget || {};
   const h = document.createElement("strong");
@@ -519,6 +540,13 @@ async function init() {
   });
   for (const p of ["A", "B", "Diff"]) attachPan(canvasFor(p));
   setEdit("A");
+  S.valid = { A: clone(S.panes.A), B: clone(S.panes.B) };
+  layout();
+  let resizing = null;
+  window.addEventListener("resize", () => {
+    clearTimeout(resizing);
+    resizing = setTimeout(() => { layout(); geometry(); redraw(); scheduleAll(); }, 150);
+  });
   geometry(); saveUrl(); scheduleAll();
 }
 window.addEventListener("DOMContentLoaded", init);
