@@ -1,13 +1,14 @@
-"""The numbers the README quotes: measured by code in this repository, stored, and rendered into the README.
+"""The numbers the docs quote: measured by code in this repository, stored, and rendered into the pages.
 
 Each section has a ``compute`` (runs cmosnoise, returns plain data) and a
 ``render`` (data -> the Markdown between ``<!-- numbers:NAME -->`` and
-``<!-- /numbers:NAME -->`` in README.md). Data live in ``docs/numbers/NAME.json``.
+``<!-- /numbers:NAME -->`` in whichever page holds the block: README.md or a
+page under docs/). Data live in ``docs/numbers/NAME.json``.
 
     python docs/readme_numbers.py compute [NAME ...]   # measure again, write the JSON
-    python docs/readme_numbers.py render               # rewrite the README's blocks from the JSON
-    python docs/readme_numbers.py check                # exit 1 if README and JSON disagree
-    python docs/readme_numbers.py images               # the README's pictures, into docs/img
+    python docs/readme_numbers.py render               # rewrite the pages' blocks from the JSON
+    python docs/readme_numbers.py check                # exit 1 if a page and its JSON disagree
+    python docs/readme_numbers.py images               # the pages' pictures, into docs/img
 
 ``speed`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and
 ``fit_coverage`` are measured by the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes
@@ -539,6 +540,20 @@ def _pattern(name: str) -> re.Pattern:
     return re.compile(rf"(<!-- numbers:{name} -->)(.*?)(<!-- /numbers:{name} -->)", re.S)
 
 
+def pages() -> list[Path]:
+    """The Markdown pages that may hold blocks: README.md and the docs' sources (not the built site)."""
+    skip = {"_build", "auto_examples"}
+    return [README, *sorted(p for p in (ROOT / "docs").rglob("*.md") if not skip & set(p.relative_to(ROOT).parts))]
+
+
+def page_blocks(paths: list[Path] | None = None) -> dict[str, str]:
+    """Every page's generated blocks, by name."""
+    out: dict[str, str] = {}
+    for path in paths if paths is not None else pages():
+        out.update(readme_blocks(path.read_text()))
+    return out
+
+
 def readme_blocks(text: str) -> dict[str, str]:
     """The README's generated blocks, by name."""
     return {name: m.group(2).strip("\n") for name in SECTIONS if (m := _pattern(name).search(text))}
@@ -633,16 +648,22 @@ def main(argv: list[str]) -> int:
     if cmd == "images":
         images()
         return 0
-    text = README.read_text()
-    new = rendered(text)
     if cmd == "render":
-        README.write_text(new)
+        for path in pages():
+            text = path.read_text()
+            if (new := rendered(text)) != text:
+                path.write_text(new)
         return 0
     if cmd == "check":
-        bad = [n for n in SECTIONS if readme_blocks(text).get(n) != readme_blocks(new).get(n)]
-        missing = [n for n in SECTIONS if n not in readme_blocks(text)]
+        bad, found = [], {}
+        for path in pages():
+            text = path.read_text()
+            have, fresh = readme_blocks(text), readme_blocks(rendered(text))
+            found.update(have)
+            bad += [f"{n} ({path.relative_to(ROOT)})" for n in have if have[n] != fresh[n]]
+        missing = [n for n in SECTIONS if n not in found]
         if bad or missing:
-            print(f"README out of step: {bad}; blocks missing: {missing}", file=sys.stderr)
+            print(f"pages out of step: {bad}; blocks missing: {missing}", file=sys.stderr)
             return 1
         return 0
     print(__doc__, file=sys.stderr)

@@ -3,15 +3,15 @@
 Each is a frozen distribution with the interface of :mod:`scipy.stats`
 (``pdf``, ``cdf``, ``sf``, ``ppf``, ``rvs``, ``fit``, ...):
 
-=================  ====================================================
-``logistic``       ``loc = mean``, ``scale = std * sqrt(3) / pi``
-``inverse_gaussian`` Wald: shape ``lambda = mean**3 / std**2``
-                   (scipy ``invgauss(mu=mean/lambda, scale=lambda)``)
-``lognormal``      ``sigma_ln**2 = ln(1 + std**2/mean**2)``,
-                   ``mu_ln = ln(mean) - sigma_ln**2 / 2``
-``normal``         ``loc = mean``, ``scale = std``
-``gamma``          ``a = mean**2 / std**2``, ``scale = std**2 / mean``
-=================  ====================================================
+====================  ====================================================
+``logistic``          ``loc = mean``, ``scale = std * sqrt(3) / pi``
+``inverse_gaussian``  Wald: shape ``lambda = mean**3 / std**2``
+                      (scipy ``invgauss(mu=mean/lambda, scale=lambda)``)
+``lognormal``         ``sigma_ln**2 = ln(1 + std**2/mean**2)``,
+                      ``mu_ln = ln(mean) - sigma_ln**2 / 2``
+``normal``            ``loc = mean``, ``scale = std``
+``gamma``             ``a = mean**2 / std**2``, ``scale = std**2 / mean``
+====================  ====================================================
 
 plus :func:`gumbel` (``gumbel_r``), the source-follower and column
 amplifiers' noise sigma over the array (docs/model.md stages 6 and 8).

@@ -171,7 +171,7 @@ class HeavyTail:
 
 
 def variates(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
-    """The fixed uniforms of a heavy-tailed map: array (3, *shape) of (body quantile, tail membership, tail magnitude).
+    """The fixed uniforms of a heavy-tailed map: array ``(3, *shape)`` of (body quantile, tail membership, tail magnitude).
 
     Open uniforms, ``(m + 0.5) 2**-52`` as the counter-based maps' (never 0 or 1, where the quantile's logit
     has no value); passed to :meth:`HeavyTail.values`, the same variates under other parameters keep every

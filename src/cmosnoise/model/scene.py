@@ -143,7 +143,7 @@ def steps(shape: tuple[int, int], n: int = 4) -> np.ndarray:
 
 
 def steps_levels(n: int = 4) -> np.ndarray:
-    """The light levels of the ``steps:n`` bands, top to bottom: ``4**-(n-1) .. 1/4, 1``."""
+    """The light levels of the ``steps:n`` bands, top to bottom: ``4**-(n-1)`` to ``1/4``, ``1``."""
     return 4.0 ** -(n - 1 - np.arange(n))
 
 

@@ -340,7 +340,7 @@ class Sensor:
         return self.expose("flat:0", sequence=SEQ_DARK_CALIBRATION).frames(n)
 
     def capture(self, scene=None, frames: int = 1, first_frame: int = 0) -> np.ndarray:
-        """Raw frames ``first_frame .. first_frame + frames - 1``, (frames, rows, cols) uint16."""
+        """Raw frames ``first_frame`` to ``first_frame + frames - 1``, (frames, rows, cols) uint16."""
         frames = _whole(frames, "frames", minimum=1)
         first_frame = _whole(first_frame, "first_frame")
         shot = self.expose(scene)
@@ -717,12 +717,12 @@ class Exposure:
         return FrameDetail(_frame_index(k), raw, electrons, keep)
 
     def frames(self, n: int, first: int = 0) -> Iterator[np.ndarray]:
-        """Raw frames ``first .. first + n - 1``, one at a time."""
+        """Raw frames ``first`` to ``first + n - 1``, one at a time."""
         for k in range(first, first + n):
             yield self.frame(k)
 
     def frames_with_electrons(self, n: int, first: int = 0) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """(raw, charge at the ADC input in e-) for frames ``first ..``, one at a time."""
+        """(raw, charge at the ADC input in e-) for frames ``first`` onwards, one at a time."""
         for k in range(first, first + n):
             yield self._render(k)
 
