@@ -485,6 +485,13 @@ def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = N
     The totals include clipping at the full well and the ADC's top where more
     than 1e-6 of the pixels clip (``clipped_fraction``); the per-source lines
     are the unclipped contributions.
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor, noise_budget
+    >>> b = noise_budget.budget(Sensor({"sensor": {"width": 64, "height": 48}}, seed=7), 1000.0)
+    >>> b["dominant_temporal"], round(b["temporal_rms_e"]["photon_shot"], 1)
+    ('photon_shot', 31.6)
     """
     if photo_e is not None:
         signal_e = float(np.mean(photo_e))

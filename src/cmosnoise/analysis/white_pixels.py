@@ -109,6 +109,18 @@ def report(values: np.ndarray, threshold: float, pattern: str) -> dict:
     """White pixels above ``threshold`` in a map or frame and the couplets they form.
 
     ``values`` and ``threshold`` are in the same unit (e.g. e-/s, or DN).
+
+    Examples
+    --------
+    Two white pixels two columns apart are neighbours in the same colour plane of an RGGB mosaic, a couplet:
+
+    >>> import numpy as np
+    >>> from cmosnoise import white_pixels
+    >>> rate = np.zeros((4, 6))
+    >>> rate[1, 1] = rate[1, 3] = 500.0
+    >>> r = white_pixels.report(rate, threshold=100.0, pattern="RGGB")
+    >>> r["white_pixels"], r["couplets"]
+    (2, 1)
     """
     values = np.asarray(values)
     if values.ndim != 2:

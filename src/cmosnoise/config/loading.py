@@ -121,6 +121,14 @@ def _preset_dir():
 
 
 def preset_names() -> list[str]:
+    """The shipped presets' names, sorted.
+
+    Examples
+    --------
+    >>> from cmosnoise import preset_names
+    >>> "paper-fig9-vga" in preset_names()
+    True
+    """
     return sorted(p.name[:-5] for p in _preset_dir().iterdir() if p.name.endswith(".yaml"))
 
 
@@ -239,6 +247,13 @@ def load_config(
         Schema-valid. What the values imply (reachable ppm, computable
         distributions, PRNU solved from its measured value) is resolved by
         :func:`cmosnoise.model.spec.resolve`, which :class:`~cmosnoise.Sensor` calls.
+
+    Examples
+    --------
+    >>> from cmosnoise import load_config
+    >>> config = load_config(preset="paper-fig9-vga", overrides=["sensor.temperature_c=45"])
+    >>> config.sensor.width, config.sensor.temperature_c
+    (640, 45.0)
     """
     data: dict = {}
     if preset:
@@ -265,5 +280,13 @@ def merge_updates(config: Config, updates: dict) -> Config:
     Every value ``config`` set is kept, ``None`` included (a ``tail: null``
     stays no tail): the merge starts from the keys that were set, not from a
     dump that leaves nulls out, and what was never set keeps its default.
+
+    Examples
+    --------
+    >>> from cmosnoise import load_config, merge_updates
+    >>> base = load_config(overrides=["sensor.temperature_c=45"])
+    >>> changed = merge_updates(base, {"prnu": {"sigma_pct": 2}})
+    >>> changed.prnu.sigma_pct, changed.sensor.temperature_c
+    (2.0, 45.0)
     """
     return _validate(deep_merge(config.model_dump(mode="json", exclude_unset=True), updates))

@@ -119,6 +119,18 @@ class PatternCache:
         What the values may hold together (the newest is kept whatever it weighs), bytes.
     max_items : int
         At most this many values.
+
+    Examples
+    --------
+    Two sensors of one seed that differ in the temperature share their PRNU map (taken from the cache):
+
+    >>> import numpy as np
+    >>> from cmosnoise import PatternCache, Sensor
+    >>> cache = PatternCache(1e8)
+    >>> a = Sensor({"sensor": {"width": 64, "height": 48}}, cache=cache)
+    >>> b = Sensor({"sensor": {"width": 64, "height": 48, "temperature_c": 45}}, cache=cache)
+    >>> np.array_equal(a.fixed_pattern.prnu_gain, b.fixed_pattern.prnu_gain)
+    True
     """
 
     def __init__(self, max_bytes: int, max_items: int = 64):

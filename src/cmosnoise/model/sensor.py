@@ -99,6 +99,16 @@ class Sensor:
         Where frames are made: the CPU kernel (the default), or an NVIDIA GPU through numba's CUDA target
         (``pip install cmosnoise[cuda]``), with the same bits. A one-line error where no GPU is present.
         :meth:`Exposure.frames_on_device` keeps the frames on the GPU.
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor
+    >>> sensor = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7)
+    >>> sensor.shape, sensor.cfa
+    ((48, 64), 'RGGB')
+    >>> raw = sensor.expose("flat:0.5").frame(0)       # frame 0 of a flat grey scene, DN
+    >>> raw.shape, raw.dtype
+    ((48, 64), dtype('uint16'))
     """
 
     def __init__(self, config: SensorSpec | Config | dict | str | Path | None = None, seed: int | None = None, *,

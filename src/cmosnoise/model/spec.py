@@ -15,7 +15,7 @@ read it and never recompute any of it.
 >>> from cmosnoise.model.spec import resolve
 >>> spec = resolve(load_config(preset="paper-fig11-full"))
 >>> spec.transfer.bits
-12
+10
 """
 
 from __future__ import annotations

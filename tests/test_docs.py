@@ -1,0 +1,145 @@
+"""The documentation cannot rot: every command line in the docs parses, every Python example runs, the docstrings'
+examples run as doctests, and the README's test command is what CI runs.
+
+The site itself is built by .ci/run with every warning an error (broken links, docstrings that do not parse, a
+gallery example that fails).
+"""
+
+import doctest
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import cli
+
+import cmosnoise
+
+ROOT = Path(__file__).resolve().parent.parent
+SKIP = {"_build", "generated", "auto_examples"}
+
+
+def pages() -> list[Path]:
+    return [ROOT / "README.md", *sorted(p for p in (ROOT / "docs").rglob("*.md")
+                                        if not SKIP & set(p.relative_to(ROOT).parts))]
+
+
+def blocks(lang: str | None = None):
+    """(page, text) of every fenced code block (of ``lang``, or without a language, if given)."""
+    fence = re.compile(r"^```([A-Za-z]*)[^\n]*\n(.*?)^```", re.S | re.M)
+    for page in pages():
+        for m in fence.finditer(page.read_text()):
+            if lang is None or m.group(1) == lang:
+                yield page, m.group(2)
+
+
+def command_lines():
+    """Every ``cmosnoise ...`` line of the docs' code blocks: continuations joined, comments and redirections cut."""
+    out = []
+    for page, text in blocks():
+        text = text.replace("\\\n", " ")
+        for line in text.splitlines():
+            line = line.strip().removeprefix("$ ")
+            if not line.startswith("cmosnoise ") and "&& cmosnoise " not in line:
+                continue
+            line = line[line.index("cmosnoise "):]
+            line = re.split(r"\s+#\s", line)[0]          # a comment
+            line = re.split(r"\s[>|]\s", line)[0]        # a redirection or a pipe
+            out.append((page.relative_to(ROOT).as_posix(), line))
+    return out
+
+
+COMMANDS = command_lines()
+
+
+def test_the_docs_show_commands():
+    assert len(COMMANDS) > 40 and {line.split()[1] for _, line in COMMANDS} >= {
+        "simulate", "sweep", "compare", "fit", "measure", "characterize", "dataset", "evaluate", "explore"}
+
+
+@pytest.mark.parametrize("page, line", COMMANDS, ids=[f"{p}:{i}" for i, (p, _) in enumerate(COMMANDS)])
+def test_every_command_line_in_the_docs_parses(page, line):
+    """Each documented command line is parsed by the command line itself (its options, their types, their
+    ranges), without running it: a renamed option or a changed range fails here."""
+    import typer.main
+
+    from cmosnoise.app.cli import app
+
+    group = typer.main.get_command(app)
+    args = [a for a in shlex.split(line)[1:] if a != "..."]  # "..." elides options shown elsewhere
+    while args and args[0].startswith("-"):  # the app's own options (-q, -v)
+        args = args[1:]
+    assert args, f"{page}: {line!r} names no command"
+    cmd = group.commands.get(args[0])
+    assert cmd is not None, f"{page}: {line!r}: no command {args[0]!r}"
+    cmd.make_context(f"cmosnoise {args[0]}", args[1:])
+
+
+def test_the_readme_commands_are_what_ci_runs():
+    readme = (ROOT / "README.md").read_text()
+    install, tests = [t.strip() for _, t in blocks() if _ == ROOT / "README.md"][:2]
+    assert install.endswith("pip install . && cmosnoise simulate")
+    assert "pip install -q '.[test]'" in tests and tests.endswith("python -m pytest -q")
+    ci = (ROOT / ".ci" / "run").read_text().replace("\\\n", " ")
+    ci = " ".join(ci.split())
+    head, _, tail = tests.partition(" && python -m pytest -q")
+    assert head in ci and ci.rstrip().endswith("python -m pytest -q"), "the README's test command is not .ci/run's"
+    assert "minutes" in readme.split(tests)[0][-400:] or "minutes" in readme  # the test time is stated
+
+
+PYTHON = [(page.relative_to(ROOT).as_posix(), text) for page, text in blocks("python")]
+
+
+@pytest.mark.parametrize("page, code", PYTHON, ids=[f"{p}:{i}" for i, (p, _) in enumerate(PYTHON)])
+def test_every_python_example_in_the_docs_runs(page, code, tmp_path):
+    """In a fresh interpreter, in an empty folder; a ``# cmosnoise ...`` comment in the example is the command
+    that makes its input, run first. An example for the GPU runs where one is, and is compiled elsewhere."""
+    for setup in re.findall(r"#\s*(cmosnoise [^\n]+)", code):
+        r = cli(*shlex.split(setup)[1:], cwd=tmp_path)
+        assert r.returncode == 0, f"{page}: {setup}: {r.stderr}"
+    if '"cuda"' in code:
+        from numba import cuda
+
+        if not cuda.is_available():  # no GPU here: the example is checked to compile, and runs on a GPU machine
+            compile(code, page, "exec")
+            return
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, f"{page}:\n{code}\n{r.stderr[-3000:]}"
+
+
+def _public_objects():
+    for name in cmosnoise.__all__:
+        if name == "__version__":
+            continue
+        obj = getattr(cmosnoise, name)
+        yield name, obj
+
+
+def test_the_docstrings_examples_run_as_doctests():
+    """Every Examples section of the public names (and their members) runs, and gives what it shows."""
+    finder, runner = doctest.DocTestFinder(), doctest.DocTestRunner(optionflags=doctest.ELLIPSIS
+                                                                    | doctest.NORMALIZE_WHITESPACE)
+    ran = 0
+    for name, obj in _public_objects():
+        for test in finder.find(obj, f"cmosnoise.{name}", globs={"cmosnoise": cmosnoise}):
+            if test.examples:
+                result = runner.run(test, out=lambda s: None)
+                assert result.failed == 0, f"the doctest of {test.name} fails"
+                ran += result.attempted
+    assert ran >= 10  # the examples exist (a finder that found none would pass silently)
+
+
+def test_the_sensor_guide_runs_as_written(tmp_path):
+    """The guide's first study, as the page shows it: two runs that differ in the temperature, and compare."""
+    guide = (ROOT / "docs" / "sensor" / "index.md").read_text()
+    first = next(t for page, t in blocks() if page.name == "index.md" and page.parent.name == "sensor"
+                 and "cmosnoise compare run25 run65" in t)
+    assert first in guide and first.count("cmosnoise ") == 3
+    for line in first.strip().splitlines():
+        r = cli(*shlex.split(line)[1:], cwd=tmp_path)
+        assert r.returncode == 0, f"{line}: {r.stderr}"
+    assert (tmp_path / "cmp" / "compare.html").is_file() and (tmp_path / "run65" / "report.html").is_file()
