@@ -407,7 +407,7 @@ def test_a_fixed_white_threshold_counts_at_every_temperature_against_the_same_ra
 
 
 def test_readme_white_pixel_snippet_runs_on_what_tifffile_reads(tmp_path):
-    """The README's Python snippet, on a real run's raw.tiff (a (frames, rows, cols) stack)."""
+    """docs/sensor/dark-current.md's Python snippet, on a real run's raw.tiff (a (frames, rows, cols) stack)."""
     import tifffile
 
     out = tmp_path / "dark"

@@ -98,7 +98,7 @@ def test_photon_transfer_weights_each_level_by_its_sampling_variance():
     assert abs(ks.mean() - K) <= Z * se_theory / math.sqrt(trials)
     assert abs(ks.var(ddof=1) / se_theory**2 - 1) <= Z * math.sqrt(2 / (trials - 1))
     assert abs(hits - 0.95 * trials) <= Z * math.sqrt(trials * 0.05 * 0.95), hits
-    # the README's claim: on such a set the unweighted slope is more than twice as noisy (its variance more than
+    # docs/sensor/fit.md's claim: on such a set the unweighted slope is more than twice as noisy (its variance more than
     # four times; the ratio of two sample variances of 2000 is itself within a few per cent)
     assert unweighted.var(ddof=1) > 4 * ks.var(ddof=1)
 

@@ -1,6 +1,6 @@
 """``cmosnoise fit``: every stage docs/model.md describes, fitted to a measured data set (:class:`~cmosnoise.io.stacks.Dataset`).
 
-What is fitted from what (the README's "Fit" section says the same for a lab):
+What is fitted from what (docs/sensor/fit.md says the same for a lab):
 
 =========================================  ===================================================================
 parameter                                  needs
