@@ -121,8 +121,16 @@ def _public_objects():
         yield name, obj
 
 
+#: public names whose docstrings have no Examples section yet (this list only shrinks: a new name comes with one)
+WITHOUT_EXAMPLES = {"SensorSpec", "crosstalk", "shot_noise", "source_follower", "row_noise", "column_noise", "process",
+                    "characterize", "emva_evaluation", "emva_files", "dataset"}
+
+
 def test_the_docstrings_examples_run_as_doctests():
-    """Every Examples section of the public names (and their members) runs, and gives what it shows."""
+    """Every Examples section of the public names (and their members) runs, and gives what it shows; every public
+    name but those listed has one."""
+    missing = {name for name, obj in _public_objects() if ">>>" not in (obj.__doc__ or "")}
+    assert missing <= WITHOUT_EXAMPLES, f"public names without an Examples section: {sorted(missing - WITHOUT_EXAMPLES)}"
     finder, runner = doctest.DocTestFinder(), doctest.DocTestRunner(optionflags=doctest.ELLIPSIS
                                                                     | doctest.NORMALIZE_WHITESPACE)
     ran = 0
@@ -132,7 +140,7 @@ def test_the_docstrings_examples_run_as_doctests():
                 result = runner.run(test, out=lambda s: None)
                 assert result.failed == 0, f"the doctest of {test.name} fails"
                 ran += result.attempted
-    assert ran >= 10  # the examples exist (a finder that found none would pass silently)
+    assert ran >= 100  # the examples exist (a finder that found none would pass silently)
 
 
 def test_the_sensor_guide_runs_as_written(tmp_path):

@@ -7,7 +7,17 @@ exit status 2; anything else is a bug and keeps its traceback. It is a
 
 
 class CmosnoiseError(ValueError):
-    """Bad input: the message names the parameter, the value and what is allowed."""
+    """Bad input: the message names the parameter, the value and what is allowed.
+
+    Examples
+    --------
+    >>> from cmosnoise import CmosnoiseError, Sensor
+    >>> try:
+    ...     Sensor(seed=1.5)
+    ... except CmosnoiseError as exc:
+    ...     print(exc)
+    seed = 1.5: expected a whole number >= 0
+    """
 
 
 class Terminated(BaseException):

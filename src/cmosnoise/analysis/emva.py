@@ -10,6 +10,15 @@ gain K, DN/e-, for electrons). Conventions follow EMVA 1288 release 4.0:
   variances of column and row means (EMVA 1288 4.0, Sec. 8.3);
 - PRNU = ``sqrt(s^2_bright - s^2_dark) / (mu_bright - mu_dark)``;
 - quantization: 1/12 DN^2 is part of the temporal variance.
+
+Examples
+--------
+>>> import numpy as np
+>>> from cmosnoise import emva
+>>> rng = np.random.default_rng(0)
+>>> stack = 100 + rng.normal(0, 2.0, (2, 64, 64))   # two frames of 2 DN temporal noise
+>>> round(emva.temporal_variance(stack[0], stack[1]), 1)   # DN^2: half the variance of the difference
+4.0
 """
 
 from __future__ import annotations

@@ -18,6 +18,13 @@ here, so a figure means the same wherever it shows:
 
 The robust sigma and the 95 % quantile are :mod:`cmosnoise.estimators`'
 (one place for every layer, ``isp`` included).
+
+Examples
+--------
+>>> from cmosnoise import Sensor, figures_of_merit
+>>> kf = figures_of_merit.key_figures(Sensor({"sensor": {"width": 64, "height": 48}}))
+>>> kf["saturation_e"]
+10000.0
 """
 
 from __future__ import annotations

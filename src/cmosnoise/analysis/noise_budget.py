@@ -30,6 +30,13 @@ with the moments of a clipped normal, and gives the temporal and spatial
 variance and the fraction of clipped pixels that frames will show. The
 totals in :func:`budget` include it; the per-source lines are the unclipped
 contributions.
+
+Examples
+--------
+>>> from cmosnoise import Sensor, noise_budget
+>>> b = noise_budget.budget(Sensor({"sensor": {"width": 64, "height": 48}}, seed=7))   # in the dark
+>>> b["dominant_temporal"], noise_budget.SOURCE_NAMES[b["dominant_temporal"]]
+('thermal', 'source follower, thermal (white)')
 """
 
 from __future__ import annotations

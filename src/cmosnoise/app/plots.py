@@ -2,6 +2,13 @@
 
 Every plot has labelled axes with units, a legend where there is more than
 one thing to tell apart, and a title.
+
+Examples
+--------
+>>> from cmosnoise import plots
+>>> fig, ax = plots.figure(figsize=(3, 2))     # a matplotlib Figure, no pyplot
+>>> len(plots.to_png_bytes(fig)) > 100      # the figure as PNG bytes
+True
 """
 
 from __future__ import annotations

@@ -12,6 +12,13 @@ and returns a small record of metrics, never arrays. Tasks go to a Dask
 by default, or an existing scheduler (``--scheduler tcp://host:8786``). Rows
 are appended to ``results.csv`` as tasks finish; ``--resume`` skips the rows
 already there.
+
+Examples
+--------
+>>> from cmosnoise import sweep
+>>> axis = sweep.parse_vary("dark_current.points.0.tail.ppm_above=1000,4000")
+>>> axis.keys, axis.values
+(('dark_current.points.0.tail.ppm_above',), ((1000,), (4000,)))
 """
 
 from __future__ import annotations

@@ -691,7 +691,15 @@ class GainRow(Section):
 
 # ------------------------------------------------------------------------- root
 class Config(Section):
-    """A complete, resolved cmosnoise configuration."""
+    """A complete, resolved cmosnoise configuration.
+
+    Examples
+    --------
+    >>> from cmosnoise import Config
+    >>> config = Config()                     # every default; cmosnoise.load_config adds presets, files, --set
+    >>> config.sensor.width, config.sensor.height, config.sensor.cfa
+    (640, 480, 'RGGB')
+    """
 
     description: str = Field("", description="free text: what this configuration is for")
     seed: int = Field(0, ge=0, le=2**63 - 1, description="sensor instance: the same seed gives the same fixed pattern and noise")

@@ -5,6 +5,14 @@ by the same sensor instance at the same temperature and exposure. It removes
 the fixed dark pattern (DCNU, VFPN, fixed row offsets), not the dark shot
 noise of the frame at hand, and it cannot restore a white pixel that has
 saturated (the scene's charge is gone).
+
+Examples
+--------
+>>> import numpy as np
+>>> from cmosnoise import calibration
+>>> dark = np.full((3, 4, 6), 70.0)            # three dark frames, DN
+>>> calibration.master_dark(dark).shape
+(4, 6)
 """
 
 from __future__ import annotations

@@ -14,6 +14,14 @@ Two correctors, so users can compare them:
 
 Same-colour neighbours are those of :mod:`cmosnoise.cfa` (8 per pixel).
 Edges reflect, which keeps the CFA phase.
+
+Examples
+--------
+>>> import numpy as np
+>>> from cmosnoise import defects
+>>> dark = np.zeros((8, 8)); dark[3, 4] = 500.0   # one hot pixel in a master dark's signal
+>>> np.argwhere(defects.defect_map(dark, threshold_dn=100.0)).tolist()
+[[3, 4]]
 """
 
 from __future__ import annotations

@@ -32,7 +32,16 @@ from . import calibration, defects, reconstruction
 
 
 class Processor:
-    """The processing chain for frames of one sensor (one shape, CFA, black level)."""
+    """The processing chain for frames of one sensor (one shape, CFA, black level).
+
+    Examples
+    --------
+    >>> from cmosnoise import Processor, Sensor
+    >>> sensor = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7)
+    >>> picture = Processor(sensor.config.processing, sensor.raw_info()).render(sensor.expose("photo").frame(0))
+    >>> picture.shape, picture.dtype
+    ((48, 64, 3), dtype('uint8'))
+    """
 
     def __init__(self, settings: ProcessingSection, info: RawInfo, master_dark: np.ndarray | None = None):
         self.settings = settings

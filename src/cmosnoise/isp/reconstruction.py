@@ -12,6 +12,13 @@
 - White balance: per-channel gains, from the sensor's known responsivities,
   given, or grey world (the image's mean is grey).
 - sRGB encoding and 8-bit output.
+
+Examples
+--------
+>>> import numpy as np
+>>> from cmosnoise import reconstruction
+>>> reconstruction.demosaic(np.ones((4, 6)), "RGGB").shape   # a CFA image to RGB
+(4, 6, 3)
 """
 
 from __future__ import annotations

@@ -3,6 +3,12 @@
 A Bayer pattern is named by its top-left 2 x 2 tile read row by row
 (``RGGB``, ``BGGR``, ``GRBG``, ``GBRG``); ``none`` is a monochrome sensor.
 Channels are numbered R = 0, G = 1, B = 2.
+
+Examples
+--------
+>>> from cmosnoise import cfa
+>>> cfa.crop_pattern("RGGB", 1, 0)      # the pattern seen from row 1, column 0
+'GBRG'
 """
 
 import numpy as np

@@ -22,6 +22,13 @@ only quantiles, survival functions and moments. :class:`Frozen` computes those
 with :mod:`scipy.special` in exactly the operations scipy.stats uses (the
 same bits; a test holds them), and hands every other method to the
 equivalent frozen scipy.stats distribution, made on first use.
+
+Examples
+--------
+>>> from cmosnoise import distributions
+>>> d = distributions.body("lognormal", 500.0, 200.0)
+>>> round(float(d.mean()), 6), round(float(d.std()), 6)
+(500.0, 200.0)
 """
 
 from __future__ import annotations

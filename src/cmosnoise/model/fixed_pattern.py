@@ -22,6 +22,14 @@ what it reads (:mod:`cmosnoise.model.sensor` asks for them):
 - each pixel's source-follower sigma (flicker map, thermal sigma).
 
 So a temperature move redraws the dark map alone and reuses the photo mean.
+
+Examples
+--------
+>>> from cmosnoise import Sensor, fixed_pattern
+>>> s = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7)
+>>> part = fixed_pattern.draw(s.spec, region=(8, 16, 0, 32))   # any rectangle alone, bit for bit
+>>> bool((part.prnu_gain == s.fixed_pattern.prnu_gain[8:16, 0:32]).all())
+True
 """
 
 from __future__ import annotations
@@ -56,6 +64,13 @@ class FixedPattern:
     """A sensor instance's fixed-pattern maps (None where the stage is off).
 
     Drawn once by :class:`~cmosnoise.model.sensor.Sensor`; read them through ``sensor.fixed_pattern``.
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor
+    >>> fp = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7).fixed_pattern
+    >>> fp.prnu_gain.shape, fp.prnu_gain.dtype
+    ((48, 64), dtype('float32'))
     """
 
     prnu_gain: np.ndarray | None = None  #: per-pixel photo gain, (rows, cols) float32

@@ -13,6 +13,14 @@ counting the body's own exceedance, and rejects a ppm outside what any
 ``f`` in [0, 1] reaches. The interface follows ``scipy.stats``: ``sf``,
 ``cdf``, ``rvs``, plus :meth:`values` for maps drawn from fixed uniform
 variates (so that a pixel keeps its rank when parameters change).
+
+Examples
+--------
+>>> from cmosnoise import distributions
+>>> from cmosnoise.model.heavy_tail import HeavyTail
+>>> m = HeavyTail.from_ppm(distributions.body("lognormal", 500.0, 200.0), 4000, 1560.4, 80000.0)
+>>> round(m.ppm_above(1560.4), 6)
+4000.0
 """
 
 from __future__ import annotations

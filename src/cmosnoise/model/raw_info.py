@@ -12,7 +12,15 @@ from dataclasses import dataclass, field
 
 @dataclass
 class RawInfo:
-    """What processing needs to know about raw frames."""
+    """What processing needs to know about raw frames.
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor
+    >>> info = Sensor({"sensor": {"width": 64, "height": 48}}).raw_info()
+    >>> info.cfa, info.black_level_dn, info.bits
+    ('RGGB', 64.0, 12)
+    """
 
     cfa: str
     black_level_dn: float

@@ -24,6 +24,12 @@ pixel collects the light falling on its area), or bilinear interpolation
 where the sensor has more pixels than the scene. The CFA then keeps each
 pixel's channel (times the channel's relative responsivity); a monochrome
 sensor takes the luminance.
+
+Examples
+--------
+>>> from cmosnoise import scene
+>>> scene.render("flat:0.5", (4, 6)).shape
+(4, 6, 3)
 """
 
 from __future__ import annotations

@@ -8,6 +8,12 @@ frame ``k``, and any rectangle of any fixed map, is the same whether made one
 by one, in chunks, out of order, cropped, in tiles or on different machines,
 and switching one stage on or off, or changing one parameter, leaves every
 other random number unchanged.
+
+Examples
+--------
+>>> from cmosnoise import seeds
+>>> seeds.fixed_key(0, "prnu") == seeds.fixed_key(0, "prnu")   # a map's key: (seed, stage) alone
+True
 """
 
 import numpy as np

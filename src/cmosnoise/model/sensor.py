@@ -61,6 +61,14 @@ class FrameDetail:
     frame's black-level error, where set), ``read_noise`` (after the gain,
     where on) and ``quantization`` (rounding and clipping); ``raw`` is the ADC
     output in DN.
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor
+    >>> shot = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7).expose("flat:0.5")
+    >>> d = shot.frame(0, detail=True)
+    >>> sorted(d.contributions)[:4]
+    ['column_noise', 'crosstalk', 'dark_current', 'perfect']
     """
 
     index: int
@@ -372,6 +380,14 @@ class Exposure:
         photo mean (signal, exposure, PRNU, crosstalk) and the dark mean
         (dark map, integration time) are then kept in it as two products,
         so a change of one (a temperature, say) reuses the other.
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor
+    >>> shot = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7).expose("flat:0.5")
+    >>> frames = list(shot.frames(3))          # frames 0, 1, 2, one at a time
+    >>> len(frames), frames[0].shape, shot.photo_mean_e.shape
+    (3, (48, 64), (48, 64))
     """
 
     def __init__(self, sensor: Sensor, signal: np.ndarray, sequence: int = SEQ_SCENE, signal_parts: tuple | None = None):

@@ -157,6 +157,13 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     """The :class:`SensorSpec` of ``config``; raises CmosnoiseError on what its values cannot mean.
 
     A spec passes through unchanged.
+
+    Examples
+    --------
+    >>> from cmosnoise import load_config, resolve
+    >>> spec = resolve(load_config())
+    >>> spec.shape, spec.transfer.bits
+    ((480, 640), 12)
     """
     if isinstance(config, SensorSpec):
         return config

@@ -4,6 +4,12 @@ Rates are carried internally in electrons per second per pixel (e-/s).
 Data sheets also quote dark current as a current per pixel in attoampere
 (1 aA = 1e-18 C/s = 6.241509 e-/s) or as a current density in nA/cm^2, which
 needs the pixel pitch.
+
+Examples
+--------
+>>> from cmosnoise import units
+>>> round(units.aa_to_e_per_s(250), 1)   # 250 aA of dark current per pixel, in e-/s
+1560.4
 """
 
 ELEMENTARY_CHARGE_C = 1.602176634e-19

@@ -7,6 +7,13 @@ A linear ramp ADC (docs/model.md stage 9)::
 
 ``round`` is round-half-to-even (``numpy.rint``). The black level keeps
 negative noise excursions visible, as real sensors do.
+
+Examples
+--------
+>>> from cmosnoise import Sensor
+>>> t = Sensor({"sensor": {"width": 64, "height": 48}}).transfer
+>>> t.bits, t.black_level_dn, t.max_code
+(12, 64.0, 4095)
 """
 
 from __future__ import annotations

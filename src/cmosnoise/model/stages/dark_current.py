@@ -21,6 +21,13 @@ Every pixel has fixed uniform variates (body quantile, tail membership, tail
 magnitude) from its own counter under the stage's fixed key, so a pixel keeps
 its rank and a white pixel stays white when the sensor warms up, and any
 rectangle of the map is made alone. Rates are e-/s per pixel.
+
+Examples
+--------
+>>> from cmosnoise import Sensor
+>>> s = Sensor({"sensor": {"width": 64, "height": 48, "temperature_c": 65}}, seed=7)
+>>> s.dark_state.temperature_c, s.dark_rate.shape
+(65.0, (48, 64))
 """
 
 from __future__ import annotations

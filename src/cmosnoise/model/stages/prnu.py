@@ -5,6 +5,13 @@ drawn once per sensor instance and applied to the mean photo-electrons. As in
 the paper (Section V-B) the PRNU is independent of the signal level. The map
 is addressed per pixel (:mod:`cmosnoise.engine.fixed_maps`): any rectangle of
 it is made alone.
+
+Examples
+--------
+>>> from cmosnoise import Sensor
+>>> gain = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7).fixed_pattern.prnu_gain
+>>> 0.97 < float(gain.mean()) < 1.03   # a gain of 1 on average, spread by prnu.sigma_pct
+True
 """
 
 import numpy as np
