@@ -80,6 +80,9 @@ def test_failed_process_and_characterize_runs_leave_nothing(tmp_path):
     assert r.returncode == 2
     r = cli("characterize", "--frames-from", tmp_path / "nowhere", "--out", tmp_path / "c", "--emva-export", tmp_path / "e")
     assert r.returncode == 2
+    # a 2-frame stack would read back as a pair: the export that could not be loaded again is refused before any work
+    r = cli("characterize", "--stack-frames", "2", "--out", tmp_path / "c", "--emva-export", tmp_path / "e")
+    assert r.returncode == 2 and "--stack-frames 2 with --emva-export" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.tif"]
 
 

@@ -22,6 +22,13 @@ The "photons" of a series are the photo-electrons generated per pixel over
 the sensor's quantum efficiency (``sensor.quantum_efficiency``); without
 one, the photo-electrons themselves (eta = 1 before crosstalk's loss to the
 substrate and the PRNU gain map).
+
+Examples
+--------
+>>> from cmosnoise import Sensor, characterize
+>>> m = characterize.model_values(Sensor({"sensor": {"width": 64, "height": 48}}))
+>>> round(m["system_gain_K_dn_per_e"], 4)      # what EMVA 1288 would measure: K, DN/e-
+0.4031
 """
 
 from __future__ import annotations

@@ -6,6 +6,12 @@ the dark mean's growth with exposure time, the saturation capacity at the
 variance maximum, SNR max, dynamic range, DSNU and PRNU (:func:`evaluate`);
 and the comparison table with what a configuration implies (:func:`table`,
 :func:`footnotes`).
+
+Examples
+--------
+>>> from cmosnoise import emva_evaluation
+>>> emva_evaluation.agrees("system_gain_K_dn_per_e", 0.403, 0.404)   # within the comparison's tolerance
+True
 """
 
 from __future__ import annotations

@@ -1,5 +1,17 @@
 """EMVA 1288 descriptor files: a :class:`~.characterize.Measurement` written as TIFF frames and a descriptor
 (:func:`export`), and read back from one, of any tool (:func:`load`, every file through :mod:`cmosnoise.inputs`).
+
+Examples
+--------
+>>> import tempfile
+>>> from pathlib import Path
+>>> from cmosnoise import Sensor, characterize, emva_files
+>>> m = characterize.measure(Sensor({"sensor": {"width": 32, "height": 24}}, seed=1), steps=8, stack_frames=4,
+...                          keep_frames=True)
+>>> descriptor = emva_files.export(m, Path(tempfile.mkdtemp()))
+>>> back = emva_files.load(descriptor)                   # what any EMVA 1288 tool reads, read back
+>>> descriptor.name, back.shape, back.bits
+('EMVA1288_descriptor.txt', (24, 32), 12)
 """
 
 from __future__ import annotations

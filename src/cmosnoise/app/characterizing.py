@@ -41,6 +41,9 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
         if a == b or a in b.parents or b in a.parents:
             raise CmosnoiseError(f"--emva-export {str(emva_export)!r} and --out {str(out)!r} are the same folder or one "
                                  "holds the other; give two separate folders")
+        if stack_frames < 3:  # the descriptor format tells a stack from a pair by its length alone
+            raise CmosnoiseError(f"--stack-frames {stack_frames} with --emva-export: an EMVA 1288 descriptor holds pairs "
+                                 "of 2 frames, and a stack is what has more; give 3 or more")
     export_folder = OutputFolder(emva_export, overwrite, "--emva-export") if emva_export is not None else None
     model = None
     if frames_from is not None:

@@ -29,6 +29,14 @@ Arrays per shard (n samples of H x W): ``raw`` uint16 (the noisy frame),
 ``expected_raw`` and ``perfect_dn`` float32 (DN), ``mask`` uint16 (the
 defect bits of :data:`cmosnoise.analysis.ground_truth.MASK_BITS`), and the
 settings of each sample as columns (:data:`COLUMNS`).
+
+Examples
+--------
+>>> from cmosnoise import dataset
+>>> recipe = dataset.Recipe(samples=4, crop=(64, 64), seed=0)
+>>> sample, truth = dataset.make_sample(recipe, 0)
+>>> sorted(sample)[:4], sorted(truth)[:3]
+(['expected_raw', 'mask', 'perfect_dn', 'raw'], ['black_level_dn', 'camera', 'cfa'])
 """
 
 from __future__ import annotations

@@ -17,6 +17,14 @@ Steps, in order:
 Monochrome sensors skip 4 to 6. The **pre-processing view** (``pre=True``)
 stops short of dark calibration and defect correction, like the paper's
 Fig. 9 "pre-processing" images; ``preview.png`` shows it.
+
+Examples
+--------
+>>> from cmosnoise import Processor, Sensor
+>>> sensor = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7)
+>>> proc = Processor(sensor.config.processing, sensor.raw_info())
+>>> proc.render(sensor.expose("photo").frame(0), pre=True).shape    # the preview: no dark calibration
+(48, 64, 3)
 """
 
 from __future__ import annotations

@@ -53,6 +53,12 @@ class SensorSpec:
         The pixel offsets' law, e- (its tail fraction solved).
     nonlinearity : nonlinearity.Curve or None
         The charge-to-voltage transfer (:mod:`.stages.nonlinearity`), ``None`` where the configuration gives none.
+    Examples
+    --------
+    >>> from cmosnoise import load_config, resolve
+    >>> spec = resolve(load_config(overrides=["prnu.measured_pct=1.5"]))   # PRNU solved from its measured value
+    >>> spec.config.prnu.sigma_pct > 0, spec.shape
+    (True, (480, 640))
     """
 
     config: Config

@@ -7,6 +7,14 @@
   offset per column, fixed.
 - Optional column gain mismatch ``Normal(1, gain_sigma_pct / 100)``, fixed,
   scaling the signal that passes through the column amplifier.
+
+Examples
+--------
+>>> from cmosnoise import seeds
+>>> from cmosnoise.model.stages import column_noise
+>>> vfpn = column_noise.vfpn_offsets(0, 640, 6.0, seeds.fixed_key(0, "column_noise"))   # 6 e- of column offsets
+>>> vfpn.shape, 5.0 < float(vfpn.std()) < 7.0
+((1, 640), True)
 """
 
 from __future__ import annotations

@@ -13,6 +13,16 @@ which lowers the shot-noise variance by ``sum(k**2)``).
 
 A kernel per CFA colour models longer diffusion of red (deeper) photo-charge;
 the colour is that of the pixel where the charge was generated. Edges reflect.
+
+Examples
+--------
+>>> import numpy as np
+>>> from cmosnoise import crosstalk
+>>> kernel = [[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]]      # percent: the 0.18 um pixel's kernel
+>>> lit = np.zeros((5, 5)); lit[2, 2] = 1000.0
+>>> out = crosstalk.spread(lit, crosstalk.kernel_fractions(kernel))
+>>> round(float(out[2, 2]), 1), round(float(out.sum()), 1)           # 78.4 % stays; the charge is kept
+(784.0, 1000.0)
 """
 
 from __future__ import annotations

@@ -4,6 +4,14 @@ Temporal: ``Normal(0, sigma_e)`` per row per frame (paper Section VII-C;
 noise entering through the reset, transfer-gate or read lines). The fixed
 row component, which the paper neglects, is optional: ``Normal(0,
 fixed_sigma_e)`` per row, drawn once.
+
+Examples
+--------
+>>> from cmosnoise import seeds
+>>> from cmosnoise.model.stages import row_noise
+>>> offsets = row_noise.fixed_offsets(0, 480, 1.0, seeds.fixed_key(0, "row_noise"))   # fixed row offsets, e-
+>>> offsets.shape, 0.85 < float(offsets.std()) < 1.15
+((480, 1), True)
 """
 
 from __future__ import annotations

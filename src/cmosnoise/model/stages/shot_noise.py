@@ -6,6 +6,14 @@ A part whose shot noise is switched off enters as its mean. The charge is
 then clipped at the full-well capacity. The draws are counter-based
 (:mod:`cmosnoise.engine.samplers`): a pixel's count depends on its own mean
 and nothing else, so a scene changed at one pixel changes no other pixel.
+
+Examples
+--------
+>>> from cmosnoise import Sensor
+>>> shot = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7).expose("flat:0.5")
+>>> d = shot.frame(0, detail=True)
+>>> d.contributions["shot_noise"].shape                       # what photon and dark shot noise added, e-
+(48, 64)
 """
 
 from __future__ import annotations

@@ -8,6 +8,13 @@ clipped at 0) plus a thin uniform tail of very noisy pixels (docs/model.md
 section 4, the same heavy-tail map as the dark current). In each frame the
 pixel gets ``Normal(0, sigma_i)``. That is the paper's simplification:
 the per-pixel noise is Gaussian in time, only its size varies over the array.
+
+Examples
+--------
+>>> from cmosnoise import Sensor
+>>> fp = Sensor({"sensor": {"width": 64, "height": 48}}, seed=7).fixed_pattern
+>>> fp.flicker_sigma.shape, bool((fp.flicker_sigma > 0).all())    # each pixel's flicker sigma, e- rms
+((48, 64), True)
 """
 
 from __future__ import annotations
