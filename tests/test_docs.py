@@ -152,3 +152,52 @@ def test_the_sensor_guide_runs_as_written(tmp_path):
         r = cli(*shlex.split(line)[1:], cwd=tmp_path)
         assert r.returncode == 0, f"{line}: {r.stderr}"
     assert (tmp_path / "cmp" / "compare.html").is_file() and (tmp_path / "run65" / "report.html").is_file()
+
+
+#: every command's page (each example runs in a folder of its own, as a reader would run one page)
+COMMAND_PAGES = ["presets", "config", "simulate", "process", "figures", "characterize", "compare", "sweep", "measure",
+                 "fit", "dataset", "evaluate", "explore"]
+
+
+def test_every_commands_page_example_runs_as_written(tmp_path):
+    """Each command's page shows an example, and it runs as written, in an empty folder (a page makes what it
+    reads); explore, a server, is started, asked for its page and stopped by its id."""
+    import urllib.request
+
+    from conftest import free_port, stop_process
+
+    pages = {p.stem for p in (ROOT / "docs" / "commands").glob("*.md")} - {"index"}
+    assert pages == set(COMMAND_PAGES), "a command page is missing from the run order (or a command from the docs)"
+    for name in COMMAND_PAGES:
+        here = tmp_path / name
+        here.mkdir()
+        text = (ROOT / "docs" / "commands" / f"{name}.md").read_text()
+        example = re.search(r"^```\n(.*?)^```", text, re.S | re.M).group(1).replace("\\\n", " ")
+        for line in example.strip().splitlines():
+            args = shlex.split(re.split(r"\s[>|]\s", line)[0])[1:]
+            if args[0] == "explore":
+                port = free_port()
+                proc = subprocess.Popen([sys.executable, "-m", "cmosnoise", *args, "--no-browser", "--port", str(port)],
+                                        cwd=here, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                try:
+                    for _ in range(600):
+                        try:
+                            with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/meta", timeout=2) as r:
+                                assert r.status == 200
+                            break
+                        except OSError:
+                            assert proc.poll() is None, f"{name}: {line} ended"
+                            import time
+
+                            time.sleep(0.2)
+                    else:
+                        raise AssertionError(f"{name}: {line} did not serve its page")
+                finally:
+                    stop_process(proc)
+                continue
+            r = cli(*args, cwd=here)
+            assert r.returncode == 0, f"docs/commands/{name}.md: {line}: {r.stderr[-2000:]}"
+    for made in ("simulate/run1/raw.tiff", "process/pictures", "characterize/emva/characterization.json",
+                 "compare/cmp/compare.html", "sweep/yield/summary.csv", "measure/lab/manifest.yaml",
+                 "fit/fitted/config.yaml", "dataset/data/dataset.json", "evaluate/scores", "figures/paper/index.html"):
+        assert (tmp_path / made).exists(), made

@@ -159,6 +159,14 @@ def test_a_yield_study_over_a_list_item_runs_in_one_command(tmp_path):
     assert r.returncode == 2 and "dark_current.points has 3 item(s)" in r.stderr
 
 
+def test_keys_that_move_together_across_list_items():
+    """Two characterization points' targets varied as one axis: each point's configuration has both, the rest kept."""
+    p = sw.plan(load_config(), ["dark_current.points.0.tail.ppm_above,dark_current.points.1.tail.ppm_above=50x100,100x200"],
+                1, scene="flat:0.5")
+    tails = [[pt["tail"]["ppm_above"] for pt in c["dark_current"]["points"]] for c in p.configs]
+    assert tails == [[50, 100, 200], [100, 200, 200]]  # the 65 C point keeps its default 200 ppm
+
+
 def test_python_api_returns_a_dataframe():
     cfg = load_config(extra={"sensor": {"width": 64, "height": 48}})
     df = sw.run(cfg, ["prnu.sigma_pct=1,2"], instances=2, scene="flat:0.5", workers=1)
