@@ -25,7 +25,17 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Transfer:
-    """The ADC's transfer function."""
+    """The ADC's transfer function: ``DN = round(e- * gain_dn_per_e + black_level_dn)``, clipped to the codes.
+
+    Parameters
+    ----------
+    gain_dn_per_e : float
+        K, the conversion gain, DN per electron.
+    black_level_dn : float
+        The code of no charge, DN.
+    bits : int
+        The ADC's resolution: codes 0 to ``2**bits - 1``.
+    """
 
     gain_dn_per_e: float  #: K, DN per electron
     black_level_dn: float
@@ -68,10 +78,22 @@ def convert(electrons: np.ndarray, transfer: Transfer, black_dn: np.ndarray | No
             read_dn: np.ndarray | None = None) -> np.ndarray:
     """Quantize charge (e-, float) to raw codes (DN, uint16).
 
-    ``black_dn``: each pixel's black level (the CFA cell's offsets and the
-    frame's error included, :func:`.read_noise.black_map`), else the
-    transfer's; ``read_dn``: read noise after the gain (DN), added before the
-    rounding.
+    Parameters
+    ----------
+    electrons : (rows, cols) array, e-
+        Charge at the ADC's input.
+    transfer : Transfer
+        Gain, black level and bits.
+    black_dn : (rows, cols) array, DN, optional
+        Each pixel's black level (the CFA cell's offsets and the frame's error included,
+        :func:`.read_noise.black_map`), else the transfer's.
+    read_dn : (rows, cols) array, DN, optional
+        Read noise after the gain, added before the rounding.
+
+    Returns
+    -------
+    (rows, cols) uint16 array, DN
+        The raw codes, clipped to ``0 .. 2**bits - 1``.
     """
     # float64 so that rounding at .5 boundaries is the formula's, not float32's
     v = electrons.astype(np.float64) * transfer.gain_dn_per_e
@@ -91,6 +113,17 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
     codes n of n P(n - 1/2 < x < n + 1/2), and without noise
     ``rint(mean_dn)``: the quantization pattern then adds to the fixed
     pattern a frame shows. Clipping is not included here.
+
+    Parameters
+    ----------
+    mean_dn : array, DN
+        The code's mean before rounding.
+    sigma_dn : array or float, DN
+        Its temporal noise (broadcast to ``mean_dn``'s shape).
+
+    Returns
+    -------
+    float64 array, DN, ``mean_dn``'s shape
     """
     from scipy.special import ndtr
 

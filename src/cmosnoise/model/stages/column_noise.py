@@ -31,33 +31,102 @@ from ..distributions import gumbel
 
 def temporal_sigma_map(col0: int, col1: int, gumbel_loc_e: float, gumbel_scale_e: float,
                        key: tuple[int, int]) -> np.ndarray:
-    """Fixed per-column temporal sigma (e-), shape (1, col1 - col0), float32, >= 0."""
+    """Fixed per-column temporal sigma: the column amplifiers' noise differs from column to column (Gumbel).
+
+    Parameters
+    ----------
+    col0, col1 : int
+        The columns to make, ``col0 <= c < col1``.
+    gumbel_loc_e, gumbel_scale_e : float
+        Location and scale of the Gumbel distribution of the sigmas, e-.
+    key : (int, int)
+        The map's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+
+    Returns
+    -------
+    (1, col1 - col0) float32 array, e-, >= 0
+        Each column's temporal sigma.
+    """
     s = gumbel(gumbel_loc_e, gumbel_scale_e).ppf(fixed_maps.lines(col0, col1, key, "uniform"))
     return np.maximum(s, 0.0).astype(np.float32)[None, :]
 
 
 def vfpn_offsets(col0: int, col1: int, vfpn_sigma_e: float, key: tuple[int, int]) -> np.ndarray:
-    """Fixed per-column offsets (e-), shape (1, col1 - col0), float32."""
+    """Fixed per-column offsets (VFPN).
+
+    Parameters
+    ----------
+    col0, col1 : int
+        The columns to make, ``col0 <= c < col1``.
+    vfpn_sigma_e : float
+        Standard deviation of the offsets, e-.
+    key : (int, int)
+        The map's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+
+    Returns
+    -------
+    (1, col1 - col0) float32 array, e-
+        Each column's offset, Normal(0, ``vfpn_sigma_e``).
+    """
     return (vfpn_sigma_e * fixed_maps.lines(col0, col1, key)).astype(np.float32)[None, :]
 
 
 def gain_map(col0: int, col1: int, gain_sigma_pct: float, key: tuple[int, int]) -> np.ndarray:
-    """Fixed per-column gain, dimensionless, shape (1, col1 - col0), float32, clipped at 0."""
+    """Fixed per-column gain of the column amplifiers.
+
+    Parameters
+    ----------
+    col0, col1 : int
+        The columns to make, ``col0 <= c < col1``.
+    gain_sigma_pct : float
+        Standard deviation of the gains, percent of 1.
+    key : (int, int)
+        The map's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+
+    Returns
+    -------
+    (1, col1 - col0) float32 array, dimensionless, >= 0
+        Each column's gain, 1 + Normal(0, ``gain_sigma_pct`` / 100), clipped at 0.
+    """
     g = 1.0 + gain_sigma_pct / 100.0 * fixed_maps.lines(col0, col1, key)
     return np.maximum(g, 0.0).astype(np.float32)[None, :]
 
 
 def temporal(sigma: np.ndarray, columns: np.ndarray, stream: Stream) -> np.ndarray:
-    """One frame's column noise (e-) of the column numbers ``columns``, shape (1, len), float64.
+    """One frame's column noise of the column numbers ``columns``: ``Normal(0, sigma_c)`` per column.
 
-    ``sigma`` is the per-column sigma map (1, cols); ``Normal(0, sigma_c)`` per column.
+    Parameters
+    ----------
+    sigma : (1, cols) array, e-
+        The per-column sigma map of the whole sensor (:func:`temporal_sigma_map`).
+    columns : (n,) int array
+        Column numbers (drawn at their own numbers: a crop gets the whole sensor's values).
+    stream : Stream
+        The frame's stream of the stage (:func:`cmosnoise.model.seeds.temporal_stream`).
+
+    Returns
+    -------
+    (1, n) float64 array, e-
     """
     columns = np.asarray(columns)
     return (np.asarray(sigma, np.float64)[0, columns] * stream.normal(columns))[None, :]
 
 
 def apply(signal_e: np.ndarray, gain: np.ndarray | None, offset_e: np.ndarray | None) -> np.ndarray:
-    """The column amplifier: ``signal * gain + offset`` per column (e-)."""
+    """The column amplifier: ``signal * gain + offset`` per column.
+
+    Parameters
+    ----------
+    signal_e : (rows, cols) array, e-
+    gain : (1, cols) array, dimensionless, or None
+        The column gains (:func:`gain_map`); None: 1.
+    offset_e : (1, cols) or (rows, cols) array, e-, or None
+        Column offsets (fixed and this frame's temporal ones); None: 0.
+
+    Returns
+    -------
+    (rows, cols) array, e-
+    """
     out = signal_e * gain if gain is not None else signal_e
     if offset_e is not None:
         out = out + offset_e

@@ -34,7 +34,19 @@ from .. import cfa as cfa_mod
 
 
 def kernel_fractions(kernel_pct) -> np.ndarray | dict[str, np.ndarray]:
-    """Kernel(s) from percent to fractions."""
+    """Kernel(s) from percent to fractions.
+
+    Parameters
+    ----------
+    kernel_pct : (3, 3) array_like, or dict of them
+        Percent of a pixel's charge that each neighbour receives (the centre keeps its own), or one such kernel
+        per colour, ``{"R": k, "G": k, "B": k}``.
+
+    Returns
+    -------
+    (3, 3) float64 array, or dict of them
+        The same kernel(s) as fractions (divided by 100).
+    """
     if isinstance(kernel_pct, dict):
         return {c: np.asarray(k, dtype=np.float64) / 100.0 for c, k in kernel_pct.items()}
     return np.asarray(kernel_pct, dtype=np.float64) / 100.0
@@ -49,6 +61,18 @@ def spread(mean_e: np.ndarray, kernel) -> np.ndarray:
     convolution with ``mode="reflect"`` mirrors the sources instead, which
     loses charge at one edge and creates it at the other for a lopsided
     kernel.)
+
+    Parameters
+    ----------
+    mean_e : (rows, cols) array, e-
+        Charge per pixel before diffusion.
+    kernel : (3, 3) array_like, fractions
+        Fraction of a pixel's charge sent to each neighbour (:func:`kernel_fractions`).
+
+    Returns
+    -------
+    (rows, cols) array, e-, of ``mean_e``'s dtype
+        Charge per pixel after diffusion.
     """
     k = np.asarray(kernel, dtype=mean_e.dtype)
     out = ndimage.convolve(np.pad(mean_e, 1), k, mode="constant")  # into a one-pixel frame around the array
@@ -65,8 +89,16 @@ def apply(mean_e: np.ndarray, kernel, pattern: str = "none") -> np.ndarray:
     Parameters
     ----------
     mean_e : (rows, cols) array, e-
-    kernel : 3 x 3 array of fractions, or ``{"R": k, "G": k, "B": k}``
-    pattern : CFA pattern, used only with per-colour kernels
+        Charge per pixel before diffusion.
+    kernel : (3, 3) array of fractions, or ``{"R": k, "G": k, "B": k}``
+        One kernel for every pixel, or one per colour of the CFA.
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG), used only with per-colour kernels.
+
+    Returns
+    -------
+    (rows, cols) array, e-
+        Charge per pixel after diffusion.
     """
     if not isinstance(kernel, dict):
         return spread(mean_e, kernel)
@@ -82,6 +114,18 @@ def channel_mixing_matrix(kernel, pattern: str) -> np.ndarray:
     Found by passing flat single-colour fields through :func:`apply`: column j
     is what a flat field of unit signal in channel j alone produces in the
     R, G and B pixels. Its inverse undoes crosstalk's colour mixing.
+
+    Parameters
+    ----------
+    kernel : (3, 3) array of fractions, or ``{"R": k, "G": k, "B": k}``
+        The crosstalk kernel(s), as :func:`apply` takes them.
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG).
+
+    Returns
+    -------
+    (3, 3) float64 array, dimensionless
+        ``M[i, j]``: the mean of channel i's pixels for unit signal in channel j.
     """
     shape = (16, 16)
     masks = cfa_mod.masks(pattern, shape)

@@ -46,7 +46,23 @@ from ..heavy_tail import HeavyTail
 
 @dataclass(frozen=True)
 class Point:
-    """One characterization point, rates in e-/s per pixel."""
+    """One characterization point, rates in e-/s per pixel.
+
+    Parameters
+    ----------
+    temperature_c : float
+        The point's temperature, C.
+    family : str
+        The body's distribution: logistic, inverse_gaussian, lognormal, normal or gamma.
+    mean, std : float
+        The body's mean and standard deviation, e-/s.
+    ppm_above : float
+        Parts per million of pixels above ``threshold`` (the white-pixel tail's target).
+    threshold : float or None
+        The white-pixel threshold, e-/s (None: no tail).
+    tail_max : float
+        The tail's largest rate, e-/s (0: no tail).
+    """
 
     temperature_c: float
     family: str
@@ -85,6 +101,29 @@ class DarkState:
     then names both, and ``mean``, ``std``, ``tail_fraction`` and
     ``tail_max`` are the log-interpolated parameters, a description (the
     map's own statistics are in the run summary).
+
+    Parameters
+    ----------
+    temperature_c : float
+        The sensor's temperature, C.
+    family : str
+        The body's family (two names between two points of different families).
+    mean, std : float
+        The body's mean and standard deviation, e-/s.
+    tail_fraction : float
+        The fraction of pixels in the white-pixel tail.
+    tail_max : float
+        The tail's largest rate, e-/s.
+    threshold : float or None
+        The white-pixel threshold every count uses, e-/s.
+    lo, hi : HeavyTail or None
+        The model at (or below) the temperature, and above it between two points.
+    w : float
+        The warmer point's weight between two points.
+    body_scale, tail_scale : float
+        The doubling laws' factors outside the points.
+    threshold_source : str
+        Where ``threshold`` comes from.
     """
 
     temperature_c: float
@@ -173,6 +212,21 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     temperature; without it, the nearest characterization point's tail threshold (which moves with the
     temperature: 100 e-/s at 25 C and 1560 e-/s at 65 C by default, so counts at two temperatures then differ in
     their threshold as well as in the dark current). The map is the same either way.
+
+    Parameters
+    ----------
+    points : list of Point
+        The characterization points (one or more temperatures).
+    temperature_c : float
+        The sensor's temperature, C.
+    doubling_c, tail_doubling_c : float
+        The body and the tail double every this many degrees C (outside the points).
+    white_threshold : (float, str), optional
+        A fixed white-pixel threshold, e-/s, and the key that gave it.
+
+    Returns
+    -------
+    DarkState
     """
     pts = sorted(points, key=lambda p: p.temperature_c)
     models = [p.model() for p in pts]
@@ -217,6 +271,21 @@ def rate_map(state: DarkState, region: tuple[int, int, int, int], cols: int, key
     Addressed per pixel (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`): each pixel's variates, and so
     its rank and its tail membership, are the same at every temperature; between two points its rate is
     log-linear between its own rates there (floored at ``RATE_FLOOR`` times each point's body mean).
+
+    Parameters
+    ----------
+    state : DarkState
+        The DCNU at the sensor's temperature (:func:`at_temperature`).
+    region : (row0, row1, col0, col1)
+        The rectangle to make.
+    cols : int
+        The sensor's width (a pixel's address is ``r * cols + c``).
+    key : (int, int)
+        The stage's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+
+    Returns
+    -------
+    (row1 - row0, col1 - col0) float32 array, e-/s, >= 0
     """
     return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, **state.inversion())
 
@@ -230,6 +299,18 @@ def cooling_fraction(points: list[Point], draw_variates) -> float:
     (every quantile of each warmer point above the colder one's, tails no
     smaller) the answer is 0 without looking at pixels. A user's points can
     break that, and the run summary says so.
+
+    Parameters
+    ----------
+    points : list of Point
+        The characterization points.
+    draw_variates : callable
+        Returns the pixels' fixed uniforms, (3, ...) arrays (one, or an iterable of row bands).
+
+    Returns
+    -------
+    float
+        The fraction of pixels, 0 to 1.
     """
     pts = sorted(points, key=lambda p: p.temperature_c)
     if len(pts) < 2:
@@ -273,5 +354,17 @@ def _dominates(hot: HeavyTail, cold: HeavyTail) -> bool:
 
 
 def mean_charge(rate_e_per_s: np.ndarray, integration_time_s: float) -> np.ndarray:
-    """Mean dark electrons collected in one integration time: ``rate * t_int`` (e-)."""
+    """Mean dark electrons collected in one integration time: ``rate * t_int``.
+
+    Parameters
+    ----------
+    rate_e_per_s : array, e-/s
+        The dark-current map (:func:`rate_map`).
+    integration_time_s : float
+        The integration time, s.
+
+    Returns
+    -------
+    float32 array, e-, the map's shape
+    """
     return (rate_e_per_s * np.float32(integration_time_s)).astype(np.float32)

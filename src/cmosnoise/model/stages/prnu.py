@@ -43,5 +43,18 @@ def gain_map(region: tuple[int, int, int, int], cols: int, sigma_pct: float, key
 
 
 def apply(mean_e: np.ndarray, gain: np.ndarray) -> np.ndarray:
-    """Mean photo-electrons (e-) after the gain map."""
+    """Mean photo-electrons after the gain map.
+
+    Parameters
+    ----------
+    mean_e : (rows, cols) array, e-
+        Mean photo-electrons per pixel.
+    gain : (rows, cols) array, dimensionless
+        The PRNU gain map (:func:`gain_map`) of the same rectangle.
+
+    Returns
+    -------
+    (rows, cols) array, e-
+        ``mean_e * gain``.
+    """
     return mean_e * gain

@@ -23,11 +23,41 @@ from ...engine.samplers import Stream
 
 
 def fixed_offsets(row0: int, row1: int, fixed_sigma_e: float, key: tuple[int, int]) -> np.ndarray:
-    """Fixed offsets (e-) of rows ``row0`` to ``row1``, shape (row1 - row0, 1), float32; row ``r``'s from its own
-    counter under the map's fixed ``key`` (:func:`cmosnoise.engine.fixed_maps.lines`)."""
+    """Fixed offsets of rows ``row0`` to ``row1``; row ``r``'s from its own counter under the map's fixed ``key``
+    (:func:`cmosnoise.engine.fixed_maps.lines`).
+
+    Parameters
+    ----------
+    row0, row1 : int
+        The rows to make, ``row0 <= r < row1``.
+    fixed_sigma_e : float
+        Standard deviation of the offsets, e-.
+    key : (int, int)
+        The map's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+
+    Returns
+    -------
+    (row1 - row0, 1) float32 array, e-
+        Each row's offset, Normal(0, ``fixed_sigma_e``).
+    """
     return (fixed_sigma_e * fixed_maps.lines(row0, row1, key)).astype(np.float32)[:, None]
 
 
 def temporal(rows: np.ndarray, sigma_e: float, stream: Stream) -> np.ndarray:
-    """One frame's row noise (e-) of the row numbers ``rows``, shape (len(rows), 1), float64."""
+    """One frame's row noise of the row numbers ``rows``.
+
+    Parameters
+    ----------
+    rows : (n,) int array
+        Row numbers (a row's noise is drawn at its own number: a crop gets the whole sensor's values).
+    sigma_e : float
+        Standard deviation, e-.
+    stream : Stream
+        The frame's stream of the stage (:func:`cmosnoise.model.seeds.temporal_stream`).
+
+    Returns
+    -------
+    (n, 1) float64 array, e-
+        One Normal(0, ``sigma_e``) value per row.
+    """
     return (sigma_e * stream.normal(np.asarray(rows)))[:, None]

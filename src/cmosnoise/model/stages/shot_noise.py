@@ -46,8 +46,14 @@ def collect(
     gaussian_above_e : float or None
         Speed option: where the mean exceeds this, draw ``Normal(mu, sqrt(mu))``
         rounded to whole electrons instead of Poisson (the paper used 1000).
-    index : array of pixel indices ``r * cols + c``, the shape of the means
-        (default: 0, 1, 2, ... in C order, the pixels of a whole frame).
+    index : array of int, optional
+        The pixels' indices ``r * cols + c``, the shape of the means (default: 0, 1, 2, ... in C order, the pixels
+        of a whole frame): a pixel's noise is drawn at its own index.
+
+    Returns
+    -------
+    array, e-, float64, the means' shape
+        Whole electrons where shot noise is drawn (Poisson), the exact mean elsewhere, clipped at the full well.
     """
     if noisy_mean_e is None:
         if exact_mean_e is None:

@@ -44,8 +44,23 @@ def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float |
 
 def flicker_sigma_map(model: HeavyTail, region: tuple[int, int, int, int], cols: int,
                       key: tuple[int, int]) -> np.ndarray:
-    """Fixed per-pixel flicker sigma (e-) over ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide,
-    float32, from the stage's fixed ``key``: :meth:`HeavyTail.map`."""
+    """Fixed per-pixel flicker sigma over a rectangle, from the stage's fixed ``key`` (:meth:`HeavyTail.map`).
+
+    Parameters
+    ----------
+    model : HeavyTail
+        The sigmas' law over the array (:func:`flicker_model`), e-.
+    region : (row0, row1, col0, col1)
+        The rectangle to make.
+    cols : int
+        The sensor's width (a pixel's address is ``r * cols + c``).
+    key : (int, int)
+        The stage's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+
+    Returns
+    -------
+    (row1 - row0, col1 - col0) float32 array, e- rms
+    """
     return model.map(region, cols, key)
 
 
@@ -54,6 +69,19 @@ def total_sigma(thermal_sigma_e: float, flicker_sigma: np.ndarray | None, shape:
 
     Thermal and flicker noise are both zero-mean normal in each frame, so
     they are drawn as one normal with this sigma. Computed once per sensor.
+
+    Parameters
+    ----------
+    thermal_sigma_e : float
+        The thermal (white) noise, the same in every pixel, e- rms.
+    flicker_sigma : (rows, cols) array, e- rms, or None
+        Each pixel's flicker sigma (:func:`flicker_sigma_map`); None: thermal noise alone.
+    shape : (rows, cols)
+        The map's shape where ``flicker_sigma`` is None.
+
+    Returns
+    -------
+    (rows, cols) float32 array, e- rms
     """
     if flicker_sigma is None:
         return np.full(shape, thermal_sigma_e, np.float32)
@@ -63,7 +91,17 @@ def total_sigma(thermal_sigma_e: float, flicker_sigma: np.ndarray | None, shape:
 def noise(sigma_e: np.ndarray, stream: Stream, index: np.ndarray) -> np.ndarray:
     """One frame of source-follower noise (e-), float64: ``sigma_i * Normal(0, 1)`` per pixel.
 
-    ``sigma_e`` from :func:`total_sigma`; ``index`` the pixels' indices
-    ``r * cols + c``, same shape.
+    Parameters
+    ----------
+    sigma_e : array, e- rms
+        Each pixel's sigma (:func:`total_sigma`).
+    stream : Stream
+        The frame's stream of the stage (:func:`cmosnoise.model.seeds.temporal_stream`).
+    index : int array, the shape of ``sigma_e``
+        The pixels' indices ``r * cols + c``.
+
+    Returns
+    -------
+    float64 array, e-, the shape of ``sigma_e``
     """
     return np.asarray(sigma_e, np.float64) * stream.normal(index)
