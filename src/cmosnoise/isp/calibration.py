@@ -23,12 +23,36 @@ import numpy as np
 
 
 def subtract_black(raw: np.ndarray, black_level_dn: float) -> np.ndarray:
-    """Raw DN to signal above black (DN), float32; may be negative."""
+    """Raw codes to signal above black.
+
+    Parameters
+    ----------
+    raw : array, DN
+        Raw codes.
+    black_level_dn : float
+        The black level, DN.
+
+    Returns
+    -------
+    float32 array, DN, ``raw``'s shape
+        May be negative (noise around black).
+    """
     return raw.astype(np.float32) - np.float32(black_level_dn)
 
 
 def master_dark(frames: Iterable[np.ndarray]) -> np.ndarray:
-    """Mean of dark frames (DN, black level included), float32, accumulated one frame at a time."""
+    """Mean of dark frames, accumulated one frame at a time.
+
+    Parameters
+    ----------
+    frames : iterable of (rows, cols) arrays, DN
+        Dark frames (raw codes, black level included).
+
+    Returns
+    -------
+    (rows, cols) float32 array, DN
+        The master dark, black level included.
+    """
     total = None
     n = 0
     for f in frames:
@@ -40,5 +64,19 @@ def master_dark(frames: Iterable[np.ndarray]) -> np.ndarray:
 
 
 def subtract_dark(signal_dn: np.ndarray, master_dark_dn: np.ndarray, black_level_dn: float) -> np.ndarray:
-    """Signal above black minus the master dark's signal above black (DN)."""
+    """Signal above black minus the master dark's signal above black.
+
+    Parameters
+    ----------
+    signal_dn : (rows, cols) array, DN
+        A frame's signal above black (:func:`subtract_black`).
+    master_dark_dn : (rows, cols) array, DN
+        The master dark, black level included (:func:`master_dark`).
+    black_level_dn : float
+        The black level, DN.
+
+    Returns
+    -------
+    (rows, cols) array, DN
+    """
     return signal_dn - (master_dark_dn - np.float32(black_level_dn))

@@ -29,21 +29,57 @@ def is_mono(pattern: str) -> bool:
 
 
 def tile(pattern: str) -> np.ndarray:
-    """The 2 x 2 tile of channel indices of a Bayer pattern."""
+    """The 2 x 2 tile of channel indices of a Bayer pattern.
+
+    Parameters
+    ----------
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG.
+
+    Returns
+    -------
+    (2, 2) int8 array
+        0 for R, 1 for G, 2 for B.
+    """
     if pattern not in BAYER_PATTERNS:
         raise ValueError(f"not a Bayer pattern: {pattern!r}; use one of {BAYER_PATTERNS}")
     return np.array([CHANNEL_INDEX[c] for c in pattern], dtype=np.int8).reshape(2, 2)
 
 
 def crop_pattern(pattern: str, row: int, col: int) -> str:
-    """The pattern of a crop whose corner is pixel (``row``, ``col``) of a sensor of ``pattern``."""
+    """The pattern of a crop whose corner is pixel (``row``, ``col``) of a sensor of ``pattern``.
+
+    Parameters
+    ----------
+    pattern : str
+        The sensor's pattern (RGGB, BGGR, GRBG or GBRG).
+    row, col : int
+        The crop's top-left pixel.
+
+    Returns
+    -------
+    str
+        The crop's pattern.
+    """
     if is_mono(pattern):
         return pattern
     return "".join(pattern[2 * ((row + i) % 2) + (col + j) % 2] for i in (0, 1) for j in (0, 1))
 
 
 def channel_map(pattern: str, shape: tuple[int, int]) -> np.ndarray:
-    """Channel index (0, 1, 2) of every pixel, shape ``shape``; all 1 for mono."""
+    """Channel index of every pixel.
+
+    Parameters
+    ----------
+    pattern : str
+        RGGB, BGGR, GRBG, GBRG, or none (monochrome).
+    shape : (rows, cols)
+
+    Returns
+    -------
+    (rows, cols) int8 array
+        0 for R, 1 for G, 2 for B; all 1 for monochrome.
+    """
     rows, cols = shape
     if is_mono(pattern):
         return np.ones(shape, dtype=np.int8)
@@ -52,7 +88,18 @@ def channel_map(pattern: str, shape: tuple[int, int]) -> np.ndarray:
 
 
 def masks(pattern: str, shape: tuple[int, int]) -> np.ndarray:
-    """Boolean masks, shape (3, rows, cols): which pixels sit under R, G, B."""
+    """Which pixels sit under R, G and B.
+
+    Parameters
+    ----------
+    pattern : str
+        RGGB, BGGR, GRBG, GBRG, or none (monochrome).
+    shape : (rows, cols)
+
+    Returns
+    -------
+    (3, rows, cols) bool array
+    """
     cmap = channel_map(pattern, shape)
     return np.stack([cmap == c for c in range(3)])
 

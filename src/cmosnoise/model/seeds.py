@@ -63,6 +63,20 @@ def fixed_key(seed: int, stage: str, part: int = 0) -> tuple[int, int]:
     (:mod:`cmosnoise.engine.fixed_maps`). ``part`` separates the maps of one
     stage (e.g. column sigma, VFPN offsets, column gains), so switching one
     off leaves the others.
+
+    Parameters
+    ----------
+    seed : int
+        The sensor instance's seed.
+    stage : str
+        The stage's name (a key of ``STAGE_IDS``).
+    part : int
+        Which of the stage's maps.
+
+    Returns
+    -------
+    (int, int)
+        Philox4x32's two key words.
     """
     ss = np.random.SeedSequence(seed, spawn_key=(FIXED, STAGE_IDS[stage], 2**31 + part))
     k0, k1 = ss.generate_state(2, np.uint32)
@@ -70,7 +84,20 @@ def fixed_key(seed: int, stage: str, part: int = 0) -> tuple[int, int]:
 
 
 def stream_key(seed: int, stage: str) -> tuple[int, int]:
-    """The two 32-bit key words of a stage's temporal noise (Philox4x32), from ``(seed, TEMPORAL, stage)``."""
+    """The two 32-bit key words of a stage's temporal noise (Philox4x32), from ``(seed, TEMPORAL, stage)``.
+
+    Parameters
+    ----------
+    seed : int
+        The sensor instance's seed.
+    stage : str
+        The stage's name (a key of ``STAGE_IDS``).
+
+    Returns
+    -------
+    (int, int)
+        Philox4x32's two key words.
+    """
     ss = np.random.SeedSequence(seed, spawn_key=(TEMPORAL, STAGE_IDS[stage]))
     k0, k1 = ss.generate_state(2, np.uint32)
     return int(k0), int(k1)
@@ -82,6 +109,22 @@ def temporal_stream(seed: int, stage: str, frame: int, sequence: int = SEQ_SCENE
     Counter-based (docs/model.md section 1): the draw of pixel ``i`` depends on
     nothing but (seed, stage, frame, sequence, i), so frames, crops, threads
     and machines never change a bit.
+
+    Parameters
+    ----------
+    seed : int
+        The sensor instance's seed.
+    stage : str
+        The stage's name (a key of ``STAGE_IDS``).
+    frame : int
+        The frame's index, >= 0.
+    sequence : int
+        The frame series (the scene's, a master dark's, ...).
+
+    Returns
+    -------
+    Stream
+        Draws addressed by pixel index (:class:`cmosnoise.engine.samplers.Stream`).
     """
     if frame < 0:
         raise ValueError(f"frame index must be >= 0, got {frame}")
