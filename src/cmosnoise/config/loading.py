@@ -123,6 +123,11 @@ def _preset_dir():
 def preset_names() -> list[str]:
     """The shipped presets' names, sorted.
 
+    Returns
+    -------
+    list of str
+        Each a name ``load_config(preset=...)`` and ``--preset`` take.
+
     Examples
     --------
     >>> from cmosnoise import preset_names
@@ -280,6 +285,18 @@ def merge_updates(config: Config, updates: dict) -> Config:
     Every value ``config`` set is kept, ``None`` included (a ``tail: null``
     stays no tail): the merge starts from the keys that were set, not from a
     dump that leaves nulls out, and what was never set keeps its default.
+
+    Parameters
+    ----------
+    config : Config
+        The configuration to change.
+    updates : dict
+        A (partial) configuration as data, sections as nested dicts, merged over ``config``.
+
+    Returns
+    -------
+    Config
+        Schema-valid (what the values imply is checked by :func:`cmosnoise.resolve`).
 
     Examples
     --------

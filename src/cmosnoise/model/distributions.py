@@ -255,7 +255,18 @@ def body(family: str, mean: float, std: float) -> Frozen:
 
 
 def gumbel(loc: float, scale: float) -> Frozen:
-    """The Fisher-Tippett-Gumbel distribution of the maximum, scipy's ``gumbel_r(loc, scale)``."""
+    """The Fisher-Tippett-Gumbel distribution of the maximum, scipy's ``gumbel_r(loc, scale)``.
+
+    Parameters
+    ----------
+    loc, scale : float
+        Location and scale, in the unit of the values (e- rms for the noise sigmas).
+
+    Returns
+    -------
+    Frozen
+        With the interface of a frozen :mod:`scipy.stats` distribution.
+    """
     return Frozen("gumbel_r", loc=loc, scale=scale)
 
 
@@ -271,6 +282,16 @@ def ppf_table(dist) -> np.ndarray:
     The fixed maps interpolate it linearly in logit space
     (:func:`cmosnoise.engine.fixed_maps.ppf_cell`): relative error below 1e-6 for these families, where some
     scipy ppfs (the inverse Gaussian's) take seconds per million values.
+
+    Parameters
+    ----------
+    dist : Frozen or frozen scipy.stats distribution
+        The distribution (:func:`body`, :func:`gumbel`).
+
+    Returns
+    -------
+    (8193,) float64 array
+        The quantiles, in the distribution's unit.
     """
     xg = getattr(dist, "_cmosnoise_ppf_table", None)
     if xg is None:

@@ -47,6 +47,18 @@ def integral_of_sf(body, a: float, b: float) -> float:
     quantiles 1e-15 ... 1 - 1e-15 (where its sf bends) and each piece into
     16 equal parts. Beyond those quantiles the sf is within 1e-15 of 1 or 0,
     and smooth. Tested against ``scipy.integrate.quad``.
+
+    Parameters
+    ----------
+    body : frozen distribution
+        The body (:func:`cmosnoise.model.distributions.body`).
+    a, b : float
+        The interval, in the body's unit, ``a <= b``.
+
+    Returns
+    -------
+    float
+        The integral, in the body's unit.
     """
     if not b > a:
         return 0.0
@@ -59,7 +71,17 @@ def integral_of_sf(body, a: float, b: float) -> float:
 
 
 class UnreachablePpm(ValueError):
-    """The requested ppm cannot be produced by any tail fraction in [0, 1]."""
+    """The requested ppm cannot be produced by any tail fraction in [0, 1].
+
+    Parameters
+    ----------
+    ppm : float
+        The ppm asked for.
+    low_ppm, high_ppm : float
+        The reachable range: the body alone, and the body with every pixel in the tail.
+    threshold, tail_max : float
+        The threshold and the tail's largest value, in the model's unit.
+    """
 
     def __init__(self, ppm: float, low_ppm: float, high_ppm: float, threshold: float, tail_max: float):
         self.ppm, self.low_ppm, self.high_ppm = ppm, low_ppm, high_ppm
@@ -184,5 +206,16 @@ def variates(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
     Open uniforms, ``(m + 0.5) 2**-52`` as the counter-based maps' (never 0 or 1, where the quantile's logit
     has no value); passed to :meth:`HeavyTail.values`, the same variates under other parameters keep every
     pixel's rank. (A sensor's own variates: :func:`cmosnoise.engine.fixed_maps.variates`.)
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The map's shape.
+    rng : numpy.random.Generator
+        Where the uniforms come from.
+
+    Returns
+    -------
+    (3, *shape) float64 array, in (0, 1)
     """
     return (rng.integers(0, 2**52, (3, *shape)) + 0.5) * 2.0**-52

@@ -100,6 +100,9 @@ class Sensor:
         defaults, or a YAML file's path (defaults if omitted).
     seed : int, optional
         Overrides the configuration's seed (every other value it set is kept, nulls included).
+    fixed_pattern : FixedPattern, optional
+        Maps already drawn for this configuration and seed (a sensor made again from its parts); drawn if
+        omitted.
     cache : PatternCache, optional
         Fixed-pattern maps and exposure products kept between sensors (:mod:`.fixed_pattern`): a map
         whose inputs a cached sensor of the same seed and size shared is taken from it, bit for bit.

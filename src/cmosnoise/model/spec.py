@@ -149,7 +149,17 @@ class SensorSpec:
 
 
 def transfer(config: Config) -> adc.Transfer:
-    """The ADC transfer a configuration sets (the ideal one with the ADC off)."""
+    """The ADC transfer a configuration sets (the ideal one with the ADC off).
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    cmosnoise.model.stages.adc.Transfer
+        K (DN/e-, from ``adc.gain_dn_per_e`` or the full scale over the codes), black level (DN) and bits.
+    """
     a = config.adc
     if not a.enabled:
         return adc.Transfer.ideal()
@@ -163,6 +173,22 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     """The :class:`SensorSpec` of ``config``; raises CmosnoiseError on what its values cannot mean.
 
     A spec passes through unchanged.
+
+    Parameters
+    ----------
+    config : Config or SensorSpec
+        A schema-valid configuration (:func:`cmosnoise.load_config`).
+
+    Returns
+    -------
+    SensorSpec
+        The dark-current points in e-/s, the flicker and offset laws, PRNU solved from its measured value, the
+        ADC transfer: what the model reads, computed once.
+
+    Raises
+    ------
+    CmosnoiseError
+        An unreachable ppm, a distribution that cannot be computed, timings out of range.
 
     Examples
     --------
