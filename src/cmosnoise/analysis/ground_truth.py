@@ -67,7 +67,21 @@ MASK_BITS = {
 
 @dataclass(frozen=True)
 class Truth:
-    """The ground truth of one exposure over a region (arrays (rows, cols))."""
+    """The ground truth of one exposure over a region (arrays (rows, cols)).
+
+    Parameters
+    ----------
+    perfect_e : (rows, cols) float32 array, e-
+        Mean photo-electrons of the perfect image.
+    perfect_dn : (rows, cols) float32 array, DN
+        The perfect image through the ideal ADC (e- with the ADC off).
+    expected_raw : (rows, cols) float32 array, DN
+        What infinitely many frames average to (e- with the ADC off).
+    mask : (rows, cols) uint16 array
+        The defect mask, bits of :data:`MASK_BITS`.
+    white_threshold_e_per_s : float or None
+        The dark current above which a pixel is white, e-/s (None: no dark current).
+    """
 
     perfect_e: np.ndarray  #: mean photo-electrons of the perfect image, e-, float32
     perfect_dn: np.ndarray  #: the perfect image through the ideal ADC, DN, float32 (e- with the ADC off)
@@ -77,8 +91,20 @@ class Truth:
 
 
 def white_threshold(sensor, threshold_e_per_s: float | None = None) -> float | None:
-    """The white-pixel threshold, e-/s: the one given, else the dark-current model's own (its nearest
-    characterization point's tail threshold), else 10 times the mean dark current; None without dark current."""
+    """The white-pixel threshold: the one given, else the dark-current model's own (``dark_current.white_threshold_*``,
+    else its nearest characterization point's tail threshold), else 10 times the mean dark current.
+
+    Parameters
+    ----------
+    sensor : Sensor
+    threshold_e_per_s : float, optional
+        A threshold to use instead, e-/s.
+
+    Returns
+    -------
+    float or None
+        e-/s; None without dark current.
+    """
     state = sensor.dark_state
     if state is None:
         return None
@@ -90,8 +116,22 @@ def white_threshold(sensor, threshold_e_per_s: float | None = None) -> float | N
 
 
 def mask(sensor, region=None, white_threshold_e_per_s: float | None = None) -> np.ndarray:
-    """The defect mask of ``region`` (uint16 bits of :data:`MASK_BITS`): white pixels above the threshold
-    (:func:`white_threshold`) and their couplets, the defects of stage 15, the random telegraph pixels."""
+    """The defect mask of ``region``: white pixels above the threshold (:func:`white_threshold`) and their
+    couplets, the defects of stage 15, the random telegraph pixels.
+
+    Parameters
+    ----------
+    sensor : Sensor
+    region : (row0, row1, col0, col1), optional
+        The rectangle (the whole sensor if omitted).
+    white_threshold_e_per_s : float, optional
+        The white-pixel threshold, e-/s (default: :func:`white_threshold`'s).
+
+    Returns
+    -------
+    (row1 - row0, col1 - col0) uint16 array
+        Bits of :data:`MASK_BITS`.
+    """
     rows, cols = sensor.shape
     r0, r1, c0, c1 = region_of(region, sensor.shape)
     out = np.zeros((r1 - r0, c1 - c0), np.uint16)
@@ -142,6 +182,15 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
 
     The pixels no clip comes near (within 10 sigma) take one compiled pass
     (:func:`_far_pixels`, the same formulas); the others, the NumPy functions.
+
+    Parameters
+    ----------
+    exposure : Exposure
+        A scene on a sensor (:meth:`Sensor.expose`).
+
+    Returns
+    -------
+    (rows, cols) float32 array, DN (e- with the ADC off)
     """
     sensor = exposure.sensor
     c = sensor.config
@@ -227,7 +276,19 @@ _far_pixels = _compile_far_pixels()
 
 
 def truth(exposure: Exposure, white_threshold_e_per_s: float | None = None) -> Truth:
-    """The ground truth of ``exposure``: perfect image (e-, DN), expected raw and defect mask."""
+    """The ground truth of ``exposure``: perfect image (e-, DN), expected raw and defect mask.
+
+    Parameters
+    ----------
+    exposure : Exposure
+        A scene on a sensor (:meth:`Sensor.expose`).
+    white_threshold_e_per_s : float, optional
+        The mask's white-pixel threshold, e-/s (default: :func:`white_threshold`'s).
+
+    Returns
+    -------
+    Truth
+    """
     sensor = exposure.sensor
     c = sensor.config
     t = sensor.transfer

@@ -59,6 +59,18 @@ def couplet_pairs(mask: np.ndarray, pattern: str) -> np.ndarray:
 
     From the white pixels' coordinates (one pass over the map, then work in their number): which CFA positions
     may start a pair along each offset is :func:`_pair_starts` of one 2 x 2 cell (the CFA repeats every 2).
+
+    Parameters
+    ----------
+    mask : (rows, cols) bool array
+        The white pixels.
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG, or none): couplets are neighbours in one colour plane.
+
+    Returns
+    -------
+    (n, 2, 2) int array
+        Each couplet's two pixels, ((r1, c1), (r2, c2)).
     """
     mask = np.asarray(mask, dtype=bool)
     rows, cols = mask.shape
@@ -75,13 +87,36 @@ def couplet_pairs(mask: np.ndarray, pattern: str) -> np.ndarray:
 
 
 def count_couplets(mask: np.ndarray, pattern: str) -> int:
-    """Number of couplets (pairs of same-colour neighbouring white pixels)."""
+    """Number of couplets (pairs of same-colour neighbouring white pixels).
+
+    Parameters
+    ----------
+    mask : (rows, cols) bool array
+        The white pixels.
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG, or none): couplets are neighbours in one colour plane.
+
+    Returns
+    -------
+    int
+    """
     mask = np.asarray(mask, dtype=bool)
     return sum(int(np.count_nonzero(_shifted_pairs(start, mask, dr, dc))) for (dr, dc), start in _pair_starts(mask, pattern))
 
 
 def neighbour_pairs(shape: tuple[int, int], pattern: str) -> int:
-    """How many same-colour neighbour pairs an array of this shape has (every place a couplet could be)."""
+    """How many same-colour neighbour pairs an array of this shape has (every place a couplet could be).
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG, or none): couplets are neighbours in one colour plane.
+
+    Returns
+    -------
+    int
+    """
     rows, cols = shape
     n = 0
     for (dr, dc), start in _pair_starts(np.ones((min(rows, 4), min(cols, 4)), bool), pattern):
@@ -108,6 +143,19 @@ def expected_couplets(shape: tuple[int, int], pattern: str, white_fraction: floa
 
     Each of the array's same-colour neighbour pairs (:func:`neighbour_pairs`,
     a closed form) is a couplet with probability ``white_fraction**2``.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG, or none): couplets are neighbours in one colour plane.
+    white_fraction : float
+        The fraction of white pixels, 0 to 1.
+
+    Returns
+    -------
+    float
+        The expected number of couplets.
     """
     return neighbour_pairs(shape, pattern) * white_fraction**2
 
@@ -115,7 +163,20 @@ def expected_couplets(shape: tuple[int, int], pattern: str, white_fraction: floa
 def report(values: np.ndarray, threshold: float, pattern: str) -> dict:
     """White pixels above ``threshold`` in a map or frame and the couplets they form.
 
-    ``values`` and ``threshold`` are in the same unit (e.g. e-/s, or DN).
+    Parameters
+    ----------
+    values : (rows, cols) array
+        A dark-current map (e-/s) or a frame's signal (DN).
+    threshold : float
+        In the unit of ``values``: a pixel above it is white.
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG, or none): couplets are neighbours in one colour plane.
+
+    Returns
+    -------
+    dict
+        ``threshold``, ``white_pixels``, ``ppm``, ``couplets`` and ``couplets_expected_random`` (at random with the
+        same density, :func:`expected_couplets`).
 
     Examples
     --------
@@ -151,6 +212,21 @@ def dark_rate_from_raw(raw: np.ndarray, black_level_dn: float, gain_dn_per_e: fl
     ``raw`` is one frame (rows, cols) or a stack (frames, rows, cols), as
     ``tifffile.imread`` returns ``raw.tiff``; a stack is averaged over its
     frames first, which lowers the temporal noise in the estimate.
+
+    Parameters
+    ----------
+    raw : (rows, cols) or (frames, rows, cols) array, DN
+        Dark raw codes.
+    black_level_dn : float
+        The black level, DN.
+    gain_dn_per_e : float
+        K, DN per electron.
+    integration_time_s : float
+        The frames' integration time, s.
+
+    Returns
+    -------
+    (rows, cols) float64 array, e-/s
     """
     raw = np.asarray(raw, dtype=np.float64)
     if raw.ndim == 3:
