@@ -79,13 +79,38 @@ def transfer_slope(sensor: Sensor, charge_e: float) -> float:
 
     Charge-referred noise (shot noise) and signal differences (PRNU) pass
     through the transfer scaled by it, to first order.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    charge_e : float
+        The mean collected charge, e-.
+
+    Returns
+    -------
+    float
+        d(output e-) / d(collected e-), dimensionless.
     """
     curve = sensor.spec.nonlinearity_on("charge")  # on the mean charge, the shot noise follows the mean it is drawn with
     return 1.0 if curve is None else curve.slope(charge_e)
 
 
 def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:
-    """Each temporal source's variance (e-^2) at mean photo-signal ``signal_e``."""
+    """Each temporal source's variance at mean photo-signal ``signal_e``.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    signal_e : float
+        The mean photo-signal, e-.
+
+    Returns
+    -------
+    dict of str to float
+        Variance per source (:data:`SOURCE_NAMES`), e-^2, referred to the charge.
+    """
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
@@ -123,8 +148,19 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
 
 
 def after_gain_variances(sensor: Sensor) -> dict[str, float]:
-    """The temporal variances the ADC adds before rounding (stage 9a), DN^2 referred to e-^2: the read noise after
-    the gain and the black level's error per frame (empty with the ADC off)."""
+    """The temporal variances the ADC adds before rounding (stage 9a): the read noise after the gain and the black
+    level's error per frame.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+
+    Returns
+    -------
+    dict of str to float
+        ``read_after_gain`` and ``black_level_frame``, where on: DN^2 referred to e-^2 (empty with the ADC off).
+    """
     c, k = sensor.config, sensor.transfer.gain_dn_per_e
     out: dict[str, float] = {}
     if not c.adc.enabled:
@@ -140,7 +176,19 @@ def after_gain_variances(sensor: Sensor) -> dict[str, float]:
 
 
 def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, float]]:
-    """The fixed-pattern variances that do not depend on the signal (e-^2), and those per signal^2 (e-^2 / e-^2)."""
+    """The fixed-pattern variances that do not depend on the signal, and those that grow with it.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+
+    Returns
+    -------
+    (dict of str to float, dict of str to float)
+        The constant variances, e-^2 (DCNU, offsets, VFPN, ...), and those per signal^2 (PRNU, column gains),
+        e-^2 / e-^2.
+    """
     c = sensor.config
     fp = sensor.fixed_pattern
     const: dict[str, float] = {}
@@ -176,7 +224,19 @@ def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, flo
 def fixed_pattern_variances(sensor: Sensor, signal_e: float = 0.0, _parts=None) -> dict[str, float]:
     """Each fixed-pattern source's spatial variance (e-^2) at mean photo-signal ``signal_e``.
 
-    (``_parts``: :func:`fixed_pattern_parts` of this sensor, when several levels are asked for.)
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    signal_e : float
+        The mean photo-signal, e-.
+    _parts : tuple, optional
+        :func:`fixed_pattern_parts` of this sensor, when several levels are asked for.
+
+    Returns
+    -------
+    dict of str to float
+        Spatial variance per source (:data:`SOURCE_NAMES`), e-^2.
     """
     const, per_s2 = _parts or fixed_pattern_parts(sensor)
     seen = signal_e * transfer_slope(sensor, signal_e)  # a gain difference passes the transfer by its slope
@@ -231,6 +291,25 @@ def clipped_moments(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray |
     ``E[min(round(black + K X), top code)]`` referred back to e- (exact for
     each of the two normal components), and ``quantized`` marks those pixels
     (the others' means are the charge's, for :func:`~cmosnoise.model.stages.adc.expected_code`).
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    signal_e : float
+        A flat field's mean photo-signal, e- (where ``photo_e`` is not given).
+    photo_e : (rows, cols) array, e-, optional
+        A scene's mean photo-charge per pixel.
+    exposure : Exposure, optional
+        A scene on ``sensor``: its mean charges, defects and telegraph pixels.
+    codes : bool
+        Near the ADC's top, the quantizer's expectation instead of the charge's mean.
+
+    Returns
+    -------
+    dict
+        ``mean`` and ``var``, (rows, cols) float64, e- and e-^2; ``p_full_well`` and ``p_top``, (rows, cols)
+        probabilities or None; ``quantized``, a (rows, cols) bool array or None.
     """
     terms = readout_terms(sensor, signal_e, photo_e, exposure)
     shape = sensor.shape
@@ -262,7 +341,24 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
     (1, cols) or per pixel; never expanded): the mean charge ``mean_n`` and its shot variance ``shot``, the
     read variance before the column gain ``read`` and after it ``col_read`` (e-^2), the offsets before the
     column gain ``row_off`` and after it ``col_off`` (e-), the column ``gain``; the full well ``fw`` and the
-    top code's charge ``top`` (e-)."""
+    top code's charge ``top`` (e-).
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    signal_e : float
+        A flat field's mean photo-signal, e- (where ``photo_e`` is not given).
+    photo_e : (rows, cols) array, e-, optional
+        A scene's mean photo-charge per pixel.
+    exposure : Exposure, optional
+        A scene on ``sensor`` (its mean charges, defects and telegraph pixels).
+
+    Returns
+    -------
+    dict
+        The terms by the names above: scalars or arrays of shape (rows, 1), (1, cols) or (rows, cols).
+    """
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
@@ -314,7 +410,25 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
 
 
 def near_moments(sensor: Sensor, terms: dict, idx: tuple, codes: bool = False) -> dict:
-    """:func:`clipped_moments` at the pixels ``idx`` (a tuple of row and column index arrays) near a clip."""
+    """:func:`clipped_moments` at the pixels ``idx`` near a clip.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    terms : dict
+        :func:`readout_terms` of the sensor.
+    idx : (rows_index, cols_index)
+        Two index arrays of the pixels.
+    codes : bool
+        Near the ADC's top, the quantizer's expectation instead of the charge's mean.
+
+    Returns
+    -------
+    dict
+        ``mean`` (e-), ``var`` (e-^2), ``p_full_well``, ``p_top`` and ``quantized`` (or None), each an array over
+        ``idx``.
+    """
     c = sensor.config
     t = sensor.transfer
     shape = sensor.shape
@@ -351,6 +465,21 @@ def clipping(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None =
     Averages of :func:`clipped_moments` over the pixels; where nothing comes
     near a clip, the fractions are 0 and the variances NaN (the unclipped
     budget holds).
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    signal_e : float
+        A flat field's mean photo-signal, e- (where ``photo_e`` is not given).
+    photo_e : (rows, cols) array, e-, optional
+        A scene's mean photo-charge per pixel.
+
+    Returns
+    -------
+    dict
+        ``temporal_var_e2`` and ``spatial_var_e2`` (e-^2), ``full_well_fraction``, ``top_code_fraction`` and
+        ``clipped_fraction`` (0 to 1).
     """
     nothing = {"full_well_fraction": 0.0, "top_code_fraction": 0.0, "clipped_fraction": 0.0,
                "temporal_var_e2": math.nan, "spatial_var_e2": math.nan}
@@ -435,6 +564,17 @@ def telegraph_moments(sensor: Sensor) -> dict:
     ``traps`` (stage 6b, where on) and ``blinking`` (4b), each (pixels uint64, mean e-, variance e-^2) as
     :func:`~cmosnoise.model.stages.random_telegraph.trap_moments` and ``blink_moments`` give them. Empty with
     both stages off.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+
+    Returns
+    -------
+    dict
+        ``{"traps" | "blinking": (pixels, mean_e, variance_e2)}``: the pixels' indices ``r * cols + c`` (uint64),
+        their stationary mean (e-) and variance (e-^2).
     """
     from ..engine.telegraph import per_pixel
     from ..model.stages import random_telegraph as rt
@@ -492,6 +632,24 @@ def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = N
     The totals include clipping at the full well and the ADC's top where more
     than 1e-6 of the pixels clip (``clipped_fraction``); the per-source lines
     are the unclipped contributions.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance (its configuration and fixed pattern).
+    signal_e : float
+        The mean photo-signal, e- (ignored where ``photo_e`` is given).
+    photo_e : (rows, cols) array, e-, optional
+        A scene's mean photo-charge per pixel: the budget over the scene, pixel by pixel.
+    _parts : tuple, optional
+        :func:`fixed_pattern_parts` of this sensor, when several levels are asked for.
+
+    Returns
+    -------
+    dict
+        ``signal_e``; ``temporal_rms_e`` and ``fixed_pattern_rms_e`` (per source, e- rms); ``temporal_total_e``,
+        ``temporal_total_dn`` and ``fixed_pattern_total_e``; ``dominant_temporal``; ``clipped_fraction``;
+        ``snr_temporal`` and ``snr`` (with the fixed pattern), ratios.
 
     Examples
     --------
