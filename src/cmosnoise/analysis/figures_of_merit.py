@@ -64,10 +64,18 @@ FIGURE_NAMES = {
 def temporal_noise(stats: dict, gain_dn_per_e: float) -> dict:
     """Temporal noise from a :meth:`RunStats.result` (``var(frame k - frame k-1) / 2`` over the pixels).
 
-    Returns ``rms_dn`` (raw codes: quantization included), ``rms_e``
-    (``rms_dn`` through K), ``rms_e_before_adc`` (the charge at the ADC
-    input, without quantization) and ``method``; each None with fewer than
-    two frames.
+    Parameters
+    ----------
+    stats : dict
+        :meth:`cmosnoise.analysis.run_stats.RunStats.result` of a run's frames.
+    gain_dn_per_e : float
+        K, DN per electron.
+
+    Returns
+    -------
+    dict
+        ``rms_dn`` (raw codes: quantization included), ``rms_e`` (``rms_dn`` through K), ``rms_e_before_adc``
+        (the charge at the ADC input, without quantization) and ``method``; each None with fewer than two frames.
     """
     dn = stats.get("temporal_noise_dn")
     return {"rms_dn": dn, "rms_e": None if dn is None else dn / gain_dn_per_e,
@@ -75,8 +83,23 @@ def temporal_noise(stats: dict, gain_dn_per_e: float) -> dict:
 
 
 def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
-    """SNR (temporal, and with the fixed pattern) at signal levels ``levels_e`` (e-) and half the saturation,
-    and the dynamic range (saturation over the dark temporal noise); levels are keyed as text (``"100"``)."""
+    """SNR (temporal, and with the fixed pattern) at signal levels and at half the saturation, and the dynamic
+    range (saturation over the dark temporal noise).
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+    levels_e : sequence of float
+        Signal levels, e-.
+
+    Returns
+    -------
+    dict
+        ``saturation_e`` and ``dark_temporal_noise_e`` (e-), ``dynamic_range`` (ratio) and ``dynamic_range_db``;
+        ``snr_temporal_db_at_signal_e`` and ``snr_total_db_at_signal_e``, dB by level keyed as text (``"100"``).
+        :data:`FIGURE_NAMES` names them.
+    """
     sat = sensor.saturation_e
     levels = sorted({*levels_e, round(sat / 2, 3)})
     parts = noise_budget.fixed_pattern_parts(sensor)  # once for every level
@@ -103,6 +126,16 @@ def dark_map(sensor: Sensor) -> dict | None:
     ``mean_e_per_s``, ``threshold_e_per_s`` (``dark_current.white_threshold_*``, else the nearest
     characterization point's, or None), ``threshold_source`` (which) and, with a threshold, :func:`white_pixels.report`'s
     ``ppm``, ``white_pixels``, ``couplets`` and ``couplets_expected_random``.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+
+    Returns
+    -------
+    dict or None
+        The figures above (rates in e-/s); None with dark current off.
     """
     state, rate = sensor.dark_state, sensor.dark_rate
     if state is None:
@@ -118,8 +151,26 @@ def dark_map(sensor: Sensor) -> dict | None:
 def dark_current(sensor: Sensor, shot: Exposure | None = None, electrons0: np.ndarray | None = None,
                  read_var_e2: float = 0.0) -> dict | None:
     """Dark-current figures of a run: the map's statistics, its white pixels and couplets, and (given frame 0's
-    charge ``electrons0`` of ``shot`` and the dark read variance, e-^2) those seen in frame 0. None with the
-    stage off."""
+    charge ``electrons0`` of ``shot`` and the dark read variance, e-^2) those seen in frame 0.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+    shot : Exposure, optional
+        The run's exposure.
+    electrons0 : (rows, cols) array, e-, optional
+        Frame 0's charge at the ADC input.
+    read_var_e2 : float
+        The dark temporal variance of the readout, e-^2.
+
+    Returns
+    -------
+    dict or None
+        The body and tail, the map's mean and median (e-/s), the threshold (e-/s and aA) and where it comes from,
+        the expected ppm, the map's white pixels and couplets (``map``) and frame 0's (``frame0``); None with the
+        stage off.
+    """
     state, rate = sensor.dark_state, sensor.dark_rate
     if state is None:
         return None
@@ -160,6 +211,24 @@ def frame0_white_pixels(sensor: Sensor, shot: Exposure, electrons0: np.ndarray, 
     noise plus the read noise): false alarms about 3e-7 per pixel. In a
     short exposure or a bright area a white pixel can hide in that noise,
     so the count is a lower bound of the map's; the summary says so.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+    shot : Exposure
+        The run's exposure.
+    electrons0 : (rows, cols) array, e-
+        Frame 0's charge at the ADC input.
+    threshold_e_per_s : float
+        The white-pixel threshold, e-/s.
+    read_var_e2 : float
+        The dark temporal variance of the readout, e-^2.
+
+    Returns
+    -------
+    dict
+        :func:`white_pixels.report`'s figures and the ``method``.
     """
     t_int = sensor.config.exposure.integration_time_s
     photo = shot.photo_mean_e.astype(np.float64)
@@ -172,8 +241,23 @@ def frame0_white_pixels(sensor: Sensor, shot: Exposure, electrons0: np.ndarray, 
 
 
 def pane(sensor: Sensor, shot: Exposure, levels_e=(10.0, 100.0, 1000.0)) -> dict:
-    """What the explorer shows beside a picture and a sweep records of an instance: key figures, the noise
-    budget over the scene (per source, e- rms) and the dark map's figures (:func:`dark_map`)."""
+    """What the explorer shows beside a picture and a sweep records of an instance.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+    shot : Exposure
+        A scene on the sensor.
+    levels_e : sequence of float
+        The key figures' signal levels, e-.
+
+    Returns
+    -------
+    dict
+        ``key_figures`` (:func:`key_figures`), ``budget`` over the scene (per source, e- rms, and totals) and,
+        with dark current on, ``dark`` (:func:`dark_map`).
+    """
     b = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)
     out = {"key_figures": key_figures(sensor, levels_e),
            "budget": {"temporal_e": b["temporal_rms_e"], "fixed_e": b["fixed_pattern_rms_e"],
@@ -193,6 +277,18 @@ def telegraph(sensor: Sensor, frame_period_s: float) -> dict | None:
     e^-s tau) >= 0.01``: those a dark stack shows; with CDS off, those whose
     level is not all but always one state, ``min(pi0, pi1) >= 0.01``).
     ``blinking``: pixels, ppm, median step (e-/s) and median dwell times (s).
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+    frame_period_s : float
+        The time from one frame to the next, s.
+
+    Returns
+    -------
+    dict or None
+        ``source_follower`` and ``blinking`` (where on), as above.
     """
     fp, c = sensor.fixed_pattern, sensor.config
     n = sensor.shape[0] * sensor.shape[1]
