@@ -64,32 +64,89 @@ COLORCHECKER_SRGB8 = np.array(
 
 # ------------------------------------------------------------------ encoding
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    """Decode sRGB-encoded values in [0, 1] to linear light (IEC 61966-2-1)."""
+    """Decode sRGB-encoded values in [0, 1] to linear light (IEC 61966-2-1).
+
+    Parameters
+    ----------
+    v : array
+        sRGB-encoded values, 0 to 1.
+
+    Returns
+    -------
+    array
+        Linear light, 0 to 1, ``v``'s shape.
+    """
     v = np.asarray(v, dtype=np.float64)
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
 def linear_to_srgb(v: np.ndarray) -> np.ndarray:
-    """Encode linear light in [0, 1] as sRGB in [0, 1]."""
+    """Encode linear light in [0, 1] as sRGB in [0, 1].
+
+    Parameters
+    ----------
+    v : array
+        Linear light, 0 to 1.
+
+    Returns
+    -------
+    array
+        sRGB-encoded values, 0 to 1, ``v``'s shape.
+    """
     v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
     return np.where(v <= 0.0031308, v * 12.92, 1.055 * v ** (1 / 2.4) - 0.055)
 
 
 # ------------------------------------------------------------------ built-ins
 def flat(shape: tuple[int, int], level: float) -> np.ndarray:
-    """Uniform grey at ``level`` (fraction of the peak rate)."""
+    """Uniform grey at ``level`` (fraction of the peak rate).
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+    level : float
+        The grey level, 0 to 1.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1 (1: the peak rate).
+    """
     return np.full((*shape, 3), float(level))
 
 
 def ramp(shape: tuple[int, int]) -> np.ndarray:
-    """Horizontal ramp, linear light from 0 at the left edge to 1 at the right."""
+    """Horizontal ramp, linear light from 0 at the left edge to 1 at the right.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1 (1: the peak rate).
+    """
     rows, cols = shape
     x = (np.arange(cols) + 0.5) / cols
     return np.broadcast_to(x[None, :, None], (rows, cols, 3)).copy()
 
 
 def colorchecker(shape: tuple[int, int]) -> np.ndarray:
-    """The 24-patch ColorChecker on a dark grey surround (linear light)."""
+    """The 24-patch ColorChecker on a dark grey surround (linear light).
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1 (1: the peak rate).
+    """
     rows, cols = shape
     lin = srgb_to_linear(COLORCHECKER_SRGB8 / 255.0)
     img = np.full((rows, cols, 3), srgb_to_linear(np.array(30 / 255.0)))
@@ -104,7 +161,18 @@ def colorchecker(shape: tuple[int, int]) -> np.ndarray:
 
 
 def colorchecker_patches(shape: tuple[int, int]) -> list[tuple[slice, slice]]:
-    """Central regions (half of each patch) of the 24 patches, for measuring them."""
+    """Central regions (half of each patch) of the 24 patches, for measuring them.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+
+    Returns
+    -------
+    list of (slice, slice)
+        The 24 patches' central regions, row by row.
+    """
     rows, cols = shape
     ph, pw = rows / 4, cols / 6
     out = []
@@ -121,6 +189,16 @@ def zoneplate(shape: tuple[int, int]) -> np.ndarray:
 
     The frequency reaches Nyquist (0.5 cycles/pixel) at the middle of the
     shorter edge, so the corners alias, as a zone plate should show.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1 (1: the peak rate).
     """
     rows, cols = shape
     y = np.arange(rows) - (rows - 1) / 2
@@ -132,7 +210,20 @@ def zoneplate(shape: tuple[int, int]) -> np.ndarray:
 
 
 def siemens(shape: tuple[int, int], spokes: int = 36) -> np.ndarray:
-    """Siemens star: ``spokes`` black and white sectors around the centre."""
+    """Siemens star: ``spokes`` black and white sectors around the centre.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+    spokes : int
+        The number of black and white sectors.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1 (1: the peak rate).
+    """
     rows, cols = shape
     y = np.arange(rows) - (rows - 1) / 2
     x = np.arange(cols) - (cols - 1) / 2
@@ -142,19 +233,54 @@ def siemens(shape: tuple[int, int], spokes: int = 36) -> np.ndarray:
 
 
 def steps(shape: tuple[int, int], n: int = 4) -> np.ndarray:
-    """``n`` horizontal bands at levels ``4**-(n-1-i)``, darkest at the top."""
+    """``n`` horizontal bands at levels ``4**-(n-1-i)``, darkest at the top.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+    n : int
+        The number of bands.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1 (1: the peak rate).
+    """
     rows, cols = shape
     band = np.minimum((np.arange(rows) * n) // rows, n - 1)
     return np.broadcast_to(steps_levels(n)[band][:, None, None], (rows, cols, 3)).copy()
 
 
 def steps_levels(n: int = 4) -> np.ndarray:
-    """The light levels of the ``steps:n`` bands, top to bottom: ``4**-(n-1)`` to ``1/4``, ``1``."""
+    """The light levels of the ``steps:n`` bands, top to bottom: ``4**-(n-1)`` to ``1/4``, ``1``.
+
+    Parameters
+    ----------
+    n : int
+        The number of bands.
+
+    Returns
+    -------
+    (n,) float64 array
+        The levels, 0 to 1.
+    """
     return 4.0 ** -(n - 1 - np.arange(n))
 
 
 def spot(shape: tuple[int, int]) -> np.ndarray:
-    """One lit pixel (value 1) at ``(rows // 2, cols // 2)``, all else black."""
+    """One lit pixel (value 1) at ``(rows // 2, cols // 2)``, all else black.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1 (1: the peak rate).
+    """
     img = np.zeros((*shape, 3))
     img[shape[0] // 2, shape[1] // 2] = 1.0
     return img
@@ -206,6 +332,21 @@ def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MA
     file, at most ``MAX_SCENE_BYTES``, and at most ``max_pixels`` decoded
     pixels over all its frames and pages, read from its header. Only the
     first frame or page is decoded.
+
+    Parameters
+    ----------
+    path : str or Path
+        An image file (PNG, JPEG, TIFF, ... or a .npy array).
+    scale : float, optional
+        The value that is white: an 8-bit picture's code (default 255), another type's value (default: the
+        largest in the file).
+    max_pixels : int
+        The most decoded pixels read.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1.
     """
     p = Path(path)
     name = str(path)
@@ -279,6 +420,17 @@ def resample(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
     Area averaging conserves the mean light level exactly, so a scene's
     exposure does not depend on the sensor's resolution.
+
+    Parameters
+    ----------
+    img : (rows, cols, C) array
+        A picture.
+    shape : (rows, cols)
+        The size to resample to.
+
+    Returns
+    -------
+    (shape[0], shape[1], C) float64 array
     """
     rows, cols = shape
     wr = _axis_matrix(img.shape[0], rows)
@@ -290,7 +442,20 @@ def resample(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 
 def crop_to_aspect(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Centre crop of ``img`` with the aspect ratio of ``shape``."""
+    """Centre crop of ``img`` with the aspect ratio of ``shape``.
+
+    Parameters
+    ----------
+    img : (rows, cols, ...) array
+        A picture.
+    shape : (rows, cols)
+        The aspect ratio to crop to.
+
+    Returns
+    -------
+    array
+        The centre crop, ``img``'s dtype and channels.
+    """
     h, w = img.shape[:2]
     target = shape[1] / shape[0]
     if w / h > target:
@@ -304,7 +469,17 @@ def crop_to_aspect(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 # ------------------------------------------------------------------ public
 def is_builtin(source: str) -> bool:
-    """Whether ``source`` names a built-in scene (``flat:0.5``, ``steps:8``, ``photo``, ...) rather than a file."""
+    """Whether ``source`` names a built-in scene (``flat:0.5``, ``steps:8``, ``photo``, ...) rather than a file.
+
+    Parameters
+    ----------
+    source : str
+        A scene: a built-in's name or a file's path.
+
+    Returns
+    -------
+    bool
+    """
     low = str(source).strip().lower()
     head = low.partition(":")[0]
     return head in ("flat", "steps") or (low == head and low in ("photo", "ramp", "colorchecker", "zoneplate", "siemens", "spot"))
@@ -316,6 +491,26 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
 
     With ``window = (row, col)``: the ``shape`` of the source at that corner, at the source's own resolution
     (an image file's pixels; a built-in, the photo included, drawn at ``source_size``, default ``shape``).
+
+    Parameters
+    ----------
+    source : str
+        A built-in (:data:`BUILTINS`) or an image file's path.
+    shape : (rows, cols)
+        The sensor's size.
+    scale : float, optional
+        The value that is white in an image file (:func:`load_file`).
+    fit : str
+        "crop": a picture of another aspect ratio is cropped to the sensor's at its centre; else it is stretched.
+    window : (row, col), optional
+        The corner of a window at the source's own resolution.
+    source_size : (rows, cols), optional
+        The size a built-in is drawn at, with ``window``.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1.
     """
     if window is None:
         return _fitted(source, shape, scale, fit)
@@ -324,14 +519,45 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
 
 def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
     """The whole source, linear RGB (rows, cols, 3) float64: an image file's own pixels, or a built-in (the
-    bundled photo included) drawn at ``size``. What :func:`render` takes a window of."""
+    bundled photo included) drawn at ``size``. What :func:`render` takes a window of.
+
+    Parameters
+    ----------
+    source : str
+        A built-in (:data:`BUILTINS`) or an image file's path.
+    size : (rows, cols)
+        The size a built-in is drawn at.
+    scale : float, optional
+        The value that is white in an image file (:func:`load_file`).
+    fit : str
+        "crop": a picture of another aspect ratio is cropped to ``size``'s at its centre; else it is stretched.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Linear light, 0 to 1.
+    """
     if is_builtin(source):
         return _fitted(source, tuple(size), scale, fit)
     return load_file(source, scale)
 
 
 def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) -> np.ndarray:
-    """The ``shape`` of ``img`` at the corner ``window = (row, col)``, float64, or a one-line error where it leaves it."""
+    """The ``shape`` of ``img`` at the corner ``window = (row, col)``, float64, or a one-line error where it leaves it.
+
+    Parameters
+    ----------
+    img : (rows, cols, 3) array
+        The whole source (:func:`source_image`).
+    window : (row, col)
+        The window's corner.
+    shape : (rows, cols)
+        The window's size.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+    """
     r, c = window
     if r + shape[0] > img.shape[0] or c + shape[1] > img.shape[1]:
         raise CmosnoiseError(f"scene.window = [{r}, {c}]: a {shape[0]} x {shape[1]} window there leaves the source "
@@ -386,6 +612,20 @@ def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.nd
 
     Each pixel keeps its own channel times that channel's relative
     responsivity; a monochrome sensor (``pattern='none'``) takes the luminance.
+
+    Parameters
+    ----------
+    rgb : (rows, cols, 3) array
+        Linear light, 0 to 1.
+    pattern : str
+        RGGB, BGGR, GRBG, GBRG, or none (monochrome).
+    responsivity : (float, float, float)
+        The R, G and B pixels' relative responsivity.
+
+    Returns
+    -------
+    (rows, cols) array
+        Relative signal per pixel.
     """
     if cfa_mod.is_mono(pattern):
         return rgb @ LUMINANCE
@@ -395,5 +635,19 @@ def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.nd
 
 
 def photo_electrons(signal: np.ndarray, peak_rate_e_per_s: float, integration_time_s: float) -> np.ndarray:
-    """Mean photo-electrons per pixel: ``signal * peak_rate * t_int`` (e-), float32."""
+    """Mean photo-electrons per pixel: ``signal * peak_rate * t_int`` (e-), float32.
+
+    Parameters
+    ----------
+    signal : (rows, cols) array
+        Relative signal per pixel, 0 to 1 (:func:`to_cfa`).
+    peak_rate_e_per_s : float
+        The photo-electron rate of signal 1, e-/s.
+    integration_time_s : float
+        The integration time, s.
+
+    Returns
+    -------
+    (rows, cols) float32 array, e-
+    """
     return (signal * (peak_rate_e_per_s * integration_time_s)).astype(np.float32)
