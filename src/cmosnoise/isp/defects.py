@@ -55,12 +55,39 @@ def _neighbour_views(img: np.ndarray, pattern: str, step: int = 1):
 
 
 def neighbours(img: np.ndarray, pattern: str) -> np.ndarray:
-    """The 8 same-colour neighbours of every pixel: array (8, rows, cols)."""
+    """The 8 same-colour neighbours of every pixel: array (8, rows, cols).
+
+    Parameters
+    ----------
+    img : (rows, cols) array
+        A CFA image, DN.
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG, or none.
+
+    Returns
+    -------
+    (8, rows, cols) array
+        Mirrored at the edges.
+    """
     return np.stack(list(_neighbour_views(img, pattern)))
 
 
 def neighbours_at(img: np.ndarray, pattern: str, r: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """The 8 same-colour neighbours of the pixels (r, c) only: array (8, len(r))."""
+    """The 8 same-colour neighbours of the pixels (r, c) only: array (8, len(r)).
+
+    Parameters
+    ----------
+    img : (rows, cols) array
+        A CFA image, DN.
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG, or none.
+    r, c : (n,) int arrays
+        The pixels' rows and columns.
+
+    Returns
+    -------
+    (8, n) array
+    """
     pad = np.pad(img, 2, mode="reflect")
     rb, g = _offsets(pattern)
     offs = np.broadcast_to(rb[:, None, :], (8, len(r), 2)).copy()
@@ -77,6 +104,22 @@ def correct_isolated(img: np.ndarray, pattern: str, threshold_sigma: float = 6.0
     The threshold is ``threshold_dn`` if given, else ``threshold_sigma``
     times the robust spread of (pixel - neighbour median), estimated on
     every 4th row. Returns (corrected image, mask of replaced pixels).
+
+    Parameters
+    ----------
+    img : (rows, cols) array
+        A CFA image, DN.
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG, or none.
+    threshold_sigma : float
+        The threshold in robust standard deviations.
+    threshold_dn : float, optional
+        The threshold in DN instead.
+
+    Returns
+    -------
+    (corrected, replaced) : ((rows, cols) array, (rows, cols) bool array)
+        The image with the outliers replaced by their neighbours' median, and which pixels were.
     """
     if threshold_dn is None:
         sample = img[::4] - np.median(np.stack(list(_neighbour_views(img, pattern, step=4))), axis=0)
@@ -98,6 +141,19 @@ def defect_map(master_dark_signal: np.ndarray, threshold_sigma: float = 6.0, thr
 
     A pixel is defective if it exceeds the median by more than
     ``threshold_dn``, or by ``threshold_sigma`` times the dark's robust spread.
+
+    Parameters
+    ----------
+    master_dark_signal : (rows, cols) array, DN
+        A master dark's signal above black.
+    threshold_sigma : float
+        The threshold in robust standard deviations above the median.
+    threshold_dn : float, optional
+        The threshold in DN above the median instead.
+
+    Returns
+    -------
+    (rows, cols) bool array
     """
     med = float(np.median(master_dark_signal))
     thr = threshold_dn if threshold_dn is not None else threshold_sigma * robust_sigma(master_dark_signal)
@@ -108,6 +164,20 @@ def correct_with_map(img: np.ndarray, pattern: str, defects: np.ndarray) -> np.n
     """Replace mapped defects by the median of their non-defective same-colour neighbours.
 
     A defect whose 8 neighbours are all defective keeps its value.
+
+    Parameters
+    ----------
+    img : (rows, cols) array
+        A CFA image, DN.
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG, or none.
+    defects : (rows, cols) bool array
+        The defect map (:func:`defect_map`).
+
+    Returns
+    -------
+    (rows, cols) array
+        The image with its defects replaced.
     """
     out = img.copy()
     r, c = np.nonzero(defects)

@@ -42,6 +42,19 @@ def demosaic(cfa_img: np.ndarray, pattern: str, method: str = "bilinear") -> np.
     by an even number of pixels keeps every pixel's colour), so border pixels
     are interpolated from real neighbours of their own colour: without it
     the methods' own edge handling leaves a one-pixel colour fringe.
+
+    Parameters
+    ----------
+    cfa_img : (rows, cols) array
+        A CFA image (signal, any unit).
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG.
+    method : str
+        One of :data:`DEMOSAIC_METHODS`: bilinear, malvar2004 or menon2007 (the last two by ``colour-demosaicing``).
+
+    Returns
+    -------
+    (rows, cols, 3) float32 array
     """
     if method not in DEMOSAIC_METHODS:
         raise ValueError(f"unknown demosaicing method {method!r}; use one of {DEMOSAIC_METHODS}")
@@ -67,6 +80,17 @@ def bilinear(cfa_img: np.ndarray, pattern: str) -> np.ndarray:
 
     The kernels and edge mode (``reflect``) of ``colour-demosaicing``'s
     ``demosaicing_CFA_Bayer_bilinear``.
+
+    Parameters
+    ----------
+    cfa_img : (rows, cols) array
+        A CFA image (signal, any unit).
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG.
+
+    Returns
+    -------
+    (rows, cols, 3) float32 array
     """
     from scipy.ndimage import convolve
 
@@ -84,6 +108,17 @@ def superpixel(cfa_img: np.ndarray, pattern: str) -> np.ndarray:
     (rows, cols) -> (rows // 2, cols // 2, 3) float32; a trailing odd row or
     column is dropped. For previews at half size or less: exact colours,
     no interpolation, four times fewer pixels to process.
+
+    Parameters
+    ----------
+    cfa_img : (rows, cols) array
+        A CFA image (signal, any unit).
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG.
+
+    Returns
+    -------
+    (rows // 2, cols // 2, 3) float32 array
     """
     img = np.asarray(cfa_img, dtype=np.float32)
     rows, cols = img.shape[0] // 2 * 2, img.shape[1] // 2 * 2
@@ -103,6 +138,17 @@ def apply_matrix(rgb: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     Element-wise, not through BLAS: a BLAS call leaves its threads spinning
     for a while afterwards, and on a small machine they take the cores the
     next frame's kernel needs (it ran at half speed after each picture).
+
+    Parameters
+    ----------
+    rgb : (..., 3) float32 array
+        Linear RGB.
+    matrix : (3, 3) array
+        Applied to each pixel's RGB vector.
+
+    Returns
+    -------
+    (..., 3) float32 array
     """
     m = np.asarray(matrix, np.float32)
     rgb = np.asarray(rgb, np.float32)
@@ -114,7 +160,18 @@ def apply_matrix(rgb: np.ndarray, matrix: np.ndarray) -> np.ndarray:
 
 
 def grey_world_gains(rgb: np.ndarray) -> np.ndarray:
-    """Gains that make the image's mean grey (normalised to green)."""
+    """Gains that make the image's mean grey (normalised to green).
+
+    Parameters
+    ----------
+    rgb : (..., 3) array
+        Linear RGB.
+
+    Returns
+    -------
+    (3,) float32 array
+        The R, G and B gains: green's mean over each channel's (G's gain is 1).
+    """
     means = rgb.reshape(-1, 3).mean(axis=0)
     means = np.where(means > 0, means, 1.0)
     return (means[1] / means).astype(np.float32)
@@ -130,6 +187,16 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
 
     Through a 16-bit lookup table: the input step (1/65535) moves the output
     by at most 0.05 of a code, near black where the sRGB slope is steepest.
+
+    Parameters
+    ----------
+    linear : array
+        Linear light, white = 1.
+
+    Returns
+    -------
+    uint8 array, ``linear``'s shape
+        sRGB codes.
     """
     idx = np.clip(linear * np.float32(_LUT_SIZE - 1) + np.float32(0.5), 0, _LUT_SIZE - 1).astype(np.intp)
     return _SRGB8_LUT[idx]
@@ -224,6 +291,26 @@ def bilinear_srgb8(cfa_img: np.ndarray, pattern: str, offset: float, white: floa
     one by one (a test holds them equal), several times faster: it is every
     run's ``preview.png``. Bayer patterns larger than 4 x 4; needs numba
     (:data:`COMPILED`).
+
+    Parameters
+    ----------
+    cfa_img : (rows, cols) array
+        A CFA image (signal, any unit) DN.
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG.
+    offset : float
+        Subtracted first: the black level, DN (0 for an image already above black).
+    white : float
+        The signal of scene white above black, DN.
+    matrix : (3, 3) array or None
+        Crosstalk compensation.
+    gains : (3,) array
+        The white-balance gains of R, G and B.
+
+    Returns
+    -------
+    (rows, cols, 3) uint8 array
+        sRGB.
     """
     if numba is None:  # pragma: no cover
         raise RuntimeError("numba is not installed: take the steps one by one (Processor does so by itself)")
@@ -249,6 +336,26 @@ def superpixel_srgb8(cfa_img: np.ndarray, pattern: str, offset: float, white: fl
     those steps taken one by one (a test holds them equal), about ten times
     faster at 1920 x 1080 (it is the explore page's picture after every
     slider move). Needs numba (:data:`COMPILED`).
+
+    Parameters
+    ----------
+    cfa_img : (rows, cols) array
+        A CFA image (signal, any unit) DN.
+    pattern : str
+        RGGB, BGGR, GRBG or GBRG.
+    offset : float
+        Subtracted first: the black level, DN (0 for an image already above black).
+    white : float
+        The signal of scene white above black, DN.
+    matrix : (3, 3) array or None
+        Crosstalk compensation.
+    gains : (3,) array
+        The white-balance gains of R, G and B.
+
+    Returns
+    -------
+    (rows // 2, cols // 2, 3) uint8 array
+        sRGB.
     """
     if numba is None:  # pragma: no cover
         raise RuntimeError("numba is not installed: take the steps one by one (Processor does so by itself)")
