@@ -36,6 +36,16 @@ def temporal_variance(a: np.ndarray, b: np.ndarray) -> float:
     The difference is taken in float64 (exact for integer frames), in one
     temporary array, with the variance in place. (Not ``np.dot``: BLAS's
     threads keep spinning after the call and slow the next frame's kernel.)
+
+    Parameters
+    ----------
+    a, b : (rows, cols) arrays, DN
+        Two frames of the same scene.
+
+    Returns
+    -------
+    float
+        DN^2.
     """
     d = np.subtract(a, b, dtype=np.float64)
     d -= d.mean()
@@ -44,7 +54,18 @@ def temporal_variance(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def temporal_variance_stack(stack: np.ndarray) -> float:
-    """Temporal variance (DN^2): mean over pixels of the per-pixel variance over frames (ddof=1)."""
+    """Temporal variance (DN^2): mean over pixels of the per-pixel variance over frames (ddof=1).
+
+    Parameters
+    ----------
+    stack : (frames, rows, cols) array, DN
+        Frames of the same scene, two or more.
+
+    Returns
+    -------
+    float
+        DN^2.
+    """
     return float(np.mean(np.var(stack.astype(np.float64), axis=0, ddof=1)))
 
 
@@ -58,6 +79,16 @@ def spatial_variances(stack: np.ndarray) -> dict[str, float]:
     the latter as the pixel noise / (L rows), which holds for white noise
     only: temporal column and row noise (a noise of the whole column in one
     frame) would otherwise count as fixed pattern.
+
+    Parameters
+    ----------
+    stack : (frames, rows, cols) array, DN
+        Frames of the same scene.
+
+    Returns
+    -------
+    dict of str to float
+        ``total``, ``column``, ``row`` and ``pixel`` variances (DN^2) and the frame average's ``mean`` (DN).
     """
     stack = stack.astype(np.float64)
     n_frames, rows, cols = stack.shape
@@ -83,7 +114,18 @@ def spatial_variances(stack: np.ndarray) -> dict[str, float]:
 
 
 def dsnu(dark_stack: np.ndarray) -> dict[str, float]:
-    """DSNU (DN rms): total, column, row and pixel parts, from a stack of dark frames."""
+    """DSNU (DN rms): total, column, row and pixel parts, from a stack of dark frames.
+
+    Parameters
+    ----------
+    dark_stack : (frames, rows, cols) array, DN
+        Dark frames.
+
+    Returns
+    -------
+    dict of str to float
+        ``total``, ``column``, ``row`` and ``pixel``, DN rms.
+    """
     v = spatial_variances(dark_stack)
     return {k: math.sqrt(max(v[k], 0.0)) for k in ("total", "column", "row", "pixel")}
 
@@ -99,6 +141,17 @@ def defect_pixels(bright_stack: np.ndarray, dark_stack: np.ndarray, saturation_d
     (it clips, and its variance is no longer the gain's). Selecting by the
     dark signal is independent of the gain map, so the PRNU of the pixels
     left is an unbiased estimate of the whole map's.
+
+    Parameters
+    ----------
+    bright_stack, dark_stack : (frames, rows, cols) arrays, DN
+        Bright (about half saturation) and dark frames.
+    saturation_dn : float
+        The saturation level, DN.
+
+    Returns
+    -------
+    (rows, cols) bool array
     """
     dark = dark_stack.astype(np.float64).mean(axis=0)
     bright = bright_stack.mean(axis=0, dtype=np.float64)
@@ -114,6 +167,18 @@ def prnu(bright_stack: np.ndarray, dark_stack: np.ndarray, exclude: np.ndarray |
     ``exclude`` (rows, cols) bool leaves those pixels out (see
     :func:`defect_pixels`); the spatial variances are then totals over the
     pixels kept, each corrected for the temporal variance left in the mean.
+
+    Parameters
+    ----------
+    bright_stack, dark_stack : (frames, rows, cols) arrays, DN
+        Bright (about half saturation) and dark frames.
+    exclude : (rows, cols) bool array, optional
+        Pixels to leave out.
+
+    Returns
+    -------
+    float
+        PRNU as a fraction of the signal (NaN when fewer than two pixels are kept).
     """
     if exclude is None or not exclude.any():
         b = spatial_variances(bright_stack)

@@ -83,11 +83,11 @@ class Truth:
         The dark current above which a pixel is white, e-/s (None: no dark current).
     """
 
-    perfect_e: np.ndarray  #: mean photo-electrons of the perfect image, e-, float32
-    perfect_dn: np.ndarray  #: the perfect image through the ideal ADC, DN, float32 (e- with the ADC off)
-    expected_raw: np.ndarray  #: what infinitely many frames average to, DN, float32 (e- with the ADC off)
-    mask: np.ndarray  #: the defect mask, uint16 bits of MASK_BITS
-    white_threshold_e_per_s: float | None  #: the dark current above which a pixel is white (None: no dark current)
+    perfect_e: np.ndarray
+    perfect_dn: np.ndarray
+    expected_raw: np.ndarray
+    mask: np.ndarray
+    white_threshold_e_per_s: float | None
 
 
 def white_threshold(sensor, threshold_e_per_s: float | None = None) -> float | None:

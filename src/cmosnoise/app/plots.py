@@ -25,7 +25,18 @@ _FIGURE_KEYS = ("figsize", "dpi", "facecolor", "edgecolor", "layout")
 
 def figure(*args, **kwargs):
     """``(fig, axes)`` as ``pyplot.subplots`` gives them, on a :class:`matplotlib.figure.Figure` of its own: no
-    pyplot, no global backend switch (a notebook's backend is left alone), nothing to close."""
+    pyplot, no global backend switch (a notebook's backend is left alone), nothing to close.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        As ``pyplot.subplots`` takes them (``figsize``, ``dpi``, ``layout`` go to the figure, the rest to
+        ``Figure.subplots``).
+
+    Returns
+    -------
+    (matplotlib.figure.Figure, Axes or array of Axes)
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(**{k: kwargs.pop(k) for k in _FIGURE_KEYS if k in kwargs})
@@ -48,7 +59,15 @@ def data_uri(png: bytes) -> str:
 
 # ------------------------------------------------------------------ histograms
 def log_histogram_axes(ax, xlabel: str, title: str, ylabel: str = "pixels per bin (log)") -> None:
-    """Log count axis, labels, title and a legend: the dress of every histogram here."""
+    """Log count axis, labels, title and a legend: the dress of every histogram here.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Where to draw.
+    xlabel, title, ylabel : str
+        The labels.
+    """
     ax.set_yscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
@@ -62,6 +81,16 @@ def dark_current_histogram(ax, rate: np.ndarray, state, title: str = "") -> None
     The rate axis is logarithmic so that the body (a few e-/s) and the tail
     (up to tens of thousands) both show; pixels at exactly 0 (a body clipped
     at 0) are counted in the legend.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Where to draw.
+    rate : array, e-/s
+        The dark-current map.
+    state : DarkState or None
+        Its parameters (:attr:`Sensor.dark_state`): body and tail told apart, the threshold marked.
+    title : str
     """
     r = rate.ravel().astype(np.float64)
     pos = r[r > 0]
@@ -88,7 +117,20 @@ def dark_current_histogram(ax, rate: np.ndarray, state, title: str = "") -> None
 
 def temporal_noise_histogram(ax, sigma: np.ndarray, model=None, threshold: float | None = None, title: str = "",
                              xlabel: str = "per-pixel temporal noise [e- rms]") -> None:
-    """Per-pixel temporal noise on a log count axis, with the model's density (paper Fig. 7)."""
+    """Per-pixel temporal noise on a log count axis, with the model's density (paper Fig. 7).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Where to draw.
+    sigma : array, e- rms
+        Each pixel's temporal noise.
+    model : distribution, optional
+        Its law (with a ``cdf``), drawn as the expected counts per bin.
+    threshold : float, optional
+        A tail threshold to mark, e- rms.
+    title, xlabel : str
+    """
     s = sigma.ravel().astype(np.float64)
     bins = np.linspace(0, max(float(s.max()), 1e-6) * 1.02, 150)
     counts, edges, _ = ax.hist(s, bins=bins, color="C0", alpha=0.8, label=f"pixels ({s.size})")
@@ -103,7 +145,15 @@ def temporal_noise_histogram(ax, sigma: np.ndarray, model=None, threshold: float
 
 
 def noise_budget_bars(ax, dark: dict, scene: dict) -> None:
-    """Each temporal source's rms at dark and at the scene's mean level."""
+    """Each temporal source's rms at dark and at the scene's mean level.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Where to draw.
+    dark, scene : dict
+        :func:`cmosnoise.analysis.noise_budget.budget` in the dark and at the scene's mean.
+    """
     names = sorted(set(dark["temporal_rms_e"]) | set(scene["temporal_rms_e"]),
                    key=lambda n: -scene["temporal_rms_e"].get(n, 0))
     y = np.arange(len(names))
@@ -120,7 +170,22 @@ def noise_budget_bars(ax, dark: dict, scene: dict) -> None:
 
 
 def circle_couplets(ax, pairs: np.ndarray, offset=(0, 0), scale: float = 1.0, radius: float = 6.0, color="white") -> None:
-    """Circle each couplet (pairs of (row, col)) on an image axis."""
+    """Circle each couplet (pairs of (row, col)) on an image axis.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Where to draw.
+    pairs : (n, 2, 2) int array
+        Couplets (:func:`cmosnoise.analysis.white_pixels.couplet_pairs`).
+    offset : (row, col)
+        The image's top-left pixel on the sensor.
+    scale : float
+        Image pixels per sensor pixel.
+    radius : float
+        The circles' radius, image pixels.
+    color : matplotlib colour
+    """
     from matplotlib.patches import Circle
 
     for (r1, c1), (r2, c2) in pairs:
@@ -130,7 +195,19 @@ def circle_couplets(ax, pairs: np.ndarray, offset=(0, 0), scale: float = 1.0, ra
 
 
 def densest_window(mask: np.ndarray, size: tuple[int, int]) -> tuple[int, int]:
-    """Top-left corner of the ``size`` window holding the most True pixels."""
+    """Top-left corner of the ``size`` window holding the most True pixels.
+
+    Parameters
+    ----------
+    mask : (rows, cols) bool array
+    size : (rows, cols)
+        The window's size.
+
+    Returns
+    -------
+    (int, int)
+        The window's top-left pixel.
+    """
     from scipy import ndimage
 
     h, w = min(size[0], mask.shape[0]), min(size[1], mask.shape[1])

@@ -42,6 +42,15 @@ from . import calibration, defects, reconstruction
 class Processor:
     """The processing chain for frames of one sensor (one shape, CFA, black level).
 
+    Parameters
+    ----------
+    settings : ProcessingSection
+        The processing chain's settings (``config.processing``).
+    info : RawInfo
+        What the frames are: CFA, black level, bits, scene white, crosstalk kernel.
+    master_dark : (rows, cols) array, DN, optional
+        A master dark for dark calibration (black level included).
+
     Examples
     --------
     >>> from cmosnoise import Processor, Sensor
@@ -162,7 +171,18 @@ class Processor:
 
 # ------------------------------------------------------------------ reading
 def read_dark(path) -> np.ndarray:
-    """A master dark from a file: the mean of a dark-frame stack, or an already averaged frame."""
+    """A master dark from a file: the mean of a dark-frame stack, or an already averaged frame.
+
+    Parameters
+    ----------
+    path : str or Path
+        A TIFF of dark frames (frames, rows, cols), or one averaged frame (rows, cols), DN.
+
+    Returns
+    -------
+    (rows, cols) float32 array, DN
+        The master dark, black level included.
+    """
     from ..io.raw_tiff import read_raw_tiff
 
     data, _ = read_raw_tiff(path, "dark file")

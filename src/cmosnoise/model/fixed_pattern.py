@@ -93,6 +93,15 @@ def dependencies(spec: SensorSpec) -> dict[str, object]:
     The one table of it: :func:`draw` keys its cache by it. A map's entry
     holds every value its drawing function reads (a section switched off
     draws nothing, so its switch is part of the entry).
+
+    Parameters
+    ----------
+    spec : SensorSpec
+
+    Returns
+    -------
+    dict of str to object
+        For each map's name, the values its drawing reads.
     """
     c = spec.config
     sf, rn = c.source_follower, c.row_noise
@@ -111,7 +120,18 @@ def dependencies(spec: SensorSpec) -> dict[str, object]:
 
 
 def key(*parts) -> str:
-    """A cache key: a digest of ``parts`` (pydantic sections and dataclasses by their values)."""
+    """A cache key: a digest of ``parts`` (pydantic sections and dataclasses by their values).
+
+    Parameters
+    ----------
+    *parts
+        Values, pydantic sections and dataclasses included.
+
+    Returns
+    -------
+    str
+        A SHA-1 hex digest.
+    """
     return hashlib.sha1(json.dumps(parts, sort_keys=True, default=_plain).encode()).hexdigest()
 
 
@@ -180,7 +200,16 @@ class PatternCache:
 
 
 def nbytes(value) -> int:
-    """Bytes of the arrays in ``value`` (an array, a tuple of them, or an object with ``nbytes``)."""
+    """Bytes of the arrays in ``value``.
+
+    Parameters
+    ----------
+    value : array, tuple or list of arrays, or object with ``nbytes``
+
+    Returns
+    -------
+    int
+    """
     if isinstance(value, np.ndarray):
         return value.nbytes
     if isinstance(value, (tuple, list)):
@@ -189,7 +218,23 @@ def nbytes(value) -> int:
 
 
 def cached(cache: PatternCache | None, name: str, parts: tuple, make: Callable[[], object]):
-    """``make()`` through ``cache`` when there is one."""
+    """``make()`` through ``cache`` when there is one.
+
+    Parameters
+    ----------
+    cache : PatternCache or None
+    name : str
+        The value's name.
+    parts : tuple
+        What it depends on (the key, with ``name``).
+    make : callable
+        Makes the value when the cache does not hold it.
+
+    Returns
+    -------
+    object
+        What ``make`` returns, or the cached value it returned before.
+    """
     return make() if cache is None else cache.get(name, parts, make)
 
 
@@ -209,6 +254,11 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
         addressed per pixel, row or column (:mod:`cmosnoise.engine.fixed_maps`), so a tile's maps are that
         rectangle of the whole sensor's, bit for bit. Row maps then cover the tile's rows, column maps its
         columns. The telegraph populations and the defects are drawn for the whole sensor (they are sparse).
+
+    Returns
+    -------
+    FixedPattern
+        The maps of ``region``, None where a stage is off.
     """
     c = spec.config
     shape, seed = spec.shape, spec.seed
