@@ -77,12 +77,34 @@ class Measurement:
 
 def dsnu_of_pair(a: np.ndarray, b: np.ndarray) -> float:
     """The fixed-pattern variance of two frames of one exposure (DN^2): EMVA 1288's spatial variance of a stack
-    (:func:`emva.spatial_variances`), here of two frames."""
+    (:func:`emva.spatial_variances`), here of two frames.
+
+    Parameters
+    ----------
+    a, b : (rows, cols) arrays, DN
+        Two frames of one exposure.
+
+    Returns
+    -------
+    float
+        DN^2.
+    """
     return emva.spatial_variances(np.stack([a, b]))["total"]
 
 
 def pair_stats(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """(mean, temporal variance) of two frames of one exposure, DN and DN^2 (EMVA 1288's pair estimator)."""
+    """(mean, temporal variance) of two frames of one exposure, DN and DN^2 (EMVA 1288's pair estimator).
+
+    Parameters
+    ----------
+    a, b : (rows, cols) arrays, DN
+        Two frames of one exposure.
+
+    Returns
+    -------
+    (float, float)
+        The mean, DN, and the temporal variance, DN^2.
+    """
     return (float(a.mean()) + float(b.mean())) / 2, emva.temporal_variance(a, b)
 
 
@@ -93,6 +115,23 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
     The irradiation is set so that saturation is reached at 1 s; exposure
     times run from 1/steps to 1.3 s. ``steps`` >= MIN_STEPS puts at least
     3 exposure times below 70 % of saturation, where K is fitted.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor to measure.
+    steps : int
+        Exposure times in the photon-transfer series.
+    stack_frames : int
+        Frames of the dark and bright stacks (DSNU, PRNU).
+    keep_frames : bool
+        Keep the frames in the result (to write them as an EMVA 1288 data set).
+    progress : callable, optional
+        Called once per step.
+
+    Returns
+    -------
+    Measurement
     """
     if not isinstance(steps, (int, np.integer)) or steps < MIN_STEPS:
         raise CmosnoiseError(f"steps = {steps!r}: the photon-transfer series needs at least {MIN_STEPS} exposure times")
@@ -111,6 +150,21 @@ def measure_like(sensor: Sensor, like: Measurement, keep_frames: bool = False,
 
     What a comparison with a measured data set needs: EMVA 1288's linearity
     error and saturation depend on where the series samples the response.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor to measure.
+    like : Measurement
+        The series to repeat (:func:`cmosnoise.analysis.emva_files.load`).
+    keep_frames : bool
+        Keep the frames in the result.
+    progress : callable, optional
+        Called once per step.
+
+    Returns
+    -------
+    Measurement
     """
     qe = sensor.config.sensor.qe_mean() or 1.0
     texp = np.maximum(np.asarray(like.texp_s, np.float64), 1e-9)
@@ -172,6 +226,22 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
     stack's exposure time, with the full-well and ADC clips (white pixels
     that saturate count at the saturation level, as in the frames). PRNU:
     the photo-response map (PRNU gain, crosstalk, column gain) of every pixel.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The simulated sensor instance.
+    stack_texp_s : float
+        The stacks' exposure time, s.
+    series_e : array, e-, optional
+        The measured series' photo-charge per pixel at each step.
+    shortest_texp_s : float, optional
+        The series' shortest exposure time, s.
+
+    Returns
+    -------
+    dict
+        The quantities of :func:`cmosnoise.analysis.emva_evaluation.evaluate`, by the same keys, in the same units.
     """
     c = sensor.config
     t = sensor.transfer

@@ -57,6 +57,18 @@ def evaluate(m: Measurement) -> dict:
     times. The dark series is fitted only over exposure times where no dark
     pixel is near saturation (``dark_fit_points``), and the PRNU leaves out
     the defect pixels (``prnu_excluded_pixels``, :func:`emva.defect_pixels`).
+
+    Parameters
+    ----------
+    m : Measurement
+        A measurement series (:func:`cmosnoise.analysis.characterize.measure`, or a lab's through
+        :func:`cmosnoise.analysis.emva_files.load`).
+
+    Returns
+    -------
+    dict
+        Each quantity by its key (units in its name: ``_dn_per_e``, ``_e``, ``_pct``, ...), ``unavailable`` and
+        what was left out.
     """
     unavailable: dict[str, str] = {}
     y = m.mu_y - m.mu_ydark
@@ -174,7 +186,19 @@ LINEARITY_POINTS = 0.25
 
 
 def agrees(key: str, measured: float, simulated: float) -> bool | None:
-    """Whether ``simulated`` reproduces ``measured`` within :data:`AGREEMENT_LIMITS` (None: no limit for it)."""
+    """Whether ``simulated`` reproduces ``measured`` within :data:`AGREEMENT_LIMITS` (None: no limit for it).
+
+    Parameters
+    ----------
+    key : str
+        The quantity.
+    measured, simulated : float
+        Its two values.
+
+    Returns
+    -------
+    bool or None
+    """
     if key in ("linearity_error_min_pct", "linearity_error_max_pct"):
         return bool(abs(simulated - measured) <= LINEARITY_POINTS)
     if key not in AGREEMENT_LIMITS or not measured:
@@ -201,7 +225,19 @@ TABLE_ROWS = [
 
 
 def table(measured: dict, model: dict | None) -> list[tuple[str, str, str, str, str]]:
-    """Rows (quantity, unit, measured, model, deviation %) for printing; "n/a" where the frames cannot give it."""
+    """Rows (quantity, unit, measured, model, deviation %) for printing; "n/a" where the frames cannot give it.
+
+    Parameters
+    ----------
+    measured : dict
+        :func:`evaluate`'s result.
+    model : dict or None
+        :func:`cmosnoise.analysis.characterize.model_values`, or None.
+
+    Returns
+    -------
+    list of (str, str, str, str, str)
+    """
     rows = []
     for key, label, unit, fmt in TABLE_ROWS:
         mv = measured.get(key)
@@ -214,7 +250,17 @@ def table(measured: dict, model: dict | None) -> list[tuple[str, str, str, str, 
 
 
 def footnotes(measured: dict) -> list[str]:
-    """Why a quantity is n/a, what was left out, and the quantities that agree only up to a definition."""
+    """Why a quantity is n/a, what was left out, and the quantities that agree only up to a definition.
+
+    Parameters
+    ----------
+    measured : dict
+        :func:`evaluate`'s result.
+
+    Returns
+    -------
+    list of str
+    """
     labels = {key: label.strip() for key, label, _, _ in TABLE_ROWS}
     out = []
     reasons: dict[str, list[str]] = {}

@@ -27,7 +27,20 @@ from .characterize import Measurement, dsnu_of_pair, pair_stats
 
 
 def export(m: Measurement, folder: Path) -> Path:
-    """Write the frames as TIFFs and an EMVA 1288 descriptor file (exposure in ns, photons per pixel)."""
+    """Write the frames as TIFFs and an EMVA 1288 descriptor file (exposure in ns, photons per pixel).
+
+    Parameters
+    ----------
+    m : Measurement
+        A measurement with its frames (``keep_frames=True``).
+    folder : Path
+        Where the descriptor and ``images/`` go.
+
+    Returns
+    -------
+    Path
+        The descriptor file.
+    """
     import tifffile
 
     images = folder / "images"
@@ -53,7 +66,17 @@ def export(m: Measurement, folder: Path) -> Path:
 
 
 def load(descriptor: Path) -> Measurement:
-    """A :class:`Measurement` from an EMVA 1288 descriptor file and its images (e.g. a real camera's)."""
+    """A :class:`Measurement` from an EMVA 1288 descriptor file and its images (e.g. a real camera's).
+
+    Parameters
+    ----------
+    descriptor : Path
+        An EMVA 1288 descriptor file, or the folder that holds one.
+
+    Returns
+    -------
+    Measurement
+    """
     import tifffile
 
     from ..io.stacks import descriptor_path, parse_descriptor
