@@ -53,7 +53,15 @@ SPEC_RE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(<=|>=|==|!=|<|>)\s*([-+0-
 # ------------------------------------------------------------------ the grid
 @dataclass(frozen=True)
 class Axis:
-    """Keys that move together and their values (one tuple of values per step)."""
+    """Keys that move together and their values (one tuple of values per step).
+
+    Parameters
+    ----------
+    keys : tuple of str
+        Dotted keys.
+    values : tuple of tuple
+        One tuple of values (one per key) per step.
+    """
 
     keys: tuple[str, ...]
     values: tuple[tuple, ...]
@@ -69,7 +77,17 @@ def _scalar(text: str, where: str):
 
 
 def parse_vary(text: str) -> Axis:
-    """``KEY=v1,v2,...``, ``KEY=start:stop:count`` or ``KEY1,KEY2=a1xb1,a2xb2`` (keys that move together)."""
+    """``KEY=v1,v2,...``, ``KEY=start:stop:count`` or ``KEY1,KEY2=a1xb1,a2xb2`` (keys that move together).
+
+    Parameters
+    ----------
+    text : str
+        A ``--vary`` value.
+
+    Returns
+    -------
+    Axis
+    """
     where = f"--vary {text!r}"
     if "=" not in text:
         raise CmosnoiseError(f"{where}: expected KEY=VALUES, e.g. sensor.temperature_c=25,45,65")
@@ -105,7 +123,17 @@ def parse_vary(text: str) -> Axis:
 
 
 def grid(axes: list[Axis]) -> list[dict]:
-    """Every point of the sweep: {key: value} for the product of the axes, in a fixed order."""
+    """Every point of the sweep: {key: value} for the product of the axes, in a fixed order.
+
+    Parameters
+    ----------
+    axes : list of Axis
+
+    Returns
+    -------
+    list of dict
+        Each point as {key: value}.
+    """
     points = []
     for combo in itertools.product(*(a.values for a in axes)):
         point = {}
@@ -117,7 +145,19 @@ def grid(axes: list[Axis]) -> list[dict]:
 
 def point_config(base, point: dict):
     """The base configuration with a point's values, validated (physics included); a number in a key indexes a
-    list (``dark_current.points.0.tail.ppm_above``), as ``--set`` does."""
+    list (``dark_current.points.0.tail.ppm_above``), as ``--set`` does.
+
+    Parameters
+    ----------
+    base : Config
+        The sweep's base configuration.
+    point : dict
+        {dotted key: value}.
+
+    Returns
+    -------
+    Config
+    """
     from ..config.loading import with_values
     from ..model.spec import resolve
 
@@ -131,18 +171,50 @@ def point_config(base, point: dict):
 
 
 def is_flat_scene(scene: str) -> bool:
-    """Whether ``scene`` is the built-in flat field (``flat`` or ``flat:LEVEL``)."""
+    """Whether ``scene`` is the built-in flat field (``flat`` or ``flat:LEVEL``).
+
+    Parameters
+    ----------
+    scene : str
+
+    Returns
+    -------
+    bool
+    """
     return scene.strip().lower().split(":")[0] == "flat"
 
 
 def instance_seed(root_seed: int, instance: int) -> int:
-    """Instance i's seed: ``SeedSequence(root_seed, spawn_key=(i,))``, as a 63-bit integer."""
+    """Instance i's seed: ``SeedSequence(root_seed, spawn_key=(i,))``, as a 63-bit integer.
+
+    Parameters
+    ----------
+    root_seed : int
+        The sweep's seed (the base configuration's).
+    instance : int
+        The instance's number, from 0.
+
+    Returns
+    -------
+    int
+    """
     state = np.random.SeedSequence(root_seed, spawn_key=(instance,)).generate_state(2, np.uint32)
     return (int(state[0]) << 31) ^ int(state[1])
 
 
 @dataclass(frozen=True)
 class Spec:
+    """A pass/fail test of an instance: ``metric op value`` (``--spec couplets_after_correction<=0``).
+
+    Parameters
+    ----------
+    metric : str
+        One of :data:`METRICS`.
+    op : str
+        <=, >=, <, >, == or !=.
+    value : float
+    """
+
     metric: str
     op: str
     value: float
@@ -177,6 +249,25 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     ``cache`` (a :class:`~cmosnoise.model.fixed_pattern.PatternCache`) lends the maps that another point of
     the same seed drew with the same inputs (the worker's own cache); the numbers are the same without it.
     ``device``: where the frames are made (``"cuda"``: the worker's GPU; the same numbers).
+
+    Parameters
+    ----------
+    config_data : dict
+        A point's configuration as data.
+    scene : str
+        The scene.
+    frames : int
+        Frames to measure the temporal noise on.
+    seed : int
+        The instance's seed (:func:`instance_seed`).
+    cache : PatternCache, optional
+    device : str
+        "cpu" or "cuda".
+
+    Returns
+    -------
+    dict of str to float
+        Every metric of :data:`METRICS`.
     """
     from ..analysis import figures_of_merit as fom
     from ..analysis import white_pixels
@@ -264,6 +355,30 @@ def _task(config_data: dict, scene: str, frames: int, point: int, instance: int,
 # ------------------------------------------------------------------ the sweep
 @dataclass
 class Plan:
+    """Everything a sweep needs, checked before any task runs (:func:`plan`).
+
+    Parameters
+    ----------
+    base : Config
+        The base configuration.
+    axes : list of Axis
+        The varied keys.
+    points : list of dict
+        The grid's points, {key: value}.
+    configs : list of dict
+        Each point's configuration as data.
+    instances, frames : int
+        Instances per point, frames per instance.
+    scene : str
+        The scene every instance sees.
+    specs : list of Spec
+        The pass/fail tests.
+    plot_metrics : tuple of str
+        The metrics plotted.
+    scene_why : str
+        Why this scene.
+    """
+
     base: object  # Config
     axes: list[Axis]
     points: list[dict]
@@ -273,7 +388,7 @@ class Plan:
     scene: str
     specs: list[Spec]
     plot_metrics: tuple[str, ...] = METRICS
-    scene_why: str = ""  #: why this scene (the index and the command line say it)
+    scene_why: str = ""
 
     @property
     def keys(self) -> list[str]:
@@ -290,7 +405,29 @@ class Plan:
 
 def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | None = None,
          specs: list[str] | None = None, metrics: list[str] | None = None) -> Plan:
-    """Check everything a sweep needs before any task runs; returns the plan (``metrics``: those to plot)."""
+    """Check everything a sweep needs before any task runs; returns the plan (``metrics``: those to plot).
+
+    Parameters
+    ----------
+    base : Config
+        The base configuration.
+    vary : list of str
+        ``--vary`` values.
+    instances : int
+        Sensor instances per point.
+    frames : int
+        Frames per instance.
+    scene : str, optional
+        The scene (default: a flat field for a yield study, else the configuration's).
+    specs : list of str, optional
+        ``--spec`` values.
+    metrics : list of str, optional
+        The metrics to plot.
+
+    Returns
+    -------
+    Plan
+    """
     unknown = [m for m in metrics or [] if m not in METRICS]
     if unknown:
         raise CmosnoiseError(f"--metric {unknown[0]!r}: use one of {', '.join(METRICS)}")
@@ -342,7 +479,20 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
 
 
 def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """Wilson score interval (95 %) of a proportion k / n."""
+    """Wilson score interval (95 %) of a proportion k / n.
+
+    Parameters
+    ----------
+    k, n : int
+        Successes and trials.
+    z : float
+        The normal quantile (1.96: 95 %).
+
+    Returns
+    -------
+    (float, float)
+        The interval's ends.
+    """
     if n == 0:
         return (math.nan, math.nan)
     p = k / n
@@ -353,7 +503,21 @@ def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
 
 
 def connect(scheduler: str | None, workers: int | None, say: Callable[[str], None] = lambda m: None):
-    """A Dask client: an existing scheduler's, or a LocalCluster of processes on this machine (loopback)."""
+    """A Dask client: an existing scheduler's, or a LocalCluster of processes on this machine (loopback).
+
+    Parameters
+    ----------
+    scheduler : str or None
+        An existing scheduler's address (``tcp://host:8786``), or None for a LocalCluster.
+    workers : int or None
+        The LocalCluster's worker processes (default: the core count).
+    say : callable
+        Told what was started.
+
+    Returns
+    -------
+    (distributed.Client, LocalCluster or None)
+    """
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -374,7 +538,17 @@ def connect(scheduler: str | None, workers: int | None, say: Callable[[str], Non
 
 def repair_rows(path: Path) -> int:
     """Cut a last row that was half written (a kill or a full disk mid-row): ``results.csv`` ends at its last
-    whole line. Returns the bytes removed."""
+    whole line. Returns the bytes removed.
+
+    Parameters
+    ----------
+    path : Path
+        ``results.csv``.
+
+    Returns
+    -------
+    int
+    """
     size = path.stat().st_size
     if size == 0:
         return 0
@@ -417,7 +591,26 @@ def _done_rows(path: Path, columns: list[str]) -> set[tuple[int, int]]:
 def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable[[int, int], None] | None = None,
             device: str = "cpu") -> Path:
     """Run every (point, instance) not yet in ``out/results.csv`` on ``client``; rows are appended as tasks finish
-    (``device``: where each worker makes the frames)."""
+    (``device``: where each worker makes the frames).
+
+    Parameters
+    ----------
+    p : Plan
+    out : Path
+        The sweep's folder.
+    client : distributed.Client
+    resume : bool
+        Skip the rows already there.
+    progress : callable, optional
+        Called with (done, total).
+    device : str
+        "cpu" or "cuda".
+
+    Returns
+    -------
+    Path
+        ``results.csv``.
+    """
     from distributed import as_completed
 
     results = out / "results.csv"
@@ -476,7 +669,19 @@ def _cell(v):
 
 
 def summarize(p: Plan, out: Path):
-    """summary.csv, a plot per metric (percentile bands), the yield plot, and index.html, from results.csv."""
+    """summary.csv, a plot per metric (percentile bands), the yield plot, and index.html, from results.csv.
+
+    Parameters
+    ----------
+    p : Plan
+    out : Path
+        The sweep's folder.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``summary.csv``'s rows.
+    """
     import pandas as pd
 
     try:
@@ -589,6 +794,33 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
     configuration); ``vary`` holds ``--vary`` texts. Without ``out`` the
     files go to a temporary folder that is removed afterwards. ``device``: where
     the workers make the frames (``"cuda"``: their GPU, numba's CUDA target; the same numbers).
+
+    Parameters
+    ----------
+    base : Config, SensorSpec, dict, str or Path
+        The base configuration.
+    vary : list of str
+        ``--vary`` values.
+    instances : int
+        Sensor instances per point.
+    out : str or Path, optional
+        The sweep's folder.
+    frames, scene, specs, metrics
+        As :func:`plan` takes them.
+    scheduler, workers
+        As :func:`connect` takes them.
+    resume, overwrite : bool
+        Continue the sweep in ``out``, or replace it.
+    progress : callable, optional
+        Called with (done, total).
+    say : callable
+        Told what is started.
+    device : str
+        "cpu" or "cuda".
+
+    Returns
+    -------
+    pandas.DataFrame
     """
     import shutil
     import tempfile
@@ -639,7 +871,19 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
 
 def task_result(future, what: str):
     """A Dask future's result; a worker's failure past its retries as one line naming ``what``, not Dask's
-    traceback."""
+    traceback.
+
+    Parameters
+    ----------
+    future : distributed.Future
+    what : str
+        What the task was, for the message.
+
+    Returns
+    -------
+    object
+        The task's result.
+    """
     try:
         return future.result()
     except CmosnoiseError:
@@ -650,7 +894,13 @@ def task_result(future, what: str):
 
 
 def disconnect(client, cluster) -> None:
-    """Close the Dask client and cluster without their shutdown chatter (closed streams, cancelled heartbeats)."""
+    """Close the Dask client and cluster without their shutdown chatter (closed streams, cancelled heartbeats).
+
+    Parameters
+    ----------
+    client : distributed.Client
+    cluster : LocalCluster or None
+    """
     import logging
 
     from .logs import quieted
@@ -684,7 +934,18 @@ def _mode(out: Path, p: Plan, resume: bool, overwrite: bool) -> str:
 
 
 def sweep_from_yaml(path: Path) -> dict:
-    """The options of a ``sweep.yaml`` (to rerun a sweep: ``cmosnoise sweep --from out/sweep.yaml``)."""
+    """The options of a ``sweep.yaml`` (to rerun a sweep: ``cmosnoise sweep --from out/sweep.yaml``).
+
+    Parameters
+    ----------
+    path : Path
+        A sweep's ``sweep.yaml``.
+
+    Returns
+    -------
+    dict
+        ``base``, ``scene``, ``instances``, ``frames``, ``vary`` and ``specs``.
+    """
     from .. import inputs
 
     text = inputs.read_text(path, "--from", 10_000_000)
