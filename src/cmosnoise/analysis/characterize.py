@@ -54,24 +54,48 @@ MIN_STEPS = 8
 
 @dataclass
 class Measurement:
-    """Frames reduced to what EMVA 1288 needs, plus (optionally) the frames themselves."""
+    """Frames reduced to what EMVA 1288 needs, plus (optionally) the frames themselves.
+
+    Parameters
+    ----------
+    bits : int
+        The ADC's bits.
+    shape : (rows, cols)
+    texp_s : (steps,) array
+        The exposure time of each step, s.
+    mu_p : (steps,) array
+        Photons (photo-electrons generated) per pixel at each step.
+    mu_y, mu_ydark : (steps,) arrays
+        The mean of the two bright, and of the two dark, frames, DN.
+    s2_y, s2_ydark : (steps,) arrays
+        The temporal variance ``var(A - B) / 2``, bright and dark, DN^2.
+    stack_texp_s, stack_mu_p : float
+        The stacks' exposure time (s) and photons per pixel.
+    stack_bright, stack_dark : (L, rows, cols) arrays, DN
+        The bright and dark stacks.
+    max_ydark : (steps,) array
+        The brightest pixel of the two dark frames at each step, DN (to see white pixels saturate).
+    frames : dict
+        For export: name -> list of frames.
+    dsnu_shortest_dn2 : float, optional
+        The fixed pattern of the dark pair at the shortest exposure time (DN^2, :func:`dsnu_of_pair`): the pixel
+        offsets' DSNU, with the least dark current in it.
+    """
 
     bits: int
     shape: tuple[int, int]
-    texp_s: np.ndarray  #: exposure time of each step, s
-    mu_p: np.ndarray  #: photons (photo-electrons generated) per pixel at each step
-    mu_y: np.ndarray  #: mean of the two bright frames, DN
-    mu_ydark: np.ndarray  #: mean of the two dark frames, DN
-    s2_y: np.ndarray  #: temporal variance var(A - B)/2, bright, DN^2
-    s2_ydark: np.ndarray  #: temporal variance, dark, DN^2
+    texp_s: np.ndarray
+    mu_p: np.ndarray
+    mu_y: np.ndarray
+    mu_ydark: np.ndarray
+    s2_y: np.ndarray
+    s2_ydark: np.ndarray
     stack_texp_s: float
     stack_mu_p: float
-    stack_bright: np.ndarray  #: (L, rows, cols)
+    stack_bright: np.ndarray
     stack_dark: np.ndarray
-    max_ydark: np.ndarray  #: brightest pixel of the two dark frames at each step, DN (to see white pixels saturate)
-    frames: dict = field(default_factory=dict)  #: for export: name -> list of frames
-    #: the fixed pattern of the dark pair at the shortest exposure time (DN^2, :func:`dsnu_of_pair`): the pixel
-    #: offsets' DSNU, with the least dark current in it
+    max_ydark: np.ndarray
+    frames: dict = field(default_factory=dict)
     dsnu_shortest_dn2: float | None = None
 
 

@@ -94,6 +94,33 @@ class Recipe:
     ``light_e`` is the charge at the scene's white (e-), log-uniform;
     ``integration_time_s`` log-uniform; ``temperature_c`` uniform.
     ``overrides`` are ``--set`` texts applied to every sample last.
+
+    Parameters
+    ----------
+    samples : int
+        How many samples.
+    crop : (rows, cols)
+        Each sample's size, pixels.
+    seed : int
+        The data set's seed: sample i depends on (seed, i) alone.
+    cameras : tuple of str
+        Presets and virtual camera families, as above.
+    sources : tuple of str
+        Image paths or built-in scene names.
+    light_e : (float, float)
+        The charge at the scene's white, e-, log-uniform.
+    integration_time_s : (float, float) or None
+        Log-uniform, s (None: each camera's).
+    temperature_c : (float, float) or None
+        Uniform, C (None: each camera's).
+    overrides : tuple of str
+        ``--set`` texts.
+    white_threshold_e_per_s : float or None
+        The mask's white-pixel threshold, e-/s (None: the model's).
+    shard_size : int
+        Samples per shard file.
+    format : str
+        The shards' format: hdf5, npz or fits.
     """
 
     samples: int
@@ -131,7 +158,18 @@ class Recipe:
 
 
 def check(recipe: Recipe, sources: "Sources | None" = None) -> Recipe:
-    """``recipe`` if every part is usable; raises CmosnoiseError naming the first that is not (before any work)."""
+    """``recipe`` if every part is usable; raises CmosnoiseError naming the first that is not (before any work).
+
+    Parameters
+    ----------
+    recipe : Recipe
+    sources : Sources, optional
+        Where the sources' images are read (or given).
+
+    Returns
+    -------
+    Recipe
+    """
     r = recipe
     if not 1 <= r.samples <= MAX_SAMPLES:
         raise CmosnoiseError(f"--samples {r.samples}: give 1 to {MAX_SAMPLES}")
@@ -180,7 +218,17 @@ def _gain_update(cam: str) -> dict:
 
 
 def image_sources(folder: str | Path) -> tuple[str, ...]:
-    """The image files of ``folder`` (sorted by name), as the sources of a recipe."""
+    """The image files of ``folder`` (sorted by name), as the sources of a recipe.
+
+    Parameters
+    ----------
+    folder : str or Path
+
+    Returns
+    -------
+    tuple of str
+        The files' paths.
+    """
     p = Path(folder)
     if not p.is_dir():
         raise CmosnoiseError(f"--images {str(folder)!r} is not a folder of images")
@@ -193,11 +241,20 @@ class Sources:
 
     ``images`` may be given arrays under names of their own (``array:0``, ...): linear RGB (rows, cols, 3) or a
     clean raw mosaic (rows, cols) in [0, 1] of the white, its CFA phase at (0, 0) the sensor's.
+
+    Parameters
+    ----------
+    images : dict
+        Source name -> its whole image (read on first use).
+    presets : dict
+        The presets' configurations, loaded once.
+    preset_texts : dict
+        The presets' files as data, read once.
     """
 
     images: dict = field(default_factory=dict)
-    presets: dict = field(default_factory=dict)  #: the presets' configurations, loaded once
-    preset_texts: dict = field(default_factory=dict)  #: the presets' files as data, read once
+    presets: dict = field(default_factory=dict)
+    preset_texts: dict = field(default_factory=dict)
 
     def preset(self, name: str | None):
         if name not in self.presets:
@@ -218,7 +275,17 @@ class Sources:
 
 @dataclass(frozen=True)
 class SampleSettings:
-    """What sample ``index`` is: its configuration (the sensor, seed, scene window, exposure) and its columns."""
+    """What sample ``index`` is: its configuration (the sensor, seed, scene window, exposure) and its columns.
+
+    Parameters
+    ----------
+    index : int
+        The sample's number.
+    config : Config
+        Its sensor's configuration.
+    columns : dict
+        Its settings as columns (:data:`COLUMNS`).
+    """
 
     index: int
     config: object
@@ -230,7 +297,19 @@ def _rng(recipe: Recipe, index: int) -> np.random.Generator:
 
 
 def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> SampleSettings:
-    """Sample ``index``'s settings, from a generator keyed by (recipe seed, index) alone."""
+    """Sample ``index``'s settings, from a generator keyed by (recipe seed, index) alone.
+
+    Parameters
+    ----------
+    recipe : Recipe
+    index : int
+        The sample's number.
+    sources : Sources, optional
+
+    Returns
+    -------
+    SampleSettings
+    """
     sources = sources or Sources()
     rng = _rng(recipe, index)
     cam = recipe.cameras[int(rng.integers(len(recipe.cameras)))]
@@ -300,6 +379,26 @@ def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, fram
     temporal noise on the same sensor, scene and truth). ``device``: where the frame is made (the same bits);
     ``on_device`` (with ``device="cuda"``): the raw is left on the GPU, a device array (the truths are made on the
     host either way).
+
+    Parameters
+    ----------
+    recipe : Recipe
+    index : int
+        The sample's number.
+    sources : Sources, optional
+        Where the sources' images are read (or given).
+    frame : int
+        Which frame of the sample's sensor is the noisy raw.
+    device : str
+        "cpu" or "cuda".
+    on_device : bool
+        Leave the raw on the GPU.
+
+    Returns
+    -------
+    (dict, dict)
+        The arrays by name (:data:`ARRAYS`: ``raw`` and ``expected_raw`` in DN, ``perfect_dn``, ``mask``), each
+        (rows, cols), and the settings by column name (:data:`COLUMNS`).
     """
     sources = sources or Sources()
     st = settings(recipe, index, sources)
@@ -318,7 +417,22 @@ def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, fram
 
 # ------------------------------------------------------------------ shards
 def shard_bytes(recipe_json: str, shard: int, device: str = "cpu") -> bytes:
-    """Shard ``shard`` of the recipe, as the bytes of its file (made in memory: a Dask task returns them)."""
+    """Shard ``shard`` of the recipe, as the bytes of its file (made in memory: a Dask task returns them).
+
+    Parameters
+    ----------
+    recipe_json : str
+        The recipe as JSON (what a Dask task gets).
+    shard : int
+        The shard's number.
+    device : str
+        "cpu" or "cuda".
+
+    Returns
+    -------
+    bytes
+        The shard file's contents.
+    """
     recipe = Recipe.from_json(recipe_json)
     sources = Sources()
     made = [make_sample(recipe, i, sources, device=device) for i in recipe.shard_range(shard)]
@@ -400,7 +514,18 @@ def _fits(arrays: dict, columns: dict, recipe: Recipe) -> bytes:
 
 
 def read_shard(path: str | Path) -> tuple[dict, dict]:
-    """(arrays, columns) of a shard file of any format."""
+    """(arrays, columns) of a shard file of any format.
+
+    Parameters
+    ----------
+    path : str or Path
+        An HDF5, npz or FITS shard.
+
+    Returns
+    -------
+    (dict, dict)
+        The arrays (each (samples, rows, cols)) and the columns (each (samples,)).
+    """
     p = Path(path)
     if p.suffix == ".h5":
         import h5py
@@ -440,7 +565,18 @@ def _manifest(recipe: Recipe) -> str:
 
 
 def missing(recipe: Recipe, folder: Path) -> list[int]:
-    """The shards of ``recipe`` that ``folder`` does not hold yet."""
+    """The shards of ``recipe`` that ``folder`` does not hold yet.
+
+    Parameters
+    ----------
+    recipe : Recipe
+    folder : Path
+
+    Returns
+    -------
+    list of int
+        The missing shards' numbers.
+    """
     return [s for s in range(recipe.shards()) if not (folder / recipe.shard_name(s)).is_file()]
 
 
@@ -474,7 +610,31 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
     """Make the data set ``recipe`` in ``out``: ``dataset.json`` and its shards (each written whole, under a
     temporary name first). ``resume`` makes only the missing shards of the same recipe. ``workers`` or
     ``scheduler``: the shards are made on Dask (a LocalCluster of processes, or that scheduler); the bytes
-    are the same. ``device``: where the frames are made (``"cuda"``: the GPU; the same bytes)."""
+    are the same. ``device``: where the frames are made (``"cuda"``: the GPU; the same bytes).
+
+    Parameters
+    ----------
+    recipe : Recipe
+    out : str or Path
+        The data set's folder.
+    resume, overwrite : bool
+        Complete the data set in ``out``, or replace it.
+    scheduler : str, optional
+        An existing Dask scheduler's address.
+    workers : int, optional
+        A LocalCluster of this many processes.
+    progress : callable, optional
+        Called with (samples done, samples).
+    say : callable
+        Told what is started.
+    device : str
+        "cpu" or "cuda".
+
+    Returns
+    -------
+    Path
+        The folder.
+    """
     from ..io.output import OutputFolder
     from .sweep import connect, disconnect
 
@@ -521,7 +681,18 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
 
 
 def read(folder: str | Path) -> Iterator[tuple[dict, dict]]:
-    """Every shard of a data set folder in order: (arrays, columns)."""
+    """Every shard of a data set folder in order: (arrays, columns).
+
+    Parameters
+    ----------
+    folder : str or Path
+        A data set folder (``dataset.json`` and its shards).
+
+    Yields
+    ------
+    (dict, dict)
+        Each shard's arrays (each (samples, rows, cols)) and columns (each (samples,)).
+    """
     folder = Path(folder)
     manifest = json.loads((folder / _MANIFEST).read_text())
     for name in manifest["shards"]:
@@ -529,7 +700,17 @@ def read(folder: str | Path) -> Iterator[tuple[dict, dict]]:
 
 
 def load_sample_config(text: str):
-    """A sample's configuration from its ``config`` column (YAML; ``cmosnoise simulate --config`` reads it too)."""
+    """A sample's configuration from its ``config`` column (YAML; ``cmosnoise simulate --config`` reads it too).
+
+    Parameters
+    ----------
+    text : str
+        A sample's ``config`` column.
+
+    Returns
+    -------
+    Config
+    """
     from ..config.loading import load_yaml_text
 
     return load_config(extra=load_yaml_text(str(text)))

@@ -693,6 +693,27 @@ class GainRow(Section):
 class Config(Section):
     """A complete, resolved cmosnoise configuration.
 
+    Parameters
+    ----------
+    description : str
+        Free text: what this configuration is for.
+    seed : int
+        The sensor instance: the same seed gives the same fixed pattern and noise.
+    scene, run, processing : sections
+        What is simulated (the scene, frames, outputs) and how the frames become pictures.
+    sensor, exposure : sections
+        The array (size, CFA, pixel, temperature, gain setting) and the exposure.
+    prnu, crosstalk, dark_current, shot_noise, source_follower, row_noise, column_noise, adc : sections
+        The paper's stages.
+    pixel_offset, nonlinearity, black_level, read_noise, defects : sections
+        What measured sensors show beyond the paper.
+    gain_table : list of GainRow
+        The camera's gain settings (ISO or dB).
+
+    Notes
+    -----
+    Every key, with its unit and meaning: ``cmosnoise config --explain``; the model behind them: docs/model.md.
+
     Examples
     --------
     >>> from cmosnoise import Config

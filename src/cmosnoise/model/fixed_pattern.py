@@ -65,6 +65,33 @@ class FixedPattern:
 
     Drawn once by :class:`~cmosnoise.model.sensor.Sensor`; read them through ``sensor.fixed_pattern``.
 
+    Parameters
+    ----------
+    prnu_gain : (rows, cols) float32 array
+        Per-pixel photo gain.
+    dark_state : DarkState
+        The DCNU's parameters at the sensor's temperature.
+    dark_rate : (rows, cols) float32 array, e-/s
+        The dark-current map at the sensor's temperature.
+    flicker_sigma : (rows, cols) float32 array, e- rms
+        Per-pixel flicker sigma.
+    row_offset : (rows, 1) array, e-
+        Fixed row offsets.
+    column_sigma : (1, cols) array, e- rms
+        Per-column temporal sigma.
+    vfpn : (1, cols) array, e-
+        Fixed column offsets.
+    column_gain : (1, cols) array
+        Fixed column gains.
+    pixel_offset : (rows, cols) float32 array, e-
+        Per-pixel offsets.
+    traps : Telegraphs
+        The source follower's random telegraph traps (sizes: amplitudes, e-).
+    blinkers : Telegraphs
+        Blinking white pixels (sizes: rate steps at the temperature, e-/s).
+    defects : Defects
+        Dead, stuck and gain pixels, hot clusters, bad lines (stage 15).
+
     Examples
     --------
     >>> from cmosnoise import Sensor
@@ -73,18 +100,18 @@ class FixedPattern:
     ((48, 64), dtype('float32'))
     """
 
-    prnu_gain: np.ndarray | None = None  #: per-pixel photo gain, (rows, cols) float32
-    dark_state: dark_current.DarkState | None = None  #: DCNU parameters at the sensor's temperature
-    dark_rate: np.ndarray | None = None  #: dark-current map at the sensor's temperature, e-/s, (rows, cols) float32
-    flicker_sigma: np.ndarray | None = None  #: per-pixel flicker sigma, e- rms, (rows, cols) float32
-    row_offset: np.ndarray | None = None  #: fixed row offsets, e-, (rows, 1)
-    column_sigma: np.ndarray | None = None  #: per-column temporal sigma, e- rms, (1, cols)
-    vfpn: np.ndarray | None = None  #: fixed column offsets, e-, (1, cols)
-    column_gain: np.ndarray | None = None  #: fixed column gains, (1, cols)
-    pixel_offset: np.ndarray | None = None  #: per-pixel offset, e-, (rows, cols) float32
-    traps: Telegraphs | None = None  #: the source follower's random telegraph traps (sizes: amplitudes, e-)
-    blinkers: Telegraphs | None = None  #: blinking white pixels (sizes: rate steps at the temperature, e-/s)
-    defects: defects.Defects | None = None  #: dead, stuck, gain pixels, hot clusters, bad lines (stage 15)
+    prnu_gain: np.ndarray | None = None
+    dark_state: dark_current.DarkState | None = None
+    dark_rate: np.ndarray | None = None
+    flicker_sigma: np.ndarray | None = None
+    row_offset: np.ndarray | None = None
+    column_sigma: np.ndarray | None = None
+    vfpn: np.ndarray | None = None
+    column_gain: np.ndarray | None = None
+    pixel_offset: np.ndarray | None = None
+    traps: Telegraphs | None = None
+    blinkers: Telegraphs | None = None
+    defects: defects.Defects | None = None
 
 
 def dependencies(spec: SensorSpec) -> dict[str, object]:

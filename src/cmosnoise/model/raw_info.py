@@ -14,6 +14,23 @@ from dataclasses import dataclass, field
 class RawInfo:
     """What processing needs to know about raw frames.
 
+    Parameters
+    ----------
+    cfa : str
+        RGGB, BGGR, GRBG, GBRG, or none.
+    black_level_dn : float
+        The black level, DN.
+    bits : int
+        The ADC's bits (the white level is ``2**bits - 1``).
+    white_dn : float, optional
+        The raw code of scene white (None: the white level).
+    crosstalk_kernel_pct : (3, 3) array or dict of them, optional
+        The sensor's crosstalk kernel(s), percent, for compensation.
+    responsivity : (float, float, float)
+        The R, G and B pixels' relative responsivity.
+    extra : dict
+        Anything else a file's metadata held.
+
     Examples
     --------
     >>> from cmosnoise import Sensor
@@ -25,8 +42,8 @@ class RawInfo:
     cfa: str
     black_level_dn: float
     bits: int
-    white_dn: float | None = None  #: raw code of scene white (None: the white level)
-    crosstalk_kernel_pct: object = None  #: the sensor's crosstalk kernel(s), for compensation
+    white_dn: float | None = None
+    crosstalk_kernel_pct: object = None
     responsivity: tuple[float, float, float] = (1.0, 1.0, 1.0)
     extra: dict = field(default_factory=dict)
 

@@ -62,6 +62,17 @@ class FrameDetail:
     where on) and ``quantization`` (rounding and clipping); ``raw`` is the ADC
     output in DN.
 
+    Parameters
+    ----------
+    index : int
+        The frame's index.
+    raw : (rows, cols) uint16 array, DN
+        The frame (float32 e- with the ADC off).
+    electrons : (rows, cols) array, e-
+        The charge at the ADC's input.
+    contributions : dict of str to (rows, cols) array, e-
+        What each stage added.
+
     Examples
     --------
     >>> from cmosnoise import Sensor

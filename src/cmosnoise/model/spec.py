@@ -37,7 +37,7 @@ from .stages.pixel_offset import OffsetModel
 class SensorSpec:
     """A configuration resolved: what the model reads (see the module docstring).
 
-    Attributes
+    Parameters
     ----------
     config : Config
         The validated configuration, ``prnu.sigma_pct`` solved.
@@ -53,6 +53,7 @@ class SensorSpec:
         The pixel offsets' law, e- (its tail fraction solved).
     nonlinearity : nonlinearity.Curve or None
         The charge-to-voltage transfer (:mod:`.stages.nonlinearity`), ``None`` where the configuration gives none.
+
     Examples
     --------
     >>> from cmosnoise import load_config, resolve
