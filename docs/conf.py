@@ -36,7 +36,7 @@ smartquotes = False  # --set stays two hyphens, not a dash
 suppress_warnings = ["myst.header"]  # the model document numbers its own sections (it starts at level 2)
 
 autosummary_generate = True
-autodoc_default_options = {"members": False}
+templates_path = ["_templates"]  # a module's page shows every public function and class in full (numpydoc sections)
 numpydoc_show_class_members = False
 numpydoc_validation_checks = set()  # the doctests are run by tests/test_docs.py
 

@@ -216,6 +216,6 @@ def variates(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
 
     Returns
     -------
-    (3, *shape) float64 array, in (0, 1)
+    ``(3, *shape)`` float64 array, in (0, 1)
     """
     return (rng.integers(0, 2**52, (3, *shape)) + 0.5) * 2.0**-52
