@@ -128,8 +128,16 @@ def test_a_measurement_without_random_telegraph_pixels_fits_none_and_a_short_sta
     from cmosnoise.app import fitting
 
     cfg = load_config(extra={"sensor": {"width": 96, "height": 64}})
-    manifest = fitting.write_measurement(cfg, tmp_path / "m", long_frames=60)
-    doc = fitting.run(manifest, cfg, tmp_path / "fit", False, with_round_trip=False)
+    told = []  # measure's progress (frames made of frames to make) and fit's phases: what a terminal shows
+    manifest = fitting.write_measurement(cfg, tmp_path / "m", long_frames=60, progress=lambda d, t: told.append((d, t)))
+    frames = sum(e["files"] and len(np.load(tmp_path / "m" / e["files"][0], mmap_mode="r"))
+                 for e in yaml.safe_load(manifest.read_text())["stacks"])
+    assert told[-1] == (frames, frames) and [d for d, _ in told] == list(range(1, frames + 1))
+    phases = []
+    doc = fitting.run(manifest, cfg, tmp_path / "fit", False, with_round_trip=False, phase=phases.append)
+    assert phases[0] == "reading the stacks" and phases[-1] == "writing fit_report.html"
+    assert {f"fitting: {p}" for p in ("photon transfer", "black level", "random telegraph pixels", "dark current",
+                                      "readout noise", "crosstalk", "PRNU and column gain")} <= set(phases)
     assert doc["parameters"]["source_follower.rts.ppm"]["value"] == 0
     assert not yaml.safe_load((tmp_path / "fit" / "config.yaml").read_text())["source_follower"]["rts"]["enabled"]
     short = fitting.write_measurement(cfg, tmp_path / "s", long_frames=20)

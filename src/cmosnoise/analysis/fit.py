@@ -29,6 +29,7 @@ base configuration's value.
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -97,10 +98,11 @@ def _intercept(times: np.ndarray, means: np.ndarray, var_means: np.ndarray) -> t
 
 
 def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s: float | None = None,
-                seed: int = 0) -> dict:
+                seed: int = 0, phase: Callable[[str], None] = lambda name: None) -> dict:
     """Fit ``ds`` (a :class:`~cmosnoise.io.stacks.Dataset`); ``base`` (a Config) gives what is not fitted.
 
     Returns ``{"parameters": {...}, "not_fitted": {...}, "dark": {T: {...}}, "plots": {...}, "meta": {...}}``.
+    ``phase`` is told each part as it starts ("photon transfer", "black level", ...: a progress display's text).
     """
     P: dict = {}
     not_fitted: dict = {}
@@ -122,6 +124,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     temps = ds.temperatures
 
     # ---------------------------------------------------------------- photon transfer
+    phase("photon transfer")
     flats = ds.of_kind("flat")
     pts = []
     for f in flats:
@@ -167,6 +170,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                     "saturation_index": ptc["saturation_index"]}
 
     # ---------------------------------------------------------------- black level (reference temperature)
+    phase("black level")
     darks_ref = [d for d in ds.of_kind("dark") if d.temperature_c == t_ref] or ds.of_kind("dark")
     usable = [d for d in darks_ref if float(np.mean(d.mean >= DARK_FIT_LIMIT * sat_dn)) < 0.01]
     times = np.array([d.exposure_s for d in usable])
@@ -205,6 +209,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         not_fitted["full_well_e"] = "the flat levels do not reach saturation (the variance never turns down); add brighter flats"
 
     # ---------------------------------------------------------------- random telegraph pixels: the longest dark stack
+    phase("random telegraph pixels")
     longs = [d for d in ds.of_kind("dark") if d.n >= MIN_READOUT_FRAMES]
     telegraph: dict = {}
     rts_pixels = None
@@ -213,6 +218,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         rts_pixels = _telegraph(st, k, P, not_fitted, seed, telegraph, plots, base.source_follower.rts.cds_interval_s)
 
     # ---------------------------------------------------------------- dark current at each temperature
+    phase("dark current")
     dark_maps: dict[float, np.ndarray] = {}
     slope_var: dict[float, np.ndarray] = {}
     clipped: dict[float, np.ndarray] = {}
@@ -301,6 +307,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         not_fitted["dark_current.doubling_c, tail_doubling_c"] = "needs dark current at 2 or more temperatures"
 
     # ---------------------------------------------------------------- readout: the longest dark stack
+    phase("readout noise")
     if not longs:
         n_max = max((d.n for d in ds.of_kind("dark")), default=0)
         not_fitted["source_follower, row_noise, column_noise (temporal, vfpn)"] = (
@@ -310,6 +317,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                  not_fitted, exclude=rts_pixels)
 
     # ---------------------------------------------------------------- crosstalk from spots
+    phase("crosstalk")
     spots = [(sp, _dark_at(ds, sp)) for sp in ds.of_kind("spot")]
     spots = [(sp, d) for sp, d in spots if d is not None]
     if not spots:
@@ -328,6 +336,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                         f"out of the base's total {ksum * 100:.4g} % (a spot shows the sharing, not the loss)",
                         ci95_pct=r["ci95_pct"])
     # ---------------------------------------------------------------- PRNU and column gain
+    phase("PRNU and column gain")
     cands = [(f, _dark_at(ds, f)) for f in flats]
     cands = [(f, d) for f, d in cands if d is not None and 0.1 * sat_dn < f.mean.mean() < 0.8 * sat_dn]
     if not cands:

@@ -149,6 +149,22 @@ def _counting(ctx: typer.Context, label: str, unit: str = ""):
         yield lambda done, total: bar.update(task, completed=done, total=total)
 
 
+@contextlib.contextmanager
+def _status(ctx: typer.Context):
+    """A spinner on stderr (a terminal, not -q) that shows what a long job does now: yields ``(phase(text),
+    say(line))``; a line said clears the spinner first, so the two never share a line."""
+    if not (err_console.is_terminal and _level(ctx) >= 0):
+        yield (lambda text: None), (lambda line: _say(ctx, line))
+        return
+    with err_console.status("") as status:
+        def say(line: str) -> None:
+            status.stop()
+            _say(ctx, line)
+            status.start()
+
+        yield (lambda text: status.update(f"[bold]{text}")), say
+
+
 def _progress_factory(enabled: Optional[bool], pixels: int):
     def factory(n: int):
         show = enabled if enabled is not None else (err_console.is_terminal and n * pixels >= 5_000_000)
@@ -482,8 +498,9 @@ def fit(
     if cfa is not None and cfa not in ("RGGB", "BGGR", "GRBG", "GBRG", "none"):
         raise CmosnoiseError(f"--cfa {cfa!r}: expected RGGB, BGGR, GRBG, GBRG or none")
     base = _sensor(config, preset, None, {"sensor": {"cfa": cfa}} if cfa else None).config
-    doc = fitting.run(frames_from, base, out, overwrite, temperature, threshold, cfa, black_level, bits,
-                      with_round_trip=round_trip, say=lambda m: _say(ctx, m))
+    with _status(ctx) as (phase, say):
+        doc = fitting.run(frames_from, base, out, overwrite, temperature, threshold, cfa, black_level, bits,
+                          with_round_trip=round_trip, say=say, phase=phase)
     if doc.get("settings"):  # one fit per gain setting: a gain table
         for setting, r in doc["settings"].items():
             k = r["parameters"]["system_gain_K_dn_per_e"]
@@ -533,8 +550,9 @@ def measure(
         if bad or not temps:
             raise CmosnoiseError(f"--temperatures {temperatures!r}: each must be -60 to 150 C")
     folder = OutputFolder(out, overwrite)
-    with folder as tmp:
-        fitting.write_measurement(cfg, tmp, cfg.seed, temps, levels, long_frames, say=lambda m: _say(ctx, m))
+    with folder as tmp, _counting(ctx, "measure", "frames") as progress:
+        fitting.write_measurement(cfg, tmp, cfg.seed, temps, levels, long_frames, say=lambda m: _say(ctx, m),
+                                  progress=progress)
     _say(ctx, f"wrote {out}/manifest.yaml and its stacks; fit them with: cmosnoise fit --frames-from {out}/manifest.yaml")
 
 

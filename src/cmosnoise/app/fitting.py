@@ -156,9 +156,14 @@ def emva_round_trip(descriptor: Path, cfg) -> list[dict]:
 def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: float | None = None,
         threshold_e_per_s: float | None = None, cfa: str | None = None, black_level_dn: float | None = None,
         bits: int | None = None, with_round_trip: bool = True, seed: int = 0,
-        say: Callable[[str], None] = lambda m: None) -> dict:
-    """Fit ``frames_from`` and write the outputs to ``out`` (whole or not at all)."""
+        say: Callable[[str], None] = lambda m: None, phase: Callable[[str], None] = lambda m: None) -> dict:
+    """Fit ``frames_from`` and write the outputs to ``out`` (whole or not at all).
+
+    ``say`` is told what was done (lines a user keeps); ``phase`` what is being done now (a progress display's
+    text: reading, each part of the fit, the round trip, the report).
+    """
     folder = OutputFolder(out, overwrite)  # refuses a bad output folder before any work
+    phase("reading the stacks")
     ds = stacks.load(frames_from, temperature_c)
     if cfa:
         ds.cfa = cfa
@@ -175,7 +180,9 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
     for v, sub in parts.items():
         if v is not None:
             say(f"fitting the stacks at {index} {v:g}")
-        fits[v] = fitting.fit_dataset(sub, base, temperature_c, threshold_e_per_s, seed)
+        at = "" if v is None else f" at {index} {v:g}"
+        fits[v] = fitting.fit_dataset(sub, base, temperature_c, threshold_e_per_s, seed,
+                                      phase=lambda name, at=at: phase(f"fitting{at}: {name}"))
     cfg = fitting.fitted_config(base, fits[None]) if index is None else fitting.fitted_gain_config(base, index, fits)
     result = fits[values[0]]
     trip = emva = None
@@ -184,11 +191,15 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
         trip = []
         for v, sub in parts.items():  # each setting's stacks from the fitted sensor at that setting
             at = cfg if v is None else resolve(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={index: v})})).config
+            where = "" if v is None else f" at {index} {v:g}"
+            phase(f"round trip{where}: simulating the measurement from the fitted sensor")
             again = fitting.fit_dataset(simulate_like(sub, at, fits[v]["parameters"]["system_gain_K_dn_per_e"]["value"],
-                                                      seed), at, temperature_c, threshold_e_per_s, seed)
+                                                      seed), at, temperature_c, threshold_e_per_s, seed,
+                                        phase=lambda name, w=where: phase(f"round trip{w}: fitting again: {name}"))
             prefix = "" if v is None else f"{index} {v:g}: "
             trip += [{**row, "parameter": prefix + row["parameter"]} for row in round_trip(fits[v], again)]
         if ds.kind == "emva" and ds.descriptor is not None:
+            phase("round trip: EMVA 1288 of the fitted sensor on the measured plan")
             emva = emva_round_trip(ds.descriptor, cfg)
     per_setting = None if index is None else {
         f"{v:g}": {"parameters": fits[v]["parameters"], "not_fitted": fits[v]["not_fitted"],
@@ -201,6 +212,7 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
                          for T, r in result["dark"].items()},
         "round_trip": trip, "emva_round_trip": emva, "settings": per_setting,
     }
+    phase("writing fit_report.html")
     html_text = fit_report.build(doc, result, cfg)
     with folder as tmp:
         (tmp / "config.yaml").write_text(cfg.to_yaml())
@@ -234,7 +246,8 @@ def dark_exposures(sensor: Sensor, base_s: tuple[float, ...] = (0.25, 0.5, 1.0),
 
 def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float] | None = None, levels: int = 40,
                       long_frames: int = 100, dark_times: tuple[float, ...] = (0.25, 0.5, 1.0),
-                      say: Callable[[str], None] = lambda m: None) -> Path:
+                      say: Callable[[str], None] = lambda m: None,
+                      progress: Callable[[int, int], None] | None = None) -> Path:
     """A lab's measurement of the sensor ``cfg``, simulated, as ``.npy`` stacks and a manifest (what ``fit`` reads).
 
     At each temperature: a ``long_frames`` dark stack at 5 ms (the readout
@@ -245,7 +258,8 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
     the first temperature also: ``levels`` flat pairs at 5 ms from 2 % to
     130 % of saturation, a 16-frame flat at half saturation (PRNU, column
     gain), an 8-frame stack of single lit pixels 7 apart (crosstalk). Every
-    stack has frames of its own. Returns the manifest's path.
+    stack has frames of its own. Returns the manifest's path. ``progress(done, total)`` is told the frames
+    made.
     ``folder`` is written into as it is (``cmosnoise measure`` gives it an
     output folder's temporary, so the result is whole or absent).
     """
@@ -255,10 +269,17 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
     folder.mkdir(parents=True, exist_ok=True)
     stacks_: list[dict] = []
     frame = 0
+    # the frames to make (a cool sensor's dark stacks at lengthened times as well are added when found)
+    total = len(temperatures) * (long_frames + 8 * len(dark_times)) + 2 * levels + 16 + 8
 
     def save(name: str, ex, n: int, **entry) -> None:
         nonlocal frame
-        arr = np.stack([ex.frame(frame + i) for i in range(n)])
+        frames = []
+        for i in range(n):
+            frames.append(ex.frame(frame + i))
+            if progress:
+                progress(frame + i + 1, total)
+        arr = np.stack(frames)
         frame += n
         np.save(folder / name, arr)
         stacks_.append(dict(entry, files=[name]))
@@ -270,7 +291,9 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
         save(f"dark_{T:g}C_{t_flat:g}s.npy", s.with_exposure(t_flat).expose("flat:0"), long_frames,
              kind="dark", exposure_s=t_flat, temperature_c=T,
              frame_period_s=random_telegraph.frame_period_s(cfg.sensor.frame_rate_hz, t_flat))
-        for t in dark_exposures(s, dark_times):
+        times = dark_exposures(s, dark_times)
+        total += 8 * (len(times) - len(dark_times))
+        for t in times:
             save(f"dark_{T:g}C_{t:g}s.npy", s.with_exposure(t).expose("flat:0"), 8, kind="dark", exposure_s=t,
                  temperature_c=T)
         if j == 0:
