@@ -385,7 +385,7 @@ def test_a_fixed_white_threshold_counts_at_every_temperature_against_the_same_ra
         assert f["map"]["white_pixels"] == int((fixed.dark_rate > aa_to_e_per_s(250)).sum())
         # the count is Binomial(n, p) with p the model's exceedance at the fixed threshold: within Z of its sd
         p = f["ppm_expected"] / 1e6
-        assert abs(f["map"]["white_pixels"] - n * p) <= Z * np.sqrt(n * p * (1 - p)) + 1
+        assert abs(f["map"]["white_pixels"] - n * p) <= Z * np.sqrt(n * p * (1 - p))
     # the same unit converted: e-/s and aA give the same count; two units at once are refused
     a = Sensor(load_config(overrides=["dark_current.white_threshold_e_per_s=500"]), seed=1)
     assert fom.dark_map(a)["threshold_e_per_s"] == 500

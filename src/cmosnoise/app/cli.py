@@ -460,15 +460,7 @@ def compare(
     from . import compare as cmp
 
     with _counting(ctx, "compare", "instances") as progress:
-        def factory(total: int):
-            done = [0]
-
-            def advance():
-                done[0] += 1
-                progress(done[0], total)
-            return advance
-
-        result = cmp.run(run_a, run_b, out, instances, _white_e_per_s(white_threshold), overwrite, factory)
+        result = cmp.run(run_a, run_b, out, instances, _white_e_per_s(white_threshold), overwrite, progress)
     if _level(ctx) >= 0:
         typer.echo(cmp.text_table(result), nl=False)
     if out is not None:

@@ -192,13 +192,13 @@ def recount(config: Config) -> dict:
 
 # ------------------------------------------------------------------ the comparison
 def compare(a: Run, b: Run, instances: int = INSTANCES, white_threshold_e_per_s: float | None = None,
-            progress: Callable[[int], Callable[[], None]] | None = None) -> dict:
+            progress: Callable[[int, int], None] | None = None) -> dict:
     """Both runs' figures, their difference, its sampling error and whether it is beyond it.
 
     Returns ``{"rows": [...], "threshold": {...}, "instances": n, "z_flag": Z_FLAG, "flagged": [keys]}``; a row
     is ``{"key", "label", "a", "b", "difference", "relative", "sampling_error", "z", "beyond"}``
     (``sampling_error``: the standard deviation of the difference, sqrt(s_A^2 + s_B^2); ``z``: the difference
-    over it, None where it is 0).
+    over it, None where it is 0). ``progress(done, total)`` is told the further instances made.
     """
     if not isinstance(instances, int) or not 3 <= instances <= 1000:
         raise CmosnoiseError(f"--instances {instances!r}: give 3 to 1000 (the instances that measure the sampling "
@@ -214,7 +214,12 @@ def compare(a: Run, b: Run, instances: int = INSTANCES, white_threshold_e_per_s:
     for own, cfg, f in ((thr_a, cfg_a, fa), (thr_b, cfg_b, fb)):
         if thr is not None and own is not None and own != thr:  # counted against another threshold: count again
             f.update(recount(cfg))
-    advance = progress(2 * instances) if progress else (lambda: None)
+    made = iter(range(1, 2 * instances + 1))  # the instances made, of both runs
+
+    def advance() -> None:
+        if progress:
+            progress(next(made), 2 * instances)
+
     sa = sampling_error(a, cfg_a, instances, advance)
     sb = sampling_error(b, cfg_b, instances, advance)
     rows = []
@@ -309,7 +314,7 @@ instances do not move the figure, so any difference is one of the configurations
 
 def run(path_a: str | Path, path_b: str | Path, out: str | Path | None = None, instances: int = INSTANCES,
         white_threshold_e_per_s: float | None = None, overwrite: bool = False,
-        progress: Callable[[int], Callable[[], None]] | None = None) -> dict:
+        progress: Callable[[int, int], None] | None = None) -> dict:
     """Compare two run folders; with ``out``, write compare.txt, compare.json and compare.html there (whole or not
     at all). Returns :func:`compare`'s result."""
     a, b = load_run(path_a, "RUN_A"), load_run(path_b, "RUN_B")

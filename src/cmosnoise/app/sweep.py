@@ -158,30 +158,15 @@ def point_config(base, point: dict):
     -------
     Config
     """
-    from ..config.loading import with_values
+    from ..config.loading import apply_values, config_values, default_data, validate_data
     from ..model.spec import resolve
 
+    data = apply_values(config_values(base), point, default_data())  # a key that is not there: its own line
     try:
-        return resolve(with_values(base, point)).config
-    except CmosnoiseError as exc:
-        if str(exc).startswith("--vary"):  # the key itself (a list index out of range): no point to name
-            raise
+        return resolve(validate_data(data)).config
+    except CmosnoiseError as exc:  # a value the schema or the physics refuses: named with its point
         shown = ", ".join(f"{k}={v}" for k, v in point.items())
         raise CmosnoiseError(f"sweep point {shown}: {str(exc)}") from None
-
-
-def is_flat_scene(scene: str) -> bool:
-    """Whether ``scene`` is the built-in flat field (``flat`` or ``flat:LEVEL``).
-
-    Parameters
-    ----------
-    scene : str
-
-    Returns
-    -------
-    bool
-    """
-    return scene.strip().lower().split(":")[0] == "flat"
 
 
 def instance_seed(root_seed: int, instance: int) -> int:
@@ -443,6 +428,9 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
     checked = [point_config(base, p) for p in points]
     configs = [c.model_dump(mode="json") for c in checked]
     parsed_specs = [parse_spec(s) for s in specs or []]
+    from ..model import footprint
+    from ..model import scene as scene_mod
+
     if scene:
         why = "given with --scene"
     elif parsed_specs:
@@ -450,12 +438,10 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
                                    "counts as a defect; --scene picks another")
     else:
         scene, why = base.scene.source, "the configuration's scene.source"
-    if not is_flat_scene(scene) and "residual_defects" in (metrics or METRICS):
+    if scene_mod.builtin_name(scene) != "flat":  # every row holds residual_defects, plotted or not
         why += ("; residual_defects and couplets_after_correction count what processing leaves beyond "
                 f"{DEFECT_TOLERANCE_E:g} e- of the expected signal, and on a scene with detail that includes the detail: "
                 "use a flat scene (flat:0.5) for defect yield")
-    from ..model import footprint
-    from ..model import scene as scene_mod
 
     # what every task would find, found once before any task runs: the scene decodes, each point's sensor fits
     if scene_mod.is_builtin(scene):

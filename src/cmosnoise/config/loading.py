@@ -9,6 +9,7 @@ merged last. Everything here is about data: the result is a validated
 from __future__ import annotations
 
 import copy
+import functools
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -219,7 +220,7 @@ def build_section(cls, data: dict, name: str):
         raise CmosnoiseError(msg) from None
 
 
-def _validate(data: dict | None = None) -> Config:
+def validate_data(data: dict | None = None) -> Config:
     """Validate a (partial) configuration dict merged over the defaults."""
     try:
         return Config.model_validate(data or {})
@@ -268,15 +269,21 @@ def load_config(
     if extra:
         data = deep_merge(data, extra)
     if overrides:
-        data = apply_overrides(data, overrides, Config().model_dump(mode="json"))
-    return _validate(data)
+        data = apply_overrides(data, overrides, default_data())
+    return validate_data(data)
 
 
-def with_values(config: Config, values: dict[str, Any], where: str = "--vary") -> Config:
-    """A new schema-valid configuration: ``config`` with each dotted key of ``values`` set (list items by their
-    index), every value ``config`` set kept (as :func:`merge_updates`)."""
-    data = config.model_dump(mode="json", exclude_unset=True)
-    return _validate(apply_values(data, values, Config().model_dump(mode="json"), where))
+def config_values(config: Config) -> dict:
+    """The values ``config`` set, as data (what :func:`apply_values` and :func:`merge_updates` change: a value set
+    to None stays set, and what was never set keeps its default when validated again)."""
+    return config.model_dump(mode="json", exclude_unset=True)
+
+
+@functools.lru_cache(maxsize=1)
+def default_data() -> dict:
+    """The schema's defaults as data, made once (where ``--set`` and ``--vary`` find a list the data do not hold;
+    read, never changed)."""
+    return Config().model_dump(mode="json")
 
 
 def merge_updates(config: Config, updates: dict) -> Config:
@@ -306,4 +313,4 @@ def merge_updates(config: Config, updates: dict) -> Config:
     >>> changed.prnu.sigma_pct, changed.sensor.temperature_c
     (2.0, 45.0)
     """
-    return _validate(deep_merge(config.model_dump(mode="json", exclude_unset=True), updates))
+    return validate_data(deep_merge(config_values(config), updates))

@@ -468,8 +468,29 @@ def crop_to_aspect(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ public
+def builtin_name(source: str) -> str | None:
+    """The built-in scene ``source`` names (``flat`` for ``flat:0.5``, ``steps`` for ``steps:8``, ``photo``, ...),
+    or None for a file.
+
+    Parameters
+    ----------
+    source : str
+        A scene: a built-in's name or a file's path.
+
+    Returns
+    -------
+    str or None
+    """
+    low = str(source).strip().lower()
+    head = low.partition(":")[0]
+    if head in ("flat", "steps") or (low == head and low in ("photo", "ramp", "colorchecker", "zoneplate", "siemens",
+                                                                "spot")):
+        return head
+    return None
+
+
 def is_builtin(source: str) -> bool:
-    """Whether ``source`` names a built-in scene (``flat:0.5``, ``steps:8``, ``photo``, ...) rather than a file.
+    """Whether ``source`` names a built-in scene rather than a file (:func:`builtin_name`).
 
     Parameters
     ----------
@@ -480,9 +501,7 @@ def is_builtin(source: str) -> bool:
     -------
     bool
     """
-    low = str(source).strip().lower()
-    head = low.partition(":")[0]
-    return head in ("flat", "steps") or (low == head and low in ("photo", "ramp", "colorchecker", "zoneplate", "siemens", "spot"))
+    return builtin_name(source) is not None
 
 
 def render(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
