@@ -1,5 +1,6 @@
 """The noise engine (docs/model.md section 1): Philox, the samplers, and frames that never change a bit."""
 
+import json
 import math
 
 import numpy as np
@@ -280,15 +281,21 @@ def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path
         env = dict(os.environ)
     else:
         env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", "2", "--no-progress",
+    cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", "1", "--no-progress",
            "--set", "sensor.width=64", "--set", "sensor.height=48"]
     first = subprocess.run(cmd + ["--out", str(tmp_path / "a")], env=env, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr
     assert first.stderr.count("compiling the frame kernel") == 1, first.stderr
     assert first.stderr.count("compiled the frame kernel in") == 1, first.stderr
+    # its one frame waited for the compile: no time per frame is claimed, and the compile is in the timings
+    timings = json.loads((tmp_path / "a" / "summary.json").read_text())["timings_s"]
+    assert timings["frame_s"] is None and timings["stages"]["kernel_compile"] > 2.0, timings
+    assert "included: run again for the time per frame" in first.stdout, first.stdout
     second = subprocess.run(cmd + ["--out", str(tmp_path / "b")], env=env, capture_output=True, text=True, timeout=600)
     assert second.returncode == 0, second.stderr
     assert "compil" not in second.stderr, second.stderr
+    timings = json.loads((tmp_path / "b" / "summary.json").read_text())["timings_s"]
+    assert timings["frame_s"] > 0 and "kernel_compile" not in timings["stages"] and "ms/frame after" in second.stdout
     # the cache is found by a run's preload (in a process of its own, and in this one, which renders with the
     # same numba target: conftest imported engine.jit first), and it loads what render then uses
     probe = ("from cmosnoise.engine import kernel\n"

@@ -149,6 +149,14 @@ def _counting(ctx: typer.Context, label: str, unit: str = ""):
         yield lambda done, total: bar.update(task, completed=done, total=total)
 
 
+def _speed(timings: dict) -> str:
+    """A run's time per frame and its set-up, as simulate's line says them."""
+    if timings["frame_s"] is None:  # one frame, and it waited for the kernel's first compile
+        return (f"{timings['set_up']:.1f} s, the frame kernel's compile ({timings['stages']['kernel_compile']:.0f} s) "
+                "included: run again for the time per frame")
+    return f"{timings['frame_s'] * 1000:.1f} ms/frame after {timings['set_up']:.2f} s of set-up"
+
+
 @contextlib.contextmanager
 def _status(ctx: typer.Context):
     """A spinner on stderr (a terminal, not -q) that shows what a long job does now: yields ``(phase(text),
@@ -251,8 +259,7 @@ def simulate(
     _say(
         ctx,
         f"wrote {summary['frames']} frame(s) {cfg.sensor.height}x{cfg.sensor.width} {cfg.sensor.cfa} to {out}/ "
-        f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {summary['timings_s']['frame_s'] * 1000:.1f} "
-        f"ms/frame after {summary['timings_s']['set_up']:.2f} s of set-up)"
+        f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {_speed(summary['timings_s'])})"
     )
     dc = summary.get("dark_current") or {}
     if "map" in dc:

@@ -163,10 +163,14 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         t_summary = time.perf_counter() - t0  # the summary's own time counts in the run's total
         summary["timings_s"]["summary"] = round(t_summary, 6)
         # frame 0 waits for the compiled kernel (compiled on a machine's first run): the steady time per frame is
-        # that of the frames after it; what frame 0 took beyond it counts as set-up
-        steady = (stamps[-1] - stamps[1]) / (n - 1) if n > 1 else stamps[-1] - stamps[0]
-        summary["timings_s"]["frame_s"] = round(steady, 6)
-        summary["timings_s"]["set_up"] = round(max(t_frames - n * steady, 0.0), 6)
+        # that of the frames after it, and what frame 0 took beyond it counts as set-up; a run of one frame that
+        # compiled the kernel has no steady time to give (None)
+        if n > 1:
+            steady = (stamps[-1] - stamps[1]) / (n - 1)
+        else:
+            steady = None if sensor.timings.get("kernel_compile") else stamps[-1] - stamps[0]
+        summary["timings_s"]["frame_s"] = None if steady is None else round(steady, 6)
+        summary["timings_s"]["set_up"] = round(max(t_frames - n * (steady or 0.0), 0.0), 6)
         summary["timings_s"]["total"] = round(t_frames + t_summary, 6)
         pre_view, processed, t = job.result()
         t_process += t

@@ -724,13 +724,15 @@ def read_constants(plan: FramePlan) -> tuple[int, float, np.ndarray]:
     return 1, float(scale), samplers.tukey_lambda_table(float(shape))
 
 
-def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
+def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, timings: dict | None = None):
     """Frame ``frame`` of ``plan``: (raw, electrons or None).
 
     ``region = (row0, row1, col0, col1)`` renders that rectangle alone
     (bit-identical to the same crop of the whole frame). ``raw`` is uint16 DN,
     or float32 e- with the ADC off; ``electrons`` (float32 e- at the ADC
-    input) only when asked for.
+    input) only when asked for. ``timings`` (a ``defaultdict(float)``, s) gets
+    ``kernel_compile``: the time of a call that compiled the kernel, which is
+    not a frame's time.
     """
     rows, cols = plan.shape
     r0, r1, c0, c1 = region if region is not None else (0, rows, 0, cols)
@@ -775,6 +777,8 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False):
     if len(_render.signatures) > held and elapsed > 2.0:  # a cache load takes well under a second: a compile
         what = "the frame kernel" if held == 0 else "a variant of the frame kernel for these switches' types"
         _logger.info(f"compiled {what} in {elapsed:.0f} s ({jit.vectors()}); later runs reuse it")
+        if timings is not None:
+            timings["kernel_compile"] += elapsed
     raw = out_dn if adc_on else out_e
     return raw, (out_e if electrons or not adc_on else None)
 

@@ -668,7 +668,7 @@ class Exposure:
             timings["frame_kernel"] += time.perf_counter() - t0
             return raw, e
         if keep is None and kernel.AVAILABLE:
-            raw, e = kernel.render(self.plan(), k, region, electrons)
+            raw, e = kernel.render(self.plan(), k, region, electrons, timings)
             timings["frame_kernel"] += time.perf_counter() - t0
             return self._stick(raw, region, None), e
         e = self._electrons(k, region, keep)
