@@ -39,9 +39,11 @@ AVAILABLE = numba is not None
 class FramePlan:
     """What a frame needs that does not change from frame to frame (per sensor and exposure).
 
-    Arrays are full-frame: ``noisy_e``/``exact_e``/``sf_sigma_e`` (rows, cols)
-    float32, e-; ``row_offset_e`` (rows,), ``col_sigma_e``, ``col_offset_e``,
-    ``col_gain`` (cols,) float64. ``keys`` holds the two key words of the
+    Arrays cover the frame, or its ``window`` (a tile):
+    ``noisy_e``/``exact_e``/``sf_sigma_e``/``offset_e`` (rows, cols) float32,
+    e-; ``row_offset_e`` (rows,), ``col_sigma_e``, ``col_offset_e``,
+    ``col_gain`` (cols,) float64; ``shape`` is always the whole frame's (it
+    addresses the random numbers). ``keys`` holds the two key words of the
     shot-noise, source-follower, row, column, black-level and read-noise
     streams, (6, 2) uint64.
     A ``None`` switches that term off.
@@ -78,6 +80,20 @@ class FramePlan:
     frame_period_s: float = 1.0  #: frame k starts at k frame_period_s (s)
     exposure_s: float = 1.0  #: the exposure of a frame, s (blinking pixels integrate their rate over it)
     blink_noisy: bool = True  #: whether the dark charge is in ``noisy_e`` (with shot noise) or in ``exact_e``
+    #: the rectangle of the frame the arrays cover, (row0, row1, col0, col1); None: the whole frame. A tile's plan
+    #: holds arrays of its window only (per-pixel maps (h, w), row maps (h,), column maps (w,)); the random numbers
+    #: stay addressed by the frame's pixel index
+    window: tuple[int, int, int, int] | None = None
+
+    @property
+    def origin(self) -> tuple[int, int]:
+        """Where the arrays' first pixel sits in the frame, (row, col)."""
+        return (0, 0) if self.window is None else (self.window[0], self.window[2])
+
+    @property
+    def region(self) -> tuple[int, int, int, int]:
+        """The rectangle the arrays cover, (row0, row1, col0, col1): the window, or the whole frame."""
+        return (0, self.shape[0], 0, self.shape[1]) if self.window is None else tuple(self.window)
 
     @property
     def blink_mean_e(self) -> np.ndarray:
@@ -382,8 +398,8 @@ if numba is not None:
 
     @numba.njit(**_JIT)
     def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
-                     gain, keys, fr, sq, r0, c0, c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale,
-                     nl_a, nl_b, nl_c, offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val,
+                     gain, keys, fr, sq, r0, c0, c1, cols, ar0, ac0, k_adc, cell_black, top, loggam_table, nl_table,
+                     nl_scale, nl_a, nl_b, nl_c, offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val,
                      blink_ptr, blink_col, blink_mean, out_dn, out_e):
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
 
@@ -416,11 +432,13 @@ if numba is not None:
         n = np.zeros(w)
         saved = np.empty(w if (has_blink and blink_exact) else 0)  # a row's counts of its blinking pixels
         noise = np.empty(w)
+        a0, a1 = c0 - ac0, c1 - ac0  # the region's columns in the arrays
         for i in range(i0, i1):
             r = r0 + i
+            ra = r - ar0  # the row in the arrays
             base = np.uint64(r * cols + c0)
             if has_noisy:
-                ns, nb = _shot_row(noisy[r, c0:c1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
+                ns, nb = _shot_row(noisy[ra, a0:a1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
                 _shot_rest(lam, u1, u2, n, small, ns, big, nb, buf, loggam_table, base, fr, sq, s0, s1)
                 if has_blink and not blink_exact:  # stage 4b: a blinking pixel's count at this frame's mean
                     for e in range(blink_ptr[i], blink_ptr[i + 1]):
@@ -432,7 +450,7 @@ if numba is not None:
                     for e in range(blink_ptr[i], blink_ptr[i + 1]):
                         saved[e - blink_ptr[i]] = n[blink_col[e]]
                 for j in range(w):
-                    n[j] = n[j] + np.float64(exact[r, c0 + j])
+                    n[j] = n[j] + np.float64(exact[ra, a0 + j])
                 if has_blink and blink_exact:  # stage 4b: a blinking pixel's mean dark charge of this frame
                     for e in range(blink_ptr[i], blink_ptr[i + 1]):
                         n[blink_col[e]] = saved[e - blink_ptr[i]] + np.float64(blink_mean[e])
@@ -452,15 +470,15 @@ if numba is not None:
                         n[j] = x * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
             if has_offset and not has_sf:  # stage 5c (with the source follower: in its last pass, same order)
                 for j in range(w):
-                    n[j] = n[j] + np.float64(offset[r, c0 + j])
+                    n[j] = n[j] + np.float64(offset[ra, a0 + j])
             if has_sf:  # uniforms, then Box-Muller: 25 % faster than one loop (measured)
                 for j in range(w):
                     u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
                 for j in range(w):
-                    noise[j] = np.float64(sf[r, c0 + j]) * _normal_from(u1[j], u2[j])
+                    noise[j] = np.float64(sf[ra, a0 + j]) * _normal_from(u1[j], u2[j])
                 if has_offset:
                     for j in range(w):
-                        n[j] = (n[j] + np.float64(offset[r, c0 + j])) + noise[j]
+                        n[j] = (n[j] + np.float64(offset[ra, a0 + j])) + noise[j]
                 else:
                     for j in range(w):
                         n[j] = n[j] + noise[j]
@@ -469,7 +487,7 @@ if numba is not None:
                     j = rts_col[e]
                     n[j] = n[j] + rts_val[e]
             if has_row:
-                rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
+                rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[ra]
                 for j in range(w):
                     n[j] = n[j] + rowval
             if has_col:
@@ -515,8 +533,8 @@ if numba is not None:
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
-                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, k_adc, black, top, loggam_table, nl_table, nl_scale,
-                nl_a, nl_b, nl_c, offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_table, rts_ptr,
+                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, ar0, ac0, k_adc, black, top, loggam_table, nl_table,
+                nl_scale, nl_a, nl_b, nl_c, offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_table, rts_ptr,
                 rts_col, rts_val, blink_ptr, blink_col, blink_mean, out_dn, out_e):
         fr = np.uint64(frame)
         sq = np.uint64(seq)
@@ -533,13 +551,13 @@ if numba is not None:
         if has_col:
             for j in range(w):
                 c = c0 + j
-                colterm[j] = col_offset[c] + col_sigma[c] * _normal(c, fr, sq, keys[3, 0], keys[3, 1])
-                gain[j] = col_gain[c]
+                colterm[j] = col_offset[c - ac0] + col_sigma[c - ac0] * _normal(c, fr, sq, keys[3, 0], keys[3, 1])
+                gain[j] = col_gain[c - ac0]
         nblocks = (h + _ROWS_PER_BLOCK - 1) // _ROWS_PER_BLOCK
         for blk in numba.prange(nblocks):
             _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
                          normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
-                         c1, cols, k_adc, cell_black, top, loggam_table, nl_table, nl_scale, nl_a, nl_b, nl_c,
+                         c1, cols, ar0, ac0, k_adc, cell_black, top, loggam_table, nl_table, nl_scale, nl_a, nl_b, nl_c,
                          offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col,
                          blink_mean, out_dn, out_e)
 
@@ -675,7 +693,7 @@ def preload() -> bool:
         return False
     flags = np.zeros(_FLAGS, np.bool_)
     args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
-            np.zeros((6, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
+            np.zeros((6, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 0, 0, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
             0.0, 0.0, 0.0, _DUMMY2, _DUMMY1, 0.0, 0, 0.0, _DUMMY_NL, _DUMMY_PTR, _DUMMY_COL, _DUMMY1, _DUMMY_PTR,
             _DUMMY_COL, _DUMMY_F32, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
@@ -735,9 +753,10 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
     not a frame's time.
     """
     rows, cols = plan.shape
-    r0, r1, c0, c1 = region if region is not None else (0, rows, 0, cols)
-    if not (0 <= r0 < r1 <= rows and 0 <= c0 < c1 <= cols):
-        raise ValueError(f"region {region} is not inside the frame (0..{rows}, 0..{cols})")
+    ar0, ar1, ac0, ac1 = plan.region
+    r0, r1, c0, c1 = region if region is not None else (ar0, ar1, ac0, ac1)
+    if not (ar0 <= r0 < r1 <= ar1 and ac0 <= c0 < c1 <= ac1):
+        raise ValueError(f"region {region} is not inside the plan's window (rows {ar0}..{ar1}, cols {ac0}..{ac1})")
     if numba is None:  # pragma: no cover
         raise RuntimeError("numba is not installed: use the NumPy implementation (the model does so by itself)")
     h, w = r1 - r0, c1 - c0
@@ -767,7 +786,8 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
                 plan.col_sigma_e if plan.col_sigma_e is not None else _DUMMY1,
                 plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
                 plan.col_gain if plan.col_gain is not None else _DUMMY1,
-                plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, float(k_adc), float(black), float(top),
+                plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, ar0, ac0, float(k_adc), float(black),
+                float(top),
                 plan.loggam_table, nl, float(nl_scale), nl_a, nl_b, nl_c,
                 plan.offset_e if plan.offset_e is not None else _DUMMY2,
                 np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),
@@ -805,13 +825,18 @@ def blink_means(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.nda
     with ONE_LAUNCH:
         _blink_values(int(frame), np.uint64(plan.sequence), pixels.up, pixels.down, pixels.size, pixels.index,
                       pixels.slot, float(plan.frame_period_s), float(plan.exposure_s), k0, k1, extra)
-    return pixels.index, plus_charge(plan.blink_mean_e, pixels.index, extra)
+    return pixels.index, plus_charge(plan.blink_mean_e, pixels.index, extra, plan.origin, plan.shape[1])
 
 
-def plus_charge(mean_e: np.ndarray, index: np.ndarray, extra: np.ndarray) -> np.ndarray:
-    """``mean_e`` (float32, (rows, cols)) at the pixels ``index`` plus ``extra`` (e-), rounded to float32 as every
-    mean charge is: the one place a blinking pixel's mean of a frame is made."""
-    return (mean_e.ravel()[index.astype(np.int64)].astype(np.float64) + extra).astype(np.float32)
+def plus_charge(mean_e: np.ndarray, index: np.ndarray, extra: np.ndarray, origin=(0, 0),
+                cols: int | None = None) -> np.ndarray:
+    """``mean_e`` (float32, (h, w), its first pixel at ``origin`` of a frame ``cols`` wide) at the pixels ``index``
+    (the frame's) plus ``extra`` (e-), rounded to float32 as every mean charge is: the one place a blinking
+    pixel's mean of a frame is made."""
+    index = index.astype(np.int64)
+    if tuple(origin) != (0, 0):
+        index = (index // cols - origin[0]) * mean_e.shape[1] + (index % cols - origin[1])
+    return (mean_e.ravel()[index].astype(np.float64) + extra).astype(np.float32)
 
 
 def sparse_rows(index: np.ndarray, values: np.ndarray, region, cols: int):

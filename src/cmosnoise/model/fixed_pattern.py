@@ -266,7 +266,7 @@ def cached(cache: PatternCache | None, name: str, parts: tuple, make: Callable[[
 
 
 def draw(spec: SensorSpec, cache: PatternCache | None = None,
-         region: tuple[int, int, int, int] | None = None) -> FixedPattern:
+         region: tuple[int, int, int, int] | None = None, populations: FixedPattern | None = None) -> FixedPattern:
     """Every fixed-pattern map of ``spec`` over ``region``, each from its own counter-based stream of the seed.
 
     Parameters
@@ -281,6 +281,9 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
         addressed per pixel, row or column (:mod:`cmosnoise.engine.fixed_maps`), so a tile's maps are that
         rectangle of the whole sensor's, bit for bit. Row maps then cover the tile's rows, column maps its
         columns. The telegraph populations and the defects are drawn for the whole sensor (they are sparse).
+    populations : FixedPattern, optional
+        A pattern of the same configuration and seed (another tile's) whose telegraph populations and defects
+        are taken as they are, not drawn again (each is a pass over every pixel of the sensor).
 
     Returns
     -------
@@ -297,6 +300,8 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
     deps = dependencies(spec)
 
     def held(name, make, whole=False):
+        if whole and populations is not None:
+            return getattr(populations, name)
         return cached(cache, name, (seed, shape, None if whole else region, deps[name]), make)
 
     maps: dict = {}

@@ -98,7 +98,12 @@ def linear_to_srgb(v: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ built-ins
-def flat(shape: tuple[int, int], level: float) -> np.ndarray:
+def _span(shape: tuple[int, int], region) -> tuple[int, int, int, int]:
+    """``region`` (row0, row1, col0, col1) of a picture of ``shape``, or the whole of it."""
+    return (0, shape[0], 0, shape[1]) if region is None else tuple(int(v) for v in region)
+
+
+def flat(shape: tuple[int, int], level: float, region=None) -> np.ndarray:
     """Uniform grey at ``level`` (fraction of the peak rate).
 
     Parameters
@@ -107,16 +112,19 @@ def flat(shape: tuple[int, int], level: float) -> np.ndarray:
         The picture's size, pixels.
     level : float
         The grey level, 0 to 1.
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
 
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1 (1: the peak rate).
     """
-    return np.full((*shape, 3), float(level))
+    r0, r1, c0, c1 = _span(shape, region)
+    return np.full((r1 - r0, c1 - c0, 3), float(level))
 
 
-def ramp(shape: tuple[int, int]) -> np.ndarray:
+def ramp(shape: tuple[int, int], region=None) -> np.ndarray:
     """Horizontal ramp, linear light from 0 at the left edge to 1 at the right.
 
     Parameters
@@ -124,17 +132,21 @@ def ramp(shape: tuple[int, int]) -> np.ndarray:
     shape : (rows, cols)
         The picture's size, pixels.
 
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
+
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1 (1: the peak rate).
     """
     rows, cols = shape
-    x = (np.arange(cols) + 0.5) / cols
-    return np.broadcast_to(x[None, :, None], (rows, cols, 3)).copy()
+    r0, r1, c0, c1 = _span(shape, region)
+    x = (np.arange(c0, c1) + 0.5) / cols
+    return np.broadcast_to(x[None, :, None], (r1 - r0, c1 - c0, 3)).copy()
 
 
-def colorchecker(shape: tuple[int, int]) -> np.ndarray:
+def colorchecker(shape: tuple[int, int], region=None) -> np.ndarray:
     """The 24-patch ColorChecker on a dark grey surround (linear light).
 
     Parameters
@@ -142,21 +154,25 @@ def colorchecker(shape: tuple[int, int]) -> np.ndarray:
     shape : (rows, cols)
         The picture's size, pixels.
 
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
+
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1 (1: the peak rate).
     """
     rows, cols = shape
+    g0, g1, h0, h1 = _span(shape, region)
     lin = srgb_to_linear(COLORCHECKER_SRGB8 / 255.0)
-    img = np.full((rows, cols, 3), srgb_to_linear(np.array(30 / 255.0)))
+    img = np.full((g1 - g0, h1 - h0, 3), srgb_to_linear(np.array(30 / 255.0)))
     ph, pw = rows / 4, cols / 6
     border = 0.12
     for i in range(4):
         for j in range(6):
             r0, r1 = int(round((i + border) * ph)), int(round((i + 1 - border) * ph))
             c0, c1 = int(round((j + border) * pw)), int(round((j + 1 - border) * pw))
-            img[r0:r1, c0:c1] = lin[i * 6 + j]
+            img[max(r0 - g0, 0):max(r1 - g0, 0), max(c0 - h0, 0):max(c1 - h0, 0)] = lin[i * 6 + j]
     return img
 
 
@@ -184,7 +200,7 @@ def colorchecker_patches(shape: tuple[int, int]) -> list[tuple[slice, slice]]:
     return out
 
 
-def zoneplate(shape: tuple[int, int]) -> np.ndarray:
+def zoneplate(shape: tuple[int, int], region=None) -> np.ndarray:
     """Circular zone plate: cos(a r^2), local frequency a r / pi cycles/pixel.
 
     The frequency reaches Nyquist (0.5 cycles/pixel) at the middle of the
@@ -195,21 +211,25 @@ def zoneplate(shape: tuple[int, int]) -> np.ndarray:
     shape : (rows, cols)
         The picture's size, pixels.
 
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
+
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1 (1: the peak rate).
     """
     rows, cols = shape
-    y = np.arange(rows) - (rows - 1) / 2
-    x = np.arange(cols) - (cols - 1) / 2
+    r0, r1, c0, c1 = _span(shape, region)
+    y = np.arange(r0, r1) - (rows - 1) / 2
+    x = np.arange(c0, c1) - (cols - 1) / 2
     r2 = y[:, None] ** 2 + x[None, :] ** 2
     r_edge = min(rows, cols) / 2
     v = 0.5 + 0.5 * np.cos(np.pi / 2 * r2 / r_edge)
     return np.repeat(v[..., None], 3, axis=2)
 
 
-def siemens(shape: tuple[int, int], spokes: int = 36) -> np.ndarray:
+def siemens(shape: tuple[int, int], spokes: int = 36, region=None) -> np.ndarray:
     """Siemens star: ``spokes`` black and white sectors around the centre.
 
     Parameters
@@ -219,20 +239,24 @@ def siemens(shape: tuple[int, int], spokes: int = 36) -> np.ndarray:
     spokes : int
         The number of black and white sectors.
 
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
+
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1 (1: the peak rate).
     """
     rows, cols = shape
-    y = np.arange(rows) - (rows - 1) / 2
-    x = np.arange(cols) - (cols - 1) / 2
+    r0, r1, c0, c1 = _span(shape, region)
+    y = np.arange(r0, r1) - (rows - 1) / 2
+    x = np.arange(c0, c1) - (cols - 1) / 2
     theta = np.arctan2(y[:, None], x[None, :])
     v = (np.sin(spokes / 2 * theta) > 0).astype(np.float64) * 0.9 + 0.05
     return np.repeat(v[..., None], 3, axis=2)
 
 
-def steps(shape: tuple[int, int], n: int = 4) -> np.ndarray:
+def steps(shape: tuple[int, int], n: int = 4, region=None) -> np.ndarray:
     """``n`` horizontal bands at levels ``4**-(n-1-i)``, darkest at the top.
 
     Parameters
@@ -242,14 +266,18 @@ def steps(shape: tuple[int, int], n: int = 4) -> np.ndarray:
     n : int
         The number of bands.
 
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
+
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1 (1: the peak rate).
     """
     rows, cols = shape
-    band = np.minimum((np.arange(rows) * n) // rows, n - 1)
-    return np.broadcast_to(steps_levels(n)[band][:, None, None], (rows, cols, 3)).copy()
+    r0, r1, c0, c1 = _span(shape, region)
+    band = np.minimum((np.arange(r0, r1) * n) // rows, n - 1)
+    return np.broadcast_to(steps_levels(n)[band][:, None, None], (r1 - r0, c1 - c0, 3)).copy()
 
 
 def steps_levels(n: int = 4) -> np.ndarray:
@@ -268,7 +296,7 @@ def steps_levels(n: int = 4) -> np.ndarray:
     return 4.0 ** -(n - 1 - np.arange(n))
 
 
-def spot(shape: tuple[int, int]) -> np.ndarray:
+def spot(shape: tuple[int, int], region=None) -> np.ndarray:
     """One lit pixel (value 1) at ``(rows // 2, cols // 2)``, all else black.
 
     Parameters
@@ -276,13 +304,19 @@ def spot(shape: tuple[int, int]) -> np.ndarray:
     shape : (rows, cols)
         The picture's size, pixels.
 
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
+
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1 (1: the peak rate).
     """
-    img = np.zeros((*shape, 3))
-    img[shape[0] // 2, shape[1] // 2] = 1.0
+    r0, r1, c0, c1 = _span(shape, region)
+    img = np.zeros((r1 - r0, c1 - c0, 3))
+    r, c = shape[0] // 2, shape[1] // 2
+    if r0 <= r < r1 and c0 <= c < c1:
+        img[r - r0, c - c0] = 1.0
     return img
 
 
@@ -415,7 +449,7 @@ def _axis_matrix(n_in: int, n_out: int) -> sp.csr_matrix:
     )
 
 
-def resample(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+def resample(img: np.ndarray, shape: tuple[int, int], region=None) -> np.ndarray:
     """Resample (rows, cols, C) to ``shape``: area averaging down, bilinear up.
 
     Area averaging conserves the mean light level exactly, so a scene's
@@ -427,15 +461,19 @@ def resample(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         A picture.
     shape : (rows, cols)
         The size to resample to.
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the result to make (a tile): the same rows of the axes' weights, so the same values as
+        that crop of the whole.
 
     Returns
     -------
-    (shape[0], shape[1], C) float64 array
+    (rows, cols, C) float64 array
+        ``shape``, or the region's size.
     """
-    rows, cols = shape
-    wr = _axis_matrix(img.shape[0], rows)
-    wc = _axis_matrix(img.shape[1], cols)
-    out = np.empty((rows, cols, img.shape[2]))
+    r0, r1, c0, c1 = _span(shape, region)
+    wr = _axis_matrix(img.shape[0], shape[0])[r0:r1]
+    wc = _axis_matrix(img.shape[1], shape[1])[c0:c1]
+    out = np.empty((r1 - r0, c1 - c0, img.shape[2]))
     for c in range(img.shape[2]):
         out[..., c] = (wc @ (wr @ img[..., c]).T).T
     return out
@@ -505,7 +543,8 @@ def is_builtin(source: str) -> bool:
 
 
 def render(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
-           window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None) -> np.ndarray:
+           window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None,
+           region: tuple[int, int, int, int] | None = None) -> np.ndarray:
     """The scene ``source`` as linear RGB at the sensor's ``shape``, (rows, cols, 3), float64.
 
     With ``window = (row, col)``: the ``shape`` of the source at that corner, at the source's own resolution
@@ -525,15 +564,21 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
         The corner of a window at the source's own resolution.
     source_size : (rows, cols), optional
         The size a built-in is drawn at, with ``window``.
+    region : (row0, row1, col0, col1), optional
+        The rectangle of the sensor to render (a tile): bit for bit that crop of the whole, without making the
+        whole (a built-in draws only the region; a picture is resampled only there).
 
     Returns
     -------
     (rows, cols, 3) float64 array
-        Linear light, 0 to 1.
+        Linear light, 0 to 1: ``shape``, or the region's size.
     """
     if window is None:
-        return _fitted(source, shape, scale, fit)
-    return window_of(source_image(source, source_size or shape, scale, fit), window, shape)
+        return _fitted(source, shape, scale, fit, region)
+    r0, r1, c0, c1 = _span(shape, region)
+    img = source_image(source, source_size or shape, scale, fit)
+    window_of(img, window, shape)  # the whole window must lie in the source
+    return window_of(img, (window[0] + r0, window[1] + c0), (r1 - r0, c1 - c0))
 
 
 def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
@@ -585,7 +630,8 @@ def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) 
     return np.ascontiguousarray(img[r:r + shape[0], c:c + shape[1]], dtype=np.float64)
 
 
-def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
+def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
+            region=None) -> np.ndarray:
     if not isinstance(source, str) or not source:
         raise CmosnoiseError(f"scene.source = {source!r}: give a built-in ({', '.join(BUILTINS)}) or an image path")
     name = source.strip()
@@ -601,29 +647,29 @@ def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit
             raise CmosnoiseError(f"scene 'flat:{text}': LEVEL must be a number in [0, 1]") from None
         if not (0.0 <= level <= 1.0):
             raise CmosnoiseError(f"scene 'flat:{text}': LEVEL = {level:g} is outside [0, 1] (fraction of the peak rate)")
-        return flat(shape, level)
+        return flat(shape, level, region)
     if low == "ramp":
-        return ramp(shape)
+        return ramp(shape, region)
     if low == "colorchecker":
-        return colorchecker(shape)
+        return colorchecker(shape, region)
     if low == "zoneplate":
-        return zoneplate(shape)
+        return zoneplate(shape, region)
     if low == "siemens":
-        return siemens(shape)
+        return siemens(shape, region=region)
     if low == "spot":
-        return spot(shape)
+        return spot(shape, region)
     if low.startswith("steps"):
         text = name.partition(":")[2] or "4"
         if not text.isdigit() or not 1 <= int(text) <= 16:
             raise CmosnoiseError(f"scene 'steps:{text}': N must be a whole number of bands from 1 to 16")
-        return steps(shape, int(text))
+        return steps(shape, int(text), region)
     if low == "photo":
         img = load_file(bundled_photo_path())
     else:
         img = load_file(name, scale)
     if fit == "crop":
         img = crop_to_aspect(img, shape)
-    return resample(img, shape)
+    return resample(img, shape, region)
 
 
 def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:

@@ -121,6 +121,13 @@ class Sensor:
         Where frames are made: the CPU kernel (the default), or an NVIDIA GPU through numba's CUDA target
         (``pip install cmosnoise[cuda]``), with the same bits. A one-line error where no GPU is present.
         :meth:`Exposure.frames_on_device` keeps the frames on the GPU.
+    window : (row0, row1, col0, col1), optional
+        Make only this rectangle of the sensor (a tile of a sensor too large to hold whole; default the whole
+        sensor): every fixed map, the scene and the mean charge cover the window alone, and its frames (any
+        region inside it) are bit for bit those regions of the whole sensor's frames, except within a pixel of
+        an inner edge of the window, where crosstalk would need the neighbours outside
+        (:mod:`cmosnoise.model.tiles` adds that margin). ``row0`` and ``col0`` must be even, so that the CFA's
+        phase is the sensor's. ``shape`` stays the whole sensor's; :attr:`map_shape` is the window's.
 
     Examples
     --------
@@ -135,7 +142,8 @@ class Sensor:
 
     def __init__(self, config: SensorSpec | Config | dict | str | Path | None = None, seed: int | None = None, *,
                  fixed_pattern: FixedPattern | None = None, cache: PatternCache | None = None,
-                 device: str = "cpu"):
+                 device: str = "cpu", window: tuple[int, int, int, int] | None = None,
+                 populations: FixedPattern | None = None):
         check_device(device)
         #: where frames are made: "cpu" or "cuda"
         self.device = device
@@ -144,15 +152,21 @@ class Sensor:
             seed = _whole(seed, "seed")
             if seed != spec.seed:
                 spec = spec.updated({"seed": seed})
+        #: the rectangle of the sensor this instance makes, (row0, row1, col0, col1); None: the whole sensor
+        self.window = None if window is None else _window(window, spec)
+        if self.window is not None and device != "cpu":
+            raise CmosnoiseError(f"device = {device!r} with a window: a tile's frames are made by the CPU kernel "
+                                 "(the GPU makes crops of a whole sensor's exposure: Exposure.frames_on_device)")
         if fixed_pattern is None:
-            footprint.check_fits(spec.config, run=False)
+            footprint.check_fits(spec.config, run=False, pixels=_pixels(self.window, spec.shape))
         #: the resolved specification this sensor reads (its ``config``: the configuration, PRNU solved)
         self.spec = spec
         self.config = spec.config
         self.cache = cache
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
-        self._fixed = fixed_pattern if fixed_pattern is not None else draw(spec, cache)
+        self._fixed = (fixed_pattern if fixed_pattern is not None
+                       else draw(spec, cache, region=self.window, populations=populations))
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
         self._statistics: dict[str, float] = {}
@@ -171,7 +185,7 @@ class Sensor:
             updates["peak_rate_photons_per_s"] = None
         exposure = build_section(ExposureSection, {**self.config.exposure.model_dump(), **updates}, "exposure")
         spec = self.spec.with_config(self.config.model_copy(update={"exposure": exposure}))
-        other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache, device=self.device)
+        other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache, device=self.device, window=self.window)
         other.timings = self.timings
         other._statistics = self._statistics  # of the fixed maps: the same at any exposure
         return other
@@ -206,8 +220,9 @@ class Sensor:
         if self._sf_sigma is None:
             thermal = self.config.source_follower.thermal_sigma_e
             self._sf_sigma = cached(
-                self.cache, "sf_sigma", (self.seed, self.shape, dependencies(self.spec)["flicker_sigma"], thermal),
-                lambda: source_follower.total_sigma(thermal, self._fixed.flicker_sigma, self.shape))
+                self.cache, "sf_sigma", (self.seed, self.shape, self.window, dependencies(self.spec)["flicker_sigma"],
+                                         thermal),
+                lambda: source_follower.total_sigma(thermal, self._fixed.flicker_sigma, self.map_shape))
         return self._sf_sigma
 
     @property
@@ -219,7 +234,7 @@ class Sensor:
         times it with the default kernel). All ones when both stages are off.
         """
         if self._flat is None:
-            g = self.photo_response(np.ones(self.shape))[1]
+            g = self.photo_response(np.ones(self.map_shape))[1]
             self._flat = g / g.mean()
         return self._flat
 
@@ -264,6 +279,19 @@ class Sensor:
     @property
     def shape(self) -> tuple[int, int]:
         return self.config.shape
+
+    @property
+    def map_shape(self) -> tuple[int, int]:
+        """The shape of this instance's maps and mean images: the window's, or the sensor's."""
+        if self.window is None:
+            return self.shape
+        r0, r1, c0, c1 = self.window
+        return r1 - r0, c1 - c0
+
+    @property
+    def region(self) -> tuple[int, int, int, int]:
+        """The rectangle this instance makes, (row0, row1, col0, col1): the window, or the whole sensor."""
+        return self.window if self.window is not None else (0, self.shape[0], 0, self.shape[1])
 
     @property
     def cfa(self) -> str:
@@ -323,21 +351,24 @@ class Sensor:
 
         ``scene`` is a built-in name or path (see :mod:`cmosnoise.scene`), a
         linear RGB array (rows, cols, 3) or a CFA-sampled array (rows, cols)
-        at the sensor's size; default: the configuration's scene.
+        at the sensor's size (the window's, for a window); default: the configuration's scene.
         """
         c = self.config
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            rgb = scene_mod.render(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size)
+            rgb = scene_mod.render(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size,
+                                   region=self.window)
         else:
             try:
                 rgb = np.asarray(scene, dtype=np.float64)
             except (TypeError, ValueError):
                 raise CmosnoiseError(f"scene: expected a name, a path or an array of numbers, got {type(scene).__name__}") from None
-            if rgb.ndim not in (2, 3) or rgb.shape[:2] != self.shape or (rgb.ndim == 3 and rgb.shape[2] not in (1, 3)):
-                raise CmosnoiseError(f"scene array has shape {rgb.shape}; expected the sensor's {self.shape} (CFA signal), "
-                                     f"{self.shape + (1,)} (grey) or {self.shape + (3,)} (linear RGB)")
+            shape = self.map_shape
+            if rgb.ndim not in (2, 3) or rgb.shape[:2] != shape or (rgb.ndim == 3 and rgb.shape[2] not in (1, 3)):
+                whose = "sensor's" if self.window is None else "window's"
+                raise CmosnoiseError(f"scene array has shape {rgb.shape}; expected the {whose} {shape} (CFA signal), "
+                                     f"{shape + (1,)} (grey) or {shape + (3,)} (linear RGB)")
             bad = ~np.isfinite(rgb)
             if bad.any() or (rgb < 0).any():
                 what = f"{int(bad.sum())} NaN or infinite" if bad.any() else f"{int((rgb < 0).sum())} negative"
@@ -361,8 +392,8 @@ class Sensor:
         if self.cache is None or not isinstance(scene, str):
             return Exposure(self, self.scene_signal(scene), sequence)
         c = self.config
-        signal_parts = (scene, self.shape, self.cfa, list(self.spec.channel_responsivity), c.scene.scale, c.scene.fit,
-                        c.scene.window, c.scene.source_size)
+        signal_parts = (scene, self.shape, self.window, self.cfa, list(self.spec.channel_responsivity), c.scene.scale,
+                        c.scene.fit, c.scene.window, c.scene.source_size)
         signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))
         return Exposure(self, signal, sequence, signal_parts)
 
@@ -423,7 +454,7 @@ class Exposure:
                 mean = on_mean.apply(mean)
             return perfect, after_prnu, mean.astype(np.float32)
 
-        photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
+        photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.window, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
                        deps["prnu_gain"], c.crosstalk, c.nonlinearity if on_mean is not None else None)
         #: stage 1: mean photo-electrons of the perfect image; after PRNU (stage 2); after crosstalk (stage 3):
         #: the mean photo-charge that shot noise acts on
@@ -432,7 +463,7 @@ class Exposure:
         self.dark_mean_e = None
         if sensor.fixed_pattern.dark_rate is not None:
             self.dark_mean_e = cached(
-                cache, "dark_mean", (sensor.seed, sensor.shape, deps["dark_rate"], ex.integration_time_s),
+                cache, "dark_mean", (sensor.seed, sensor.shape, sensor.window, deps["dark_rate"], ex.integration_time_s),
                 lambda: dark_current.mean_charge(sensor.fixed_pattern.dark_rate, ex.integration_time_s))
         #: the mean photo- and dark charge a pixel collects, with the defects of stage 15 (the same arrays as
         #: photo_mean_e and dark_mean_e without them)
@@ -440,8 +471,7 @@ class Exposure:
         d = sensor.fixed_pattern.defects
         if d is not None and d.has_charge_effect:
             self.collected_photo_e, self.collected_dark_e = defects.collected(
-                self.photo_mean_e, self.dark_mean_e, d, (0, sensor.shape[0], 0, sensor.shape[1]),
-                ex.integration_time_s)
+                self.photo_mean_e, self.dark_mean_e, d, sensor.region, ex.integration_time_s)
         # what shot noise acts on, and what enters as its mean
         noisy, exact = [], []
         (noisy if c.shot_noise.enabled else exact).append(self.collected_photo_e)
@@ -474,7 +504,7 @@ class Exposure:
             c = s.config
             fp = s.fixed_pattern
             keys = np.array([stream_key(c.seed, st) for st in TEMPORAL_STAGES], dtype=np.uint64)
-            cols = s.shape[1]
+            cols = s.map_shape[1]
 
             rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
 
@@ -504,25 +534,26 @@ class Exposure:
                 cds_interval_s=c.source_follower.rts.cds_interval_s if c.source_follower.rts.cds else None,
                 blinkers=fp.blinkers, blink_key=stream_key(c.seed, "dark_current_rts"),
                 frame_period_s=self.frame_period_s, exposure_s=float(c.exposure.integration_time_s),
-                blink_noisy=bool(c.dark_current.shot_noise),
+                blink_noisy=bool(c.dark_current.shot_noise), window=s.window,
             )
         return self._plan
 
     def readout_lines(self) -> tuple[bool, float, np.ndarray, bool, np.ndarray]:
         """(rows on, row sigma e-, row offsets (rows,) float64, columns on, column offsets (cols,) float64): the
         fixed row and column offsets with the offset lines of stage 15 in them; a stage off runs with sigma 0
-        when an offset line needs it."""
+        when an offset line needs it. The lines are the window's (its rows and columns) on a window."""
         s = self.sensor
         c = s.config
         fp = s.fixed_pattern
-        rows, cols = s.shape
+        rows, cols = s.map_shape
         row_offset = np.zeros(rows) if fp.row_offset is None else fp.row_offset.ravel().astype(np.float64)
         col_offset = np.zeros(cols) if fp.vfpn is None else fp.vfpn.ravel().astype(np.float64)
         rows_on, columns_on = c.row_noise.enabled, c.column_noise.enabled
         if fp.defects is not None:
+            r0, r1, c0, c1 = s.region
             lines_r, lines_c = defects.line_offsets(fp.defects)
             on_r, on_c = fp.defects.has_offsets
-            row_offset, col_offset = row_offset + lines_r, col_offset + lines_c
+            row_offset, col_offset = row_offset + lines_r[r0:r1], col_offset + lines_c[c0:c1]
             rows_on, columns_on = rows_on or on_r, columns_on or on_c
         return rows_on, (s.spec.row_sigma_e if c.row_noise.enabled else 0.0), row_offset, columns_on, col_offset
 
@@ -536,7 +567,8 @@ class Exposure:
         c = s.config
         r0, r1, c0, c1 = region
         rows, cols = np.arange(r0, r1), np.arange(c0, c1)
-        win = (slice(r0, r1), slice(c0, c1))
+        w0, _, v0, _ = s.region  # the region in this instance's arrays (a window's own)
+        win = (slice(r0 - w0, r1 - w0), slice(c0 - v0, c1 - v0))
         index = pixel_index(region, s.shape[1])
 
         def stream(stage):
@@ -551,7 +583,7 @@ class Exposure:
             pixels = fp.blinkers.within(region, s.shape[1])
             extra = random_telegraph.blink_charge(pixels, k, self.sequence, plan.frame_period_s, plan.exposure_s,
                                                   plan.blink_key)
-            means = kernel.plus_charge(plan.blink_mean_e, pixels.index, extra)
+            means = kernel.plus_charge(plan.blink_mean_e, pixels.index, extra, plan.origin, s.shape[1])
             at_blink = positions(pixels.index, region, s.shape[1])
             patched = (noisy if plan.blink_noisy else exact).copy()
             blinking = means - patched[at_blink]
@@ -578,14 +610,14 @@ class Exposure:
             n[at] = n[at] + traps
         rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
         if rows_on:
-            rown = row_noise.temporal(rows, row_sigma, stream("row_noise")) + row_offset[r0:r1, None]
+            rown = row_noise.temporal(rows, row_sigma, stream("row_noise")) + row_offset[win[0], None]
             n = n + rown
         before_columns = n
         if columns_on:
-            offset = col_offset[None, c0:c1]
+            offset = col_offset[None, win[1]]
             if fp.column_sigma is not None:
-                offset = offset + column_noise.temporal(fp.column_sigma, cols, stream("column_noise"))
-            n = column_noise.apply(n, fp.column_gain[:, c0:c1] if fp.column_gain is not None else None, offset)
+                offset = offset + column_noise.temporal(fp.column_sigma, cols, stream("column_noise"), first=v0)
+            n = column_noise.apply(n, fp.column_gain[:, win[1]] if fp.column_gain is not None else None, offset)
         if keep is not None:
             keep["perfect"] = self.perfect_e[win]
             keep["prnu"] = self.after_prnu_e[win] - self.perfect_e[win]
@@ -633,7 +665,15 @@ class Exposure:
         return self.photo_mean_e if self.dark_mean_e is None else self.photo_mean_e + self.dark_mean_e
 
     def _region(self, region) -> tuple[int, int, int, int]:
-        return region_of(region, self.sensor.shape)
+        """``region`` validated (default: the sensor's whole window); on a window, it must lie inside it."""
+        s = self.sensor
+        if region is None or s.window is None:
+            return region_of(region if region is not None else s.window, s.shape)
+        r0, r1, c0, c1 = region_of(region, s.shape)
+        w0, w1, v0, v1 = s.window
+        if not (w0 <= r0 and r1 <= w1 and v0 <= c0 and c1 <= v1):
+            raise CmosnoiseError(f"region = {(r0, r1, c0, c1)}: must lie inside the sensor's window {s.window}")
+        return r0, r1, c0, c1
 
     def _after_gain(self, k: int, region: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray | None]:
         """Frame ``k``'s black level per pixel (DN, the cell offsets and the frame's error in it) and read
@@ -781,6 +821,22 @@ def _as_spec(config) -> SensorSpec:
     if isinstance(config, (str, Path)):
         return resolve(load_config(Path(config)))
     raise CmosnoiseError(f"config: expected a Config, a dict or a YAML file's path, got {type(config).__name__}")
+
+
+def _window(window, spec: SensorSpec) -> tuple[int, int, int, int]:
+    """A sensor's window, validated: a rectangle of it with even first row and column (the CFA's phase)."""
+    r0, r1, c0, c1 = region_of(window, spec.shape)
+    if r0 % 2 or c0 % 2:
+        raise CmosnoiseError(f"window = {(r0, r1, c0, c1)}: row0 and col0 must be even (a window keeps the CFA's "
+                             "2 x 2 phase)")
+    return r0, r1, c0, c1
+
+
+def _pixels(window, shape: tuple[int, int]) -> int:
+    """Pixels of ``window`` (or of the whole ``shape``)."""
+    if window is None:
+        return shape[0] * shape[1]
+    return (window[1] - window[0]) * (window[3] - window[2])
 
 
 def _whole(value, name: str, minimum: int = 0) -> int:

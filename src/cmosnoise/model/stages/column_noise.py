@@ -92,24 +92,27 @@ def gain_map(col0: int, col1: int, gain_sigma_pct: float, key: tuple[int, int]) 
     return np.maximum(g, 0.0).astype(np.float32)[None, :]
 
 
-def temporal(sigma: np.ndarray, columns: np.ndarray, stream: Stream) -> np.ndarray:
+def temporal(sigma: np.ndarray, columns: np.ndarray, stream: Stream, first: int = 0) -> np.ndarray:
     """One frame's column noise of the column numbers ``columns``: ``Normal(0, sigma_c)`` per column.
 
     Parameters
     ----------
     sigma : (1, cols) array, e-
-        The per-column sigma map of the whole sensor (:func:`temporal_sigma_map`).
+        The per-column sigma map (:func:`temporal_sigma_map`): the whole sensor's, or a window's from column
+        ``first``.
     columns : (n,) int array
         Column numbers (drawn at their own numbers: a crop gets the whole sensor's values).
     stream : Stream
         The frame's stream of the stage (:func:`cmosnoise.model.seeds.temporal_stream`).
+    first : int
+        The column number of ``sigma``'s first entry.
 
     Returns
     -------
     (1, n) float64 array, e-
     """
     columns = np.asarray(columns)
-    return (np.asarray(sigma, np.float64)[0, columns] * stream.normal(columns))[None, :]
+    return (np.asarray(sigma, np.float64)[0, columns - first] * stream.normal(columns))[None, :]
 
 
 def apply(signal_e: np.ndarray, gain: np.ndarray | None, offset_e: np.ndarray | None) -> np.ndarray:
