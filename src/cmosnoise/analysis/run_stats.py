@@ -95,8 +95,7 @@ class RunStats:
         self.n = 0
         self._size = 0
         self._sums = np.zeros(len(_FIELDS))
-        self._pairs = 0
-        self._tvar = np.zeros(2)  # sum over pairs of var(A - B) / 2: DN, e-
+        self._pair_sums: list[np.ndarray] = []  # per pair of frames: the sums of d_dn, d2_dn, d_e, d2_e
         self._prev: tuple[np.ndarray, np.ndarray] | None = None
 
     def update(self, raw: np.ndarray, electrons: np.ndarray) -> None:
@@ -107,10 +106,21 @@ class RunStats:
         self._size = raw.size
         self._sums[:3] += s[:3]
         if self._prev is not None:
-            n = raw.size
-            self._tvar += [(s[4] - s[3] ** 2 / n) / n / 2, (s[6] - s[5] ** 2 / n) / n / 2]
-            self._pairs += 1
+            self._pair_sums.append(s[3:7].copy())
         self._prev = (raw, electrons)
+
+    def absorb(self, other: "RunStats") -> None:
+        """Add the sums of ``other``: the same frames of another part of the frame (a tile), so that the result
+        is that of the whole frame's pixels; ``other`` keeps its own."""
+        if self.n == 0:
+            self.n, self._pair_sums = other.n, [p.copy() for p in other._pair_sums]
+        elif other.n != self.n:
+            raise ValueError(f"RunStats.absorb: {other.n} frames against {self.n}; parts must hold the same frames")
+        else:
+            for mine, theirs in zip(self._pair_sums, other._pair_sums):
+                mine += theirs
+        self._size += other._size
+        self._sums += other._sums
 
     def result(self) -> dict:
         if self.n == 0:
@@ -122,10 +132,15 @@ class RunStats:
             "mean_dn": float(self._sums[1] / px),
             "saturated_fraction": float(self._sums[2] / px),
         }
-        if self._pairs:
-            out["temporal_noise_dn"] = float(np.sqrt(self._tvar[0] / self._pairs))
-            out["temporal_noise_e"] = float(np.sqrt(self._tvar[1] / self._pairs))
-            out["temporal_noise_method"] = f"var(frame k - frame k-1)/2 over pixels, mean of {self._pairs} pairs"
+        pairs = len(self._pair_sums)
+        if pairs:
+            n = self._size
+            tvar = np.zeros(2)  # sum over pairs of var(A - B) / 2: DN, e-
+            for s in self._pair_sums:
+                tvar += [(s[1] - s[0] ** 2 / n) / n / 2, (s[3] - s[2] ** 2 / n) / n / 2]
+            out["temporal_noise_dn"] = float(np.sqrt(tvar[0] / pairs))
+            out["temporal_noise_e"] = float(np.sqrt(tvar[1] / pairs))
+            out["temporal_noise_method"] = f"var(frame k - frame k-1)/2 over pixels, mean of {pairs} pairs"
         else:
             out["temporal_noise_e"] = None
             out["temporal_noise_dn"] = None

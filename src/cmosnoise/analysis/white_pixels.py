@@ -73,9 +73,37 @@ def couplet_pairs(mask: np.ndarray, pattern: str) -> np.ndarray:
         Each couplet's two pixels, ((r1, c1), (r2, c2)).
     """
     mask = np.asarray(mask, dtype=bool)
-    rows, cols = mask.shape
-    r, c = np.nonzero(mask)
-    index = r.astype(np.int64) * cols + c
+    return pairs_at(*np.nonzero(mask), mask.shape, pattern)
+
+
+def pairs_at(r: np.ndarray, c: np.ndarray, shape: tuple[int, int], pattern: str) -> np.ndarray:
+    """:func:`couplet_pairs` of the white pixels at rows ``r`` and columns ``c`` of a map of ``shape`` (a map too
+    large to hold: its white pixels gathered tile by tile).
+
+    Parameters
+    ----------
+    r, c : (n,) int arrays
+        The white pixels' rows and columns, in row-major order.
+    shape : (rows, cols)
+        The map's size.
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG, or none): couplets are neighbours in one colour plane.
+
+    Returns
+    -------
+    (n, 2, 2) int array
+        Each couplet's two pixels, ((r1, c1), (r2, c2)).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cmosnoise import white_pixels
+    >>> white_pixels.pairs_at(np.array([1, 1]), np.array([1, 3]), (4, 6), "RGGB").tolist()
+    [[[1, 1], [1, 3]]]
+    """
+    r, c = np.asarray(r, np.int64), np.asarray(c, np.int64)
+    rows, cols = shape
+    index = r * cols + c
     pairs = []
     for (dr, dc), start in _pair_starts(np.ones((2, 2), bool), pattern):
         ok = start[r % 2, c % 2] & (r + dr < rows) & (c + dc >= 0) & (c + dc < cols)

@@ -36,14 +36,16 @@ from ..io.raw_tiff import RawTiffReader, raw_metadata, write_float_tiff, write_r
 from ..io.video import VideoWriter
 from ..isp import calibration
 from ..isp.process import Processor, read_dark
-from ..model import footprint
+from ..model import footprint, tiles
 from ..model.raw_info import RawInfo
 from ..model.sensor import Sensor, check_device
 from ..model.spec import SensorSpec, resolve
+from . import tiled
 
 
 def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
-             phase: Callable[[str], None] | None = None, overwrite: bool = False, device: str = "cpu") -> dict:
+             phase: Callable[[str], None] | None = None, overwrite: bool = False, device: str = "cpu",
+             tile: int | None = None, client=None) -> dict:
     """Run the simulation of ``config`` and write the results into ``out``; returns the summary.
 
     ``progress``, if given, is called with the frame count and returns a
@@ -54,6 +56,9 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     An existing non-empty ``out`` is replaced as a whole with ``overwrite``,
     else refused (:class:`~cmosnoise.io.output.OutputFolder`). ``device``:
     where frames are made (``"cpu"`` or ``"cuda"``, :class:`~cmosnoise.model.sensor.Sensor`; the same bits).
+    ``tile``: make the sensor tile by tile, ``tile`` pixels a side (:mod:`.tiled`: memory bounded by a few tiles,
+    raw.tiff tiled, the same bits as a whole run's), on the Dask ``client``'s workers where one is given;
+    ``progress`` then counts tiles times frames.
     """
     phase = phase or (lambda _name: None)
 
@@ -65,9 +70,22 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     if config.run.dng and not config.adc.enabled:
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     check_device(device)  # before anything is drawn or written
-    footprint.check_fits(config)  # before anything is drawn or written
+    if tile is not None:
+        tile = tiles.check_size(tile)
+        if device != "cpu":
+            raise CmosnoiseError(f"--device {device} with --tile: tiles are made by the CPU kernel (the GPU makes "
+                                 "whole frames, or crops of one exposure)")
+        tiled.check(config)
+        tiled.check_fits(config, tile)
+    else:
+        footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
-    folder.check_space(output_bytes(config))
+    folder.check_space(output_bytes(config) * (2 if tile is not None and config.run.frames > 1 else 1))
+    if tile is not None:
+        with folder as tmp:
+            summary = tiled.simulate_tiled(spec, tmp, tile, progress, phase, client)
+            write_json(tmp / "summary.json", summary)
+        return summary
     # Two more threads take work nothing waits for: loading the compiled kernel while this thread draws the
     # fixed pattern, and frame 0's pictures while the summary is built (PNG encoding and most of NumPy's work
     # release the GIL; the compiled loops take turns, engine.jit.ONE_LAUNCH).

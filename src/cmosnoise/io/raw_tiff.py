@@ -40,10 +40,12 @@ def raw_metadata(cfa: str, black_level_dn: float, bits: int, gain_dn_per_e: floa
 
 
 def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape: tuple[int, int], metadata: dict,
-                   dtype: str = "uint16") -> None:
+                   dtype: str = "uint16", tile: int | None = None) -> None:
     """Write ``n`` frames of ``shape`` as one (n, rows, cols) TIFF series, frame by frame.
 
-    ``dtype`` is uint16 for raw codes, float32 for the ideal readout (e-, ADC off).
+    ``dtype`` is uint16 for raw codes, float32 for the ideal readout (e-, ADC off). With ``tile`` (a multiple of
+    16), the TIFF is tiled and ``frames`` yields its tiles instead, each frame's row by row (those at the right
+    and bottom edges cut; the TIFF pads them).
 
     The CFA pattern also goes into the TIFF/EP ``CFARepeatPatternDim`` and
     ``CFAPattern`` tags so that raw tools can read it.
@@ -55,7 +57,7 @@ def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape
     with tifffile.TiffWriter(path, bigtiff=size > 2**31) as tw:
         tw.write(
             frames, shape=(n, *shape), dtype=dtype, photometric="minisblack",
-            metadata=metadata, extratags=extratags,
+            metadata=metadata, extratags=extratags, tile=None if tile is None else (tile, tile),
         )
 
 

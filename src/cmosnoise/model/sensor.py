@@ -801,10 +801,11 @@ class Exposure:
         for k in range(first, first + n):
             yield self.frame(k)
 
-    def frames_with_electrons(self, n: int, first: int = 0) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """(raw, charge at the ADC input in e-) for frames ``first`` onwards, one at a time."""
+    def frames_with_electrons(self, n: int, first: int = 0, region=None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """(raw, charge at the ADC input in e-) for frames ``first`` onwards, one at a time (of ``region`` only,
+        where given)."""
         for k in range(first, first + n):
-            yield self._render(k)
+            yield self._render(k, region=region)
 
 
 def _as_spec(config) -> SensorSpec:

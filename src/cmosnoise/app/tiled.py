@@ -1,0 +1,313 @@
+"""``simulate --tile SIZE``: a sensor of any size made tile by tile, with memory bounded by a few tiles.
+
+Each tile is made alone (:class:`cmosnoise.model.tiles.Tiling`: its window's fixed maps, scene and mean
+charge), its frames are rendered, measured and written, and it is dropped. ``raw.tiff`` is a tiled TIFF whose
+tiles are the run's: one frame's tiles go straight into it in their order; with several frames each tile's frames
+are made together (its set-up once) and kept in a spool file beside the output until the TIFF is written page by
+page. With Dask (``--workers`` or ``--scheduler``) the tiles go to the workers, a few at a time, and come back in
+order.
+
+The summary is gathered from the tiles as they pass: the measured signal and temporal noise (the sums of every
+tile's pixels, :class:`~cmosnoise.analysis.run_stats.RunStats`), and the dark-current map's mean and white pixels
+with their couplets (from the white pixels' positions, so that a couplet across two tiles counts). What needs the
+whole frame at once (the noise budget, frame 0's white pixels, the pictures, processing) is not made; the summary
+says so.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .._version import __version__
+from ..analysis import figures_of_merit as fom
+from ..analysis import white_pixels
+from ..analysis.run_stats import RunStats
+from ..engine.kernel import generator_info
+from ..errors import CmosnoiseError
+from ..io.output import write_json
+from ..io.raw_tiff import raw_metadata, write_raw_tiff
+from ..model import footprint, tiles
+from ..model.spec import SensorSpec, resolve
+from ..model.units import e_per_s_to_aa
+
+#: what a tiled run leaves out, and why (the summary's ``tiles.not_made``)
+NOT_MADE = {
+    "noise_budget": "a budget is a pass over the whole sensor's maps at once",
+    "key_figures": "they are the whole sensor's map statistics",
+    "dark_current.frame0": "frame 0's white pixels are judged against the budget's read noise",
+    "preview.png": "a picture of the whole frame",
+}
+#: how many tiles a Dask run keeps in flight per worker
+IN_FLIGHT_PER_WORKER = 2
+
+
+def check(config) -> None:
+    """Refuse, in one line, what a tiled run cannot make (before anything is drawn or written).
+
+    Parameters
+    ----------
+    config : Config
+        The run's configuration.
+    """
+    wants = [name for name, on in (("processing (--process)", config.processing.enabled),
+                                   ("dark frames (--dark-frames)", config.processing.dark_frames > 0),
+                                   ("a report (--report)", config.run.report),
+                                   ("DNG files (--format dng)", config.run.dng)) if on]
+    if wants:
+        raise CmosnoiseError(f"--tile makes raw.tiff, config.yaml and summary.json tile by tile; {', '.join(wants)} "
+                             "need(s) the whole frame at once: leave them out, or run without --tile")
+
+
+def tile_task(config_data: dict, size: int, region: tuple[int, int, int, int], frames: int, first: int,
+              populations=None) -> dict:
+    """Everything a run takes from one tile: its frames, its sums and its dark map's white pixels.
+
+    What a Dask worker runs (a pure function of the configuration as data and the tile).
+
+    Parameters
+    ----------
+    config_data : dict
+        The run's configuration as data (``Config.model_dump()``).
+    size : int
+        The tile side.
+    region : (row0, row1, col0, col1)
+        The tile.
+    frames, first : int
+        How many frames, and the first one's number.
+    populations : FixedPattern, optional
+        The whole sensor's sparse populations (another tile's), so that they are not drawn again.
+
+    Returns
+    -------
+    dict
+        ``raw``: the frames (frames, h, w); ``stats``: their :class:`RunStats`; ``perfect_e``, ``expected_e``:
+        the sums of the perfect image and of the mean charge (e-); ``dark_sum``: of the dark map (e-/s);
+        ``white``: the dark map's white pixels (rows, cols) above the threshold; ``populations``; ``set_up_s``,
+        ``frames_s``: where its time went.
+    """
+    from ..config.schema import Config
+
+    spec = resolve(Config.model_validate(config_data))
+    tiling = tiles.Tiling(spec, size)
+    tiling.share(populations)
+    t0 = time.perf_counter()
+    shot = tiling.exposure(region)
+    t1 = time.perf_counter()
+    sensor = shot.sensor
+    stats = RunStats(sensor.transfer.max_code)
+    raws = []
+    for raw, electrons in shot.frames_with_electrons(frames, first, region):
+        stats.update(raw, electrons)
+        raws.append(raw)
+    t2 = time.perf_counter()
+    w0, _, v0, _ = sensor.region
+    r0, r1, c0, c1 = region
+    inner = (slice(r0 - w0, r1 - w0), slice(c0 - v0, c1 - v0))
+    out = {"raw": np.stack(raws), "stats": stats, "populations": tiling.populations,
+           "perfect_e": float(shot.perfect_e[inner].sum(dtype=np.float64)),
+           "expected_e": float(shot.mean_charge_e[inner].sum(dtype=np.float64)),
+           "set_up_s": t1 - t0, "frames_s": t2 - t1, "dark_sum": None, "white": None}
+    state = sensor.dark_state
+    if state is not None:
+        rate = sensor.dark_rate[inner]
+        out["dark_sum"] = float(rate.sum(dtype=np.float64))
+        if state.threshold is not None:
+            r, c = np.nonzero(rate > state.threshold)
+            out["white"] = (r + r0, c + c0)
+    return out
+
+
+def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase: Callable[[str], None] | None = None,
+                   client=None) -> dict:
+    """Make the run of ``spec`` tile by tile into the folder ``tmp``: raw.tiff (tiled) and the summary.
+
+    Parameters
+    ----------
+    spec : SensorSpec
+        The run's sensor (its ``run`` section: frames, first frame).
+    tmp : Path
+        The output folder being written (:class:`~cmosnoise.io.output.OutputFolder`'s temporary one).
+    size : int
+        The tile side (:func:`cmosnoise.model.tiles.grid`).
+    progress : callable, optional
+        As :func:`~cmosnoise.app.run.simulate`'s: called with the number of tiles times frames.
+    phase : callable, optional
+        Told ``"set-up"`` (the sparse populations), then ``"frames"``, ``"writing"``.
+    client : distributed.Client, optional
+        Make the tiles on its workers.
+
+    Returns
+    -------
+    dict
+        The summary (written to ``summary.json`` by the caller).
+    """
+    import contextlib
+
+    phase = phase or (lambda _name: None)
+    config = spec.config
+    size = tiles.check_size(size)
+    rows, cols = spec.shape
+    n, first = config.run.frames, config.run.first_frame
+    regions = tiles.grid(spec.shape, size)
+    data = config.model_dump()
+    t_start = time.perf_counter()
+    phase("set-up")
+    populations = tiles.populations(spec)  # drawn once, shared by every tile
+    transfer, cfa = spec.transfer, config.sensor.cfa
+    dtype = np.dtype("uint16" if config.adc.enabled else "float32")
+    stats = RunStats(transfer.max_code)
+    sums = {"perfect_e": 0.0, "expected_e": 0.0, "dark_sum": 0.0, "set_up_s": 0.0, "frames_s": 0.0}
+    white_r, white_c = [], []
+    spool_path = tmp / "raw.spool"
+    spool = open(spool_path, "w+b") if n > 1 else None
+    places: dict[tuple[int, int], int] = {}  # (frame, tile) -> its offset in the spool
+
+    def results():
+        """Each tile's :func:`tile_task` result, in the tiles' order."""
+        if client is None:
+            for region in regions:
+                yield tile_task(data, size, region, n, first, populations)
+            return
+        from .sweep import task_result
+
+        shared = client.scatter(populations, broadcast=True)
+        ahead = max(1, IN_FLIGHT_PER_WORKER * len(client.scheduler_info().get("workers", {})))
+        pending = []  # (tile, future), oldest first: results come back in the tiles' order
+        for region in regions:
+            pending.append((region, client.submit(tile_task, data, size, region, n, first, shared, pure=False)))
+            while len(pending) > ahead:
+                done, future = pending.pop(0)
+                yield task_result(future, f"tile {done}")
+        for done, future in pending:
+            yield task_result(future, f"tile {done}")
+
+    def tile_stream(advance):
+        """The tiles of frame 0 (one frame: straight to the TIFF), or nothing (several: into the spool)."""
+        for t, part in enumerate(results()):
+            stats.absorb(part["stats"])
+            for key in sums:
+                sums[key] += part[key] or 0.0
+            if part["white"] is not None:
+                white_r.append(part["white"][0])
+                white_c.append(part["white"][1])
+            for k in range(n):
+                if spool is None:
+                    yield part["raw"][0]
+                else:
+                    places[(k, t)] = spool.tell()
+                    spool.write(np.ascontiguousarray(part["raw"][k]).tobytes())
+                advance()
+
+    def spooled():
+        """Every frame's tiles from the spool, page by page."""
+        for k in range(n):
+            for t, (r0, r1, c0, c1) in enumerate(regions):
+                count = (r1 - r0) * (c1 - c0)
+                buf = os.pread(spool.fileno(), count * dtype.itemsize, places[(k, t)])
+                yield np.frombuffer(buf, dtype).reshape(r1 - r0, c1 - c0)
+
+    meta = raw_metadata(cfa, transfer.black_level_dn, transfer.bits, transfer.gain_dn_per_e,
+                        first_frame=first, seed=config.seed, cmosnoise_version=__version__,
+                        scene_white_dn=spec.white_dn, channel_responsivity=list(spec.channel_responsivity),
+                        crosstalk_kernel_pct=config.crosstalk.kernel_pct if config.crosstalk.enabled else None,
+                        generator=generator_info("cpu"), tile=size,
+                        units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)")
+    phase("frames")
+    cm = progress(len(regions) * n) if progress else contextlib.nullcontext(lambda: None)
+    try:
+        with cm as advance:
+            if spool is None:
+                write_raw_tiff(tmp / "raw.tiff", tile_stream(advance), n, spec.shape, meta, dtype.name, tile=size)
+            else:
+                for _ in tile_stream(advance):
+                    pass
+        if spool is not None:
+            phase("writing")
+            spool.flush()
+            write_raw_tiff(tmp / "raw.tiff", spooled(), n, spec.shape, meta, dtype.name, tile=size)
+    finally:
+        if spool is not None:
+            spool.close()
+            spool_path.unlink(missing_ok=True)
+    total = time.perf_counter() - t_start
+    (tmp / "config.yaml").write_text(config.to_yaml())
+    return _summary(spec, stats, sums, (white_r, white_c), populations, size, len(regions), total)
+
+
+def _summary(spec: SensorSpec, stats: RunStats, sums: dict, white, populations, size: int, count: int,
+             total: float) -> dict:
+    """The tiled run's summary.json: what the tiles' sums give (module docstring)."""
+    from ..model.sensor import Sensor
+
+    config = spec.config
+    t = spec.transfer
+    pixels = spec.shape[0] * spec.shape[1]
+    measured = stats.result()
+    n = config.run.frames
+    small = Sensor(spec, window=tiles.CORNER, populations=populations)  # what is the same in every tile
+    out = {
+        "cmosnoise_version": __version__,
+        "generator": generator_info("cpu"),
+        "seed": config.seed,
+        "scene": config.scene.source,
+        "frames": n,
+        "first_frame": config.run.first_frame,
+        "sensor": {"rows": spec.shape[0], "cols": spec.shape[1], "cfa": config.sensor.cfa},
+        "tiles": {"size": size, "count": count, "halo": tiles.HALO, "not_made": NOT_MADE},
+        "stages": small.stages_on(),
+        "adc": {"gain_dn_per_e": t.gain_dn_per_e, "gain_e_per_dn": 1 / t.gain_dn_per_e,
+                "black_level_dn": t.black_level_dn, "bits": t.bits},
+        "signal": {"perfect_mean_e": sums["perfect_e"] / pixels, "expected_mean_e": sums["expected_e"] / pixels,
+                   "mean_e": measured.get("mean_e"), "mean_dn": measured.get("mean_dn"),
+                   "saturated_fraction": measured.get("saturated_fraction")},
+        "temporal_noise": fom.temporal_noise(measured, t.gain_dn_per_e),
+        "dark_current": None,
+        "warnings": [],
+        "timings_s": {"total": round(total, 6), "per_frame": round(total / max(n, 1), 6),
+                      "frame_s": round(sums["frames_s"] / max(n, 1), 6), "set_up": round(sums["set_up_s"], 6),
+                      "stages": {}},
+    }
+    state = small.dark_state
+    if state is not None:
+        t_int = config.exposure.integration_time_s
+        mean = sums["dark_sum"] / pixels
+        dc = {"temperature_c": state.temperature_c, "map_mean_e_per_s": mean, "mean_dark_e_per_frame": mean * t_int,
+              "threshold_e_per_s": state.threshold, "threshold_source": state.threshold_source}
+        if state.threshold is not None:
+            r = np.concatenate(white[0]) if white[0] else np.zeros(0, np.int64)
+            c = np.concatenate(white[1]) if white[1] else np.zeros(0, np.int64)
+            order = np.lexsort((c, r))
+            r, c = r[order], c[order]
+            frac = r.size / pixels
+            dc.update({"threshold_aA": e_per_s_to_aa(state.threshold), "ppm_expected": state.expected_ppm_above(),
+                       "map": {"threshold": float(state.threshold), "white_pixels": int(r.size), "ppm": frac * 1e6,
+                               "couplets": int(len(white_pixels.pairs_at(r, c, spec.shape, config.sensor.cfa))),
+                               "couplets_expected_random": white_pixels.expected_couplets(spec.shape,
+                                                                                          config.sensor.cfa, frac)}})
+        out["dark_current"] = dc
+    return out
+
+
+def memory_pixels(size: int, frames: int) -> int:
+    """Pixels a tiled run holds at once, for :func:`cmosnoise.model.footprint.check_fits`: a tile's window, and
+    its frames (raw and electrons, about a third of a map's bytes each)."""
+    side = size + 2 * tiles.HALO
+    return side * side * (1 + frames // 3)
+
+
+def check_fits(config, size: int) -> None:
+    """A tiled run's memory check: what its tiles in flight need (a one-line error naming --tile where not).
+
+    Parameters
+    ----------
+    config : Config
+        The run's configuration.
+    size : int
+        The tile side.
+    """
+    footprint.check_fits(config, pixels=memory_pixels(size, config.run.frames), tiled=True)
