@@ -149,8 +149,11 @@ def _counting(ctx: typer.Context, label: str, unit: str = ""):
         yield lambda done, total: bar.update(task, completed=done, total=total)
 
 
-def _speed(timings: dict) -> str:
-    """A run's time per frame and its set-up, as simulate's line says them."""
+def _speed(timings: dict, pixels: int | None = None) -> str:
+    """A run's time per frame and its set-up, as simulate's line says them (a tiled run: its time per pixel,
+    ``pixels`` a frame's)."""
+    if pixels is not None:  # tiles: set-up and frames overlap on two threads, so only the wall time says it
+        return f"{timings['total']:.1f} s in all, {1e9 * timings['total'] / pixels / max(timings['frames'], 1):.1f} ns/pixel"
     if timings["frame_s"] is None:  # one frame, and it waited for the kernel's first compile
         return (f"{timings['set_up']:.1f} s, the frame kernel's compile ({timings['stages']['kernel_compile']:.0f} s) "
                 "included: run again for the time per frame")
@@ -173,7 +176,7 @@ def _status(ctx: typer.Context):
         yield (lambda text: status.update(f"[bold]{text}")), say
 
 
-def _progress_factory(enabled: Optional[bool], pixels: int):
+def _progress_factory(enabled: Optional[bool], pixels: int, unit: str = "frames"):
     def factory(n: int):
         show = enabled if enabled is not None else (err_console.is_terminal and n * pixels >= 5_000_000)
         if not show:
@@ -182,7 +185,7 @@ def _progress_factory(enabled: Optional[bool], pixels: int):
         @contextlib.contextmanager
         def cm():
             with Progress(
-                TextColumn("[bold]simulating"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
+                TextColumn("[bold]simulating"), BarColumn(), MofNCompleteColumn(), TextColumn(unit),
                 TimeRemainingColumn(), console=err_console, transient=False,
             ) as p:
                 task = p.add_task("frames", total=n)
@@ -222,6 +225,13 @@ def simulate(
     progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
     white_threshold: Optional[str] = WhiteThresholdOpt,
     device: str = DeviceOpt,
+    tile: Optional[int] = typer.Option(None, "--tile", help="make the sensor tile by tile, SIZE pixels a side (a "
+                                       "multiple of 16, e.g. 2048): memory bounded by a few tiles, raw.tiff tiled, "
+                                       "the same bits; for sensors too large to hold whole"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="with --tile: make the tiles on an existing "
+                                            "Dask scheduler, e.g. tcp://host:8786"),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="with --tile: make the tiles on "
+                                          "a LocalCluster of this many worker processes"),
     overwrite: bool = OverwriteOpt,
 ):
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
@@ -234,7 +244,10 @@ def simulate(
     show = progress if progress is not None else (err_console.is_terminal
                                                   and cfg.run.frames * cfg.sensor.width * cfg.sensor.height >= 5_000_000)
     status = err_console.status("") if show else None
-    texts = {"set-up": "drawing the fixed pattern", "scene": "rendering the scene and its mean charge",
+    if (scheduler or workers) and tile is None:
+        raise CmosnoiseError("--scheduler and --workers make a run's tiles on Dask: give --tile SIZE too")
+    texts = {"set-up": "drawing the fixed pattern" + (" (the sparse populations, for every tile)" if tile else ""),
+             "scene": "rendering the scene and its mean charge", "writing": "writing raw.tiff from the spool",
              "dark": f"averaging {cfg.processing.dark_frames} dark frames into a master dark",
              "summary": "writing preview.png and measuring the summary (noise budget, white pixels)",
              "report": "writing report.html"}
@@ -248,19 +261,34 @@ def simulate(
         status.update(f"[bold]{texts.get(name, name)}")
         status.start()
 
+    client = cluster = None
     try:
-        summary = run_simulate(spec, out, progress=_progress_factory(progress, cfg.sensor.width * cfg.sensor.height),
-                               phase=phase, overwrite=overwrite, device=device)
+        if scheduler or workers:
+            from .sweep import connect
+
+            client, cluster = connect(scheduler, workers, lambda m: _say(ctx, m))
+        pixels = cfg.sensor.width * cfg.sensor.height
+        summary = run_simulate(spec, out, progress=_progress_factory(progress, pixels if tile is None else tile * tile,
+                                                                     "tiles" if tile else "frames"),
+                               phase=phase, overwrite=overwrite, device=device, tile=tile, client=client)
     finally:
         if status is not None:
             status.stop()
+        if client is not None:
+            from .sweep import disconnect
+
+            disconnect(client, cluster)
     sig, tn = summary["signal"], summary["temporal_noise"]
     noise = f", temporal noise {tn['rms_e']:.2f} e- ({tn['rms_dn']:.2f} DN)" if tn["rms_e"] is not None else ""
     _say(
         ctx,
         f"wrote {summary['frames']} frame(s) {cfg.sensor.height}x{cfg.sensor.width} {cfg.sensor.cfa} to {out}/ "
-        f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; {_speed(summary['timings_s'])})"
+        + (f"in {summary['tiles']['count']} tiles of {summary['tiles']['size']} " if "tiles" in summary else "")
+        + f"(mean {sig['mean_e']:.1f} e-, {sig['mean_dn']:.1f} DN{noise}; "
+        f"{_speed(summary['timings_s'], pixels if 'tiles' in summary else None)})"
     )
+    if "tiles" in summary:
+        _say(ctx, "not made in tiles: " + ", ".join(summary["tiles"]["not_made"]) + " (they need the whole frame)")
     dc = summary.get("dark_current") or {}
     if "map" in dc:
         _say(ctx, f"white pixels: {dc['map']['white_pixels']} in the dark-current map ({dc['map']['ppm']:.0f} ppm) above "

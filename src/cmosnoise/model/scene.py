@@ -694,9 +694,11 @@ def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.nd
     """
     if cfa_mod.is_mono(pattern):
         return rgb @ LUMINANCE
-    cmap = cfa_mod.channel_map(pattern, rgb.shape[:2])
     resp = np.asarray(responsivity, dtype=np.float64)
-    return np.take_along_axis(rgb, cmap[..., None].astype(np.intp), axis=2)[..., 0] * resp[cmap]
+    out = np.empty(rgb.shape[:2], dtype=np.result_type(rgb.dtype, resp.dtype))
+    for (i, j), ch in np.ndenumerate(cfa_mod.tile(pattern)):  # each of the 2 x 2 cell's positions, strided
+        out[i::2, j::2] = rgb[i::2, j::2, ch] * resp[ch]
+    return out
 
 
 def photo_electrons(signal: np.ndarray, peak_rate_e_per_s: float, integration_time_s: float) -> np.ndarray:

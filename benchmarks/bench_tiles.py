@@ -1,0 +1,101 @@
+"""A sensor too large to hold whole, made in tiles: time per pixel and peak memory against the 1080p frame kernel.
+
+For each size, ``cmosnoise simulate --tile SIZE`` of the default sensor (one frame of a flat grey scene, written
+to a tiled raw.tiff in a temporary folder) runs in a child process: its wall time, its peak resident memory
+(``wait4``'s ``ru_maxrss``) and its summary's split (the tiles' set-up, the frame kernel). In another child, a
+1920 x 1080 frame of the default sensor on the same threads (the fastest of ``--repeats``, the kernel loaded
+first) gives the kernel's own time per pixel. "kernel ratio": the tiled run's frame time per pixel over the
+1080p kernel's; "run ratio": its whole wall time (set-up, frames, writing) per pixel over it.
+
+    python benchmarks/bench_tiles.py [--sizes 50,400] [--tile 2048] [--threads 2] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+#: (width, height) of each size in megapixels
+SIZES = {50: (8192, 6144), 100: (11552, 8672), 400: (20000, 20000)}
+
+
+def kernel_1080p(repeats: int) -> dict:
+    from cmosnoise import Sensor
+
+    ex = Sensor({"sensor": {"width": 1920, "height": 1080}}).expose("flat:0.5")
+    ex.frame(0)
+    best = math.inf
+    for k in range(1, repeats + 1):
+        t0 = time.perf_counter()
+        ex.frame(k)
+        best = min(best, time.perf_counter() - t0)
+    return {"frame_s": best, "ns_per_pixel": 1e9 * best / (1920 * 1080)}
+
+
+def tiled_run(width: int, height: int, tile: int, env: dict) -> dict:
+    with tempfile.TemporaryDirectory(prefix="cmosnoise-tiles-") as tmp:
+        out = Path(tmp) / "run"
+        cmd = [sys.executable, "-m", "cmosnoise", "-q", "simulate", "--tile", str(tile), "--scene", "flat:0.5",
+               "--set", f"sensor.width={width}", "--set", f"sensor.height={height}", "-o", str(out)]
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        if os.waitstatus_to_exitcode(status) != 0:
+            raise SystemExit(f"{' '.join(cmd)} failed")
+        proc.returncode = 0
+        summary = json.loads((out / "summary.json").read_text())
+        raw_bytes = (out / "raw.tiff").stat().st_size
+    pixels = width * height
+    t = summary["timings_s"]
+    return {"width": width, "height": height, "pixels": pixels, "tile": tile, "tiles": summary["tiles"]["count"],
+            "wall_s": wall, "peak_bytes": usage.ru_maxrss * 1024, "raw_bytes": raw_bytes,
+            "set_up_s": t["set_up"], "frame_s": t["frame_s"], "total_s": t["total"],
+            "ns_per_pixel": 1e9 * wall / pixels, "frame_ns_per_pixel": 1e9 * t["frame_s"] / pixels,
+            "set_up_ns_per_pixel": 1e9 * t["set_up"] / pixels}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", default="50,400", help="megapixels, of " + ", ".join(map(str, SIZES)))
+    ap.add_argument("--tile", type=int, default=2048)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=5, help="1080p frames timed, the fastest kept")
+    ap.add_argument("--json", help="also write the results here")
+    ap.add_argument("--kernel", action="store_true", help=argparse.SUPPRESS)  # a child: the 1080p kernel
+    a = ap.parse_args()
+    if a.kernel:
+        print(json.dumps(kernel_1080p(a.repeats)))
+        return
+    env = {**os.environ, "NUMBA_NUM_THREADS": str(a.threads)}
+    out = subprocess.run([sys.executable, __file__, "--kernel", "--repeats", str(a.repeats)], env=env, check=True,
+                         capture_output=True, text=True).stdout
+    ref = json.loads(out.strip().splitlines()[-1])
+    print(f"1080p frame kernel: {ref['frame_s'] * 1000:.1f} ms = {ref['ns_per_pixel']:.1f} ns/pixel "
+          f"({a.threads} threads)")
+    rows = []
+    for mp in (int(s) for s in a.sizes.split(",")):
+        w, h = SIZES[mp]
+        r = tiled_run(w, h, a.tile, env)
+        r["kernel_ratio"] = r["frame_ns_per_pixel"] / ref["ns_per_pixel"]
+        r["run_ratio"] = r["ns_per_pixel"] / ref["ns_per_pixel"]
+        rows.append(r)
+        print(f"{mp:4d} MP ({w} x {h}) in {r['tiles']} tiles of {a.tile}: {r['wall_s']:.1f} s "
+              f"({r['ns_per_pixel']:.1f} ns/pixel; set-up {r['set_up_s']:.1f} s, frame {r['frame_s']:.1f} s = "
+              f"{r['frame_ns_per_pixel']:.1f} ns/pixel, {r['kernel_ratio']:.2f} x the 1080p kernel's), "
+              f"peak {r['peak_bytes'] / 2**30:.2f} GiB, raw.tiff {r['raw_bytes'] / 2**30:.2f} GiB")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump({"threads": a.threads, "cpu_count": os.cpu_count(), "kernel_1080p": ref, "rows": rows}, f,
+                      indent=1)
+
+
+if __name__ == "__main__":
+    main()
