@@ -31,7 +31,6 @@ from ..analysis import white_pixels
 from ..analysis.run_stats import RunStats
 from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
-from ..io.output import write_json
 from ..io.raw_tiff import raw_metadata, write_raw_tiff
 from ..model import footprint, tiles
 from ..model.spec import SensorSpec, resolve
