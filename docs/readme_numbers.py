@@ -479,6 +479,22 @@ def render_setup_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_tile_speed(d: dict) -> str:
+    k = d["kernel_1080p"]
+    lines = [f"Measured with `python benchmarks/bench_tiles.py --sizes 50,400 --json docs/numbers/tile_speed.json` "
+             f"({d['threads']} threads; one frame of a flat grey scene, tiles of {d['rows'][0]['tile']}, written to "
+             f"disk). The frame kernel takes {k['ns_per_pixel']:.1f} ns a pixel on a 1920 x 1080 frame and "
+             f"{k['tile_ns_per_pixel']:.1f} ns ({k['tile_ratio']:.2f} times) on a tile of the 400 MP sensor, in the "
+             "same run:", "",
+             "| sensor | tiles | wall time | per pixel (x the 1080p kernel's) | peak memory | raw.tiff |",
+             "|---|---|---|---|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| {r['width']} x {r['height']} ({r['pixels'] / 1e6:.0f} MP) | {r['tiles']} | "
+                     f"{r['wall_s']:.1f} s | {r['ns_per_pixel']:.1f} ns ({r['run_ratio']:.1f}) | "
+                     f"{r['peak_bytes'] / 2**30:.2f} GiB | {r['raw_bytes'] / 2**30:.2f} GiB |")
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -501,6 +517,7 @@ SECTIONS = {
     "dataset_speed": (None, render_dataset_speed),
     "gpu_speed": (None, render_gpu_speed),
     "setup_speed": (None, render_setup_speed),
+    "tile_speed": (None, render_tile_speed),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -518,7 +535,8 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "dataset_speed": ["bench_dataset.py", "--memory", "10000", "--json", "dataset_speed.json"],
               # on a machine with an NVIDIA GPU and cmosnoise[cuda]
               "gpu_speed": ["bench_gpu.py", "--json", "gpu_speed.json"],
-              "setup_speed": ["bench_setup.py", "--sizes", "1,12,50", "--json", "setup_speed.json"]}
+              "setup_speed": ["bench_setup.py", "--sizes", "1,12,50", "--json", "setup_speed.json"],
+              "tile_speed": ["bench_tiles.py", "--sizes", "50,400", "--json", "tile_speed.json"]}
 SLOW = {"sweep_fig9"}
 
 

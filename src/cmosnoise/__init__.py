@@ -49,7 +49,7 @@ _MODULES = {
     "noise_budget": "analysis.noise_budget", "emva": "analysis.emva", "characterize": "analysis.characterize",
     "white_pixels": "analysis.white_pixels", "figures_of_merit": "analysis.figures_of_merit",
     "emva_evaluation": "analysis.emva_evaluation", "emva_files": "analysis.emva_files",
-    "fixed_pattern": "model.fixed_pattern", "spec": "model.spec",
+    "fixed_pattern": "model.fixed_pattern", "spec": "model.spec", "tiles": "model.tiles",
     "plots": "app.plots", "sweep": "app.sweep", "dataset": "app.dataset", "ground_truth": "analysis.ground_truth",
 }
 

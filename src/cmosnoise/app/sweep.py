@@ -813,9 +813,9 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
 
     import pandas as pd
 
-    from ..model.sensor import _as_spec, check_device
+    from ..model.sensor import as_spec, check_device
 
-    base = _as_spec(base).config
+    base = as_spec(base).config
     check_device(device, "--device")
     p = plan(base, vary, instances, frames, scene, specs, metrics)
     say(f"scene: {p.scene} ({p.scene_why})")

@@ -212,6 +212,9 @@ class DevicePlan:
     """
 
     def __init__(self, plan: kernel.FramePlan, stuck: tuple[np.ndarray, np.ndarray] | None = None):
+        if plan.window is not None:
+            raise CmosnoiseError(f"a plan of the window {plan.window} (a tile) is made by the CPU kernel; the GPU "
+                                 "takes a whole sensor's exposure and makes crops of it")
         check()
         self.k = kernels()
         cuda = self.k.cuda

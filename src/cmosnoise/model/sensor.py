@@ -128,6 +128,9 @@ class Sensor:
         an inner edge of the window, where crosstalk would need the neighbours outside
         (:mod:`cmosnoise.model.tiles` adds that margin). ``row0`` and ``col0`` must be even, so that the CFA's
         phase is the sensor's. ``shape`` stays the whole sensor's; :attr:`map_shape` is the window's.
+    populations : FixedPattern, optional
+        Another window's fixed pattern of this configuration and seed, whose sparse populations (random
+        telegraph traps, blinking pixels, defects: drawn for the whole sensor) are taken, not drawn again.
 
     Examples
     --------
@@ -147,7 +150,7 @@ class Sensor:
         check_device(device)
         #: where frames are made: "cpu" or "cuda"
         self.device = device
-        spec = _as_spec(config)
+        spec = as_spec(config)
         if seed is not None:
             seed = _whole(seed, "seed")
             if seed != spec.seed:
@@ -808,9 +811,25 @@ class Exposure:
             yield self._render(k, region=region)
 
 
-def _as_spec(config) -> SensorSpec:
+def as_spec(config) -> SensorSpec:
     """The resolved sensor a user means: None (defaults), a spec, a Config, a dict (merged over the defaults)
-    or a YAML file's path."""
+    or a YAML file's path (what :class:`Sensor` and :class:`~cmosnoise.model.tiles.Tiling` take).
+
+    Parameters
+    ----------
+    config : SensorSpec, Config, dict, str, Path or None
+        The sensor as a user gives it.
+
+    Returns
+    -------
+    SensorSpec
+
+    Examples
+    --------
+    >>> from cmosnoise.model.sensor import as_spec
+    >>> as_spec({"sensor": {"width": 64, "height": 48}}).shape
+    (48, 64)
+    """
     if isinstance(config, SensorSpec):
         return config
     if config is None:

@@ -22,14 +22,15 @@ True
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 
 from ..config import Config
 from ..errors import CmosnoiseError
 from .fixed_pattern import FixedPattern
-from .sensor import Exposure, Sensor
-from .spec import SensorSpec, resolve
+from .sensor import Exposure, Sensor, as_spec
+from .spec import SensorSpec
 
 #: pixels around a tile that its window holds: crosstalk reads one neighbour; two keep the CFA's 2 x 2 phase
 HALO = 2
@@ -52,6 +53,14 @@ def populations(spec: SensorSpec) -> FixedPattern:
     -------
     FixedPattern
         Its ``traps``, ``blinkers`` and ``defects`` are the whole sensor's.
+
+    Examples
+    --------
+    >>> from cmosnoise import load_config
+    >>> from cmosnoise.model import tiles
+    >>> spec = load_config(extra={"sensor": {"width": 64, "height": 48}, "defects": {"enabled": True}})
+    >>> tiles.populations(spec).defects.shape
+    (48, 64)
     """
     return Sensor(spec, window=CORNER).fixed_pattern
 
@@ -95,6 +104,12 @@ def check_size(size) -> int:
     Returns
     -------
     int
+
+    Examples
+    --------
+    >>> from cmosnoise.model import tiles
+    >>> tiles.check_size(2048)
+    2048
     """
     try:
         value = int(size)
@@ -120,6 +135,12 @@ def window_of(region: tuple[int, int, int, int], shape: tuple[int, int]) -> tupl
     Returns
     -------
     (row0, row1, col0, col1)
+
+    Examples
+    --------
+    >>> from cmosnoise.model import tiles
+    >>> tiles.window_of((0, 32, 32, 64), (48, 64))
+    (0, 34, 30, 64)
     """
     r0, r1, c0, c1 = region
     return max(r0 - HALO, 0), min(r1 + HALO, shape[0]), max(c0 - HALO, 0), min(c1 + HALO, shape[1])
@@ -130,8 +151,8 @@ class Tiling:
 
     Parameters
     ----------
-    config : SensorSpec or Config
-        The sensor.
+    config : SensorSpec, Config, dict, str or Path
+        The sensor, as :class:`~cmosnoise.model.sensor.Sensor` takes it.
     size : int
         The tile's side, pixels (:func:`grid`).
     scene : str, optional
@@ -148,8 +169,9 @@ class Tiling:
     [(32, 32), (32, 32)]
     """
 
-    def __init__(self, config: SensorSpec | Config, size: int, scene: str | None = None, sequence: int = 0):
-        self.spec = resolve(config)
+    def __init__(self, config: SensorSpec | Config | dict | str | Path, size: int, scene: str | None = None,
+                 sequence: int = 0):
+        self.spec = as_spec(config)
         self.size = check_size(size)
         self.scene = scene
         self.sequence = sequence
@@ -163,7 +185,24 @@ class Tiling:
         return self._populations
 
     def share(self, populations: FixedPattern | None) -> None:
-        """Take the sparse populations another :class:`Tiling` of the same sensor drew (a Dask worker's copy)."""
+        """Take the sparse populations another :class:`Tiling` of the same sensor drew (a Dask worker's copy).
+
+        Parameters
+        ----------
+        populations : FixedPattern or None
+            :attr:`populations` of another tiling of this sensor, or :func:`populations` of it; None: draw them
+            with the next tile.
+
+        Examples
+        --------
+        >>> from cmosnoise import load_config
+        >>> from cmosnoise.model import tiles
+        >>> spec = load_config(extra={"sensor": {"width": 64, "height": 48}})
+        >>> tiling = tiles.Tiling(spec, 32)
+        >>> tiling.share(tiles.populations(spec))
+        >>> tiling.populations is not None
+        True
+        """
         self._populations = populations
 
     def exposure(self, region: tuple[int, int, int, int]) -> Exposure:
@@ -178,6 +217,15 @@ class Tiling:
         -------
         Exposure
             Its frames' ``region=`` is the tile.
+
+        Examples
+        --------
+        >>> from cmosnoise import load_config
+        >>> from cmosnoise.model import tiles
+        >>> tiling = tiles.Tiling(load_config(extra={"sensor": {"width": 64, "height": 48}}), 32)
+        >>> shot = tiling.exposure((0, 32, 32, 64))
+        >>> shot.sensor.window, shot.frame(0, region=(0, 32, 32, 64)).shape
+        ((0, 34, 30, 64), (32, 32))
         """
         sensor = Sensor(self.spec, window=window_of(region, self.spec.shape), populations=self._populations)
         if self._populations is None:
@@ -204,6 +252,14 @@ class Tiling:
         -------
         iterator
             Each frame equals that rectangle of the whole sensor's frame, bit for bit.
+
+        Examples
+        --------
+        >>> from cmosnoise import load_config
+        >>> from cmosnoise.model import tiles
+        >>> tiling = tiles.Tiling(load_config(extra={"sensor": {"width": 64, "height": 48}}), 32)
+        >>> [(raw.dtype.name, e.dtype.name) for raw, e in tiling.frames((32, 48, 0, 32), 2, electrons=True)]
+        [('uint16', 'float32'), ('uint16', 'float32')]
         """
         shot = self.exposure(region)
         if electrons:
@@ -226,5 +282,13 @@ class Tiling:
         -------
         (h, w) array
             uint16 DN, or float32 e- with the ADC off.
+
+        Examples
+        --------
+        >>> from cmosnoise import load_config
+        >>> from cmosnoise.model import tiles
+        >>> tiling = tiles.Tiling(load_config(extra={"sensor": {"width": 64, "height": 48}}), 32)
+        >>> tiling.frame((32, 48, 32, 64), 5).shape
+        (16, 32)
         """
         return next(self.frames(region, 1, k))
