@@ -86,3 +86,15 @@ def test_photo_electrons_scale_with_peak_rate_and_time():
     cfg = quiet_config(exposure={"integration_time_s": 0.5, "peak_rate_e_per_s": 2000}, sensor={"cfa": "none"})
     shot = Sensor(cfg).expose("flat:0.3")
     np.testing.assert_allclose(shot.perfect_e, 0.3 * 2000 * 0.5, rtol=1e-6)
+
+
+def test_the_compiled_interleave_moves_values_only():
+    """resample's planes go into the (rows, cols, 3) image by a blocked compiled copy (engine/layout.py): the
+    same values as NumPy's transpose, at sizes that are not multiples of its blocks."""
+    from cmosnoise.engine.layout import interleave_transposed
+
+    rng = np.random.default_rng(2)
+    planes = [rng.random((333, 517)) for _ in range(3)]  # 172 161 values a plane: the compiled path
+    assert np.array_equal(interleave_transposed(planes), np.stack([p.T for p in planes], axis=-1))
+    small = [rng.random((5, 7))]
+    assert np.array_equal(interleave_transposed(small), small[0].T[..., None])

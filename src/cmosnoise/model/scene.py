@@ -41,6 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import inputs
+from ..engine import layout
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
 
@@ -473,10 +474,8 @@ def resample(img: np.ndarray, shape: tuple[int, int], region=None) -> np.ndarray
     r0, r1, c0, c1 = _span(shape, region)
     wr = _axis_matrix(img.shape[0], shape[0])[r0:r1]
     wc = _axis_matrix(img.shape[1], shape[1])[c0:c1]
-    out = np.empty((r1 - r0, c1 - c0, img.shape[2]))
-    for c in range(img.shape[2]):
-        out[..., c] = (wc @ (wr @ img[..., c]).T).T
-    return out
+    # each channel as scipy's sparse products give it, (cols, rows); interleaved by a blocked, compiled copy
+    return layout.interleave_transposed([wc @ (wr @ img[..., c]).T for c in range(img.shape[2])])
 
 
 def crop_to_aspect(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
