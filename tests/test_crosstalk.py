@@ -107,3 +107,24 @@ def test_cfa_masks_partition_the_sensor():
     m = masks("GBRG", (4, 6))
     assert (m.sum(axis=0) == 1).all()
     assert m[1, 0, 0] and m[2, 0, 1] and m[0, 1, 0] and m[1, 1, 1]
+
+
+def test_the_compiled_spread_is_ndimage_bit_for_bit():
+    """engine/stencil.py replaces ndimage.convolve over the padded array: the same bits on random arrays of both
+    float dtypes, tiny and odd shapes, and kernels lopsided, with zeros and with a weight below DBL_EPSILON
+    (ndimage leaves such a point out of its footprint)."""
+    from scipy import ndimage
+
+    from cmosnoise.engine.stencil import framed_convolve
+
+    rng = np.random.default_rng(0)
+    kernels = [np.array([[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]]) / 100, rng.random((3, 3)) / 5,
+               np.array([[0, 1, 0], [2, 80, 3], [0, 0.5, 0]]) / 100,
+               np.array([[1e-20, 0.1, 0.0], [0.3, 0.5, 0.01], [0.0, 0, 0.02]])]
+    for k in kernels:
+        for shape in [(1, 1), (1, 5), (2, 2), (5, 1), (7, 9), (64, 48), (301, 457)]:
+            for dtype in (np.float64, np.float32):
+                x = (rng.random(shape) * 1000).astype(dtype)
+                want = ndimage.convolve(np.pad(x, 1), np.asarray(k, dtype), mode="constant")
+                got = framed_convolve(x, k)
+                assert got.dtype == want.dtype and np.array_equal(got, want), (shape, dtype)

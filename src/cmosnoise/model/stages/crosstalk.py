@@ -28,8 +28,8 @@ Examples
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
+from ...engine import stencil
 from .. import cfa as cfa_mod
 
 
@@ -74,8 +74,7 @@ def spread(mean_e: np.ndarray, kernel) -> np.ndarray:
     (rows, cols) array, e-, of ``mean_e``'s dtype
         Charge per pixel after diffusion.
     """
-    k = np.asarray(kernel, dtype=mean_e.dtype)
-    out = ndimage.convolve(np.pad(mean_e, 1), k, mode="constant")  # into a one-pixel frame around the array
+    out = stencil.framed_convolve(mean_e, kernel)  # into a one-pixel frame around the array (ndimage's bits)
     out[1, :] += out[0, :]
     out[-2, :] += out[-1, :]
     out[:, 1] += out[:, 0]

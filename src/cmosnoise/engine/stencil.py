@@ -1,0 +1,68 @@
+"""A small kernel's convolution over an array and a frame around it, compiled: what crosstalk spreads.
+
+:func:`framed_convolve` gives, for an array ``x`` (rows, cols) and a 3 x 3 kernel, the (rows + 2, cols + 2)
+array that ``scipy.ndimage.convolve(np.pad(x, 1), k, mode="constant")`` gives, bit for bit: each value is a sum
+started at 0.0 over the kernel's points in the order ndimage takes them (the flipped kernel in C order, points
+whose weight is within ``DBL_EPSILON`` of 0 left out, as ndimage leaves them out of its footprint), each term the
+float64 value times the float64 weight, and the result rounded to ``x``'s dtype once. Points outside ``x`` add
+nothing (ndimage adds ``0.0 * w`` there, which leaves every sum as it is). One parallel pass, without the padded
+copy: at 50 MP about a sixth of ndimage's time with the pad. The tests hold it to ndimage on random arrays,
+kernels (lopsided, with zeros and near-zeros) and both float dtypes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import ONE_LAUNCH, numba  # None where numba is not installed
+
+if numba is not None:
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _framed(x, dr, dc, w, out):  # pragma: no cover - compiled
+        rows, cols = x.shape
+        for i in numba.prange(rows + 2):
+            for j in range(cols + 2):
+                tmp = 0.0
+                for q in range(w.size):
+                    y = i + dr[q] - 2
+                    z = j + dc[q] - 2
+                    if 0 <= y < rows and 0 <= z < cols:
+                        tmp += np.float64(x[y, z]) * w[q]
+                out[i, j] = tmp
+
+
+def framed_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """The convolution of ``x`` with a 3 x 3 ``kernel`` over ``x`` and a one-pixel frame of zeros around it.
+
+    Parameters
+    ----------
+    x : (rows, cols) float32 or float64 array
+        The values.
+    kernel : (3, 3) array_like
+        The weights, in ``x``'s dtype (as ndimage takes them).
+
+    Returns
+    -------
+    (rows + 2, cols + 2) array of ``x``'s dtype
+        ``scipy.ndimage.convolve(np.pad(x, 1), kernel, mode="constant")``, the same bits.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cmosnoise.engine.stencil import framed_convolve
+    >>> x = np.zeros((3, 3)); x[1, 1] = 1.0
+    >>> framed_convolve(x, [[0, 0, 0], [0.1, 0.8, 0.1], [0, 0, 0]])[2]
+    array([0. , 0. , 0.1, 0.8, 0.1])
+    """
+    x = np.ascontiguousarray(x)
+    k = np.asarray(kernel, dtype=x.dtype).astype(np.float64)
+    if numba is None:  # pragma: no cover - numba is a dependency
+        from scipy import ndimage
+
+        return ndimage.convolve(np.pad(x, 1), k.astype(x.dtype), mode="constant")
+    flipped = k[::-1, ::-1]  # a convolution is the correlation with the flipped kernel
+    dr, dc = np.nonzero(np.abs(flipped) > np.finfo(np.float64).eps)
+    out = np.empty((x.shape[0] + 2, x.shape[1] + 2), x.dtype)
+    with ONE_LAUNCH:
+        _framed(x, dr.astype(np.int64), dc.astype(np.int64), np.ascontiguousarray(flipped[dr, dc]), out)
+    return out
