@@ -33,6 +33,7 @@ import math
 
 import numpy as np
 
+from ..engine import fixed_maps
 from ..engine import telegraph as telegraph_chain
 from ..model.sensor import Exposure, Sensor
 from ..model.units import e_per_s_to_aa
@@ -231,10 +232,19 @@ def frame0_white_pixels(sensor: Sensor, shot: Exposure, electrons0: np.ndarray, 
         :func:`white_pixels.report`'s figures and the ``method``.
     """
     t_int = sensor.config.exposure.integration_time_s
-    photo = shot.photo_mean_e.astype(np.float64)
-    excess_e = electrons0 - photo - 5.0 * np.sqrt(photo + read_var_e2)  # read_var_e2: the budget's dark variance (e-^2)
-    rep = white_pixels.report(excess_e / t_int, threshold_e_per_s, sensor.cfa)
-    kind = "dark frame" if float(photo.max()) <= 0 else "lit frame"
+    rows, cols = [], []
+    lit = False
+    for r0, r1 in fixed_maps.bands((0, electrons0.shape[0], 0, electrons0.shape[1])):  # small temporaries
+        photo = shot.photo_mean_e[r0:r1].astype(np.float64)
+        lit = lit or float(photo.max()) > 0
+        # read_var_e2: the budget's dark variance (e-^2)
+        excess_e = electrons0[r0:r1] - photo - 5.0 * np.sqrt(photo + read_var_e2)
+        r, c = np.nonzero(excess_e / t_int > threshold_e_per_s)
+        rows.append(r + r0)
+        cols.append(c)
+    rep = white_pixels.report_at(np.concatenate(rows), np.concatenate(cols), electrons0.shape, threshold_e_per_s,
+                                 sensor.cfa)
+    kind = "lit frame" if lit else "dark frame"
     rep["method"] = (f"{kind}: (charge - expected photo-charge - 5 sigma of photon shot and read noise) / integration "
                      "time, above the threshold; a lower bound of the map's count (white pixels can hide in the noise)")
     return rep

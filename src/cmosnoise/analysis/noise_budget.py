@@ -46,6 +46,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..engine.reduce import moments
+
 if TYPE_CHECKING:
     from ..model.sensor import Sensor
 
@@ -96,6 +98,41 @@ def transfer_slope(sensor: Sensor, charge_e: float) -> float:
     return 1.0 if curve is None else curve.slope(charge_e)
 
 
+def map_moment(sensor: Sensor, name: str, which: str) -> float:
+    """A fixed map's mean, variance or mean square (``which``: "mean", "var", "mean_square"), computed once per
+    sensor with the other two (:func:`cmosnoise.engine.reduce.moments`, two compiled passes) and kept by
+    :meth:`~cmosnoise.model.sensor.Sensor.map_statistic`.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+    name : str
+        A field of its fixed pattern (``dark_rate``, ``flicker_sigma``, ...) or ``flat_response``.
+    which : {"mean", "var", "mean_square"}
+        The statistic.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor, noise_budget
+    >>> sensor = Sensor({"sensor": {"width": 64, "height": 48}}, seed=1)
+    >>> noise_budget.map_moment(sensor, "dark_rate", "mean") > 0
+    True
+    """
+    def compute():
+        values = sensor.flat_response if name == "flat_response" else getattr(sensor.fixed_pattern, name)
+        found = dict(zip(("mean", "var", "mean_square"), moments(values)))
+        for other, value in found.items():  # the three come together: keep them all
+            sensor.map_statistic(f"{other}:{name}", lambda v=value: v)
+        return found[which]
+
+    return sensor.map_statistic(f"{which}:{name}", compute)
+
+
 def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float]:
     """Each temporal source's variance at mean photo-signal ``signal_e``.
 
@@ -114,10 +151,9 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
     c = sensor.config
     fp = sensor.fixed_pattern
     t = sensor.transfer
-    stat = sensor.map_statistic
-    g2 = (stat("mean_square:column_gain", lambda: np.mean(fp.column_gain.astype(np.float64) ** 2))
+    g2 = (map_moment(sensor, "column_gain", "mean_square")
           if fp.column_gain is not None else 1.0)
-    dark_e = (stat("mean:dark_rate", lambda: fp.dark_rate.mean()) * c.exposure.integration_time_s
+    dark_e = (map_moment(sensor, "dark_rate", "mean") * c.exposure.integration_time_s
               if fp.dark_rate is not None else 0.0)
     slope2 = transfer_slope(sensor, signal_e + dark_e) ** 2
     out: dict[str, float] = {}
@@ -128,7 +164,7 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
     if c.source_follower.enabled:
         out["thermal"] = c.source_follower.thermal_sigma_e**2 * g2
         if fp.flicker_sigma is not None:
-            out["flicker"] = stat("mean_square:flicker_sigma", lambda: np.mean(fp.flicker_sigma.astype(np.float64) ** 2)) * g2
+            out["flicker"] = map_moment(sensor, "flicker_sigma", "mean_square") * g2
     if c.row_noise.enabled:
         out["row"] = sensor.spec.row_sigma_e**2 * g2
     n = sensor.shape[0] * sensor.shape[1]
@@ -140,7 +176,7 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
         shot = float(mean.sum()) if c.dark_current.shot_noise else 0.0
         out["rts_blinking"] = (float(var.sum()) + shot) / n * g2 * slope2
     if fp.column_sigma is not None:
-        out["column"] = stat("mean_square:column_sigma", lambda: np.mean(fp.column_sigma.astype(np.float64) ** 2))
+        out["column"] = map_moment(sensor, "column_sigma", "mean_square")
     if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
         out.update(after_gain_variances(sensor))
         out["quantization"] = 1.0 / (12.0 * t.gain_dn_per_e**2)
@@ -195,7 +231,7 @@ def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, flo
     per_s2: dict[str, float] = {}
 
     def var(name):  # a fixed map's variance, once per sensor
-        return sensor.map_statistic("var:" + name, lambda: np.var(getattr(fp, name).astype(np.float64)))
+        return map_moment(sensor, name, "var")
 
     if fp.dark_rate is not None:
         const["dcnu"] = var("dark_rate") * c.exposure.integration_time_s**2
@@ -215,7 +251,7 @@ def fixed_pattern_parts(sensor: Sensor) -> tuple[dict[str, float], dict[str, flo
     if c.adc.enabled and offsets.any():  # the four cell positions, equally many pixels each (the frame error: temporal)
         const["black_level_cells"] = float(np.var(offsets)) / sensor.transfer.gain_dn_per_e**2
     if fp.prnu_gain is not None or c.crosstalk.enabled:
-        per_s2["prnu"] = sensor.map_statistic("var:flat_response", lambda: np.var(sensor.flat_response))  # after crosstalk
+        per_s2["prnu"] = map_moment(sensor, "flat_response", "var")  # after crosstalk
     if fp.column_gain is not None:
         per_s2["column_gain"] = var("column_gain")
     return const, per_s2

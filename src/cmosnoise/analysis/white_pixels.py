@@ -222,15 +222,44 @@ def report(values: np.ndarray, threshold: float, pattern: str) -> dict:
     if values.ndim != 2:
         raise CmosnoiseError(f"white_pixels.report: values of shape {values.shape}; give one (rows, cols) map or frame "
                              "(for a stack of dark frames, dark_rate_from_raw averages them)")
-    mask = values > threshold
-    n = int(mask.sum())
-    frac = n / mask.size
+    return report_at(*np.nonzero(values > threshold), values.shape, threshold, pattern)
+
+
+def report_at(r: np.ndarray, c: np.ndarray, shape: tuple[int, int], threshold: float, pattern: str) -> dict:
+    """:func:`report` of a map or frame whose white pixels are at rows ``r`` and columns ``c``: for one too large to
+    hold, its white pixels gathered band by band or tile by tile.
+
+    Parameters
+    ----------
+    r, c : (n,) int arrays
+        The white pixels' rows and columns, in row-major order.
+    shape : (rows, cols)
+        The map's size.
+    threshold : float
+        The threshold they are above (recorded).
+    pattern : str
+        The CFA pattern (RGGB, BGGR, GRBG, GBRG, or none): couplets are neighbours in one colour plane.
+
+    Returns
+    -------
+    dict
+        As :func:`report`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cmosnoise import white_pixels
+    >>> white_pixels.report_at(np.array([1, 1]), np.array([1, 3]), (4, 6), 100.0, "RGGB")["couplets"]
+    1
+    """
+    n = int(np.size(r))
+    frac = n / (shape[0] * shape[1])
     return {
         "threshold": float(threshold),
         "white_pixels": n,
         "ppm": frac * 1e6,
-        "couplets": count_couplets(mask, pattern),
-        "couplets_expected_random": expected_couplets(mask.shape, pattern, frac),
+        "couplets": int(len(pairs_at(r, c, shape, pattern))),
+        "couplets_expected_random": expected_couplets(tuple(shape), pattern, frac),
     }
 
 

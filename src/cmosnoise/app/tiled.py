@@ -291,12 +291,8 @@ def _summary(spec: SensorSpec, stats: RunStats, sums: dict, white, populations, 
             c = np.concatenate(white[1]) if white[1] else np.zeros(0, np.int64)
             order = np.lexsort((c, r))
             r, c = r[order], c[order]
-            frac = r.size / pixels
             dc.update({"threshold_aA": e_per_s_to_aa(state.threshold), "ppm_expected": state.expected_ppm_above(),
-                       "map": {"threshold": float(state.threshold), "white_pixels": int(r.size), "ppm": frac * 1e6,
-                               "couplets": int(len(white_pixels.pairs_at(r, c, spec.shape, config.sensor.cfa))),
-                               "couplets_expected_random": white_pixels.expected_couplets(spec.shape,
-                                                                                          config.sensor.cfa, frac)}})
+                       "map": white_pixels.report_at(r, c, spec.shape, state.threshold, config.sensor.cfa)})
         out["dark_current"] = dc
     return out
 
