@@ -237,7 +237,7 @@ class Sensor:
         times it with the default kernel). All ones when both stages are off.
         """
         if self._flat is None:
-            g = self.photo_response(np.ones(self.map_shape))[1]
+            g = self.photo_response(np.broadcast_to(1.0, self.map_shape))[1]  # ones, without making them
             self._flat = g / g.mean()
         return self._flat
 
