@@ -180,11 +180,21 @@ _PTX_PROBE = textwrap.dedent('''
             return np.zeros(shape, dtype)
 
     fake = types.SimpleNamespace(cuda=Host, **{n: Launch(n) for n in ("lines", "trap_values", "pixel_sums",
-                                                                       "blink_values", "pixels", "stick")})
+                                                                       "blink_values", "pixels", "stick",
+                                                                       "normal_map", "heavy_tail_map")})
     cuda_kernel.check = lambda: None
     cuda_kernel.kernels = lambda: fake
-    shot = Sensor(json.loads(sys.argv[1]), seed=5).expose("photo")
+    sensor = Sensor(json.loads(sys.argv[1]), seed=5)
+    shot = sensor.expose("photo")
     shot.frames_on_device([0, 1], electrons=True)
+    # the fixed maps' kernels, launched as fixed_maps launches them (a heavy-tailed map between two points)
+    from cmosnoise.engine import fixed_maps
+    from cmosnoise.model.stages.dark_current import LOGIT_GRID
+    fixed_maps._on_device = lambda kind, out, args: cuda_kernel.fixed_map(kind, out.shape, *args)
+    fixed_maps.normal_map((0, 8, 0, 8), 64, (1, 2), 1.0, 0.02, 0.0, engine="cuda")
+    warm = Sensor({**json.loads(sys.argv[1]), "sensor": {"width": 64, "height": 48, "temperature_c": 40}}, seed=5)
+    s = warm.dark_state.inversion()
+    fixed_maps.heavy_tail_map((0, 8, 0, 8), 64, (1, 2), LOGIT_GRID, s["points"], s["w"], engine="cuda")
     out = {}
     for name, args in calls:
         sig = tuple(numba.typeof(a) for a in args)
@@ -211,11 +221,12 @@ def test_nvvm_compiles_the_kernels_without_multiply_add_contraction():
                        env=env, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     counts = json.loads(r.stdout.strip().splitlines()[-1])
-    assert set(counts) == {"lines", "trap_values", "pixel_sums", "blink_values", "pixels", "stick"}
+    assert set(counts) == {"lines", "trap_values", "pixel_sums", "blink_values", "pixels", "stick", "normal_map",
+                           "heavy_tail_map"}
     for name, c in counts.items():
         assert c["strict_fma"] == 0 and c["strict_plain_mul"] == 0, (name, c)
     assert counts["pixels"]["strict_mul_rn"] > 50 and counts["pixels"]["loose_fma"] > 50, counts["pixels"]
-    assert all(counts[k]["loose_fma"] > 0 for k in ("lines", "trap_values", "blink_values"))
+    assert all(counts[k]["loose_fma"] > 0 for k in ("lines", "trap_values", "blink_values", "heavy_tail_map"))
 
 
 def test_crops_of_a_map_on_the_device_are_the_maps_crops():
@@ -260,3 +271,27 @@ def torch_equal(a, b) -> bool:
     import torch
 
     return bool(torch.equal(a, b))
+
+
+def test_the_fixed_maps_made_on_the_gpu_are_the_cpus():
+    """#33: every fixed map's two loops (a normal map; a heavy-tailed map at a point, scaled from it, and between
+    two points) run on the GPU from the same sources, and give the compiled CPU loops' bits on a rectangle away
+    from the corner (its origin in the counters) and on the whole sensor."""
+    from cmosnoise.engine import fixed_maps
+    from cmosnoise.model.seeds import fixed_key
+
+    rows, cols = (24, 40) if SIMULATED else (1080, 1920)
+    key = fixed_key(3, "prnu")
+    for region in [(0, rows, 0, cols), (5, rows - 3, 7, cols - 2)]:
+        cpu = fixed_maps.normal_map(region, cols, key, 1.0, 0.02, 0.0, engine="compiled")
+        assert np.array_equal(fixed_maps.normal_map(region, cols, key, 1.0, 0.02, 0.0, engine="cuda"), cpu)
+    from cmosnoise.model.stages.dark_current import LOGIT_GRID
+
+    sensor = Sensor({"sensor": {"width": cols, "height": rows, "temperature_c": 40}}, seed=3)
+    s = sensor.dark_state.inversion()  # 40 C: between two characterization points, the two-point map
+    assert len(s["points"]) == 2
+    for points, w, scales in [(s["points"], s["w"], (1.0, 1.0)), (s["points"][:1], 0.0, (1.0, 1.0)),
+                              (s["points"][:1], 0.0, (1.7, 2.3))]:
+        args = ((2, rows, 3, cols), cols, fixed_key(3, "dark_current"), LOGIT_GRID, points, w, *scales)
+        cpu = fixed_maps.heavy_tail_map(*args, engine="compiled")
+        assert np.array_equal(fixed_maps.heavy_tail_map(*args, engine="cuda"), cpu), (len(points), scales)

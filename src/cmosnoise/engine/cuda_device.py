@@ -256,3 +256,44 @@ def gather(source, corners, out):
     j, i, b = cuda.grid(3)
     if b < out.shape[0] and i < out.shape[1] and j < out.shape[2]:
         out[b, i, j] = source[corners[b, 0] + i, corners[b, 1] + j]
+
+
+# ------------------------------------------------------------------ fixed maps (fixed_maps' sources, per pixel)
+ppf_cell, heavy_tail_value, two_point, normal_value = (h[k] for k in ("ppf_cell", "heavy_tail_value", "two_point",
+                                                                      "normal_value"))
+_Z64, _ONE64 = np.uint64(0), np.uint64(1)
+
+
+@cuda.jit(fastmath=False)
+def normal_map(out, r0, c0, cols, k0, k1, mean, sigma, low):
+    """kernel._normal_map on the device: one thread a pixel of the rectangle at (r0, c0)."""
+    j, i = cuda.grid(2)
+    if i < out.shape[0] and j < out.shape[1]:
+        index = np.uint64(r0 + i) * cols + np.uint64(c0) + np.uint64(j)
+        u1, u2 = uniform_pair(index, _Z64, _Z64, _Z64, k0, k1)
+        out[i, j] = np.float32(normal_value(u1, u2, mean, sigma, low))
+
+
+@cuda.jit(fastmath=False)
+def heavy_tail_map(out, r0, c0, cols, k0, k1, start, step, last, tables, params, w, body_scale, tail_scale, two):
+    """kernel._heavy_tail_map on the device: one thread a pixel; block 1 (the tail's magnitude) drawn only for the
+    tail's members, as there."""
+    j, i = cuda.grid(2)
+    if i < out.shape[0] and j < out.shape[1]:
+        bs = 1.0 if two else body_scale
+        ts = 1.0 if two else tail_scale
+        top = max(params[0, 0], params[1, 0]) if two else params[0, 0]
+        index = np.uint64(r0 + i) * cols + np.uint64(c0) + np.uint64(j)
+        u_body, u_member = uniform_pair(index, _Z64, _Z64, _Z64, k0, k1)
+        node, weight = ppf_cell(u_body, start, step, last)
+        u_tail = 0.5  # read only by the tail's members
+        if u_member < top:
+            u_tail, _ = uniform_pair(index, _Z64, _Z64, _ONE64, k0, k1)
+        k = int(node)
+        v = heavy_tail_value(tables[0, k], tables[0, k + 1], weight, u_member, u_tail, bs, params[0, 0],
+                             params[0, 1], ts)
+        if two:
+            v1 = heavy_tail_value(tables[1, k], tables[1, k + 1], weight, u_member, u_tail, 1.0, params[1, 0],
+                                  params[1, 1], 1.0)
+            v = two_point(v, v1, params[0, 2], params[1, 2], w)
+        out[i, j] = np.float32(v)

@@ -182,6 +182,33 @@ def crops(source, corners, shape: tuple[int, int]):
     return out
 
 
+def fixed_map(kind: str, shape: tuple[int, int], *args):
+    """A fixed map's rectangle made on the GPU, left there: device array (h, w) float32, bit for bit the CPU's.
+
+    Parameters
+    ----------
+    kind : {"normal", "heavy_tail"}
+        Which of :mod:`.fixed_maps`' compiled loops (``kernel._normal_map``, ``kernel._heavy_tail_map``).
+    shape : (h, w)
+        The rectangle's size.
+    *args
+        That loop's arguments after ``out`` (the rectangle's corner, the sensor's width, the key, the map's
+        parameters), as :func:`.fixed_maps.normal_map` and :func:`.fixed_maps.heavy_tail_map` give them.
+
+    Returns
+    -------
+    device array (h, w) float32
+    """
+    k = kernels()
+    cuda = k.cuda
+    out = cuda.device_array(tuple(int(v) for v in shape), np.float32)
+    args = tuple(cuda.to_device(np.ascontiguousarray(a)) if isinstance(a, np.ndarray) and a.ndim else a for a in args)
+    grid = ((out.shape[1] + BLOCK - 1) // BLOCK, out.shape[0])
+    with strict_arithmetic():
+        (k.normal_map if kind == "normal" else k.heavy_tail_map)[grid, (BLOCK, 1)](out, *args)
+    return out
+
+
 def to_torch(array):
     """A device array as a PyTorch CUDA tensor over the same memory (no copy)."""
     import torch

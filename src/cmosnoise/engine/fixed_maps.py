@@ -133,15 +133,18 @@ def normal_map(region, cols: int, key: tuple[int, int], mean: float, sigma: floa
     """``max(mean + sigma z, low)`` per pixel over ``region = (row0, row1, col0, col1)`` of a sensor ``cols``
     wide, (rows, cols) float32 (rounded from float64 once).
 
-    ``engine``: "numpy" (the specification), "compiled", or "auto" (compiled where numba is present).
+    ``engine``: "numpy" (the specification), "compiled", "auto" (compiled where numba is present), or "cuda"
+    (the GPU's kernel, :func:`.cuda_kernel.fixed_map`; the same bits).
     """
     region = _check(region, cols)
     out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
     k0, k1 = _key(key)
+    args = (region[0], region[2], np.uint64(cols), k0, k1, float(mean), float(sigma), float(low))
+    if engine == "cuda":
+        return _on_device("normal", out, args)
     if _compiled(engine):
         with ONE_LAUNCH:
-            _kernels()["normal"](out, region[0], region[2], np.uint64(cols), k0, k1, float(mean), float(sigma),
-                                 float(low))
+            _kernels()["normal"](out, *args)
         return out
     for a, b in bands(region):
         u1, u2 = uniform_pair(pixel_index((a, b, region[2], region[3]), cols), _ZERO, _ZERO, _ZERO, k0, k1)
@@ -183,19 +186,23 @@ def heavy_tail_map(region, cols: int, key: tuple[int, int], grid: tuple[float, f
         log-linear between its values at the two points (weight ``w`` of the second; scales not applied).
         ``table``: the body's quantiles on the grid, (last + 1,) float64; ``floor``: the rate floor before the
         log (two points only).
-    engine : {"auto", "numpy", "compiled"}
+    engine : {"auto", "numpy", "compiled", "cuda"}
+        How it is made (the same bits each way); "cuda": on the GPU (:func:`.cuda_kernel.fixed_map`).
     """
     region = _check(region, cols)
     out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
     k0, k1 = _key(key)
-    if _compiled(engine):
+    if engine == "cuda" or _compiled(engine):
         two = len(points) == 2
         tables = np.ascontiguousarray([np.asarray(p[0], np.float64) for p in points] * (1 if two else 2))
         params = np.array([p[1:] for p in points] * (1 if two else 2), np.float64)  # fraction, tail_max, floor
         start, step, last = (float(v) for v in grid)
+        args = (region[0], region[2], np.uint64(cols), k0, k1, start, step, last, tables, params, float(w),
+                float(body_scale), float(tail_scale), two)
+        if engine == "cuda":
+            return _on_device("heavy_tail", out, args)
         with ONE_LAUNCH:
-            _kernels()["heavy_tail"](out, region[0], region[2], np.uint64(cols), k0, k1, start, step, last, tables,
-                                     params, float(w), float(body_scale), float(tail_scale), two)
+            _kernels()["heavy_tail"](out, *args)
         return out
     for a, b in bands(region):
         u = _blocks(pixel_index((a, b, region[2], region[3]), cols), k0, k1)
@@ -203,9 +210,17 @@ def heavy_tail_map(region, cols: int, key: tuple[int, int], grid: tuple[float, f
     return out
 
 
+def _on_device(kind: str, out: np.ndarray, args: tuple) -> np.ndarray:
+    """A map made by the GPU's kernel (:func:`.cuda_kernel.fixed_map`), brought into ``out``."""
+    from . import cuda_kernel
+
+    cuda_kernel.fixed_map(kind, out.shape, *args).copy_to_host(out)
+    return out
+
+
 def _compiled(engine: str) -> bool:
     if engine not in ("auto", "numpy", "compiled"):
-        raise ValueError(f"engine must be 'auto', 'numpy' or 'compiled', got {engine!r}")
+        raise ValueError(f"engine must be 'auto', 'numpy', 'compiled' or 'cuda', got {engine!r}")
     if engine == "compiled" and numba is None:
         raise RuntimeError("the compiled fixed-pattern loops need numba")
     return engine == "compiled" or (engine == "auto" and numba is not None)

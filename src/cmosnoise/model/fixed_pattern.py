@@ -266,7 +266,8 @@ def cached(cache: PatternCache | None, name: str, parts: tuple, make: Callable[[
 
 
 def draw(spec: SensorSpec, cache: PatternCache | None = None,
-         region: tuple[int, int, int, int] | None = None, populations: FixedPattern | None = None) -> FixedPattern:
+         region: tuple[int, int, int, int] | None = None, populations: FixedPattern | None = None,
+         engine: str = "auto") -> FixedPattern:
     """Every fixed-pattern map of ``spec`` over ``region``, each from its own counter-based stream of the seed.
 
     Parameters
@@ -284,6 +285,9 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
     populations : FixedPattern, optional
         A pattern of the same configuration and seed (another tile's) whose telegraph populations and defects
         are taken as they are, not drawn again (each is a pass over every pixel of the sensor).
+    engine : {"auto", "numpy", "compiled", "cuda"}
+        Where the per-pixel maps are made (:mod:`cmosnoise.engine.fixed_maps`): "cuda" on the GPU. The same bits
+        each way; the cache does not tell them apart.
 
     Returns
     -------
@@ -307,7 +311,7 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
     maps: dict = {}
     if c.prnu.enabled:
         maps["prnu_gain"] = held("prnu_gain", lambda: prnu.gain_map(region, cols, c.prnu.sigma_pct,
-                                                                      fixed_key(seed, "prnu")))
+                                                                      fixed_key(seed, "prnu"), engine))
     if c.dark_current.enabled:
         d = c.dark_current
         state = dark_current.at_temperature(list(spec.dark_points), c.sensor.temperature_c, d.doubling_c,
@@ -315,13 +319,13 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
         maps["dark_state"] = state
 
         def dark():
-            return dark_current.rate_map(state, region, cols, fixed_key(seed, "dark_current"))
+            return dark_current.rate_map(state, region, cols, fixed_key(seed, "dark_current"), engine)
 
         maps["dark_rate"] = held("dark_rate", dark)
     sf = c.source_follower
     if sf.enabled and sf.flicker.enabled:
         maps["flicker_sigma"] = held("flicker_sigma", lambda: source_follower.flicker_sigma_map(
-            spec.flicker, region, cols, fixed_key(seed, "source_follower")))
+            spec.flicker, region, cols, fixed_key(seed, "source_follower"), engine))
     if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
         maps["row_offset"] = held("row_offset", lambda: row_noise.fixed_offsets(r0, r1, c.row_noise.fixed_sigma_e,
                                                                                  fixed_key(seed, "row_noise")))

@@ -189,11 +189,12 @@ class HeavyTail:
         """
         return fixed_maps.heavy_tail_values(u_body, u_member, u_tail, LOGIT_GRID, [self.point])
 
-    def map(self, region: tuple[int, int, int, int], cols: int, key: tuple[int, int]) -> np.ndarray:
+    def map(self, region: tuple[int, int, int, int], cols: int, key: tuple[int, int],
+            engine: str = "auto") -> np.ndarray:
         """The map of this law over ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide, float32,
         addressed per pixel under the fixed ``key``: :meth:`values` of the pixels' own variates
-        (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`)."""
-        return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, [self.point])
+        (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`, made where ``engine`` says)."""
+        return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, [self.point], engine=engine)
 
     def rvs(self, size, random_state: np.random.Generator) -> np.ndarray:
         """Independent draws (each pixel its own variates)."""

@@ -169,7 +169,8 @@ class Sensor:
         self.timings: dict[str, float] = defaultdict(float)
         t0 = time.perf_counter()
         self._fixed = (fixed_pattern if fixed_pattern is not None
-                       else draw(spec, cache, region=self.window, populations=populations))
+                       else draw(spec, cache, region=self.window, populations=populations,
+                                 engine="cuda" if device == "cuda" else "auto"))
         self._sf_sigma: np.ndarray | None = None
         self._flat: np.ndarray | None = None
         self._statistics: dict[str, float] = {}

@@ -264,7 +264,8 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     )
 
 
-def rate_map(state: DarkState, region: tuple[int, int, int, int], cols: int, key: tuple[int, int]) -> np.ndarray:
+def rate_map(state: DarkState, region: tuple[int, int, int, int], cols: int, key: tuple[int, int],
+             engine: str = "auto") -> np.ndarray:
     """Fixed dark-current map at ``state``'s temperature over ``region = (row0, row1, col0, col1)`` of a sensor
     ``cols`` wide, e-/s per pixel, float32 (>= 0), from the stage's fixed ``key``.
 
@@ -282,12 +283,14 @@ def rate_map(state: DarkState, region: tuple[int, int, int, int], cols: int, key
         The sensor's width (a pixel's address is ``r * cols + c``).
     key : (int, int)
         The stage's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+    engine : {"auto", "numpy", "compiled", "cuda"}
+        Where the map is made (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`; the same bits each way).
 
     Returns
     -------
     (row1 - row0, col1 - col0) float32 array, e-/s, >= 0
     """
-    return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, **state.inversion())
+    return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, **state.inversion(), engine=engine)
 
 
 def cooling_fraction(points: list[Point], draw_variates) -> float:

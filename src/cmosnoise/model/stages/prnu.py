@@ -19,7 +19,8 @@ import numpy as np
 from ...engine import fixed_maps
 
 
-def gain_map(region: tuple[int, int, int, int], cols: int, sigma_pct: float, key: tuple[int, int]) -> np.ndarray:
+def gain_map(region: tuple[int, int, int, int], cols: int, sigma_pct: float, key: tuple[int, int],
+             engine: str = "auto") -> np.ndarray:
     """Fixed PRNU gain over ``region``, dimensionless, mean 1, std ``sigma_pct`` % (before clipping at 0).
 
     Parameters
@@ -32,6 +33,8 @@ def gain_map(region: tuple[int, int, int, int], cols: int, sigma_pct: float, key
         PRNU as a percentage of the signal, >= 0.
     key : (int, int)
         The stage's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+    engine : {"auto", "numpy", "compiled", "cuda"}
+        Where the map is made (:func:`cmosnoise.engine.fixed_maps.normal_map`; the same bits each way).
 
     Returns
     -------
@@ -39,7 +42,7 @@ def gain_map(region: tuple[int, int, int, int], cols: int, sigma_pct: float, key
     """
     if sigma_pct < 0:
         raise ValueError(f"sigma_pct must be >= 0, got {sigma_pct}")
-    return fixed_maps.normal_map(region, cols, key, 1.0, sigma_pct / 100.0, 0.0)
+    return fixed_maps.normal_map(region, cols, key, 1.0, sigma_pct / 100.0, 0.0, engine=engine)
 
 
 def apply(mean_e: np.ndarray, gain: np.ndarray) -> np.ndarray:

@@ -43,7 +43,7 @@ def flicker_model(gumbel_loc_e: float, gumbel_scale_e: float, ppm_above: float |
 
 
 def flicker_sigma_map(model: HeavyTail, region: tuple[int, int, int, int], cols: int,
-                      key: tuple[int, int]) -> np.ndarray:
+                      key: tuple[int, int], engine: str = "auto") -> np.ndarray:
     """Fixed per-pixel flicker sigma over a rectangle, from the stage's fixed ``key`` (:meth:`HeavyTail.map`).
 
     Parameters
@@ -56,12 +56,14 @@ def flicker_sigma_map(model: HeavyTail, region: tuple[int, int, int, int], cols:
         The sensor's width (a pixel's address is ``r * cols + c``).
     key : (int, int)
         The stage's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+    engine : {"auto", "numpy", "compiled", "cuda"}
+        Where the map is made (:func:`cmosnoise.engine.fixed_maps.heavy_tail_map`; the same bits each way).
 
     Returns
     -------
     (row1 - row0, col1 - col0) float32 array, e- rms
     """
-    return model.map(region, cols, key)
+    return model.map(region, cols, key, engine)
 
 
 def total_sigma(thermal_sigma_e: float, flicker_sigma: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
