@@ -122,7 +122,7 @@ def test_the_compiled_spread_is_ndimage_bit_for_bit():
                np.array([[0, 1, 0], [2, 80, 3], [0, 0.5, 0]]) / 100,
                np.array([[1e-20, 0.1, 0.0], [0.3, 0.5, 0.01], [0.0, 0, 0.02]])]
     for k in kernels:
-        for shape in [(1, 1), (1, 5), (2, 2), (5, 1), (7, 9), (64, 48), (301, 457)]:
+        for shape in [(1, 1), (1, 5), (2, 2), (5, 1), (7, 9), (64, 48), (301, 457), (256, 257)]:  # compiled: >= 2**16
             for dtype in (np.float64, np.float32):
                 x = (rng.random(shape) * 1000).astype(dtype)
                 want = ndimage.convolve(np.pad(x, 1), np.asarray(k, dtype), mode="constant")
