@@ -11,6 +11,8 @@ configuration and keeps what they give in a
 
 from __future__ import annotations
 
+import functools
+
 from ..config import Config
 from ..errors import CmosnoiseError
 from .heavy_tail import HeavyTail, UnreachablePpm
@@ -163,13 +165,22 @@ def prnu_seen_per_sigma(config: Config) -> float:
     spreading a single pixel's charge with the configured kernel(s); the
     result is the root mean square over the cell. 1 without crosstalk.
     """
+    import json
+
+    if not config.crosstalk.enabled:
+        return 1.0
+    return _seen_per_sigma(json.dumps(config.crosstalk.kernel_pct, sort_keys=True), config.sensor.cfa)
+
+
+@functools.lru_cache(maxsize=64)  # a pure function of its two arguments: a memo, not state (36 spreads a Sensor())
+def _seen_per_sigma(kernel_json: str, cfa: str) -> float:
+    import json
+
     import numpy as np
 
     from .stages import crosstalk
 
-    if not config.crosstalk.enabled:
-        return 1.0
-    kernel = crosstalk.kernel_fractions(config.crosstalk.kernel_pct)
+    kernel = crosstalk.kernel_fractions(json.loads(kernel_json))
     n = 8
     ratios = []
     for pr, pc in [(4, 4), (4, 5), (5, 4), (5, 5)]:
@@ -178,7 +189,7 @@ def prnu_seen_per_sigma(config: Config) -> float:
             for dc in (-1, 0, 1):
                 delta = np.zeros((n, n))
                 delta[pr + dr, pc + dc] = 1.0
-                w.append(crosstalk.apply(delta, kernel, config.sensor.cfa)[pr, pc])
+                w.append(crosstalk.apply(delta, kernel, cfa)[pr, pc])
         w = np.array(w)
         ratios.append(float(np.sum(w**2) / np.sum(w) ** 2))
     return float(np.sqrt(np.mean(ratios)))
