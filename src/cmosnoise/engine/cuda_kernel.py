@@ -38,7 +38,7 @@ import types
 import numpy as np
 
 from ..errors import CmosnoiseError
-from . import kernel
+from . import dlpack, kernel
 from .jit import numba
 
 #: threads per block of the pixel kernel (along a row: coalesced loads of the maps and stores of the frame)
@@ -138,19 +138,20 @@ def kernels():
 
 
 def as_device_array(value, name: str = "array"):
-    """A GPU array as numba's device array, without a copy: anything with ``__cuda_array_interface__``, or (through
-    PyTorch, where installed) with ``__dlpack__``; a numba device array as it is."""
+    """A GPU array as numba's device array, without a copy: anything with ``__cuda_array_interface__`` (CuPy,
+    PyTorch, numba), or with ``__dlpack__`` (JAX, and any DLPack producer: read by :mod:`.dlpack`, no framework
+    needed); a numba device array as it is."""
     cuda = _cuda()
     if hasattr(value, "copy_to_host"):  # numba's own (the simulator's too)
         return value
-    if not hasattr(value, "__cuda_array_interface__") and hasattr(value, "__dlpack__"):
-        try:
-            import torch
-
-            value = torch.from_dlpack(value)
-        except ImportError:
-            raise CmosnoiseError(f"{name}: a DLPack array is read through PyTorch, which is not installed; pass "
-                                 "an array with __cuda_array_interface__ (CuPy, PyTorch, numba)") from None
+    if not hasattr(value, "__cuda_array_interface__") and hasattr(value, "__dlpack__"):  # JAX, and any DLPack array
+        taken = dlpack.read(value)
+        if taken.device[0] == dlpack.CUDA and not simulated():
+            return cuda.from_cuda_array_interface(taken.__cuda_array_interface__, owner=taken)
+        if taken.device[0] == dlpack.CPU and simulated():  # the simulator's "GPU" is host memory
+            return cuda.to_device(np.asarray(taken))
+        raise CmosnoiseError(f"{name}: a DLPack array on device type {taken.device[0]} (1: host memory, 2: an NVIDIA "
+                             "GPU); expected one on the GPU")
     if not hasattr(value, "__cuda_array_interface__"):
         raise CmosnoiseError(f"{name}: expected an array on the GPU (__cuda_array_interface__ or __dlpack__), got "
                              f"{type(value).__name__}")
@@ -207,6 +208,34 @@ def fixed_map(kind: str, shape: tuple[int, int], *args):
     with strict_arithmetic():
         (k.normal_map if kind == "normal" else k.heavy_tail_map)[grid, (BLOCK, 1)](out, *args)
     return out
+
+
+def dlpack_view(array) -> "dlpack.View":
+    """A device array (a frame left on the GPU) offered by the DLPack protocol, without a copy:
+    ``jax.dlpack.from_dlpack``, ``cupy.from_dlpack``, ``torch.from_dlpack`` take it; no framework is needed to make
+    it (:mod:`.dlpack`, ctypes alone).
+
+    Parameters
+    ----------
+    array : numba device array
+        What :meth:`DevicePlan.render` returns (``frames_on_device``).
+
+    Returns
+    -------
+    dlpack.View
+        Keeps ``array`` alive until its consumer is done. In numba's simulator (no GPU) it offers the host memory
+        that stands for the device's (device type CPU).
+    """
+    if simulated():
+        host = np.asarray(array)  # the simulator's device array over its host array: the same memory
+        return dlpack.View(host.ctypes.data, host.shape, host.strides, host.dtype, (dlpack.CPU, 0), array)
+    desc = array.__cuda_array_interface__
+    dtype = np.dtype(desc["typestr"])
+    shape = tuple(desc["shape"])
+    strides = desc.get("strides") or tuple(int(np.prod(shape[i + 1:], dtype=np.int64)) * dtype.itemsize
+                                           for i in range(len(shape)))
+    device = _cuda().get_current_device().id
+    return dlpack.View(desc["data"][0], shape, strides, dtype, (dlpack.CUDA, device), array)
 
 
 def to_torch(array):
