@@ -119,10 +119,10 @@ def flat(shape: tuple[int, int], level: float, region=None) -> np.ndarray:
     Returns
     -------
     (rows, cols, 3) float64 array
-        Linear light, 0 to 1 (1: the peak rate).
+        Linear light, 0 to 1 (1: the peak rate); a read-only view of the one value (copy it to write into it).
     """
     r0, r1, c0, c1 = _span(shape, region)
-    return np.full((r1 - r0, c1 - c0, 3), float(level))
+    return np.broadcast_to(float(level), (r1 - r0, c1 - c0, 3))  # one value: a read-only view, no array of it
 
 
 def ramp(shape: tuple[int, int], region=None) -> np.ndarray:
