@@ -93,9 +93,29 @@ def tile_task(config_data: dict, size: int, region: tuple[int, int, int, int], f
     """
     from ..config.schema import Config
 
-    spec = resolve(Config.model_validate(config_data))
-    tiling = tiles.Tiling(spec, size)
+    tiling = tiles.Tiling(resolve(Config.model_validate(config_data)), size)
     tiling.share(populations)
+    return tile_result(tiling, region, frames, first)
+
+
+def tile_result(tiling: tiles.Tiling, region: tuple[int, int, int, int], frames: int, first: int) -> dict:
+    """:func:`tile_task`'s work on a tiling already made (its populations and its picture shared by the tiles one
+    process makes).
+
+    Parameters
+    ----------
+    tiling : Tiling
+        The sensor in tiles.
+    region : (row0, row1, col0, col1)
+        The tile.
+    frames, first : int
+        How many frames, and the first one's number.
+
+    Returns
+    -------
+    dict
+        As :func:`tile_task`.
+    """
     t0 = time.perf_counter()
     shot = tiling.exposure(region)
     t1 = time.perf_counter()
@@ -171,10 +191,12 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
     def results():
         """Each tile's :func:`tile_task` result, in the tiles' order."""
         if client is None:  # two tiles at a time: one's set-up (mostly one core's NumPy) beside the other's frames
+            tiling = tiles.Tiling(spec, size)  # one for every tile: the populations and a picture held once
+            tiling.share(populations)
             with ThreadPoolExecutor(2, thread_name_prefix="cmosnoise-tile") as pool:
                 pending = deque()
                 for region in regions:
-                    pending.append(pool.submit(tile_task, data, size, region, n, first, populations))
+                    pending.append(pool.submit(tile_result, tiling, region, n, first))
                     if len(pending) > 2:
                         yield pending.popleft().result()
                 while pending:

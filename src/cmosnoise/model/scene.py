@@ -472,10 +472,20 @@ def resample(img: np.ndarray, shape: tuple[int, int], region=None) -> np.ndarray
         ``shape``, or the region's size.
     """
     r0, r1, c0, c1 = _span(shape, region)
-    wr = _axis_matrix(img.shape[0], shape[0])[r0:r1]
-    wc = _axis_matrix(img.shape[1], shape[1])[c0:c1]
+    wr, (a0, a1) = _band(_axis_matrix(img.shape[0], shape[0])[r0:r1])
+    wc, (b0, b1) = _band(_axis_matrix(img.shape[1], shape[1])[c0:c1])
+    part = img[a0:a1, b0:b1]  # only the source pixels the region reads: the same terms of each sum, in order
     # each channel as scipy's sparse products give it, (cols, rows); interleaved by a blocked, compiled copy
-    return layout.interleave_transposed([wc @ (wr @ img[..., c]).T for c in range(img.shape[2])])
+    return layout.interleave_transposed([wc @ (wr @ part[..., c]).T for c in range(img.shape[2])])
+
+
+def _band(w) -> tuple:
+    """Weights ``w`` (CSR, output x source) cut to the source indices they read: (the cut weights, (first, end))."""
+    if w.nnz == 0:
+        return w[:, :0], (0, 0)
+    lo, hi = int(w.indices.min()), int(w.indices.max()) + 1
+    # made from its arrays, each row's terms keep their stored order (no re-sorting): the same sums, bit for bit
+    return sp.csr_matrix((w.data, w.indices - lo, w.indptr), shape=(w.shape[0], hi - lo)), (lo, hi)
 
 
 def crop_to_aspect(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -572,12 +582,43 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
     (rows, cols, 3) float64 array
         Linear light, 0 to 1: ``shape``, or the region's size.
     """
+    return prepare(source, shape, scale, fit, window, source_size)(region)
+
+
+def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
+            window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None):
+    """:func:`render` in two steps: the source read (an image file decoded, cropped; a built-in's name checked)
+    once, then any region rendered from it. What a sensor made in tiles uses, so that a picture is decoded once,
+    not once a tile.
+
+    Parameters
+    ----------
+    source, shape, scale, fit, window, source_size
+        As :func:`render` takes them.
+
+    Returns
+    -------
+    callable
+        ``region -> (rows, cols, 3) float64 array``: :func:`render`'s result for that region (None: the whole).
+
+    Examples
+    --------
+    >>> from cmosnoise import scene
+    >>> draw = scene.prepare("photo", (60, 80))
+    >>> part = draw((10, 20, 30, 45))
+    >>> part.shape, bool((part == scene.render("photo", (60, 80))[10:20, 30:45]).all())
+    ((10, 15, 3), True)
+    """
     if window is None:
-        return _fitted(source, shape, scale, fit, region)
-    r0, r1, c0, c1 = _span(shape, region)
+        return _fitted(source, shape, scale, fit)
     img = source_image(source, source_size or shape, scale, fit)
     window_of(img, window, shape)  # the whole window must lie in the source
-    return window_of(img, (window[0] + r0, window[1] + c0), (r1 - r0, c1 - c0))
+
+    def draw(region=None):
+        r0, r1, c0, c1 = _span(shape, region)
+        return window_of(img, (window[0] + r0, window[1] + c0), (r1 - r0, c1 - c0))
+
+    return draw
 
 
 def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
@@ -601,7 +642,7 @@ def source_image(source: str, size: tuple[int, int], scale: float | None = None,
         Linear light, 0 to 1.
     """
     if is_builtin(source):
-        return _fitted(source, tuple(size), scale, fit)
+        return _fitted(source, tuple(size), scale, fit)()
     return load_file(source, scale)
 
 
@@ -629,8 +670,8 @@ def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) 
     return np.ascontiguousarray(img[r:r + shape[0], c:c + shape[1]], dtype=np.float64)
 
 
-def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
-            region=None) -> np.ndarray:
+def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop"):
+    """The source at ``shape``, prepared: a function of a region (None: the whole) that draws it there."""
     if not isinstance(source, str) or not source:
         raise CmosnoiseError(f"scene.source = {source!r}: give a built-in ({', '.join(BUILTINS)}) or an image path")
     name = source.strip()
@@ -646,29 +687,29 @@ def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit
             raise CmosnoiseError(f"scene 'flat:{text}': LEVEL must be a number in [0, 1]") from None
         if not (0.0 <= level <= 1.0):
             raise CmosnoiseError(f"scene 'flat:{text}': LEVEL = {level:g} is outside [0, 1] (fraction of the peak rate)")
-        return flat(shape, level, region)
+        return lambda region=None: flat(shape, level, region)
     if low == "ramp":
-        return ramp(shape, region)
+        return lambda region=None: ramp(shape, region)
     if low == "colorchecker":
-        return colorchecker(shape, region)
+        return lambda region=None: colorchecker(shape, region)
     if low == "zoneplate":
-        return zoneplate(shape, region)
+        return lambda region=None: zoneplate(shape, region)
     if low == "siemens":
-        return siemens(shape, region=region)
+        return lambda region=None: siemens(shape, region=region)
     if low == "spot":
-        return spot(shape, region)
+        return lambda region=None: spot(shape, region)
     if low.startswith("steps"):
         text = name.partition(":")[2] or "4"
         if not text.isdigit() or not 1 <= int(text) <= 16:
             raise CmosnoiseError(f"scene 'steps:{text}': N must be a whole number of bands from 1 to 16")
-        return steps(shape, int(text), region)
+        return lambda region=None: steps(shape, int(text), region)
     if low == "photo":
         img = load_file(bundled_photo_path())
     else:
         img = load_file(name, scale)
     if fit == "crop":
         img = crop_to_aspect(img, shape)
-    return resample(img, shape, region)
+    return lambda region=None: resample(img, shape, region)
 
 
 def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:

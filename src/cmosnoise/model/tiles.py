@@ -28,6 +28,7 @@ import numpy as np
 
 from ..config import Config
 from ..errors import CmosnoiseError
+from . import scene as scene_mod
 from .fixed_pattern import FixedPattern
 from .sensor import Exposure, Sensor, as_spec
 from .spec import SensorSpec
@@ -178,6 +179,15 @@ class Tiling:
         #: every tile, row-major
         self.regions = grid(self.spec.shape, self.size)
         self._populations: FixedPattern | None = None
+        c = self.spec.config
+        source = scene if scene is not None else c.scene.source
+        #: the scene as each tile draws it: a built-in by its name (drawn for the window alone); a picture (a file,
+        #: the photo, any source seen through scene.window) decoded once here (scene.prepare), a region per tile
+        self._source = source
+        self._picture = None
+        if scene_mod.builtin_name(source) in (None, "photo") or c.scene.window is not None:
+            self._picture = scene_mod.prepare(source, self.spec.shape, c.scene.scale, c.scene.fit, c.scene.window,
+                                              c.scene.source_size)
 
     @property
     def populations(self) -> FixedPattern | None:
@@ -227,10 +237,13 @@ class Tiling:
         >>> shot.sensor.window, shot.frame(0, region=(0, 32, 32, 64)).shape
         ((0, 34, 30, 64), (32, 32))
         """
-        sensor = Sensor(self.spec, window=window_of(region, self.spec.shape), populations=self._populations)
+        window = window_of(region, self.spec.shape)
+        sensor = Sensor(self.spec, window=window, populations=self._populations)
         if self._populations is None:
             self._populations = sensor.fixed_pattern
-        return sensor.expose(self.scene, sequence=self.sequence)
+        if self._picture is None:
+            return sensor.expose(self._source, sequence=self.sequence)
+        return sensor.expose(self._picture(window), sequence=self.sequence)
 
     def frames(self, region: tuple[int, int, int, int], n: int, first: int = 0,
                electrons: bool = False) -> Iterator[np.ndarray | tuple[np.ndarray, np.ndarray]]:
