@@ -198,7 +198,7 @@ def test_every_commands_page_example_runs_as_written(tmp_path):
                 continue
             r = cli(*args, cwd=here)
             assert r.returncode == 0, f"docs/commands/{name}.md: {line}: {r.stderr[-2000:]}"
-    for made in ("simulate/run1/raw.tiff", "process/pictures", "characterize/emva/characterization.json",
+    for made in ("simulate/run1/raw.tiff", "simulate/tiled/raw.tiff", "process/pictures", "characterize/emva/characterization.json",
                  "compare/cmp/compare.html", "sweep/yield/summary.csv", "measure/lab/manifest.yaml",
                  "fit/fitted/config.yaml", "dataset/data/dataset.json", "evaluate/scores", "figures/paper/index.html"):
         assert (tmp_path / made).exists(), made
