@@ -319,11 +319,35 @@ def _summary(spec: SensorSpec, stats: RunStats, sums: dict, white, populations, 
     return out
 
 
+#: tiles a run holds at once: two being made (one's set-up beside the other's frames) and one being written
+TILES_IN_FLIGHT = 3
+
+
 def memory_pixels(size: int, frames: int) -> int:
-    """Pixels a tiled run holds at once, for :func:`cmosnoise.model.footprint.check_fits`: a tile's window, and
-    its frames (raw and electrons, about a third of a map's bytes each)."""
+    """Pixels a tiled run holds at once, in the units of :func:`cmosnoise.model.footprint.check_fits` (a run's
+    bytes a pixel): :data:`TILES_IN_FLIGHT` tiles' windows, each with its frames kept until written (2 bytes a
+    pixel a frame).
+
+    Parameters
+    ----------
+    size : int
+        The tile side.
+    frames : int
+        The run's frames.
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> from cmosnoise.app import tiled
+    >>> tiled.memory_pixels(2048, 1) < 20_000_000
+    True
+    """
     side = size + 2 * tiles.HALO
-    return side * side * (1 + frames // 3)
+    per_pixel = footprint.PER_PIXEL["run"]
+    return int(TILES_IN_FLIGHT * side * side * (per_pixel + 2 * frames) / per_pixel) + 1
 
 
 def check_fits(config, size: int) -> None:
