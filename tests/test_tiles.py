@@ -211,3 +211,19 @@ def test_bad_windows_are_one_line_errors():
         Sensor(cfg, window=(0, 20, 0, 20)).expose().frame(0, region=(10, 30, 0, 10))
     with pytest.raises(CmosnoiseError, match="window's"):
         Sensor(cfg, window=(0, 20, 0, 20)).expose(np.zeros((ROWS, COLS)))
+
+
+@pytest.mark.parametrize("name, extra", [
+    ("monochrome", {"sensor": {"cfa": "none"}}),
+    ("ADC off: float32 e-", {"adc": {"enabled": False}}),
+    ("later frames", {"run": {"first_frame": 7, "frames": 2}}),
+    ("smaller than a tile", {"sensor": {"width": 40, "height": 30}}),
+    ("a window of a picture", {"scene": {"source": "photo", "window": [100, 50], "source_size": [600, 800]}}),
+])
+def test_tiled_runs_of_other_sensors_and_scenes_are_the_whole_runs(tmp_path, name, extra):
+    data = {**extra, "sensor": {"width": 160, "height": 112, **extra.get("sensor", {})}}
+    cfg = load_config(extra=data)
+    simulate(cfg, tmp_path / "tiled", tile=48)
+    simulate(cfg, tmp_path / "whole")
+    a, b = tifffile.imread(tmp_path / "tiled" / "raw.tiff"), tifffile.imread(tmp_path / "whole" / "raw.tiff")
+    assert a.dtype == b.dtype and np.array_equal(a, b), name
