@@ -188,3 +188,28 @@ def test_report_of_a_wide_sensor_is_reduced_with_1_to_1_crops_and_counts_couplet
     assert ", 1:2" in text and "centre at 1:1" in text
     assert f"of the map&#x27;s {n_couplets} couplet(s)" in text
     assert len(text) < 4e6, len(text)  # the full-size pictures alone would be about 9 MB of base64
+
+
+def test_large_pngs_are_written_in_bands_and_read_back_by_other_decoders():
+    """io.output.png_bands: a standard PNG (grey, RGB, RGBA; filter Up; one zlib stream of independently deflated
+    bands) that Pillow and imageio decode to the same pixels, at odd sizes and with more bands than rows' worth of
+    work; png_bytes sends pictures of BANDED_PNG_PIXELS or more to it."""
+    import io
+
+    import imageio.v3 as iio
+    from PIL import Image
+
+    from cmosnoise.io import output
+
+    rng = np.random.default_rng(0)
+    for shape in [(1, 1, 3), (7, 5), (13, 11, 4), (301, 457, 3)]:
+        picture = rng.integers(0, 256, shape, dtype=np.uint8)
+        for workers in (1, 3):
+            data = output.png_bands(picture, workers=workers)
+            Image.open(io.BytesIO(data)).verify()  # chunk CRCs and structure
+            assert np.array_equal(np.asarray(Image.open(io.BytesIO(data))), picture), (shape, workers)
+            assert np.array_equal(iio.imread(io.BytesIO(data), extension=".png"), picture), (shape, workers)
+    big = np.zeros((2000, 2000, 3), np.uint8)
+    big[::7] = 200
+    data = output.png_bytes(big, compress_level=1)
+    assert data.startswith(b"\x89PNG") and np.array_equal(np.asarray(Image.open(io.BytesIO(data))), big)

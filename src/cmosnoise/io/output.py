@@ -332,17 +332,95 @@ def atomic_file(path: str | Path):
         raise
 
 
+#: pictures of at least this many pixels are encoded in row bands on every core (:func:`png_bands`)
+BANDED_PNG_PIXELS = 4_000_000
+
+
 def png_bytes(image: np.ndarray, compress_level: int = 6) -> bytes:
     """An 8-bit picture (rows, cols) or (rows, cols, 3|4) as PNG bytes.
 
     Pillow directly, with the format named: it loads its five common plugins, not all 45 of them, as imageio's
-    Pillow plugin does (0.2 s of every run).
+    Pillow plugin does (0.2 s of every run). A picture of :data:`BANDED_PNG_PIXELS` or more goes to
+    :func:`png_bands` instead: Pillow's encoder runs on one core (3.8 s for a 50 MP preview at level 1).
     """
+    image = np.ascontiguousarray(image)
+    if image.shape[0] * image.shape[1] >= BANDED_PNG_PIXELS and image.dtype == np.uint8:
+        return png_bands(image, compress_level)
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", compress_level=compress_level)
+    Image.fromarray(image).save(buf, format="PNG", compress_level=compress_level)
     return buf.getvalue()
+
+
+def png_bands(image: np.ndarray, compress_level: int = 1, workers: int | None = None) -> bytes:
+    """An 8-bit picture as PNG bytes, its rows deflated in bands on every core.
+
+    The PNG is the standard one (8-bit grey, RGB or RGBA; every row with filter type 2, "Up": its bytes less
+    the row above's, which NumPy makes at once); the image data is one zlib stream whose deflate blocks come from
+    independent compressors, one a band of rows, each ended by a full flush (byte-aligned, its window reset) but
+    the last, and the Adler-32 of all the filtered rows. ``zlib`` releases the GIL while it compresses, so the
+    bands run in threads. Why not Pillow: its encoder is one thread with adaptive filters, 3.8 s for a 50 MP
+    preview here; this is a fraction of it, some files a few percent larger. The tests decode the result with
+    Pillow and imageio.
+
+    Parameters
+    ----------
+    image : (rows, cols) or (rows, cols, 3|4) uint8 array
+        The picture.
+    compress_level : int
+        zlib's level, 0 to 9.
+    workers : int, optional
+        Threads (default: the core count).
+
+    Returns
+    -------
+    bytes
+        The PNG file.
+
+    Examples
+    --------
+    >>> import io
+    >>> import numpy as np
+    >>> from PIL import Image
+    >>> from cmosnoise.io.output import png_bands
+    >>> picture = np.arange(2 * 3 * 3, dtype=np.uint8).reshape(2, 3, 3)
+    >>> bool((np.asarray(Image.open(io.BytesIO(png_bands(picture)))) == picture).all())
+    True
+    """
+    import struct
+    import zlib
+    from concurrent.futures import ThreadPoolExecutor
+
+    image = np.ascontiguousarray(image, dtype=np.uint8)
+    rows, cols = image.shape[:2]
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    colour = {1: 0, 3: 2, 4: 6}[channels]
+    flat = image.reshape(rows, cols * channels)
+    filtered = np.empty((rows, 1 + cols * channels), np.uint8)
+    filtered[:, 0] = 2  # "Up"
+    filtered[0, 1:] = flat[0]  # the row above the first is zeros
+    np.subtract(flat[1:], flat[:-1], out=filtered[1:, 1:])  # modulo 256, as the filter is
+    workers = workers or os.cpu_count() or 1
+    step = max(1, -(-rows // (4 * workers)))
+    bands = [filtered[a:a + step] for a in range(0, rows, step)]
+
+    def deflate(i: int) -> bytes:
+        c = zlib.compressobj(compress_level, zlib.DEFLATED, -15)  # raw deflate: the zlib wrapper is made below
+        return c.compress(bands[i]) + c.flush(zlib.Z_FINISH if i == len(bands) - 1 else zlib.Z_FULL_FLUSH)
+
+    with ThreadPoolExecutor(min(workers, len(bands))) as pool:
+        parts = list(pool.map(deflate, range(len(bands))))
+    adler = 1
+    for band in bands:
+        adler = zlib.adler32(band, adler)
+    data = b"\x78\x01" + b"".join(parts) + struct.pack(">I", adler)
+
+    def chunk(kind: bytes, payload: bytes) -> bytes:
+        return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
+
+    header = struct.pack(">IIBBBBB", cols, rows, 8, colour, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", data) + chunk(b"IEND", b"")
 
 
 def write_png(path: str | Path, image: np.ndarray) -> None:
