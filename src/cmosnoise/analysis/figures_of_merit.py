@@ -141,7 +141,7 @@ def dark_map(sensor: Sensor) -> dict | None:
     state, rate = sensor.dark_state, sensor.dark_rate
     if state is None:
         return None
-    out = {"mean_e_per_s": float(rate.mean()), "threshold_e_per_s": state.threshold,
+    out = {"mean_e_per_s": float(rate.mean(dtype=np.float64)), "threshold_e_per_s": state.threshold,
            "threshold_source": state.threshold_source}
     if state.threshold is not None:
         rep = white_pixels.report(rate, state.threshold, sensor.cfa)
@@ -180,9 +180,9 @@ def dark_current(sensor: Sensor, shot: Exposure | None = None, electrons0: np.nd
         "temperature_c": state.temperature_c,
         "body": {"family": state.family, "mean_e_per_s": state.mean, "std_e_per_s": state.std},
         "tail": {"fraction": state.tail_fraction, "max_e_per_s": state.tail_max},
-        "map_mean_e_per_s": float(rate.mean()),
+        "map_mean_e_per_s": float(rate.mean(dtype=np.float64)),
         "map_median_e_per_s": float(np.median(rate)),
-        "mean_dark_e_per_frame": float(rate.mean() * t_int),
+        "mean_dark_e_per_frame": float(rate.mean(dtype=np.float64) * t_int),
         "interpolation": (f"per-pixel exponential between the points at {state.temperature_c:g} C (weight {state.w:.3f})"
                           if state.between else "at a characterization point, or scaled from the nearest one"),
     }
@@ -191,16 +191,40 @@ def dark_current(sensor: Sensor, shot: Exposure | None = None, electrons0: np.nd
     if cooling > 0:
         out["warning"] = (f"{100 * cooling:.3g} % of pixels cool while the sensor warms between two of the "
                           "dark_current.points: a warmer point's quantiles lie below a colder one's")
+    out.update(threshold_figures(state))
     if state.threshold is not None:
-        thr = state.threshold
-        out["threshold_e_per_s"] = thr
-        out["threshold_aA"] = e_per_s_to_aa(thr)
-        out["threshold_source"] = state.threshold_source
-        out["ppm_expected"] = state.expected_ppm_above()
-        out["map"] = white_pixels.report(rate, thr, sensor.cfa)
+        out["map"] = white_pixels.report(rate, state.threshold, sensor.cfa)
         if shot is not None and electrons0 is not None:
-            out["frame0"] = frame0_white_pixels(sensor, shot, electrons0, thr, read_var_e2)
+            out["frame0"] = frame0_white_pixels(sensor, shot, electrons0, state.threshold, read_var_e2)
     return out
+
+
+def threshold_figures(state) -> dict:
+    """The white-pixel threshold of a dark state: e-/s, aA, where it comes from, and the ppm the law expects above
+    it; empty without a threshold. The one place a summary states them (a whole run's, a tiled run's).
+
+    Parameters
+    ----------
+    state : DarkState
+        The dark current at the sensor's temperature.
+
+    Returns
+    -------
+    dict
+        ``threshold_e_per_s``, ``threshold_aA``, ``threshold_source``, ``ppm_expected``.
+
+    Examples
+    --------
+    >>> from cmosnoise import Sensor, figures_of_merit
+    >>> state = Sensor({"sensor": {"width": 64, "height": 48}}).dark_state
+    >>> figures_of_merit.threshold_figures(state)["threshold_e_per_s"]
+    100.0
+    """
+    thr = state.threshold
+    if thr is None:
+        return {}
+    return {"threshold_e_per_s": thr, "threshold_aA": e_per_s_to_aa(thr), "threshold_source": state.threshold_source,
+            "ppm_expected": state.expected_ppm_above()}
 
 
 def frame0_white_pixels(sensor: Sensor, shot: Exposure, electrons0: np.ndarray, threshold_e_per_s: float,

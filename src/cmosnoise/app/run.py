@@ -40,7 +40,6 @@ from ..model import footprint, tiles
 from ..model.raw_info import RawInfo
 from ..model.sensor import Sensor, check_device
 from ..model.spec import SensorSpec, resolve
-from . import tiled
 
 
 def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
@@ -71,6 +70,8 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
     check_device(device)  # before anything is drawn or written
     if tile is not None:
+        from . import tiled  # it builds on this module's summary
+
         tile = tiles.check_size(tile)
         if device != "cpu":
             raise CmosnoiseError(f"--device {device} with --tile: tiles are made by the CPU kernel (the GPU makes "
@@ -154,13 +155,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
                 stamps.append(time.perf_counter())
                 yield raw
 
-        meta = raw_metadata(
-            sensor.cfa, transfer.black_level_dn, transfer.bits, transfer.gain_dn_per_e,
-            first_frame=first, seed=config.seed, cmosnoise_version=__version__,
-            scene_white_dn=info.white_dn, channel_responsivity=list(info.responsivity),
-            crosstalk_kernel_pct=info.crosstalk_kernel_pct, generator=generator_info(device),
-            units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)",
-        )
+        meta = run_metadata(sensor)
         phase("frames")
         cm = progress(n) if progress else contextlib.nullcontext(lambda: None)
         try:
@@ -244,13 +239,50 @@ def run_warnings(measured: dict, predicted: dict) -> list[str]:
     return out
 
 
-def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, electrons0: np.ndarray) -> dict:
+def run_metadata(sensor: Sensor, **extra) -> dict:
+    """What a run's raw.tiff records (:func:`~cmosnoise.io.raw_tiff.raw_metadata`): the CFA, black level, bits and
+    gain, the first frame, the seed, the version, scene white, the responsivities, crosstalk, the generator, the
+    units, and ``extra``.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The run's sensor (a whole one, or a tiled run's corner window).
+    **extra
+        Further entries (a tiled run's ``tile``).
+
+    Returns
+    -------
+    dict
+    """
+    config, t, info = sensor.config, sensor.transfer, sensor.raw_info()
+    return raw_metadata(
+        sensor.cfa, t.black_level_dn, t.bits, t.gain_dn_per_e,
+        first_frame=config.run.first_frame, seed=config.seed, cmosnoise_version=__version__,
+        scene_white_dn=info.white_dn, channel_responsivity=list(info.responsivity),
+        crosstalk_kernel_pct=info.crosstalk_kernel_pct, generator=generator_info(sensor.device),
+        units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)", **extra,
+    )
+
+
+def summary_head(sensor: Sensor, n: int) -> dict:
+    """What every run's summary.json starts with: the version, the generator, the seed, the scene, the frames,
+    the sensor's size and CFA, its stages and its ADC (a whole run's sensor, or a tiled run's corner window: the
+    same configuration).
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The run's sensor.
+    n : int
+        The run's frames.
+
+    Returns
+    -------
+    dict
+    """
     c = sensor.config
     t = sensor.transfer
-    measured = stats.result()
-    timings = {k: round(v, 6) for k, v in sensor.timings.items()}
-    predicted = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)  # this scene, pixel by pixel: clipping included
-    at_dark = noise_budget.budget(sensor, 0.0)
     return {
         "cmosnoise_version": __version__,
         "generator": generator_info(sensor.device),
@@ -266,13 +298,39 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "black_level_dn": t.black_level_dn,
             "bits": t.bits,
         },
-        "signal": {
-            "perfect_mean_e": float(shot.perfect_e.mean()),
-            "expected_mean_e": float(shot.mean_charge_e.mean()),
-            "mean_e": measured.get("mean_e"),
-            "mean_dn": measured.get("mean_dn"),
-            "saturated_fraction": measured.get("saturated_fraction"),
-        },
+    }
+
+
+def signal_figures(perfect_mean_e: float, expected_mean_e: float, measured: dict) -> dict:
+    """A summary's ``signal``: the perfect image's and the expected charge's means (e-, float64 sums) beside the
+    frames' measured ones (:meth:`RunStats.result`).
+
+    Parameters
+    ----------
+    perfect_mean_e, expected_mean_e : float
+        The means over the sensor, e-.
+    measured : dict
+        The run's statistics.
+
+    Returns
+    -------
+    dict
+    """
+    return {"perfect_mean_e": perfect_mean_e, "expected_mean_e": expected_mean_e,
+            "mean_e": measured.get("mean_e"), "mean_dn": measured.get("mean_dn"),
+            "saturated_fraction": measured.get("saturated_fraction")}
+
+
+def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, electrons0: np.ndarray) -> dict:
+    t = sensor.transfer
+    measured = stats.result()
+    timings = {k: round(v, 6) for k, v in sensor.timings.items()}
+    predicted = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)  # this scene, pixel by pixel: clipping included
+    at_dark = noise_budget.budget(sensor, 0.0)
+    return {
+        **summary_head(sensor, n),
+        "signal": signal_figures(float(shot.perfect_e.mean(dtype=np.float64)),
+                                 float(shot.mean_charge_e.mean(dtype=np.float64)), measured),
         "temporal_noise": {
             **fom.temporal_noise(measured, t.gain_dn_per_e),
             "predicted_rms_e": predicted["temporal_total_e"],

@@ -25,16 +25,15 @@ from typing import Callable
 
 import numpy as np
 
-from .._version import __version__
 from ..analysis import figures_of_merit as fom
 from ..analysis import white_pixels
 from ..analysis.run_stats import RunStats
-from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
-from ..io.raw_tiff import raw_metadata, write_raw_tiff
+from ..io.raw_tiff import write_raw_tiff
 from ..model import footprint, tiles
+from ..model.sensor import Sensor
 from ..model.spec import SensorSpec, resolve
-from ..model.units import e_per_s_to_aa
+from .run import run_metadata, signal_figures, summary_head
 
 #: what a tiled run leaves out, and why (the summary's ``tiles.not_made``)
 NOT_MADE = {
@@ -172,16 +171,15 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
     phase = phase or (lambda _name: None)
     config = spec.config
     size = tiles.check_size(size)
-    rows, cols = spec.shape
     n, first = config.run.frames, config.run.first_frame
     regions = tiles.grid(spec.shape, size)
     data = config.model_dump()
     t_start = time.perf_counter()
     phase("set-up")
-    populations = tiles.populations(spec)  # drawn once, shared by every tile
-    transfer, cfa = spec.transfer, config.sensor.cfa
+    corner = Sensor(spec, window=tiles.CORNER)  # the sparse populations drawn once, shared by every tile
+    populations = corner.fixed_pattern
     dtype = np.dtype("uint16" if config.adc.enabled else "float32")
-    stats = RunStats(transfer.max_code)
+    stats = RunStats(spec.transfer.max_code)
     sums = {"perfect_e": 0.0, "expected_e": 0.0, "dark_sum": 0.0, "set_up_s": 0.0, "frames_s": 0.0}
     white_r, white_c = [], []
     spool_path = tmp / "raw.spool"
@@ -240,12 +238,7 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
                 buf = os.pread(spool.fileno(), count * dtype.itemsize, places[(k, t)])
                 yield np.frombuffer(buf, dtype).reshape(r1 - r0, c1 - c0)
 
-    meta = raw_metadata(cfa, transfer.black_level_dn, transfer.bits, transfer.gain_dn_per_e,
-                        first_frame=first, seed=config.seed, cmosnoise_version=__version__,
-                        scene_white_dn=spec.white_dn, channel_responsivity=list(spec.channel_responsivity),
-                        crosstalk_kernel_pct=config.crosstalk.kernel_pct if config.crosstalk.enabled else None,
-                        generator=generator_info("cpu"), tile=size,
-                        units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)")
+    meta = run_metadata(corner, tile=size)
     phase("frames")
     cm = progress(len(regions) * n) if progress else contextlib.nullcontext(lambda: None)
     try:
@@ -265,36 +258,21 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
             spool_path.unlink(missing_ok=True)
     total = time.perf_counter() - t_start
     (tmp / "config.yaml").write_text(config.to_yaml())
-    return _summary(spec, stats, sums, (white_r, white_c), populations, size, len(regions), total)
+    return _summary(corner, stats, sums, (white_r, white_c), size, len(regions), total)
 
 
-def _summary(spec: SensorSpec, stats: RunStats, sums: dict, white, populations, size: int, count: int,
-             total: float) -> dict:
-    """The tiled run's summary.json: what the tiles' sums give (module docstring)."""
-    from ..model.sensor import Sensor
-
-    config = spec.config
-    t = spec.transfer
-    pixels = spec.shape[0] * spec.shape[1]
+def _summary(corner: Sensor, stats: RunStats, sums: dict, white, size: int, count: int, total: float) -> dict:
+    """The tiled run's summary.json: what the tiles' sums give (module docstring); ``corner``: the sensor's corner
+    window, which holds what every tile shares (the configuration, the stages, the dark state)."""
+    config = corner.config
+    pixels = corner.shape[0] * corner.shape[1]
     measured = stats.result()
     n = config.run.frames
-    small = Sensor(spec, window=tiles.CORNER, populations=populations)  # what is the same in every tile
     out = {
-        "cmosnoise_version": __version__,
-        "generator": generator_info("cpu"),
-        "seed": config.seed,
-        "scene": config.scene.source,
-        "frames": n,
-        "first_frame": config.run.first_frame,
-        "sensor": {"rows": spec.shape[0], "cols": spec.shape[1], "cfa": config.sensor.cfa},
+        **summary_head(corner, n),
         "tiles": {"size": size, "count": count, "halo": tiles.HALO, "not_made": NOT_MADE},
-        "stages": small.stages_on(),
-        "adc": {"gain_dn_per_e": t.gain_dn_per_e, "gain_e_per_dn": 1 / t.gain_dn_per_e,
-                "black_level_dn": t.black_level_dn, "bits": t.bits},
-        "signal": {"perfect_mean_e": sums["perfect_e"] / pixels, "expected_mean_e": sums["expected_e"] / pixels,
-                   "mean_e": measured.get("mean_e"), "mean_dn": measured.get("mean_dn"),
-                   "saturated_fraction": measured.get("saturated_fraction")},
-        "temporal_noise": fom.temporal_noise(measured, t.gain_dn_per_e),
+        "signal": signal_figures(sums["perfect_e"] / pixels, sums["expected_e"] / pixels, measured),
+        "temporal_noise": fom.temporal_noise(measured, corner.transfer.gain_dn_per_e),
         "dark_current": None,
         "warnings": [],
         "processing": {"enabled": False, "processing_s": 0.0},
@@ -302,19 +280,16 @@ def _summary(spec: SensorSpec, stats: RunStats, sums: dict, white, populations, 
                       "frame_s": round(sums["frames_s"] / max(n, 1), 6), "set_up": round(sums["set_up_s"], 6),
                       "stages": {}},
     }
-    state = small.dark_state
+    state = corner.dark_state
     if state is not None:
-        t_int = config.exposure.integration_time_s
         mean = sums["dark_sum"] / pixels
-        dc = {"temperature_c": state.temperature_c, "map_mean_e_per_s": mean, "mean_dark_e_per_frame": mean * t_int,
-              "threshold_e_per_s": state.threshold, "threshold_source": state.threshold_source}
+        dc = {"temperature_c": state.temperature_c, "map_mean_e_per_s": mean,
+              "mean_dark_e_per_frame": mean * config.exposure.integration_time_s, **fom.threshold_figures(state)}
         if state.threshold is not None:
             r = np.concatenate(white[0]) if white[0] else np.zeros(0, np.int64)
             c = np.concatenate(white[1]) if white[1] else np.zeros(0, np.int64)
             order = np.lexsort((c, r))
-            r, c = r[order], c[order]
-            dc.update({"threshold_aA": e_per_s_to_aa(state.threshold), "ppm_expected": state.expected_ppm_above(),
-                       "map": white_pixels.report_at(r, c, spec.shape, state.threshold, config.sensor.cfa)})
+            dc["map"] = white_pixels.report_at(r[order], c[order], corner.shape, state.threshold, config.sensor.cfa)
         out["dark_current"] = dc
     return out
 

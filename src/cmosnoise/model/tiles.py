@@ -282,7 +282,8 @@ class Tiling:
             yield shot.frame(k, region=region)
 
     def frame(self, region: tuple[int, int, int, int], k: int) -> np.ndarray:
-        """Frame ``k`` of tile ``region`` (:meth:`frames`).
+        """Frame ``k`` of tile ``region`` (:meth:`frames`): the tile is made for this call; for several frames of one
+        tile, :meth:`frames` makes it once.
 
         Parameters
         ----------
