@@ -470,3 +470,31 @@ def test_frame0_white_pixels_do_not_count_photon_shot_noise(tmp_path):
     expected, sd = p.sum(), np.sqrt(np.sum(p * (1 - p)))
     assert expected > 0.5 * long["map"]["white_pixels"]  # the case is one where frame 0 can see them
     assert abs(long["frame0"]["white_pixels"] - expected) <= Z * sd, (long["frame0"]["white_pixels"], expected, sd)
+
+
+def test_couplets_are_counted_as_their_definition_says():
+    """Couplets from the white pixels' coordinates (white_pixels.pairs_at, what every count calls) against the
+    definition checked pair by pair: two white pixels of one colour that are neighbours in their colour plane
+    (R and B: a step of 2 along a row, a column or a diagonal; G: also a step of 1 on a diagonal; a monochrome
+    sensor: the 8 neighbours), on random masks of every pattern, dense enough that couplets touch and chain."""
+    from cmosnoise.model import cfa
+
+    rng = np.random.default_rng(4)
+    for pattern in ("RGGB", "BGGR", "GRBG", "GBRG", "none"):
+        mask = rng.random((23, 31)) < 0.15
+        r, c = np.nonzero(mask)
+        colour = cfa.channel_map(pattern, mask.shape)
+        expected = 0
+        for i in range(r.size):
+            for j in range(i + 1, r.size):
+                dr, dc = abs(int(r[i]) - int(r[j])), abs(int(c[i]) - int(c[j]))
+                if colour[r[i], c[i]] != colour[r[j], c[j]]:
+                    continue
+                if pattern == "none":
+                    near = max(dr, dc) == 1
+                elif colour[r[i], c[i]] == 1:  # green: a quincunx, its neighbours at 1 diagonal step or 2 straight
+                    near = (dr, dc) in {(1, 1), (0, 2), (2, 0)}
+                else:
+                    near = (dr, dc) in {(0, 2), (2, 0), (2, 2)}
+                expected += near
+        assert expected > 10 and white_pixels.count_couplets(mask, pattern) == expected, pattern

@@ -33,16 +33,6 @@ def _pair_offsets(pattern: str) -> tuple[list[tuple[int, int]], list[tuple[int, 
     return [(0, 2), (2, 0)], [(1, 1), (1, -1)]
 
 
-def _shifted_pairs(a: np.ndarray, b_mask: np.ndarray, dr: int, dc: int):
-    """Boolean array over pixels p where a[p] and b_mask[p + (dr, dc)] both hold."""
-    rows, cols = a.shape
-    r0, r1 = 0, rows - dr
-    c0, c1 = max(0, -dc), cols - max(0, dc)
-    out = np.zeros_like(a, dtype=bool)
-    out[r0:r1, c0:c1] = a[r0:r1, c0:c1] & b_mask[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
-    return out
-
-
 def _pair_starts(mask: np.ndarray, pattern: str) -> list[tuple[tuple[int, int], np.ndarray]]:
     """For each neighbour offset (each pair counted once), the pixels a pair may start from."""
     all_offsets, green_offsets = _pair_offsets(pattern)
@@ -128,8 +118,7 @@ def count_couplets(mask: np.ndarray, pattern: str) -> int:
     -------
     int
     """
-    mask = np.asarray(mask, dtype=bool)
-    return sum(int(np.count_nonzero(_shifted_pairs(start, mask, dr, dc))) for (dr, dc), start in _pair_starts(mask, pattern))
+    return int(len(couplet_pairs(mask, pattern)))  # one count of couplets: from the white pixels' coordinates
 
 
 def neighbour_pairs(shape: tuple[int, int], pattern: str) -> int:
