@@ -299,6 +299,35 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     return {m: out.get(m, math.nan) for m in METRICS}
 
 
+def worker_attribute(name: str, make: Callable[[], object]):
+    """A value kept on the Dask worker that runs this task, made by ``make()`` on its first task; ``make()``'s
+    value, kept nowhere, outside a worker.
+
+    Parameters
+    ----------
+    name : str
+        The value's name on the worker.
+    make : callable
+        Makes it.
+
+    Returns
+    -------
+    object
+    """
+    try:
+        from distributed import get_worker
+
+        worker = get_worker()
+    except (ImportError, ValueError):
+        return make()
+    attribute = "_cmosnoise_" + name
+    value = getattr(worker, attribute, None)
+    if value is None:
+        value = make()
+        setattr(worker, attribute, value)
+    return value
+
+
 def _worker_cache():
     """The Dask worker's own :class:`PatternCache` (made on its first task; None outside a worker).
 
@@ -306,21 +335,19 @@ def _worker_cache():
     inputs the points do not change. A tenth of the memory available when
     it is made, at most 2 GB, across the worker's threads.
     """
+    from ..model import footprint
+    from ..model.fixed_pattern import PatternCache
+
+    def make():
+        return PatternCache(int(min(2e9, 0.1 * (footprint.available_bytes() or 1e9))))
+
     try:
         from distributed import get_worker
 
-        worker = get_worker()
+        get_worker()
     except (ImportError, ValueError):
         return None
-    cache = getattr(worker, "_cmosnoise_patterns", None)
-    if cache is None:
-        from ..model import footprint
-        from ..model.fixed_pattern import PatternCache
-
-        avail = footprint.available_bytes() or 1e9
-        cache = PatternCache(int(min(2e9, 0.1 * avail)))
-        worker._cmosnoise_patterns = cache
-    return cache
+    return worker_attribute("patterns", make)
 
 
 def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int, device: str = "cpu") -> dict:

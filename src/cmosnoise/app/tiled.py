@@ -16,6 +16,7 @@ says so.
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from collections import deque
@@ -91,10 +92,16 @@ def tile_task(config_data: dict, size: int, region: tuple[int, int, int, int], f
         ``frames_s``: where its time went (two tiles are made at once: the run's sums of them overlap).
     """
     from ..config.schema import Config
+    from .sweep import worker_attribute
 
-    tiling = tiles.Tiling(resolve(Config.model_validate(config_data)), size)
-    tiling.share(populations)
-    return tile_result(tiling, region, frames, first)
+    # the worker's tiling of this run, kept between its tasks (a picture decoded once a worker, not once a tile)
+    key = json.dumps([config_data, size], sort_keys=True, default=str)
+    held = worker_attribute("tiling", dict)
+    if held.get("key") != key:
+        tiling = tiles.Tiling(resolve(Config.model_validate(config_data)), size)
+        tiling.share(populations)
+        held.update(key=key, tiling=tiling)
+    return tile_result(held["tiling"], region, frames, first)
 
 
 def tile_result(tiling: tiles.Tiling, region: tuple[int, int, int, int], frames: int, first: int) -> dict:

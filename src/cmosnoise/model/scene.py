@@ -612,7 +612,7 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     if window is None:
         return _fitted(source, shape, scale, fit)
     img = source_image(source, source_size or shape, scale, fit)
-    window_of(img, window, shape)  # the whole window must lie in the source
+    _check_window(img.shape, window, shape)  # the whole window must lie in the source (checked, not copied)
 
     def draw(region=None):
         r0, r1, c0, c1 = _span(shape, region)
@@ -663,11 +663,17 @@ def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) 
     (rows, cols, 3) float64 array
     """
     r, c = window
-    if r + shape[0] > img.shape[0] or c + shape[1] > img.shape[1]:
-        raise CmosnoiseError(f"scene.window = [{r}, {c}]: a {shape[0]} x {shape[1]} window there leaves the source "
-                             f"({img.shape[0]} x {img.shape[1]}); the corner must be at most "
-                             f"[{img.shape[0] - shape[0]}, {img.shape[1] - shape[1]}]")
+    _check_window(img.shape, window, shape)
     return np.ascontiguousarray(img[r:r + shape[0], c:c + shape[1]], dtype=np.float64)
+
+
+def _check_window(source_shape, window: tuple[int, int], shape: tuple[int, int]) -> None:
+    """A one-line error where a ``shape`` window at ``window`` leaves a source of ``source_shape``."""
+    r, c = window
+    if r + shape[0] > source_shape[0] or c + shape[1] > source_shape[1]:
+        raise CmosnoiseError(f"scene.window = [{r}, {c}]: a {shape[0]} x {shape[1]} window there leaves the source "
+                             f"({source_shape[0]} x {source_shape[1]}); the corner must be at most "
+                             f"[{source_shape[0] - shape[0]}, {source_shape[1] - shape[1]}]")
 
 
 def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop"):
