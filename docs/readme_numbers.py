@@ -495,6 +495,22 @@ def render_tile_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_run_speed(d: dict) -> str:
+    a = d["summary_alone"]
+    lines = [f"Measured with `python benchmarks/bench_run.py --megapixels 50 --json docs/numbers/run_speed.json` "
+             f"({d['threads']} threads; `cmosnoise simulate` of the default sensor at {d['width']} x {d['height']}, "
+             f"the bundled photo, one frame, every output, {len(d['runs'])} runs):", "",
+             "| run | wall time | peak memory | set-up | frame | summary after the frames | beside them |",
+             "|---|---|---|---|---|---|---|"]
+    for k, r in enumerate(d["runs"], 1):
+        lines.append(f"| {k} | {r['wall_s']:.1f} s | {r['peak_bytes'] / 2**30:.2f} GiB | {r['set_up_s']:.2f} s | "
+                     f"{r['frame_s']:.2f} s | {r['summary_s']:.2f} s | {r['summary_aside_s']:.2f} s |")
+    lines += ["", f"The whole summary made alone after a frame, without the pictures beside it, takes "
+                  f"{a['summary_s']:.2f} s against the frame kernel's {a['frame_s']:.2f} s: "
+                  f"{a['frames_worth']:.2f} frames' worth (the fastest of {len(d['runs'])} each)."]
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
@@ -518,6 +534,7 @@ SECTIONS = {
     "gpu_speed": (None, render_gpu_speed),
     "setup_speed": (None, render_setup_speed),
     "tile_speed": (None, render_tile_speed),
+    "run_speed": (None, render_run_speed),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -536,7 +553,8 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               # on a machine with an NVIDIA GPU and cmosnoise[cuda]
               "gpu_speed": ["bench_gpu.py", "--json", "gpu_speed.json"],
               "setup_speed": ["bench_setup.py", "--sizes", "1,12,50", "--json", "setup_speed.json"],
-              "tile_speed": ["bench_tiles.py", "--sizes", "50,400", "--json", "tile_speed.json"]}
+              "tile_speed": ["bench_tiles.py", "--sizes", "50,400", "--json", "tile_speed.json"],
+              "run_speed": ["bench_run.py", "--megapixels", "50", "--json", "run_speed.json"]}
 SLOW = {"sweep_fig9"}
 
 

@@ -98,3 +98,31 @@ def test_the_compiled_interleave_moves_values_only():
     assert np.array_equal(interleave_transposed(planes), np.stack([p.T for p in planes], axis=-1))
     small = [rng.random((5, 7))]
     assert np.array_equal(interleave_transposed(small), small[0].T[..., None])
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG", "none"])
+def test_a_resampled_picture_through_the_cfa_is_the_three_channel_path_bit_for_bit(pattern):
+    """Resampled.cfa applies the columns' weights only for each pixel's own channel (engine/resample.py, compiled
+    above 65 536 pixels): the same bits as to_cfa of the full RGB resampling, growing and shrinking, for the whole
+    and for regions at even and odd corners."""
+    rng = np.random.default_rng(11)
+    resp = (0.83, 1.0, 1.21)
+    for img, shape in [(rng.random((40, 60, 3)), (301, 451)),     # grown: linear interpolation
+                       (rng.random((900, 700, 3)), (333, 259)),   # shrunk: area averaging
+                       (rng.random((20, 30, 3)), (20, 30))]:      # the same size
+        picture = scene.Resampled(img, shape)
+        for region in [None, (0, shape[0], 1, shape[1] - 2), (4, shape[0] - 3, 6, shape[1] // 2)]:
+            got = picture.cfa(pattern, resp, region)
+            want = scene.to_cfa(picture(region), pattern, resp)
+            assert got.dtype == want.dtype and got.shape == want.shape
+            assert np.array_equal(got.view(np.uint64), want.view(np.uint64)), (shape, region)
+
+
+def test_a_sensor_takes_a_picture_through_the_cfa_without_its_full_size_rgb():
+    """Sensor.scene_signal of a picture (the photo) equals to_cfa of scene.render, bit for bit, whole and in a window."""
+    cfg = {"sensor": {"width": 640, "height": 480, "cfa": "GBRG"}}
+    whole = Sensor(cfg).scene_signal("photo")
+    want = scene.to_cfa(scene.render("photo", (480, 640)), "GBRG", Sensor(cfg).spec.channel_responsivity)
+    assert np.array_equal(whole, want)
+    part = Sensor(cfg, window=(100, 400, 40, 333)).scene_signal("photo")
+    assert np.array_equal(part, whole[100:400, 40:333])

@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..engine.reduce import moments
+from ..engine.reduce import statistics
 
 if TYPE_CHECKING:
     from ..model.sensor import Sensor
@@ -99,8 +99,9 @@ def transfer_slope(sensor: Sensor, charge_e: float) -> float:
 
 
 def map_moment(sensor: Sensor, name: str, which: str) -> float:
-    """A fixed map's mean, variance or mean square (``which``: "mean", "var", "mean_square"), computed once per
-    sensor with the other two (:func:`cmosnoise.engine.reduce.moments`, two compiled passes) and kept by
+    """A fixed map's mean, variance, mean square or extreme (``which``: one of
+    :data:`cmosnoise.engine.reduce.STATISTICS`), computed once per sensor with the others
+    (:func:`cmosnoise.engine.reduce.statistics`, one compiled pass) and kept by
     :meth:`~cmosnoise.model.sensor.Sensor.map_statistic`.
 
     Parameters
@@ -108,8 +109,9 @@ def map_moment(sensor: Sensor, name: str, which: str) -> float:
     sensor : Sensor
         The sensor instance.
     name : str
-        A field of its fixed pattern (``dark_rate``, ``flicker_sigma``, ...) or ``flat_response``.
-    which : {"mean", "var", "mean_square"}
+        A field of its fixed pattern (``dark_rate``, ``flicker_sigma``, ...) or ``flat_response``
+        (:meth:`~cmosnoise.model.sensor.Sensor.flat_statistics`, made in bands without the map).
+    which : {"mean", "var", "mean_square", "min", "max"}
         The statistic.
 
     Returns
@@ -124,9 +126,11 @@ def map_moment(sensor: Sensor, name: str, which: str) -> float:
     True
     """
     def compute():
-        values = sensor.flat_response if name == "flat_response" else getattr(sensor.fixed_pattern, name)
-        found = dict(zip(("mean", "var", "mean_square"), moments(values)))
-        for other, value in found.items():  # the three come together: keep them all
+        if name == "flat_response":
+            found = sensor.flat_statistics()
+        else:
+            found = statistics(getattr(sensor.fixed_pattern, name))
+        for other, value in found.items():  # they come together: keep them all
             sensor.map_statistic(f"{other}:{name}", lambda v=value: v)
         return found[which]
 
@@ -540,25 +544,26 @@ def _may_clip(sensor: Sensor, signal_e: float, photo_e: np.ndarray | None) -> bo
     fp = sensor.fixed_pattern
     t = sensor.transfer
 
-    def top_of(a) -> float:
-        return float(np.max(a)) if a is not None else 0.0
+    def top_of(name) -> float:  # a fixed map's largest value, once per sensor
+        return map_moment(sensor, name, "max") if getattr(fp, name) is not None else 0.0
 
-    photo = float(np.max(photo_e)) if photo_e is not None else signal_e * float(np.max(sensor.flat_response))
+    photo = float(np.max(photo_e)) if photo_e is not None else signal_e * map_moment(sensor, "flat_response", "max")
     photo = max(photo, 0.0)
-    dark = max(top_of(fp.dark_rate) * c.exposure.integration_time_s, 0.0)
+    dark = max(top_of("dark_rate") * c.exposure.integration_time_s, 0.0)
     shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0)
     if photo + dark + 10 * math.sqrt(shot) + 1 >= c.sensor.full_well_e:
         return True
     if not c.adc.enabled:
         return False
     top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e
-    read = (sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0) + (
-        top_of(sensor.source_follower_sigma) ** 2 if c.source_follower.enabled else 0.0)
-    g_hi = top_of(fp.column_gain) if fp.column_gain is not None else 1.0
-    g_lo = float(np.min(fp.column_gain)) if fp.column_gain is not None else 1.0
-    x = photo + dark + (top_of(fp.row_offset) if fp.row_offset is not None else 0.0)
-    mean = max(x * g_hi, x * g_lo) + (top_of(fp.vfpn) if fp.vfpn is not None else 0.0)
-    col_read = top_of(fp.column_sigma) ** 2 if fp.column_sigma is not None else 0.0
+    # the largest source-follower sigma, sqrt(thermal^2 + flicker^2), is the largest flicker sigma's
+    sf = c.source_follower.thermal_sigma_e**2 + top_of("flicker_sigma") ** 2
+    read = (sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0) + (sf if c.source_follower.enabled else 0.0)
+    g_hi = top_of("column_gain") if fp.column_gain is not None else 1.0
+    g_lo = map_moment(sensor, "column_gain", "min") if fp.column_gain is not None else 1.0
+    x = photo + dark + top_of("row_offset")
+    mean = max(x * g_hi, x * g_lo) + top_of("vfpn")
+    col_read = top_of("column_sigma") ** 2
     var = (shot + read) * max(g_hi * g_hi, g_lo * g_lo) + col_read
     return mean + 10 * math.sqrt(var) + 1 >= top
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..engine import reduce
 from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
 
@@ -211,7 +212,7 @@ def report(values: np.ndarray, threshold: float, pattern: str) -> dict:
     if values.ndim != 2:
         raise CmosnoiseError(f"white_pixels.report: values of shape {values.shape}; give one (rows, cols) map or frame "
                              "(for a stack of dark frames, dark_rate_from_raw averages them)")
-    return report_at(*np.nonzero(values > threshold), values.shape, threshold, pattern)
+    return report_at(*reduce.positions_above(values, threshold), values.shape, threshold, pattern)
 
 
 def report_at(r: np.ndarray, c: np.ndarray, shape: tuple[int, int], threshold: float, pattern: str) -> dict:

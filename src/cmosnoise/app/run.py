@@ -88,13 +88,15 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
             write_json(tmp / "summary.json", summary)
         return summary
     # Two more threads take work nothing waits for: loading the compiled kernel while this thread draws the
-    # fixed pattern, and frame 0's pictures while the summary is built (PNG encoding and most of NumPy's work
-    # release the GIL; the compiled loops take turns, engine.jit.ONE_LAUNCH).
+    # fixed pattern, the summary's figures of the sensor alone while this thread makes the scene and the frames,
+    # and frame 0's pictures while the rest of the summary is built (PNG encoding and most of NumPy's work release
+    # the GIL; the compiled loops take turns, engine.jit.ONE_LAUNCH).
     with folder as tmp, ThreadPoolExecutor(2, thread_name_prefix="cmosnoise-aside") as aside:
         t_start = time.perf_counter()
         aside.submit(kernel.preload)
         phase("set-up")
         sensor = Sensor(spec, device=device)
+        prepared = aside.submit(sensor_figures, sensor)  # from the maps alone, beside the scene and the frames
         phase("scene")
         shot = sensor.expose()
         n, first = config.run.frames, config.run.first_frame
@@ -172,7 +174,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         job = aside.submit(pictures)  # while this thread builds the summary (not in the loop: it took the kernel's cores)
         (tmp / "config.yaml").write_text(config.to_yaml())
         t0 = time.perf_counter()
-        summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1])
+        summary = build_summary(sensor, shot, stats, t_frames, n, frame0[1], prepared.result())
         t_summary = time.perf_counter() - t0  # the summary's own time counts in the run's total
         summary["timings_s"]["summary"] = round(t_summary, 6)
         # frame 0 waits for the compiled kernel (compiled on a machine's first run): the steady time per frame is
@@ -321,16 +323,48 @@ def signal_figures(perfect_mean_e: float, expected_mean_e: float, measured: dict
             "saturated_fraction": measured.get("saturated_fraction")}
 
 
-def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, electrons0: np.ndarray) -> dict:
+def sensor_figures(sensor: Sensor) -> dict:
+    """The summary's figures of the sensor alone, from its fixed maps (not the scene, not the frames): the dark
+    noise budget, the key figures and the dark-current map's figures. A run makes them on a thread of their own
+    while the scene and the frames are made (:func:`simulate`), so the summary after the frames has only the
+    scene's and frame 0's figures left to make.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor instance.
+
+    Returns
+    -------
+    dict
+        ``at_dark`` (:func:`noise_budget.budget` at no signal), ``key_figures`` (:func:`fom.key_figures`),
+        ``dark_current`` (:func:`fom.dark_current` of the map, without frame 0's figures; None with the stage
+        off) and ``seconds`` (what they took).
+    """
+    t0 = time.perf_counter()
+    out = {"at_dark": noise_budget.budget(sensor, 0.0), "key_figures": fom.key_figures(sensor),
+           "dark_current": fom.dark_current(sensor)}
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, electrons0: np.ndarray,
+                  prepared: dict | None = None) -> dict:
     t = sensor.transfer
     measured = stats.result()
     timings = {k: round(v, 6) for k, v in sensor.timings.items()}
+    prepared = prepared or sensor_figures(sensor)
+    at_dark = prepared["at_dark"]
     predicted = noise_budget.budget(sensor, photo_e=shot.photo_mean_e)  # this scene, pixel by pixel: clipping included
-    at_dark = noise_budget.budget(sensor, 0.0)
+    dark = prepared["dark_current"]
+    state = sensor.dark_state
+    if dark is not None and state.threshold is not None:  # the white pixels seen in frame 0, after the map's
+        dark = {**dark, "frame0": fom.frame0_white_pixels(sensor, shot, electrons0, state.threshold,
+                                                          at_dark["temporal_total_e"] ** 2)}
     return {
         **summary_head(sensor, n),
         "signal": signal_figures(float(shot.perfect_e.mean(dtype=np.float64)),
-                                 float(shot.mean_charge_e.mean(dtype=np.float64)), measured),
+                                 shot.expected_sum() / shot.photo_mean_e.size, measured),
         "temporal_noise": {
             **fom.temporal_noise(measured, t.gain_dn_per_e),
             "predicted_rms_e": predicted["temporal_total_e"],
@@ -340,14 +374,16 @@ def build_summary(sensor: Sensor, shot, stats: RunStats, wall_s: float, n: int, 
             "dark": at_dark,
             "scene_mean": predicted,
         },
-        "key_figures": fom.key_figures(sensor),
-        "dark_current": (dark := fom.dark_current(sensor, shot, electrons0, at_dark["temporal_total_e"] ** 2)),
+        "key_figures": prepared["key_figures"],
+        "dark_current": dark,
         "random_telegraph": fom.telegraph(sensor, shot.frame_period_s),
         "warnings": run_warnings(measured, predicted) + ([dark["warning"]] if dark and "warning" in dark else []),
         "timings_s": {
             "total": round(wall_s, 6),  # simulate() adds the summary's own time ("summary")
             "per_frame": round(wall_s / max(n, 1), 6),  # set-up and frames, per frame
             "stages": timings,
+            # the sensor's own figures, made on a thread of their own beside the scene and the frames
+            "summary_aside": round(prepared["seconds"], 6),
         },
     }
 

@@ -137,7 +137,7 @@ def tile_result(tiling: tiles.Tiling, region: tuple[int, int, int, int], frames:
     inner = (slice(r0 - w0, r1 - w0), slice(c0 - v0, c1 - v0))
     out = {"raw": np.stack(raws), "stats": stats,
            "perfect_e": float(shot.perfect_e[inner].sum(dtype=np.float64)),
-           "expected_e": float(shot.mean_charge_e[inner].sum(dtype=np.float64)),
+           "expected_e": shot.expected_sum(inner),
            "set_up_s": t1 - t0, "frames_s": t2 - t1, "dark_sum": None, "white": None}
     state = sensor.dark_state
     if state is not None:

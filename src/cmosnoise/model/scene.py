@@ -42,6 +42,7 @@ import scipy.sparse as sp
 
 from .. import inputs
 from ..engine import layout
+from ..engine import resample as resample_engine
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
 
@@ -471,12 +472,104 @@ def resample(img: np.ndarray, shape: tuple[int, int], region=None) -> np.ndarray
     (rows, cols, C) float64 array
         ``shape``, or the region's size.
     """
+    planes, wc = _row_pass(img, shape, region)
+    # each channel as scipy's sparse products give it, (cols, rows); interleaved by a blocked, compiled copy
+    return layout.interleave_transposed([wc @ plane.T for plane in planes])
+
+
+def _row_pass(img: np.ndarray, shape: tuple[int, int], region) -> tuple:
+    """The first half of :func:`resample`: each channel after the rows' weights, (C, rows, n), and the columns'
+    weights (cols, n), both cut to the ``n`` source columns the region reads."""
     r0, r1, c0, c1 = _span(shape, region)
     wr, (a0, a1) = _band(_axis_matrix(img.shape[0], shape[0])[r0:r1])
     wc, (b0, b1) = _band(_axis_matrix(img.shape[1], shape[1])[c0:c1])
     part = img[a0:a1, b0:b1]  # only the source pixels the region reads: the same terms of each sum, in order
-    # each channel as scipy's sparse products give it, (cols, rows); interleaved by a blocked, compiled copy
-    return layout.interleave_transposed([wc @ (wr @ part[..., c]).T for c in range(img.shape[2])])
+    return np.stack([wr @ part[..., c] for c in range(img.shape[2])]), wc
+
+
+class Resampled:
+    """A picture resampled to a sensor's ``shape``: any region of it, as linear RGB or through a CFA.
+
+    Parameters
+    ----------
+    img : (rows, cols, 3) float64 array
+        The picture (cropped to the sensor's aspect ratio where it is fitted by cropping).
+    shape : (rows, cols)
+        The sensor's size.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cmosnoise import scene
+    >>> picture = scene.Resampled(np.random.default_rng(1).random((30, 40, 3)), (60, 80))
+    >>> mosaic = picture.cfa("RGGB", region=(0, 20, 10, 40))
+    >>> bool((mosaic == scene.to_cfa(picture((0, 20, 10, 40)), "RGGB")).all())
+    True
+    """
+
+    def __init__(self, img: np.ndarray, shape: tuple[int, int]):
+        self.img = img
+        self.shape = tuple(shape)
+
+    def __call__(self, region=None) -> np.ndarray:
+        """:func:`resample` of the picture: (rows, cols, 3) float64, the region's size (None: the whole)."""
+        return resample(self.img, self.shape, region)
+
+    def cfa(self, pattern: str, responsivity=(1.0, 1.0, 1.0), region=None) -> np.ndarray:
+        """``to_cfa(self(region), pattern, responsivity)``, bit for bit, without making the three channels at the
+        sensor's size: the columns' weights are applied only for each pixel's own channel
+        (:func:`cmosnoise.engine.resample.mosaic`).
+
+        Parameters
+        ----------
+        pattern : str
+            RGGB, BGGR, GRBG, GBRG, or none (monochrome: the luminance of the three channels).
+        responsivity : (float, float, float)
+            The R, G and B pixels' relative responsivity.
+        region : (row0, row1, col0, col1), optional
+            The rectangle to make (None: the whole).
+
+        Returns
+        -------
+        (rows, cols) float64 array
+            Relative signal per pixel.
+        """
+        if cfa_mod.is_mono(pattern) or self.img.shape[2] != 3:
+            return to_cfa(self(region), pattern, responsivity)
+        planes, wc = _row_pass(self.img, self.shape, region)
+        return resample_engine.mosaic(planes, wc, cfa_mod.tile(pattern), np.asarray(responsivity, np.float64))
+
+
+def cfa_signal(draw, pattern: str, responsivity=(1.0, 1.0, 1.0), region=None) -> np.ndarray:
+    """A prepared scene (:func:`prepare`) through the CFA: ``to_cfa(draw(region), pattern, responsivity)``, made
+    without the full-size RGB where the scene is a resampled picture (:meth:`Resampled.cfa`).
+
+    Parameters
+    ----------
+    draw : callable
+        :func:`prepare`'s result.
+    pattern : str
+        RGGB, BGGR, GRBG, GBRG, or none (monochrome).
+    responsivity : (float, float, float)
+        The R, G and B pixels' relative responsivity.
+    region : (row0, row1, col0, col1), optional
+        The rectangle to make (None: the whole).
+
+    Returns
+    -------
+    (rows, cols) float64 array
+        Relative signal per pixel.
+
+    Examples
+    --------
+    >>> from cmosnoise import scene
+    >>> draw = scene.prepare("photo", (60, 80))
+    >>> bool((scene.cfa_signal(draw, "GRBG") == scene.to_cfa(draw(), "GRBG")).all())
+    True
+    """
+    if isinstance(draw, Resampled):
+        return draw.cfa(pattern, responsivity, region)
+    return to_cfa(draw(region), pattern, responsivity)
 
 
 def _band(w) -> tuple:
@@ -715,7 +808,7 @@ def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit
         img = load_file(name, scale)
     if fit == "crop":
         img = crop_to_aspect(img, shape)
-    return lambda region=None: resample(img, shape, region)
+    return Resampled(img, shape)
 
 
 def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
-from ..engine import cuda_kernel, fixed_maps, kernel
+from ..engine import cuda_kernel, fixed_maps, kernel, reduce
 from ..engine.telegraph import per_pixel, positions
 from ..errors import CmosnoiseError
 from . import footprint
@@ -242,15 +242,47 @@ class Sensor:
             self._flat = g / g.mean()
         return self._flat
 
-    def photo_response(self, perfect_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def flat_statistics(self) -> dict[str, float]:
+        """:func:`~cmosnoise.engine.reduce.statistics` of :attr:`flat_response` (mean, variance, mean square,
+        extremes), made a band of rows at a time without the whole map: what the noise budget needs of it.
+
+        Each band's response is made from its rows and two more on each side (crosstalk reads one; two keep the
+        CFA's phase), so its rows are the whole map's bit for bit; the bands' statistics are joined
+        (:func:`~cmosnoise.engine.reduce.combine`) and scaled by the mean, as the map is.
+
+        Returns
+        -------
+        dict of str to float
+            ``mean`` (1 up to rounding), ``var``, ``mean_square``, ``min`` and ``max`` of the flat response.
+        """
+        if self._flat is not None:
+            return reduce.statistics(self._flat)
+        rows, cols = self.map_shape
+        parts = []
+        step = 2 * max(8, -(-reduce.BAND_VALUES // (2 * cols)))  # even, and enough values for a parallel pass
+        for r0 in range(0, rows, step):
+            r1 = min(rows, r0 + step)
+            a0, a1 = max(r0 - 2, 0), min(r1 + 2, rows)
+            g = self.photo_response(np.broadcast_to(1.0, (a1 - a0, cols)), rows=(a0, a1))[1][r0 - a0:r1 - a0]
+            parts.append((g.size, reduce.statistics(g)))
+        st = reduce.combine(parts)
+        m = st["mean"]
+        return {"mean": 1.0, "var": st["var"] / m**2, "mean_square": st["mean_square"] / m**2,
+                "min": st["min"] / m, "max": st["max"] / m}
+
+    def photo_response(self, perfect_e: np.ndarray, rows: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Mean photo-charge of ``perfect_e`` through PRNU (stage 2) and crosstalk (stage 3), e- float64.
 
         Returns (after PRNU, after crosstalk), each (rows, cols); the one
         place both stages meet a mean image (exposures and
-        :attr:`flat_response` call it).
+        :attr:`flat_response` call it). With ``rows = (row0, row1)``, ``perfect_e`` holds only those rows of
+        the map (``row0`` even), and crosstalk treats their first and last as edges.
         """
         c = self.config
-        after_prnu = perfect_e if self._fixed.prnu_gain is None else prnu.apply(perfect_e, self._fixed.prnu_gain)
+        gain = self._fixed.prnu_gain
+        if gain is not None and rows is not None:
+            gain = gain[rows[0]:rows[1]]
+        after_prnu = perfect_e if gain is None else prnu.apply(perfect_e, gain)
         mean = after_prnu
         if c.crosstalk.enabled:
             mean = crosstalk.apply(mean, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
@@ -361,26 +393,25 @@ class Sensor:
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            rgb = scene_mod.render(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size,
-                                   region=self.window)
-        else:
-            try:
-                rgb = np.asarray(scene, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise CmosnoiseError(f"scene: expected a name, a path or an array of numbers, got {type(scene).__name__}") from None
-            shape = self.map_shape
-            if rgb.ndim not in (2, 3) or rgb.shape[:2] != shape or (rgb.ndim == 3 and rgb.shape[2] not in (1, 3)):
-                whose = "sensor's" if self.window is None else "window's"
-                raise CmosnoiseError(f"scene array has shape {rgb.shape}; expected the {whose} {shape} (CFA signal), "
-                                     f"{shape + (1,)} (grey) or {shape + (3,)} (linear RGB)")
-            bad = ~np.isfinite(rgb)
-            if bad.any() or (rgb < 0).any():
-                what = f"{int(bad.sum())} NaN or infinite" if bad.any() else f"{int((rgb < 0).sum())} negative"
-                raise CmosnoiseError(f"scene array has {what} values; a scene is finite light levels >= 0")
-            if rgb.ndim == 2:
-                return rgb
-            if rgb.shape[2] == 1:
-                rgb = np.repeat(rgb, 3, axis=2)
+            draw = scene_mod.prepare(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size)
+            return scene_mod.cfa_signal(draw, self.cfa, self.spec.channel_responsivity, region=self.window)
+        try:
+            rgb = np.asarray(scene, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise CmosnoiseError(f"scene: expected a name, a path or an array of numbers, got {type(scene).__name__}") from None
+        shape = self.map_shape
+        if rgb.ndim not in (2, 3) or rgb.shape[:2] != shape or (rgb.ndim == 3 and rgb.shape[2] not in (1, 3)):
+            whose = "sensor's" if self.window is None else "window's"
+            raise CmosnoiseError(f"scene array has shape {rgb.shape}; expected the {whose} {shape} (CFA signal), "
+                                 f"{shape + (1,)} (grey) or {shape + (3,)} (linear RGB)")
+        bad = ~np.isfinite(rgb)
+        if bad.any() or (rgb < 0).any():
+            what = f"{int(bad.sum())} NaN or infinite" if bad.any() else f"{int((rgb < 0).sum())} negative"
+            raise CmosnoiseError(f"scene array has {what} values; a scene is finite light levels >= 0")
+        if rgb.ndim == 2:
+            return rgb
+        if rgb.shape[2] == 1:
+            rgb = np.repeat(rgb, 3, axis=2)
         return scene_mod.to_cfa(rgb, self.cfa, self.spec.channel_responsivity)
 
     def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> "Exposure":
@@ -493,6 +524,27 @@ class Exposure:
         if self.collected_dark_e is None:
             return self.collected_photo_e
         return self.collected_photo_e + self.collected_dark_e
+
+    def expected_sum(self, part: tuple[slice, slice] | None = None) -> float:
+        """The sum of :attr:`mean_charge_e` over ``part`` of the maps (all of them by default), e-, float64: the
+        photo- and the dark charge summed apart, so the map of their sum is not made.
+
+        Parameters
+        ----------
+        part : (slice, slice), optional
+            Rows and columns of this exposure's maps.
+
+        Returns
+        -------
+        float
+            Within float32 rounding of ``mean_charge_e[part].sum(dtype=np.float64)`` (each pixel's two charges
+            are added in float64 here, in float32 there).
+        """
+        part = part or (slice(None), slice(None))
+        total = float(self.collected_photo_e[part].sum(dtype=np.float64))
+        if self.collected_dark_e is not None:
+            total += float(self.collected_dark_e[part].sum(dtype=np.float64))
+        return total
 
     @property
     def frame_period_s(self) -> float:

@@ -243,7 +243,8 @@ class Tiling:
             self._populations = sensor.fixed_pattern
         if self._picture is None:
             return sensor.expose(self._source, sequence=self.sequence)
-        return sensor.expose(self._picture(window), sequence=self.sequence)
+        signal = scene_mod.cfa_signal(self._picture, sensor.cfa, self.spec.channel_responsivity, region=window)
+        return sensor.expose(signal, sequence=self.sequence)
 
     def frames(self, region: tuple[int, int, int, int], n: int, first: int = 0,
                electrons: bool = False) -> Iterator[np.ndarray | tuple[np.ndarray, np.ndarray]]:
