@@ -19,34 +19,51 @@ import numpy as np
 
 from .jit import ONE_LAUNCH, numba  # None where numba is not installed
 
+#: independent partial sums per row in :func:`statistics`' compiled pass
+_LANES = 8
+
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _rows(a):  # pragma: no cover - compiled
         """Each row's sum, sum of squared deviations from its own mean, sum of squares, min and max: one pass
-        over memory (a row's second reading comes from cache)."""
+        over memory (a row's second reading comes from cache). Each sum runs in 8 lanes (column mod 8) added at
+        the row's end: independent chains the compiler can overlap or vectorize, in a fixed order."""
         rows, cols = a.shape
         part = np.zeros((rows, 5))
         for r in numba.prange(rows):
-            s = 0.0
-            q = 0.0
-            lo = np.inf
-            hi = -np.inf
-            for c in range(cols):
+            s = np.zeros(_LANES)
+            q = np.zeros(_LANES)
+            lo = np.full(_LANES, np.inf)
+            hi = np.full(_LANES, -np.inf)
+            body = cols - cols % _LANES
+            for c0 in range(0, body, _LANES):
+                for k in range(_LANES):
+                    x = np.float64(a[r, c0 + k])
+                    s[k] += x
+                    q[k] += x * x
+                    lo[k] = min(lo[k], x)
+                    hi[k] = max(hi[k], x)
+            for c in range(body, cols):
                 x = np.float64(a[r, c])
-                s += x
-                q += x * x
-                lo = min(lo, x)
-                hi = max(hi, x)
-            mean = s / cols
-            d2 = 0.0
-            for c in range(cols):
+                s[0] += x
+                q[0] += x * x
+                lo[0] = min(lo[0], x)
+                hi[0] = max(hi[0], x)
+            total = s.sum()
+            mean = total / cols
+            d2 = np.zeros(_LANES)
+            for c0 in range(0, body, _LANES):
+                for k in range(_LANES):
+                    d = np.float64(a[r, c0 + k]) - mean
+                    d2[k] += d * d
+            for c in range(body, cols):
                 d = np.float64(a[r, c]) - mean
-                d2 += d * d
-            part[r, 0] = s
-            part[r, 1] = d2
-            part[r, 2] = q
-            part[r, 3] = lo
-            part[r, 4] = hi
+                d2[0] += d * d
+            part[r, 0] = total
+            part[r, 1] = d2.sum()
+            part[r, 2] = q.sum()
+            part[r, 3] = lo.min()
+            part[r, 4] = hi.max()
         return part
 
     @numba.njit(cache=True, nogil=True)
@@ -96,7 +113,7 @@ def moments(a: np.ndarray) -> tuple[float, float, float]:
 
 
 #: a band of a map made and reduced in pieces holds at least this many values (a parallel pass's worth)
-BAND_VALUES = 1 << 18
+BAND_VALUES = 1 << 20
 
 #: the figures :func:`statistics` gives
 STATISTICS = ("mean", "var", "mean_square", "min", "max")
