@@ -79,13 +79,16 @@ def _grid_points(two: bool):
     return pts
 
 
-@pytest.mark.parametrize("kind", ["normal", "one point", "scaled", "two points"])
+@pytest.mark.parametrize("kind", ["normal", "one point", "scaled", "two points", "offset", "offset with tail"])
 def test_the_compiled_loops_equal_the_numpy_specification_on_any_thread_count(kind):
     region, cols, key = (3, 203, 5, 306), 311, fixed_key(4, "dark_current")
 
     def make(engine):
         if kind == "normal":
             return fixed_maps.normal_map(region, cols, key, 1.0, 0.02, 0.0, engine=engine)
+        if kind.startswith("offset"):  # a tail of 2 % of the pixels, up to 50 e-: many members in 60 000 pixels
+            tail = (0.02, 50.0) if kind.endswith("tail") else (0.0, 0.0)
+            return fixed_maps.offset_map(region, cols, key, 3.5, *tail, engine=engine)
         scales = dict(body_scale=1.7, tail_scale=1.3) if kind == "scaled" else {}
         return fixed_maps.heavy_tail_map(region, cols, key, LOGIT_GRID, _grid_points(kind == "two points"), w=0.35,
                                          engine=engine, **scales)

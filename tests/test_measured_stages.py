@@ -10,7 +10,7 @@ from scipy import stats
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.engine.samplers import Stream
-from cmosnoise.model.seeds import fixed_key, pixel_index
+from cmosnoise.model.seeds import fixed_key
 from cmosnoise.model.stages import nonlinearity, pixel_offset, read_noise
 
 SIZE = {"width": 320, "height": 240}
@@ -45,8 +45,8 @@ def test_offset_map_has_the_configured_moments_and_ppm():
 def test_offset_map_is_addressed_per_pixel_and_independent_of_exposure_and_temperature():
     cfg = load_config(extra={"sensor": SIZE, "pixel_offset": {"enabled": True, "sigma_e": 3.0}})
     whole = Sensor(cfg, seed=7).fixed_pattern.pixel_offset
-    tile = pixel_offset.offset_map(pixel_offset.offset_model(3.0), fixed_key(7, "pixel_offset"),
-                                   pixel_index((17, 90, 33, 301), 320))
+    tile = pixel_offset.offset_map(pixel_offset.offset_model(3.0), fixed_key(7, "pixel_offset"), (17, 90, 33, 301),
+                                   320)
     np.testing.assert_array_equal(tile, whole[17:90, 33:301])
     warm = load_config(extra={"sensor": {**SIZE, "temperature_c": 60}, "exposure": {"integration_time_s": 2.0},
                               "pixel_offset": {"enabled": True, "sigma_e": 3.0}})

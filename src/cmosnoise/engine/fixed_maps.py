@@ -152,6 +152,35 @@ def normal_map(region, cols: int, key: tuple[int, int], mean: float, sigma: floa
     return out
 
 
+def offset_map(region, cols: int, key: tuple[int, int], sigma: float, fraction: float = 0.0, tail_max: float = 0.0,
+               engine: str = "auto") -> np.ndarray:
+    """``sigma z`` per pixel, plus ``u * tail_max`` where the pixel is in the tail, over ``region = (row0, row1,
+    col0, col1)`` of a sensor ``cols`` wide, (rows, cols) float32 (rounded from float64 once): the pixel offsets'
+    map (:func:`cmosnoise.model.stages.pixel_offset.offset_map`).
+
+    Block 0 of a pixel's counter gives z (Box-Muller); block 1 its tail membership (first uniform below
+    ``fraction``) and ``u`` (second uniform), drawn only where ``fraction > 0``. ``engine``: "numpy" (the
+    specification, in row bands), "compiled", "auto" (compiled where numba is present); "cuda" makes it with
+    the compiled CPU loop (the same bits; the map is uploaded with the others).
+    """
+    region = _check(region, cols)
+    out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
+    k0, k1 = _key(key)
+    if _compiled("auto" if engine == "cuda" else engine):
+        with ONE_LAUNCH:
+            _kernels()["offset"](out, region[0], region[2], np.uint64(cols), k0, k1, float(sigma), float(fraction),
+                                 float(tail_max))
+        return out
+    for a, b in bands(region):
+        index = pixel_index((a, b, region[2], region[3]), cols)
+        values = sigma * normal_from(*uniform_pair(index, _ZERO, _ZERO, _ZERO, k0, k1))
+        if fraction > 0.0:
+            member, u = uniform_pair(index, _ZERO, _ZERO, _ONE, k0, k1)
+            values = values + np.where(member < fraction, u * tail_max, 0.0)
+        out[a - region[0]:b - region[0]] = values
+    return out
+
+
 def heavy_tail_values(u_body, u_member, u_tail, grid: tuple[float, float, int], points, w: float = 0.0,
                       body_scale: float = 1.0, tail_scale: float = 1.0) -> np.ndarray:
     """A heavy-tailed map's values for given variates (open uniforms, arrays of any one shape), float64, by NumPy:

@@ -577,6 +577,19 @@ if numba is not None:
                 out[i, j] = np.float32(_normal_value(u1, u2, mean, sigma, low))
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
+    def _offset_map(out, r0, c0, cols, k0, k1, sigma, fraction, tail_max):
+        """fixed_maps.offset_map, compiled: a rectangle of the pixel offsets, parallel over its rows."""
+        for i in numba.prange(out.shape[0]):
+            base = np.uint64(r0 + i) * cols + np.uint64(c0)
+            for j in range(out.shape[1]):
+                u1, u2 = _uniform_pair(base + np.uint64(j), _Z64, _Z64, _Z64, k0, k1)
+                v = sigma * _normal_from(u1, u2)
+                if fraction > 0.0:
+                    member, u = _uniform_pair(base + np.uint64(j), _Z64, _Z64, _ONE64, k0, k1)
+                    v = v + (u * tail_max if member < fraction else 0.0)
+                out[i, j] = np.float32(v)
+
+    @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _heavy_tail_map(out, r0, c0, cols, k0, k1, start, step, last, tables, params, w, body_scale, tail_scale,
                         two):
         """fixed_maps.heavy_tail_map, compiled: a rectangle of a heavy-tailed map, parallel over its rows.
@@ -615,7 +628,7 @@ def fixed_map_kernels() -> dict:
     """The compiled loops of :mod:`.fixed_maps` (say so once when they are compiled rather than loaded)."""
     if not (_normal_map.signatures or _heavy_tail_map.signatures) and not _cached_for_this_machine(_heavy_tail_map):
         _logger.info("compiling the fixed-pattern loops for this machine (once; a few seconds) ...")
-    return {"normal": _normal_map, "heavy_tail": _heavy_tail_map}
+    return {"normal": _normal_map, "heavy_tail": _heavy_tail_map, "offset": _offset_map}
 
 
 def _version_of(package: str) -> str | None:

@@ -45,7 +45,7 @@ import numpy as np
 
 from ..engine.telegraph import Telegraphs
 from . import physics
-from .seeds import fixed_key, pixel_index
+from .seeds import fixed_key
 from .spec import SensorSpec
 from .stages import (
     column_noise,
@@ -333,7 +333,7 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
         maps["column_sigma"], maps["vfpn"], maps["column_gain"] = held("column", lambda: _column_maps(c, c0, c1))
     if c.pixel_offset.enabled and (spec.offsets.sigma_e > 0 or spec.offsets.tail_fraction > 0):
         maps["pixel_offset"] = held("pixel_offset", lambda: pixel_offset.offset_map(
-            spec.offsets, fixed_key(seed, "pixel_offset"), pixel_index(region, cols)))
+            spec.offsets, fixed_key(seed, "pixel_offset"), region, cols, engine))
     if sf.enabled and sf.rts.enabled:
         maps["traps"] = held("traps", lambda: random_telegraph.draw_traps(
             sf.rts, fixed_key(seed, "source_follower_rts"), shape), whole=True)

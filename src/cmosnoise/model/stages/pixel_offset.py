@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from ...engine.samplers import Stream
+from ...engine import fixed_maps
 
 
 @dataclass(frozen=True)
@@ -107,17 +107,31 @@ def offset_model(sigma_e: float, ppm_above: float | None = None, threshold_e: fl
     return OffsetModel(float(sigma_e), f, float(max_e))
 
 
-def offset_map(model: OffsetModel, key: tuple[int, int], index: np.ndarray) -> np.ndarray:
-    """The fixed offsets (e-) of the pixels at ``index`` (``r * cols + c``, :func:`~cmosnoise.model.seeds.pixel_index`),
+def offset_map(model: OffsetModel, key: tuple[int, int], region: tuple[int, int, int, int], cols: int,
+               engine: str = "auto") -> np.ndarray:
+    """The fixed offsets (e-) of the pixels of ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide,
     float32, from the stage's fixed ``key``.
 
     Block 0 of a pixel's counter (frame and sequence 0) gives the body's
     normal (Box-Muller), block 1 its tail membership (first uniform below
-    ``tail_fraction``) and where in the tail it sits (second uniform).
+    ``tail_fraction``) and where in the tail it sits (second uniform):
+    :func:`cmosnoise.engine.fixed_maps.offset_map`, compiled, any rectangle alone.
+
+    Parameters
+    ----------
+    model : OffsetModel
+        The offsets' law (:func:`offset_model`).
+    key : (int, int)
+        The stage's fixed key (:func:`cmosnoise.model.seeds.fixed_key`).
+    region : (row0, row1, col0, col1)
+        The rectangle.
+    cols : int
+        The sensor's width (a pixel's address is ``r * cols + c``).
+    engine : {"auto", "numpy", "compiled", "cuda"}
+        Where the map is made (the same bits each way).
+
+    Returns
+    -------
+    (row1 - row0, col1 - col0) float32 array, e-
     """
-    stream = Stream(key, 0, 0)
-    values = model.sigma_e * stream.normal(index)
-    if model.tail_fraction > 0.0:
-        member, where = stream.uniforms(index, 1)
-        values = values + np.where(member < model.tail_fraction, where * model.tail_max_e, 0.0)
-    return values.astype(np.float32)
+    return fixed_maps.offset_map(region, cols, key, model.sigma_e, model.tail_fraction, model.tail_max_e, engine)
