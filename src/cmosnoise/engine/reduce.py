@@ -194,9 +194,10 @@ def combine(parts: list[tuple[int, dict[str, float]]]) -> dict[str, float]:
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def _histogram(keys, shift, prefix, prefix_shift, chunks):  # pragma: no cover - compiled
-        """Counts of ``(key >> shift) & 0xFFFF`` over the keys whose ``key >> prefix_shift`` is ``prefix``
-        (every key where ``prefix_shift`` is 32)."""
+    def _histogram(keys, shift, prefix, every, chunks):  # pragma: no cover - compiled
+        """Counts of ``(key >> shift) & 0xFFFF`` over every key (``every``), or over the keys whose high 16 bits
+        are ``prefix``; a key is the float's bits made to order as the floats do (sign flipped, or all bits for
+        a negative)."""
         n = keys.size
         step = (n + chunks - 1) // chunks
         counts = np.zeros((chunks, 1 << 16), np.int64)
@@ -207,7 +208,7 @@ if numba is not None:
                     u = ~u
                 else:
                     u = u | np.uint32(0x80000000)
-                if prefix_shift == 32 or (u >> prefix_shift) == prefix:
+                if every or (u >> np.uint32(16)) == prefix:
                     counts[p, (u >> shift) & np.uint32(0xFFFF)] += 1
         return counts.sum(axis=0)
 
@@ -218,7 +219,7 @@ def _order_statistics(bits: np.ndarray, ks: list[int]) -> list[np.float32]:
     16 bits of the keys in each ``k``'s bin (one pass per distinct bin: the two middle values share one)."""
     chunks = 16
     with ONE_LAUNCH:
-        high = np.cumsum(_histogram(bits, 16, np.uint32(0), 32, chunks))
+        high = np.cumsum(_histogram(bits, 16, np.uint32(0), True, chunks))
     low: dict[int, np.ndarray] = {}
     out = []
     for k in ks:
@@ -226,7 +227,7 @@ def _order_statistics(bits: np.ndarray, ks: list[int]) -> list[np.float32]:
         rank = k - (int(high[b - 1]) if b else 0)
         if b not in low:
             with ONE_LAUNCH:
-                low[b] = np.cumsum(_histogram(bits, 0, np.uint32(b), 16, chunks))
+                low[b] = np.cumsum(_histogram(bits, 0, np.uint32(b), False, chunks))
         key = np.uint32((b << 16) | int(np.searchsorted(low[b], rank, side="right")))
         u = ~key if not key & np.uint32(0x80000000) else key & np.uint32(0x7FFFFFFF)
         out.append(np.array([u], np.uint32).view(np.float32)[0])
