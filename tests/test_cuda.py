@@ -181,7 +181,8 @@ _PTX_PROBE = textwrap.dedent('''
 
     fake = types.SimpleNamespace(cuda=Host, **{n: Launch(n) for n in ("lines", "trap_values", "pixel_sums",
                                                                        "blink_values", "pixels", "stick",
-                                                                       "normal_map", "heavy_tail_map")})
+                                                                       "normal_map", "heavy_tail_map",
+                                                                       "offset_map")})
     cuda_kernel.check = lambda: None
     cuda_kernel.kernels = lambda: fake
     sensor = Sensor(json.loads(sys.argv[1]), seed=5)
@@ -195,6 +196,7 @@ _PTX_PROBE = textwrap.dedent('''
     warm = Sensor({**json.loads(sys.argv[1]), "sensor": {"width": 64, "height": 48, "temperature_c": 40}}, seed=5)
     s = warm.dark_state.inversion()
     fixed_maps.heavy_tail_map((0, 8, 0, 8), 64, (1, 2), LOGIT_GRID, s["points"], s["w"], engine="cuda")
+    fixed_maps.offset_map((0, 8, 0, 8), 64, (1, 2), 3.0, 0.01, 200.0, engine="cuda")
     out = {}
     for name, args in calls:
         sig = tuple(numba.typeof(a) for a in args)
@@ -222,7 +224,7 @@ def test_nvvm_compiles_the_kernels_without_multiply_add_contraction():
     assert r.returncode == 0, r.stderr[-3000:]
     counts = json.loads(r.stdout.strip().splitlines()[-1])
     assert set(counts) == {"lines", "trap_values", "pixel_sums", "blink_values", "pixels", "stick", "normal_map",
-                           "heavy_tail_map"}
+                           "heavy_tail_map", "offset_map"}
     for name, c in counts.items():
         assert c["strict_fma"] == 0 and c["strict_plain_mul"] == 0, (name, c)
     assert counts["pixels"]["strict_mul_rn"] > 50 and counts["pixels"]["loose_fma"] > 50, counts["pixels"]
@@ -295,3 +297,7 @@ def test_the_fixed_maps_made_on_the_gpu_are_the_cpus():
         args = ((2, rows, 3, cols), cols, fixed_key(3, "dark_current"), LOGIT_GRID, points, w, *scales)
         cpu = fixed_maps.heavy_tail_map(*args, engine="compiled")
         assert np.array_equal(fixed_maps.heavy_tail_map(*args, engine="cuda"), cpu), (len(points), scales)
+    for tail in [(0.0, 0.0), (0.05, 200.0)]:  # the pixel offsets, without and with a tail (5 %: many members)
+        args = ((3, rows, 1, cols - 4), cols, fixed_key(3, "pixel_offset"), 2.5, *tail)
+        cpu = fixed_maps.offset_map(*args, engine="compiled")
+        assert np.array_equal(fixed_maps.offset_map(*args, engine="cuda"), cpu), tail

@@ -275,6 +275,20 @@ def normal_map(out, r0, c0, cols, k0, k1, mean, sigma, low):
 
 
 @cuda.jit(fastmath=False)
+def offset_map(out, r0, c0, cols, k0, k1, sigma, fraction, tail_max):
+    """kernel._offset_map on the device: one thread a pixel; block 1 (the tail) drawn only where the map has one."""
+    j, i = cuda.grid(2)
+    if i < out.shape[0] and j < out.shape[1]:
+        index = np.uint64(r0 + i) * cols + np.uint64(c0) + np.uint64(j)
+        u1, u2 = uniform_pair(index, _Z64, _Z64, _Z64, k0, k1)
+        v = sigma * normal_from(u1, u2)
+        if fraction > 0.0:
+            member, u = uniform_pair(index, _Z64, _Z64, _ONE64, k0, k1)
+            v = v + (u * tail_max if member < fraction else 0.0)
+        out[i, j] = np.float32(v)
+
+
+@cuda.jit(fastmath=False)
 def heavy_tail_map(out, r0, c0, cols, k0, k1, start, step, last, tables, params, w, body_scale, tail_scale, two):
     """kernel._heavy_tail_map on the device: one thread a pixel; block 1 (the tail's magnitude) drawn only for the
     tail's members, as there."""

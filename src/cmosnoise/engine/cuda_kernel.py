@@ -188,13 +188,15 @@ def fixed_map(kind: str, shape: tuple[int, int], *args):
 
     Parameters
     ----------
-    kind : {"normal", "heavy_tail"}
-        Which of :mod:`.fixed_maps`' compiled loops (``kernel._normal_map``, ``kernel._heavy_tail_map``).
+    kind : {"normal", "heavy_tail", "offset"}
+        Which of :mod:`.fixed_maps`' compiled loops (``kernel._normal_map``, ``kernel._heavy_tail_map``,
+        ``kernel._offset_map``).
     shape : (h, w)
         The rectangle's size.
     *args
         That loop's arguments after ``out`` (the rectangle's corner, the sensor's width, the key, the map's
-        parameters), as :func:`.fixed_maps.normal_map` and :func:`.fixed_maps.heavy_tail_map` give them.
+        parameters), as :func:`.fixed_maps.normal_map`, :func:`.fixed_maps.heavy_tail_map` and
+        :func:`.fixed_maps.offset_map` give them.
 
     Returns
     -------
@@ -206,7 +208,8 @@ def fixed_map(kind: str, shape: tuple[int, int], *args):
     args = tuple(cuda.to_device(np.ascontiguousarray(a)) if isinstance(a, np.ndarray) and a.ndim else a for a in args)
     grid = ((out.shape[1] + BLOCK - 1) // BLOCK, out.shape[0])
     with strict_arithmetic():
-        (k.normal_map if kind == "normal" else k.heavy_tail_map)[grid, (BLOCK, 1)](out, *args)
+        {"normal": k.normal_map, "heavy_tail": k.heavy_tail_map, "offset": k.offset_map}[kind][grid, (BLOCK, 1)](
+            out, *args)
     return out
 
 

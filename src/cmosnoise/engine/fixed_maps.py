@@ -160,16 +160,18 @@ def offset_map(region, cols: int, key: tuple[int, int], sigma: float, fraction: 
 
     Block 0 of a pixel's counter gives z (Box-Muller); block 1 its tail membership (first uniform below
     ``fraction``) and ``u`` (second uniform), drawn only where ``fraction > 0``. ``engine``: "numpy" (the
-    specification, in row bands), "compiled", "auto" (compiled where numba is present); "cuda" makes it with
-    the compiled CPU loop (the same bits; the map is uploaded with the others).
+    specification, in row bands), "compiled", "auto" (compiled where numba is present), or "cuda" (the GPU's
+    kernel, :func:`.cuda_kernel.fixed_map`; the same bits).
     """
     region = _check(region, cols)
     out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
     k0, k1 = _key(key)
-    if _compiled("auto" if engine == "cuda" else engine):
+    args = (region[0], region[2], np.uint64(cols), k0, k1, float(sigma), float(fraction), float(tail_max))
+    if engine == "cuda":
+        return _on_device("offset", out, args)
+    if _compiled(engine):
         with ONE_LAUNCH:
-            _kernels()["offset"](out, region[0], region[2], np.uint64(cols), k0, k1, float(sigma), float(fraction),
-                                 float(tail_max))
+            _kernels()["offset"](out, *args)
         return out
     for a, b in bands(region):
         index = pixel_index((a, b, region[2], region[3]), cols)
