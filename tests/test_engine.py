@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -342,3 +343,23 @@ def test_numba_imported_first_still_gets_the_full_vector_width_or_says_it_did_no
     out = subprocess.run([sys.executable, "-c", late], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == ("AVX-512 (256-bit preferred)" if avx512 else vectors), out.stdout
+
+
+def test_the_summarys_compiled_loops_say_once_that_they_compile(tmp_path):
+    """#33: a compile of any variant says so once. With an empty compile cache the summary's reductions (one
+    module's loops, several of them compiled in turn) are announced once; a second process, which loads them
+    from the cache, says nothing."""
+    import subprocess
+    import sys
+
+    code = ("import logging, numpy as np\n"
+            "logging.basicConfig(level=logging.INFO, format='%(message)s')\n"
+            "from cmosnoise.engine import reduce\n"
+            "a = np.random.default_rng(0).random((300, 300)).astype(np.float32)\n"
+            "reduce.statistics(a); reduce.median(a); reduce.positions_above(a, 0.5); reduce.statistics(a)\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    said = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
+            for _ in range(2)]
+    assert all(r.returncode == 0 for r in said), said[0].stderr + said[1].stderr
+    assert said[0].stderr.count("compiling the summary's reductions for this machine") == 1, said[0].stderr
+    assert "compil" not in said[1].stderr, said[1].stderr

@@ -91,4 +91,54 @@ if numba is not None and not os.environ.get("NUMBA_THREADING_LAYER") and numba.c
 #: the explorer's figure thread beside its pictures, a Dask worker's threads); the loops use every core anyway.
 ONE_LAUNCH = threading.RLock()
 
-__all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH"]
+
+
+def cached_for_this_machine(dispatcher) -> bool:
+    """Whether numba's on-disk cache holds a compile of ``dispatcher`` for this machine and vector width (any
+    argument types); True where numba's internals cannot say (nothing is announced then).
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher
+        A function compiled with ``cache=True``.
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        index = dispatcher._cache._cache_file._load_index()  # {(signature, magic tuple, ...): file}
+        magic = dispatcher.targetctx.codegen().magic_tuple()
+        return any(key[1] == magic for key in index)
+    except Exception:  # numba's internals moved
+        return True
+
+
+_ANNOUNCED: set = set()
+_ANNOUNCE_LOCK = threading.Lock()
+
+
+def announce(what: str, *dispatchers) -> None:
+    """Say once a process, before the first call of ``what``'s compiled loops, that they are being compiled for
+    this machine, where none of them is in memory or in numba's on-disk cache (a fresh installation, or a
+    changed source). On the command line the message shows on stderr.
+
+    Parameters
+    ----------
+    what : str
+        What the loops are, as the message names them ("the summary's reductions").
+    *dispatchers : numba dispatchers
+        The loops.
+    """
+    with _ANNOUNCE_LOCK:
+        if what in _ANNOUNCED:
+            return
+        _ANNOUNCED.add(what)
+    if any(d.signatures for d in dispatchers) or any(cached_for_this_machine(d) for d in dispatchers):
+        return
+    import logging
+
+    logging.getLogger(__name__).info(f"compiling {what} for this machine (once; a few seconds) ...")
+
+
+__all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH", "cached_for_this_machine", "announce"]

@@ -626,7 +626,7 @@ if numba is not None:
 
 def fixed_map_kernels() -> dict:
     """The compiled loops of :mod:`.fixed_maps` (say so once when they are compiled rather than loaded)."""
-    if not (_normal_map.signatures or _heavy_tail_map.signatures) and not _cached_for_this_machine(_heavy_tail_map):
+    if not (_normal_map.signatures or _heavy_tail_map.signatures) and not jit.cached_for_this_machine(_heavy_tail_map):
         _logger.info("compiling the fixed-pattern loops for this machine (once; a few seconds) ...")
     return {"normal": _normal_map, "heavy_tail": _heavy_tail_map, "offset": _offset_map}
 
@@ -669,24 +669,13 @@ _DUMMY_F32 = np.zeros(1, np.float32)
 _FLAGS = 13
 
 
-def _cached_for_this_machine(dispatcher) -> bool:
-    """Whether numba's on-disk cache holds a compile of ``dispatcher`` for this machine and vector width (any
-    argument types); True where numba's internals cannot say (nothing is announced then)."""
-    try:
-        index = dispatcher._cache._cache_file._load_index()  # {(signature, magic tuple, ...): file}
-        magic = dispatcher.targetctx.codegen().magic_tuple()
-        return any(key[1] == magic for key in index)
-    except Exception:  # numba's internals moved
-        return True
-
-
 def _needs_compile() -> int:
     """How many variants of the kernel this process holds (-1 without numba); says first that it compiles when
     nothing is cached for this machine and vector width."""
     if numba is None:
         return -1
     held = len(_render.signatures)
-    if not held and not _cached_for_this_machine(_render):
+    if not held and not jit.cached_for_this_machine(_render):
         _logger.info(f"compiling the frame kernel for this machine ({jit.vectors()}; once; about half a minute) ...")
     return held
 

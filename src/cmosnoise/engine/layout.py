@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import ONE_LAUNCH, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
 
 _BLOCK = 64
 
@@ -57,6 +57,7 @@ def interleave_transposed(planes: list[np.ndarray]) -> np.ndarray:
         if numba is None or plane.size < 1 << 16:  # small: NumPy's copy is quick, and nothing compiled is loaded
             out[..., c] = plane.T
             continue
+        announce("the image interleave", _interleave)
         with ONE_LAUNCH:
             _interleave(plane, out, c)
     return out

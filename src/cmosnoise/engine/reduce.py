@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import ONE_LAUNCH, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+
+#: how the compile message names this module's loops
+WHAT = "the summary's reductions"
 
 #: independent partial sums per row in :func:`statistics`' compiled pass
 _LANES = 8
@@ -148,6 +151,7 @@ def statistics(a: np.ndarray) -> dict[str, float]:
         values = (x.mean(), x.var(), np.mean(x * x), x.min(), x.max())
     else:
         a = np.ascontiguousarray(a)
+        announce(WHAT, _rows, _join)
         with ONE_LAUNCH:
             s = _join(_rows(a), a.shape[1])
         values = (s[0] / n, s[1] / n, s[2] / n, s[3], s[4])
@@ -218,6 +222,7 @@ def _order_statistics(bits: np.ndarray, ks: list[int]) -> list[np.float32]:
     selection on the high 16 bits of a key that orders as the floats do (one pass for every ``k``), then on the low
     16 bits of the keys in each ``k``'s bin (one pass per distinct bin: the two middle values share one)."""
     chunks = 16
+    announce(WHAT, _histogram)
     with ONE_LAUNCH:
         high = np.cumsum(_histogram(bits, 16, np.uint32(0), True, chunks))
     low: dict[int, np.ndarray] = {}
@@ -337,6 +342,7 @@ def positions_above(values: np.ndarray, threshold: float) -> tuple[np.ndarray, n
     values = np.ascontiguousarray(values)
     # NumPy compares a float array with a Python float in the array's type (NEP 50), an integer array in float64
     threshold = values.dtype.type(threshold) if values.dtype.kind == "f" else float(threshold)
+    announce(WHAT, _count_above, _fill_above)
     with ONE_LAUNCH:
         counts = _count_above(values, threshold)
         start = np.zeros(counts.size, np.int64)
@@ -388,6 +394,7 @@ def excess_positions(charge: np.ndarray, photo: np.ndarray, read_var: float, k_s
         r, c = np.nonzero(excess / t_int > threshold)
         return r.astype(np.int64), c.astype(np.int64), bool(photo.size and photo.max() > 0)
     keep = np.empty(charge.shape, np.bool_)
+    announce(WHAT, _excess)
     with ONE_LAUNCH:
         lit = bool(_excess(np.ascontiguousarray(charge), np.ascontiguousarray(photo), float(read_var),
                            float(k_sigma), float(t_int), float(threshold), keep))

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .jit import ONE_LAUNCH, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
@@ -74,6 +74,7 @@ def mosaic(planes: np.ndarray, columns: sp.csr_matrix, cell: np.ndarray, gain: n
             out[i::2, j::2] = (columns @ planes[c].T).T[i::2, j::2] * gain[c]
         return out
     out = np.empty((rows, cols))
+    announce("the scene's resampling through the CFA", _mosaic)
     with ONE_LAUNCH:
         _mosaic(planes, np.ascontiguousarray(columns.data, np.float64), columns.indices.astype(np.int64),
                 columns.indptr.astype(np.int64), cell, gain, out)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import ONE_LAUNCH, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
@@ -72,6 +72,7 @@ def framed_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     flipped = k[::-1, ::-1]  # a convolution is the correlation with the flipped kernel
     dr, dc = np.nonzero(np.abs(flipped) > np.finfo(np.float64).eps)
     out = np.empty((x.shape[0] + 2, x.shape[1] + 2), x.dtype)
+    announce("the crosstalk stencil", _framed)
     with ONE_LAUNCH:
         _framed(x, dr.astype(np.int64), dc.astype(np.int64), np.ascontiguousarray(flipped[dr, dc]), out)
     return out
