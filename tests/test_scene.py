@@ -126,3 +126,16 @@ def test_a_sensor_takes_a_picture_through_the_cfa_without_its_full_size_rgb():
     assert np.array_equal(whole, want)
     part = Sensor(cfg, window=(100, 400, 40, 333)).scene_signal("photo")
     assert np.array_equal(part, whole[100:400, 40:333])
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG", "none"])
+def test_a_windows_cfa_signal_is_the_copied_windows(pattern):
+    """window_cfa reads each pixel's channel from the source where it lies: the same bits as to_cfa of the
+    window's copy (what a data set's crops go through)."""
+    img = scene.source_image("photo", (300, 400))
+    for corner, shape in [((0, 0), (300, 400)), ((17, 33), (128, 96)), ((1, 2), (5, 7))]:
+        got = scene.window_cfa(img, corner, shape, pattern, (0.9, 1.0, 1.1))
+        want = scene.to_cfa(scene.window_of(img, corner, shape), pattern, (0.9, 1.0, 1.1))
+        assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+    with pytest.raises(CmosnoiseError, match="leaves the source"):
+        scene.window_cfa(img, (290, 0), (20, 20), pattern)

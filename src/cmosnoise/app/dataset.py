@@ -404,8 +404,9 @@ def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, fram
     st = settings(recipe, index, sources)
     c = st.config
     sensor = Sensor(c, device=device)
-    img = scene_mod.window_of(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape)
-    shot = sensor.expose(img)
+    # the crop's pixels through the CFA, read from the source where they lie (no copy of the window)
+    shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape,
+                                              sensor.cfa, sensor.spec.channel_responsivity))
     raw = shot.frames_on_device([frame])[0][0] if on_device else shot.frame(frame)
     truth = ground_truth.truth(shot, recipe.white_threshold_e_per_s)
     t = sensor.transfer

@@ -760,6 +760,46 @@ def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) 
     return np.ascontiguousarray(img[r:r + shape[0], c:c + shape[1]], dtype=np.float64)
 
 
+def window_cfa(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int], pattern: str,
+               responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """``to_cfa(window_of(img, window, shape), pattern, responsivity)``, bit for bit, without the window's float64
+    copy: each pixel's channel is read from the source where it lies.
+
+    Parameters
+    ----------
+    img : (rows, cols, 3) array, or (rows, cols)
+        The whole source (:func:`source_image`), or a mosaic (relative signal per pixel, returned as it is).
+    window : (row, col)
+        The window's corner.
+    shape : (rows, cols)
+        The window's size.
+    pattern : str
+        RGGB, BGGR, GRBG, GBRG, or none (monochrome).
+    responsivity : (float, float, float)
+        The R, G and B pixels' relative responsivity.
+
+    Returns
+    -------
+    (rows, cols) float64 array
+        Relative signal per pixel.
+
+    Examples
+    --------
+    >>> from cmosnoise import scene
+    >>> img = scene.source_image("photo", (60, 80))
+    >>> a = scene.window_cfa(img, (10, 20), (32, 40), "RGGB")
+    >>> bool((a == scene.to_cfa(scene.window_of(img, (10, 20), (32, 40)), "RGGB")).all())
+    True
+    """
+    if img.ndim == 2:  # a mosaic already (a user's clean raw): the window is the signal
+        return window_of(img, window, shape)
+    if cfa_mod.is_mono(pattern):  # the luminance is a matrix product: on the contiguous window, as there
+        return to_cfa(window_of(img, window, shape), pattern, responsivity)
+    r, c = window
+    _check_window(img.shape, window, shape)
+    return to_cfa(np.asarray(img[r:r + shape[0], c:c + shape[1]], dtype=np.float64), pattern, responsivity)
+
+
 def _check_window(source_shape, window: tuple[int, int], shape: tuple[int, int]) -> None:
     """A one-line error where a ``shape`` window at ``window`` leaves a source of ``source_shape``."""
     r, c = window
