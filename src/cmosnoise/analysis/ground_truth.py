@@ -260,11 +260,14 @@ def _compile_far_pixels():
                 elif sd < 1.0:
                     centre = np.rint(mu)
                     code = 0.0
-                    for d in range(-8, 9):  # 8 codes each side: beyond 7.5 sigma for sigma < 1
+                    # 8 codes each side: beyond 7.5 sigma for sigma < 1. A code's upper edge is the next one's
+                    # lower edge, the same float (n + 0.5 and (n + 1) - 0.5 are exact): each edge's erfc once
+                    lo = 0.5 * math.erfc(-((centre - 8.0 - 0.5 - mu) / sd) / math.sqrt(2.0))
+                    for d in range(-8, 9):
                         n = centre + d
                         hi = 0.5 * math.erfc(-((n + 0.5 - mu) / sd) / math.sqrt(2.0))
-                        lo = 0.5 * math.erfc(-((n - 0.5 - mu) / sd) / math.sqrt(2.0))
                         code += n * (hi - lo)
+                        lo = hi
                 else:
                     code = mu
                 out[i, j] = np.float32(min(max(code, 0.0), max_code))
