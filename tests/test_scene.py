@@ -139,3 +139,20 @@ def test_a_windows_cfa_signal_is_the_copied_windows(pattern):
         assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
     with pytest.raises(CmosnoiseError, match="leaves the source"):
         scene.window_cfa(img, (290, 0), (20, 20), pattern)
+
+
+def test_the_compiled_cfa_pick_is_numpys_strided_product():
+    """to_cfa's compiled pass (engine/layout.cfa_pick, above 65 536 pixels) equals the 2 x 2 cell's strided
+    products bit for bit: float64 and float32 images, a non-contiguous view, a broadcast flat field."""
+    from cmosnoise.engine.layout import cfa_pick
+
+    rng = np.random.default_rng(4)
+    cell, gain = np.array([[1, 0], [2, 1]]), np.array([0.83, 1.0, 1.21])
+    images = [rng.random((301, 457, 3)), rng.random((300, 400, 3)).astype(np.float32),
+              rng.random((700, 500, 3))[::2, 1::2], np.broadcast_to(np.array([0.2, 0.5, 0.7]), (333, 444, 3))]
+    for rgb in images:
+        want = np.empty(rgb.shape[:2])
+        for (i, j), ch in np.ndenumerate(cell):
+            want[i::2, j::2] = rgb[i::2, j::2, ch] * gain[ch]
+        got = cfa_pick(rgb, cell, gain)
+        assert got.dtype == np.float64 and np.array_equal(got.view(np.uint64), want.view(np.uint64))

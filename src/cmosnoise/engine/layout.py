@@ -1,9 +1,12 @@
-"""Array layouts changed by compiled, cache-blocked loops: what NumPy does slowly at tens of megapixels.
+"""Array layouts changed by compiled loops: what NumPy does slowly at tens of megapixels.
 
 A channel-interleaved image (rows, cols, C) made from planes held transposed (cols, rows), as a separable
 resampling gives them (:func:`cmosnoise.model.scene.resample`): NumPy's strided copy walks one of the two
 arrays against its memory order and took 3 to 5 s at 50 MP; blocks of 64 x 64 that both fit in cache, in
 parallel over row blocks, take a tenth of it. Only values move, so the result is the same bits.
+
+The mosaic a colour filter array samples from such an image (:func:`cfa_pick`, what ``scene.to_cfa`` calls):
+each pixel's own channel times its gain in one parallel pass, the same product as NumPy's.
 """
 
 from __future__ import annotations
@@ -26,6 +29,58 @@ if numba is not None:
                 for i in range(i0, i1):
                     for j in range(j0, j1):
                         out[i, j, c] = plane[j, i]
+
+
+if numba is not None:
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _pick(rgb, cell, gain, out):  # pragma: no cover - compiled
+        rows, cols = out.shape
+        for i in numba.prange(rows):
+            for j in range(cols):
+                c = cell[i & 1, j & 1]
+                out[i, j] = np.float64(rgb[i, j, c]) * gain[c]
+
+
+def cfa_pick(rgb: np.ndarray, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
+    """Each pixel's own channel of a channel-interleaved image, times that channel's gain: the mosaic a colour
+    filter array samples, in one parallel pass (NumPy's four strided copies of the 2 x 2 cell's positions write
+    every other value, a fifth of the speed at tens of megapixels).
+
+    Parameters
+    ----------
+    rgb : (rows, cols, C) array
+        The image (any strides: a broadcast flat field too).
+    cell : (2, 2) int array
+        The channel of each position of the 2 x 2 cell (row and column parity).
+    gain : (C,) float64 array
+        Each channel's factor.
+
+    Returns
+    -------
+    (rows, cols) float64 array
+        ``rgb[i, j, cell[i % 2, j % 2]] * gain[cell[i % 2, j % 2]]``, the same bits as NumPy's product.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cmosnoise.engine.layout import cfa_pick
+    >>> rgb = np.arange(12.0).reshape(2, 2, 3)
+    >>> cfa_pick(rgb, np.array([[0, 1], [1, 2]]), np.array([1.0, 10.0, 100.0]))
+    array([[   0.,   40.],
+           [  70., 1100.]])
+    """
+    rows, cols = rgb.shape[:2]
+    cell = np.ascontiguousarray(cell, dtype=np.int64)
+    gain = np.ascontiguousarray(gain, dtype=np.float64)
+    out = np.empty((rows, cols), np.result_type(rgb.dtype, np.float64))
+    if numba is None or rows * cols < 1 << 16 or out.dtype != np.float64:
+        for (i, j), ch in np.ndenumerate(cell):
+            out[i::2, j::2] = rgb[i::2, j::2, ch] * gain[ch]
+        return out
+    announce("the image interleave", _interleave, _pick)
+    with ONE_LAUNCH:
+        _pick(rgb, cell, gain, out)
+    return out
 
 
 def interleave_transposed(planes: list[np.ndarray]) -> np.ndarray:

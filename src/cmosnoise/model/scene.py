@@ -873,11 +873,8 @@ def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.nd
     """
     if cfa_mod.is_mono(pattern):
         return rgb @ LUMINANCE
-    resp = np.asarray(responsivity, dtype=np.float64)
-    out = np.empty(rgb.shape[:2], dtype=np.result_type(rgb.dtype, resp.dtype))
-    for (i, j), ch in np.ndenumerate(cfa_mod.tile(pattern)):  # each of the 2 x 2 cell's positions, strided
-        out[i::2, j::2] = rgb[i::2, j::2, ch] * resp[ch]
-    return out
+    # each pixel's channel times its responsivity, in one compiled pass (engine/layout.py)
+    return layout.cfa_pick(rgb, cfa_mod.tile(pattern), np.asarray(responsivity, dtype=np.float64))
 
 
 def photo_electrons(signal: np.ndarray, peak_rate_e_per_s: float, integration_time_s: float) -> np.ndarray:
@@ -896,4 +893,5 @@ def photo_electrons(signal: np.ndarray, peak_rate_e_per_s: float, integration_ti
     -------
     (rows, cols) float32 array, e-
     """
-    return (signal * (peak_rate_e_per_s * integration_time_s)).astype(np.float32)
+    out = np.empty(np.shape(signal), np.float32)  # the float64 product rounded once, without a float64 copy
+    return np.multiply(signal, peak_rate_e_per_s * integration_time_s, out=out, casting="same_kind")
