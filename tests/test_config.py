@@ -82,3 +82,24 @@ def test_a_typo_in_a_key_gets_a_suggestion(tmp_path):
         assert len(r.stderr.strip().splitlines()) == 1
     r = cli("simulate", "--set", "sensor.zzzz=1", "--out", tmp_path / "o")
     assert r.returncode == 2 and "unknown key 'sensor.zzzz'" in r.stderr and "did you mean" not in r.stderr
+
+
+def test_the_yaml_made_by_sections_is_the_whole_documents():
+    """Config.to_yaml writes each top-level section on its own (kept by its value: a data set writes one
+    configuration per sample); the text equals PyYAML's dump of the whole document, for the default, every
+    preset and sampled virtual cameras, and reads back to the same configuration."""
+    import yaml
+
+    from cmosnoise.app import dataset as ds
+    from cmosnoise.config.loading import preset_names
+
+    configs = [load_config()] + [load_config(preset=name) for name in preset_names()]
+    recipe = ds.Recipe(samples=8, crop=(64, 64), cameras=("led", "sony-imx900"), seed=3)
+    sources = ds.Sources()
+    configs += [ds.settings(recipe, i, sources).config for i in range(8)]
+    dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+    for c in configs:
+        whole = yaml.dump(c.model_dump(mode="json"), Dumper=dumper, sort_keys=False, default_flow_style=None,
+                          width=100)
+        assert c.to_yaml() == whole
+        assert ds.load_sample_config(c.to_yaml()) == c

@@ -9,6 +9,8 @@ unknown key is an error. The schema holds no physics: what the values imply
 
 from __future__ import annotations
 
+import functools
+import json
 import math
 from typing import Literal, Optional, Union
 
@@ -786,9 +788,30 @@ class Config(Section):
 
     def to_yaml(self) -> str:
         """Every key, those that are null included (they read back as null)."""
-        # libyaml's emitter where PyYAML has it (the same text, some 15 times faster: a data set writes one per sample)
-        dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
-        return yaml.dump(self.model_dump(mode="json"), Dumper=dumper, sort_keys=False, default_flow_style=None,
-                         width=100)
+        # a top-level block mapping is its sections' texts one after another: each section is dumped on its own
+        # and kept by its value (a data set writes one configuration per sample, most of its sections the same)
+        return "".join(_section_yaml(json.dumps({k: v}, sort_keys=False))
+                       for k, v in self.model_dump(mode="json").items())
+
+
+class _Top(dict):
+    """A configuration's top-level mapping: written in block style, as it is in the whole text (whose sections
+    are mappings); alone, a section of one scalar (``seed: 0``) would be written in flow style."""
+
+
+class _Dumper(getattr(yaml, "CSafeDumper", yaml.SafeDumper)):  # libyaml's emitter where PyYAML has it
+    """PyYAML's safe dumper that writes :class:`_Top` as a block mapping."""
+
+
+_Dumper.add_representer(_Top, lambda dumper, data: dumper.represent_mapping("tag:yaml.org,2002:map", data,
+                                                                          flow_style=False))
+
+
+@functools.lru_cache(maxsize=512)
+def _section_yaml(section_json: str) -> str:
+    """One top-level section (``{name: value}`` as JSON, the cache's key) as YAML, as it reads in the whole
+    configuration's text (libyaml's emitter: the same text, some 15 times faster than PyYAML's own)."""
+    return yaml.dump(_Top(json.loads(section_json)), Dumper=_Dumper, sort_keys=False, default_flow_style=None,
+                     width=100)
 
 
