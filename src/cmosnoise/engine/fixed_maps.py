@@ -136,19 +136,28 @@ def normal_map(region, cols: int, key: tuple[int, int], mean: float, sigma: floa
     ``engine``: "numpy" (the specification), "compiled", "auto" (compiled where numba is present), or "cuda"
     (the GPU's kernel, :func:`.cuda_kernel.fixed_map`; the same bits).
     """
+    def spec(index, k0, k1):
+        return normal_value(*uniform_pair(index, _ZERO, _ZERO, _ZERO, k0, k1), mean, sigma, low)
+
+    return _made("normal", region, cols, key, lambda: (float(mean), float(sigma), float(low)), spec, engine)
+
+
+def _made(kind: str, region, cols: int, key, params, spec, engine: str) -> np.ndarray:
+    """A map's rectangle, (rows, cols) float32, where ``engine`` says: the GPU's kernel (:func:`_on_device`), the
+    compiled loop ``kind`` (:func:`_kernels`), both given the rectangle's corner, the sensor's width, the key and
+    ``params()``; or the NumPy specification ``spec(index, k0, k1)`` band by band (a band's pixel addresses)."""
     region = _check(region, cols)
     out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
     k0, k1 = _key(key)
-    args = (region[0], region[2], np.uint64(cols), k0, k1, float(mean), float(sigma), float(low))
-    if engine == "cuda":
-        return _on_device("normal", out, args)
-    if _compiled(engine):
+    if engine == "cuda" or _compiled(engine):
+        args = (region[0], region[2], np.uint64(cols), k0, k1, *params())
+        if engine == "cuda":
+            return _on_device(kind, out, args)
         with ONE_LAUNCH:
-            _kernels()["normal"](out, *args)
+            _kernels()[kind](out, *args)
         return out
     for a, b in bands(region):
-        u1, u2 = uniform_pair(pixel_index((a, b, region[2], region[3]), cols), _ZERO, _ZERO, _ZERO, k0, k1)
-        out[a - region[0]:b - region[0]] = normal_value(u1, u2, mean, sigma, low)
+        out[a - region[0]:b - region[0]] = spec(pixel_index((a, b, region[2], region[3]), cols), k0, k1)
     return out
 
 
@@ -163,24 +172,14 @@ def offset_map(region, cols: int, key: tuple[int, int], sigma: float, fraction: 
     specification, in row bands), "compiled", "auto" (compiled where numba is present), or "cuda" (the GPU's
     kernel, :func:`.cuda_kernel.fixed_map`; the same bits).
     """
-    region = _check(region, cols)
-    out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
-    k0, k1 = _key(key)
-    args = (region[0], region[2], np.uint64(cols), k0, k1, float(sigma), float(fraction), float(tail_max))
-    if engine == "cuda":
-        return _on_device("offset", out, args)
-    if _compiled(engine):
-        with ONE_LAUNCH:
-            _kernels()["offset"](out, *args)
-        return out
-    for a, b in bands(region):
-        index = pixel_index((a, b, region[2], region[3]), cols)
+    def spec(index, k0, k1):
         values = sigma * normal_from(*uniform_pair(index, _ZERO, _ZERO, _ZERO, k0, k1))
         if fraction > 0.0:
             member, u = uniform_pair(index, _ZERO, _ZERO, _ONE, k0, k1)
             values = values + np.where(member < fraction, u * tail_max, 0.0)
-        out[a - region[0]:b - region[0]] = values
-    return out
+        return values
+
+    return _made("offset", region, cols, key, lambda: (float(sigma), float(fraction), float(tail_max)), spec, engine)
 
 
 def heavy_tail_values(u_body, u_member, u_tail, grid: tuple[float, float, int], points, w: float = 0.0,
@@ -220,25 +219,17 @@ def heavy_tail_map(region, cols: int, key: tuple[int, int], grid: tuple[float, f
     engine : {"auto", "numpy", "compiled", "cuda"}
         How it is made (the same bits each way); "cuda": on the GPU (:func:`.cuda_kernel.fixed_map`).
     """
-    region = _check(region, cols)
-    out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
-    k0, k1 = _key(key)
-    if engine == "cuda" or _compiled(engine):
+    def params():  # the compiled loops' form: the tables and each point's (fraction, tail_max, floor) as arrays
         two = len(points) == 2
         tables = np.ascontiguousarray([np.asarray(p[0], np.float64) for p in points] * (1 if two else 2))
-        params = np.array([p[1:] for p in points] * (1 if two else 2), np.float64)  # fraction, tail_max, floor
+        per_point = np.array([p[1:] for p in points] * (1 if two else 2), np.float64)
         start, step, last = (float(v) for v in grid)
-        args = (region[0], region[2], np.uint64(cols), k0, k1, start, step, last, tables, params, float(w),
-                float(body_scale), float(tail_scale), two)
-        if engine == "cuda":
-            return _on_device("heavy_tail", out, args)
-        with ONE_LAUNCH:
-            _kernels()["heavy_tail"](out, *args)
-        return out
-    for a, b in bands(region):
-        u = _blocks(pixel_index((a, b, region[2], region[3]), cols), k0, k1)
-        out[a - region[0]:b - region[0]] = heavy_tail_values(*u, grid, points, w, body_scale, tail_scale)
-    return out
+        return start, step, last, tables, per_point, float(w), float(body_scale), float(tail_scale), two
+
+    def spec(index, k0, k1):
+        return heavy_tail_values(*_blocks(index, k0, k1), grid, points, w, body_scale, tail_scale)
+
+    return _made("heavy_tail", region, cols, key, params, spec, engine)
 
 
 def _on_device(kind: str, out: np.ndarray, args: tuple) -> np.ndarray:
