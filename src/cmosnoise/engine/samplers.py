@@ -53,16 +53,26 @@ def tukey_lambda_table(lam: float) -> np.ndarray:
     tails are as finely tabulated as the body. Computed with :mod:`.fdmath`'s
     log and exp (the same bits everywhere); read-only.
     """
+    a, b = _tukey_node_logs()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = a - b if lam == 0.0 else (exp(lam * a) - exp(lam * b)) / lam
+    out = np.ascontiguousarray(q.ravel())
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _tukey_node_logs() -> tuple[np.ndarray, np.ndarray]:
+    """``log(v)`` and ``log(1 - v)`` at :func:`tukey_lambda_table`'s nodes, (TUKEY_OCTAVES, TUKEY_STEPS + 1) each:
+    the same for every shape, made once (a data set of virtual cameras asks for a new shape every sample)."""
     j = np.arange(TUKEY_STEPS + 1, dtype=np.float64)
     o = np.arange(TUKEY_OCTAVES, dtype=np.float64)[:, None]
     v = np.ldexp(0.5 + j / (2.0 * TUKEY_STEPS), -o.astype(np.int32))
     a = log(v)
     with np.errstate(divide="ignore", invalid="ignore"):
         b = log(np.where(v < 1.0, 1.0 - v, 0.5))  # v = 1 (row 0's last node) is never reached: any finite value
-        q = a - b if lam == 0.0 else (exp(lam * a) - exp(lam * b)) / lam
-    out = np.ascontiguousarray(q.ravel())
-    out.flags.writeable = False
-    return out
+    a.flags.writeable = b.flags.writeable = False
+    return a, b
 
 
 def tukey_lambda_cell(u):
