@@ -370,4 +370,4 @@ def mean_charge(rate_e_per_s: np.ndarray, integration_time_s: float) -> np.ndarr
     -------
     float32 array, e-, the map's shape
     """
-    return (rate_e_per_s * np.float32(integration_time_s)).astype(np.float32)
+    return (rate_e_per_s * np.float32(integration_time_s)).astype(np.float32, copy=False)  # float32 already: no copy
