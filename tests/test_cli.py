@@ -28,6 +28,11 @@ def test_simulate_writes_the_four_outputs(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["frames"] == 3 and summary["stages"]["prnu"] is True
     assert summary["signal"]["mean_e"] > 0 and summary["temporal_noise"]["rms_e"] > 0
+    # the run's total counts its parts after the set-up: the frames, the summary, the wait for the pictures
+    t = summary["timings_s"]
+    parts = t["set_up"] + 3 * (t["frame_s"] or 0.0) + t["summary"] + t["pictures_after_summary"]
+    assert min(t["summary_aside"], t["summary"], t["pictures_after_summary"]) >= 0
+    assert abs(t["total"] - parts) <= 1e-5 * 6 or t["frame_s"] is None  # each rounded to 1 us
     import imageio.v3 as iio
     assert iio.imread(out / "preview.png").shape == (64, 96, 3)
 
