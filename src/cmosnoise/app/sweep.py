@@ -299,9 +299,9 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     return {m: out.get(m, math.nan) for m in METRICS}
 
 
-def worker_attribute(name: str, make: Callable[[], object]):
-    """A value kept on the Dask worker that runs this task, made by ``make()`` on its first task; ``make()``'s
-    value, kept nowhere, outside a worker.
+def worker_attribute(name: str, make: Callable[[], object], anywhere: bool = True):
+    """A value kept on the Dask worker that runs this task, made by ``make()`` on its first task; outside a
+    worker, ``make()``'s value kept nowhere (``anywhere``) or None.
 
     Parameters
     ----------
@@ -309,6 +309,8 @@ def worker_attribute(name: str, make: Callable[[], object]):
         The value's name on the worker.
     make : callable
         Makes it.
+    anywhere : bool
+        Outside a worker, make it all the same (True) or give None (False).
 
     Returns
     -------
@@ -319,7 +321,7 @@ def worker_attribute(name: str, make: Callable[[], object]):
 
         worker = get_worker()
     except (ImportError, ValueError):
-        return make()
+        return make() if anywhere else None
     attribute = "_cmosnoise_" + name
     value = getattr(worker, attribute, None)
     if value is None:
@@ -341,13 +343,7 @@ def _worker_cache():
     def make():
         return PatternCache(int(min(2e9, 0.1 * (footprint.available_bytes() or 1e9))))
 
-    try:
-        from distributed import get_worker
-
-        get_worker()
-    except (ImportError, ValueError):
-        return None
-    return worker_attribute("patterns", make)
+    return worker_attribute("patterns", make, anywhere=False)
 
 
 def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int, device: str = "cpu") -> dict:

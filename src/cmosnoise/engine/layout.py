@@ -77,7 +77,7 @@ def cfa_pick(rgb: np.ndarray, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
         for (i, j), ch in np.ndenumerate(cell):
             out[i::2, j::2] = rgb[i::2, j::2, ch] * gain[ch]
         return out
-    announce("the image interleave", _interleave, _pick)
+    announce("the image layout loops", _interleave, _pick)
     with ONE_LAUNCH:
         _pick(rgb, cell, gain, out)
     return out
@@ -112,7 +112,7 @@ def interleave_transposed(planes: list[np.ndarray]) -> np.ndarray:
         if numba is None or plane.size < 1 << 16:  # small: NumPy's copy is quick, and nothing compiled is loaded
             out[..., c] = plane.T
             continue
-        announce("the image interleave", _interleave)
+        announce("the image layout loops", _interleave, _pick)
         with ONE_LAUNCH:
             _interleave(plane, out, c)
     return out

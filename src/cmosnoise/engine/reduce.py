@@ -91,30 +91,6 @@ if numba is not None:
         return out
 
 
-def moments(a: np.ndarray) -> tuple[float, float, float]:
-    """(mean, variance, mean square) of every value of ``a``, in float64.
-
-    Parameters
-    ----------
-    a : array
-        A map (any shape; float32 or float64).
-
-    Returns
-    -------
-    (float, float, float)
-        The mean, the population variance (``ddof=0``, as ``np.var``) and the mean of the squares.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from cmosnoise.engine.reduce import moments
-    >>> moments(np.array([[1.0, 2.0], [3.0, 4.0]], np.float32))
-    (2.5, 1.25, 7.5)
-    """
-    m = statistics(a)
-    return m["mean"], m["var"], m["mean_square"]
-
-
 #: a band of a map made and reduced in pieces holds at least this many values (a parallel pass's worth)
 BAND_VALUES = 1 << 20
 

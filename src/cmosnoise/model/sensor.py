@@ -255,8 +255,6 @@ class Sensor:
         dict of str to float
             ``mean`` (1 up to rounding), ``var``, ``mean_square``, ``min`` and ``max`` of the flat response.
         """
-        if self._flat is not None:
-            return reduce.statistics(self._flat)
         rows, cols = self.map_shape
         parts = []
         step = 2 * max(8, -(-reduce.BAND_VALUES // (2 * cols)))  # even, and enough values for a parallel pass
