@@ -472,17 +472,23 @@ def resample(img: np.ndarray, shape: tuple[int, int], region=None) -> np.ndarray
     (rows, cols, C) float64 array
         ``shape``, or the region's size.
     """
-    planes, wc = _row_pass(img, shape, region)
-    # each channel as scipy's sparse products give it, (cols, rows); interleaved by a blocked, compiled copy
+    return _columns_pass(*_row_pass(img, shape, region))
+
+
+def _columns_pass(planes: np.ndarray, wc) -> np.ndarray:
+    """The second half of :func:`resample`: each channel as scipy's sparse products give it, (cols, rows),
+    interleaved into (rows, cols, C) by a blocked, compiled copy."""
     return layout.interleave_transposed([wc @ plane.T for plane in planes])
 
 
-def _row_pass(img: np.ndarray, shape: tuple[int, int], region) -> tuple:
+def _row_pass(img: np.ndarray, shape: tuple[int, int], region, axes: tuple | None = None) -> tuple:
     """The first half of :func:`resample`: each channel after the rows' weights, (C, rows, n), and the columns'
-    weights (cols, n), both cut to the ``n`` source columns the region reads."""
+    weights (cols, n), both cut to the ``n`` source columns the region reads. ``axes``: the two axes' whole
+    weights (:func:`_axis_matrix`) where they are kept (:class:`Resampled`, asked for a region per tile)."""
     r0, r1, c0, c1 = _span(shape, region)
-    wr, (a0, a1) = _band(_axis_matrix(img.shape[0], shape[0])[r0:r1])
-    wc, (b0, b1) = _band(_axis_matrix(img.shape[1], shape[1])[c0:c1])
+    rows_w, cols_w = axes or (_axis_matrix(img.shape[0], shape[0]), _axis_matrix(img.shape[1], shape[1]))
+    wr, (a0, a1) = _band(rows_w[r0:r1])
+    wc, (b0, b1) = _band(cols_w[c0:c1])
     part = img[a0:a1, b0:b1]  # only the source pixels the region reads: the same terms of each sum, in order
     return np.stack([wr @ part[..., c] for c in range(img.shape[2])]), wc
 
@@ -510,10 +516,12 @@ class Resampled:
     def __init__(self, img: np.ndarray, shape: tuple[int, int]):
         self.img = img
         self.shape = tuple(shape)
+        #: the two axes' whole weights, made once for every region asked for
+        self.axes = (_axis_matrix(img.shape[0], self.shape[0]), _axis_matrix(img.shape[1], self.shape[1]))
 
     def __call__(self, region=None) -> np.ndarray:
         """:func:`resample` of the picture: (rows, cols, 3) float64, the region's size (None: the whole)."""
-        return resample(self.img, self.shape, region)
+        return _columns_pass(*_row_pass(self.img, self.shape, region, self.axes))
 
     def cfa(self, pattern: str, responsivity=(1.0, 1.0, 1.0), region=None) -> np.ndarray:
         """``to_cfa(self(region), pattern, responsivity)``, bit for bit, without making the three channels at the
@@ -536,7 +544,7 @@ class Resampled:
         """
         if cfa_mod.is_mono(pattern) or self.img.shape[2] != 3:
             return to_cfa(self(region), pattern, responsivity)
-        planes, wc = _row_pass(self.img, self.shape, region)
+        planes, wc = _row_pass(self.img, self.shape, region, self.axes)
         return resample_engine.mosaic(planes, wc, cfa_mod.tile(pattern), np.asarray(responsivity, np.float64))
 
 
