@@ -141,7 +141,7 @@ def dark_map(sensor: Sensor) -> dict | None:
     state, rate = sensor.dark_state, sensor.dark_rate
     if state is None:
         return None
-    out = {"mean_e_per_s": float(rate.mean(dtype=np.float64)), "threshold_e_per_s": state.threshold,
+    out = {"mean_e_per_s": noise_budget.map_moment(sensor, "dark_rate", "mean"), "threshold_e_per_s": state.threshold,
            "threshold_source": state.threshold_source}
     if state.threshold is not None:
         rep = white_pixels.report(rate, state.threshold, sensor.cfa)
@@ -176,13 +176,14 @@ def dark_current(sensor: Sensor, shot: Exposure | None = None, electrons0: np.nd
     if state is None:
         return None
     t_int = sensor.config.exposure.integration_time_s
+    mean = noise_budget.map_moment(sensor, "dark_rate", "mean")  # the map's statistics, once per sensor
     out = {
         "temperature_c": state.temperature_c,
         "body": {"family": state.family, "mean_e_per_s": state.mean, "std_e_per_s": state.std},
         "tail": {"fraction": state.tail_fraction, "max_e_per_s": state.tail_max},
-        "map_mean_e_per_s": float(rate.mean(dtype=np.float64)),
+        "map_mean_e_per_s": mean,
         "map_median_e_per_s": float(reduce.median(rate)),  # radix selection: no sorted copy
-        "mean_dark_e_per_frame": float(rate.mean(dtype=np.float64) * t_int),
+        "mean_dark_e_per_frame": mean * t_int,
         "interpolation": (f"per-pixel exponential between the points at {state.temperature_c:g} C (weight {state.w:.3f})"
                           if state.between else "at a characterization point, or scaled from the nearest one"),
     }
