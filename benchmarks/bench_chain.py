@@ -91,17 +91,28 @@ def cost_arguments(doc: str, json_help: str = "also write the results here"):
 
 def stage_costs(cases, frames: int, repeats: int, size=(1920, 1080)) -> list[dict]:
     """Each case ``(label, configuration extra)`` at ``size``: ms a frame of the ``photo`` scene and its ratio to
-    :func:`numpy_reference`, timed alternately with it (the first case is the baseline others are read against)."""
+    :func:`numpy_reference`, timed alternately with it (the first case is the baseline others are read against).
+
+    The cases take turns, round by round (``repeats`` rounds, the best of each kept): the reference's first
+    rounds run some 10 % slower (its arrays' first pages), which timed one case after the other fell on the
+    first case alone and moved the ratio of ratios by as much (measured: 99 against 90 ms a frame).
+    """
     from cmosnoise import Sensor, load_config
 
-    rows = []
+    made = []
     for label, extra in cases:
         sensor = Sensor(load_config(extra={**extra, "sensor": {**extra.get("sensor", {}), "width": size[0],
                                                                "height": size[1]}}), seed=0)
         shot = sensor.expose("photo")
         shot.frame(0)  # compile
-        ref = numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)
-        t, t_ref = against_reference(shot.frame, frames, repeats, ref, max(frames // 4, 2))
+        made.append((label, shot, numpy_reference(shot.mean_charge_e, sensor.transfer.gain_dn_per_e)))
+    best = [(float("inf"), float("inf"))] * len(made)
+    for _ in range(repeats):
+        for i, (_label, shot, ref) in enumerate(made):
+            t, t_ref = against_reference(shot.frame, frames, 1, ref, max(frames // 4, 2))
+            best[i] = (min(best[i][0], t), min(best[i][1], t_ref))
+    rows = []
+    for (label, _shot, _ref), (t, t_ref) in zip(made, best):
         rows.append({"label": label, "ms": 1e3 * t, "ref_ms": 1e3 * t_ref, "ratio": t / t_ref})
         print(f"{label}: {1e3 * t:.1f} ms/frame, reference {1e3 * t_ref:.1f} ms, ratio {t / t_ref:.3f}")
     return rows

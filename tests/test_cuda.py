@@ -90,6 +90,16 @@ def test_each_preset_equals_the_cpu_kernel(preset):
         np.testing.assert_array_equal(gpu.frame(k), cpu.frame(k), err_msg=f"{preset} frame {k}")
 
 
+@pytest.mark.parametrize("kind", ["normal", "tukey_lambda"])
+def test_read_noise_without_the_source_follower_equals_the_cpu_kernel(kind):
+    """Read noise after the gain takes the sine normal of the source follower's block: with that stage off the
+    block is still drawn, on either device."""
+    cpu, gpu = _pair({"source_follower": {"enabled": False},
+                      "read_noise": {"enabled": True, "distribution": kind, "scale_dn": 1.7, "shape": -0.2}}, seed=4)
+    for k in (0, 5):
+        np.testing.assert_array_equal(gpu.frame(k), cpu.frame(k), err_msg=f"{kind} frame {k}")
+
+
 def test_a_batch_of_crops_at_different_corners_equals_the_crops_of_the_whole_frames():
     cpu, gpu = _pair(EVERY, seed=7)
     h, w = HEIGHT // 2, WIDTH // 3

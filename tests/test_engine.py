@@ -12,7 +12,7 @@ from scipy import stats
 from cmosnoise import Sensor, load_config
 from cmosnoise.engine import fdmath, kernel
 from cmosnoise.engine.philox import philox4x32
-from cmosnoise.engine.samplers import Stream, poisson_inversion
+from cmosnoise.engine.samplers import Stream, normal_pair_from, poisson_inversion
 
 U = np.uint64
 
@@ -47,6 +47,9 @@ def test_own_log_exp_cos_loggam_match_the_correctly_rounded_functions():
     assert np.max(np.abs(fdmath.exp(x) - ref) / np.spacing(ref)) <= 1.0
     u = rng.uniform(0, 1, 50_000)
     assert np.max(np.abs(fdmath.cos_turn(u) - np.cos(2 * np.pi * u))) < 2e-15
+    c, s = fdmath.sincos_turn(u)
+    assert np.array_equal(c, fdmath.cos_turn(u))  # one reduction for both: the cosine's bits are cos_turn's
+    assert np.max(np.abs(s - np.sin(2 * np.pi * u))) < 2e-15
     k = np.arange(1.0, 400.0)
     np.testing.assert_allclose(fdmath.loggam(k), [math.lgamma(v) for v in k], rtol=1e-13, atol=1e-13)
 
@@ -127,6 +130,21 @@ def test_normals_are_standard_normal():
     assert_close(z.mean(), 0.0, 1 / math.sqrt(z.size), "mean")
     assert_close(z.var(ddof=1), 1.0, math.sqrt(2 / z.size), "variance")
     assert stats.kstest(z, "norm").pvalue > 1e-6
+
+
+def test_box_mullers_two_normals_are_independent_standard_normals():
+    """The sine normal of a block (read noise after the gain takes it; the source follower the cosine one):
+    standard normal (mean, variance, KS), uncorrelated with the cosine normal and with uncorrelated squares
+    (both share the block's radius: a dependence there shows in the squares). Over n pairs the sample
+    correlation has standard error 1/sqrt(n); z1^2 z2^2 has mean 1 and variance E z^4 E z^4 - 1 = 8."""
+    n = 200_000
+    z1, z2 = normal_pair_from(*Stream((41, 42), 0).uniforms(np.arange(n, dtype=U)))
+    assert np.array_equal(z1, Stream((41, 42), 0).normal(np.arange(n, dtype=U)))  # the cosine one, bit for bit
+    assert_close(z2.mean(), 0.0, 1 / math.sqrt(n), "mean")
+    assert_close(z2.var(ddof=1), 1.0, math.sqrt(2 / n), "variance")
+    assert stats.kstest(z2, "norm").pvalue > 1e-6
+    assert_close(np.corrcoef(z1, z2)[0, 1], 0.0, 1 / math.sqrt(n), "correlation")
+    assert_close(np.mean(z1**2 * z2**2), 1.0, math.sqrt(8 / n), "E z1^2 z2^2")
 
 
 # ------------------------------------------------------------------ frames never change a bit

@@ -249,18 +249,56 @@ def test_a_sensor_without_dark_current_fits(tmp_path):
     assert not yaml.safe_load((tmp_path / "fit" / "config.yaml").read_text())["dark_current"]["enabled"]
 
 
-@pytest.mark.parametrize("shape", [-0.2, -0.05, 0.0, 0.1474653, 1.0])
-def test_tabulated_tukey_lambda_quantile_is_scipys(shape):
-    """The tabulated quantile (equal steps within each octave of min(u, 1 - u), linear between) against
-    scipy.stats.tukeylambda.ppf, from 2**-53 to 1 - 2**-53: linear interpolation of a smooth function with 256
-    steps an octave leaves (h/v)^2/8 ~ 2e-6 of its curvature's scale; 1e-5 relative (with an absolute floor
-    of 1e-9 where the quantile crosses 0)."""
+@pytest.mark.parametrize("shape", [-0.49, -0.2, -0.05, 0.0, 0.1474653, 1.0, 2.0])
+def test_tabulated_tukey_lambda_of_a_normal_is_scipys(shape):
+    """The table against a normal z (equal steps of |z| to 8.6, linear between) against
+    scipy.stats.tukeylambda.ppf(ndtr(z)), over every |z| Box-Muller makes (to sqrt(-2 log 2**-53) = 8.5717) and
+    both signs: linear interpolation leaves h^2/8 of the relative curvature, at most (lam z)^2 ~ 18 at lam = -0.49,
+    h = 8.6 / 8192: 2.5e-6 (seen: 2.6e-6 there, below 2e-7 for lam >= -0.1); 1e-5 relative. The upper tail is
+    read as -ppf(ndtr(-z)), where scipy's ppf keeps its precision."""
+    from scipy import special
+
     from cmosnoise.engine.samplers import tukey_lambda_from, tukey_lambda_table
 
     rng = np.random.default_rng(3)
-    u = np.r_[2.0**-53, 1e-12, 1e-6, rng.random(20000), 0.5, 1 - 1e-6, 1 - 2.0**-52]
-    ours = tukey_lambda_from(u, tukey_lambda_table(shape))
-    np.testing.assert_allclose(ours, stats.tukeylambda(shape).ppf(u), rtol=1e-5, atol=1e-9)
+    z = np.r_[np.linspace(1e-6, 8.5717, 20001), rng.standard_normal(20000), -8.5717, -1e-3]
+    ours = tukey_lambda_from(z, tukey_lambda_table(shape))
+    exact = -np.sign(z) * stats.tukeylambda(shape).ppf(special.ndtr(-np.abs(z)))
+    np.testing.assert_allclose(ours, exact, rtol=1e-5, atol=0)
+
+
+def test_the_normal_tail_at_the_tables_nodes_is_scipys():
+    """Phi(-z) at the Tukey table's nodes (Gauss-Legendre steps with fdmath's exp, summed from z = 12) against
+    scipy.special.ndtr: 5-point rules on steps of 0.001 are exact to rounding, and a sum of 11 000 positive
+    terms in order keeps a relative error of some 1e-14 (seen: 1.6e-14); 1e-12."""
+    from scipy import special
+
+    from cmosnoise.engine.samplers import TUKEY_Z_MAX, TUKEY_Z_STEPS, normal_tail_nodes
+
+    v = normal_tail_nodes()
+    z = np.arange(TUKEY_Z_STEPS + 1) * (TUKEY_Z_MAX / TUKEY_Z_STEPS)
+    np.testing.assert_allclose(v, special.ndtr(-z), rtol=1e-12, atol=0)
+
+
+def test_read_noise_is_independent_of_the_source_follower_noise_it_shares_a_block_with():
+    """In a frame with both on, the source follower's noise (e-) and the read noise (DN), made from the two
+    normals of one Philox block, are uncorrelated, and so are their squares (n pixels: standard errors 1/sqrt(n)
+    and, for normalized squares, sqrt(8/n) on E a^2 b^2 = 1); switching the source follower off leaves the read
+    noise bit for bit (common random numbers)."""
+    rn = {"enabled": True, "distribution": "normal", "scale_dn": 1.5}
+    cfg = quiet_config(sensor={"width": 320, "height": 240}, read_noise=rn, source_follower={"enabled": True})
+    sensor = Sensor(cfg, seed=8)
+    d = sensor.expose("flat:0.3").frame(2, detail=True)
+    # each pixel's normals: the source follower's over its own sigma, the read noise (e-, to float32) over its rms
+    a = (d.contributions["source_follower"] / sensor.source_follower_sigma).astype(np.float64).ravel()
+    b = d.contributions["read_noise"].astype(np.float64).ravel()
+    b = b / np.sqrt(np.mean(b**2))
+    n = a.size
+    assert_close(np.corrcoef(a, b)[0, 1], 0.0, 1 / math.sqrt(n), "correlation")
+    assert_close(np.mean(a**2 * b**2), 1.0, math.sqrt(8 / n), "E a^2 b^2")
+    without = quiet_config(sensor={"width": 320, "height": 240}, read_noise=rn, source_follower={"enabled": False})
+    alone = Sensor(without, seed=8).expose("flat:0.3").frame(2, detail=True)
+    assert np.array_equal(alone.contributions["read_noise"], d.contributions["read_noise"])
 
 
 def test_fit_recovers_the_black_level_per_cfa_cell_and_per_frame(tmp_path):

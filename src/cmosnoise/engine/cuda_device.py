@@ -18,7 +18,7 @@ from .cuda_kernel import scalar_numpy
 npx = scalar_numpy(cuda)  #: what ``np`` stands for in the helpers on the device
 dev = cuda.jit(device=True, fastmath=False)
 h = kernel.compile_helpers(dev, numpy=npx, skip=("occupancy",))  # it allocates: the device's form is below
-uniform_pair, normal_from = h["uniform_pair"], h["normal_from"]
+uniform_pair, normal_from, normal_pair_from = h["uniform_pair"], h["normal_from"], h["normal_pair_from"]
 poisson_one, tukey_lambda_cell = h["poisson_one"], h["tukey_lambda_cell"]
 frame_states, inside = h["frame_states"], h["inside"]
 floor, rint = npx.floor, npx.rint
@@ -200,9 +200,12 @@ def pixels(noisy, exact, flags, normal_above, full_well, sf, rowval, colterm, ga
         else:
             sx = n * nl_scale
             n = n * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
-    if has_sf:
+    z = partner = 0.0
+    if has_sf or has_read:  # the source follower's block: its cosine normal is stage 6's, its sine normal 9a's
         u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[1, 0], keys[1, 1])
-        noise = np.float64(sf[r, c]) * normal_from(u1, u2)
+        z, partner = normal_pair_from(u1, u2)
+    if has_sf:
+        noise = np.float64(sf[r, c]) * z
         if has_offset:
             n = (n + np.float64(offset[r, c])) + noise
         else:
@@ -223,15 +226,13 @@ def pixels(noisy, exact, flags, normal_above, full_well, sf, rowval, colterm, ga
         v = n * k_adc + cell_black[b, 2 * (r & 1) + (c & 1)]
         if has_read:  # stage 9a
             if read_kind == 0:
-                u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[5, 0], keys[5, 1])
-                noise = read_scale * normal_from(u1, u2)
+                noise = read_scale * partner
             else:
-                u, _ = uniform_pair(index, fr, sq, np.uint64(0), keys[5, 0], keys[5, 1])
-                kf, wt = tukey_lambda_cell(u)
+                kf, wt = tukey_lambda_cell(partner)
                 k = np.int64(kf)
                 lo = read_table[k]
                 q = lo + wt * (read_table[k + 1] - lo)
-                noise = read_scale * (-q if u > 0.5 else q)
+                noise = read_scale * (0.0 - q if partner < 0.0 else q)
             v = v + noise
         v = rint(v)
         out_dn[b, i, j] = np.uint16(min(max(v, 0.0), top))

@@ -44,8 +44,8 @@ class FramePlan:
     e-; ``row_offset_e`` (rows,), ``col_sigma_e``, ``col_offset_e``,
     ``col_gain`` (cols,) float64; ``shape`` is always the whole frame's (it
     addresses the random numbers). ``keys`` holds the two key words of the
-    shot-noise, source-follower, row, column, black-level and read-noise
-    streams, (6, 2) uint64.
+    shot-noise, source-follower, row, column and black-level streams, (5, 2)
+    uint64 (read noise after the gain takes the source follower's second normal).
     A ``None`` switches that term off.
     """
 
@@ -68,7 +68,8 @@ class FramePlan:
     offset_e: np.ndarray | None = None  #: per-pixel offsets (rows, cols) float32, e- (stage 5c)
     cell_offsets_dn: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  #: black level per 2 x 2 cell position
     frame_black_sigma_dn: float = 0.0  #: the black level's error per frame, DN (keys row 4)
-    read_noise: tuple[str, float, float] | None = None  #: (normal | tukey_lambda, scale DN, shape), keys row 5
+    #: (normal | tukey_lambda, scale DN, shape): from the sine normal of the source follower's block (keys row 1)
+    read_noise: tuple[str, float, float] | None = None
     #: source-follower random telegraph noise (stage 6b): the traps, their temporal key, and the CDS interval (s;
     #: None: no CDS, the trap's level)
     traps: telegraph.Telegraphs | None = None
@@ -111,11 +112,11 @@ class FramePlan:
 # ------------------------------------------------------------------ compiled helpers
 #: the helpers compiled from their own source, module by module, callees first
 HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
-           (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "cos_turn", "loggam"]),
+           (fdmath, ["log", "exp", "_kernel_sin", "_kernel_cos", "sincos_turn", "cos_turn", "loggam"]),
            (telegraph, ["decay", "one_minus", "transition", "_bridge_weights", "bridge", "midpoint", "_uniform",
                         "frame_states", "inside", "occupancy_uniform", "occupancy_r_n", "occupancy_events",
                         "occupancy_walk", "occupancy"]),
-           (samplers, ["normal_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept",
+           (samplers, ["normal_from", "normal_pair_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept",
                        "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try", "poisson_one"]),
            (fixed_maps, ["ppf_cell", "heavy_tail_value", "two_point", "normal_value"])]
 
@@ -170,7 +171,7 @@ if numba is not None:
     _cold_uniform_pair, _cold_normal_from, _cold_constants, _cold_ptrs_try = (
         _cold[name] for name in ("uniform_pair", "normal_from", "ptrs_constants", "ptrs_try"))
     _uniform_pair, _normal_from, _exp, _log = _h["uniform_pair"], _h["normal_from"], _h["exp"], _h["log"]
-    _tukey_lambda_cell = _h["tukey_lambda_cell"]
+    _normal_pair_from, _tukey_lambda_cell = _h["normal_pair_from"], _h["tukey_lambda_cell"]
     _ptrs_constants, _ptrs_candidate, _ptrs_log_test = _h["ptrs_constants"], _h["ptrs_candidate"], _h["ptrs_log_test"]
     _ptrs_quick_accept, _ptrs_early_reject = _h["ptrs_quick_accept"], _h["ptrs_early_reject"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
@@ -432,6 +433,7 @@ if numba is not None:
         n = np.zeros(w)
         saved = np.empty(w if (has_blink and blink_exact) else 0)  # a row's counts of its blinking pixels
         noise = np.empty(w)
+        partner = np.empty(w if has_read else 0)  # the sine normals of the source follower's blocks (stage 9a)
         a0, a1 = c0 - ac0, c1 - ac0  # the region's columns in the arrays
         for i in range(i0, i1):
             r = r0 + i
@@ -471,11 +473,20 @@ if numba is not None:
             if has_offset and not has_sf:  # stage 5c (with the source follower: in its last pass, same order)
                 for j in range(w):
                     n[j] = n[j] + np.float64(offset[ra, a0 + j])
-            if has_sf:  # uniforms, then Box-Muller: 25 % faster than one loop (measured)
-                for j in range(w):
+            if has_sf or has_read:  # the source follower's block: uniforms, then Box-Muller (25 % faster than one
+                for j in range(w):  # loop, measured); its cosine normal is stage 6's, its sine normal stage 9a's
                     u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
-                for j in range(w):
-                    noise[j] = np.float64(sf[ra, a0 + j]) * _normal_from(u1[j], u2[j])
+                if has_sf and has_read:
+                    for j in range(w):
+                        z, partner[j] = _normal_pair_from(u1[j], u2[j])
+                        noise[j] = np.float64(sf[ra, a0 + j]) * z
+                elif has_sf:
+                    for j in range(w):
+                        noise[j] = np.float64(sf[ra, a0 + j]) * _normal_from(u1[j], u2[j])
+                else:
+                    for j in range(w):
+                        partner[j] = _normal_pair_from(u1[j], u2[j])[1]
+            if has_sf:
                 if has_offset:
                     for j in range(w):
                         n[j] = (n[j] + np.float64(offset[ra, a0 + j])) + noise[j]
@@ -500,21 +511,17 @@ if numba is not None:
                 if has_read:  # stage 9a: read noise after the gain, DN (read_noise.noise)
                     if read_kind == 0:
                         for j in range(w):
-                            u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, keys[5, 0], keys[5, 1])
-                        for j in range(w):
-                            noise[j] = read_scale * _normal_from(u1[j], u2[j])
+                            noise[j] = read_scale * partner[j]
                     else:
-                        # samplers.tukey_lambda_from in two passes: the uniform and where it falls in the table
-                        # (SIMD), then the table's loads (a loop that indexes a table is not vectorized)
+                        # samplers.tukey_lambda_from in two passes: where the normal falls in the table (SIMD),
+                        # then the table's loads (a loop that indexes a table is not vectorized)
                         for j in range(w):
-                            u, _ = _uniform_pair(base + np.uint64(j), fr, sq, zero, keys[5, 0], keys[5, 1])
-                            u1[j] = u
-                            lam[j], u2[j] = _tukey_lambda_cell(u)
+                            lam[j], u2[j] = _tukey_lambda_cell(partner[j])
                         for j in range(w):
                             k = np.int64(lam[j])
                             lo = read_table[k]
                             q = lo + u2[j] * (read_table[k + 1] - lo)
-                            noise[j] = read_scale * (-q if u1[j] > 0.5 else q)
+                            noise[j] = read_scale * (0.0 - q if partner[j] < 0.0 else q)
                 if one_black and not has_read:  # the paper's ADC: one black level, nothing after the gain
                     b0 = cell_black[0]
                     for j in range(w):
@@ -644,7 +651,8 @@ def generator_info(device: str = "cpu") -> dict:
     """What made the random numbers, for every output's metadata (docs/model.md section 1); ``device``: where the
     frames were made (``"cuda"``: the GPU kernel, the same bits)."""
     return {
-        "scheme": "philox4x32-10; counter (index, frame, sequence, try); Box-Muller normals; "
+        "scheme": "philox4x32-10; counter (index, frame, sequence, try); Box-Muller normals (read noise after "
+                  "the gain: the source follower's sine branch); "
                   "Poisson by inversion below 10, PTRS from 10",
         "scheme_version": samplers.SCHEME_VERSION,
         "numpy": np.__version__,
@@ -695,7 +703,7 @@ def preload() -> bool:
         return False
     flags = np.zeros(_FLAGS, np.bool_)
     args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
-            np.zeros((6, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 0, 0, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
+            np.zeros((5, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 0, 0, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
             0.0, 0.0, 0.0, _DUMMY2, _DUMMY1, 0.0, 0, 0.0, _DUMMY_NL, _DUMMY_PTR, _DUMMY_COL, _DUMMY1, _DUMMY_PTR,
             _DUMMY_COL, _DUMMY_F32, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
@@ -735,7 +743,7 @@ def curve_constants(plan: FramePlan) -> tuple[np.ndarray, float, tuple[float, fl
 
 def read_constants(plan: FramePlan) -> tuple[int, float, np.ndarray]:
     """The read noise (stage 9a) as the kernels take it: (0 normal or 1 Tukey-lambda, scale DN, the Tukey-lambda
-    quantile table or a 2-long dummy)."""
+    variate's table against a normal, or a 2-long dummy)."""
     if plan.read_noise is None:
         return 0, 0.0, _DUMMY_NL
     kind, scale, shape = plan.read_noise

@@ -43,7 +43,7 @@ STAGE_IDS = {
     "column_noise": 8,
     "pixel_offset": 10,
     "black_level": 11,
-    "read_noise": 12,
+    "read_noise": 12,  # keys no stream since scheme 3: its noise is the source follower's sine normal
     "source_follower_rts": 13,
     "dark_current_rts": 14,
     "defects": 15,
@@ -51,7 +51,7 @@ STAGE_IDS = {
 
 
 #: the stages with temporal noise, in the engine's key order
-TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level", "read_noise")
+TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level")
 
 
 def fixed_key(seed: int, stage: str, part: int = 0) -> tuple[int, int]:

@@ -740,7 +740,7 @@ class Exposure:
         read = None
         if rn.enabled:
             read = read_noise.noise(rn.distribution, rn.scale_dn, rn.shape,
-                                    temporal_stream(c.seed, "read_noise", k, self.sequence),
+                                    temporal_stream(c.seed, "source_follower", k, self.sequence),
                                     pixel_index(region, self.sensor.shape[1]))
         return black, read
 

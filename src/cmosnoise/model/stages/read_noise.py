@@ -3,10 +3,12 @@
 Measured cameras calibrate part of their read noise after the gain, in DN
 (ELD, Wei et al. 2020): its law is often heavier-tailed than a normal, and
 a Tukey-lambda law with shape ``lam`` and scale ``s`` fits it. Each pixel in
-each frame gets ``s * Q(u)``, ``Q`` the standard Tukey-lambda quantile
-(tabulated per octave of ``min(u, 1 - u)`` and interpolated:
-:func:`cmosnoise.engine.samplers.tukey_lambda_from`) and ``u`` its own
-counter-based uniform, or ``s * Normal(0, 1)``.
+each frame gets ``s * z`` or ``s * Q(Phi(z))``, ``Q`` the standard
+Tukey-lambda quantile (tabulated against ``z`` and interpolated:
+:func:`cmosnoise.engine.samplers.tukey_lambda_from`), where ``z`` is the
+second normal of the pixel's source-follower block (Box-Muller's sine branch;
+the source follower, stage 6, takes the cosine): independent of every other
+draw, and no Philox block of its own.
 
 The black level has two errors beside ``adc.black_level_dn``: a fixed offset
 per position of the 2 x 2 CFA cell (the "colour bias" of ELD's cameras), and
@@ -20,15 +22,20 @@ import math
 
 import numpy as np
 
-from ...engine.samplers import Stream, normal_from, tukey_lambda_from, tukey_lambda_table
+from ...engine.samplers import Stream, normal_pair_from, tukey_lambda_from, tukey_lambda_table
 
 
 def noise(kind: str, scale_dn: float, shape: float, stream: Stream, index: np.ndarray) -> np.ndarray:
-    """One frame of read noise (DN), float64, at pixel indices ``index`` (``r * cols + c``)."""
-    u1, u2 = stream.uniforms(index)
+    """One frame of read noise (DN), float64, at pixel indices ``index`` (``r * cols + c``).
+
+    ``stream`` is the frame's source-follower stream: the noise is made from
+    the sine normal of each pixel's block, whose cosine normal is the source
+    follower's (:func:`cmosnoise.engine.samplers.normal_pair_from`).
+    """
+    _, z = normal_pair_from(*stream.uniforms(index))
     if kind == "normal":
-        return scale_dn * normal_from(u1, u2)
-    return scale_dn * tukey_lambda_from(u1, tukey_lambda_table(float(shape)))
+        return scale_dn * z
+    return scale_dn * tukey_lambda_from(z, tukey_lambda_table(float(shape)))
 
 
 def tukey_lambda_variance(lam: float) -> float:
