@@ -74,12 +74,26 @@ def test_the_mask_is_the_defects_placed():
     assert np.array_equal(gt.mask(sensor, (13, 61, 7, 90)), m[13:61, 7:90])
 
 
-@pytest.mark.parametrize("over", [{}, {"exposure": {"integration_time_s": 0.03, "peak_rate_e_per_s": 6e5}},
-                                  {"read_noise": {"enabled": True, "distribution": "normal", "scale_dn": 0.3}}])
-def test_the_compiled_pass_gives_the_numpy_paths_bits(over, monkeypatch):
-    """The pixels far from a clip take one compiled pass (ground_truth._far_pixels); without numba the NumPy
-    functions make every pixel. The same bits: clips reached (a bright ramp), and below 1 DN of noise (the
-    quantizer's sum over codes)."""
+BRIGHT = {"exposure": {"integration_time_s": 0.03, "peak_rate_e_per_s": 6e5}}
+
+
+@pytest.mark.parametrize("over", [
+    {}, BRIGHT, {"read_noise": {"enabled": True, "distribution": "normal", "scale_dn": 0.3}},
+    # the ADC's top below the full well, as LED's virtual cameras have it: the top code within reach of a wide
+    # noise (the clipped normal)
+    {**BRIGHT, "adc": {"gain_dn_per_e": 4.0}},
+    # the full well 1 DN below the top code: the clipped charge's readout within 2 DN of it (the sum over codes;
+    # 3655 of its pixels)
+    {**BRIGHT, "adc": {"gain_dn_per_e": 0.4035}},
+    # no temporal noise at all, the top below the full well: the quantizer's rint at the top (7240 pixels)
+    {**BRIGHT, "adc": {"gain_dn_per_e": 4.0}, "shot_noise": {"enabled": False}, "row_noise": {"enabled": False},
+     "column_noise": {"enabled": False}, "source_follower": {"enabled": False, "rts": {"enabled": False}}}],
+    ids=["plain", "bright", "fine-read", "top-below-fw", "fw-at-top", "top-noiseless"])
+def test_the_compiled_passes_give_the_numpy_paths_bits(over, monkeypatch):
+    """The pixels far from a clip take one compiled pass (ground_truth._far_pixels), those near one another
+    (_near_pixels); without numba the NumPy functions make every pixel. The same bits: clips reached (a bright
+    ramp: the full well, and the ADC's top code where it lies below the full well), and below 1 DN of noise
+    (the quantizer's sum over codes)."""
     shot = small(**over).expose("ramp")
     compiled = gt.expected_raw(shot)
     monkeypatch.setattr(gt, "_far_pixels", None)

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..engine.jit import ONE_LAUNCH
+from ..engine.jit import ONE_LAUNCH, numba
 from ..engine.telegraph import in_region
 from ..model import cfa as cfa_mod
 from ..model.sensor import Exposure, region_of
@@ -181,7 +181,8 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
     an exact expectation).
 
     The pixels no clip comes near (within 10 sigma) take one compiled pass
-    (:func:`_far_pixels`, the same formulas); the others, the NumPy functions.
+    (``_far_pixels``), the others another (``_near_pixels``): the same
+    formulas, per pixel (without numba, the NumPy functions make every pixel).
 
     Parameters
     ----------
@@ -207,7 +208,12 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
                         float(t.max_code), out, near)
         if near.any():
             idx = np.nonzero(near)
-            out[idx] = _codes(noise_budget.near_moments(sensor, terms, idx, codes=True), t)
+            if _near_pixels is not None:
+                with ONE_LAUNCH:
+                    _near_pixels(*parts, terms["fw"], terms["top"], float(t.gain_dn_per_e),
+                                 float(t.black_level_dn), float(t.max_code), idx[0], idx[1], out)
+            else:
+                out[idx] = _codes(noise_budget.near_moments(sensor, terms, idx, codes=True), t)
         top = t.max_code
     elif c.adc.enabled:
         out = _codes(noise_budget.clipped_moments(sensor, exposure=exposure, codes=True), t)
@@ -231,17 +237,71 @@ def _codes(moments: dict, t) -> np.ndarray:
     return np.clip(code, 0, t.max_code).astype(np.float32)
 
 
-def _compile_far_pixels():
-    from ..engine.jit import numba
+# the compiled passes of expected_raw (module level: numba caches them across processes; a closure's would miss)
+_ROOT_2, _ROOT_2PI = math.sqrt(2.0), math.sqrt(2 * math.pi)  # divided by, as the NumPy functions do
+_far_pixels = _near_pixels = None
+if numba is not None:
+    _inline = numba.njit(inline="always", cache=True, nogil=True)
 
-    if numba is None:
-        return None
+    @_inline
+    def _ndtr(a):
+        """The standard normal's cdf (scipy.special.ndtr's value to an ulp or two)."""
+        return 0.5 * math.erfc(-a / _ROOT_2)
+
+    @_inline
+    def _expected_code(mu, sd):
+        """adc.expected_code of one pixel: the mean from 1 DN of noise, the codes' sum below, rint without."""
+        if sd == 0.0:
+            return np.rint(mu)
+        if sd >= 1.0:
+            return mu
+        centre = np.rint(mu)
+        code = 0.0
+        # 8 codes each side: beyond 7.5 sigma for sigma < 1. A code's upper edge is the next one's lower edge,
+        # the same float (n + 0.5 and (n + 1) - 0.5 are exact): each edge's erfc once
+        lo = _ndtr((centre - 8.0 - 0.5 - mu) / sd)
+        for d in range(-8, 9):
+            n = centre + d
+            hi = _ndtr((n + 0.5 - mu) / sd)
+            code += n * (hi - lo)
+            lo = hi
+        return code
+
+    @_inline
+    def _clipped_normal(m, v, top):
+        """noise_budget._clipped_normal of one pixel: mean, variance and P(X > top) of min(X, top)."""
+        if math.isinf(top):
+            return m, v, 0.0
+        s = math.sqrt(max(v, 1e-300))
+        a = (top - m) / s
+        cdf = _ndtr(a)
+        pdf = math.exp(-0.5 * a * a) / _ROOT_2PI
+        mean = m * cdf - s * pdf + top * (1 - cdf)
+        second = (m * m + v) * cdf - s * (m + top) * pdf + top * top * (1 - cdf)
+        return mean, max(second - mean * mean, 0.0), 1 - cdf
+
+    @_inline
+    def _top_code(m, v, k, black, top):
+        """noise_budget._top_code of one pixel: (E[min(round(Y), top)] DN, whether the top is within reach)."""
+        mu = black + k * m
+        sd = k * math.sqrt(max(v, 0.0))
+        if not top - mu < 10 * sd + 2:
+            return 0.0, False
+        if sd == 0.0:
+            return min(np.rint(mu), top), True
+        if sd < 2.0:
+            acc = 0.0
+            for j in range(1, int(math.ceil(top - mu + 10 * sd)) + 3):
+                acc += _ndtr((top - j + 0.5 - mu) / sd)
+            return top - acc, True
+        mean, _, above = _clipped_normal(mu, sd * sd, top + 0.5)
+        return mean - 0.5 * above, True
 
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def far_pixels(mean_n, shot, read, col_read, row_off, col_off, gain, fw, top_e, k, black, max_code, out, near):
+    def _far_pixels(mean_n, shot, read, col_read, row_off, col_off, gain, fw, top_e, k, black, max_code, out, near):
         """The expected code of every pixel no clip comes within 10 sigma of; ``near`` marks the others. The
-        formulas of noise_budget.clipped_moments (mean and variance at the ADC input) and adc.expected_code
-        (the quantizer: the mean from 1 DN of noise, the codes' sum below, rint without), one pass."""
+        formulas of noise_budget.clipped_moments (mean and variance at the ADC input) and adc.expected_code,
+        one pass."""
         rows, cols = out.shape
         for i in numba.prange(rows):
             for j in range(cols):
@@ -253,29 +313,48 @@ def _compile_far_pixels():
                 if mn + 10.0 * np.sqrt(sh) + 1.0 >= fw or m + 10.0 * np.sqrt(v) + 1.0 >= top_e:
                     near[i, j] = True
                     continue
-                mu = black + k * m
-                sd = k * np.sqrt(v)
-                if sd == 0.0:
-                    code = np.rint(mu)
-                elif sd < 1.0:
-                    centre = np.rint(mu)
-                    code = 0.0
-                    # 8 codes each side: beyond 7.5 sigma for sigma < 1. A code's upper edge is the next one's
-                    # lower edge, the same float (n + 0.5 and (n + 1) - 0.5 are exact): each edge's erfc once
-                    lo = 0.5 * math.erfc(-((centre - 8.0 - 0.5 - mu) / sd) / math.sqrt(2.0))
-                    for d in range(-8, 9):
-                        n = centre + d
-                        hi = 0.5 * math.erfc(-((n + 0.5 - mu) / sd) / math.sqrt(2.0))
-                        code += n * (hi - lo)
-                        lo = hi
-                else:
-                    code = mu
+                code = _expected_code(black + k * m, k * np.sqrt(v))
                 out[i, j] = np.float32(min(max(code, 0.0), max_code))
 
-    return far_pixels
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _near_pixels(mean_n, shot, read, col_read, row_off, col_off, gain, fw, top_e, k, black, max_code, rows,
+                    cols, out):
+        """The expected code of the pixels ``(rows[e], cols[e])`` a clip comes near: the formulas of
+        noise_budget.near_moments (with codes) and ground_truth._codes, one pass. The charge, a normal, is
+        clipped at the full well with probability p_fw; each of the two cases passes the readout and the ADC's
+        top as a clipped normal, or as the quantizer's expectation where the top code is within reach."""
+        for e in numba.prange(rows.size):
+            i, j = rows[e], cols[e]
+            mn, sh, rd, cr = mean_n[i, j], shot[i, j], read[i, j], col_read[i, j]
+            ro, co, g = row_off[i, j], col_off[i, j], gain[i, j]
+            s = math.sqrt(max(sh, 1e-300))
+            a = (fw - mn) / s
+            p_fw = 1.0 - _ndtr(a)
+            # N given N < FW (noise_budget._truncated_below)
+            ratio = math.exp(-0.5 * a * a) / _ROOT_2PI / max(_ndtr(a), 1e-300)
+            m_below = mn - s * ratio
+            v_below = sh * min(max(1 - a * ratio - ratio * ratio, 0.0), 1.0)
+            mc, vc = (fw + ro) * g + co, rd * g * g + cr
+            mu, vu = (m_below + ro) * g + co, (v_below + rd) * g * g + cr
+            m_c, v_c, _ = _clipped_normal(mc, vc, top_e)
+            m_u, v_u, _ = _clipped_normal(mu, vu, top_e)
+            m = p_fw * m_c + (1 - p_fw) * m_u
+            e_c, at_c = _top_code(mc, vc, k, black, max_code)
+            e_u, at_u = _top_code(mu, vu, k, black, max_code)
+            quantized = at_c or at_u
+            if quantized:  # either component within reach of the top code: the code expectation for both
+                if not at_c:
+                    e_c = black + k * mc
+                if not at_u:
+                    e_u = black + k * mu
+                m = ((p_fw * e_c + (1 - p_fw) * e_u) - black) / k
+            second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
+            var = max(second - m**2, 0.0)
+            mean_dn = black + k * m
+            code = mean_dn if quantized else _expected_code(mean_dn, k * math.sqrt(var))
+            out[i, j] = np.float32(min(max(code, 0.0), max_code))
 
 
-_far_pixels = _compile_far_pixels()
 
 
 def truth(exposure: Exposure, white_threshold_e_per_s: float | None = None) -> Truth:
