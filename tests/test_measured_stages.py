@@ -280,12 +280,14 @@ def test_the_normal_tail_at_the_tables_nodes_is_scipys():
     np.testing.assert_allclose(v, special.ndtr(-z), rtol=1e-12, atol=0)
 
 
-def test_read_noise_is_independent_of_the_source_follower_noise_it_shares_a_block_with():
+@pytest.mark.parametrize("kind", ["normal", "tukey_lambda"])
+def test_read_noise_is_independent_of_the_source_follower_noise_it_shares_a_block_with(kind):
     """In a frame with both on, the source follower's noise (e-) and the read noise (DN), made from the two
     normals of one Philox block, are uncorrelated, and so are their squares (n pixels: standard errors 1/sqrt(n)
-    and, for normalized squares, sqrt(8/n) on E a^2 b^2 = 1); switching the source follower off leaves the read
-    noise bit for bit (common random numbers)."""
-    rn = {"enabled": True, "distribution": "normal", "scale_dn": 1.5}
+    and, for normalized squares, sqrt(8/n) on E a^2 b^2 = 1; the Tukey-lambda law at shape 0.14 is near a
+    normal's, its E b^4 = 3.0); switching the source follower off leaves the read noise bit for bit (common
+    random numbers); the kernel's frames equal the stage-by-stage ones either way."""
+    rn = {"enabled": True, "distribution": kind, "scale_dn": 1.5, "shape": 0.14}
     cfg = quiet_config(sensor={"width": 320, "height": 240}, read_noise=rn, source_follower={"enabled": True})
     sensor = Sensor(cfg, seed=8)
     d = sensor.expose("flat:0.3").frame(2, detail=True)
@@ -297,8 +299,11 @@ def test_read_noise_is_independent_of_the_source_follower_noise_it_shares_a_bloc
     assert_close(np.corrcoef(a, b)[0, 1], 0.0, 1 / math.sqrt(n), "correlation")
     assert_close(np.mean(a**2 * b**2), 1.0, math.sqrt(8 / n), "E a^2 b^2")
     without = quiet_config(sensor={"width": 320, "height": 240}, read_noise=rn, source_follower={"enabled": False})
-    alone = Sensor(without, seed=8).expose("flat:0.3").frame(2, detail=True)
+    alone_shot = Sensor(without, seed=8).expose("flat:0.3")
+    alone = alone_shot.frame(2, detail=True)
     assert np.array_equal(alone.contributions["read_noise"], d.contributions["read_noise"])
+    assert np.array_equal(alone_shot.frame(2), alone.raw)
+    assert np.array_equal(sensor.expose("flat:0.3").frame(2), d.raw)
 
 
 def test_fit_recovers_the_black_level_per_cfa_cell_and_per_frame(tmp_path):

@@ -176,6 +176,14 @@ if numba is not None:
     _ptrs_quick_accept, _ptrs_early_reject = _h["ptrs_quick_accept"], _h["ptrs_early_reject"]
     _INV_MAX, _PTRS_FROM = samplers.INVERSION_MAX, samplers.PTRS_FROM
 
+    @numba.njit(inline="always", fastmath=False, error_model="numpy")
+    def _tukey_parts(z, scale):
+        """samplers.tukey_lambda_from's arithmetic for a normal ``z``, its table's loads apart: (node, the next
+        node's weight, ``scale`` carrying ``z``'s sign). The signed scale times the table's value equals the
+        specification's ``scale * (0 - q)`` up to the sign of a zero, which the rounding to a code does not see."""
+        kf, w = _tukey_lambda_cell(z)
+        return np.int64(kf), w, (0.0 - scale if z < 0.0 else scale)
+
     @numba.njit(fastmath=False, error_model="numpy")
     def _normal(index, frame, seq, k0, k1):
         """One normal: a row's or a column's (once a row or column, so called, not inlined)."""
@@ -433,7 +441,11 @@ if numba is not None:
         n = np.zeros(w)
         saved = np.empty(w if (has_blink and blink_exact) else 0)  # a row's counts of its blinking pixels
         noise = np.empty(w)
-        partner = np.empty(w if has_read else 0)  # the sine normals of the source follower's blocks (stage 9a)
+        tukey = has_read and read_kind == 1
+        partner = np.empty(w if has_read and not tukey else 0)  # the sine normals of the source follower's blocks
+        cell = np.empty(w if tukey else 0, np.int64)  # Tukey-lambda read noise: each sine normal's table node,
+        weight = np.empty(w if tukey else 0)  # the next node's weight,
+        scale = np.empty(w if tukey else 0)  # and the scale with the normal's sign
         a0, a1 = c0 - ac0, c1 - ac0  # the region's columns in the arrays
         for i in range(i0, i1):
             r = r0 + i
@@ -476,13 +488,21 @@ if numba is not None:
             if has_sf or has_read:  # the source follower's block: uniforms, then Box-Muller (25 % faster than one
                 for j in range(w):  # loop, measured); its cosine normal is stage 6's, its sine normal stage 9a's
                     u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
-                if has_sf and has_read:
+                if has_sf and tukey:  # samplers.tukey_lambda_from's arithmetic here (SIMD), its loads in stage 9a
+                    for j in range(w):
+                        z, z2 = _normal_pair_from(u1[j], u2[j])
+                        noise[j] = np.float64(sf[ra, a0 + j]) * z
+                        cell[j], weight[j], scale[j] = _tukey_parts(z2, read_scale)
+                elif has_sf and has_read:
                     for j in range(w):
                         z, partner[j] = _normal_pair_from(u1[j], u2[j])
                         noise[j] = np.float64(sf[ra, a0 + j]) * z
                 elif has_sf:
                     for j in range(w):
                         noise[j] = np.float64(sf[ra, a0 + j]) * _normal_from(u1[j], u2[j])
+                elif tukey:
+                    for j in range(w):
+                        cell[j], weight[j], scale[j] = _tukey_parts(_normal_pair_from(u1[j], u2[j])[1], read_scale)
                 else:
                     for j in range(w):
                         partner[j] = _normal_pair_from(u1[j], u2[j])[1]
@@ -512,16 +532,11 @@ if numba is not None:
                     if read_kind == 0:
                         for j in range(w):
                             noise[j] = read_scale * partner[j]
-                    else:
-                        # samplers.tukey_lambda_from in two passes: where the normal falls in the table (SIMD),
-                        # then the table's loads (a loop that indexes a table is not vectorized)
+                    else:  # the table's loads (a loop that indexes a table is not vectorized)
                         for j in range(w):
-                            lam[j], u2[j] = _tukey_lambda_cell(partner[j])
-                        for j in range(w):
-                            k = np.int64(lam[j])
+                            k = cell[j]
                             lo = read_table[k]
-                            q = lo + u2[j] * (read_table[k + 1] - lo)
-                            noise[j] = read_scale * (0.0 - q if partner[j] < 0.0 else q)
+                            noise[j] = scale[j] * (lo + weight[j] * (read_table[k + 1] - lo))
                 if one_black and not has_read:  # the paper's ADC: one black level, nothing after the gain
                     b0 = cell_black[0]
                     for j in range(w):
