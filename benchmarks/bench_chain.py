@@ -128,8 +128,8 @@ def stage_cost(a, off: str, on: str, extra: dict) -> tuple[list[dict], float]:
 def save_cost(a, rows: list[dict], cost: float, **more) -> None:
     """Write a stage-cost measurement to ``--json`` (when given): the CPU, threads, frames, rows and cost."""
     if a.json:
-        Path(a.json).write_text(json.dumps({**cpu(), "threads": a.threads, "frames": a.frames, "rows": rows,
-                                            "cost": cost, **more}, indent=1))
+        Path(a.json).write_text(json.dumps({**cpu(), "threads": a.threads, "frames": a.frames, "repeats": a.repeats,
+                                            "rows": rows, "cost": cost, **more}, indent=1))
 
 
 def cpu() -> dict:

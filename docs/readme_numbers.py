@@ -353,7 +353,8 @@ def render_fit_coverage(d: dict) -> str:
 
 def _stage_cost_table(d: dict, script: str) -> list[str]:
     """A stage-cost benchmark's table (bench_measured_stages.py, bench_telegraph.py): its rows against the reference."""
-    lines = [f"Measured with `python benchmarks/{script} --frames {d['frames']}` ({d['cpu']}, {d['vectors']} vectors, "
+    repeats = f" --repeats {d['repeats']}" if "repeats" in d else ""
+    lines = [f"Measured with `python benchmarks/{script} --frames {d['frames']}{repeats}` ({d['cpu']}, {d['vectors']} vectors, "
              f"numba threads {d['threads']}; 1920 x 1080 photo frame, each ratio to the NumPy reference timed "
              "alternately with it):", "",
              "| frame kernel | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|"]
@@ -546,7 +547,7 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
               "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"],
               "fit_coverage": ["fit_coverage.py", "--json", "fit_coverage.json"],
-              "measured_stages": ["bench_measured_stages.py", "--json", "measured_stages.json"],
+              "measured_stages": ["bench_measured_stages.py", "--repeats", "15", "--json", "measured_stages.json"],
               "telegraph_cost": ["bench_telegraph.py", "--json", "telegraph_cost.json"],
               "telegraph_fit": ["fit_telegraph_coverage.py", "--json", "telegraph_fit.json"],
               "dataset_speed": ["bench_dataset.py", "--memory", "10000", "--json", "dataset_speed.json"],
