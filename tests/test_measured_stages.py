@@ -95,6 +95,16 @@ def test_black_level_per_cell_position_and_per_frame():
     assert_close(frame_means.std(ddof=1), expected_sd, expected_sd / math.sqrt(2 * (frames - 1)), "frame error")
 
 
+@pytest.mark.parametrize("region", [(0, 6, 0, 8), (1, 6, 3, 8), (3, 4, 5, 6), (2, 9, 1, 2), (5, 5, 0, 4)])
+def test_the_black_map_lays_each_pixel_its_cells_value(region):
+    """read_noise.black_map: pixel (r, c) of the region takes the cell's value at (r % 2, c % 2), whatever the
+    region's corner and size (odd, one wide, empty)."""
+    cell = np.array([[1.5, -0.5], [0.25, 2.0]])
+    r0, r1, c0, c1 = region
+    expected = np.array([[cell[r % 2, c % 2] for c in range(c0, c1)] for r in range(r0, r1)]).reshape(r1 - r0, c1 - c0)
+    assert np.array_equal(read_noise.black_map(cell, region), expected)
+
+
 # ------------------------------------------------------------------ read noise after the gain
 @pytest.mark.parametrize("shape", [-0.09, 0.0, 0.1474653, 0.5])
 def test_tukey_lambda_read_noise_is_scipys_tukeylambda(shape):

@@ -66,4 +66,6 @@ def cell_black(black_level_dn: float, offsets_dn, frame_error_dn: float) -> np.n
 def black_map(cell: np.ndarray, region: tuple[int, int, int, int]) -> np.ndarray:
     """``cell`` laid over ``region = (row0, row1, col0, col1)`` by each pixel's position in the cell."""
     r0, r1, c0, c1 = region
-    return cell[np.arange(r0, r1)[:, None] % 2, np.arange(c0, c1)[None, :] % 2]
+    rows, cols = r1 - r0, c1 - c0
+    origin = cell[np.ix_((np.arange(2) + r0) % 2, (np.arange(2) + c0) % 2)]  # the cell as the region's corner has it
+    return np.tile(origin, ((rows + 1) // 2, (cols + 1) // 2))[:rows, :cols]  # copies, not a gather per pixel
