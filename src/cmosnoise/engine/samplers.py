@@ -5,7 +5,9 @@ counter ``(index, frame, sequence, attempt)`` under the stage's key, and
 from nothing else: its value depends on that pixel's own mean and on no other
 pixel. ``attempt`` advances only inside a rejection sampler.
 
-- Normal: Box-Muller on the two uniforms of block 0 (the cosine branch).
+- Normal: Box-Muller on the two uniforms of block 0 (the cosine branch; the
+  read noise after the gain takes the sine branch of the source follower's
+  block, :func:`normal_pair_from`).
 - Poisson: inversion of the CDF below a mean of 10 (one uniform of block 0);
   from 10 up, PTRS (Hoermann 1993) with numpy's constants and order of tests,
   each try taking its own block. Given the same uniforms, the inversion equals
