@@ -260,8 +260,8 @@ def gather(source, corners, out):
 
 
 # ------------------------------------------------------------------ fixed maps (fixed_maps' sources, per pixel)
-ppf_cell, heavy_tail_value, two_point, normal_value = (h[k] for k in ("ppf_cell", "heavy_tail_value", "two_point",
-                                                                      "normal_value"))
+ppf_cell, heavy_tail_value, two_point, normal_value, offset_value = (
+    h[k] for k in ("ppf_cell", "heavy_tail_value", "two_point", "normal_value", "offset_value"))
 _Z64, _ONE64 = np.uint64(0), np.uint64(1)
 
 
@@ -281,12 +281,7 @@ def offset_map(out, r0, c0, cols, k0, k1, sigma, fraction, tail_max):
     j, i = cuda.grid(2)
     if i < out.shape[0] and j < out.shape[1]:
         index = np.uint64(r0 + i) * cols + np.uint64(c0) + np.uint64(j)
-        u1, u2 = uniform_pair(index, _Z64, _Z64, _Z64, k0, k1)
-        v = sigma * normal_from(u1, u2)
-        if fraction > 0.0:
-            member, u = uniform_pair(index, _Z64, _Z64, _ONE64, k0, k1)
-            v = v + (u * tail_max if member < fraction else 0.0)
-        out[i, j] = np.float32(v)
+        out[i, j] = np.float32(offset_value(index, k0, k1, sigma, fraction, tail_max))
 
 
 @cuda.jit(fastmath=False)

@@ -76,6 +76,18 @@ def normal_value(u1, u2, mean, sigma, low):
     return where(v > low, v, low)
 
 
+def offset_value(index, k0, k1, sigma, fraction, tail_max):
+    """A pixel offset: ``sigma z`` (block 0 of the pixel's counter, Box-Muller), plus ``u * tail_max`` where the
+    pixel is in the tail (block 1: its first uniform below ``fraction``, ``u`` its second; drawn only where
+    ``fraction > 0``)."""
+    u1, u2 = uniform_pair(index, _ZERO, _ZERO, _ZERO, k0, k1)
+    v = sigma * normal_from(u1, u2)
+    if fraction > 0.0:
+        member, u = uniform_pair(index, _ZERO, _ZERO, _ONE, k0, k1)
+        v = v + where(member < fraction, u * tail_max, 0.0)
+    return v
+
+
 def _check(region, cols):
     r0, r1, c0, c1 = (int(v) for v in region)
     if not (0 <= r0 <= r1 and 0 <= c0 <= c1 <= cols):
@@ -173,11 +185,7 @@ def offset_map(region, cols: int, key: tuple[int, int], sigma: float, fraction: 
     kernel, :func:`.cuda_kernel.fixed_map`; the same bits).
     """
     def spec(index, k0, k1):
-        values = sigma * normal_from(*uniform_pair(index, _ZERO, _ZERO, _ZERO, k0, k1))
-        if fraction > 0.0:
-            member, u = uniform_pair(index, _ZERO, _ZERO, _ONE, k0, k1)
-            values = values + np.where(member < fraction, u * tail_max, 0.0)
-        return values
+        return offset_value(index, k0, k1, sigma, fraction, tail_max)
 
     return _made("offset", region, cols, key, lambda: (float(sigma), float(fraction), float(tail_max)), spec, engine)
 

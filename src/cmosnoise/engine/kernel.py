@@ -118,7 +118,7 @@ HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
                         "occupancy_walk", "occupancy"]),
            (samplers, ["normal_from", "normal_pair_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept",
                        "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try", "poisson_one"]),
-           (fixed_maps, ["ppf_cell", "heavy_tail_value", "two_point", "normal_value"])]
+           (fixed_maps, ["ppf_cell", "heavy_tail_value", "two_point", "normal_value", "offset_value"])]
 
 
 def compile_helpers(jit, numpy=np, skip=()) -> dict:
@@ -585,8 +585,8 @@ if numba is not None:
 
 
 if numba is not None:
-    _ppf_cell, _heavy_tail_value, _two_point, _normal_value = (
-        _h[name] for name in ("ppf_cell", "heavy_tail_value", "two_point", "normal_value"))
+    _ppf_cell, _heavy_tail_value, _two_point, _normal_value, _offset_value = (
+        _h[name] for name in ("ppf_cell", "heavy_tail_value", "two_point", "normal_value", "offset_value"))
     _Z64, _ONE64 = np.uint64(0), np.uint64(1)
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
@@ -604,12 +604,7 @@ if numba is not None:
         for i in numba.prange(out.shape[0]):
             base = np.uint64(r0 + i) * cols + np.uint64(c0)
             for j in range(out.shape[1]):
-                u1, u2 = _uniform_pair(base + np.uint64(j), _Z64, _Z64, _Z64, k0, k1)
-                v = sigma * _normal_from(u1, u2)
-                if fraction > 0.0:
-                    member, u = _uniform_pair(base + np.uint64(j), _Z64, _Z64, _ONE64, k0, k1)
-                    v = v + (u * tail_max if member < fraction else 0.0)
-                out[i, j] = np.float32(v)
+                out[i, j] = np.float32(_offset_value(base + np.uint64(j), k0, k1, sigma, fraction, tail_max))
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _heavy_tail_map(out, r0, c0, cols, k0, k1, start, step, last, tables, params, w, body_scale, tail_scale,
