@@ -92,7 +92,6 @@ if numba is not None and not os.environ.get("NUMBA_THREADING_LAYER") and numba.c
 ONE_LAUNCH = threading.RLock()
 
 
-
 def cached_for_this_machine(dispatcher) -> bool:
     """Whether numba's on-disk cache holds a compile of ``dispatcher`` for this machine and vector width (any
     argument types); True where numba's internals cannot say (nothing is announced then).
