@@ -13,7 +13,27 @@ import numpy as np
 from numba import cuda
 
 from . import kernel, telegraph
-from .cuda_kernel import scalar_numpy
+from .cuda_kernel import (
+    BLACK,
+    CDS,
+    CDS_INTERVAL,
+    EXPOSURE,
+    FRAME_BLACK_SIGMA,
+    FRAME_PERIOD,
+    FULL_WELL,
+    K_ADC,
+    NL_A,
+    NL_B,
+    NL_C,
+    NL_SCALE,
+    NL_SIZE,
+    NORMAL_ABOVE,
+    READ_KIND,
+    READ_SCALE,
+    ROW_SIGMA,
+    TOP,
+    scalar_numpy,
+)
 
 npx = scalar_numpy(cuda)  #: what ``np`` stands for in the helpers on the device
 dev = cuda.jit(device=True, fastmath=False)
@@ -79,26 +99,29 @@ def find(ptr, col, r, c):
 
 
 @cuda.jit(fastmath=False)
-def lines(frames, corners, h, w, seq, keys, has_row, row_sigma, row_offset, has_col, col_sigma, col_offset, black,
-          cell_offsets, frame_black_sigma, rowval, colterm, cell_black):
-    """Each item's row terms (B, h), column terms (B, w) and black level per 2 x 2 cell (B, 4)."""
+def lines(frames, which, corners, h, w, seqs, keys, flags, numbers, row_offset, col_sigma, col_offset, cell_offsets,
+          rowval, colterm, cell_black):
+    """Each item's row terms (B, h), column terms (B, w) and black level per 2 x 2 cell (B, 4), from its plan
+    ``which[b]``."""
     t, b = cuda.grid(2)
     if b >= frames.size or t >= h + w + 4:
         return
+    p = which[b]
     fr = np.uint64(frames[b])
-    sq = np.uint64(seq)
+    sq = seqs[p]
     if t < h:
-        if has_row:
+        if flags[p, 3]:
             r = corners[b, 0] + t
-            rowval[b, t] = row_sigma * normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[r]
+            rowval[b, t] = numbers[p, ROW_SIGMA] * normal(r, fr, sq, keys[p, 2, 0], keys[p, 2, 1]) + row_offset[p, r]
     elif t < h + w:
-        if has_col:
+        if flags[p, 4]:
             c = corners[b, 1] + (t - h)
-            colterm[b, t - h] = col_offset[c] + col_sigma[c] * normal(c, fr, sq, keys[3, 0], keys[3, 1])
+            colterm[b, t - h] = col_offset[p, c] + col_sigma[p, c] * normal(c, fr, sq, keys[p, 3, 0], keys[p, 3, 1])
     else:
         q = t - h - w
-        err = frame_black_sigma * normal(0, fr, sq, keys[4, 0], keys[4, 1]) if frame_black_sigma > 0.0 else 0.0
-        cell_black[b, q] = (black + cell_offsets[q]) + err
+        sigma = numbers[p, FRAME_BLACK_SIGMA]
+        err = sigma * normal(0, fr, sq, keys[p, 4, 0], keys[p, 4, 1]) if sigma > 0.0 else 0.0
+        cell_black[b, q] = (numbers[p, BLACK] + cell_offsets[p, q]) + err
 
 
 @dev
@@ -119,136 +142,166 @@ def _states_at(frame, seq, t, up, down, dt, index, slot, k0, k1):
 
 
 @cuda.jit(fastmath=False)
-def trap_values(frames, corners, h, w, cols, seq, up, down, size, index, slot, dt, interval, cds, k0, k1, out):
-    """What each trap adds in each item's frame (e-), (B, traps): kernel._trap_values; only for the traps inside
-    the item (the others are never read)."""
+def trap_values(frames, which, corners, h, w, cols, seqs, start, up, down, size, index, slot, numbers, ints, tkeys,
+                out):
+    """What each trap adds in each item's frame (e-), (B, most traps of a plan): kernel._trap_values. Item ``b``'s
+    plan ``p`` holds the traps ``start[p]`` to ``start[p + 1]`` of the arrays; only those inside the item are made
+    (the others are never read)."""
     t, b = cuda.grid(2)
-    if b >= frames.size or t >= up.size or not _inside_item(index[t], corners, b, h, w, cols):
+    if b >= frames.size:
         return
-    frame, sq, x, y = _states_at(frames[b], seq, t, up, down, dt, index, slot, k0, k1)
-    if cds:
-        sig = inside(frame, x, y, up[t], down[t], dt, interval, index[t], slot[t], sq, k0, k1)
-        out[b, t] = size[t] * (sig - x)
+    p = which[b]
+    q = start[p] + t
+    if q >= start[p + 1] or not _inside_item(index[q], corners, b, h, w, cols):
+        return
+    dt = numbers[p, FRAME_PERIOD]
+    k0, k1 = tkeys[p, 0], tkeys[p, 1]
+    frame, sq, x, y = _states_at(frames[b], seqs[p], q, up, down, dt, index, slot, k0, k1)
+    if ints[p, CDS]:
+        sig = inside(frame, x, y, up[q], down[q], dt, numbers[p, CDS_INTERVAL], index[q], slot[q], sq, k0, k1)
+        out[b, t] = size[q] * (sig - x)
     else:
-        out[b, t] = size[t] * x
+        out[b, t] = size[q] * x
 
 
 @cuda.jit(fastmath=False)
-def blink_values(frames, corners, h, w, cols, seq, up, down, size, index, slot, dt, exposure, k0, k1, out):
-    """Each blinking pixel's extra dark charge in each item's frame (e-), (B, pixels): kernel._blink_values; only
-    for the pixels inside the item (``h`` x ``w`` at its corner; the others are never read)."""
+def blink_values(frames, which, corners, h, w, cols, seqs, start, up, down, size, index, slot, numbers, bkeys, out):
+    """Each blinking pixel's extra dark charge in each item's frame (e-), (B, most blinking pixels of a plan):
+    kernel._blink_values; plan ``p``'s pixels are ``start[p]`` to ``start[p + 1]``; only those inside the item
+    (``h`` x ``w`` at its corner; the others are never read)."""
     t, b = cuda.grid(2)
-    if b >= frames.size or t >= up.size or not _inside_item(index[t], corners, b, h, w, cols):
+    if b >= frames.size:
         return
-    frame, sq, x, y = _states_at(frames[b], seq, t, up, down, dt, index, slot, k0, k1)
-    end = inside(frame, x, y, up[t], down[t], dt, exposure, index[t], slot[t], sq, k0, k1)
-    out[b, t] = size[t] * occupancy(frame, x, end, up[t], down[t], exposure, index[t], slot[t], sq, k0, k1)
+    p = which[b]
+    q = start[p] + t
+    if q >= start[p + 1] or not _inside_item(index[q], corners, b, h, w, cols):
+        return
+    dt, exposure = numbers[p, FRAME_PERIOD], numbers[p, EXPOSURE]
+    k0, k1 = bkeys[p, 0], bkeys[p, 1]
+    frame, sq, x, y = _states_at(frames[b], seqs[p], q, up, down, dt, index, slot, k0, k1)
+    end = inside(frame, x, y, up[q], down[q], dt, exposure, index[q], slot[q], sq, k0, k1)
+    out[b, t] = size[q] * occupancy(frame, x, end, up[q], down[q], exposure, index[q], slot[q], sq, k0, k1)
 
 
 @cuda.jit(fastmath=False)
-def pixel_sums(first, index, corners, h, w, cols, values, out):
-    """Per pixel inside each item, its traps' values summed in slot order (telegraph.per_pixel), (B, pixels)."""
-    p, b = cuda.grid(2)
-    if b >= values.shape[0] or p >= out.shape[1] or not _inside_item(index[first[p]], corners, b, h, w, cols):
+def pixel_sums(which, groups, start, first, index, corners, h, w, cols, values, out):
+    """Per trapped pixel inside each item, its traps' values summed in slot order (telegraph.per_pixel), (B, most
+    trapped pixels of a plan). Plan ``p``'s pixels are ``groups[p]`` to ``groups[p + 1]``, pixel ``g``'s traps
+    ``first[g]`` to ``first[g + 1]`` of the arrays (``values`` holds them from ``start[p]``)."""
+    g, b = cuda.grid(2)
+    if b >= values.shape[0]:
         return
-    s = values[b, first[p]]
-    for e in range(first[p] + 1, first[p + 1]):
-        s = s + values[b, e]
-    out[b, p] = s
+    p = which[b]
+    q = groups[p] + g
+    if q >= groups[p + 1] or not _inside_item(index[first[q]], corners, b, h, w, cols):
+        return
+    base = start[p]
+    s = values[b, first[q] - base]
+    for e in range(first[q] + 1, first[q + 1]):
+        s = s + values[b, e - base]
+    out[b, g] = s
 
 
 @cuda.jit(fastmath=False)
-def pixels(noisy, exact, flags, normal_above, full_well, sf, rowval, colterm, gain, keys, frames, corners, seq,
-           h, w, cols, k_adc, cell_black, top, nl_table, nl_scale, nl_a, nl_b, nl_c, offset, read_kind, read_scale,
-           read_table, rts_ptr, rts_col, rts_sum, blink_ptr, blink_col, blink_extra, out_dn, out_e):
-    """Every stage of one pixel of one item (kernel._render_rows, in its order): grid (columns, rows, items)."""
+def pixels(noisy, exact, flags, ints, numbers, sf, rowval, colterm, gain, keys, frames, which, corners, seqs, h, w,
+           cols, cell_black, nl_table, offset, read_table, rts_ptr, rts_col, groups, rts_sum, blink_ptr, blink_col,
+           blinks, blink_extra, out_dn, out_e):
+    """Every stage of one pixel of one item (kernel._render_rows, in its order): grid (columns, rows, items). Item
+    ``b`` reads plan ``which[b]``'s maps, switches and numbers (:class:`.cuda_kernel.DevicePlan`)."""
     j, i, b = cuda.grid(3)
     if j >= w or i >= h or b >= frames.size:
         return
+    p = which[b]
     has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
-        flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
-    has_nl, has_offset, has_read = flags[7], flags[8], flags[9]
-    has_rts, has_blink, blink_exact = flags[10], flags[11], flags[12]
+        flags[p, 0], flags[p, 1], flags[p, 2], flags[p, 3], flags[p, 4], flags[p, 5], flags[p, 6])
+    has_nl, has_offset, has_read = flags[p, 7], flags[p, 8], flags[p, 9]
+    has_rts, has_blink, blink_exact = flags[p, 10], flags[p, 11], flags[p, 12]
     r = corners[b, 0] + i
     c = corners[b, 1] + j
     fr = np.uint64(frames[b])
-    sq = np.uint64(seq)
+    sq = seqs[p]
     index = np.uint64(r * cols + c)
-    blink = find(blink_ptr, blink_col, r, c) if has_blink else -1
+    blink = find(blink_ptr[p], blink_col, r, c) if has_blink else -1
     n = 0.0
     blink_mean = 0.0
     if blink >= 0:  # stage 4b: a blinking pixel's mean charge of this frame, float32 (kernel.plus_charge)
-        held = exact[r, c] if blink_exact else noisy[r, c]
-        blink_mean = np.float64(np.float32(np.float64(held) + blink_extra[b, blink]))
+        held = exact[p, r, c] if blink_exact else noisy[p, r, c]
+        blink_mean = np.float64(np.float32(np.float64(held) + blink_extra[b, blink - blinks[p]]))
     if has_noisy:
-        m = np.float64(noisy[r, c])
+        m = np.float64(noisy[p, r, c])
         if blink >= 0 and not blink_exact:  # a blinking pixel's count at this frame's mean
             m = blink_mean
-        n = poisson_one(m, index, fr, sq, keys[0, 0], keys[0, 1], normal_above)
+        n = poisson_one(m, index, fr, sq, keys[p, 0, 0], keys[p, 0, 1], numbers[p, NORMAL_ABOVE])
     if has_exact:
         if blink >= 0 and blink_exact:  # a blinking pixel's mean dark charge of this frame
             n = n + blink_mean
         else:
-            n = n + np.float64(exact[r, c])
-    n = min(n, full_well)
+            n = n + np.float64(exact[p, r, c])
+    n = min(n, numbers[p, FULL_WELL])
     if has_nl:  # stage 5b (nonlinearity.Curve.apply)
-        if nl_table.size > 2:
-            q = n * nl_scale
-            t = np.int64(min(floor(q), np.float64(nl_table.size - 2)))
-            lo = nl_table[t]
-            n = lo + (q - t) * (nl_table[t + 1] - lo)
+        size = ints[p, NL_SIZE]
+        if size > 2:
+            q = n * numbers[p, NL_SCALE]
+            t = np.int64(min(floor(q), np.float64(size - 2)))
+            lo = nl_table[p, t]
+            n = lo + (q - t) * (nl_table[p, t + 1] - lo)
         else:
-            sx = n * nl_scale
-            n = n * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
+            sx = n * numbers[p, NL_SCALE]
+            n = n * (1.0 + sx * (numbers[p, NL_A] + sx * (numbers[p, NL_B] + sx * numbers[p, NL_C])))
     z = partner = 0.0
     if has_sf or has_read:  # the source follower's block: its cosine normal is stage 6's, its sine normal 9a's
-        u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[1, 0], keys[1, 1])
+        u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[p, 1, 0], keys[p, 1, 1])
         z, partner = normal_pair_from(u1, u2)
     if has_sf:
-        noise = np.float64(sf[r, c]) * z
+        noise = np.float64(sf[p, r, c]) * z
         if has_offset:
-            n = (n + np.float64(offset[r, c])) + noise
+            n = (n + np.float64(offset[p, r, c])) + noise
         else:
             n = n + noise
     elif has_offset:  # stage 5c
-        n = n + np.float64(offset[r, c])
+        n = n + np.float64(offset[p, r, c])
     if has_rts:  # stage 6b
-        e = find(rts_ptr, rts_col, r, c)
+        e = find(rts_ptr[p], rts_col, r, c)
         if e >= 0:
-            n = n + rts_sum[b, e]
+            n = n + rts_sum[b, e - groups[p]]
     if has_row:
         n = n + rowval[b, i]
     if has_col:
-        n = n * gain[c] + colterm[b, j]
+        n = n * gain[p, c] + colterm[b, j]
     if want_e:
         out_e[b, i, j] = np.float32(n)
     if adc_on:
-        v = n * k_adc + cell_black[b, 2 * (r & 1) + (c & 1)]
+        v = n * numbers[p, K_ADC] + cell_black[b, 2 * (r & 1) + (c & 1)]
         if has_read:  # stage 9a
-            if read_kind == 0:
-                noise = read_scale * partner
+            scale = numbers[p, READ_SCALE]
+            if ints[p, READ_KIND] == 0:
+                noise = scale * partner
             else:
                 kf, wt = tukey_lambda_cell(partner)
                 k = np.int64(kf)
-                lo = read_table[k]
-                q = lo + wt * (read_table[k + 1] - lo)
-                noise = read_scale * (0.0 - q if partner < 0.0 else q)
+                lo = read_table[p, k]
+                q = lo + wt * (read_table[p, k + 1] - lo)
+                noise = scale * (0.0 - q if partner < 0.0 else q)
             v = v + noise
         v = rint(v)
-        out_dn[b, i, j] = np.uint16(min(max(v, 0.0), top))
+        out_dn[b, i, j] = np.uint16(min(max(v, 0.0), numbers[p, TOP]))
 
 
 @cuda.jit(fastmath=False)
-def stick(where, value, corners, out):
-    """Stuck pixels (stage 15): ``out[b]`` at each item's pixels ``where`` (full-frame (row, col)) inside it."""
+def stick(which, start, where, value, corners, out):
+    """Stuck pixels (stage 15): ``out[b]`` at each of its plan's stuck pixels (``where``, full-frame (row, col),
+    plan ``p``'s from ``start[p]`` to ``start[p + 1]``) inside the item."""
     s, b = cuda.grid(2)
-    if b >= out.shape[0] or s >= value.size:
+    if b >= out.shape[0]:
         return
-    i = where[s, 0] - corners[b, 0]
-    j = where[s, 1] - corners[b, 1]
+    p = which[b]
+    q = start[p] + s
+    if q >= start[p + 1]:
+        return
+    i = where[q, 0] - corners[b, 0]
+    j = where[q, 1] - corners[b, 1]
     if 0 <= i < out.shape[1] and 0 <= j < out.shape[2]:
-        out[b, i, j] = value[s]
-
+        out[b, i, j] = value[q]
 
 
 @cuda.jit(fastmath=False)

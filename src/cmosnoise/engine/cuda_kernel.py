@@ -256,91 +256,196 @@ def _rows_of(index: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.
     return ptr, (index % cols).astype(np.int64)
 
 
+#: the columns of :attr:`DevicePlan.numbers`, each plan's scalars (float64): the Poisson draw's normal
+#: approximation from, the full well (e-); K (DN/e-), black level and top code (DN); the curve's charge scale and
+#: cubic; the read noise's scale (DN); the row noise's sigma (e-), the black level's error per frame (DN); the
+#: frame period, CDS interval and exposure (s; telegraph noise and blinking pixels)
+(NORMAL_ABOVE, FULL_WELL, K_ADC, BLACK, TOP, NL_SCALE, NL_A, NL_B, NL_C, READ_SCALE, ROW_SIGMA, FRAME_BLACK_SIGMA,
+ FRAME_PERIOD, CDS_INTERVAL, EXPOSURE) = range(15)
+#: the columns of :attr:`DevicePlan.ints` (int64): the read noise's law (0 normal, 1 Tukey-lambda), the curve
+#: table's length (2: the cubic), whether the traps are read by CDS
+READ_KIND, NL_SIZE, CDS = range(3)
+
+
+def _spans(counts) -> np.ndarray:
+    """Where each plan's part of a concatenated list starts, and the total: (P + 1,) int64."""
+    return np.r_[0, np.cumsum(np.asarray(counts, np.int64))].astype(np.int64)
+
+
 class DevicePlan:
-    """A :class:`.kernel.FramePlan` on the GPU: its maps, tables and populations uploaded once.
+    """One or several :class:`.kernel.FramePlan` of the same shape on the GPU: maps, tables and populations
+    uploaded once, every frame made from them in one launch.
 
     Parameters
     ----------
-    plan : kernel.FramePlan
-        What every frame of an exposure shares (full-frame maps).
-    stuck : tuple of ndarray, optional
+    plan : kernel.FramePlan, or a sequence of them (P,)
+        What every frame of an exposure shares (full-frame maps). Several plans (each its own sensor, exposure
+        and seed: the samples of a data set) share the device arrays, stacked (P, rows, cols), and a batch takes
+        any of them per item.
+    stuck : tuple of ndarray, or a sequence of them (one per plan, or None), optional
         The stuck pixels of stage 15 as (flat pixel index (n,) int64, value (n,) float64), each pixel once: a code
         (DN), or e- with the ADC off. They replace the pixel's value after the ADC.
 
-    Every array stays on the device; :meth:`render` launches a batch.
+    Every array stays on the device; :meth:`render` launches a batch. Each plan's scalars sit in a row of
+    :attr:`numbers` (float64, columns ``NORMAL_ABOVE`` ... ``EXPOSURE`` of this module) and :attr:`ints`;
+    variable-length lists (traps, blinking and stuck pixels) are concatenated plan after plan, with each plan's
+    start.
     """
 
-    def __init__(self, plan: kernel.FramePlan, stuck: tuple[np.ndarray, np.ndarray] | None = None):
-        if plan.window is not None:
-            raise CmosnoiseError(f"a plan of the window {plan.window} (a tile) is made by the CPU kernel; the GPU "
-                                 "takes a whole sensor's exposure and makes crops of it")
+    def __init__(self, plan, stuck=None):
+        one = isinstance(plan, kernel.FramePlan)
+        plans = [plan] if one else list(plan)
+        stucks = [stuck] if one else (list(stuck) if stuck is not None else [None] * len(plans))
+        if not plans or len(stucks) != len(plans):
+            raise ValueError(f"DevicePlan: expected one or more plans and a stuck-pixel list (or None) for each, got "
+                             f"{len(plans)} plans and {len(stucks)} lists")
+        shape = tuple(plans[0].shape)
+        for q, p in enumerate(plans):
+            if p.window is not None:
+                raise CmosnoiseError(f"a plan of the window {p.window} (a tile) is made by the CPU kernel; the GPU "
+                                     "takes a whole sensor's exposure and makes crops of it")
+            if tuple(p.shape) != shape or (p.adc is None) != (plans[0].adc is None):
+                raise CmosnoiseError(f"plans in one batch: plan {q} is {p.shape} with the ADC "
+                                     f"{'off' if p.adc is None else 'on'}, plan 0 {shape} with it "
+                                     f"{'off' if plans[0].adc is None else 'on'}; expected one shape and one ADC "
+                                     "setting (the frames of a batch are one array)")
         check()
         self.k = kernels()
         cuda = self.k.cuda
         #: threads per block of the pixel kernel
         self.block = BLOCK
-        self.plan = plan
-        rows, cols = plan.shape
+        #: the plans, (P,)
+        self.plans = plans
+        self.plan = plans[0]
+        self.shape = shape
+        rows, cols = shape
 
         def up(a, dtype=None):
-            if a is None:
-                return None
             return cuda.to_device(np.ascontiguousarray(a if dtype is None else np.asarray(a, dtype)))
 
-        dummy2, dummy1 = up(np.zeros((1, 1), np.float32)), up(np.zeros(1))
-        self.noisy = up(plan.noisy_e, np.float32) if plan.noisy_e is not None else dummy2
-        self.exact = up(plan.exact_e, np.float32) if plan.exact_e is not None else dummy2
-        self.sf = up(plan.sf_sigma_e, np.float32) if plan.sf_sigma_e is not None else dummy2
-        self.offset = up(plan.offset_e, np.float32) if plan.offset_e is not None else dummy2
-        self.row_offset = up(plan.row_offset_e, np.float64) if plan.row_offset_e is not None else up(np.zeros(rows))
-        self.col_sigma = up(plan.col_sigma_e, np.float64) if plan.col_sigma_e is not None else dummy1
-        self.col_offset = up(plan.col_offset_e, np.float64) if plan.col_offset_e is not None else dummy1
-        self.col_gain = up(plan.col_gain, np.float64) if plan.col_gain is not None else dummy1
-        self.keys = up(plan.keys, np.uint64)
-        self.cell_offsets = up(np.asarray(plan.cell_offsets_dn, np.float64))
-        nl, self.nl_scale, self.nl_abc = kernel.curve_constants(plan)
-        self.nl = up(nl, np.float64)
-        self.read_kind, self.read_scale, read_table = kernel.read_constants(plan)
-        self.read_table = up(read_table)
-        empty_ptr = np.zeros(rows + 1, np.int64)
-        # traps (stage 6b): sorted by pixel, then slot; their pixels as a row-sorted list
-        self.traps = plan.traps if plan.traps is not None and plan.traps.index.size else None
-        if self.traps is not None:
-            t = self.traps
-            first = np.flatnonzero(np.r_[True, t.index[1:] != t.index[:-1]])
-            ptr, col = _rows_of(t.index[first], plan.shape)
-            self.trap_arrays = tuple(up(a) for a in (t.up, t.down, t.size, t.index.astype(np.uint64),
-                                                     t.slot.astype(np.uint64)))
-            self.trap_first = up(np.r_[first, t.index.size].astype(np.int64))
-            self.rts_ptr, self.rts_col = up(ptr), up(col)
-        else:
-            self.rts_ptr, self.rts_col = up(empty_ptr), up(np.zeros(1, np.int64))
-        # blinking pixels (stage 4b): one a pixel, sorted
-        self.blinkers = plan.blinkers if plan.blinkers is not None and plan.blinkers.index.size else None
-        if self.blinkers is not None:
-            t = self.blinkers
-            if np.any(np.diff(t.index.astype(np.int64)) <= 0):
+        def stacked(name, dtype, size):
+            """Each plan's array ``name`` (None: zeros), stacked (P, *size); a dummy (1, ...) where no plan has
+            one (its switch keeps it unread)."""
+            arrays = [getattr(p, name) for p in plans]
+            if all(a is None for a in arrays):
+                return up(np.zeros((1,) * (len(size) + 1), dtype))
+            if len(arrays) == 1:  # a view of the plan's own array: no copy on the host
+                return up(np.asarray(arrays[0], dtype)[None])
+            out = np.zeros((len(arrays), *size), dtype)
+            for q, a in enumerate(arrays):
+                if a is not None:
+                    out[q] = a
+            return up(out)
+
+        self.noisy = stacked("noisy_e", np.float32, shape)
+        self.exact = stacked("exact_e", np.float32, shape)
+        self.sf = stacked("sf_sigma_e", np.float32, shape)
+        self.offset = stacked("offset_e", np.float32, shape)
+        self.row_offset = up(np.stack([np.zeros(rows) if p.row_offset_e is None else np.asarray(p.row_offset_e)
+                                       for p in plans]), np.float64)
+        self.col_sigma = stacked("col_sigma_e", np.float64, (cols,))
+        self.col_offset = stacked("col_offset_e", np.float64, (cols,))
+        self.col_gain = stacked("col_gain", np.float64, (cols,))
+        self.keys = up(np.stack([p.keys for p in plans]), np.uint64)
+        self.seqs = up(np.array([p.sequence for p in plans], np.uint64))
+        self.cell_offsets = up(np.array([p.cell_offsets_dn for p in plans], np.float64))
+        numbers = np.zeros((len(plans), 15))
+        ints = np.zeros((len(plans), 3), np.int64)
+        nl_tables, read_tables = [], []
+        for q, p in enumerate(plans):
+            table, nl_scale, (a, b, c) = kernel.curve_constants(p)
+            read_kind, read_scale, read_table = kernel.read_constants(p)
+            k_adc, black, top = p.adc if p.adc is not None else (1.0, 0.0, 0)
+            numbers[q] = (p.normal_above_e, p.full_well_e, k_adc, black, top, nl_scale, a, b, c, read_scale,
+                          p.row_sigma_e or 0.0, p.frame_black_sigma_dn, p.frame_period_s, p.cds_interval_s or 0.0,
+                          p.exposure_s)
+            ints[q] = (read_kind, table.size, p.cds_interval_s is not None)
+            nl_tables.append(table)
+            read_tables.append(read_table)
+        #: each plan's scalars (P, 15) float64 and (P, 3) int64 (the columns named above)
+        self.numbers, self.ints = up(numbers), up(ints)
+        self.nl = up(self._padded(nl_tables))
+        self.read_table = up(self._padded(read_tables))
+        # traps (stage 6b): sorted by pixel, then slot, plan after plan; their pixels as row-sorted lists whose
+        # row pointers count the trapped pixels of all the plans before
+        traps = [p.traps if p.traps is not None and p.traps.index.size else None for p in plans]
+        firsts = [np.flatnonzero(np.r_[True, t.index[1:] != t.index[:-1]]) if t is not None else np.zeros(0, int)
+                  for t in traps]
+        self.has_traps = [t is not None for t in traps]
+        self.trap_start = _spans([0 if t is None else t.index.size for t in traps])
+        self.trap_groups = _spans([f.size for f in firsts])
+        ptrs, cols_ = [], []
+        for q, (t, f) in enumerate(zip(traps, firsts)):
+            ptr, col = _rows_of(t.index[f], shape) if t is not None else (np.zeros(rows + 1, np.int64), f)
+            ptrs.append(ptr + self.trap_groups[q])
+            cols_.append(col)
+        self.rts_ptr, self.rts_col = up(np.stack(ptrs)), up(np.concatenate(cols_ + [np.zeros(1, np.int64)]))
+        self.d_trap_start, self.d_trap_groups = up(self.trap_start), up(self.trap_groups)
+        if any(self.has_traps):
+            present = [t for t in traps if t is not None]
+            self.trap_arrays = self._concatenated(present)
+            self.trap_first = up(np.r_[np.concatenate([f + self.trap_start[q] for q, f in enumerate(firsts)]),
+                                       self.trap_start[-1]].astype(np.int64))
+            self.trap_keys = up(np.array([p.trap_key for p in plans], np.uint64))
+        # blinking pixels (stage 4b): one a pixel, sorted, plan after plan
+        blinkers = [p.blinkers if p.blinkers is not None and p.blinkers.index.size else None for p in plans]
+        for t in blinkers:
+            if t is not None and np.any(np.diff(t.index.astype(np.int64)) <= 0):
                 raise ValueError("blinkers: expected one blinking pixel per pixel, sorted")
-            self.blink_ptr, self.blink_col = (up(a) for a in _rows_of(t.index, plan.shape))
-            self.blink_arrays = tuple(up(a) for a in (t.up, t.down, t.size, t.index.astype(np.uint64),
-                                                      t.slot.astype(np.uint64)))
-        else:
-            self.blink_ptr, self.blink_col = up(empty_ptr), up(np.zeros(1, np.int64))
+        self.has_blinkers = [t is not None for t in blinkers]
+        self.blink_start = _spans([0 if t is None else t.index.size for t in blinkers])
+        ptrs, cols_ = [], []
+        for q, t in enumerate(blinkers):
+            ptr, col = _rows_of(t.index, shape) if t is not None else (np.zeros(rows + 1, np.int64), np.zeros(0, int))
+            ptrs.append(ptr + self.blink_start[q])
+            cols_.append(col)
+        self.blink_ptr = up(np.stack(ptrs))
+        self.blink_col = up(np.concatenate(cols_ + [np.zeros(1, np.int64)]).astype(np.int64))
+        self.d_blink_start = up(self.blink_start)
+        if any(self.has_blinkers):
+            self.blink_arrays = self._concatenated([t for t in blinkers if t is not None])
+            self.blink_keys = up(np.array([p.blink_key for p in plans], np.uint64))
+        # stuck pixels (stage 15), plan after plan
+        stucks = [(np.zeros(0, np.int64), np.zeros(0)) if s is None else (np.asarray(s[0], np.int64),
+                                                                          np.asarray(s[1], np.float64))
+                  for s in stucks]
+        self.stuck_start = _spans([s[0].size for s in stucks])
         self.stuck = None
-        if stuck is not None and stuck[0].size:
-            index = np.asarray(stuck[0], np.int64)
-            self.stuck = (up(np.stack([index // cols, index % cols], axis=1)), up(np.asarray(stuck[1], np.float64)))
+        if self.stuck_start[-1]:
+            index = np.concatenate([s[0] for s in stucks])
+            self.stuck = (up(np.stack([index // cols, index % cols], axis=1)),
+                          up(np.concatenate([s[1] for s in stucks])), up(self.stuck_start))
+        #: the kernels' switches of each plan (P, 13), without and with the charge at the ADC input asked for
+        self.flags = {e: up(np.stack([kernel.switches(p, e, t, bl) for p, t, bl in
+                                      zip(plans, self.has_traps, self.has_blinkers)]))
+                      for e in (False, True)}
+
+    @staticmethod
+    def _padded(tables: list) -> np.ndarray:
+        """Tables of different lengths as the rows of one (P, longest) array (the rest zeros, never read)."""
+        out = np.zeros((len(tables), max(t.size for t in tables)))
+        for q, t in enumerate(tables):
+            out[q, :t.size] = t
+        return out
+
+    def _concatenated(self, populations: list) -> tuple:
+        """The populations' (up, down, size, index, slot) arrays, plan after plan, on the device."""
+        cuda = self.k.cuda
+        return tuple(cuda.to_device(np.ascontiguousarray(np.concatenate([getattr(t, name) for t in populations])
+                                                         .astype(dtype)))
+                     for name, dtype in (("up", np.float64), ("down", np.float64), ("size", np.float64),
+                                         ("index", np.uint64), ("slot", np.uint64)))
 
     def with_means(self, noisy_e=None, exact_e=None) -> "DevicePlan":
         """This plan with the mean charge (the scene) taken from arrays already on the GPU, without a copy.
 
         Parameters
         ----------
-        noisy_e, exact_e : GPU array (rows, cols) float32, e-, optional
+        noisy_e, exact_e : GPU array (rows, cols), or (P, rows, cols) for P plans, float32, e-, optional
             The mean charge shot noise acts on, and that entering without it (the plan's ``noisy_e`` and
             ``exact_e``): anything with ``__cuda_array_interface__`` (a PyTorch or CuPy tensor, a numba device
             array), or a DLPack capsule's owner where PyTorch can read it. None keeps the plan's own; each must be
-            given where the plan has one (the plan's stages decide which exist).
+            given where the plans have one (the plans' stages decide which exist).
 
         The arrays are read, never copied or kept beyond the plan.
         """
@@ -350,23 +455,35 @@ class DevicePlan:
         for name, value in (("noisy_e", noisy_e), ("exact_e", exact_e)):
             if value is None:
                 continue
-            if getattr(self.plan, name) is None:
+            if all(getattr(p, name) is None for p in self.plans):
                 raise CmosnoiseError(f"{name}: this plan has no {name} (its stages put the charge elsewhere)")
             arr = as_device_array(value, name)
-            if arr.shape != self.plan.shape or np.dtype(arr.dtype) != np.float32:
-                raise CmosnoiseError(f"{name}: expected a float32 array of {self.plan.shape}, got {arr.dtype} "
-                                     f"{tuple(arr.shape)}")
+            want = (len(self.plans), *self.shape)
+            if arr.ndim == 2 and len(self.plans) == 1:
+                arr = arr.reshape(want)
+            if tuple(arr.shape) != want or np.dtype(arr.dtype) != np.float32:
+                raise CmosnoiseError(f"{name}: expected a float32 array of {self.shape if len(self.plans) == 1 else want}, "
+                                     f"got {arr.dtype} {tuple(arr.shape)}")
             setattr(other, "noisy" if name == "noisy_e" else "exact", arr)
         return other
 
     def nbytes(self) -> int:
         """Bytes this plan holds on the device."""
-        arrays = [a for v in vars(self).values() for a in (v if isinstance(v, tuple) else (v,))
-                  if hasattr(a, "copy_to_host")]
-        return int(sum(a.nbytes for a in arrays))
+        found = []
 
-    def render(self, frames, corners=None, shape=None, electrons: bool = False, stream=0):
-        """A batch: item ``b`` is frame ``frames[b]`` at corner ``corners[b] = (row0, col0)``, ``shape = (h, w)``.
+        def walk(v):
+            if hasattr(v, "copy_to_host"):
+                found.append(v)
+            elif isinstance(v, (tuple, list, dict)):
+                for x in (v.values() if isinstance(v, dict) else v):
+                    walk(x)
+
+        walk(list(vars(self).values()))
+        return int(sum(a.nbytes for a in found))
+
+    def render(self, frames, corners=None, shape=None, electrons: bool = False, stream=0, plans=None):
+        """A batch: item ``b`` is frame ``frames[b]`` of plan ``plans[b]`` at corner ``corners[b] = (row0, col0)``,
+        ``shape = (h, w)``.
 
         Parameters
         ----------
@@ -378,74 +495,87 @@ class DevicePlan:
             Each item's rows and columns; default the whole frame.
         electrons : bool
             Also return the charge at the ADC input (float32 e-).
+        plans : sequence of int, (B,), optional
+            Which of this object's plans each item is made from; default plan 0 for every item where there is one
+            plan, and item ``b`` from plan ``b`` where there are several (then B is their number).
 
         Returns
         -------
         raw : device array, (B, h, w)
             uint16 DN, or float32 e- with the ADC off (then ``electrons`` is the same array). Each item equals
-            ``kernel.render(plan, frame, region)`` with the stuck pixels set, bit for bit.
+            ``kernel.render(plans[b], frame, region)`` with the stuck pixels set, bit for bit.
         electrons : device array (B, h, w) float32, or None
         """
         cuda = self.k.cuda
-        plan = self.plan
-        rows, cols = plan.shape
+        rows, cols = self.shape
+        count = len(self.plans)
         frames = np.atleast_1d(np.asarray(frames, np.int64))
         if frames.ndim != 1 or frames.size == 0:
             raise ValueError(f"frames: expected one frame number or a list of them, got shape {frames.shape}")
         if frames.min() < 0 or frames.max() > 2**32 - 1:
             raise ValueError("frames: frame numbers must be 0 to 2**32 - 1")
         n = frames.size
+        if plans is None:
+            if count > 1 and n != count:
+                raise ValueError(f"plans: {n} items of {count} plans; give each item's plan")
+            plans = np.zeros(n, np.int64) if count == 1 else np.arange(n)
+        which = np.asarray(plans, np.int64).reshape(-1)
+        if which.size != n or which.min() < 0 or which.max() >= count:
+            raise ValueError(f"plans: expected {n} plan numbers from 0 to {count - 1}, got {which.tolist()[:8]}")
         corners = np.zeros((n, 2), np.int64) if corners is None else np.asarray(corners, np.int64).reshape(n, 2)
         h, w = (rows, cols) if shape is None else (int(shape[0]), int(shape[1]))
         if h < 1 or w < 1 or corners.min() < 0 or (corners[:, 0] + h).max() > rows or (corners[:, 1] + w).max() > cols:
             raise ValueError(f"regions of {h} x {w} at corners {corners.tolist()[:4]}... do not fit in {rows} x {cols}")
-        flags = kernel.switches(plan, electrons, self.traps is not None, self.blinkers is not None)
-        has_row, has_col, adc_on, want_e = (bool(flags[i]) for i in (3, 4, 5, 6))
+        used = [self.plans[q] for q in np.unique(which)]
+        has_row = any(p.row_sigma_e is not None for p in used)
+        has_col = any(p.col_gain is not None for p in used)
+        adc_on = self.plan.adc is not None
+        want_e = electrons or not adc_on
+        flags = self.flags[bool(electrons)]
         d_frames, d_corners = cuda.to_device(frames, stream=stream), cuda.to_device(corners, stream=stream)
+        d_which = cuda.to_device(which, stream=stream)
         rowval = cuda.device_array((n, h) if has_row else (1, 1), np.float64, stream=stream)
         colterm = cuda.device_array((n, w) if has_col else (1, 1), np.float64, stream=stream)
         cell_black = cuda.device_array((n, 4), np.float64, stream=stream)
-        k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
+
+        def most(start):  # the longest of the plans' lists, at least 1 (a grid is never empty)
+            return max(1, int(np.diff(start).max()))
+
         with strict_arithmetic():
             span = h + w + 4
             self.k.lines[((span + 63) // 64, n), (64, 1), stream](
-                d_frames, d_corners, h, w, plan.sequence, self.keys, has_row, float(plan.row_sigma_e or 0.0),
-                self.row_offset, has_col, self.col_sigma, self.col_offset, float(black), self.cell_offsets,
-                float(plan.frame_black_sigma_dn), rowval, colterm, cell_black)
+                d_frames, d_which, d_corners, h, w, self.seqs, self.keys, flags, self.numbers, self.row_offset,
+                self.col_sigma, self.col_offset, self.cell_offsets, rowval, colterm, cell_black)
             rts_sum = cuda.device_array((1, 1), np.float64, stream=stream)
-            if self.traps is not None:
-                t = self.traps
-                values = cuda.device_array((n, t.index.size), np.float64, stream=stream)
-                k0, k1 = (np.uint64(v) for v in plan.trap_key)
-                cds = plan.cds_interval_s is not None
-                self.k.trap_values[((t.index.size + 127) // 128, n), (128, 1), stream](
-                    d_frames, d_corners, h, w, cols, np.uint64(plan.sequence), *self.trap_arrays,
-                    float(plan.frame_period_s), float(plan.cds_interval_s or 0.0), cds, k0, k1, values)
-                npix = self.rts_col.size
-                rts_sum = cuda.device_array((n, npix), np.float64, stream=stream)
-                self.k.pixel_sums[((npix + 127) // 128, n), (128, 1), stream](
-                    self.trap_first, self.trap_arrays[3], d_corners, h, w, cols, values, rts_sum)
+            if any(self.has_traps):
+                traps, groups = most(self.trap_start), most(self.trap_groups)
+                values = cuda.device_array((n, traps), np.float64, stream=stream)
+                self.k.trap_values[((traps + 127) // 128, n), (128, 1), stream](
+                    d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_trap_start, *self.trap_arrays,
+                    self.numbers, self.ints, self.trap_keys, values)
+                rts_sum = cuda.device_array((n, groups), np.float64, stream=stream)
+                self.k.pixel_sums[((groups + 127) // 128, n), (128, 1), stream](
+                    d_which, self.d_trap_groups, self.d_trap_start, self.trap_first, self.trap_arrays[3], d_corners,
+                    h, w, cols, values, rts_sum)
             blink_extra = cuda.device_array((1, 1), np.float64, stream=stream)
-            if self.blinkers is not None:
-                t = self.blinkers
-                blink_extra = cuda.device_array((n, t.index.size), np.float64, stream=stream)
-                k0, k1 = (np.uint64(v) for v in plan.blink_key)
-                self.k.blink_values[((t.index.size + 127) // 128, n), (128, 1), stream](
-                    d_frames, d_corners, h, w, cols, np.uint64(plan.sequence), *self.blink_arrays,
-                    float(plan.frame_period_s), float(plan.exposure_s), k0, k1, blink_extra)
+            if any(self.has_blinkers):
+                blinks = most(self.blink_start)
+                blink_extra = cuda.device_array((n, blinks), np.float64, stream=stream)
+                self.k.blink_values[((blinks + 127) // 128, n), (128, 1), stream](
+                    d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_blink_start, *self.blink_arrays,
+                    self.numbers, self.blink_keys, blink_extra)
             out_dn = cuda.device_array((n, h, w) if adc_on else (1, 1, 1), np.uint16, stream=stream)
             out_e = cuda.device_array((n, h, w) if want_e else (1, 1, 1), np.float32, stream=stream)
-            a, b_, c_ = self.nl_abc
             grid = ((w + self.block - 1) // self.block, h, n)
             self.k.pixels[grid, (self.block, 1, 1), stream](
-                self.noisy, self.exact, cuda.to_device(flags, stream=stream), float(plan.normal_above_e),
-                float(plan.full_well_e), self.sf, rowval, colterm, self.col_gain, self.keys, d_frames, d_corners,
-                plan.sequence, h, w, cols, float(k_adc), cell_black, float(top), self.nl, float(self.nl_scale),
-                a, b_, c_,
-                self.offset, self.read_kind, float(self.read_scale), self.read_table, self.rts_ptr, self.rts_col,
-                rts_sum, self.blink_ptr, self.blink_col, blink_extra, out_dn, out_e)
+                self.noisy, self.exact, flags, self.ints, self.numbers, self.sf, rowval, colterm, self.col_gain,
+                self.keys, d_frames, d_which, d_corners, self.seqs, h, w, cols, cell_black, self.nl, self.offset,
+                self.read_table, self.rts_ptr, self.rts_col, self.d_trap_groups, rts_sum, self.blink_ptr,
+                self.blink_col, self.d_blink_start, blink_extra, out_dn, out_e)
             raw = out_dn if adc_on else out_e
             if self.stuck is not None:
-                where, value = self.stuck
-                self.k.stick[((value.size + 127) // 128, n), (128, 1), stream](where, value, d_corners, raw)
+                where, value, start = self.stuck
+                stuck = most(self.stuck_start)
+                self.k.stick[((stuck + 127) // 128, n), (128, 1), stream](d_which, start, where, value, d_corners,
+                                                                          raw)
         return raw, (out_e if want_e else None)
