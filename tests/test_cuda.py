@@ -113,6 +113,51 @@ def test_a_batch_of_crops_at_different_corners_equals_the_crops_of_the_whole_fra
     np.testing.assert_array_equal(gpu.frame(9, region=(3, h + 3, 5, w + 5)), cpu.frame(9, region=(3, h + 3, 5, w + 5)))
 
 
+def test_a_batch_of_different_sensors_in_one_launch_equals_each_sensors_own_frames():
+    """#31: crops from different samples (each its own sensor: presets, stages, populations, tables and seeds
+    differ) in one launch; each item is its plan's frame bit for bit, whatever the other plans hold."""
+    from cmosnoise import frames_together
+
+    size = {"sensor": {"width": WIDTH, "height": HEIGHT}}
+    # plans are made on the host (a GPU sensor's maps are the CPU's bits), so the CPU's exposures give them
+    cpus = [Sensor(load_config(preset=preset, extra=_merged(config, size)), seed=seed).expose("photo")
+            for config, preset, seed in
+            [(EVERY, None, 7),  # traps, blinking and stuck pixels, Tukey-lambda read noise, the cubic
+             (VARIANTS["exact-dark-table-normal"], None, 8),  # a curve table, normal read noise
+             ({}, "sony-imx900", 9),  # no populations at all
+             ({}, "paper-fig11-full", 10)]]
+    plan = cuda_kernel.DevicePlan([c.plan() for c in cpus], [c.stuck_pixels() for c in cpus])
+    which, frames = [3, 0, 2, 1, 0, 2], [1, 4, 0, 2, 4_000_000_000, 5]
+    h, w = HEIGHT // 2, WIDTH // 2
+    corners = [(0, 0), (HEIGHT - h, WIDTH - w), (3, 5), (1, 2), (2, 4), (HEIGHT // 3, WIDTH // 4)]
+    raw, electrons = plan.render(frames, corners, (h, w), electrons=True, plans=which)
+    raw, electrons = raw.copy_to_host(), electrons.copy_to_host()
+    for b, (q, k, (r, c)) in enumerate(zip(which, frames, corners)):
+        expected, expected_e = cpus[q]._render(k)
+        np.testing.assert_array_equal(raw[b], expected[r:r + h, c:c + w], err_msg=f"item {b}, plan {q}")
+        np.testing.assert_array_equal(electrons[b], expected_e[r:r + h, c:c + w], err_msg=f"item {b}, plan {q}")
+    # the model's entry: one frame of each exposure, whole (two of them: the simulator is slow)
+    raw, _ = frames_together([cpus[2], cpus[0]], frames=[6, 0])
+    for b, (cpu, k) in enumerate(zip([cpus[2], cpus[0]], [6, 0])):
+        np.testing.assert_array_equal(raw.copy_to_host()[b], cpu.frame(k), err_msg=f"exposure {b}")
+
+
+def test_plans_of_one_batch_must_share_a_shape_and_the_adc():
+    a = _pair(seed=1)[0]
+    b = Sensor(load_config(extra={"sensor": {"width": WIDTH // 2, "height": HEIGHT}}), seed=1).expose("photo")
+    off = Sensor(load_config(extra={"sensor": {"width": WIDTH, "height": HEIGHT}, "adc": {"enabled": False}}),
+                 seed=1).expose("photo")
+    with pytest.raises(CmosnoiseError, match="expected one shape and one ADC setting"):
+        cuda_kernel.DevicePlan([a.plan(), b.plan()])
+    with pytest.raises(CmosnoiseError, match="with the ADC off"):
+        cuda_kernel.DevicePlan([a.plan(), off.plan()])
+    plan = cuda_kernel.DevicePlan([a.plan(), a.plan()])
+    with pytest.raises(ValueError, match="give each item's plan"):
+        plan.render([0, 1, 2])
+    with pytest.raises(ValueError, match="plan numbers from 0 to 1"):
+        plan.render([0, 1], plans=[0, 2])
+
+
 def test_the_device_arrays_are_the_cuda_array_interface_and_the_plan_is_uploaded_once():
     _, gpu = _pair(seed=3)
     raw, e = gpu.frames_on_device(1)

@@ -31,6 +31,7 @@ _NAMES = {
     "PatternCache": "model.fixed_pattern",
     "Sensor": "model.sensor",
     "Exposure": "model.sensor",
+    "frames_together": "model.sensor",
     "FrameDetail": "model.sensor",
     "FixedPattern": "model.fixed_pattern",
     "RawInfo": "model.raw_info",

@@ -780,17 +780,21 @@ class Exposure:
         timings["frame_numpy"] += time.perf_counter() - t0
         return self._stick(raw, region, keep), e.astype(np.float32)
 
+    def stuck_pixels(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The stuck pixels and lines of stage 15 as the GPU kernel takes them: (flat pixel index (n,) int64, value
+        (n,) float64: a code in DN, or e- with the ADC off), each pixel once; None where there are none."""
+        s = self.sensor
+        d = s.fixed_pattern.defects
+        if d is None or not d.has_stuck:
+            return None
+        adc_on = s.config.adc.enabled
+        return defects.stuck_pixels(d, s.transfer.max_code if adc_on else s.config.sensor.full_well_e,
+                                    rounded=adc_on)
+
     def device_plan(self) -> "cuda_kernel.DevicePlan":
         """This exposure's :meth:`plan` on the GPU, with its stuck pixels (uploaded once, then reused)."""
         if self._device_plan is None:
-            s = self.sensor
-            d = s.fixed_pattern.defects
-            stuck = None
-            if d is not None and d.has_stuck:
-                adc_on = s.config.adc.enabled
-                stuck = defects.stuck_pixels(d, s.transfer.max_code if adc_on else s.config.sensor.full_well_e,
-                                             rounded=adc_on)
-            self._device_plan = cuda_kernel.DevicePlan(self.plan(), stuck)
+            self._device_plan = cuda_kernel.DevicePlan(self.plan(), self.stuck_pixels())
         return self._device_plan
 
     def frames_on_device(self, frames, region=None, corners=None, electrons: bool = False):
@@ -860,6 +864,57 @@ class Exposure:
         where given)."""
         for k in range(first, first + n):
             yield self._render(k, region=region)
+
+
+def frames_together(exposures, frames=0, electrons: bool = False):
+    """One frame of each of several exposures of the same shape, made on the GPU in one launch and left there.
+
+    The exposures are those of different sensors (each its own configuration, seed, maps and scene: the samples
+    of a data set, each a crop-sized sensor); their plans are uploaded together
+    (:class:`.cuda_kernel.DevicePlan` of several plans) and item ``b`` of the batch is frame ``frames[b]`` of
+    ``exposures[b]``, bit for bit ``exposures[b].frame(frames[b])``.
+
+    Parameters
+    ----------
+    exposures : sequence of Exposure, (B,)
+        Of one shape, all with the ADC on or all with it off.
+    frames : int or sequence of int, (B,)
+        Each exposure's frame number (one number: the same for all).
+    electrons : bool
+        Also the charge at the ADC input, float32 e-.
+
+    Returns
+    -------
+    raw : device array (B, rows, cols)
+        uint16 DN, or float32 e- with the ADC off.
+    electrons : device array (B, rows, cols) float32, or None
+
+    Examples
+    --------
+    Two sensors of different seeds and presets (on a GPU; numba's CUDA simulator stands in for one in the tests):
+
+    >>> import numpy as np
+    >>> from cmosnoise import Sensor, frames_together, load_config
+    >>> size = {"sensor": {"width": 32, "height": 24}}
+    >>> shots = [Sensor(load_config(preset=p, extra=size), seed=s).expose("photo")
+    ...          for p, s in ((None, 1), ("sony-imx900", 2))]
+    >>> raw, _ = frames_together(shots, frames=[0, 7])
+    >>> raw.shape
+    (2, 24, 32)
+    >>> bool(np.array_equal(raw.copy_to_host()[1], shots[1].frame(7)))
+    True
+    """
+    exposures = list(exposures)
+    if not exposures:
+        raise ValueError("exposures: expected at least one")
+    frames = np.atleast_1d(np.asarray(frames, dtype=object)).tolist()
+    if len(frames) == 1:
+        frames = frames * len(exposures)
+    if len(frames) != len(exposures):
+        raise ValueError(f"frames: {len(frames)} frame numbers for {len(exposures)} exposures")
+    frames = [_frame_index(k) for k in frames]
+    plan = cuda_kernel.DevicePlan([e.plan() for e in exposures], [e.stuck_pixels() for e in exposures])
+    return plan.render(frames, electrons=electrons)
 
 
 def as_spec(config) -> SensorSpec:
