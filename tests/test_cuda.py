@@ -298,11 +298,16 @@ def test_crops_of_a_map_on_the_device_are_the_maps_crops():
         cuda_kernel.crops(source, [(HEIGHT - 5, 0)], (10, 12))
 
 
-def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_path):
+def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_path, monkeypatch):
     from cmosnoise.app import dataset as ds
     from cmosnoise.app import sweep as sw
 
-    recipe = ds.Recipe(samples=2, crop=(32, 48), seed=4, cameras=("led",), sources=ds.BUILTIN_SCENES, shard_size=2)
+    # a shard's samples from different cameras, their frames in launches of GPU_BATCH samples (2: three samples
+    # cross a batch's end)
+    recipe = ds.Recipe(samples=3, crop=(32, 48), seed=4, cameras=("led", "sony-imx900"), sources=ds.BUILTIN_SCENES,
+                       shard_size=3)
+    assert len({ds.settings(recipe, i).columns["camera"] for i in range(3)}) == 2
+    monkeypatch.setattr(ds, "GPU_BATCH", 2)
     assert ds.shard_bytes(recipe.to_json(), 0, "cuda") == ds.shard_bytes(recipe.to_json(), 0)
     cfg = {"sensor": {"width": 48, "height": 32}}
     base = load_config(extra=cfg)
@@ -315,10 +320,12 @@ def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_
 def test_the_torch_dataset_on_the_gpu_gives_the_cpus_tensors():
     from cmosnoise.torch import NoisyRawDataset
 
-    cpu = NoisyRawDataset(3, crop=(32, 48), seed=2)
-    gpu = NoisyRawDataset(3, crop=(32, 48), seed=2, device="cuda")
-    for i in range(3):
-        a, b = cpu[i], gpu[i]
+    cpu = NoisyRawDataset(3, crop=(32, 48), seed=2, cameras=("led", "sony-imx900"))
+    gpu = NoisyRawDataset(3, crop=(32, 48), seed=2, cameras=("led", "sony-imx900"), device="cuda")
+    assert len({cpu.sample(i)[1]["camera"] for i in range(3)}) == 2  # two cameras among them
+    together = gpu.__getitems__([2, 0])  # what a DataLoader with a batch_size asks: one launch
+    for i, b in [(0, gpu[0]), (1, gpu[1]), (2, gpu[2]), (2, together[0]), (0, together[1])]:
+        a = cpu[i]
         assert b["noisy"].device.type == ("cpu" if SIMULATED else "cuda")
         for key in ("noisy", "expected", "perfect", "mask", "raw"):
             assert a[key].dtype == b[key].dtype and torch_equal(a[key], b[key].cpu()), (i, key)

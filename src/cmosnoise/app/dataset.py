@@ -60,7 +60,7 @@ from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError
 from ..io.output import atomic_file, resumable_mode
 from ..model import scene as scene_mod
-from ..model.sensor import Sensor, check_device
+from ..model.sensor import Sensor, check_device, frames_together
 
 FORMATS = {"hdf5": ".h5", "npz": ".npz", "fits": ".fits"}
 #: image files a --images folder may hold
@@ -371,6 +371,11 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     return SampleSettings(index, config, columns)
 
 
+#: samples whose frames the GPU makes in one launch (:func:`make_samples`): their maps are stacked on the host and
+#: the device, some 16 bytes a pixel each
+GPU_BATCH = 64
+
+
 def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, frame: int = 0,
                 device: str = "cpu", on_device: bool = False) -> tuple[dict, dict]:
     """(arrays, columns) of sample ``index``: the noisy raw and its truths (:data:`ARRAYS`), and its settings.
@@ -401,17 +406,72 @@ def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, fram
         (rows, cols), and the settings by column name (:data:`COLUMNS`).
     """
     sources = sources or Sources()
+    shot, st = _exposure(recipe, index, sources, device)
+    raw = shot.frames_on_device([frame])[0][0] if on_device else shot.frame(frame)
+    return _finish(recipe, shot, st, raw)
+
+
+def make_samples(recipe: Recipe, indices, sources: Sources | None = None, frame: int = 0, device: str = "cpu",
+                 on_device: bool = False) -> list[tuple[dict, dict]]:
+    """Samples ``indices``, as :func:`make_sample` makes each, the same bits; on the GPU their frames in one launch.
+
+    With ``device="cuda"`` each sample's sensor and exposure are set up as
+    one alone would be, and then the noisy raws of all of them (each its own
+    sensor: camera, gain, seed, scene) are made together
+    (:func:`cmosnoise.frames_together`): one upload of their maps and one
+    launch for every :data:`GPU_BATCH` samples, not one per sample.
+
+    Parameters
+    ----------
+    recipe : Recipe
+    indices : sequence of int
+        The samples' numbers.
+    sources : Sources, optional
+        Where the sources' images are read (or given).
+    frame : int
+        Which frame of each sample's sensor is its noisy raw.
+    device : str
+        "cpu" or "cuda".
+    on_device : bool
+        Leave the raws on the GPU: each sample's ``raw`` is then an item of its batch's device array (B, rows,
+        cols).
+
+    Returns
+    -------
+    list of (dict, dict)
+        Each sample's arrays and settings, in the order of ``indices``.
+    """
+    sources = sources or Sources()
+    indices = [int(i) for i in indices]
+    if device != "cuda":
+        return [make_sample(recipe, i, sources, frame) for i in indices]
+    out = []
+    for first in range(0, len(indices), GPU_BATCH):  # the host holds a batch's maps at a time, stacked
+        made = [_exposure(recipe, i, sources, device) for i in indices[first:first + GPU_BATCH]]
+        raws, _ = frames_together([shot for shot, _ in made], frame)
+        if not on_device:
+            raws = raws.copy_to_host()
+        out += [_finish(recipe, shot, st, raws[b]) for b, (shot, st) in enumerate(made)]
+    return out
+
+
+def _exposure(recipe: Recipe, index: int, sources: Sources, device: str) -> tuple:
+    """Sample ``index``'s exposure (its sensor set up, the crop's scene exposed) and its settings."""
     st = settings(recipe, index, sources)
     c = st.config
     sensor = Sensor(c, device=device)
     # the crop's pixels through the CFA, read from the source where they lie (no copy of the window)
     shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape,
                                               sensor.cfa, sensor.spec.channel_responsivity))
-    raw = shot.frames_on_device([frame])[0][0] if on_device else shot.frame(frame)
+    return shot, st
+
+
+def _finish(recipe: Recipe, shot, st: SampleSettings, raw) -> tuple[dict, dict]:
+    """A sample's arrays (its noisy ``raw`` and its truths) and columns."""
     truth = ground_truth.truth(shot, recipe.white_threshold_e_per_s)
-    t = sensor.transfer
+    t = shot.sensor.transfer
     columns = {**st.columns, "k_dn_per_e": t.gain_dn_per_e, "black_level_dn": t.black_level_dn,
-               "white_level_dn": float(t.max_code), "config": c.to_yaml()}
+               "white_level_dn": float(t.max_code), "config": st.config.to_yaml()}
     arrays = {"raw": raw, "expected_raw": truth.expected_raw, "perfect_dn": truth.perfect_dn, "mask": truth.mask}
     return arrays, columns
 
@@ -436,7 +496,7 @@ def shard_bytes(recipe_json: str, shard: int, device: str = "cpu") -> bytes:
     """
     recipe = Recipe.from_json(recipe_json)
     sources = Sources()
-    made = [make_sample(recipe, i, sources, device=device) for i in recipe.shard_range(shard)]
+    made = make_samples(recipe, recipe.shard_range(shard), sources, device=device)
     arrays = {k: np.stack([a[k] for a, _ in made]) for k in ARRAYS}
     columns = {k: [c[k] for _, c in made] for k in COLUMNS}
     return {"hdf5": _hdf5, "npz": _npz, "fits": _fits}[recipe.format](arrays, columns, recipe)

@@ -148,13 +148,30 @@ class NoisyRawDataset(Dataset):
         return ds.make_sample(self.recipe, index, self.sources, self.epoch if self.fresh_noise else 0,
                               device=self.device, on_device=self.device == "cuda")
 
-    def __getitem__(self, index: int) -> dict:
-        target = None
-        if self.device == "cuda":
-            from ..engine import cuda_kernel
+    def _target(self):
+        """The torch device the tensors go to (None: the CPU)."""
+        if self.device != "cuda":
+            return None
+        from ..engine import cuda_kernel
 
-            target = "cpu" if cuda_kernel.simulated() else "cuda"
-        return to_tensors(*self.sample(int(index)), device=target)
+        return "cpu" if cuda_kernel.simulated() else "cuda"
+
+    def __getitem__(self, index: int) -> dict:
+        return to_tensors(*self.sample(int(index)), device=self._target())
+
+    def __getitems__(self, indices) -> list[dict]:
+        """Several samples, as ``[self[i] for i in indices]``; on the GPU their frames in one launch
+        (:func:`cmosnoise.dataset.make_samples`). A ``DataLoader`` with a ``batch_size`` asks for a batch this
+        way."""
+        indices = [int(i) for i in indices]
+        if self.device != "cuda":
+            return [self[i] for i in indices]
+        for i in indices:
+            if not 0 <= i < len(self):
+                raise IndexError(f"index {i} is outside 0 .. {len(self) - 1}")
+        made = ds.make_samples(self.recipe, indices, self.sources, self.epoch if self.fresh_noise else 0,
+                               device="cuda", on_device=True)
+        return [to_tensors(arrays, columns, device=self._target()) for arrays, columns in made]
 
 
 class NoisyRawIterableDataset(IterableDataset):
