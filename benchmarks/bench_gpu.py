@@ -191,6 +191,39 @@ def training_crops(name: str, extra, batch: int, repeats: int) -> dict:
     return row
 
 
+def dataset_samples(camera: str, batch: int, repeats: int, crop: int = 512) -> dict:
+    """``cmosnoise dataset``'s samples with ``--device cuda``: each its own sensor (camera, gain, seed, scene), set
+    up and its truth made on the host, the frames of ``batch`` of them in one launch (dataset.make_samples); and,
+    of that, the upload of their plans and the launch alone."""
+    from cmosnoise.app import dataset as ds
+
+    cuda = cuda_kernel.kernels().cuda
+    recipe = ds.Recipe(samples=ds.MAX_SAMPLES, crop=(crop, crop), cameras=(camera,), seed=1)
+    sources = ds.Sources()
+    starts = iter(range(0, ds.MAX_SAMPLES, batch))
+
+    def whole():
+        s = next(starts)
+        ds.make_samples(recipe, range(s, s + batch), sources, device="cuda")
+
+    t_whole = timed(whole, repeats) / batch
+    shots = [ds._exposure(recipe, i, sources, "cuda")[0] for i in range(batch)]
+    plans, stuck = [s.plan() for s in shots], [s.stuck_pixels() for s in shots]
+    t_upload = timed(lambda: cuda_kernel.DevicePlan(plans, stuck), repeats) / batch
+    plan = cuda_kernel.DevicePlan(plans, stuck)
+
+    def launch():
+        plan.render([0] * batch)
+        cuda.synchronize()
+
+    t_launch = timed(launch, repeats) / batch
+    row = {"what": f"{crop} x {crop} data set samples ({camera}: a sensor each), launches of {batch}",
+           "batch": batch, "samples_per_s": 1 / t_whole, "upload_per_s": 1 / t_upload,
+           "launch_per_s": 1 / t_launch}
+    print(json.dumps(row), flush=True)
+    return row
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", type=Path, help="also write the results here")
@@ -210,6 +243,10 @@ def main() -> None:
     if a.only_training:
         for row in (training_crops("default", None, 256, repeats), training_crops("every stage", EVERY, 256, repeats)):
             print(f"{row['what']}: {row['samples_per_s']:.0f} / s")
+        for camera in ("led", "sony-imx900"):
+            row = dataset_samples(camera, 64, repeats)
+            print(f"{row['what']}: {row['samples_per_s']:.0f} / s (plans uploaded {row['upload_per_s']:.0f} / s, "
+                  f"frames made {row['launch_per_s']:.0f} / s)")
         return
     t0 = time.perf_counter()
     doc["bits"] = {} if a.skip_bits else check_bits(a.quick)
@@ -218,6 +255,7 @@ def main() -> None:
                     speed(3840, 2160, "default", None, 8, repeats), speed(3840, 2160, "every stage", EVERY, 8, repeats)]
     doc["blocks"] = blocks(repeats)
     doc["training"] = [training_crops("default", None, 256, repeats), training_crops("every stage", EVERY, 256, repeats)]
+    doc["dataset"] = [dataset_samples(camera, 64, repeats) for camera in ("led", "sony-imx900")]
     if a.json:
         a.json.write_text(json.dumps(doc, indent=1))
     print("\nbits:", "all equal" if all(v is True for v in doc["bits"].values()) else doc["bits"], list(doc["bits"]))
@@ -225,7 +263,7 @@ def main() -> None:
     for r in doc["speed"]:
         print(f"{r['size']:>12} {r['sensor']:>12} {r['gpu_kernel_fps']:>11.0f} {r['gpu_to_host_fps']:>10.0f} "
               f"{r['cpu_kernel_fps']:>11.1f} {r['numpy_reference_fps']:>10.1f}")
-    for r in doc["training"]:
+    for r in doc["training"] + doc["dataset"]:
         print(f"{r['what']}: {r['samples_per_s']:.0f} / s")
     print("threads per block:", ", ".join(f"{r['block']}: {r['gpu_kernel_fps']:.0f} fps" for r in doc["blocks"]),
           f"({doc['blocks'][0]['registers']} registers a thread)")
