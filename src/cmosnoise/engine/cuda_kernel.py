@@ -267,6 +267,15 @@ def _rows_of(index: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.
 READ_KIND, NL_SIZE, CDS = range(3)
 
 
+def _row_lists(indices: list, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each plan's sorted list of pixel indices, concatenated plan after plan: (row pointers (P, rows + 1) into the
+    concatenated list, its columns (n + 1,) int64 (one padding entry), where each plan's part starts (P + 1,))."""
+    start = _spans([i.size for i in indices])
+    parts = [_rows_of(i, shape) for i in indices]
+    return (np.stack([ptr + s for (ptr, _), s in zip(parts, start)]),
+            np.concatenate([col for _, col in parts] + [np.zeros(1, np.int64)]), start)
+
+
 def _spans(counts) -> np.ndarray:
     """Where each plan's part of a concatenated list starts, and the total: (P + 1,) int64."""
     return np.r_[0, np.cumsum(np.asarray(counts, np.int64))].astype(np.int64)
@@ -366,24 +375,18 @@ class DevicePlan:
         self.numbers, self.ints = up(numbers), up(ints)
         self.nl = up(self._padded(nl_tables))
         self.read_table = up(self._padded(read_tables))
-        # traps (stage 6b): sorted by pixel, then slot, plan after plan; their pixels as row-sorted lists whose
-        # row pointers count the trapped pixels of all the plans before
+        # traps (stage 6b): sorted by pixel, then slot, plan after plan; their pixels as row-sorted lists
         traps = [p.traps if p.traps is not None and p.traps.index.size else None for p in plans]
-        firsts = [np.flatnonzero(np.r_[True, t.index[1:] != t.index[:-1]]) if t is not None else np.zeros(0, int)
+        firsts = [np.zeros(0, np.int64) if t is None else np.flatnonzero(np.r_[True, t.index[1:] != t.index[:-1]])
                   for t in traps]
         self.has_traps = [t is not None for t in traps]
         self.trap_start = _spans([0 if t is None else t.index.size for t in traps])
-        self.trap_groups = _spans([f.size for f in firsts])
-        ptrs, cols_ = [], []
-        for q, (t, f) in enumerate(zip(traps, firsts)):
-            ptr, col = _rows_of(t.index[f], shape) if t is not None else (np.zeros(rows + 1, np.int64), f)
-            ptrs.append(ptr + self.trap_groups[q])
-            cols_.append(col)
-        self.rts_ptr, self.rts_col = up(np.stack(ptrs)), up(np.concatenate(cols_ + [np.zeros(1, np.int64)]))
+        ptr, col, self.trap_groups = _row_lists([f if t is None else t.index[f] for t, f in zip(traps, firsts)],
+                                                shape)
+        self.rts_ptr, self.rts_col = up(ptr), up(col)
         self.d_trap_start, self.d_trap_groups = up(self.trap_start), up(self.trap_groups)
         if any(self.has_traps):
-            present = [t for t in traps if t is not None]
-            self.trap_arrays = self._concatenated(present)
+            self.trap_arrays = self._concatenated([t for t in traps if t is not None])
             self.trap_first = up(np.r_[np.concatenate([f + self.trap_start[q] for q, f in enumerate(firsts)]),
                                        self.trap_start[-1]].astype(np.int64))
             self.trap_keys = up(np.array([p.trap_key for p in plans], np.uint64))
@@ -393,15 +396,9 @@ class DevicePlan:
             if t is not None and np.any(np.diff(t.index.astype(np.int64)) <= 0):
                 raise ValueError("blinkers: expected one blinking pixel per pixel, sorted")
         self.has_blinkers = [t is not None for t in blinkers]
-        self.blink_start = _spans([0 if t is None else t.index.size for t in blinkers])
-        ptrs, cols_ = [], []
-        for q, t in enumerate(blinkers):
-            ptr, col = _rows_of(t.index, shape) if t is not None else (np.zeros(rows + 1, np.int64), np.zeros(0, int))
-            ptrs.append(ptr + self.blink_start[q])
-            cols_.append(col)
-        self.blink_ptr = up(np.stack(ptrs))
-        self.blink_col = up(np.concatenate(cols_ + [np.zeros(1, np.int64)]).astype(np.int64))
-        self.d_blink_start = up(self.blink_start)
+        ptr, col, self.blink_start = _row_lists([np.zeros(0, np.int64) if t is None else t.index for t in blinkers],
+                                                shape)
+        self.blink_ptr, self.blink_col, self.d_blink_start = up(ptr), up(col), up(self.blink_start)
         if any(self.has_blinkers):
             self.blink_arrays = self._concatenated([t for t in blinkers if t is not None])
             self.blink_keys = up(np.array([p.blink_key for p in plans], np.uint64))
