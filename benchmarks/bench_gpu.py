@@ -15,7 +15,10 @@ there, timed between two device synchronizations), end to end to host memory
 reference of benchmarks/bench_chain.py, timed in the same run. And 512 x 512
 training crops with their truth: random crops of fresh frames of one
 exposure, made in batches on the GPU, with the truth's crops (expected raw,
-mask) cut from that exposure's truth, which is made once.
+mask) cut from that exposure's truth, which is made once; and ``cmosnoise
+dataset``'s samples with ``--device cuda``, each its own sensor
+(``dataset.make_samples``, 64 to a launch): whole samples (their set-up and
+truth on the host), and the upload of their plans and the launch alone.
 """
 
 from __future__ import annotations

@@ -193,6 +193,5 @@ class NoisyRawIterableDataset(IterableDataset):
         worker, workers = (info.id, info.num_workers) if info is not None else (0, 1)
         total = len(self.inner)
         batches = math.ceil(total / self.batch_size)
-        for b in range(worker, batches, workers):
-            for i in range(b * self.batch_size, min(total, (b + 1) * self.batch_size)):
-                yield self.inner[i]
+        for b in range(worker, batches, workers):  # a batch's samples together (on the GPU: one launch)
+            yield from self.inner.__getitems__(range(b * self.batch_size, min(total, (b + 1) * self.batch_size)))
