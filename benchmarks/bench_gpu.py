@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_chain import cpu as cpu_info  # noqa: E402
 from bench_chain import numpy_reference  # noqa: E402
 
-from cmosnoise import Sensor, load_config  # noqa: E402
+from cmosnoise import Sensor, frames_together, load_config  # noqa: E402
 from cmosnoise.analysis import ground_truth  # noqa: E402
 from cmosnoise.config.loading import preset_names  # noqa: E402
 from cmosnoise.engine import cuda_kernel, kernel  # noqa: E402
@@ -89,6 +89,12 @@ def check_bits(quick: bool) -> dict:
     out["512 x 512 crops of every stage at 16 random corners and frames"] = all(
         np.array_equal(crops[b], cpu.frame(int(k), region=(r, r + 512, c, c + 512)))
         for b, (k, (r, c)) in enumerate(zip(frames, corners)))
+    # different sensors in one launch: every preset's 512 x 512 sensor, a frame each (the data set's batches)
+    shots = [Sensor(load_config(preset=name, extra=sized(None, 512, 512)), seed=11 + q).expose("photo")
+             for q, name in enumerate(preset_names())]
+    raw = frames_together(shots, frames=list(range(len(shots))))[0].copy_to_host()
+    out[f"512 x 512: {len(shots)} presets' sensors in one launch"] = all(
+        np.array_equal(raw[b], shot.frame(b)) for b, shot in enumerate(shots))
     try:
         import torch
 
