@@ -16,9 +16,11 @@ CUDA target, exactly as for the CPU. Three things keep the bits:
 - sampling is per pixel and never shared between threads.
 
 What each frame shares (maps, the scene's mean charge, the tables) is
-uploaded once (:class:`DevicePlan`); a batch of frames, or of crops at
-different corners of the same exposure, is one launch, and the frames stay
-on the device until asked for. A row's and a column's normals and each
+uploaded once (:class:`DevicePlan`); a batch of frames, of crops at
+different corners of the same exposure, or of frames of different sensors
+of one shape (a data set's samples: their plans stacked in one
+:class:`DevicePlan`, each item naming its own), is one launch, and the
+frames stay on the device until asked for. A row's and a column's normals and each
 frame's black level are drawn once per frame by a small kernel before the
 pixels, and so are the random telegraph traps' states and the blinking
 pixels' dark charge, per item (:func:`.cuda_device.occupancy`: telegraph's
