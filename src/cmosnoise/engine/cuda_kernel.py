@@ -360,20 +360,23 @@ class DevicePlan:
         self.keys = up(np.stack([p.keys for p in plans]), np.uint64)
         self.seqs = up(np.array([p.sequence for p in plans], np.uint64))
         self.cell_offsets = up(np.array([p.cell_offsets_dn for p in plans], np.float64))
-        numbers = np.zeros((len(plans), 15))
-        ints = np.zeros((len(plans), 3), np.int64)
+        numbers = np.zeros((len(plans), EXPOSURE + 1))
+        ints = np.zeros((len(plans), CDS + 1), np.int64)
         nl_tables, read_tables = [], []
         for q, p in enumerate(plans):
             table, nl_scale, (a, b, c) = kernel.curve_constants(p)
             read_kind, read_scale, read_table = kernel.read_constants(p)
             k_adc, black, top = p.adc if p.adc is not None else (1.0, 0.0, 0)
-            numbers[q] = (p.normal_above_e, p.full_well_e, k_adc, black, top, nl_scale, a, b, c, read_scale,
-                          p.row_sigma_e or 0.0, p.frame_black_sigma_dn, p.frame_period_s, p.cds_interval_s or 0.0,
-                          p.exposure_s)
-            ints[q] = (read_kind, table.size, p.cds_interval_s is not None)
+            for column, value in ((NORMAL_ABOVE, p.normal_above_e), (FULL_WELL, p.full_well_e), (K_ADC, k_adc),
+                                  (BLACK, black), (TOP, top), (NL_SCALE, nl_scale), (NL_A, a), (NL_B, b), (NL_C, c),
+                                  (READ_SCALE, read_scale), (ROW_SIGMA, p.row_sigma_e or 0.0),
+                                  (FRAME_BLACK_SIGMA, p.frame_black_sigma_dn), (FRAME_PERIOD, p.frame_period_s),
+                                  (CDS_INTERVAL, p.cds_interval_s or 0.0), (EXPOSURE, p.exposure_s)):
+                numbers[q, column] = value
+            ints[q, READ_KIND], ints[q, NL_SIZE], ints[q, CDS] = read_kind, table.size, p.cds_interval_s is not None
             nl_tables.append(table)
             read_tables.append(read_table)
-        #: each plan's scalars (P, 15) float64 and (P, 3) int64 (the columns named above)
+        #: each plan's scalars (P, EXPOSURE + 1) float64 and (P, CDS + 1) int64 (the columns named above)
         self.numbers, self.ints = up(numbers), up(ints)
         self.nl = up(self._padded(nl_tables))
         self.read_table = up(self._padded(read_tables))
