@@ -141,11 +141,15 @@ class NoisyRawDataset(Dataset):
     def __len__(self) -> int:
         return self.recipe.samples
 
-    def sample(self, index: int) -> tuple[dict, dict]:
-        """(arrays, columns) of sample ``index`` as a data set's shard holds them."""
+    def _index(self, index) -> int:
+        index = int(index)
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} is outside 0 .. {len(self) - 1}")
-        return ds.make_sample(self.recipe, index, self.sources, self.epoch if self.fresh_noise else 0,
+        return index
+
+    def sample(self, index: int) -> tuple[dict, dict]:
+        """(arrays, columns) of sample ``index`` as a data set's shard holds them."""
+        return ds.make_sample(self.recipe, self._index(index), self.sources, self.epoch if self.fresh_noise else 0,
                               device=self.device, on_device=self.device == "cuda")
 
     def _target(self):
@@ -163,13 +167,9 @@ class NoisyRawDataset(Dataset):
         """Several samples, as ``[self[i] for i in indices]``; on the GPU their frames in one launch
         (:func:`cmosnoise.dataset.make_samples`). A ``DataLoader`` with a ``batch_size`` asks for a batch this
         way."""
-        indices = [int(i) for i in indices]
         if self.device != "cuda":
             return [self[i] for i in indices]
-        for i in indices:
-            if not 0 <= i < len(self):
-                raise IndexError(f"index {i} is outside 0 .. {len(self) - 1}")
-        made = ds.make_samples(self.recipe, indices, self.sources, self.epoch if self.fresh_noise else 0,
+        made = ds.make_samples(self.recipe, [self._index(i) for i in indices], self.sources, self.epoch if self.fresh_noise else 0,
                                device="cuda", on_device=True)
         return [to_tensors(arrays, columns, device=self._target()) for arrays, columns in made]
 
