@@ -39,7 +39,7 @@ npx = scalar_numpy(cuda)  #: what ``np`` stands for in the helpers on the device
 dev = cuda.jit(device=True, fastmath=False)
 h = kernel.compile_helpers(dev, numpy=npx, skip=("occupancy",))  # it allocates: the device's form is below
 uniform_pair, normal_from, normal_pair_from = h["uniform_pair"], h["normal_from"], h["normal_pair_from"]
-poisson_one, tukey_lambda_cell = h["poisson_one"], h["tukey_lambda_cell"]
+poisson_one, tukey_lambda_cell, tukey_lambda_at = h["poisson_one"], h["tukey_lambda_cell"], h["tukey_lambda_at"]
 frame_states, inside = h["frame_states"], h["inside"]
 floor, rint = npx.floor, npx.rint
 
@@ -278,10 +278,7 @@ def pixels(noisy, exact, flags, ints, numbers, sf, rowval, colterm, gain, keys, 
                 noise = scale * partner
             else:
                 kf, wt = tukey_lambda_cell(partner)
-                k = np.int64(kf)
-                lo = read_table[p, k]
-                q = lo + wt * (read_table[p, k + 1] - lo)
-                noise = scale * (0.0 - q if partner < 0.0 else q)
+                noise = scale * tukey_lambda_at(read_table[p], kf, wt, partner)
             v = v + noise
         v = rint(v)
         out_dn[b, i, j] = np.uint16(min(max(v, 0.0), numbers[p, TOP]))

@@ -116,8 +116,9 @@ HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
            (telegraph, ["decay", "one_minus", "transition", "_bridge_weights", "bridge", "midpoint", "_uniform",
                         "frame_states", "inside", "occupancy_uniform", "occupancy_r_n", "occupancy_events",
                         "occupancy_walk", "occupancy"]),
-           (samplers, ["normal_from", "normal_pair_from", "tukey_lambda_cell", "ptrs_constants", "ptrs_candidate", "ptrs_quick_accept",
-                       "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept", "ptrs_try", "poisson_one"]),
+           (samplers, ["normal_from", "normal_pair_from", "tukey_lambda_cell", "tukey_lambda_at", "ptrs_constants",
+                       "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept",
+                       "ptrs_try", "poisson_one"]),
            (fixed_maps, ["ppf_cell", "heavy_tail_value", "two_point", "normal_value", "offset_value"])]
 
 

@@ -134,7 +134,14 @@ def tukey_lambda_from(z, table):
     ``Phi``, two logs and two exps a pixel).
     """
     k, w = tukey_lambda_cell(z)
-    k = np.asarray(k).astype(np.int64)
+    return tukey_lambda_at(table, k, w, z)
+
+
+def tukey_lambda_at(table, kf, w, z):
+    """The table's value between node ``kf`` (held as float) and the next at weight ``w`` (what
+    :func:`tukey_lambda_cell` gives for ``z``), with ``z``'s sign: :func:`tukey_lambda_from`'s lookup, on arrays
+    or (compiled, the GPU's kernel) one pixel."""
+    k = np.int64(kf)
     lo = table[k]
     q = lo + w * (table[k + 1] - lo)
     return where(z < 0.0, 0.0 - q, q)
