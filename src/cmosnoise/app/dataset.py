@@ -405,10 +405,7 @@ def make_sample(recipe: Recipe, index: int, sources: Sources | None = None, fram
         The arrays by name (:data:`ARRAYS`: ``raw`` and ``expected_raw`` in DN, ``perfect_dn``, ``mask``), each
         (rows, cols), and the settings by column name (:data:`COLUMNS`).
     """
-    sources = sources or Sources()
-    shot, st = _exposure(recipe, index, sources, device)
-    raw = shot.frames_on_device([frame])[0][0] if on_device else shot.frame(frame)
-    return _finish(recipe, shot, st, raw)
+    return make_samples(recipe, [index], sources, frame, device, on_device)[0]
 
 
 def make_samples(recipe: Recipe, indices, sources: Sources | None = None, frame: int = 0, device: str = "cpu",
@@ -423,15 +420,10 @@ def make_samples(recipe: Recipe, indices, sources: Sources | None = None, frame:
 
     Parameters
     ----------
-    recipe : Recipe
+    recipe, sources, frame, device
+        As :func:`make_sample`.
     indices : sequence of int
         The samples' numbers.
-    sources : Sources, optional
-        Where the sources' images are read (or given).
-    frame : int
-        Which frame of each sample's sensor is its noisy raw.
-    device : str
-        "cpu" or "cuda".
     on_device : bool
         Leave the raws on the GPU: each sample's ``raw`` is then an item of its batch's device array (B, rows,
         cols).
@@ -443,14 +435,16 @@ def make_samples(recipe: Recipe, indices, sources: Sources | None = None, frame:
     """
     sources = sources or Sources()
     indices = [int(i) for i in indices]
-    if device != "cuda":
-        return [make_sample(recipe, i, sources, frame) for i in indices]
+    gpu = device == "cuda"
+    step = GPU_BATCH if gpu else 1  # the host holds a batch's exposures (on the GPU, their maps stacked) at a time
     out = []
-    for first in range(0, len(indices), GPU_BATCH):  # the host holds a batch's maps at a time, stacked
-        made = [_exposure(recipe, i, sources, device) for i in indices[first:first + GPU_BATCH]]
-        raws, _ = frames_together([shot for shot, _ in made], frame)
-        if not on_device:
-            raws = raws.copy_to_host()
+    for first in range(0, len(indices), step):
+        made = [_exposure(recipe, i, sources, device) for i in indices[first:first + step]]
+        if gpu:
+            raws, _ = frames_together([shot for shot, _ in made], frame)
+            raws = raws if on_device else raws.copy_to_host()
+        else:
+            raws = [shot.frame(frame) for shot, _ in made]
         out += [_finish(recipe, shot, st, raws[b]) for b, (shot, st) in enumerate(made)]
     return out
 
