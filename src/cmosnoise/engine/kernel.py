@@ -443,7 +443,8 @@ if numba is not None:
         saved = np.empty(w if (has_blink and blink_exact) else 0)  # a row's counts of its blinking pixels
         noise = np.empty(w)
         tukey = has_read and read_kind == 1
-        partner = np.empty(w if has_read and not tukey else 0)  # the sine normals of the source follower's blocks
+        partner = np.empty(w if has_read and not tukey else 0)  # normal read noise, DN: the scale times the sine
+        #                                                         normals of the source follower's blocks
         cell = np.empty(w if tukey else 0, np.int64)  # Tukey-lambda read noise: each sine normal's table node,
         weight = np.empty(w if tukey else 0)  # the next node's weight,
         scale = np.empty(w if tukey else 0)  # and the scale with the normal's sign
@@ -469,20 +470,20 @@ if numba is not None:
                 if has_blink and blink_exact:  # stage 4b: a blinking pixel's mean dark charge of this frame
                     for e in range(blink_ptr[i], blink_ptr[i + 1]):
                         n[blink_col[e]] = saved[e - blink_ptr[i]] + np.float64(blink_mean[e])
-            for j in range(w):
-                n[j] = min(n[j], full_well)
-            if has_nl:  # stage 5b (nonlinearity.Curve.apply)
-                if nl_table.size > 2:  # a measured curve: linear in its table
-                    for j in range(w):
-                        q = n[j] * nl_scale
-                        t = np.int64(min(np.floor(q), nl_last))
-                        lo = nl_table[t]
-                        n[j] = lo + (q - t) * (nl_table[t + 1] - lo)
-                else:  # the cubic, as written
-                    for j in range(w):
-                        x = n[j]
-                        sx = x * nl_scale
-                        n[j] = x * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
+            if has_nl and nl_table.size > 2:  # the full well, then stage 5b (nonlinearity.Curve.apply): a
+                for j in range(w):  # measured curve, linear in its table
+                    q = min(n[j], full_well) * nl_scale
+                    t = np.int64(min(np.floor(q), nl_last))
+                    lo = nl_table[t]
+                    n[j] = lo + (q - t) * (nl_table[t + 1] - lo)
+            elif has_nl:  # the cubic, as written (in the full well's pass: one pass over the row fewer)
+                for j in range(w):
+                    x = min(n[j], full_well)
+                    sx = x * nl_scale
+                    n[j] = x * (1.0 + sx * (nl_a + sx * (nl_b + sx * nl_c)))
+            else:
+                for j in range(w):
+                    n[j] = min(n[j], full_well)
             if has_offset and not has_sf:  # stage 5c (with the source follower: in its last pass, same order)
                 for j in range(w):
                     n[j] = n[j] + np.float64(offset[ra, a0 + j])
@@ -492,12 +493,23 @@ if numba is not None:
                 if has_sf and tukey:  # samplers.tukey_lambda_from's arithmetic here (SIMD), its loads in stage 9a
                     for j in range(w):
                         z, z2 = _normal_pair_from(u1[j], u2[j])
-                        noise[j] = np.float64(sf[ra, a0 + j]) * z
+                        if has_offset:
+                            n[j] = (n[j] + np.float64(offset[ra, a0 + j])) + np.float64(sf[ra, a0 + j]) * z
+                        else:
+                            noise[j] = np.float64(sf[ra, a0 + j]) * z
                         cell[j], weight[j], scale[j] = _tukey_parts(z2, read_scale)
-                elif has_sf and has_read:
+                elif has_sf and has_read:  # the read noise in DN made here (stage 9a's product, the same bits)
                     for j in range(w):
-                        z, partner[j] = _normal_pair_from(u1[j], u2[j])
-                        noise[j] = np.float64(sf[ra, a0 + j]) * z
+                        z, z2 = _normal_pair_from(u1[j], u2[j])
+                        if has_offset:
+                            n[j] = (n[j] + np.float64(offset[ra, a0 + j])) + np.float64(sf[ra, a0 + j]) * z
+                        else:
+                            noise[j] = np.float64(sf[ra, a0 + j]) * z
+                        partner[j] = read_scale * z2
+                elif has_sf and has_offset:
+                    for j in range(w):
+                        n[j] = (n[j] + np.float64(offset[ra, a0 + j])) + (np.float64(sf[ra, a0 + j])
+                                                                          * _normal_from(u1[j], u2[j]))
                 elif has_sf:
                     for j in range(w):
                         noise[j] = np.float64(sf[ra, a0 + j]) * _normal_from(u1[j], u2[j])
@@ -506,14 +518,10 @@ if numba is not None:
                         cell[j], weight[j], scale[j] = _tukey_parts(_normal_pair_from(u1[j], u2[j])[1], read_scale)
                 else:
                     for j in range(w):
-                        partner[j] = _normal_pair_from(u1[j], u2[j])[1]
-            if has_sf:
-                if has_offset:
-                    for j in range(w):
-                        n[j] = (n[j] + np.float64(offset[ra, a0 + j])) + noise[j]
-                else:
-                    for j in range(w):
-                        n[j] = n[j] + noise[j]
+                        partner[j] = read_scale * _normal_pair_from(u1[j], u2[j])[1]
+            if has_sf and not has_offset:
+                for j in range(w):
+                    n[j] = n[j] + noise[j]
             if has_rts:  # stage 6b: the traps of this row's pixels
                 for e in range(rts_ptr[i], rts_ptr[i + 1]):
                     j = rts_col[e]
@@ -529,15 +537,12 @@ if numba is not None:
                 for j in range(w):
                     out_e[i, j] = n[j]
             if adc_on:
-                if has_read:  # stage 9a: read noise after the gain, DN (read_noise.noise)
-                    if read_kind == 0:
-                        for j in range(w):
-                            noise[j] = read_scale * partner[j]
-                    else:  # the table's loads (a loop that indexes a table is not vectorized)
-                        for j in range(w):
-                            k = cell[j]
-                            lo = read_table[k]
-                            noise[j] = scale[j] * (lo + weight[j] * (read_table[k + 1] - lo))
+                if tukey:  # stage 9a: read noise after the gain, DN (read_noise.noise): the table's loads (a loop
+                    for j in range(w):  # that indexes a table is not vectorized; an unsigned node is not tested for
+                        k = np.uint64(cell[j])  # wraparound: 25 % faster, measured)
+                        lo = read_table[k]
+                        noise[j] = scale[j] * (lo + weight[j] * (read_table[k + np.uint64(1)] - lo))
+                read = noise if tukey else partner  # stage 9a's noise, DN
                 if one_black and not has_read:  # the paper's ADC: one black level, nothing after the gain
                     b0 = cell_black[0]
                     for j in range(w):
@@ -548,7 +553,7 @@ if numba is not None:
                     for j in range(w):
                         v = n[j] * k_adc + row_black[j]
                         if has_read:
-                            v = v + noise[j]
+                            v = v + read[j]
                         v = np.rint(v)
                         out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
             if not has_noisy:
