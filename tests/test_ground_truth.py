@@ -100,6 +100,55 @@ def test_the_compiled_passes_give_the_numpy_paths_bits(over, monkeypatch):
     assert np.array_equal(compiled, gt.expected_raw(shot))
 
 
+def test_the_near_pixels_shortcuts_are_taken_by_the_cases_held_to_the_numpy_bits():
+    """_near_pixels' two shortcuts (a pixel 10 sigma and 2 codes above the top code, from bounds alone; the full
+    well out of reach, its case weighed by an exact 0) are taken by pixels of the "top-below-fw" case above, so
+    that test holds them to the NumPy path's bits; where the first is taken, the NumPy path gives the top code."""
+    from cmosnoise.analysis import noise_budget
+
+    shot = small(**{**BRIGHT, "adc": {"gain_dn_per_e": 4.0}}).expose("ramp")
+    sensor, t = shot.sensor, shot.sensor.transfer
+    terms = noise_budget.readout_terms(sensor, exposure=shot)
+    p = {k: np.broadcast_to(np.asarray(terms[k], np.float64), sensor.shape)
+         for k in ("mean_n", "shot", "read", "col_read", "row_off", "col_off", "gain")}
+    out, near = np.empty(sensor.shape, np.float32), np.zeros(sensor.shape, bool)
+    gt._far_pixels(*p.values(), terms["fw"], terms["top"], float(t.gain_dn_per_e), float(t.black_level_dn),
+                   float(t.max_code), out, near)
+    above, out_of_reach = [], 0
+    for i, j in zip(*np.nonzero(near)):
+        mn, sh = p["mean_n"][i, j], p["shot"][i, j]
+        if gt._above_top(mn, sh, p["read"][i, j], p["col_read"][i, j], p["row_off"][i, j], p["col_off"][i, j],
+                         p["gain"][i, j], terms["fw"], float(t.gain_dn_per_e), float(t.black_level_dn),
+                         float(t.max_code)):
+            above.append((i, j))
+        elif terms["fw"] - mn > 8.5 * np.sqrt(sh):
+            out_of_reach += 1
+    assert len(above) > 0 and out_of_reach > 0, (len(above), out_of_reach)
+    # the whole formula (the NumPy path's, before stuck pixels read their code) gives them the top code
+    idx = tuple(np.array(above).T)
+    assert np.all(gt._codes(noise_budget.near_moments(sensor, terms, idx, codes=True), t) == t.max_code)
+
+
+def test_the_expected_code_series_are_the_sum_over_codes():
+    """adc.expected_code's Fourier series (0.25 to 1 DN of noise) and codes' tails (below) against the plain
+    sum over 25 codes of n P(round(x) = n), near code 10 where that sum's rounding is a few 1e-15: within 2e-14
+    (the truncation of either series is below 1e-17 DN); the compiled pass's per-pixel form gives the same."""
+    from scipy.special import ndtr
+
+    from cmosnoise.model.stages.adc import expected_code
+
+    rng = np.random.default_rng(5)
+    mu = np.concatenate([rng.uniform(10, 11, 20000), [10.0, 10.5, 11.0]])
+    sd = np.concatenate([rng.uniform(0.0, 1.0, 20000), [0.25, np.nextafter(0.25, 0), 0.999]])
+    centre = np.round(mu)
+    plain = sum((centre + d) * (ndtr((centre + d + 0.5 - mu) / sd) - ndtr((centre + d - 0.5 - mu) / sd))
+                for d in range(-12, 13))
+    got = expected_code(mu, sd)
+    assert np.abs(got - plain).max() < 2e-14
+    one = np.array([gt._expected_code(m, s) for m, s in zip(mu[:2000], sd[:2000])])
+    assert np.abs(one - got[:2000]).max() < 2e-14
+
+
 def test_the_perfect_image_is_the_scene_on_an_ideal_pixel():
     sensor = small()
     shot = sensor.expose("ramp")

@@ -45,7 +45,7 @@ from ..engine.telegraph import in_region
 from ..model import cfa as cfa_mod
 from ..model.sensor import Exposure, region_of
 from ..model.stages import defects as defects_mod
-from ..model.stages.adc import expected_code
+from ..model.stages.adc import DITHER_SERIES_FROM, SERIES_TERMS_DN, TAIL_Z, expected_code
 from . import noise_budget
 from .white_pixels import couplet_pairs
 
@@ -250,22 +250,23 @@ if numba is not None:
 
     @_inline
     def _expected_code(mu, sd):
-        """adc.expected_code of one pixel: the mean from 1 DN of noise, the codes' sum below, rint without."""
+        """adc.expected_code of one pixel: the mean from 1 DN of noise, rint without, the Fourier series or the
+        codes' tails between (as many terms as that pixel's noise needs)."""
         if sd == 0.0:
             return np.rint(mu)
         if sd >= 1.0:
             return mu
         centre = np.rint(mu)
-        code = 0.0
-        # 8 codes each side: beyond 7.5 sigma for sigma < 1. A code's upper edge is the next one's lower edge,
-        # the same float (n + 0.5 and (n + 1) - 0.5 are exact): each edge's erfc once
-        lo = _ndtr((centre - 8.0 - 0.5 - mu) / sd)
-        for d in range(-8, 9):
-            n = centre + d
-            hi = _ndtr((n + 0.5 - mu) / sd)
-            code += n * (hi - lo)
-            lo = hi
-        return code
+        f = mu - centre
+        acc = 0.0
+        if sd >= DITHER_SERIES_FROM:
+            q = -2.0 * math.pi**2 * sd * sd
+            for k in range(1, max(int(SERIES_TERMS_DN / sd), 1) + 1):
+                acc += (-1.0) ** k * math.sin(2.0 * math.pi * k * f) * math.exp(q * k * k) / (math.pi * k)
+            return mu + acc
+        for d in range(1, int(TAIL_Z * sd) + 2):
+            acc += _ndtr((f - d + 0.5) / sd) - _ndtr((-f - d + 0.5) / sd)
+        return centre + acc
 
     @_inline
     def _clipped_normal(m, v, top):
@@ -281,12 +282,18 @@ if numba is not None:
         return mean, max(second - mean * mean, 0.0), 1 - cdf
 
     @_inline
+    def _top_within(m, v, k, black, top):
+        """Whether the top code is within 10 sigma and 2 codes of Y ~ Normal(black + K m, K^2 v) (noise_budget's
+        ``near`` of _top_code)."""
+        return top - (black + k * m) < 10 * (k * math.sqrt(max(v, 0.0))) + 2
+
+    @_inline
     def _top_code(m, v, k, black, top):
         """noise_budget._top_code of one pixel: (E[min(round(Y), top)] DN, whether the top is within reach)."""
+        if not _top_within(m, v, k, black, top):
+            return 0.0, False
         mu = black + k * m
         sd = k * math.sqrt(max(v, 0.0))
-        if not top - mu < 10 * sd + 2:
-            return 0.0, False
         if sd == 0.0:
             return min(np.rint(mu), top), True
         if sd < 2.0:
@@ -316,6 +323,19 @@ if numba is not None:
                 code = _expected_code(black + k * m, k * np.sqrt(v))
                 out[i, j] = np.float32(min(max(code, 0.0), max_code))
 
+    @_inline
+    def _above_top(mn, sh, rd, cr, ro, co, g, fw, k, black, max_code):
+        """Whether both of _near_pixels' cases (charge at the full well, and below it) lie 10 sigma and 2 codes
+        above the top code, from bounds alone (no erfc): the charge below the full well has a mean of at least
+        ``min(mn, fw) - 0.8 sqrt(sh)`` (a normal's mean truncated above at ``fw`` lies within ``phi(0) / Phi(0)
+        = 0.798`` sigma of the nearer of its mean and ``fw``) and a variance of at most ``sh``. Then
+        _top_code's sum is empty (or its clipped normal's mean the top code to 1e-18) for both, and the pixel's
+        expected code is the top code in float32: the same bits as the whole formula."""
+        clipped = (black + k * ((fw + ro) * g + co)) - 10.0 * k * math.sqrt(rd * g * g + cr)
+        below = (black + k * ((min(mn, fw) - 0.8 * math.sqrt(sh) + ro) * g + co)) - 10.0 * k * math.sqrt(
+            (sh + rd) * g * g + cr)
+        return clipped >= max_code + 2.0 and below >= max_code + 2.0
+
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _near_pixels(mean_n, shot, read, col_read, row_off, col_off, gain, fw, top_e, k, black, max_code, rows,
                     cols, out):
@@ -328,18 +348,26 @@ if numba is not None:
             mn, sh, rd, cr = mean_n[i, j], shot[i, j], read[i, j], col_read[i, j]
             ro, co, g = row_off[i, j], col_off[i, j], gain[i, j]
             s = math.sqrt(max(sh, 1e-300))
+            if _above_top(mn, sh, rd, cr, ro, co, g, fw, k, black, max_code):
+                out[i, j] = np.float32(max_code)
+                continue
             a = (fw - mn) / s
-            p_fw = 1.0 - _ndtr(a)
+            below_fw = _ndtr(a)
+            p_fw = 1.0 - below_fw
             # N given N < FW (noise_budget._truncated_below)
-            ratio = math.exp(-0.5 * a * a) / _ROOT_2PI / max(_ndtr(a), 1e-300)
+            ratio = math.exp(-0.5 * a * a) / _ROOT_2PI / max(below_fw, 1e-300)
             m_below = mn - s * ratio
             v_below = sh * min(max(1 - a * ratio - ratio * ratio, 0.0), 1.0)
             mc, vc = (fw + ro) * g + co, rd * g * g + cr
             mu, vu = (m_below + ro) * g + co, (v_below + rd) * g * g + cr
-            m_c, v_c, _ = _clipped_normal(mc, vc, top_e)
+            if p_fw == 0.0:  # the full well out of reach (a > 8.3): the clipped case is weighed by an exact 0, so
+                m_c, v_c, e_c = 0.0, 0.0, 0.0  # only whether it reaches the top code counts (the same bits)
+                at_c = _top_within(mc, vc, k, black, max_code)
+            else:
+                m_c, v_c, _ = _clipped_normal(mc, vc, top_e)
+                e_c, at_c = _top_code(mc, vc, k, black, max_code)
             m_u, v_u, _ = _clipped_normal(mu, vu, top_e)
             m = p_fw * m_c + (1 - p_fw) * m_u
-            e_c, at_c = _top_code(mc, vc, k, black, max_code)
             e_u, at_u = _top_code(mu, vu, k, black, max_code)
             quantized = at_c or at_u
             if quantized:  # either component within reach of the top code: the code expectation for both

@@ -18,6 +18,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,13 +106,27 @@ def convert(electrons: np.ndarray, transfer: Transfer, black_dn: np.ndarray | No
     return v.astype(np.uint16)
 
 
+#: below this noise (DN) the expected code is a sum over codes' edges; from it to 1 DN a Fourier series
+DITHER_SERIES_FROM = 0.25
+#: the Fourier series' terms times the noise in DN: term k is left out where ``exp(-2 pi^2 k^2 sigma^2)`` is
+#: below ``exp(-41.4) = 1e-18``, i.e. from ``k > sqrt(41.4 / (2 pi^2)) / sigma``
+SERIES_TERMS_DN = math.sqrt(41.4 / (2.0 * math.pi**2))
+#: the codes' tails reach this many sigma: ``Phi(-8.5) = 9.5e-18``
+TAIL_Z = 8.5
+
+
 def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
     """Expected value of ``round(x)`` for x ~ Normal(mean_dn, sigma_dn^2), elementwise (DN, float64).
 
     With a DN of noise or more this is ``mean_dn`` (within 3e-9 DN: the
-    noise dithers the quantizer); with less it is the sum over the nearby
-    codes n of n P(n - 1/2 < x < n + 1/2), and without noise
-    ``rint(mean_dn)``: the quantization pattern then adds to the fixed
+    noise dithers the quantizer); without noise ``rint(mean_dn)``; in
+    between, with ``c = rint(mean_dn)`` and ``f = mean_dn - c``, exactly (to
+    1e-17 DN) one of two series: from :data:`DITHER_SERIES_FROM` the
+    sawtooth's Fourier series,
+    ``mean_dn + sum_k (-1)^k sin(2 pi k f) exp(-2 pi^2 k^2 sigma^2) / (pi k)``
+    (at most 5 terms), and below it the codes' tails,
+    ``c + sum_d [Phi((f - d + 1/2) / sigma) - Phi((-f - d + 1/2) / sigma)]``
+    (at most 3 terms). The quantization pattern then adds to the fixed
     pattern a frame shows. Clipping is not included here.
 
     Parameters
@@ -124,6 +139,12 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
     Returns
     -------
     float64 array, DN, ``mean_dn``'s shape
+
+    Examples
+    --------
+    >>> from cmosnoise.model.stages.adc import expected_code
+    >>> [round(float(v), 4) for v in expected_code(np.array([10.2, 10.2, 10.2]), np.array([0.0, 0.3, 1.0]))]
+    [10.0, 10.1703, 10.2]
     """
     from scipy.special import ndtr
 
@@ -132,13 +153,34 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
     out = mean_dn.copy()
     exact = sigma_dn == 0.0
     out[exact] = np.rint(mean_dn[exact])  # as the ADC rounds (half codes to even)
-    low = (sigma_dn < 1.0) & ~exact
-    if low.any():
-        mu, sd = mean_dn[low], sigma_dn[low]
-        centre = np.round(mu)
+    series = (sigma_dn >= DITHER_SERIES_FROM) & (sigma_dn < 1.0)
+    if series.any():
+        mu, sd = mean_dn[series], sigma_dn[series]
+        f = mu - np.rint(mu)
         acc = np.zeros(mu.shape)
-        for d in range(-8, 9):  # 8 codes each side: beyond 7.5 sigma for sigma < 1
-            n = centre + d
-            acc += n * (ndtr((n + 0.5 - mu) / sd) - ndtr((n - 0.5 - mu) / sd))
-        out[low] = acc
+        q = -2.0 * math.pi**2 * sd * sd
+        for k in range(1, series_terms(float(sd.min())) + 1):
+            acc += (-1.0) ** k * np.sin(2.0 * math.pi * k * f) * np.exp(q * k * k) / (math.pi * k)
+        out[series] = mu + acc
+    tails = (sigma_dn < DITHER_SERIES_FROM) & ~exact
+    if tails.any():
+        mu, sd = mean_dn[tails], sigma_dn[tails]
+        centre = np.rint(mu)
+        f = mu - centre
+        acc = np.zeros(mu.shape)
+        for d in range(1, tail_codes(float(sd.max())) + 1):
+            acc += ndtr((f - d + 0.5) / sd) - ndtr((-f - d + 0.5) / sd)
+        out[tails] = centre + acc
     return out
+
+
+def series_terms(sigma_dn: float) -> int:
+    """How many terms :func:`expected_code`'s Fourier series takes at a noise of ``sigma_dn`` DN (>= 0.25): those
+    whose ``exp(-2 pi^2 k^2 sigma^2)`` is at least 1e-18."""
+    return max(int(SERIES_TERMS_DN / sigma_dn), 1)
+
+
+def tail_codes(sigma_dn: float) -> int:
+    """How many codes each side :func:`expected_code`'s sum over the codes' tails takes at ``sigma_dn`` DN (< 0.25):
+    those whose edge lies within 8.5 sigma of the mean."""
+    return int(TAIL_Z * sigma_dn) + 1
