@@ -3,6 +3,9 @@ and the memory of a large set.
 
     python benchmarks/bench_dataset.py [--samples 40] [--crop 512] [--repeats 3] [--memory 10000]
 
+The truth's cost is also given alone: each led sample's truth over its own
+noisy frame (one thread), their median, mean and largest ratio.
+
 Each sample is a 512 x 512 crop: its own sensor instance (set-up), one noisy
 frame, and its truth (expected raw, perfect image, defect mask), as
 ``cmosnoise dataset`` makes them (``make_sample``; writing the shards is
@@ -80,6 +83,31 @@ def numpy_reference(n: int, crop: int) -> float:
     return n / (time.perf_counter() - t0)
 
 
+def truth_cost(recipe_json: str, n: int) -> dict:
+    """Each of samples 1 to n's truth (``ground_truth.truth``) over its noisy frame, one thread, each timed once:
+    the median, mean and largest ratio, and the K (DN/e-) of the sample with the largest."""
+    from cmosnoise.analysis import ground_truth
+    from cmosnoise.app import dataset as ds
+
+    _one_thread()
+    recipe = ds.Recipe.from_json(recipe_json)
+    sources = ds.Sources()
+    ratios, gains = [], []
+    for i in range(n + 1):
+        shot, _ = ds._exposure(recipe, i, sources, "cpu")
+        t0 = time.perf_counter()
+        shot.frame(0)
+        t1 = time.perf_counter()
+        ground_truth.truth(shot, recipe.white_threshold_e_per_s)
+        t2 = time.perf_counter()
+        if i:  # sample 0 compiles
+            ratios.append((t2 - t1) / (t1 - t0))
+            gains.append(shot.sensor.transfer.gain_dn_per_e)
+    r = np.array(ratios)
+    return {"samples": n, "median": float(np.median(r)), "mean": float(r.mean()), "max": float(r.max()),
+            "max_k_dn_per_e": float(gains[int(r.argmax())])}
+
+
 def rate(recipe_json: str, n: int, workers: int) -> float:
     if workers == 1:
         ours(recipe_json, [0])  # compile, the sources read
@@ -129,6 +157,11 @@ def main() -> None:
             print(f"{f'cmosnoise {camera}, {workers} worker(s)':34s}{r:10.1f}{r / workers:10.1f}"
                   f"{r / workers / gf:18.2f}{r / ref:13.2f}")
             rows.append({"label": f"cmosnoise {camera}", "workers": workers, "per_s": r})
+    led = ds.Recipe(samples=a.samples + 1, crop=(a.crop, a.crop), cameras=("led",), seed=1).to_json()
+    with ProcessPoolExecutor(1) as pool:  # one thread, in a process of its own
+        truth = pool.submit(truth_cost, led, a.samples).result()
+    print(f"led truth over its frame, {a.samples} samples: median {truth['median']:.2f}, mean {truth['mean']:.2f}, "
+          f"largest {truth['max']:.2f} (K {truth['max_k_dn_per_e']:.1f} DN/e-)")
     if a.memory:
         small, large = peak_rss_mb(a.memory // 10), peak_rss_mb(a.memory)
         print(f"peak memory of cmosnoise dataset, 64 x 64 crops: {a.memory // 10} samples {small:.0f} MB, "
@@ -140,7 +173,7 @@ def main() -> None:
         with open(a.json, "w") as fh:
             json.dump({"command": "python benchmarks/bench_dataset.py " + " ".join(sys.argv[1:-2]),
                        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
-                       "crop": a.crop, "samples": a.samples, "rows": rows,
+                       "crop": a.crop, "samples": a.samples, "rows": rows, "truth_cost": truth,
                        **({"memory": {"samples": [a.memory // 10, a.memory], "peak_mb": [small, large]}}
                           if a.memory else {})}, fh, indent=2)
 

@@ -439,6 +439,11 @@ def render_dataset_speed(d: dict) -> str:
         m = d["memory"]
         lines += ["", f"Peak memory of `cmosnoise dataset` (64 x 64 crops): {m['peak_mb'][0]:.0f} MB for "
                       f"{m['samples'][0]} samples, {m['peak_mb'][1]:.0f} MB for {m['samples'][1]}."]
+    if "truth_cost" in d:
+        t = d["truth_cost"]
+        lines += ["", f"A led sample's truth (expected raw, perfect image, mask) against its noisy frame, one thread, "
+                      f"{t['samples']} samples: {t['median']:.2f} frames at the median, {t['mean']:.2f} on average, "
+                      f"{t['max']:.2f} at most (K {t['max_k_dn_per_e']:.1f} DN/e-)."]
     return "\n".join(lines)
 
 
