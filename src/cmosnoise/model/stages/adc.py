@@ -142,9 +142,10 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
 
     Examples
     --------
+    >>> import numpy as np
     >>> from cmosnoise.model.stages.adc import expected_code
     >>> [round(float(v), 4) for v in expected_code(np.array([10.2, 10.2, 10.2]), np.array([0.0, 0.3, 1.0]))]
-    [10.0, 10.1703, 10.2]
+    [10.0, 10.1488, 10.2]
     """
     from scipy.special import ndtr
 
@@ -159,7 +160,7 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
         f = mu - np.rint(mu)
         acc = np.zeros(mu.shape)
         q = -2.0 * math.pi**2 * sd * sd
-        for k in range(1, series_terms(float(sd.min())) + 1):
+        for k in range(1, _series_terms(float(sd.min())) + 1):
             acc += (-1.0) ** k * np.sin(2.0 * math.pi * k * f) * np.exp(q * k * k) / (math.pi * k)
         out[series] = mu + acc
     tails = (sigma_dn < DITHER_SERIES_FROM) & ~exact
@@ -168,19 +169,19 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
         centre = np.rint(mu)
         f = mu - centre
         acc = np.zeros(mu.shape)
-        for d in range(1, tail_codes(float(sd.max())) + 1):
+        for d in range(1, _tail_codes(float(sd.max())) + 1):
             acc += ndtr((f - d + 0.5) / sd) - ndtr((-f - d + 0.5) / sd)
         out[tails] = centre + acc
     return out
 
 
-def series_terms(sigma_dn: float) -> int:
+def _series_terms(sigma_dn: float) -> int:
     """How many terms :func:`expected_code`'s Fourier series takes at a noise of ``sigma_dn`` DN (>= 0.25): those
     whose ``exp(-2 pi^2 k^2 sigma^2)`` is at least 1e-18."""
     return max(int(SERIES_TERMS_DN / sigma_dn), 1)
 
 
-def tail_codes(sigma_dn: float) -> int:
+def _tail_codes(sigma_dn: float) -> int:
     """How many codes each side :func:`expected_code`'s sum over the codes' tails takes at ``sigma_dn`` DN (< 0.25):
     those whose edge lies within 8.5 sigma of the mean."""
     return int(TAIL_Z * sigma_dn) + 1
