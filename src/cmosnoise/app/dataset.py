@@ -471,7 +471,7 @@ def _finish(recipe: Recipe, shot, st: SampleSettings, raw) -> tuple[dict, dict]:
 
 
 # ------------------------------------------------------------------ shards
-def shard_bytes(recipe_json: str, shard: int, device: str = "cpu") -> bytes:
+def shard_bytes(recipe_json: str, shard: int, device: str = "cpu", sources: Sources | None = None) -> bytes:
     """Shard ``shard`` of the recipe, as the bytes of its file (made in memory: a Dask task returns them).
 
     Parameters
@@ -482,6 +482,8 @@ def shard_bytes(recipe_json: str, shard: int, device: str = "cpu") -> bytes:
         The shard's number.
     device : str
         "cpu" or "cuda".
+    sources : Sources, optional
+        The source images already read (one process's shards share them; a Dask task reads its own).
 
     Returns
     -------
@@ -489,8 +491,7 @@ def shard_bytes(recipe_json: str, shard: int, device: str = "cpu") -> bytes:
         The shard file's contents.
     """
     recipe = Recipe.from_json(recipe_json)
-    sources = Sources()
-    made = make_samples(recipe, recipe.shard_range(shard), sources, device=device)
+    made = make_samples(recipe, recipe.shard_range(shard), sources or Sources(), device=device)
     arrays = {k: np.stack([a[k] for a, _ in made]) for k in ARRAYS}
     columns = {k: [c[k] for _, c in made] for k in COLUMNS}
     return {"hdf5": _hdf5, "npz": _npz, "fits": _fits}[recipe.format](arrays, columns, recipe)
@@ -641,8 +642,9 @@ def _mode(out: Path, recipe: Recipe, resume: bool, overwrite: bool) -> str:
 
 def _shards_here(recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterator[tuple[int, bytes]]:
     recipe_json = recipe.to_json()
+    sources = Sources()  # each source image read once for all the shards
     for s in todo:
-        yield s, shard_bytes(recipe_json, s, device)
+        yield s, shard_bytes(recipe_json, s, device, sources)
 
 
 def _shards_on(client, recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterator[tuple[int, bytes]]:
