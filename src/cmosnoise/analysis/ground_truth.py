@@ -45,7 +45,7 @@ from ..engine.telegraph import in_region
 from ..model import cfa as cfa_mod
 from ..model.sensor import Exposure, region_of
 from ..model.stages import defects as defects_mod
-from ..model.stages.adc import DITHER_SERIES_FROM, SERIES_TERMS_DN, TAIL_Z, expected_code
+from ..model.stages.adc import DITHER_SERIES_FROM, expected_code, series_terms, tail_codes
 from . import noise_budget
 from .white_pixels import couplet_pairs
 
@@ -243,6 +243,8 @@ _far_pixels = _near_pixels = None
 if numba is not None:
     _inline = numba.njit(inline="always", cache=True, nogil=True)
 
+    _series_terms, _tail_codes = _inline(series_terms), _inline(tail_codes)
+
     @_inline
     def _ndtr(a):
         """The standard normal's cdf (scipy.special.ndtr's value to an ulp or two)."""
@@ -261,10 +263,10 @@ if numba is not None:
         acc = 0.0
         if sd >= DITHER_SERIES_FROM:
             q = -2.0 * math.pi**2 * sd * sd
-            for k in range(1, max(int(SERIES_TERMS_DN / sd), 1) + 1):
+            for k in range(1, _series_terms(sd) + 1):
                 acc += (-1.0) ** k * math.sin(2.0 * math.pi * k * f) * math.exp(q * k * k) / (math.pi * k)
             return mu + acc
-        for d in range(1, int(TAIL_Z * sd) + 2):
+        for d in range(1, _tail_codes(sd) + 1):
             acc += _ndtr((f - d + 0.5) / sd) - _ndtr((-f - d + 0.5) / sd)
         return centre + acc
 

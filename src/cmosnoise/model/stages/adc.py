@@ -160,7 +160,7 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
         f = mu - np.rint(mu)
         acc = np.zeros(mu.shape)
         q = -2.0 * math.pi**2 * sd * sd
-        for k in range(1, _series_terms(float(sd.min())) + 1):
+        for k in range(1, series_terms(float(sd.min())) + 1):
             acc += (-1.0) ** k * np.sin(2.0 * math.pi * k * f) * np.exp(q * k * k) / (math.pi * k)
         out[series] = mu + acc
     tails = (sigma_dn < DITHER_SERIES_FROM) & ~exact
@@ -169,19 +169,51 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
         centre = np.rint(mu)
         f = mu - centre
         acc = np.zeros(mu.shape)
-        for d in range(1, _tail_codes(float(sd.max())) + 1):
+        for d in range(1, tail_codes(float(sd.max())) + 1):
             acc += ndtr((f - d + 0.5) / sd) - ndtr((-f - d + 0.5) / sd)
         out[tails] = centre + acc
     return out
 
 
-def _series_terms(sigma_dn: float) -> int:
-    """How many terms :func:`expected_code`'s Fourier series takes at a noise of ``sigma_dn`` DN (>= 0.25): those
-    whose ``exp(-2 pi^2 k^2 sigma^2)`` is at least 1e-18."""
+def series_terms(sigma_dn: float) -> int:
+    """How many terms :func:`expected_code`'s Fourier series takes at a noise of ``sigma_dn`` DN: those whose
+    ``exp(-2 pi^2 k^2 sigma^2)`` is at least 1e-18 (at least one).
+
+    Parameters
+    ----------
+    sigma_dn : float
+        The noise, DN (0.25 to 1 where the series is used).
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> from cmosnoise.model.stages.adc import series_terms
+    >>> series_terms(0.25), series_terms(0.5), series_terms(0.9)
+    (5, 2, 1)
+    """
     return max(int(SERIES_TERMS_DN / sigma_dn), 1)
 
 
-def _tail_codes(sigma_dn: float) -> int:
-    """How many codes each side :func:`expected_code`'s sum over the codes' tails takes at ``sigma_dn`` DN (< 0.25):
-    those whose edge lies within 8.5 sigma of the mean."""
+def tail_codes(sigma_dn: float) -> int:
+    """How many codes each side :func:`expected_code`'s sum over the codes' tails takes at ``sigma_dn`` DN: those
+    whose edge can lie within 8.5 sigma of the mean.
+
+    Parameters
+    ----------
+    sigma_dn : float
+        The noise, DN (below 0.25 where the tails are used).
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> from cmosnoise.model.stages.adc import tail_codes
+    >>> tail_codes(0.05), tail_codes(0.2)
+    (1, 2)
+    """
     return int(TAIL_Z * sigma_dn) + 1
