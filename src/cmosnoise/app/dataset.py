@@ -42,6 +42,7 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import math
@@ -483,7 +484,7 @@ def shard_bytes(recipe_json: str, shard: int, device: str = "cpu", sources: Sour
     device : str
         "cpu" or "cuda".
     sources : Sources, optional
-        The source images already read (one process's shards share them; a Dask task reads its own).
+        The source images already read (one process's shards share them, and one Dask worker's).
 
     Returns
     -------
@@ -647,13 +648,25 @@ def _shards_here(recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterat
         yield s, shard_bytes(recipe_json, s, device, sources)
 
 
+@functools.lru_cache(maxsize=1)
+def _worker_sources(recipe_json: str) -> Sources:
+    """A Dask worker process's source images for ``recipe_json``: read by its first shard task, kept for its next
+    ones (the last recipe's only)."""
+    return Sources()
+
+
+def _shard_task(recipe_json: str, shard: int, device: str) -> bytes:
+    """A Dask task: :func:`shard_bytes` with the worker's source images (:func:`_worker_sources`)."""
+    return shard_bytes(recipe_json, shard, device, _worker_sources(recipe_json))
+
+
 def _shards_on(client, recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterator[tuple[int, bytes]]:
     from distributed import as_completed
 
     from .sweep import task_result
 
     recipe_json = recipe.to_json()
-    futures = {client.submit(shard_bytes, recipe_json, s, device, pure=False, retries=2): s for s in todo}
+    futures = {client.submit(_shard_task, recipe_json, s, device, pure=False, retries=2): s for s in todo}
     for future in as_completed(futures):
         data = task_result(future, "a dataset task")
         future.release()
