@@ -363,25 +363,27 @@ if numba is not None:
             mc, vc = (fw + ro) * g + co, rd * g * g + cr
             mu, vu = (m_below + ro) * g + co, (v_below + rd) * g * g + cr
             if p_fw == 0.0:  # the full well out of reach (a > 8.3): the clipped case is weighed by an exact 0, so
-                m_c, v_c, e_c = 0.0, 0.0, 0.0  # only whether it reaches the top code counts (the same bits)
+                e_c = 0.0  # only whether it reaches the top code counts (the same bits)
                 at_c = _top_within(mc, vc, k, black, max_code)
             else:
-                m_c, v_c, _ = _clipped_normal(mc, vc, top_e)
                 e_c, at_c = _top_code(mc, vc, k, black, max_code)
-            m_u, v_u, _ = _clipped_normal(mu, vu, top_e)
-            m = p_fw * m_c + (1 - p_fw) * m_u
             e_u, at_u = _top_code(mu, vu, k, black, max_code)
-            quantized = at_c or at_u
-            if quantized:  # either component within reach of the top code: the code expectation for both
-                if not at_c:
+            if at_c or at_u:  # either case within reach of the top code: the code expectation for both (the
+                if not at_c:  # clipped normals' moments below are not needed)
                     e_c = black + k * mc
                 if not at_u:
                     e_u = black + k * mu
                 m = ((p_fw * e_c + (1 - p_fw) * e_u) - black) / k
-            second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
-            var = max(second - m**2, 0.0)
-            mean_dn = black + k * m
-            code = mean_dn if quantized else _expected_code(mean_dn, k * math.sqrt(var))
+                code = black + k * m
+            else:
+                m_c, v_c = 0.0, 0.0
+                if p_fw != 0.0:
+                    m_c, v_c, _ = _clipped_normal(mc, vc, top_e)
+                m_u, v_u, _ = _clipped_normal(mu, vu, top_e)
+                m = p_fw * m_c + (1 - p_fw) * m_u
+                second = p_fw * (v_c + m_c**2) + (1 - p_fw) * (v_u + m_u**2)
+                var = max(second - m**2, 0.0)
+                code = _expected_code(black + k * m, k * math.sqrt(var))
             out[i, j] = np.float32(min(max(code, 0.0), max_code))
 
 
