@@ -45,7 +45,7 @@ from ..engine.telegraph import in_region
 from ..model import cfa as cfa_mod
 from ..model.sensor import Exposure, region_of
 from ..model.stages import defects as defects_mod
-from ..model.stages.adc import DITHER_SERIES_FROM, expected_code, series_terms, tail_codes
+from ..model.stages.adc import DITHER_SERIES_FROM, expected_code, series_terms
 from . import noise_budget
 from .white_pixels import couplet_pairs
 
@@ -243,7 +243,7 @@ _far_pixels = _near_pixels = None
 if numba is not None:
     _inline = numba.njit(inline="always", cache=True, nogil=True)
 
-    _series_terms, _tail_codes = _inline(series_terms), _inline(tail_codes)
+    _series_terms = _inline(series_terms)
 
     @_inline
     def _ndtr(a):
@@ -266,7 +266,7 @@ if numba is not None:
             for k in range(1, _series_terms(sd) + 1):
                 acc += (-1.0) ** k * math.sin(2.0 * math.pi * k * f) * math.exp(q * k * k) / (math.pi * k)
             return mu + acc
-        for d in range(1, _tail_codes(sd) + 1):
+        for d in range(1, _series_terms(sd) + 1):
             acc += _ndtr((f - d + 0.5) / sd) - _ndtr((-f - d + 0.5) / sd)
         return centre + acc
 

@@ -169,20 +169,21 @@ def expected_code(mean_dn: np.ndarray, sigma_dn: np.ndarray) -> np.ndarray:
         centre = np.rint(mu)
         f = mu - centre
         acc = np.zeros(mu.shape)
-        for d in range(1, tail_codes(float(sd.max())) + 1):
+        for d in range(1, series_terms(float(sd.max())) + 1):
             acc += ndtr((f - d + 0.5) / sd) - ndtr((-f - d + 0.5) / sd)
         out[tails] = centre + acc
     return out
 
 
 def series_terms(sigma_dn: float) -> int:
-    """How many terms :func:`expected_code`'s Fourier series takes at a noise of ``sigma_dn`` DN: those whose
-    ``exp(-2 pi^2 k^2 sigma^2)`` is at least 1e-18 (at least one).
+    """How many terms :func:`expected_code` sums at a noise of ``sigma_dn`` DN (below 1): from
+    :data:`DITHER_SERIES_FROM`, the Fourier series' terms whose ``exp(-2 pi^2 k^2 sigma^2)`` is at least 1e-18
+    (at least one); below it, the codes each side whose edge can lie within 8.5 sigma of the mean.
 
     Parameters
     ----------
     sigma_dn : float
-        The noise, DN (0.25 to 1 where the series is used).
+        The noise, DN.
 
     Returns
     -------
@@ -191,29 +192,9 @@ def series_terms(sigma_dn: float) -> int:
     Examples
     --------
     >>> from cmosnoise.model.stages.adc import series_terms
-    >>> series_terms(0.25), series_terms(0.5), series_terms(0.9)
-    (5, 2, 1)
+    >>> series_terms(0.05), series_terms(0.2), series_terms(0.25), series_terms(0.5), series_terms(0.9)
+    (1, 2, 5, 2, 1)
     """
-    return max(int(SERIES_TERMS_DN / sigma_dn), 1)
-
-
-def tail_codes(sigma_dn: float) -> int:
-    """How many codes each side :func:`expected_code`'s sum over the codes' tails takes at ``sigma_dn`` DN: those
-    whose edge can lie within 8.5 sigma of the mean.
-
-    Parameters
-    ----------
-    sigma_dn : float
-        The noise, DN (below 0.25 where the tails are used).
-
-    Returns
-    -------
-    int
-
-    Examples
-    --------
-    >>> from cmosnoise.model.stages.adc import tail_codes
-    >>> tail_codes(0.05), tail_codes(0.2)
-    (1, 2)
-    """
+    if sigma_dn >= DITHER_SERIES_FROM:
+        return max(int(SERIES_TERMS_DN / sigma_dn), 1)
     return int(TAIL_Z * sigma_dn) + 1
