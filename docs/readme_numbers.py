@@ -476,7 +476,7 @@ def render_gpu_speed(d: dict) -> str:
 
 def render_setup_speed(d: dict) -> str:
     lines = [f"Measured with `python benchmarks/bench_setup.py --sizes 1,12,50 --json docs/numbers/setup_speed.json` "
-             f"({d['threads']} threads; the fastest of 3):", "",
+             f"({d['threads']} threads; the fastest of {d.get('repeats', 3)}):", "",
              "| sensor | pixels | set-up | per pixel | frames' worth | set-up peak / maps kept |", "|---|---|---|---|---|---|"]
     for r in d["rows"]:
         lines.append(f"| {r['width']} x {r['height']} | {r['pixels'] / 1e6:.1f} MP | {r['setup_s']:.2f} s | "
