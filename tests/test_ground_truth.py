@@ -114,7 +114,7 @@ def test_the_near_pixels_shortcuts_are_taken_by_the_cases_held_to_the_numpy_bits
     out, near = np.empty(sensor.shape, np.float32), np.zeros(sensor.shape, bool)
     gt._far_pixels(*p.values(), terms["fw"], terms["top"], float(t.gain_dn_per_e), float(t.black_level_dn),
                    float(t.max_code), out, near)
-    above, out_of_reach = [], 0
+    above, out_of_reach, far_below = [], 0, 0
     for i, j in zip(*np.nonzero(near)):
         mn, sh = p["mean_n"][i, j], p["shot"][i, j]
         if gt._above_top(mn, sh, p["read"][i, j], p["col_read"][i, j], p["row_off"][i, j], p["col_off"][i, j],
@@ -123,10 +123,35 @@ def test_the_near_pixels_shortcuts_are_taken_by_the_cases_held_to_the_numpy_bits
             above.append((i, j))
         elif terms["fw"] - mn > 8.5 * np.sqrt(sh):
             out_of_reach += 1
-    assert len(above) > 0 and out_of_reach > 0, (len(above), out_of_reach)
+            s = np.sqrt(max(sh, 1e-300))
+            far_below += gt._far_below_fw((terms["fw"] - mn) / s, mn, s)
+    assert len(above) > 0 and out_of_reach > 0 and far_below > 0, (len(above), out_of_reach, far_below)
     # the whole formula (the NumPy path's, before stuck pixels read their code) gives them the top code
     idx = tuple(np.array(above).T)
     assert np.all(gt._codes(noise_budget.near_moments(sensor, terms, idx, codes=True), t) == t.max_code)
+
+
+def test_far_below_the_full_well_the_truncation_is_exactly_none():
+    """Where _far_below_fw holds (a >= 9 sigma below the full well, mean > 0.05 sigma), the NumPy path's
+    truncated normal (noise_budget._truncated_below) and full-well weight (1 - ndtr) are exactly (mn, sh) and 0,
+    as the shortcut takes them: over means from 0.05 sigma to 1e6 e-, sigmas from 1e-3 to 1e3 e- and a from 9 to
+    40, edges included, not one differs in a bit. Just inside the bound (a = 8), the weight is not 0."""
+    from cmosnoise.analysis import noise_budget
+
+    rng = np.random.default_rng(9)
+    s = np.concatenate([10 ** rng.uniform(-3, 3, 200000), [1e-3, 1.0, 1e3]])
+    a = np.concatenate([rng.uniform(9.0, 40.0, 200000), [9.0, 9.0, 9.0]])
+    mn = np.concatenate([s[:-3] * 10 ** rng.uniform(np.log10(0.05), 6, 200000), np.nextafter(0.05 * s[-3:], 1)])
+    mn = np.minimum(mn, 1e6)
+    sh = s * s
+    fw = mn + a * np.sqrt(sh)
+    a_pix = (fw - mn) / np.sqrt(sh)
+    take = np.array([gt._far_below_fw(x, m, q) for x, m, q in zip(a_pix, mn, np.sqrt(sh))])
+    assert take.mean() > 0.99, take.mean()  # the draws are where the shortcut is taken (a rounds within 1e-15)
+    m_b, v_b = noise_budget._truncated_below(mn[take], sh[take], fw[take])
+    assert np.array_equal(m_b, mn[take]) and np.array_equal(v_b, sh[take])
+    assert np.all(1.0 - noise_budget._cdf(a_pix[take]) == 0.0)
+    assert 1.0 - noise_budget._cdf(8.0) > 0.0
 
 
 def test_the_expected_code_series_are_the_sum_over_codes():

@@ -338,6 +338,16 @@ if numba is not None:
             (sh + rd) * g * g + cr)
         return clipped >= max_code + 2.0 and below >= max_code + 2.0
 
+    @_inline
+    def _far_below_fw(a, mn, s):
+        """Whether the charge ``Normal(mn, s^2)`` lies ``a >= 9`` sigma below the full well, with ``mn > 0.05 s``:
+        then _near_pixels' formulas give p_fw = 0, m_below = mn and v_below = s^2 exactly, and need no erfc or exp.
+        The cdf rounds to 1.0 there (``0.5 erfc(a / sqrt 2) < 2**-54``, in libm's erfc and in scipy's ndtr, the
+        NumPy path's); the truncation's ratio is at most phi(9) = 1.03e-18, so ``a ratio + ratio^2 < 1e-17``
+        leaves ``1 - a ratio - ratio^2`` at 1.0 (half an ulp below 1 is 2**-54 = 5.6e-17), and ``s ratio <
+        2.1e-17 mn`` leaves ``mn - s ratio`` at mn (half an ulp of mn is at least ``2**-54 mn``)."""
+        return a >= 9.0 and mn > 0.05 * s
+
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _near_pixels(mean_n, shot, read, col_read, row_off, col_off, gain, fw, top_e, k, black, max_code, rows,
                     cols, out):
@@ -354,12 +364,15 @@ if numba is not None:
                 out[i, j] = np.float32(max_code)
                 continue
             a = (fw - mn) / s
-            below_fw = _ndtr(a)
-            p_fw = 1.0 - below_fw
-            # N given N < FW (noise_budget._truncated_below)
-            ratio = math.exp(-0.5 * a * a) / _ROOT_2PI / max(below_fw, 1e-300)
-            m_below = mn - s * ratio
-            v_below = sh * min(max(1 - a * ratio - ratio * ratio, 0.0), 1.0)
+            if _far_below_fw(a, mn, s):
+                p_fw, m_below, v_below = 0.0, mn, sh
+            else:
+                below_fw = _ndtr(a)
+                p_fw = 1.0 - below_fw
+                # N given N < FW (noise_budget._truncated_below)
+                ratio = math.exp(-0.5 * a * a) / _ROOT_2PI / max(below_fw, 1e-300)
+                m_below = mn - s * ratio
+                v_below = sh * min(max(1 - a * ratio - ratio * ratio, 0.0), 1.0)
             mc, vc = (fw + ro) * g + co, rd * g * g + cr
             mu, vu = (m_below + ro) * g + co, (v_below + rd) * g * g + cr
             if p_fw == 0.0:  # the full well out of reach (a > 8.3): the clipped case is weighed by an exact 0, so
