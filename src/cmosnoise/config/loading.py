@@ -26,12 +26,17 @@ from .schema import Config
 def deep_merge(base: dict, override: dict) -> dict:
     """Recursively merge ``override`` into a copy of ``base`` (lists are replaced)."""
     out = copy.deepcopy(base)
+    _merge_into(out, override)
+    return out
+
+
+def _merge_into(out: dict, override: dict) -> None:
+    """:func:`deep_merge`'s work on ``out``, a copy already (each level copied once, not once per depth)."""
     for k, v in override.items():
         if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = deep_merge(out[k], v)
+            _merge_into(out[k], v)
         else:
             out[k] = copy.deepcopy(v)
-    return out
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
