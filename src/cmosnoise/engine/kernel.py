@@ -490,6 +490,9 @@ if numba is not None:
             if has_sf or has_read:  # the source follower's block: uniforms, then Box-Muller (25 % faster than one
                 for j in range(w):  # loop, measured); its cosine normal is stage 6's, its sine normal stage 9a's
                     u1[j], u2[j] = _uniform_pair(base + np.uint64(j), fr, sq, zero, f0, f1)
+                # the two loops below differ in their last line only; written out, not shared through an inlined
+                # helper writing either array: that helper stopped LLVM vectorizing them (the measured stages
+                # +116 % a frame instead of +12 %, bench_measured_stages.py)
                 if has_sf and tukey:  # samplers.tukey_lambda_from's arithmetic here (SIMD), its loads in stage 9a
                     for j in range(w):
                         z, z2 = _normal_pair_from(u1[j], u2[j])
