@@ -101,9 +101,10 @@ def test_the_compiled_passes_give_the_numpy_paths_bits(over, monkeypatch):
 
 
 def test_the_near_pixels_shortcuts_are_taken_by_the_cases_held_to_the_numpy_bits():
-    """_near_pixels' two shortcuts (a pixel 10 sigma and 2 codes above the top code, from bounds alone; the full
-    well out of reach, its case weighed by an exact 0) are taken by pixels of the "top-below-fw" case above, so
-    that test holds them to the NumPy path's bits; where the first is taken, the NumPy path gives the top code."""
+    """_near_pixels' shortcuts (a pixel 10 sigma and 2 codes above the top code, from bounds alone; the full
+    well out of reach, its case weighed by an exact 0; the charge 9 sigma below the full well, untruncated) are
+    taken by pixels of the "top-below-fw" case above, so that test holds them to the NumPy path's bits; where the
+    first is taken, the NumPy path gives the top code."""
     from cmosnoise.analysis import noise_budget
 
     shot = small(**{**BRIGHT, "adc": {"gain_dn_per_e": 4.0}}).expose("ramp")
