@@ -44,6 +44,9 @@ def test_median_leaves_couplets_and_clusters_and_the_dark_map_removes_them(data,
     assert "data:image/png;base64," in html and "dark-map" in html and "http" not in html.replace("http-equiv", "")
     summary = pd.read_csv(tmp_path / "e" / "summary.csv")
     assert {"method", "camera", "light", "psnr_db", "ssim", "clusters_left"} <= set(summary.columns)
+    # each score names the image its sample was cut from, and the report weighs the methods per image
+    assert set(s["source"]) <= set(ds.BUILTIN_SCENES) and s["source"].notna().all()
+    assert "Per scene" in html and all(f"<td>{src}</td>" in html for src in set(s["source"]))
 
 
 def test_a_callable_and_a_folder_of_outputs_are_scored_alike(data, tmp_path):
