@@ -42,7 +42,6 @@ Examples
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 import json
 import math
@@ -648,16 +647,15 @@ def _shards_here(recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterat
         yield s, shard_bytes(recipe_json, s, device, sources)
 
 
-@functools.lru_cache(maxsize=1)
-def _worker_sources(recipe_json: str) -> Sources:
-    """A Dask worker process's source images for ``recipe_json``: read by its first shard task, kept for its next
-    ones (the last recipe's only)."""
-    return Sources()
-
-
 def _shard_task(recipe_json: str, shard: int, device: str) -> bytes:
-    """A Dask task: :func:`shard_bytes` with the worker's source images (:func:`_worker_sources`)."""
-    return shard_bytes(recipe_json, shard, device, _worker_sources(recipe_json))
+    """A Dask task: :func:`shard_bytes` with the worker's source images, read by its first shard task of this
+    recipe and kept on the worker for its next ones (:func:`~cmosnoise.app.sweep.worker_attribute`)."""
+    from .sweep import worker_attribute
+
+    held = worker_attribute("dataset_sources", dict)
+    if held.get("recipe") != recipe_json:
+        held.update(recipe=recipe_json, sources=Sources())
+    return shard_bytes(recipe_json, shard, device, held["sources"])
 
 
 def _shards_on(client, recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterator[tuple[int, bytes]]:

@@ -212,7 +212,8 @@ def scene_table(scores):
         Indexed by source; a column per method, in the scores' order, and ``samples``.
     """
     methods = list(dict.fromkeys(scores["method"]))
-    table = scores.pivot_table(index="source", columns="method", values="psnr_db", aggfunc="mean")[methods]
+    table = scores.pivot_table(index="source", columns="method", values="psnr_db",
+                               aggfunc="mean").reindex(columns=methods)  # a method's column kept if all NaN
     table.columns.name = None
     table["samples"] = scores.groupby("source")["sample"].nunique()
     return table
@@ -267,13 +268,17 @@ def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target:
         **{c: (c, "sum") for c in scores.columns if c.endswith("_visible") or c.endswith("_left")})
     per_scene = scene_table(scores)
 
+    def cell(v) -> str:  # numbers right-aligned, floats to 4 digits
+        if isinstance(v, (float, np.floating)):
+            return f"<td class='num'>{v:.4g}</td>"
+        if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+            return f"<td class='num'>{v}</td>"
+        return f"<td>{html.escape(str(v))}</td>"
+
     def table(df) -> str:
         head = "".join(f"<th>{html.escape(str(c))}</th>" for c in [df.index.name or "", *df.columns])
-        body = "".join("<tr>" + f"<td>{html.escape(str(i))}</td>" + "".join(
-            f"<td class='num'>{v:.4g}</td>" if isinstance(v, (float, np.floating))
-            else f"<td class='num'>{v}</td>" if isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-            else f"<td>{html.escape(str(v))}</td>"
-            for v in row) + "</tr>" for i, row in zip(df.index, df.itertuples(index=False)))
+        body = "".join(f"<tr><td>{html.escape(str(i))}</td>" + "".join(cell(v) for v in row) + "</tr>"
+                       for i, row in zip(df.index, df.itertuples(index=False)))
         return f"<table><tr>{head}</tr>{body}</table>"
 
     methods = "".join(f"<li><b>{html.escape(m)}</b>: {html.escape(BASELINES.get(m, 'your method'))}</li>"
