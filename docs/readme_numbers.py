@@ -10,7 +10,7 @@ page under docs/). Data live in ``docs/numbers/NAME.json``.
     python docs/readme_numbers.py check                # exit 1 if a page and its JSON disagree
     python docs/readme_numbers.py images               # the pages' pictures, into docs/img
 
-``speed`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and
+``speed`` and ``kernel_parts`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and
 ``fit_coverage`` are measured by the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes
 long, never recomputed by tests); ``sweep_fig9`` is deterministic but takes minutes, so the tests check its
 stored data instead. The tests check that every README block is the rendering of its JSON, and recompute the
@@ -97,7 +97,9 @@ def render_speed(d: dict) -> str:
              "| | frames/s | ms/frame | reference ms/frame | x reference |", "|---|---|---|---|---|"]
     for row in d["rows"]:
         lines.append(f"| {row['label']} | {row['fps']:.1f} | {row['ms']:.1f} | {row['ref_ms']:.1f} | {row['ratio']:.2f} |")
-    lines += ["", f"Once per sensor, drawing the fixed pattern takes {d['fixed_ms']:.0f} ms; once per scene, "
+    first = (f" (the first sensor of a process {d['first_sensor_ms']:.0f} ms: it also loads the compiled loops)"
+             if "first_sensor_ms" in d else "")
+    lines += ["", f"Once per sensor, drawing the fixed pattern takes {d['fixed_ms']:.0f} ms{first}; once per scene, "
               f"exposing the photograph {d['expose_ms']:.0f} ms."
               + (f" The command's start-up and wrap-up (imports, compile-cache load, fixed pattern, scene, "
                  f"summary, preview) take {d['cli_start_up_s']:.1f} s once per run." if "cli_start_up_s" in d else ""),
@@ -526,6 +528,7 @@ SECTIONS = {
     "dark_budget": (compute_dark_budget, render_dark_budget),
     "speed": (None, render_speed),
     "speed_avx2": (None, render_speed),
+    "kernel_parts": (None, render_kernel_parts),
     "kernel_parts_avx2": (None, render_kernel_parts),
     "explore": (None, render_explore),
     "sweep_fig9": (compute_sweep_fig9, render_sweep_fig9),
@@ -547,6 +550,7 @@ SECTIONS = {
 #: speed on a CPU with AVX-512 and on one with AVX2 only: run the one that fits the machine you measure on
 BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "speed_avx2": ["bench_chain.py", "--json", "speed_avx2.json"],
+              "kernel_parts": ["kernel_parts.py", "--json", "kernel_parts.json"],
               "kernel_parts_avx2": ["kernel_parts.py", "--json", "kernel_parts_avx2.json"],
               "explore": ["bench_explore.py", "--repeats", "10", "--json", "explore.json", "--screenshot", "../img/explore.png"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
