@@ -112,6 +112,11 @@ def render_speed(d: dict) -> str:
     one, two = ratio.get("frame kernel, 1 thread(s)"), ratio.get("frame kernel, 2 thread(s)")
     cli = next((r for r in d["rows"] if r["label"].startswith("cmosnoise simulate")), None)
     further = next((r for r in d["rows"] if r["label"].startswith("each further frame")), None)
+    if "cli_start_up_s" in d and cli and further:
+        n = int(re.search(r"--frames (\d+)", cli["label"]).group(1))
+        frames = n * further["ms"] / 1000
+        lines += ["", f"Beside {n} frames ({frames:.1f} s at the further frames' rate) the start-up weighs "
+                  f"{d['cli_start_up_s'] / frames:.2f} times as much as the frames themselves."]
     if one is not None and two is not None and cli and further:
         lines += ["", f"Against the engine issue's targets: the kernel at {one:.2f} of the reference on one thread "
                   f"(target 0.4) and {two:.2f} on two (target 0.25); `simulate`, TIFF writing and run statistics "
