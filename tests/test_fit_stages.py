@@ -4,7 +4,7 @@ For the default sensor, ``paper-fig11-full`` and ``paper-fig9-vga``, each at
 25 and 65 C (the temperature changes the dark current, and with it the dark
 shot noise the readout fits take off: these are its two ends; 45 C gave the
 coverage of its neighbours in 60 more fits, and is left out to keep the
-suite within its 10 minutes), 20 sensors each are measured (a 48-frame dark
+suite within its 15 minutes), 20 sensors each are measured (a 48-frame dark
 stack, two short dark stacks, nine flat levels) and fitted. A true 95 %
 interval holds the value in at least 18 of 20 with probability 92.5 % only,
 so with some 70 (parameter, sensor, temperature) checks a few would fall
