@@ -1,8 +1,9 @@
 """A sensor's set-up (its fixed pattern) against its size, and against a frame of the same sensor.
 
 For each size, in a fresh process (so each peak is its own): ``Sensor()`` of the default configuration at that
-size, with the peak of the memory NumPy allocates during it (tracemalloc) against the bytes of the maps it
-keeps; then timed, the fastest of ``--repeats`` (the compiled loops loaded first on a 64 x 48 sensor, so no
+size, with how far its resident memory rose during it (the high-water mark of ``/proc/self/status``, reset
+before, less the resident size then: the maps live in pages of their own, ``engine/buffers.py``, which
+tracemalloc does not see) against the bytes of the maps it keeps; then timed, the fastest of ``--repeats`` (the compiled loops loaded first on a 64 x 48 sensor, so no
 compile is counted); then a frame of the default scene (the exposure made first), the fastest of as many. Set-up is linear in pixels when its time per pixel is
 the same at every size; "frames' worth" is set-up time over a frame's.
 
@@ -23,18 +24,23 @@ import time
 SIZES = {1: (1152, 864), 12: (4000, 3000), 50: (8192, 6144)}
 
 
-def measure(width: int, height: int, repeats: int) -> dict:
-    import tracemalloc
+def _resident() -> tuple[int, int]:
+    """This process's resident size and its high-water mark, bytes (Linux)."""
+    fields = dict(line.split(":", 1) for line in open("/proc/self/status"))
+    return (int(fields["VmRSS"].split()[0]) * 1024, int(fields["VmHWM"].split()[0]) * 1024)
 
+
+def measure(width: int, height: int, repeats: int) -> dict:
     from cmosnoise import Sensor
     from cmosnoise.model.fixed_pattern import nbytes
 
     Sensor({"sensor": {"width": 64, "height": 48}}).expose().frame(0)  # load the compiled loops
     cfg = {"sensor": {"width": width, "height": height}}
-    tracemalloc.start()
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")  # the high-water mark back to the resident size now
+    before, _ = _resident()
     sensor = Sensor(cfg)
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    peak = _resident()[1] - before
     setup = math.inf
     for _ in range(repeats):  # the fastest of a few: a shared machine's slow spells only ever add
         del sensor
@@ -52,7 +58,7 @@ def measure(width: int, height: int, repeats: int) -> dict:
         frame = min(frame, time.perf_counter() - t0)
     return {"width": width, "height": height, "pixels": width * height, "setup_s": setup,
             "setup_ns_per_pixel": 1e9 * setup / (width * height), "frame_s": frame,
-            "frames_worth": setup / frame, "setup_peak_bytes": peak, "maps_bytes": kept}
+            "frames_worth": setup / frame, "setup_rise_bytes": peak, "maps_bytes": kept}
 
 
 def main() -> None:
@@ -75,8 +81,8 @@ def main() -> None:
         r = json.loads(out.strip().splitlines()[-1])
         rows.append(r)
         print(f"{mp:3d} MP ({w} x {h}): set-up {r['setup_s']:.2f} s = {r['setup_ns_per_pixel']:.1f} ns/pixel, "
-              f"{r['frames_worth']:.2f} frames' worth (a frame {r['frame_s']:.2f} s); set-up peak "
-              f"{r['setup_peak_bytes'] / 2**20:.0f} MiB for {r['maps_bytes'] / 2**20:.0f} MiB of maps kept")
+              f"{r['frames_worth']:.2f} frames' worth (a frame {r['frame_s']:.2f} s); resident memory rose by "
+              f"{r['setup_rise_bytes'] / 2**20:.0f} MiB for {r['maps_bytes'] / 2**20:.0f} MiB of maps kept")
     per = [r["setup_ns_per_pixel"] for r in rows]
     spread = max(per) / min(per) - 1
     print(f"time per pixel varies by {100 * spread:.0f} % over the sizes ({a.threads} threads)")

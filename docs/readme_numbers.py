@@ -482,13 +482,16 @@ def render_gpu_speed(d: dict) -> str:
 
 
 def render_setup_speed(d: dict) -> str:
-    lines = [f"Measured with `python benchmarks/bench_setup.py --sizes 1,12,50 --json docs/numbers/setup_speed.json` "
+    lines = [f"Measured with `python benchmarks/bench_setup.py --sizes 1,12,50 --repeats {d['repeats']} --json "
+             f"docs/numbers/setup_speed.json` "
              f"({d['threads']} threads; the fastest of {d.get('repeats', 3)}):", "",
-             "| sensor | pixels | set-up | per pixel | frames' worth | set-up peak / maps kept |", "|---|---|---|---|---|---|"]
+             "| sensor | pixels | set-up | per pixel | frames' worth | resident rise / maps kept |",
+             "|---|---|---|---|---|---|"]
     for r in d["rows"]:
-        lines.append(f"| {r['width']} x {r['height']} | {r['pixels'] / 1e6:.1f} MP | {r['setup_s']:.2f} s | "
+        lines.append(f"| {r['width']} x {r['height']} | {r['pixels'] / 1e6:.1f} MP | {r['setup_s']:.3f} s | "
                      f"{r['setup_ns_per_pixel']:.1f} ns | {r['frames_worth']:.2f} | "
-                     f"{r['setup_peak_bytes'] / 2**20:.0f} / {r['maps_bytes'] / 2**20:.0f} MiB |")
+                     f"{r['setup_rise_bytes'] / 2**20:.0f} / {r['maps_bytes'] / 2**20:.0f} MiB |")
+    lines += ["", f"The cost a pixel varies by {100 * d['per_pixel_spread']:.0f} % over these sizes."]
     return "\n".join(lines)
 
 
@@ -567,7 +570,7 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "dataset_speed": ["bench_dataset.py", "--memory", "10000", "--json", "dataset_speed.json"],
               # on a machine with an NVIDIA GPU and cmosnoise[cuda]
               "gpu_speed": ["bench_gpu.py", "--json", "gpu_speed.json"],
-              "setup_speed": ["bench_setup.py", "--sizes", "1,12,50", "--json", "setup_speed.json"],
+              "setup_speed": ["bench_setup.py", "--sizes", "1,12,50", "--repeats", "20", "--json", "setup_speed.json"],
               "tile_speed": ["bench_tiles.py", "--sizes", "50,400", "--json", "tile_speed.json"],
               "run_speed": ["bench_run.py", "--megapixels", "50", "--json", "run_speed.json"]}
 SLOW = {"sweep_fig9"}

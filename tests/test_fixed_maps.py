@@ -162,3 +162,39 @@ def test_the_tabulated_quantile_is_within_1e_6_of_scipys(family):
     law = HeavyTail(b, 0.0, 0.0)
     np.testing.assert_allclose(law.values(u, np.ones_like(u), np.zeros_like(u)), np.maximum(b.scipy.ppf(u), 0.0),
                                rtol=1e-6, atol=12e-6)
+
+
+@pytest.mark.parametrize("shape, dtype", [((3, 5), np.float32), ((1152, 864), np.float32), ((700, 1000), np.float64),
+                                          ((1024, 512), np.uint8)])
+def test_a_buffer_is_an_ordinary_writable_array_in_huge_pages_from_2_mib(shape, dtype):
+    """engine/buffers.empty: the shape and type asked for, C-contiguous and writable, holding what is written;
+    from 2 MiB (where the platform has madvise) the start of a mapping of its own on a 2 MiB boundary, below that
+    NumPy's own array; it pickles to the same values (as Dask sends a sensor's maps)."""
+    import mmap
+    import pickle
+
+    from cmosnoise.engine import buffers
+
+    a = buffers.empty(shape, dtype)
+    assert a.shape == shape and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable
+    a[...] = np.arange(a.size).reshape(shape) % 251
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(a)), a)
+    big = a.nbytes >= buffers.HUGE_FROM and buffers.AVAILABLE
+    base = a
+    while isinstance(base, np.ndarray) and base.base is not None:
+        base = base.base
+    owner = base.obj if isinstance(base, memoryview) else base
+    assert isinstance(owner, mmap.mmap) == big, type(owner)
+    if big:
+        assert a.ctypes.data % buffers.HUGE_PAGE == 0
+
+
+def test_a_map_in_huge_pages_is_the_map_numpy_makes():
+    """A 1 MP map (3.98 MB: its own 2 MiB pages) equals the NumPy specification's, and a rectangle of it."""
+    from cmosnoise.engine import buffers
+
+    key = fixed_key(5, "prnu")
+    whole = fixed_maps.normal_map((0, 864, 0, 1152), 1152, key, 1.0, 0.01)
+    assert whole.nbytes >= buffers.HUGE_FROM
+    part = fixed_maps.normal_map((200, 264, 300, 365), 1152, key, 1.0, 0.01, engine="numpy")
+    np.testing.assert_array_equal(_bits(whole[200:264, 300:365]), _bits(part))

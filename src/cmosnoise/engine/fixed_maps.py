@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import buffers
 from .fdmath import exp, floor, log, where
 from .jit import ONE_LAUNCH, numba
 from .philox import uniform_pair
@@ -159,7 +160,7 @@ def _made(kind: str, region, cols: int, key, params, spec, engine: str) -> np.nd
     compiled loop ``kind`` (:func:`_kernels`), both given the rectangle's corner, the sensor's width, the key and
     ``params()``; or the NumPy specification ``spec(index, k0, k1)`` band by band (a band's pixel addresses)."""
     region = _check(region, cols)
-    out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
+    out = buffers.empty((region[1] - region[0], region[3] - region[2]), np.float32)  # huge pages from 2 MiB
     k0, k1 = _key(key)
     if engine == "cuda" or _compiled(engine):
         args = (region[0], region[2], np.uint64(cols), k0, k1, *params())
