@@ -166,10 +166,11 @@ def test_the_tabulated_quantile_is_within_1e_6_of_scipys(family):
 
 @pytest.mark.parametrize("shape, dtype", [((3, 5), np.float32), ((1152, 864), np.float32), ((700, 1000), np.float64),
                                           ((1024, 512), np.uint8)])
-def test_a_buffer_is_an_ordinary_writable_array_in_huge_pages_from_2_mib(shape, dtype):
+def test_a_buffer_is_an_ordinary_writable_array_in_huge_pages_from_2_to_4_mib(shape, dtype):
     """engine/buffers.empty: the shape and type asked for, C-contiguous and writable, holding what is written;
-    from 2 MiB (where the platform has madvise) the start of a mapping of its own on a 2 MiB boundary, below that
-    NumPy's own array; it pickles to the same values (as Dask sends a sensor's maps)."""
+    from 2 MiB up to NumPy's own 4 MiB threshold (where the platform has madvise) the start of a mapping of its
+    own on a 2 MiB boundary, else NumPy's own array; it pickles to the same values (as Dask sends a sensor's
+    maps)."""
     import mmap
     import pickle
 
@@ -179,7 +180,7 @@ def test_a_buffer_is_an_ordinary_writable_array_in_huge_pages_from_2_mib(shape, 
     assert a.shape == shape and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable
     a[...] = np.arange(a.size).reshape(shape) % 251
     np.testing.assert_array_equal(pickle.loads(pickle.dumps(a)), a)
-    big = a.nbytes >= buffers.HUGE_FROM and buffers.AVAILABLE
+    big = buffers.AVAILABLE and buffers.HUGE_FROM <= a.nbytes < buffers.NUMPY_HUGE_FROM
     base = a
     while isinstance(base, np.ndarray) and base.base is not None:
         base = base.base
@@ -195,6 +196,6 @@ def test_a_map_in_huge_pages_is_the_map_numpy_makes():
 
     key = fixed_key(5, "prnu")
     whole = fixed_maps.normal_map((0, 864, 0, 1152), 1152, key, 1.0, 0.01)
-    assert whole.nbytes >= buffers.HUGE_FROM
+    assert buffers.HUGE_FROM <= whole.nbytes < buffers.NUMPY_HUGE_FROM
     part = fixed_maps.normal_map((200, 264, 300, 365), 1152, key, 1.0, 0.01, engine="numpy")
     np.testing.assert_array_equal(_bits(whole[200:264, 300:365]), _bits(part))
