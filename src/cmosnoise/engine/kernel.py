@@ -613,6 +613,14 @@ if numba is not None:
         for i in numba.prange(out.shape[0]):
             _normal_row(out[i], np.uint64(r0 + i) * cols + np.uint64(c0), k0, k1, mean, sigma, low)
 
+    @numba.njit(cache=True, nogil=True, **_JIT)
+    def _line_draws(out, start, k0, k1, normal):
+        """fixed_maps.lines, compiled, on one thread (a line map is a single row of draws: a parallel launch would
+        cost more than it): line ``start + j``'s standard normal, or its block's first open uniform."""
+        for j in range(out.size):
+            u1, u2 = _uniform_pair(np.uint64(start) + np.uint64(j), _Z64, _Z64, _Z64, k0, k1)
+            out[j] = _normal_from(u1, u2) if normal else u1
+
     @numba.njit(**_JIT)
     def _offset_row(out, base, k0, k1, sigma, fraction, tail_max):
         for j in range(out.size):
@@ -666,7 +674,7 @@ def fixed_map_kernels() -> dict:
     """The compiled loops of :mod:`.fixed_maps` (say so once when they are compiled rather than loaded)."""
     if not (_normal_map.signatures or _heavy_tail_map.signatures) and not jit.cached_for_this_machine(_heavy_tail_map):
         _logger.info("compiling the fixed-pattern loops for this machine (once; a few seconds) ...")
-    return {"normal": _normal_map, "heavy_tail": _heavy_tail_map, "offset": _offset_map}
+    return {"normal": _normal_map, "heavy_tail": _heavy_tail_map, "offset": _offset_map, "lines": _line_draws}
 
 
 def _version_of(package: str) -> str | None:
