@@ -2,10 +2,11 @@
 
 For each size, in a fresh process (so each peak is its own): ``Sensor()`` of the default configuration at that
 size, with how far its resident memory rose during it (the high-water mark of ``/proc/self/status``, reset
-before, less the resident size then: the maps live in pages of their own, ``engine/buffers.py``, which
-tracemalloc does not see) against the bytes of the maps it keeps; then timed, the fastest of ``--repeats`` (the compiled loops loaded first on a 64 x 48 sensor, so no
-compile is counted); then a frame of the default scene (the exposure made first), the fastest of as many. Set-up is linear in pixels when its time per pixel is
-the same at every size; "frames' worth" is set-up time over a frame's.
+before, less the resident size then: some maps live in pages of their own, ``engine/buffers.py``, which
+tracemalloc does not see) against the bytes of the maps it keeps; then timed, the fastest of ``--repeats``
+(the compiled loops loaded first on a 64 x 48 sensor, so no compile is counted); then a frame of the default
+scene (the exposure made first), the fastest of as many. Set-up is linear in pixels when its time per pixel
+is the same at every size; "frames' worth" is set-up time over a frame's.
 
     python benchmarks/bench_setup.py [--sizes 1,12,50] [--threads 2] [--json FILE]
 """
