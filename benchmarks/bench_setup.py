@@ -8,7 +8,7 @@ tracemalloc does not see) against the bytes of the maps it keeps; then timed, th
 scene (the exposure made first), the fastest of as many. Set-up is linear in pixels when its time per pixel
 is the same at every size; "frames' worth" is set-up time over a frame's.
 
-    python benchmarks/bench_setup.py [--sizes 1,12,50] [--threads 2] [--json FILE]
+    python benchmarks/bench_setup.py [--sizes 1,12,50] [--threads 2] [--repeats 10] [--json FILE]
 """
 
 from __future__ import annotations
