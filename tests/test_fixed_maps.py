@@ -213,3 +213,16 @@ def test_a_map_in_huge_pages_is_the_map_numpy_makes():
     assert buffers.HUGE_FROM <= whole.nbytes < buffers.NUMPY_HUGE_FROM
     part = fixed_maps.normal_map((200, 264, 300, 365), 1152, key, 1.0, 0.01, engine="numpy")
     np.testing.assert_array_equal(_bits(whole[200:264, 300:365]), _bits(part))
+
+
+def test_a_1_mp_sensors_maps_lie_in_huge_pages_of_their_own():
+    """The maps of 2 to 4 MiB (a 1 MP sensor's float32 maps, 3.98 MB) start on a 2 MiB boundary of a mapping of
+    their own, where NumPy would give them 4 KiB pages (docs/random-numbers.md: 2 900 page faults a sensor)."""
+    from cmosnoise import Sensor
+    from cmosnoise.engine import buffers
+
+    fp = Sensor({"sensor": {"width": 1152, "height": 864}}).fixed_pattern
+    maps = [getattr(fp, name) for name in ("prnu_gain", "dark_rate", "flicker_sigma")]
+    assert all(m is not None and m.nbytes == 1152 * 864 * 4 for m in maps)
+    if buffers.AVAILABLE:  # Linux (as CI); elsewhere NumPy's arrays, the same values
+        assert all(m.ctypes.data % buffers.HUGE_PAGE == 0 for m in maps)
