@@ -27,7 +27,8 @@ SIZES = {1: (1152, 864), 12: (4000, 3000), 50: (8192, 6144)}
 
 def _resident() -> tuple[int, int]:
     """This process's resident size and its high-water mark, bytes (Linux)."""
-    fields = dict(line.split(":", 1) for line in open("/proc/self/status"))
+    with open("/proc/self/status") as f:
+        fields = dict(line.split(":", 1) for line in f)
     return (int(fields["VmRSS"].split()[0]) * 1024, int(fields["VmHWM"].split()[0]) * 1024)
 
 

@@ -481,10 +481,16 @@ def render_gpu_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def benchmark_command(name: str) -> str:
+    """The command line that measures ``name`` (:data:`BENCHMARKS`), as a reader runs it from the project's root."""
+    script, *rest = BENCHMARKS[name]
+    return " ".join(["python", f"benchmarks/{script}",
+                     *(f"docs/numbers/{a}" if a.endswith(".json") else a for a in rest)])
+
+
 def render_setup_speed(d: dict) -> str:
-    lines = [f"Measured with `python benchmarks/bench_setup.py --sizes 1,12,50 --repeats {d['repeats']} --json "
-             f"docs/numbers/setup_speed.json` "
-             f"({d['threads']} threads; the fastest of {d.get('repeats', 3)}):", "",
+    lines = [f"Measured with `{benchmark_command('setup_speed')}` ({d['threads']} threads; the fastest of "
+             f"{d['repeats']}):", "",
              "| sensor | pixels | set-up | per pixel | frames' worth | resident rise / maps kept |",
              "|---|---|---|---|---|---|"]
     for r in d["rows"]:
@@ -497,8 +503,7 @@ def render_setup_speed(d: dict) -> str:
 
 def render_tile_speed(d: dict) -> str:
     k = d["kernel_1080p"]
-    lines = [f"Measured with `python benchmarks/bench_tiles.py --sizes 50,400 --json docs/numbers/tile_speed.json` "
-             f"({d['threads']} threads; one frame of a flat grey scene, tiles of {d['rows'][0]['tile']}, written to "
+    lines = [f"Measured with `{benchmark_command('tile_speed')}` ({d['threads']} threads; one frame of a flat grey scene, tiles of {d['rows'][0]['tile']}, written to "
              f"disk). The frame kernel takes {k['ns_per_pixel']:.1f} ns a pixel on a 1920 x 1080 frame and "
              f"{k['tile_ns_per_pixel']:.1f} ns ({k['tile_ratio']:.2f} times) on a tile of the 400 MP sensor, in the "
              "same run:", "",
@@ -513,8 +518,7 @@ def render_tile_speed(d: dict) -> str:
 
 def render_run_speed(d: dict) -> str:
     a = d["summary_alone"]
-    lines = [f"Measured with `python benchmarks/bench_run.py --megapixels 50 --json docs/numbers/run_speed.json` "
-             f"({d['threads']} threads; `cmosnoise simulate` of the default sensor at {d['width']} x {d['height']}, "
+    lines = [f"Measured with `{benchmark_command('run_speed')}` ({d['threads']} threads; `cmosnoise simulate` of the default sensor at {d['width']} x {d['height']}, "
              f"the bundled photo, one frame, every output, {len(d['runs'])} runs):", "",
              "| run | wall time | peak memory | set-up | frame | summary after the frames | beside them |",
              "|---|---|---|---|---|---|---|"]
