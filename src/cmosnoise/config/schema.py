@@ -27,9 +27,11 @@ class Section(BaseModel):
     @classmethod
     def _no_booleans_for_numbers(cls, value, info):
         """``seed: true`` is a mistake, not 1: a boolean is refused where a number is expected."""
+        if not isinstance(value, bool):  # first: every field of every section passes here (42 a Sensor)
+            return value
         field = cls.model_fields.get(info.field_name)
         numeric = (int, float, Optional[int], Optional[float])
-        if isinstance(value, bool) and field is not None and field.annotation in numeric:
+        if field is not None and field.annotation in numeric:
             raise ValueError(f"expected a number, got {str(value).lower()}")
         return value
 

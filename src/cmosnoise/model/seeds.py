@@ -16,6 +16,8 @@ Examples
 True
 """
 
+import functools
+
 import numpy as np
 
 from ..engine.fixed_maps import pixel_index  # noqa: F401 - the address of a pixel, where the stages look for it
@@ -54,6 +56,7 @@ STAGE_IDS = {
 TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level")
 
 
+@functools.lru_cache(maxsize=1024)  # a pure function; a SeedSequence costs some 9 us, five of them a sensor
 def fixed_key(seed: int, stage: str, part: int = 0) -> tuple[int, int]:
     """The two 32-bit key words of a stage's fixed map ``part``, from ``(seed, FIXED, stage, 2**31 + part)``.
 
