@@ -91,6 +91,18 @@ def test_the_readme_commands_are_what_ci_runs():
     assert re.search(r"about \d+ minutes", before), before
 
 
+def test_the_readme_training_data_commands_are_the_data_set_page_s():
+    """The README's block for the image-processing engineer is the data-set page's, word for word (one text,
+    shown in both places: each is where one reader looks first), and its picture is the page's."""
+    def training(page):
+        return [t for p, t in blocks() if p == page and "cmosnoise dataset" in t][0]
+
+    page = ROOT / "docs" / "imaging" / "datasets.md"
+    assert training(ROOT / "README.md") == training(page)
+    assert "](docs/img/dataset_sample.png)" in (ROOT / "README.md").read_text()
+    assert "](../img/dataset_sample.png)" in page.read_text()
+
+
 PYTHON = [(page.relative_to(ROOT).as_posix(), text) for page, text in blocks("python")]
 
 
