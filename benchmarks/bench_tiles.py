@@ -6,9 +6,11 @@ to a tiled raw.tiff in a temporary folder) runs in a child process: its wall tim
 1920 x 1080 frame of the default sensor on the same threads (the fastest of ``--repeats``, the kernel loaded
 first) gives the kernel's own time per pixel, and a frame of one tile of the 400 MP sensor (its window's arrays)
 the kernel's in a tile. "run ratio": the tiled run's wall time (set-up, frames, writing) per pixel over the 1080p
-kernel's. The run's set-up and frame times are thread time summed over its tiles: two tiles are made at once.
+kernel's (a frame's, with ``--many N``: the largest size again with N frames, each tile's set-up made once for
+all of them and its frames spooled to disk until the TIFF is written page by page). The run's set-up and frame
+times are thread time summed over its tiles: two tiles are made at once.
 
-    python benchmarks/bench_tiles.py [--sizes 50,400] [--tile 2048] [--threads 2] [--json FILE]
+    python benchmarks/bench_tiles.py [--sizes 50,400] [--many 4] [--tile 2048] [--threads 2] [--json FILE]
 """
 
 from __future__ import annotations
@@ -55,11 +57,12 @@ def kernel_1080p(repeats: int, tile: int) -> dict:
             "tile_ns_per_pixel": 1e9 * in_tile / pixels}
 
 
-def tiled_run(width: int, height: int, tile: int, env: dict) -> dict:
+def tiled_run(width: int, height: int, tile: int, env: dict, frames: int = 1) -> dict:
     with tempfile.TemporaryDirectory(prefix="cmosnoise-tiles-") as tmp:
         out = Path(tmp) / "run"
         cmd = [sys.executable, "-m", "cmosnoise", "-q", "simulate", "--tile", str(tile), "--scene", "flat:0.5",
-               "--set", f"sensor.width={width}", "--set", f"sensor.height={height}", "-o", str(out)]
+               "--frames", str(frames), "--set", f"sensor.width={width}", "--set", f"sensor.height={height}",
+               "-o", str(out)]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, env=env)
         _, status, usage = os.wait4(proc.pid, 0)
@@ -71,10 +74,11 @@ def tiled_run(width: int, height: int, tile: int, env: dict) -> dict:
         raw_bytes = (out / "raw.tiff").stat().st_size
     pixels = width * height
     t = summary["timings_s"]
-    return {"width": width, "height": height, "pixels": pixels, "tile": tile, "tiles": summary["tiles"]["count"],
-            "wall_s": wall, "peak_bytes": usage.ru_maxrss * 1024, "raw_bytes": raw_bytes,
+    return {"width": width, "height": height, "pixels": pixels, "frames": frames, "tile": tile,
+            "tiles": summary["tiles"]["count"], "wall_s": wall, "sys_s": usage.ru_stime,
+            "peak_bytes": usage.ru_maxrss * 1024, "raw_bytes": raw_bytes,
             "set_up_s": t["set_up"], "frame_s": t["frame_s"], "total_s": t["total"],
-            "ns_per_pixel": 1e9 * wall / pixels, "frame_ns_per_pixel": 1e9 * t["frame_s"] / pixels,
+            "ns_per_pixel": 1e9 * wall / (pixels * frames), "frame_ns_per_pixel": 1e9 * t["frame_s"] / pixels,
             "set_up_ns_per_pixel": 1e9 * t["set_up"] / pixels}
 
 
@@ -85,6 +89,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=5, help="1080p frames timed, the fastest kept")
     ap.add_argument("--json", help="also write the results here")
+    ap.add_argument("--many", type=int, default=0, help="also run the largest size with this many frames")
     ap.add_argument("--kernel", action="store_true", help=argparse.SUPPRESS)  # a child: the 1080p kernel
     a = ap.parse_args()
     if a.kernel:
@@ -99,14 +104,16 @@ def main() -> None:
           f"of the 400 MP sensor {ref['tile_ns_per_pixel']:.1f} ns/pixel ({ref['tile_ratio']:.2f} x; {a.threads} "
           "threads)")
     rows = []
-    for mp in (int(s) for s in a.sizes.split(",")):
+    sizes = [(int(s), 1) for s in a.sizes.split(",")]
+    for mp, frames in sizes + ([(sizes[-1][0], a.many)] if a.many > 1 else []):
         w, h = SIZES[mp]
-        r = tiled_run(w, h, a.tile, env)
+        r = tiled_run(w, h, a.tile, env, frames)
         r["kernel_ratio"] = r["frame_ns_per_pixel"] / ref["ns_per_pixel"]
         r["run_ratio"] = r["ns_per_pixel"] / ref["ns_per_pixel"]
         rows.append(r)
-        print(f"{mp:4d} MP ({w} x {h}) in {r['tiles']} tiles of {a.tile}: {r['wall_s']:.1f} s "
-              f"({r['ns_per_pixel']:.1f} ns/pixel, {r['run_ratio']:.1f} x the 1080p kernel's; the tiles' set-up "
+        print(f"{mp:4d} MP ({w} x {h}), {frames} frame(s), in {r['tiles']} tiles of {a.tile}: {r['wall_s']:.1f} s "
+              f"({r['ns_per_pixel']:.1f} ns a pixel a frame, {r['run_ratio']:.1f} x the 1080p kernel's; system time "
+              f"{r['sys_s']:.1f} s; the tiles' set-up "
               f"{r['set_up_s']:.1f} s and frames {r['frame_s']:.1f} s of thread time, overlapping), "
               f"peak {r['peak_bytes'] / 2**30:.2f} GiB, raw.tiff {r['raw_bytes'] / 2**30:.2f} GiB")
     if a.json:
