@@ -220,7 +220,7 @@ def test_bad_windows_are_one_line_errors():
 
 @pytest.mark.parametrize("name, extra", [
     ("monochrome", {"sensor": {"cfa": "none"}}),
-    ("ADC off: float32 e-", {"adc": {"enabled": False}}),
+    ("ADC off: float32 e-, two frames", {"adc": {"enabled": False}, "run": {"frames": 2}}),
     ("later frames", {"run": {"first_frame": 7, "frames": 2}}),
     ("smaller than a tile", {"sensor": {"width": 40, "height": 30}}),
     ("a window of a picture", {"scene": {"source": "photo", "window": [100, 50], "source_size": [600, 800]}}),

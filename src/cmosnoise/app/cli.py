@@ -247,7 +247,7 @@ def simulate(
     if (scheduler or workers) and tile is None:
         raise CmosnoiseError("--scheduler and --workers make a run's tiles on Dask: give --tile SIZE too")
     texts = {"set-up": "drawing the fixed pattern" + (" (the sparse populations, for every tile)" if tile else ""),
-             "scene": "rendering the scene and its mean charge", "writing": "writing raw.tiff from the spool",
+             "scene": "rendering the scene and its mean charge",
              "dark": f"averaging {cfg.processing.dark_frames} dark frames into a master dark",
              "summary": "writing preview.png and measuring the summary (noise budget, white pixels)",
              "report": "writing report.html"}

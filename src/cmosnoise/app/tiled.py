@@ -3,8 +3,9 @@
 Each tile is made alone (:class:`cmosnoise.model.tiles.Tiling`: its window's fixed maps, scene and mean
 charge), its frames are rendered, measured and written, and it is dropped. ``raw.tiff`` is a tiled TIFF whose
 tiles are the run's: one frame's tiles go straight into it in their order; with several frames each tile's frames
-are made together (its set-up once) and kept in a spool file beside the output until the TIFF is written page by
-page. With Dask (``--workers`` or ``--scheduler``) the tiles go to the workers, a few at a time, and come back in
+are made together (its set-up once), the TIFF is laid out first with every page's tiles in place (a sparse file
+where the file system has them, :func:`~cmosnoise.io.raw_tiff.create_tiled_raw_tiff`), and each tile's frames are
+written into their pages as the tile comes. With Dask (``--workers`` or ``--scheduler``) the tiles go to the workers, a few at a time, and come back in
 order.
 
 The summary is gathered from the tiles as they pass: the measured signal and temporal noise (the sums of every
@@ -30,7 +31,7 @@ from ..analysis import figures_of_merit as fom
 from ..analysis import white_pixels
 from ..analysis.run_stats import RunStats
 from ..errors import CmosnoiseError
-from ..io.raw_tiff import write_raw_tiff
+from ..io.raw_tiff import create_tiled_raw_tiff, write_raw_tiff, write_tile
 from ..model import footprint, tiles
 from ..model.sensor import Sensor
 from ..model.spec import SensorSpec, resolve
@@ -164,7 +165,7 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
     progress : callable, optional
         As :func:`~cmosnoise.app.run.simulate`'s: called with the number of tiles times frames.
     phase : callable, optional
-        Told ``"set-up"`` (the sparse populations), then ``"frames"``, ``"writing"``.
+        Told ``"set-up"`` (the sparse populations), then ``"frames"``.
     client : distributed.Client, optional
         Make the tiles on its workers.
 
@@ -189,9 +190,6 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
     stats = RunStats(spec.transfer.max_code)
     sums = {"perfect_e": 0.0, "expected_e": 0.0, "dark_sum": 0.0, "set_up_s": 0.0, "frames_s": 0.0}
     white_r, white_c = [], []
-    spool_path = tmp / "raw.spool"
-    spool = open(spool_path, "w+b") if n > 1 else None
-    places: dict[tuple[int, int], int] = {}  # (frame, tile) -> its offset in the spool
 
     def results():
         """Each tile's :func:`tile_task` result, in the tiles' order."""
@@ -220,8 +218,9 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
         for done, future in pending:
             yield task_result(future, f"tile {done}")
 
-    def tile_stream(advance):
-        """The tiles of frame 0 (one frame: straight to the TIFF), or nothing (several: into the spool)."""
+    def tile_stream(advance, places=None):
+        """The tiles of frame 0, in order (one frame: straight into the TIFF's stream); or, with ``places`` (an open
+        file made by create_tiled_raw_tiff, and its tiles' offsets), nothing: each tile's frames written there."""
         for t, part in enumerate(results()):
             stats.absorb(part["stats"])
             for key in sums:
@@ -230,39 +229,26 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
                 white_r.append(part["white"][0])
                 white_c.append(part["white"][1])
             for k in range(n):
-                if spool is None:
+                if places is None:
                     yield part["raw"][0]
                 else:
-                    places[(k, t)] = spool.tell()
-                    spool.write(np.ascontiguousarray(part["raw"][k]).tobytes())
+                    write_tile(places[0], int(places[1][k, t]), part["raw"][k], size)
                 advance()
-
-    def spooled():
-        """Every frame's tiles from the spool, page by page."""
-        for k in range(n):
-            for t, (r0, r1, c0, c1) in enumerate(regions):
-                count = (r1 - r0) * (c1 - c0)
-                buf = os.pread(spool.fileno(), count * dtype.itemsize, places[(k, t)])
-                yield np.frombuffer(buf, dtype).reshape(r1 - r0, c1 - c0)
 
     meta = run_metadata(corner, tile=size)
     phase("frames")
     cm = progress(len(regions) * n) if progress else contextlib.nullcontext(lambda: None)
-    try:
-        with cm as advance:
-            if spool is None:
-                write_raw_tiff(tmp / "raw.tiff", tile_stream(advance), n, spec.shape, meta, dtype.name, tile=size)
-            else:
-                for _ in tile_stream(advance):
+    with cm as advance:
+        if n == 1:
+            write_raw_tiff(tmp / "raw.tiff", tile_stream(advance), n, spec.shape, meta, dtype.name, tile=size)
+        else:  # every page's tiles in place first; each tile's frames then go to their pages as they come
+            offsets = create_tiled_raw_tiff(tmp / "raw.tiff", n, spec.shape, meta, dtype.name, size)
+            fd = os.open(tmp / "raw.tiff", os.O_WRONLY)
+            try:
+                for _ in tile_stream(advance, (fd, offsets)):
                     pass
-        if spool is not None:
-            phase("writing")
-            spool.flush()
-            write_raw_tiff(tmp / "raw.tiff", spooled(), n, spec.shape, meta, dtype.name, tile=size)
-    finally:
-        if spool is not None:
-            spool.close()
-            spool_path.unlink(missing_ok=True)
+            finally:
+                os.close(fd)
     total = time.perf_counter() - t_start
     (tmp / "config.yaml").write_text(config.to_yaml())
     return _summary(corner, stats, sums, (white_r, white_c), size, len(regions), total)

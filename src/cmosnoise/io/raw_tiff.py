@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Iterable
 
@@ -39,13 +40,14 @@ def raw_metadata(cfa: str, black_level_dn: float, bits: int, gain_dn_per_e: floa
     }
 
 
-def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape: tuple[int, int], metadata: dict,
-                   dtype: str = "uint16", tile: int | None = None) -> None:
+def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray] | None, n: int, shape: tuple[int, int],
+                   metadata: dict, dtype: str = "uint16", tile: int | None = None) -> None:
     """Write ``n`` frames of ``shape`` as one (n, rows, cols) TIFF series, frame by frame.
 
     ``dtype`` is uint16 for raw codes, float32 for the ideal readout (e-, ADC off). With ``tile`` (a multiple of
     16), the TIFF is tiled and ``frames`` yields its tiles instead, each frame's row by row (those at the right
-    and bottom edges cut; the TIFF pads them).
+    and bottom edges cut; the TIFF pads them). ``frames`` None: every page's place is kept and nothing written
+    in it (:func:`create_tiled_raw_tiff`).
 
     The CFA pattern also goes into the TIFF/EP ``CFARepeatPatternDim`` and
     ``CFAPattern`` tags so that raw tools can read it.
@@ -59,6 +61,53 @@ def write_raw_tiff(path: str | Path, frames: Iterable[np.ndarray], n: int, shape
             frames, shape=(n, *shape), dtype=dtype, photometric="minisblack",
             metadata=metadata, extratags=extratags, tile=None if tile is None else (tile, tile),
         )
+
+
+def create_tiled_raw_tiff(path: str | Path, n: int, shape: tuple[int, int], metadata: dict, dtype: str,
+                          tile: int) -> np.ndarray:
+    """A tiled raw TIFF of ``n`` frames whose tiles are all in place but not yet written: the file
+    :func:`write_raw_tiff` makes (the same tags and layout), its tiles' bytes left as zeros (a sparse file where the
+    file system has them), for :func:`write_tile` to fill in any order.
+
+    How a tiled run of several frames writes each tile's frames as they are made, where frame-major writing would
+    hold or spool every tile's frames until the last tile of the first frame is made.
+
+    Parameters
+    ----------
+    path : str or Path
+    n : int
+        Frames (pages).
+    shape : (rows, cols)
+    metadata : dict
+        As :func:`write_raw_tiff`'s.
+    dtype : str
+        "uint16" or "float32".
+    tile : int
+        The tile side, a multiple of 16.
+
+    Returns
+    -------
+    (n, tiles) int64 array
+        Byte offset of each frame's tiles in the file, the tiles row by row.
+    """
+    import tifffile
+
+    write_raw_tiff(path, None, n, shape, metadata, dtype, tile=tile)
+    with tifffile.TiffFile(path) as tf:
+        return np.array([page.dataoffsets for page in tf.pages], np.int64)
+
+
+def write_tile(fd: int, offset: int, data: np.ndarray, tile: int) -> None:
+    """Write one tile's pixels, (rows, cols) with rows, cols <= ``tile``, at ``offset`` of an open file made by
+    :func:`create_tiled_raw_tiff` (an edge tile padded with zeros to the full tile, as TIFF stores it)."""
+    if data.shape != (tile, tile):
+        padded = np.zeros((tile, tile), data.dtype)
+        padded[:data.shape[0], :data.shape[1]] = data
+        data = padded
+    view = memoryview(np.ascontiguousarray(data)).cast("B")
+    done = 0
+    while done < len(view):  # pwrite may write less than asked
+        done += os.pwrite(fd, view[done:], offset + done)
 
 
 def write_float_tiff(path: str | Path, image: np.ndarray, metadata: dict) -> None:
