@@ -101,8 +101,8 @@ def main() -> None:
     print(f"time per pixel varies by {100 * spread:.0f} % over the sizes ({a.threads} threads)")
     if a.json:
         with open(a.json, "w") as f:
-            json.dump({"threads": a.threads, "repeats": a.repeats, "min_time_s": MIN_TIME_S, "rows": rows, "per_pixel_spread": spread,
-                       "cpu_count": os.cpu_count(), "finite": all(math.isfinite(p) for p in per)}, f, indent=1)
+            json.dump({"threads": a.threads, "repeats": a.repeats, "min_time_s": MIN_TIME_S, "rows": rows,
+                       "per_pixel_spread": spread, "cpu_count": os.cpu_count(), "finite": all(math.isfinite(p) for p in per)}, f, indent=1)
 
 
 if __name__ == "__main__":

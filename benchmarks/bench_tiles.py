@@ -7,8 +7,8 @@ to a tiled raw.tiff in a temporary folder) runs in a child process: its wall tim
 first) gives the kernel's own time per pixel, and a frame of one tile of the 400 MP sensor (its window's arrays)
 the kernel's in a tile. "run ratio": the tiled run's wall time (set-up, frames, writing) per pixel over the 1080p
 kernel's (a frame's, with ``--many N``: the largest size again with N frames, each tile's set-up made once for
-all of them and its frames spooled to disk until the TIFF is written page by page). The run's set-up and frame
-times are thread time summed over its tiles: two tiles are made at once.
+all of them and its frames written into their pages as the tile comes). The run's set-up and frame times are
+thread time summed over its tiles: two tiles are made at once.
 
     python benchmarks/bench_tiles.py [--sizes 50,400] [--many 4] [--tile 2048] [--threads 2] [--json FILE]
 """

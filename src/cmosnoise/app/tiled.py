@@ -5,8 +5,8 @@ charge), its frames are rendered, measured and written, and it is dropped. ``raw
 tiles are the run's: one frame's tiles go straight into it in their order; with several frames each tile's frames
 are made together (its set-up once), the TIFF is laid out first with every page's tiles in place (a sparse file
 where the file system has them, :func:`~cmosnoise.io.raw_tiff.create_tiled_raw_tiff`), and each tile's frames are
-written into their pages as the tile comes. With Dask (``--workers`` or ``--scheduler``) the tiles go to the workers, a few at a time, and come back in
-order.
+written into their pages as the tile comes. With Dask (``--workers`` or ``--scheduler``) the tiles go to the
+workers, a few at a time, and come back in order.
 
 The summary is gathered from the tiles as they pass: the measured signal and temporal noise (the sums of every
 tile's pixels, :class:`~cmosnoise.analysis.run_stats.RunStats`), and the dark-current map's mean and white pixels
