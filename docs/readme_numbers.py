@@ -504,15 +504,16 @@ def render_setup_speed(d: dict) -> str:
 
 def render_tile_speed(d: dict) -> str:
     k = d["kernel_1080p"]
-    lines = [f"Measured with `{benchmark_command('tile_speed')}` ({d['threads']} threads; a flat grey scene, tiles of {d['rows'][0]['tile']}, written to "
-             f"disk). The frame kernel takes {k['ns_per_pixel']:.1f} ns a pixel on a 1920 x 1080 frame and "
+    lines = [f"Measured with `{benchmark_command('tile_speed')}` ({d['threads']} threads; a flat grey scene, "
+             f"tiles of {d['rows'][0]['tile']}, written to disk). The frame kernel takes {k['ns_per_pixel']:.1f} ns a pixel on a 1920 x 1080 frame and "
              f"{k['tile_ns_per_pixel']:.1f} ns ({k['tile_ratio']:.2f} times) on a tile of the 400 MP sensor, in the "
              "same run:", "",
-             "| sensor | frames | tiles | wall time | a pixel a frame (x the 1080p kernel's) | system time | peak memory | raw.tiff |",
+             "| sensor | frames | tiles | wall time | a pixel a frame (x the 1080p kernel's) | system time | "
+             "peak memory | raw.tiff |",
              "|---|---|---|---|---|---|---|---|"]
     for r in d["rows"]:
-        lines.append(f"| {r['width']} x {r['height']} ({r['pixels'] / 1e6:.0f} MP) | {r['frames']} | {r['tiles']} | "
-                     f"{r['wall_s']:.1f} s | {r['ns_per_pixel']:.1f} ns ({r['run_ratio']:.1f}) | "
+        lines.append(f"| {r['width']} x {r['height']} ({r['pixels'] / 1e6:.0f} MP) | {r['frames']} | "
+                     f"{r['tiles']} | {r['wall_s']:.1f} s | {r['ns_per_pixel']:.1f} ns ({r['run_ratio']:.1f}) | "
                      f"{r['sys_s']:.1f} s | {r['peak_bytes'] / 2**30:.2f} GiB | {r['raw_bytes'] / 2**30:.2f} GiB |")
     return "\n".join(lines)
 

@@ -218,9 +218,9 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
         for done, future in pending:
             yield task_result(future, f"tile {done}")
 
-    def tile_stream(advance, places=None):
-        """The tiles of frame 0, in order (one frame: straight into the TIFF's stream); or, with ``places`` (an open
-        file made by create_tiled_raw_tiff, and its tiles' offsets), nothing: each tile's frames written there."""
+    def tile_stream(advance, put=None):
+        """The tiles of frame 0, in order (one frame: straight into the TIFF's stream); or, with ``put(frame, tile,
+        pixels)``, nothing: each tile's frames handed to it."""
         for t, part in enumerate(results()):
             stats.absorb(part["stats"])
             for key in sums:
@@ -229,10 +229,10 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
                 white_r.append(part["white"][0])
                 white_c.append(part["white"][1])
             for k in range(n):
-                if places is None:
+                if put is None:
                     yield part["raw"][0]
                 else:
-                    write_tile(places[0], int(places[1][k, t]), part["raw"][k], size)
+                    put(k, t, part["raw"][k])
                 advance()
 
     meta = run_metadata(corner, tile=size)
@@ -245,7 +245,7 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
             offsets = create_tiled_raw_tiff(tmp / "raw.tiff", n, spec.shape, meta, dtype.name, size)
             fd = os.open(tmp / "raw.tiff", os.O_WRONLY)
             try:
-                for _ in tile_stream(advance, (fd, offsets)):
+                for _ in tile_stream(advance, lambda k, t, pixels: write_tile(fd, int(offsets[k, t]), pixels, size)):
                     pass
             finally:
                 os.close(fd)
