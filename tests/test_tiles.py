@@ -3,6 +3,7 @@
 Every check here is bit-identity against the whole sensor, or a count that must be the same exact number."""
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -125,6 +126,30 @@ def test_simulate_in_tiles_writes_the_whole_runs_frames_tiled(tmp_path, frames):
     assert tiled["dark_current"]["map_mean_e_per_s"] == pytest.approx(whole["dark_current"]["map_mean_e_per_s"],
                                                                        rel=1e-11)  # float64 sums, as above
     assert json.loads((tmp_path / "tiled" / "summary.json").read_text())["tiles"]["count"] == 12
+
+
+def test_a_tiled_raw_is_laid_out_with_holes_and_filled_tile_by_tile(tmp_path):
+    from cmosnoise.io.raw_tiff import create_tiled_raw_tiff, write_raw_tiff, write_tile
+
+    # tiles of 256 x 256 uint16 (128 KiB: long enough to be holes), 3 x 3 of them a page, the last ones cut
+    shape, tile, meta = (600, 520), 256, {"cfa": "RGGB", "bits": 12}
+    laid = tmp_path / "laid.tiff"
+    offsets = create_tiled_raw_tiff(laid, 2, shape, meta, "uint16", tile)
+    zeros = tmp_path / "zeros.tiff"
+    write_raw_tiff(zeros, None, 2, shape, meta, "uint16", tile=tile)  # tifffile writing every tile's zeros
+    assert laid.read_bytes() == zeros.read_bytes()  # the same file, its last tile's hole included
+    # holes: 18 tiles of 128 KiB (2.3 MB) take no blocks; the header and tags take a few (Linux file systems
+    # for /tmp: ext4, xfs, btrfs, tmpfs, overlayfs all keep holes)
+    assert laid.stat().st_blocks * 512 < 18 * tile * tile * 2 / 4
+    frames = np.random.default_rng(0).integers(0, 4096, (2, *shape), dtype=np.uint16)
+    fd = os.open(laid, os.O_WRONLY)
+    try:
+        for t, (r0, r1, c0, c1) in reversed(list(enumerate(tiles.grid(shape, tile)))):  # any order
+            for k in range(2):
+                write_tile(fd, int(offsets[k, t]), frames[k, r0:r1, c0:c1], tile)
+    finally:
+        os.close(fd)
+    assert np.array_equal(tifffile.imread(laid), frames)
 
 
 def test_couplets_across_tile_edges_are_counted():
