@@ -87,7 +87,7 @@ def tile_task(config_data: dict, size: int, region: tuple[int, int, int, int], f
     Returns
     -------
     dict
-        ``raw``: the frames (frames, h, w); ``stats``: their :class:`RunStats`; ``perfect_e``, ``expected_e``:
+        ``raw``: the frames, a list of (h, w) arrays (not stacked: a copy of them all, in fresh memory); ``stats``: their :class:`RunStats`; ``perfect_e``, ``expected_e``:
         the sums of the perfect image and of the mean charge (e-); ``dark_sum``: of the dark map (e-/s);
         ``white``: the dark map's white pixels (rows, cols) above the threshold; ``set_up_s``,
         ``frames_s``: where its time went (two tiles are made at once: the run's sums of them overlap).
@@ -136,7 +136,7 @@ def tile_result(tiling: tiles.Tiling, region: tuple[int, int, int, int], frames:
     w0, _, v0, _ = sensor.region
     r0, r1, c0, c1 = region
     inner = (slice(r0 - w0, r1 - w0), slice(c0 - v0, c1 - v0))
-    out = {"raw": np.stack(raws), "stats": stats,
+    out = {"raw": raws, "stats": stats,
            "perfect_e": float(shot.perfect_e[inner].sum(dtype=np.float64)),
            "expected_e": shot.expected_sum(inner),
            "set_up_s": t1 - t0, "frames_s": t2 - t1, "dark_sum": None, "white": None}
