@@ -1,5 +1,5 @@
 """The compiled reductions a run's summary takes from its maps (engine/reduce.py): statistics in one pass, the
-median by radix selection, the positions above a threshold; and the flat response's statistics made in bands."""
+median by radix selection, sums, the positions above a threshold; and the flat response's statistics made in bands."""
 
 import numpy as np
 import pytest
@@ -40,6 +40,26 @@ def test_statistics_joined_from_parts_equal_those_of_the_whole():
     tol = 2 * a.size * np.finfo(np.float64).eps * want["mean_square"]
     for k in reduce.STATISTICS:
         assert abs(got[k] - want[k]) <= tol, k
+
+
+def test_total_agrees_with_numpys_sum_on_views_and_threads():
+    """The sum of a map or a strided view of it (a tile's part of its window), within 2 n eps of the absolute sum
+    of NumPy's (two summation orders, as above); the same bits on 1 and 2 threads (each row summed by one thread,
+    the rows' sums added after)."""
+    import numba
+
+    for a in _maps():
+        for view in (a, a[3:-2, 5:-1]):
+            x = view.astype(np.float64)
+            got = reduce.total(view)
+            assert abs(got - x.sum()) <= 2 * x.size * np.finfo(np.float64).eps * np.abs(x).sum()
+            before = numba.get_num_threads()
+            try:
+                numba.set_num_threads(1)
+                assert reduce.total(view) == got
+            finally:
+                numba.set_num_threads(before)
+    assert reduce.total(np.arange(6.0).reshape(2, 3)) == 15.0  # small: NumPy's own
 
 
 def test_median_is_numpys_value_exactly():

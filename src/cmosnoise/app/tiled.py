@@ -30,6 +30,7 @@ import numpy as np
 from ..analysis import figures_of_merit as fom
 from ..analysis import white_pixels
 from ..analysis.run_stats import RunStats
+from ..engine import reduce
 from ..errors import CmosnoiseError
 from ..io.raw_tiff import create_tiled_raw_tiff, write_raw_tiff, write_tile
 from ..model import footprint, tiles
@@ -137,16 +138,16 @@ def tile_result(tiling: tiles.Tiling, region: tuple[int, int, int, int], frames:
     r0, r1, c0, c1 = region
     inner = (slice(r0 - w0, r1 - w0), slice(c0 - v0, c1 - v0))
     out = {"raw": raws, "stats": stats,
-           "perfect_e": float(shot.perfect_e[inner].sum(dtype=np.float64)),
+           "perfect_e": reduce.total(shot.perfect_e[inner]),
            "expected_e": shot.expected_sum(inner),
            "set_up_s": t1 - t0, "frames_s": t2 - t1, "dark_sum": None, "white": None}
     state = sensor.dark_state
     if state is not None:
-        rate = sensor.dark_rate[inner]
-        out["dark_sum"] = float(rate.sum(dtype=np.float64))
-        if state.threshold is not None:
-            r, c = np.nonzero(rate > state.threshold)
-            out["white"] = (r + r0, c + c0)
+        out["dark_sum"] = reduce.total(sensor.dark_rate[inner])
+        if state.threshold is not None:  # found in the whole window (no copy of the tile's part), kept in the tile
+            r, c = reduce.positions_above(sensor.dark_rate, state.threshold)
+            keep = (r >= r0 - w0) & (r < r1 - w0) & (c >= c0 - v0) & (c < c1 - v0)
+            out["white"] = (r[keep] + w0, c[keep] + v0)
     return out
 
 

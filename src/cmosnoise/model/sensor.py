@@ -536,12 +536,13 @@ class Exposure:
         -------
         float
             Within float32 rounding of ``mean_charge_e[part].sum(dtype=np.float64)`` (each pixel's two charges
-            are added in float64 here, in float32 there).
+            are added in float64 here, in float32 there; :func:`~cmosnoise.engine.reduce.total`'s sums, in
+            parallel).
         """
         part = part or (slice(None), slice(None))
-        total = float(self.collected_photo_e[part].sum(dtype=np.float64))
+        total = reduce.total(self.collected_photo_e[part])
         if self.collected_dark_e is not None:
-            total += float(self.collected_dark_e[part].sum(dtype=np.float64))
+            total += reduce.total(self.collected_dark_e[part])
         return total
 
     @property
