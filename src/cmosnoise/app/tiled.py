@@ -88,8 +88,9 @@ def tile_task(config_data: dict, size: int, region: tuple[int, int, int, int], f
     Returns
     -------
     dict
-        ``raw``: the frames, a list of (h, w) arrays (not stacked: a copy of them all, in fresh memory); ``stats``: their :class:`RunStats`; ``perfect_e``, ``expected_e``:
-        the sums of the perfect image and of the mean charge (e-); ``dark_sum``: of the dark map (e-/s);
+        ``raw``: the frames, a list of (h, w) arrays (not stacked: that copies them all, into fresh memory);
+        ``stats``: their :class:`RunStats`; ``perfect_e``, ``expected_e``: the sums of the perfect image and of
+        the mean charge (e-); ``dark_sum``: of the dark map (e-/s);
         ``white``: the dark map's white pixels (rows, cols) above the threshold; ``set_up_s``,
         ``frames_s``: where its time went (two tiles are made at once: the run's sums of them overlap).
     """
