@@ -102,7 +102,8 @@ def main() -> None:
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"threads": a.threads, "repeats": a.repeats, "min_time_s": MIN_TIME_S, "rows": rows,
-                       "per_pixel_spread": spread, "cpu_count": os.cpu_count(), "finite": all(math.isfinite(p) for p in per)}, f, indent=1)
+                       "per_pixel_spread": spread, "cpu_count": os.cpu_count(),
+                       "finite": all(math.isfinite(p) for p in per)}, f, indent=1)
 
 
 if __name__ == "__main__":

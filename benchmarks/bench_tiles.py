@@ -3,9 +3,9 @@
 For each size, ``cmosnoise simulate --tile SIZE`` of the default sensor (one frame of a flat grey scene, written
 to a tiled raw.tiff in a temporary folder) runs in a child process: its wall time, its peak resident memory
 (``wait4``'s ``ru_maxrss``) and its summary's split (the tiles' set-up, the frame kernel). In another child, a
-1920 x 1080 frame of the default sensor on the same threads (the fastest of ``--repeats``, the kernel loaded
-first) gives the kernel's own time per pixel, and a frame of one tile of the 400 MP sensor (its window's arrays)
-the kernel's in a tile. "run ratio": the tiled run's wall time (set-up, frames, writing) per pixel over the 1080p
+1920 x 1080 frame of the default sensor on the same threads (the fastest of at least ``--repeats`` frames and two
+seconds of them, bench_setup's ``fastest``, the kernel loaded first) gives the kernel's own time per pixel, and a
+frame of one tile of the 400 MP sensor (its window's arrays) the kernel's in a tile. "run ratio": the tiled run's wall time (set-up, frames, writing) per pixel over the 1080p
 kernel's (a frame's, with ``--many N``: the largest size again with N frames, each tile's set-up made once for
 all of them and its frames written into their pages as the tile comes); with ``--runs N``, the fastest of N runs
 (this machine is shared: one run's time moves by some 10 %). The run's set-up and frame times are thread time
@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -26,23 +25,22 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_setup import fastest  # this folder's: a script's own folder is on its path
+
 #: (width, height) of each size in megapixels
 SIZES = {50: (8192, 6144), 100: (11552, 8672), 400: (20000, 20000)}
 
 
 def _fastest(render, repeats: int) -> float:
+    """The fastest frame after a first one (the kernel loaded): bench_setup's timing, for at least ``repeats``
+    frames and two seconds."""
     render(0)
-    best = math.inf
-    for k in range(1, repeats + 1):
-        t0 = time.perf_counter()
-        render(k)
-        best = min(best, time.perf_counter() - t0)
-    return best
+    return fastest(render, repeats)[0]
 
 
 def kernel_1080p(repeats: int, tile: int) -> dict:
     """The frame kernel's time per pixel on a 1080p frame, and on one tile of a 400 MP sensor (its window's
-    arrays), each the fastest of ``repeats`` frames."""
+    arrays), each the fastest of at least ``repeats`` frames (:func:`_fastest`)."""
     from cmosnoise import Sensor
     from cmosnoise.model import tiles
 
@@ -92,7 +90,7 @@ def main() -> None:
     ap.add_argument("--json", help="also write the results here")
     ap.add_argument("--many", type=int, default=0, help="also run the largest size with this many frames")
     ap.add_argument("--runs", type=int, default=1,
-                    help="tiled runs of each size, the fastest kept (as the kernel's fastest of --repeats frames)")
+                    help="tiled runs of each size, the fastest kept (as the kernel's fastest frame)")
     ap.add_argument("--kernel", action="store_true", help=argparse.SUPPRESS)  # a child: the 1080p kernel
     a = ap.parse_args()
     if a.kernel:
@@ -107,11 +105,12 @@ def main() -> None:
           f"of the 400 MP sensor {ref['tile_ns_per_pixel']:.1f} ns/pixel ({ref['tile_ratio']:.2f} x; {a.threads} "
           "threads)")
     rows = []
+    runs = max(1, a.runs)
     sizes = [(int(s), 1) for s in a.sizes.split(",")]
     for mp, frames in sizes + ([(sizes[-1][0], a.many)] if a.many > 1 else []):
         w, h = SIZES[mp]
-        r = min((tiled_run(w, h, a.tile, env, frames) for _ in range(max(1, a.runs))), key=lambda t: t["wall_s"])
-        r["runs"] = max(1, a.runs)
+        r = min((tiled_run(w, h, a.tile, env, frames) for _ in range(runs)), key=lambda t: t["wall_s"])
+        r["runs"] = runs
         r["kernel_ratio"] = r["frame_ns_per_pixel"] / ref["ns_per_pixel"]
         r["run_ratio"] = r["ns_per_pixel"] / ref["ns_per_pixel"]
         rows.append(r)

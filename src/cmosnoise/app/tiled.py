@@ -2,11 +2,10 @@
 
 Each tile is made alone (:class:`cmosnoise.model.tiles.Tiling`: its window's fixed maps, scene and mean
 charge), its frames are rendered, measured and written, and it is dropped. ``raw.tiff`` is a tiled TIFF whose
-tiles are the run's: one frame's tiles go straight into it in their order; with several frames each tile's frames
-are made together (its set-up once), the TIFF is laid out first with every page's tiles in place (a sparse file
-where the file system has them, :func:`~cmosnoise.io.raw_tiff.create_tiled_raw_tiff`), and each tile's frames are
-written into their pages as the tile comes. With Dask (``--workers`` or ``--scheduler``) the tiles go to the
-workers, a few at a time, and come back in order.
+tiles are the run's: it is laid out first with every page's tiles in place (holes: a sparse file where the file
+system has them, :func:`~cmosnoise.io.raw_tiff.create_tiled_raw_tiff`), each tile's frames are made together (its
+set-up once), and they are written into their pages as the tile comes. With Dask (``--workers`` or
+``--scheduler``) the tiles go to the workers, a few at a time, and come back in order.
 
 The summary is gathered from the tiles as they pass: the measured signal and temporal noise (the sums of every
 tile's pixels, :class:`~cmosnoise.analysis.run_stats.RunStats`), and the dark-current map's mean and white pixels
@@ -32,7 +31,7 @@ from ..analysis import white_pixels
 from ..analysis.run_stats import RunStats
 from ..engine import reduce
 from ..errors import CmosnoiseError
-from ..io.raw_tiff import create_tiled_raw_tiff, write_raw_tiff, write_tile
+from ..io.raw_tiff import create_tiled_raw_tiff, write_tile
 from ..model import footprint, tiles
 from ..model.sensor import Sensor
 from ..model.spec import SensorSpec, resolve
@@ -220,37 +219,26 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
         for done, future in pending:
             yield task_result(future, f"tile {done}")
 
-    def tile_stream(advance, put=None):
-        """The tiles of frame 0, in order (one frame: straight into the TIFF's stream); or, with ``put(frame, tile,
-        pixels)``, nothing: each tile's frames handed to it."""
-        for t, part in enumerate(results()):
-            stats.absorb(part["stats"])
-            for key in sums:
-                sums[key] += part[key] or 0.0
-            if part["white"] is not None:
-                white_r.append(part["white"][0])
-                white_c.append(part["white"][1])
-            for k in range(n):
-                if put is None:
-                    yield part["raw"][0]
-                else:
-                    put(k, t, part["raw"][k])
-                advance()
-
     meta = run_metadata(corner, tile=size)
     phase("frames")
     cm = progress(len(regions) * n) if progress else contextlib.nullcontext(lambda: None)
-    with cm as advance:
-        if n == 1:
-            write_raw_tiff(tmp / "raw.tiff", tile_stream(advance), n, spec.shape, meta, dtype.name, tile=size)
-        else:  # every page's tiles in place first; each tile's frames then go to their pages as they come
-            offsets = create_tiled_raw_tiff(tmp / "raw.tiff", n, spec.shape, meta, dtype.name, size)
-            fd = os.open(tmp / "raw.tiff", os.O_WRONLY)
-            try:
-                for _ in tile_stream(advance, lambda k, t, pixels: write_tile(fd, int(offsets[k, t]), pixels, size)):
-                    pass
-            finally:
-                os.close(fd)
+    # every page's tiles in place first (holes); each tile's frames then go to their pages as the tile comes
+    offsets = create_tiled_raw_tiff(tmp / "raw.tiff", n, spec.shape, meta, dtype.name, size)
+    fd = os.open(tmp / "raw.tiff", os.O_WRONLY)
+    try:
+        with cm as advance:
+            for t, part in enumerate(results()):
+                stats.absorb(part["stats"])
+                for key in sums:
+                    sums[key] += part[key] or 0.0
+                if part["white"] is not None:
+                    white_r.append(part["white"][0])
+                    white_c.append(part["white"][1])
+                for k in range(n):
+                    write_tile(fd, int(offsets[k, t]), part["raw"][k], size)
+                    advance()
+    finally:
+        os.close(fd)
     total = time.perf_counter() - t_start
     (tmp / "config.yaml").write_text(config.to_yaml())
     return _summary(corner, stats, sums, (white_r, white_c), size, len(regions), total)

@@ -144,10 +144,7 @@ if numba is not None:
             s = np.zeros(_LANES)
             for c in range(cols):
                 s[c % _LANES] += np.float64(a[r, c])
-            t = 0.0
-            for lane in range(_LANES):
-                t += s[lane]
-            out[r] = t
+            out[r] = s.sum()
         return out
 
 

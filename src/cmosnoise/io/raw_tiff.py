@@ -116,18 +116,14 @@ class _HolesForZeros(io.FileIO):
     def __init__(self, path: str | Path):
         super().__init__(path, "wb")
         self._zeros: bytes | None = None  # the last block found to be zeros (tifffile passes the same one)
-        self._end = 0
+        self._end = 0  # where the furthest hole ends (written bytes extend the file by themselves)
 
     def write(self, b) -> int:
-        if (isinstance(b, bytes) and len(b) >= self.MIN_HOLE
-                and (b is self._zeros or b == bytes(len(b)))):
-            self._zeros = b
-            self.seek(len(b), os.SEEK_CUR)
-            self._end = max(self._end, self.tell())
-            return len(b)
-        done = super().write(b)
-        self._end = max(self._end, self.tell())
-        return done
+        if not (isinstance(b, bytes) and len(b) >= self.MIN_HOLE and (b is self._zeros or b == bytes(len(b)))):
+            return super().write(b)
+        self._zeros = b
+        self._end = max(self._end, self.seek(len(b), os.SEEK_CUR))
+        return len(b)
 
     def close(self) -> None:
         if not self.closed and os.fstat(self.fileno()).st_size < self._end:
