@@ -72,7 +72,7 @@ def create_tiled_raw_tiff(path: str | Path, n: int, shape: tuple[int, int], meta
     sparse file where the file system has them: nothing written for them), for :func:`write_tile` to fill in any
     order.
 
-    How a tiled run of several frames writes each tile's frames as they are made, where frame-major writing would
+    How a tiled run writes each tile's frames as they are made: with several frames, frame-major writing would
     hold or spool every tile's frames until the last tile of the first frame is made.
 
     Parameters
