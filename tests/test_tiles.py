@@ -129,14 +129,16 @@ def test_simulate_in_tiles_writes_the_whole_runs_frames_tiled(tmp_path, frames):
 
 
 def test_a_tiled_raw_is_laid_out_with_holes_and_filled_tile_by_tile(tmp_path):
-    from cmosnoise.io.raw_tiff import create_tiled_raw_tiff, write_raw_tiff, write_tile
+    from cmosnoise.io.raw_tiff import DIRECT_ALIGN, create_tiled_raw_tiff, write_raw_tiff, write_tile
 
     # tiles of 256 x 256 uint16 (128 KiB: long enough to be holes), 3 x 3 of them a page, the last ones cut
     shape, tile, meta = (600, 520), 256, {"cfa": "RGGB", "bits": 12}
     laid = tmp_path / "laid.tiff"
     offsets = create_tiled_raw_tiff(laid, 2, shape, meta, "uint16", tile)
+    assert not np.any(offsets % DIRECT_ALIGN)  # every tile where a direct write may start
     zeros = tmp_path / "zeros.tiff"
-    write_raw_tiff(zeros, None, 2, shape, meta, "uint16", tile=tile)  # tifffile writing every tile's zeros
+    # tifffile writing every tile's zeros, its pages aligned the same way
+    write_raw_tiff(zeros, None, 2, shape, meta, "uint16", tile=tile, align=DIRECT_ALIGN)
     assert laid.read_bytes() == zeros.read_bytes()  # the same file, its last tile's hole included
     # holes: 18 tiles of 128 KiB (2.3 MB) take no blocks; the header and tags take a few (Linux file systems
     # for /tmp: ext4, xfs, btrfs, tmpfs, overlayfs all keep holes)
@@ -150,6 +152,63 @@ def test_a_tiled_raw_is_laid_out_with_holes_and_filled_tile_by_tile(tmp_path):
     finally:
         os.close(fd)
     assert np.array_equal(tifffile.imread(laid), frames)
+
+
+@pytest.mark.parametrize("dtype, tile", [("uint16", 256), ("float32", 128), ("uint16", 16)])
+def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_path, monkeypatch, dtype, tile):
+    import errno
+
+    from cmosnoise.io import raw_tiff
+
+    shape, meta = (600, 520), {"cfa": "RGGB", "bits": 12}
+    rng = np.random.default_rng(1)
+    frames = (rng.integers(0, 4096, (2, *shape)) if dtype == "uint16" else rng.normal(500, 30, (2, *shape)))
+    frames = frames.astype(dtype)
+    grid = list(enumerate(tiles.grid(shape, tile)))
+
+    def fill(name, direct=True):
+        path = tmp_path / name
+        offsets = raw_tiff.create_tiled_raw_tiff(path, 2, shape, meta, dtype, tile)
+        with raw_tiff.TileWriter(path, tile, dtype, direct=direct) as out:
+            for t, (r0, r1, c0, c1) in reversed(grid):
+                for k in range(2):
+                    out.write(int(offsets[k, t]), frames[k, r0:r1, c0:c1])
+            used = out.direct
+        return path.read_bytes(), used
+
+    through, used = fill("cache.tiff", direct=False)
+    assert not used
+    assert np.array_equal(tifffile.imread(tmp_path / "cache.tiff"), frames)
+    direct, used = fill("direct.tiff")
+    # direct where the file system takes O_DIRECT (ext4, xfs, btrfs, tmpfs from Linux 6.6), except 16 x 16 uint16
+    # tiles: 512 bytes, not a multiple of 4096, go through the page cache
+    aligned = tile * tile * np.dtype(dtype).itemsize % raw_tiff.DIRECT_ALIGN == 0
+    assert used == (aligned and _takes_o_direct(tmp_path))
+    assert direct == through
+    # a file system refusing O_DIRECT at the first write (EINVAL): the rest through the page cache, the same bytes
+    calls = []
+
+    def refuse(fd, view, offset):
+        calls.append(offset)
+        raise OSError(errno.EINVAL, "Invalid argument")
+
+    monkeypatch.setattr(raw_tiff, "_pwrite_direct", refuse)
+    refused, used = fill("refused.tiff")
+    assert refused == through and not used
+    assert len(calls) == (1 if aligned and _takes_o_direct(tmp_path) else 0)
+
+
+def _takes_o_direct(folder) -> bool:
+    """Whether files in ``folder`` open with O_DIRECT (the system has it, the file system takes it)."""
+    if not hasattr(os, "O_DIRECT"):
+        return False
+    probe = folder / "probe"
+    probe.touch()
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_DIRECT))
+        return True
+    except OSError:
+        return False
 
 
 def test_couplets_across_tile_edges_are_counted():

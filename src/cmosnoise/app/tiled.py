@@ -17,7 +17,6 @@ says so.
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -31,7 +30,7 @@ from ..analysis import white_pixels
 from ..analysis.run_stats import RunStats
 from ..engine import reduce
 from ..errors import CmosnoiseError
-from ..io.raw_tiff import create_tiled_raw_tiff, write_tile
+from ..io.raw_tiff import TileWriter, create_tiled_raw_tiff
 from ..model import footprint, tiles
 from ..model.sensor import Sensor
 from ..model.spec import SensorSpec, resolve
@@ -224,21 +223,17 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
     cm = progress(len(regions) * n) if progress else contextlib.nullcontext(lambda: None)
     # every page's tiles in place first (holes); each tile's frames then go to their pages as the tile comes
     offsets = create_tiled_raw_tiff(tmp / "raw.tiff", n, spec.shape, meta, dtype.name, size)
-    fd = os.open(tmp / "raw.tiff", os.O_WRONLY)
-    try:
-        with cm as advance:
-            for t, part in enumerate(results()):
-                stats.absorb(part["stats"])
-                for key in sums:
-                    sums[key] += part[key] or 0.0
-                if part["white"] is not None:
-                    white_r.append(part["white"][0])
-                    white_c.append(part["white"][1])
-                for k in range(n):
-                    write_tile(fd, int(offsets[k, t]), part["raw"][k], size)
-                    advance()
-    finally:
-        os.close(fd)
+    with TileWriter(tmp / "raw.tiff", size, dtype) as out, cm as advance:
+        for t, part in enumerate(results()):
+            stats.absorb(part["stats"])
+            for key in sums:
+                sums[key] += part[key] or 0.0
+            if part["white"] is not None:
+                white_r.append(part["white"][0])
+                white_c.append(part["white"][1])
+            for k in range(n):
+                out.write(int(offsets[k, t]), part["raw"][k])
+                advance()
     total = time.perf_counter() - t_start
     (tmp / "config.yaml").write_text(config.to_yaml())
     return _summary(corner, stats, sums, (white_r, white_c), size, len(regions), total)
