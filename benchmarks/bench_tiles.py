@@ -7,7 +7,8 @@ to a tiled raw.tiff in a temporary folder) runs in a child process: its wall tim
 seconds of them, bench_setup's ``fastest``, the kernel loaded first) gives the kernel's own time per pixel, and a
 frame of one tile of the 400 MP sensor (its window's arrays) the kernel's in a tile. "run ratio": the tiled run's wall time (set-up, frames, writing) per pixel over the 1080p
 kernel's (a frame's, with ``--many N``: the largest size again with N frames, each tile's set-up made once for
-all of them and its frames written into their pages as the tile comes); with ``--runs N``, the fastest of N runs
+all of them and its frames written into their pages as the tile comes, and from the two runs of that size each
+frame's time after the first, :func:`frames_after_set_up`); with ``--runs N``, the fastest of N runs
 (this machine is shared: one run's time moves by some 10 %). The run's set-up and frame times are thread time
 summed over its tiles: two tiles are made at once.
 
@@ -81,6 +82,18 @@ def tiled_run(width: int, height: int, tile: int, env: dict, frames: int = 1) ->
             "set_up_ns_per_pixel": 1e9 * t["set_up"] / pixels}
 
 
+def frames_after_set_up(one: dict, many: dict, ref: dict) -> dict:
+    """A frame's time beyond the first, from two runs of one size (1 frame and N): the N-frame run's wall time less
+    the 1-frame run's, over N - 1. What the tiles' frames cost once their set-up (each tile's fixed pattern, made
+    once for all its frames) is paid: the same terms as the 1080p kernel's time, which leaves out its sensor's
+    set-up. Also the tiles' set-up in frames' worth: its thread time over one frame's (the N-frame run's)."""
+    extra = many["frames"] - one["frames"]
+    frame_s = (many["wall_s"] - one["wall_s"]) / extra
+    ns = 1e9 * frame_s / one["pixels"]
+    return {"frames": [one["frames"], many["frames"]], "frame_s": frame_s, "ns_per_pixel": ns,
+            "ratio": ns / ref["ns_per_pixel"], "set_up_frames": many["set_up_s"] / many["frame_s"]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="50,400", help="megapixels, of " + ", ".join(map(str, SIZES)))
@@ -119,10 +132,16 @@ def main() -> None:
               f"{r['sys_s']:.1f} s; the tiles' set-up "
               f"{r['set_up_s']:.1f} s and frames {r['frame_s']:.1f} s of thread time, overlapping), "
               f"peak {r['peak_bytes'] / 2**30:.2f} GiB, raw.tiff {r['raw_bytes'] / 2**30:.2f} GiB")
+    extra = {}
+    if a.many > 1:
+        extra["after_set_up"] = after = frames_after_set_up(rows[-2], rows[-1], ref)
+        print(f"each frame after the first, {sizes[-1][0]} MP: {after['frame_s']:.2f} s = {after['ns_per_pixel']:.1f} "
+              f"ns/pixel ({after['ratio']:.2f} x the 1080p kernel's); the tiles' set-up {after['set_up_frames']:.2f} "
+              "frames' worth of thread time")
     if a.json:
         with open(a.json, "w") as f:
-            json.dump({"threads": a.threads, "cpu_count": os.cpu_count(), "kernel_1080p": ref, "rows": rows}, f,
-                      indent=1)
+            json.dump({"threads": a.threads, "cpu_count": os.cpu_count(), "kernel_1080p": ref, "rows": rows, **extra},
+                      f, indent=1)
 
 
 if __name__ == "__main__":

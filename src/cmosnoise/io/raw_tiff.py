@@ -155,8 +155,9 @@ class TileWriter:
     Where the system has ``O_DIRECT`` (Linux), the file system takes it and a tile's bytes are a multiple of
     :data:`DIRECT_ALIGN` (tiles of 64 and up), each tile is copied into a page-aligned buffer of this writer's and
     goes from there to the file, not through the page cache. Copying a 400 MP frame's 800 MB into the page cache
-    took this project's 2-core machine 1.2 to 1.9 s of system time a frame (``perf``: mostly
-    ``copy_folio_from_iter_atomic``), against 0.2 s to write them direct (see ``docs/sensor/large-sensors.md``).
+    took this project's 2-core machine some 1.2 to 1.5 s of system time a frame (``perf``: mostly
+    ``copy_folio_from_iter_atomic``; a 4-frame run's system time 7.4 s, 1.3 to 2.8 s direct; see
+    ``docs/sensor/large-sensors.md``).
     Anywhere else, or where the file system refuses a direct write, the tiles go through :func:`write_tile`: the
     same bytes.
 
