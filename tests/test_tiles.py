@@ -196,6 +196,16 @@ def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_pa
     refused, used = fill("refused.tiff")
     assert refused == through and not used
     assert len(calls) == (1 if aligned and _takes_o_direct(tmp_path) else 0)
+    # an offset off the 4096-byte grid (a file not laid out for direct writes): through the page cache, in place
+    monkeypatch.undo()
+    nbytes = tile * tile * np.dtype(dtype).itemsize
+    scratch = tmp_path / "scratch"
+    scratch.write_bytes(bytes(3 * nbytes))
+    with raw_tiff.TileWriter(scratch, tile, dtype) as out:
+        out.write(512, frames[0, :tile, :tile])
+        assert not out.direct
+    data = scratch.read_bytes()
+    assert data[512:512 + nbytes] == frames[0, :tile, :tile].tobytes() and data[:512] == bytes(512)
 
 
 def _takes_o_direct(folder) -> bool:

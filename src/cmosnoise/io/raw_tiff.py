@@ -153,7 +153,7 @@ class TileWriter:
     """Writes tiles into a raw TIFF laid out by :func:`create_tiled_raw_tiff`, around the page cache where it can.
 
     Where the system has ``O_DIRECT`` (Linux), the file system takes it and a tile's bytes are a multiple of
-    :data:`DIRECT_ALIGN` (tiles of 64 and up), each tile is copied into a page-aligned buffer of this writer's and
+    :data:`DIRECT_ALIGN` (uint16 tiles whose side is a multiple of 64, float32 ones of 32), each tile is copied into a page-aligned buffer of this writer's and
     goes from there to the file, not through the page cache. Copying a 400 MP frame's 800 MB into the page cache
     took this project's 2-core machine some 1.2 to 1.5 s of system time a frame (``perf``: mostly
     ``copy_folio_from_iter_atomic``; a 4-frame run's system time 7.4 s, 1.3 to 2.8 s direct; see
@@ -177,11 +177,12 @@ class TileWriter:
     >>> import numpy as np, tempfile, tifffile
     >>> from pathlib import Path
     >>> from cmosnoise.io.raw_tiff import TileWriter, create_tiled_raw_tiff
+    >>> from cmosnoise.model.tiles import grid
     >>> path = Path(tempfile.mkdtemp()) / "raw.tiff"
     >>> offsets = create_tiled_raw_tiff(path, 1, (100, 70), {"cfa": "RGGB", "bits": 12}, "uint16", 64)
     >>> frame = np.arange(7000, dtype=np.uint16).reshape(100, 70)
-    >>> with TileWriter(path, 64, "uint16") as out:
-    ...     for t, (r0, r1, c0, c1) in enumerate([(0, 64, 0, 64), (0, 64, 64, 70), (64, 100, 0, 64), (64, 100, 64, 70)]):
+    >>> with TileWriter(path, 64, "uint16") as out:  # 4 tiles of 64 x 64, 3 of them cut at the edges
+    ...     for t, (r0, r1, c0, c1) in enumerate(grid(frame.shape, 64)):
     ...         out.write(int(offsets[0, t]), frame[r0:r1, c0:c1])
     >>> bool(np.array_equal(tifffile.imread(path)[0], frame))  # frame 0 of a stack of 1
     True
@@ -209,7 +210,9 @@ class TileWriter:
     def write(self, offset: int, data: np.ndarray) -> None:
         """Write one tile's pixels, (rows, cols) with rows, cols <= ``tile``, at ``offset`` (an edge tile padded
         with zeros to the full tile, as TIFF stores it)."""
-        if self.direct and offset % DIRECT_ALIGN == 0:
+        if self.direct and offset % DIRECT_ALIGN:  # not laid out for it (create_tiled_raw_tiff aligns every tile)
+            self._buffered()
+        if self.direct:
             if data.shape != self._stage.shape:
                 self._stage[...] = 0
             self._stage[:data.shape[0], :data.shape[1]] = data
