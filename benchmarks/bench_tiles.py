@@ -5,14 +5,15 @@ to a tiled raw.tiff in a temporary folder) runs in a child process: its wall tim
 (``wait4``'s ``ru_maxrss``) and its summary's split (the tiles' set-up, the frame kernel). In another child, a
 1920 x 1080 frame of the default sensor on the same threads (the fastest of at least ``--repeats`` frames and two
 seconds of them, bench_setup's ``fastest``, the kernel loaded first) gives the kernel's own time per pixel, and a
-frame of one tile of the 400 MP sensor (its window's arrays) the kernel's in a tile. "run ratio": the tiled run's wall time (set-up, frames, writing) per pixel over the 1080p
-kernel's (a frame's, with ``--many N``: the largest size again with N frames, each tile's set-up made once for
-all of them and its frames written into their pages as the tile comes, and from the two runs of that size each
-frame's time after the first, :func:`frames_after_set_up`); with ``--runs N``, the fastest of N runs
-(this machine is shared: one run's time moves by some 10 %). The run's set-up and frame times are thread time
-summed over its tiles: two tiles are made at once.
+frame of one tile of the 400 MP sensor (its window's arrays) the kernel's in a tile. "run ratio": the tiled run's
+wall time (set-up, frames, writing) per pixel over the 1080p kernel's (a frame's, with ``--many N``: the largest
+size again with N frames, each tile's set-up made once for all of them and its frames written into their pages
+as the tile comes, and from the two runs of that size each frame's time after the first,
+:func:`frames_after_set_up`); with ``--runs N``, the fastest of N runs (this machine is shared: one run's time
+moves by some 10 %). The run's set-up and frame times are thread time summed over its tiles: two tiles are made
+at once.
 
-    python benchmarks/bench_tiles.py [--sizes 50,400] [--many 4] [--runs 2] [--tile 2048] [--threads 2] [--json FILE]
+    python benchmarks/bench_tiles.py [--sizes 50,400] [--many 4] [--runs 3] [--tile 2048] [--threads 2] [--json FILE]
 """
 
 from __future__ import annotations

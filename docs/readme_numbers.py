@@ -520,7 +520,7 @@ def render_tile_speed(d: dict) -> str:
     if "after_set_up" in d:
         f = d["after_set_up"]
         one, many = f["frames"]
-        lines += ["", f"Each 400 MP frame after the first (the {many}-frame run's wall time less the {one}-frame run's, "
+        lines += ["", f"Each {d['rows'][-1]['pixels'] / 1e6:.0f} MP frame after the first (the {many}-frame run's wall time less the {one}-frame run's, "
                       f"over {many - one}): {f['frame_s']:.1f} s, {f['ns_per_pixel']:.1f} ns a pixel, "
                       f"{f['ratio']:.2f} times the 1080p kernel's. That is a frame made in tiles and written with "
                       "its tiles' set-up already paid, as the kernel's own time leaves out its sensor's set-up. The "

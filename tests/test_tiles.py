@@ -129,7 +129,7 @@ def test_simulate_in_tiles_writes_the_whole_runs_frames_tiled(tmp_path, frames):
 
 
 def test_a_tiled_raw_is_laid_out_with_holes_and_filled_tile_by_tile(tmp_path):
-    from cmosnoise.io.raw_tiff import DIRECT_ALIGN, create_tiled_raw_tiff, write_raw_tiff, write_tile
+    from cmosnoise.io.raw_tiff import DIRECT_ALIGN, TileWriter, create_tiled_raw_tiff, write_raw_tiff
 
     # tiles of 256 x 256 uint16 (128 KiB: long enough to be holes), 3 x 3 of them a page, the last ones cut
     shape, tile, meta = (600, 520), 256, {"cfa": "RGGB", "bits": 12}
@@ -144,19 +144,17 @@ def test_a_tiled_raw_is_laid_out_with_holes_and_filled_tile_by_tile(tmp_path):
     # for /tmp: ext4, xfs, btrfs, tmpfs, overlayfs all keep holes)
     assert laid.stat().st_blocks * 512 < 18 * tile * tile * 2 / 4
     frames = np.random.default_rng(0).integers(0, 4096, (2, *shape), dtype=np.uint16)
-    fd = os.open(laid, os.O_WRONLY)
-    try:
+    with TileWriter(laid, tile, "uint16", direct=False) as out:
         for t, (r0, r1, c0, c1) in reversed(list(enumerate(tiles.grid(shape, tile)))):  # any order
             for k in range(2):
-                write_tile(fd, int(offsets[k, t]), frames[k, r0:r1, c0:c1], tile)
-    finally:
-        os.close(fd)
+                out.write(int(offsets[k, t]), frames[k, r0:r1, c0:c1])
     assert np.array_equal(tifffile.imread(laid), frames)
 
 
 @pytest.mark.parametrize("dtype, tile", [("uint16", 256), ("float32", 128), ("uint16", 16)])
 def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_path, monkeypatch, dtype, tile):
     import errno
+    import fcntl
 
     from cmosnoise.io import raw_tiff
 
@@ -178,7 +176,11 @@ def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_pa
 
     through, used = fill("cache.tiff", direct=False)
     assert not used
-    assert np.array_equal(tifffile.imread(tmp_path / "cache.tiff"), frames)
+    # the file tifffile writes from the same tiles (its edge tiles padded with zeros), byte for byte
+    made = tmp_path / "tifffile.tiff"
+    raw_tiff.write_raw_tiff(made, (frames[k, r0:r1, c0:c1] for k in range(2) for _, (r0, r1, c0, c1) in grid), 2,
+                            shape, meta, dtype, tile=tile, align=raw_tiff.DIRECT_ALIGN)
+    assert through == made.read_bytes()
     direct, used = fill("direct.tiff")
     # direct where the file system takes O_DIRECT (ext4, xfs, btrfs, tmpfs from Linux 6.6), except 16 x 16 uint16
     # tiles: 512 bytes, not a multiple of 4096, go through the page cache
@@ -186,13 +188,15 @@ def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_pa
     assert used == (aligned and _takes_o_direct(tmp_path))
     assert direct == through
     # a file system refusing O_DIRECT at the first write (EINVAL): the rest through the page cache, the same bytes
-    calls = []
+    calls, pwrite = [], os.pwrite
 
-    def refuse(fd, view, offset):
-        calls.append(offset)
-        raise OSError(errno.EINVAL, "Invalid argument")
+    def refuse(fd, data, offset):
+        if fcntl.fcntl(fd, fcntl.F_GETFL) & getattr(os, "O_DIRECT", 0):
+            calls.append(offset)
+            raise OSError(errno.EINVAL, "Invalid argument")
+        return pwrite(fd, data, offset)
 
-    monkeypatch.setattr(raw_tiff, "_pwrite_direct", refuse)
+    monkeypatch.setattr(os, "pwrite", refuse)
     refused, used = fill("refused.tiff")
     assert refused == through and not used
     assert len(calls) == (1 if aligned and _takes_o_direct(tmp_path) else 0)

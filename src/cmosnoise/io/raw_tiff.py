@@ -77,8 +77,7 @@ def create_tiled_raw_tiff(path: str | Path, n: int, shape: tuple[int, int], meta
     """A tiled raw TIFF of ``n`` frames whose tiles are all in place but not yet written: the file
     :func:`write_raw_tiff` makes (the same tags and layout, each page's tiles from a multiple of
     :data:`DIRECT_ALIGN` bytes), its tiles' bytes left as holes (zeros when read; a sparse file where the file
-    system has them: nothing written for them), for :class:`TileWriter` (or :func:`write_tile`) to fill in any
-    order.
+    system has them: nothing written for them), for :class:`TileWriter` to fill in any order.
 
     How a tiled run writes each tile's frames as they are made: with several frames, frame-major writing would
     hold or spool every tile's frames until the last tile of the first frame is made.
@@ -139,27 +138,17 @@ class _HolesForZeros(io.FileIO):
         super().close()
 
 
-def write_tile(fd: int, offset: int, data: np.ndarray, tile: int) -> None:
-    """Write one tile's pixels, (rows, cols) with rows, cols <= ``tile``, at ``offset`` of an open file made by
-    :func:`create_tiled_raw_tiff` (an edge tile padded with zeros to the full tile, as TIFF stores it)."""
-    if data.shape != (tile, tile):
-        padded = np.zeros((tile, tile), data.dtype)
-        padded[:data.shape[0], :data.shape[1]] = data
-        data = padded
-    _pwrite_all(fd, memoryview(np.ascontiguousarray(data)).cast("B"), offset)
-
-
 class TileWriter:
     """Writes tiles into a raw TIFF laid out by :func:`create_tiled_raw_tiff`, around the page cache where it can.
 
-    Where the system has ``O_DIRECT`` (Linux), the file system takes it and a tile's bytes are a multiple of
-    :data:`DIRECT_ALIGN` (uint16 tiles whose side is a multiple of 64, float32 ones of 32), each tile is copied into a page-aligned buffer of this writer's and
-    goes from there to the file, not through the page cache. Copying a 400 MP frame's 800 MB into the page cache
-    took this project's 2-core machine some 1.2 to 1.5 s of system time a frame (``perf``: mostly
-    ``copy_folio_from_iter_atomic``; a 4-frame run's system time 7.4 s, 1.3 to 2.8 s direct; see
-    ``docs/sensor/large-sensors.md``).
-    Anywhere else, or where the file system refuses a direct write, the tiles go through :func:`write_tile`: the
-    same bytes.
+    Each tile is copied into a page-aligned buffer of this writer's (an edge tile padded with zeros to the full
+    tile, as TIFF stores it) and written from there. Where the system has ``O_DIRECT`` (Linux), the file system
+    takes it and a tile's bytes are a multiple of :data:`DIRECT_ALIGN` (uint16 tiles whose side is a multiple of
+    64, float32 ones of 32), it goes to the file directly, not through the page cache. Copying a 400 MP frame's
+    800 MB into the page cache took this project's 2-core machine some 1.2 to 1.5 s of system time a frame
+    (``perf``: mostly ``copy_folio_from_iter_atomic``; a 4-frame run's system time 7.4 s, 1.3 to 2.8 s direct;
+    see ``docs/sensor/large-sensors.md``). Anywhere else, or where the file system refuses a direct write
+    (``EINVAL``), or at an offset off the :data:`DIRECT_ALIGN` grid, through the page cache: the same bytes.
 
     Parameters
     ----------
@@ -189,41 +178,38 @@ class TileWriter:
     """
 
     def __init__(self, path: str | Path, tile: int, dtype, direct: bool = True):
-        self.tile = tile
         self._path = path
-        self._dtype = np.dtype(dtype)
-        self._bytes = tile * tile * self._dtype.itemsize
+        dtype = np.dtype(dtype)
+        self._map = mmap.mmap(-1, tile * tile * dtype.itemsize)  # page-aligned, as O_DIRECT asks
+        self._stage = np.frombuffer(self._map, dtype).reshape(tile, tile)
         flag = getattr(os, "O_DIRECT", 0)
         self._fd = -1
-        if direct and flag and self._bytes % DIRECT_ALIGN == 0:
+        if direct and flag and len(self._map) % DIRECT_ALIGN == 0:
             try:
                 self._fd = os.open(path, os.O_WRONLY | flag)
             except OSError as exc:
                 if exc.errno != errno.EINVAL:  # a file system without O_DIRECT refuses it so
                     raise
+        #: whether the tiles go to the file directly (False: through the page cache)
         self.direct = self._fd >= 0
         if not self.direct:
             self._fd = os.open(path, os.O_WRONLY)
-        self._map = mmap.mmap(-1, self._bytes) if self.direct else None  # page-aligned, as O_DIRECT asks
-        self._stage = np.frombuffer(self._map, self._dtype).reshape(tile, tile) if self.direct else None
 
     def write(self, offset: int, data: np.ndarray) -> None:
-        """Write one tile's pixels, (rows, cols) with rows, cols <= ``tile``, at ``offset`` (an edge tile padded
-        with zeros to the full tile, as TIFF stores it)."""
+        """Write one tile's pixels, (rows, cols) with rows, cols <= the tile side, at ``offset``."""
+        rows, cols = data.shape
+        if (rows, cols) != self._stage.shape:
+            self._stage[...] = 0
+        self._stage[:rows, :cols] = data
         if self.direct and offset % DIRECT_ALIGN:  # not laid out for it (create_tiled_raw_tiff aligns every tile)
             self._buffered()
-        if self.direct:
-            if data.shape != self._stage.shape:
-                self._stage[...] = 0
-            self._stage[:data.shape[0], :data.shape[1]] = data
-            try:
-                _pwrite_direct(self._fd, memoryview(self._map), offset)
-                return
-            except OSError as exc:
-                if exc.errno != errno.EINVAL:
-                    raise
-                self._buffered()  # the file system opened the file so but refuses the write
-        write_tile(self._fd, offset, data, self.tile)
+        try:
+            _pwrite_all(self._fd, memoryview(self._map), offset)
+        except OSError as exc:
+            if not (self.direct and exc.errno == errno.EINVAL):
+                raise
+            self._buffered()  # the file system opened the file so but refuses the write
+            _pwrite_all(self._fd, memoryview(self._map), offset)
 
     def _buffered(self) -> None:
         """Through the page cache from now on."""
@@ -251,11 +237,6 @@ def _pwrite_all(fd: int, view: memoryview, offset: int) -> None:
     done = 0
     while done < len(view):
         done += os.pwrite(fd, view[done:], offset + done)
-
-
-def _pwrite_direct(fd: int, view: memoryview, offset: int) -> None:
-    """All of a page-aligned ``view`` at ``offset`` of a file opened with ``O_DIRECT``."""
-    _pwrite_all(fd, view, offset)
 
 
 def write_float_tiff(path: str | Path, image: np.ndarray, metadata: dict) -> None:
