@@ -249,3 +249,16 @@ def stop_process(proc, timeout_s: float = 30) -> None:
     except subprocess.TimeoutExpired:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
+
+
+def takes_o_direct(folder) -> bool:
+    """Whether files in ``folder`` open with O_DIRECT (the system has it, the file system takes it)."""
+    if not hasattr(os, "O_DIRECT"):
+        return False
+    probe = folder / "probe"
+    probe.touch()
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_DIRECT))
+        return True
+    except OSError:
+        return False

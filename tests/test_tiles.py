@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 import tifffile
-from conftest import cli
+from conftest import cli, takes_o_direct
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.analysis import white_pixels
@@ -185,7 +185,7 @@ def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_pa
     # direct where the file system takes O_DIRECT (ext4, xfs, btrfs, tmpfs from Linux 6.6), except 16 x 16 uint16
     # tiles: 512 bytes, not a multiple of 4096, go through the page cache
     aligned = tile * tile * np.dtype(dtype).itemsize % raw_tiff.DIRECT_ALIGN == 0
-    assert used == (aligned and _takes_o_direct(tmp_path))
+    assert used == (aligned and takes_o_direct(tmp_path))
     assert direct == through
     # a file system refusing O_DIRECT at the first write (EINVAL): the rest through the page cache, the same bytes
     calls, pwrite = [], os.pwrite
@@ -199,7 +199,7 @@ def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_pa
     monkeypatch.setattr(os, "pwrite", refuse)
     refused, used = fill("refused.tiff")
     assert refused == through and not used
-    assert len(calls) == (1 if aligned and _takes_o_direct(tmp_path) else 0)
+    assert len(calls) == (1 if aligned and takes_o_direct(tmp_path) else 0)
     # an offset off the 4096-byte grid (a file not laid out for direct writes): through the page cache, in place
     monkeypatch.undo()
     nbytes = tile * tile * np.dtype(dtype).itemsize
@@ -210,19 +210,6 @@ def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_pa
         assert not out.direct
     data = scratch.read_bytes()
     assert data[512:512 + nbytes] == frames[0, :tile, :tile].tobytes() and data[:512] == bytes(512)
-
-
-def _takes_o_direct(folder) -> bool:
-    """Whether files in ``folder`` open with O_DIRECT (the system has it, the file system takes it)."""
-    if not hasattr(os, "O_DIRECT"):
-        return False
-    probe = folder / "probe"
-    probe.touch()
-    try:
-        os.close(os.open(probe, os.O_WRONLY | os.O_DIRECT))
-        return True
-    except OSError:
-        return False
 
 
 def test_couplets_across_tile_edges_are_counted():

@@ -32,7 +32,7 @@ from ..engine.kernel import generator_info
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
 from ..io.output import OutputFolder, write_json, write_png
-from ..io.raw_tiff import RawTiffReader, raw_metadata, write_float_tiff, write_raw_tiff
+from ..io.raw_tiff import RawTiffReader, SeriesWriter, create_raw_tiff, raw_metadata, write_float_tiff
 from ..io.video import VideoWriter
 from ..isp import calibration
 from ..isp.process import Processor, read_dark
@@ -160,10 +160,12 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         meta = run_metadata(sensor)
         phase("frames")
         cm = progress(n) if progress else contextlib.nullcontext(lambda: None)
-        try:
-            with cm as advance:
-                write_raw_tiff(tmp / "raw.tiff", frames(advance), n, sensor.shape, meta,
-                               "uint16" if config.adc.enabled else "float32")
+        dtype = "uint16" if config.adc.enabled else "float32"
+        try:  # each frame written from the writer's thread while the next is made
+            offset = create_raw_tiff(tmp / "raw.tiff", n, sensor.shape, meta, dtype)
+            with SeriesWriter(tmp / "raw.tiff", offset, sensor.shape, dtype) as out, cm as advance:
+                for raw in frames(advance):
+                    out.write(raw)
         finally:
             if video is not None:
                 video.close()

@@ -1,0 +1,88 @@
+"""A raw TIFF's frames written one after another from the writer's own thread (SeriesWriter), directly or
+through the page cache: the file tifffile writes from the same frames, byte for byte."""
+
+import errno
+import fcntl
+import os
+
+import numpy as np
+import pytest
+import tifffile
+from conftest import takes_o_direct
+
+from cmosnoise.io import raw_tiff
+
+META = {"cfa": "RGGB", "bits": 12}
+
+
+def _frames(dtype, n, shape):
+    rng = np.random.default_rng(3)
+    data = rng.integers(0, 4096, (n, *shape)) if dtype == "uint16" else rng.normal(500, 30, (n, *shape))
+    return data.astype(dtype)
+
+
+def _fill(path, frames, direct=True, depth=2):
+    offset = raw_tiff.create_raw_tiff(path, len(frames), frames.shape[1:], META, frames.dtype.name)
+    with raw_tiff.SeriesWriter(path, offset, frames.shape[1:], frames.dtype, direct=direct, depth=depth) as out:
+        for frame in frames:
+            out.write(frame.copy())  # fresh arrays, as a run's frames are
+    return path.read_bytes(), out.direct  # read once closed: the writer's thread may switch it
+
+
+# 1080 x 1920 uint16 (4 MB a frame, not a multiple of 4096 bytes: each frame's tail is carried to the next),
+# 600 x 520 float32 (1.2 MB, a multiple: nothing carried) and a frame smaller than a block
+@pytest.mark.parametrize("dtype, shape, n", [("uint16", (1080, 1920), 3), ("float32", (600, 512), 2),
+                                             ("uint16", (10, 30), 5)])
+def test_a_series_written_directly_or_through_the_page_cache_is_tifffiles_file(tmp_path, monkeypatch, dtype,
+                                                                              shape, n):
+    frames = _frames(dtype, n, shape)
+    tries = takes_o_direct(tmp_path) and frames.nbytes >= raw_tiff.DIRECT_ALIGN  # a whole block to write
+    made = tmp_path / "tifffile.tiff"
+    raw_tiff.write_raw_tiff(made, iter(frames), n, shape, META, dtype, align=raw_tiff.DIRECT_ALIGN)
+    expected = made.read_bytes()
+    through, used = _fill(tmp_path / "cache.tiff", frames, direct=False)
+    assert through == expected and not used
+    direct, used = _fill(tmp_path / "direct.tiff", frames)
+    assert direct == expected
+    assert used == takes_o_direct(tmp_path)  # direct where the file system takes it (ext4, xfs, tmpfs >= 6.6)
+    assert np.array_equal(tifffile.imread(tmp_path / "direct.tiff"), frames)
+    # a file system refusing O_DIRECT at the first write: everything through the page cache, the same bytes
+    refused = []
+    pwrite = os.pwrite
+
+    def refuse(fd, data, offset):
+        if fcntl.fcntl(fd, fcntl.F_GETFL) & getattr(os, "O_DIRECT", 0):
+            refused.append(offset)
+            raise OSError(errno.EINVAL, "Invalid argument")
+        return pwrite(fd, data, offset)
+
+    monkeypatch.setattr(os, "pwrite", refuse)
+    after, used = _fill(tmp_path / "refused.tiff", frames, depth=1)
+    assert after == expected
+    # one refused write where a direct one was tried; 5 frames of 600 B never hold a whole block: no direct write
+    # was tried, and the writer would still try one
+    assert len(refused) == int(tries) and used == (takes_o_direct(tmp_path) and not tries)
+
+
+def test_the_writers_errors_reach_the_caller_and_nothing_hangs(tmp_path, monkeypatch):
+    frames = _frames("uint16", 4, (64, 64))
+    path = tmp_path / "raw.tiff"
+    offset = raw_tiff.create_raw_tiff(path, 4, (64, 64), META, "uint16")
+
+    def full(*_):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "pwrite", full)
+    out = raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16", depth=1)
+    with pytest.raises(OSError, match="No space"):  # at a later write or at the close, not lost in the thread
+        for frame in frames:
+            out.write(frame)
+        out.close()
+    out.close()  # closing again is harmless
+    with pytest.raises(ValueError, match=r"\(64, 64\) uint16"):  # a frame of another shape or type: named
+        raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16").write(frames[0, :10])
+    # the caller's own error wins over the writer's
+    with pytest.raises(KeyError):
+        with raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out:
+            out.write(frames[0])
+            raise KeyError("the caller's")
