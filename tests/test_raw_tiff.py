@@ -46,6 +46,10 @@ def test_a_series_written_directly_or_through_the_page_cache_is_tifffiles_file(t
     assert direct == expected
     assert used == takes_o_direct(tmp_path)  # direct where the file system takes it (ext4, xfs, tmpfs >= 6.6)
     assert np.array_equal(tifffile.imread(tmp_path / "direct.tiff"), frames)
+    # a frame in pieces of 8 KiB (the buffer's room after the 4 KiB it may hold over): the same file
+    monkeypatch.setattr(raw_tiff.SeriesWriter, "CHUNK", 5000)
+    assert _fill(tmp_path / "pieces.tiff", frames)[0] == expected
+    monkeypatch.undo()
     # a file system refusing O_DIRECT at the first write: everything through the page cache, the same bytes
     refused = []
     pwrite = os.pwrite
