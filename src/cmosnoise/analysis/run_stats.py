@@ -41,7 +41,7 @@ if numba is not None:
     # A row's sums run in the CPU's vector lanes: each function below may reassociate its additions (``reassoc``;
     # nothing else of fast math: no fused multiply-add, no approximations), so LLVM vectorizes them, some five
     # times faster than one chain of additions per sum (2.4 against 0.5 ns a pixel on one thread, measured with
-    # a previous frame). A row's sums then depend on the vector width the kernel was compiled for (how many
+    # a previous frame). A row's sums then depend on the vector width these loops were compiled for (how many
     # lanes), not on the thread count: the rows are added in order.
     _LANES_MATH = {"reassoc", "nsz"}
 
