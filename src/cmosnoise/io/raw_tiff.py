@@ -269,9 +269,9 @@ class SeriesWriter:
     up to :data:`CHUNK` at a time, into a page-aligned buffer behind what is left of the frame before it and
     writes every whole :data:`DIRECT_ALIGN`-byte block with ``O_DIRECT`` where the system and the file system
     take it (as :class:`TileWriter`); the last few bytes of the series, and everything where direct writing is
-    refused, go through the page cache: the same bytes either way. A 1920 x 1080 frame's 4 MB took this project's 2-core
-    machine 5 to 11 ms to copy into the page cache (``simulate``'s frame loop, measured), a third of a frame;
-    written directly from here, the disk takes them while the next frame is made.
+    refused, go through the page cache: the same bytes either way. A 1920 x 1080 frame's 4 MB took this
+    project's 2-core machine 5 to 11 ms to copy into the page cache (``simulate``'s frame loop, measured), a
+    third of a frame; written directly from here, the disk takes them while the next frame is made.
 
     Parameters
     ----------
