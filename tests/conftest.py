@@ -262,3 +262,21 @@ def takes_o_direct(folder) -> bool:
         return True
     except OSError:
         return False
+
+
+def refuse_direct_writes(monkeypatch) -> list:
+    """Make ``os.pwrite`` refuse (``EINVAL``) every write to a descriptor opened with O_DIRECT, as a file system
+    that opens files so but takes no direct write; returns the list the refused writes' offsets go to."""
+    import errno
+    import fcntl
+
+    refused, pwrite = [], os.pwrite
+
+    def refuse(fd, data, offset):
+        if fcntl.fcntl(fd, fcntl.F_GETFL) & getattr(os, "O_DIRECT", 0):
+            refused.append(offset)
+            raise OSError(errno.EINVAL, "Invalid argument")
+        return pwrite(fd, data, offset)
+
+    monkeypatch.setattr(os, "pwrite", refuse)
+    return refused

@@ -2,13 +2,12 @@
 through the page cache: the file tifffile writes from the same frames, byte for byte."""
 
 import errno
-import fcntl
 import os
 
 import numpy as np
 import pytest
 import tifffile
-from conftest import takes_o_direct
+from conftest import refuse_direct_writes, takes_o_direct
 
 from cmosnoise.io import raw_tiff
 
@@ -51,16 +50,7 @@ def test_a_series_written_directly_or_through_the_page_cache_is_tifffiles_file(t
     assert _fill(tmp_path / "pieces.tiff", frames)[0] == expected
     monkeypatch.undo()
     # a file system refusing O_DIRECT at the first write: everything through the page cache, the same bytes
-    refused = []
-    pwrite = os.pwrite
-
-    def refuse(fd, data, offset):
-        if fcntl.fcntl(fd, fcntl.F_GETFL) & getattr(os, "O_DIRECT", 0):
-            refused.append(offset)
-            raise OSError(errno.EINVAL, "Invalid argument")
-        return pwrite(fd, data, offset)
-
-    monkeypatch.setattr(os, "pwrite", refuse)
+    refused = refuse_direct_writes(monkeypatch)
     after, used = _fill(tmp_path / "refused.tiff", frames, depth=1)
     assert after == expected
     # one refused write where a direct one was tried; 5 frames of 600 B never hold a whole block: no direct write

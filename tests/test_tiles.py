@@ -3,12 +3,11 @@
 Every check here is bit-identity against the whole sensor, or a count that must be the same exact number."""
 
 import json
-import os
 
 import numpy as np
 import pytest
 import tifffile
-from conftest import cli, takes_o_direct
+from conftest import cli, refuse_direct_writes, takes_o_direct
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.analysis import white_pixels
@@ -153,8 +152,6 @@ def test_a_tiled_raw_is_laid_out_with_holes_and_filled_tile_by_tile(tmp_path):
 
 @pytest.mark.parametrize("dtype, tile", [("uint16", 256), ("float32", 128), ("uint16", 16)])
 def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_path, monkeypatch, dtype, tile):
-    import errno
-    import fcntl
 
     from cmosnoise.io import raw_tiff
 
@@ -188,15 +185,7 @@ def test_tiles_written_direct_or_through_the_page_cache_are_the_same_file(tmp_pa
     assert used == (aligned and takes_o_direct(tmp_path))
     assert direct == through
     # a file system refusing O_DIRECT at the first write (EINVAL): the rest through the page cache, the same bytes
-    calls, pwrite = [], os.pwrite
-
-    def refuse(fd, data, offset):
-        if fcntl.fcntl(fd, fcntl.F_GETFL) & getattr(os, "O_DIRECT", 0):
-            calls.append(offset)
-            raise OSError(errno.EINVAL, "Invalid argument")
-        return pwrite(fd, data, offset)
-
-    monkeypatch.setattr(os, "pwrite", refuse)
+    calls = refuse_direct_writes(monkeypatch)
     refused, used = fill("refused.tiff")
     assert refused == through and not used
     assert len(calls) == (1 if aligned and takes_o_direct(tmp_path) else 0)

@@ -234,14 +234,8 @@ def create_raw_tiff(path: str | Path, n: int, shape: tuple[int, int], metadata: 
 
     Parameters
     ----------
-    path : str or Path
-    n : int
-        Frames (pages).
-    shape : (rows, cols)
-    metadata : dict
-        As :func:`write_raw_tiff`'s.
-    dtype : str
-        "uint16" or "float32".
+    path, n, shape, metadata, dtype
+        As :func:`create_tiled_raw_tiff`'s.
 
     Returns
     -------
