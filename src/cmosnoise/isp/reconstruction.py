@@ -203,11 +203,13 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ pictures in one pass
-from ..engine.jit import ONE_LAUNCH, numba  # None where numba is not installed
+from ..engine.jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
 
 #: whether :func:`superpixel_srgb8` and :func:`bilinear_srgb8` can run here (without numba, Processor takes the
 #: steps one by one)
 COMPILED = numba is not None
+#: how the compile message names the one-pass picture loops
+_PICTURE_LOOPS = "the pictures' demosaicing to sRGB"
 
 if numba is not None:
     @numba.njit(inline="always", fastmath=False, error_model="numpy")
@@ -320,6 +322,7 @@ def bilinear_srgb8(cfa_img: np.ndarray, pattern: str, offset: float, white: floa
     if img.dtype not in (np.uint16, np.float32):
         img = img.astype(np.float32)
     m = np.eye(3, dtype=np.float32) if matrix is None else np.asarray(matrix, np.float32)
+    announce(_PICTURE_LOOPS, _bilinear_srgb8, _superpixel_srgb8)
     with ONE_LAUNCH:
         return _bilinear_srgb8(img, cfa_mod.tile(pattern), np.float32(offset), np.float32(white), m,
                                matrix is not None, np.asarray(gains, np.float32), _SRGB8_LUT)
@@ -363,6 +366,7 @@ def superpixel_srgb8(cfa_img: np.ndarray, pattern: str, offset: float, white: fl
     if img.dtype not in (np.uint16, np.float32):
         img = img.astype(np.float32)
     m = np.eye(3, dtype=np.float32) if matrix is None else np.asarray(matrix, np.float32)
+    announce(_PICTURE_LOOPS, _bilinear_srgb8, _superpixel_srgb8)
     with ONE_LAUNCH:
         return _superpixel_srgb8(img, cfa_mod.tile(pattern), np.float32(offset), np.float32(white), m,
                                  matrix is not None, np.asarray(gains, np.float32), _SRGB8_LUT)
