@@ -29,7 +29,7 @@ def _fill(path, frames, direct=True, depth=2):
 
 
 # 1080 x 1920 uint16 (4 MB a frame, not a multiple of 4096 bytes: each frame's tail is carried to the next),
-# 600 x 520 float32 (1.2 MB, a multiple: nothing carried) and a frame smaller than a block
+# 600 x 512 float32 (1.2 MB, a multiple: nothing carried) and a frame smaller than a block
 @pytest.mark.parametrize("dtype, shape, n", [("uint16", (1080, 1920), 3), ("float32", (600, 512), 2),
                                              ("uint16", (10, 30), 5)])
 def test_a_series_written_directly_or_through_the_page_cache_is_tifffiles_file(tmp_path, monkeypatch, dtype,
@@ -73,8 +73,9 @@ def test_the_writers_errors_reach_the_caller_and_nothing_hangs(tmp_path, monkeyp
             out.write(frame)
         out.close()
     out.close()  # closing again is harmless
-    with pytest.raises(ValueError, match=r"\(64, 64\) uint16"):  # a frame of another shape or type: named
-        raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16").write(frames[0, :10])
+    with raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out:
+        with pytest.raises(ValueError, match=r"\(64, 64\) uint16"):  # a frame of another shape or type: named
+            out.write(frames[0, :10])
     # the caller's own error wins over the writer's
     with pytest.raises(KeyError):
         with raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out:
