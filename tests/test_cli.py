@@ -44,6 +44,31 @@ def test_simulate_writes_the_four_outputs(tmp_path):
     np.testing.assert_array_equal(tifffile.imread(again / "raw.tiff"), data)
 
 
+def test_the_time_per_frame_is_the_steady_one_and_a_stalled_frame_counts_as_set_up(tmp_path):
+    """A frame that waits (on a first run: for a loop compiled beside the frames) does not make the steady time
+    per frame: it is the median of the frames after frame 0, and the wait goes to the set-up."""
+    import contextlib
+    import time
+
+    from cmosnoise import load_config
+    from cmosnoise.app import run as run_mod
+
+    calls = []
+
+    @contextlib.contextmanager
+    def progress(_total):
+        def advance():
+            calls.append(1)
+            if len(calls) == 3:  # frame 2 of 6 stalls for 0.5 s
+                time.sleep(0.5)
+        yield advance
+
+    cfg = load_config(extra={"sensor": {"width": 64, "height": 48}, "run": {"frames": 6}})
+    t = run_mod.simulate(cfg, tmp_path / "o", progress=progress)["timings_s"]
+    # 64 x 48 frames take well under 10 ms each; the mean of the five after frame 0 would be over 0.1 s
+    assert len(calls) == 6 and t["frame_s"] < 0.05 and t["set_up"] >= 0.5, t
+
+
 def test_first_frame_option_reproduces_a_slice_of_a_longer_run(tmp_path):
     common = ["--scene", "ramp", "--seed", "4", "--set", "sensor.width=40", "--set", "sensor.height=30"]
     assert run("simulate", *common, "--frames", "10", "--out", tmp_path / "a").returncode == 0

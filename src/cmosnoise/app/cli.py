@@ -154,7 +154,7 @@ def _speed(timings: dict, pixels: int | None = None) -> str:
     ``pixels`` a frame's)."""
     if pixels is not None:  # tiles: set-up and frames overlap on two threads, so only the wall time says it
         return f"{timings['total']:.1f} s in all, {1e9 * timings['total'] / pixels / max(timings['frames'], 1):.1f} ns/pixel"
-    if timings["frame_s"] is None:  # one frame, and it waited for the kernel's first compile
+    if timings["frame_s"] is None:  # a run that compiled the kernel (a machine's first): no frame of it is steady
         return (f"{timings['set_up']:.1f} s, the frame kernel's compile ({timings['stages']['kernel_compile']:.0f} s) "
                 "included: run again for the time per frame")
     return f"{timings['frame_s'] * 1000:.1f} ms/frame after {timings['set_up']:.2f} s of set-up"
