@@ -363,50 +363,47 @@ def test_numba_imported_first_still_gets_the_full_vector_width_or_says_it_did_no
     assert out.stdout.strip() == ("AVX-512 (256-bit preferred)" if avx512 else vectors), out.stdout
 
 
+def _first_of_two_processes(code: str, tmp_path) -> str:
+    """The stderr of ``code`` run in a process with an empty compile cache, after checking that a second process,
+    which loads what the first compiled, says nothing of compiling."""
+    import subprocess
+    import sys
+
+    prelude = "import logging, numpy as np\nlogging.basicConfig(level=logging.INFO, format='%(message)s')\n"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    said = [subprocess.run([sys.executable, "-c", prelude + code], env=env, capture_output=True, text=True,
+                           timeout=600) for _ in range(2)]
+    assert all(r.returncode == 0 for r in said), said[0].stderr + said[1].stderr
+    assert "compil" not in said[1].stderr, said[1].stderr
+    return said[0].stderr
+
+
 def test_the_run_statistics_truth_and_picture_loops_say_once_that_they_compile(tmp_path):
     """#33: a compile of any variant says so once. With an empty compile cache the run statistics, the ground
     truth's expected raw and the pictures' one-pass demosaicing each say once that they compile (the statistics'
     two variants, with and without a frame before, once together); a second process, which loads them from the
     cache, says nothing."""
-    import subprocess
-    import sys
-
-    code = ("import logging, numpy as np\n"
-            "logging.basicConfig(level=logging.INFO, format='%(message)s')\n"
-            "from cmosnoise.analysis.run_stats import RunStats\n"
-            "from cmosnoise.analysis import ground_truth\n"
-            "from cmosnoise.isp import reconstruction\n"
-            "from cmosnoise import Sensor\n"
-            "raw = np.full((40, 60), 100, np.uint16)\n"
-            "st = RunStats(4095)\n"
-            "st.update(raw, raw.astype(np.float32)); st.update(raw, raw.astype(np.float32))\n"
-            "ground_truth.expected_raw(Sensor({'sensor': {'width': 60, 'height': 40}}).expose('flat:0.5'))\n"
-            "reconstruction.bilinear_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n"
-            "reconstruction.superpixel_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n")
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    said = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
-            for _ in range(2)]
-    assert all(r.returncode == 0 for r in said), said[0].stderr + said[1].stderr
+    said = _first_of_two_processes(
+        "from cmosnoise.analysis.run_stats import RunStats\n"
+        "from cmosnoise.analysis import ground_truth\n"
+        "from cmosnoise.isp import reconstruction\n"
+        "from cmosnoise import Sensor\n"
+        "raw = np.full((40, 60), 100, np.uint16)\n"
+        "st = RunStats(4095)\n"
+        "st.update(raw, raw.astype(np.float32)); st.update(raw, raw.astype(np.float32))\n"
+        "ground_truth.expected_raw(Sensor({'sensor': {'width': 60, 'height': 40}}).expose('flat:0.5'))\n"
+        "reconstruction.bilinear_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n"
+        "reconstruction.superpixel_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n", tmp_path)
     for what in ("the run statistics", "the ground truth's expected raw", "the pictures' demosaicing to sRGB"):
-        assert said[0].stderr.count(f"compiling {what} for this machine") == 1, said[0].stderr
-    assert "compil" not in said[1].stderr, said[1].stderr
+        assert said.count(f"compiling {what} for this machine") == 1, said
 
 
 def test_the_summarys_compiled_loops_say_once_that_they_compile(tmp_path):
     """#33: a compile of any variant says so once. With an empty compile cache the summary's reductions (one
     module's loops, several of them compiled in turn) are announced once; a second process, which loads them
     from the cache, says nothing."""
-    import subprocess
-    import sys
-
-    code = ("import logging, numpy as np\n"
-            "logging.basicConfig(level=logging.INFO, format='%(message)s')\n"
-            "from cmosnoise.engine import reduce\n"
-            "a = np.random.default_rng(0).random((300, 300)).astype(np.float32)\n"
-            "reduce.statistics(a); reduce.median(a); reduce.positions_above(a, 0.5); reduce.statistics(a)\n")
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    said = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
-            for _ in range(2)]
-    assert all(r.returncode == 0 for r in said), said[0].stderr + said[1].stderr
-    assert said[0].stderr.count("compiling the summary's reductions for this machine") == 1, said[0].stderr
-    assert "compil" not in said[1].stderr, said[1].stderr
+    said = _first_of_two_processes(
+        "from cmosnoise.engine import reduce\n"
+        "a = np.random.default_rng(0).random((300, 300)).astype(np.float32)\n"
+        "reduce.statistics(a); reduce.median(a); reduce.positions_above(a, 0.5); reduce.statistics(a)\n", tmp_path)
+    assert said.count("compiling the summary's reductions for this machine") == 1, said
