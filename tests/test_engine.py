@@ -380,9 +380,10 @@ def _first_of_two_processes(code: str, tmp_path) -> str:
 
 def test_the_run_statistics_truth_and_picture_loops_say_once_that_they_compile(tmp_path):
     """#33: a compile of any variant says so once. With an empty compile cache the run statistics, the ground
-    truth's expected raw and the pictures' one-pass demosaicing each say once that they compile (the statistics'
-    two variants, with and without a frame before, once together); a second process, which loads them from the
-    cache, says nothing."""
+    truth's expected raw, the pictures' one-pass demosaicing and the random telegraph loops each say once that
+    they compile (the statistics' two variants, with and without a frame before, once together; the traps' and
+    the blinking pixels' loops once together); a second process, which loads them from the cache, says
+    nothing."""
     said = _first_of_two_processes(
         "from cmosnoise.analysis.run_stats import RunStats\n"
         "from cmosnoise.analysis import ground_truth\n"
@@ -393,8 +394,14 @@ def test_the_run_statistics_truth_and_picture_loops_say_once_that_they_compile(t
         "st.update(raw, raw.astype(np.float32)); st.update(raw, raw.astype(np.float32))\n"
         "ground_truth.expected_raw(Sensor({'sensor': {'width': 60, 'height': 40}}).expose('flat:0.5'))\n"
         "reconstruction.bilinear_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n"
-        "reconstruction.superpixel_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n", tmp_path)
-    for what in ("the run statistics", "the ground truth's expected raw", "the pictures' demosaicing to sRGB"):
+        "reconstruction.superpixel_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n"
+        "from cmosnoise.engine import kernel\n"
+        "rts = {'sensor': {'width': 60, 'height': 40}, 'dark_current': {'rts': {'enabled': True, 'ppm': 50000}},\n"
+        "       'source_follower': {'rts': {'enabled': True, 'ppm': 50000}}}\n"
+        "plan = Sensor(rts).expose('flat:0.5').plan()\n"
+        "kernel.trap_values(plan, 0, (0, 40, 0, 60)); kernel.blink_means(plan, 0, (0, 40, 0, 60))\n", tmp_path)
+    for what in ("the run statistics", "the ground truth's expected raw", "the pictures' demosaicing to sRGB",
+                 "the random telegraph loops"):
         assert said.count(f"compiling {what} for this machine") == 1, said
 
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import fdmath, fixed_maps, jit, philox, samplers, telegraph
-from .jit import ONE_LAUNCH, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
 
 _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
 
@@ -858,6 +858,10 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
     return raw, (out_e if electrons or not adc_on else None)
 
 
+#: how the compile message names the random telegraph noise's loops (the traps' and the blinking pixels')
+_TELEGRAPH_LOOPS = "the random telegraph loops"
+
+
 def trap_values(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.ndarray]:
     """(pixel index, what the trap adds in e-) of each trap of ``plan`` inside ``region`` in frame ``frame``
     (random_telegraph.trap_output, compiled)."""
@@ -865,6 +869,7 @@ def trap_values(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.nda
     out = np.empty(traps.index.size)
     k0, k1 = (np.uint64(w) for w in plan.trap_key)
     cds = plan.cds_interval_s is not None
+    announce(_TELEGRAPH_LOOPS, _trap_values, _blink_values)
     with ONE_LAUNCH:
         _trap_values(int(frame), np.uint64(plan.sequence), traps.up, traps.down, traps.size, traps.index, traps.slot,
                      float(plan.frame_period_s), float(plan.cds_interval_s or 0.0), cds, k0, k1, out)
@@ -877,6 +882,7 @@ def blink_means(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.nda
     pixels = plan.blinkers.within(region, plan.shape[1])
     extra = np.empty(pixels.index.size)
     k0, k1 = (np.uint64(w) for w in plan.blink_key)
+    announce(_TELEGRAPH_LOOPS, _trap_values, _blink_values)
     with ONE_LAUNCH:
         _blink_values(int(frame), np.uint64(plan.sequence), pixels.up, pixels.down, pixels.size, pixels.index,
                       pixels.slot, float(plan.frame_period_s), float(plan.exposure_s), k0, k1, extra)
