@@ -10,6 +10,7 @@ import tifffile
 from conftest import refuse_direct_writes, takes_o_direct
 
 from cmosnoise.io import raw_tiff
+from cmosnoise.model.tiles import grid
 
 META = {"cfa": "RGGB", "bits": 12}
 
@@ -81,3 +82,17 @@ def test_the_writers_errors_reach_the_caller_and_nothing_hangs(tmp_path, monkeyp
         with raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out:
             out.write(frames[0])
             raise KeyError("the caller's")
+
+
+def test_a_system_without_pwrite_writes_the_same_file(tmp_path, monkeypatch):
+    """Windows has no os.pwrite: the writers seek and write instead (one thread a descriptor), the same bytes."""
+    frames = _frames("uint16", 3, (100, 70))
+    made = tmp_path / "tifffile.tiff"
+    raw_tiff.write_raw_tiff(made, iter(frames), 3, (100, 70), META, "uint16", align=raw_tiff.DIRECT_ALIGN)
+    monkeypatch.delattr(os, "pwrite")
+    assert _fill(tmp_path / "series.tiff", frames, direct=False)[0] == made.read_bytes()
+    offsets = raw_tiff.create_tiled_raw_tiff(tmp_path / "tiled.tiff", 1, (100, 70), META, "uint16", 64)
+    with raw_tiff.TileWriter(tmp_path / "tiled.tiff", 64, "uint16", direct=False) as out:
+        for t, (r0, r1, c0, c1) in enumerate(grid((100, 70), 64)):  # 4 tiles, 3 of them cut
+            out.write(int(offsets[0, t]), frames[0, r0:r1, c0:c1])
+    assert np.array_equal(tifffile.imread(tmp_path / "tiled.tiff")[0], frames[0])  # a stack of one

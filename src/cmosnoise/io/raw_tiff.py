@@ -188,7 +188,7 @@ class TileWriter:
         #: whether the tiles go to the file directly (False: through the page cache)
         self.direct = self._fd >= 0
         if not self.direct:
-            self._fd = os.open(path, os.O_WRONLY)
+            self._fd = os.open(path, _WRITE)
 
     def write(self, offset: int, data: np.ndarray) -> None:
         """Write one tile's pixels, (rows, cols) with rows, cols <= the tile side, at ``offset``."""
@@ -209,7 +209,7 @@ class TileWriter:
     def _buffered(self) -> None:
         """Through the page cache from now on."""
         os.close(self._fd)
-        self._fd, self.direct = os.open(self._path, os.O_WRONLY), False
+        self._fd, self.direct = os.open(self._path, _WRITE), False
 
     def close(self) -> None:
         if self._fd >= 0:
@@ -312,7 +312,7 @@ class SeriesWriter:
         self._fd = _open_direct(path) if direct and offset % DIRECT_ALIGN == 0 else -1
         #: whether the frames go to the file directly (False: through the page cache)
         self.direct = self._fd >= 0
-        self._cached = os.open(path, os.O_WRONLY)  # the series' last bytes (and all of it where not direct)
+        self._cached = os.open(path, _WRITE)  # the series' last bytes (and all of it where not direct)
         self._error: BaseException | None = None  # the writer's thread's, until raised in the caller's
         self._failed = False  # whether the thread stopped writing (it lets the frames still handed over go)
         self._queue: queue.Queue = queue.Queue(max(1, depth))
@@ -405,18 +405,28 @@ def _open_direct(path: str | Path) -> int:
     if not flag:
         return -1
     try:
-        return os.open(path, os.O_WRONLY | flag)
+        return os.open(path, _WRITE | flag)
     except OSError as exc:
         if exc.errno != errno.EINVAL:  # a file system without O_DIRECT refuses it so
             raise
         return -1
 
 
+#: how the writers open a file: for writing, in binary mode (Windows translates line ends without O_BINARY)
+_WRITE = os.O_WRONLY | getattr(os, "O_BINARY", 0)
+
+
 def _pwrite_all(fd: int, view: memoryview, offset: int) -> None:
-    """All of ``view`` at ``offset`` (pwrite may write less than asked)."""
+    """All of ``view`` at ``offset`` (pwrite may write less than asked). Where the system has no ``pwrite``
+    (Windows), a seek and a write: each writer writes its descriptor from one thread."""
+    pwrite = getattr(os, "pwrite", None)
     done = 0
     while done < len(view):
-        done += os.pwrite(fd, view[done:], offset + done)
+        if pwrite is not None:
+            done += pwrite(fd, view[done:], offset + done)
+        else:
+            os.lseek(fd, offset + done, os.SEEK_SET)
+            done += os.write(fd, view[done:])
 
 
 def write_float_tiff(path: str | Path, image: np.ndarray, metadata: dict) -> None:
