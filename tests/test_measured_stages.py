@@ -2,6 +2,10 @@
 photo-response nonlinearity, read noise after the gain (normal or Tukey-lambda). Each tested as a statistic."""
 
 import math
+import os
+import platform
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -14,6 +18,14 @@ from cmosnoise.model.seeds import fixed_key
 from cmosnoise.model.stages import nonlinearity, pixel_offset, read_noise
 
 SIZE = {"width": 320, "height": 240}
+
+
+def _cpu_flags() -> str:
+    try:
+        with open("/proc/cpuinfo") as fh:
+            return fh.read()
+    except OSError:
+        return ""
 
 
 # ------------------------------------------------------------------ pixel offsets
@@ -175,6 +187,23 @@ def test_linearity_error_is_recovered_from_simulated_flats(pair):
     n = 256 * 256
     se = 100 * math.sqrt(0.05 * full_well / n) / (0.05 * full_well)
     assert abs(lo - reached[0]) <= Z * se and abs(hi - reached[1]) <= Z * se, ((lo, hi), reached, se)
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64") or "avx2" not in _cpu_flags(),
+                    reason="OPENBLAS_CORETYPE names x86-64 kernels; Haswell's needs AVX2")
+def test_the_solved_cubic_is_the_same_bits_under_any_blas_kernel():
+    """The cubic solved from a linearity error does not depend on the CPU: solved in two processes whose OpenBLAS
+    runs different kernels (Prescott's SSE3 and Haswell's AVX2, OPENBLAS_CORETYPE), the coefficients are the
+    same bits. A solve through LAPACK (least_squares' default trust-region method) fails this: its coefficients
+    moved by 1.6e-6 between these two kernels, and by some 3e-5 between an AVX2 and an AVX-512 machine, which
+    moved pixels of the sony-imx900 preset's frames."""
+    code = ("from cmosnoise.model.stages import nonlinearity as n\n"
+            "print([n.solve_polynomial(*p, w)[0] for p, w in [((-1.133, 0.595), 9458.0), ((-0.55, 0.294), 2183.0),"
+            " ((-1.2, 0.6), 20000.0)]])")
+    out = {kind: subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                                env={**os.environ, "OPENBLAS_CORETYPE": kind}).stdout
+           for kind in ("Prescott", "Haswell")}
+    assert out["Prescott"] == out["Haswell"] and out["Prescott"].startswith("[("), out
 
 
 def test_a_curve_is_applied_as_given_and_must_be_increasing(tmp_path):

@@ -314,10 +314,11 @@ if numba is not None:
     _VECTOR_TRIES = np.uint64(3)  # PTRS tries made in SIMD passes over the pixels left; then one by one
 
     @numba.njit(inline="always", **_JIT)
-    def _inversion_lanes(m, u, out):
-        """Poisson by inversion (samplers.poisson_inversion) for _LANES pixels at once, until all are done."""
-        p = np.empty(_LANES)
-        total = np.empty(_LANES)
+    def _inversion_lanes(m, u, out, p, total):
+        """Poisson by inversion (samplers.poisson_inversion) for _LANES pixels at once, until all are done.
+
+        ``p`` and ``total`` are scratch lanes of the caller's (an array made here, at every call, cost a heap
+        allocation per _LANES pixels: a third of the inversion's time, measured)."""
         for q in range(_LANES):
             p[q] = _exp(-m[q])
             total[q] = p[q]
@@ -338,7 +339,7 @@ if numba is not None:
                 break
 
     @numba.njit(inline="always", **_JIT)
-    def _shot_rest(lam, u1, u2, res, small, ns, big, nb, buf, table, base, frame, seq, k0, k1):
+    def _shot_rest(lam, u1, u2, res, small, ns, big, nb, buf, lanes, table, base, frame, seq, k0, k1):
         """The pixels the first pass left: inversion below 10 in SIMD lanes; PTRS: all of try 0, tries 1 and 2, then one by one.
 
         Pixels are copied into the contiguous rows of ``buf`` (10, width)
@@ -350,15 +351,13 @@ if numba is not None:
         bl, bu1, bu2, bk, bll, ba, bb, blia, bvr, bg = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6],
                                                         buf[7], buf[8], buf[9])
         last = np.float64(table.size - 1)
-        m = np.empty(_LANES)
-        u = np.empty(_LANES)
-        got = np.empty(_LANES)
+        m, u, got, p, total = lanes[0], lanes[1], lanes[2], lanes[3], lanes[4]
         for t0 in range(0, ns, _LANES):  # inversion, _LANES pixels at a time (the last lanes padded)
             for q in range(_LANES):
                 t = min(t0 + q, ns - 1)
                 m[q] = lam[small[t]]
                 u[q] = u1[small[t]]
-            _inversion_lanes(m, u, got)
+            _inversion_lanes(m, u, got, p, total)
             for q in range(min(_LANES, ns - t0)):
                 res[small[t0 + q]] = got[q]
         for t in range(nb):
@@ -439,6 +438,7 @@ if numba is not None:
         small = np.empty(w, np.int64)
         big = np.empty(w, np.int64)
         buf = np.empty((10, w))
+        lanes = np.empty((5, _LANES))  # _shot_rest's inversion lanes: means, uniforms, counts, and two scratch
         n = np.zeros(w)
         saved = np.empty(w if (has_blink and blink_exact) else 0)  # a row's counts of its blinking pixels
         noise = np.empty(w)
@@ -455,7 +455,7 @@ if numba is not None:
             base = np.uint64(r * cols + c0)
             if has_noisy:
                 ns, nb = _shot_row(noisy[ra, a0:a1], base, fr, sq, s0, s1, lam, u1, u2, n, small, big, normal_above)
-                _shot_rest(lam, u1, u2, n, small, ns, big, nb, buf, loggam_table, base, fr, sq, s0, s1)
+                _shot_rest(lam, u1, u2, n, small, ns, big, nb, buf, lanes, loggam_table, base, fr, sq, s0, s1)
                 if has_blink and not blink_exact:  # stage 4b: a blinking pixel's count at this frame's mean
                     for e in range(blink_ptr[i], blink_ptr[i + 1]):
                         j = blink_col[e]

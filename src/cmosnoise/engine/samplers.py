@@ -28,7 +28,7 @@ from .fdmath import cos_turn, exp, floor, log, loggam, sincos_turn, where
 from .philox import uniform_pair
 
 #: generator scheme version, written into every output's metadata
-SCHEME_VERSION = 3
+SCHEME_VERSION = 4
 #: below this mean, Poisson by inversion; from it up, PTRS
 PTRS_FROM = 10.0
 #: inversion never goes past this count (P(k > 100 | mean < 10) < 1e-60)

@@ -25,6 +25,7 @@ identity.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,7 +90,7 @@ def solve_polynomial(le_min: float, le_max: float, full_well_e: float) -> tuple[
     well) is nearest the pair, the smallest coefficients breaking ties. A
     smooth transfer cannot give every pair on every series: a compressive
     one whose maximum is above about 0.55 of its minimum's size is met
-    only approximately (``(-1.25, 0.85)`` lands at ``(-1.33, 0.69)``), as
+    only approximately (``(-1.25, 0.85)`` lands at ``(-1.33, 0.68)``), as
     the number depends on the series it was measured on.
 
     Returns
@@ -113,13 +114,19 @@ def solve_polynomial(le_min: float, le_max: float, full_well_e: float) -> tuple[
         lo, hi = reached(p)
         return [lo - le_min, hi - le_max, 1e-6 * p[0], 1e-6 * p[1], 1e-6 * p[2]]
 
-    best = None
+    # MINPACK's Levenberg-Marquardt (method="lm"): its QR and steps are its own compiled code, so the coefficients
+    # are the same bits on every CPU. The default trust-region method solves through LAPACK, whose OpenBLAS kernels
+    # differ by CPU: its coefficients moved by 1.6e-6 (relative) between two kernels of one machine
+    # (OPENBLAS_CORETYPE), and by some 3e-5 between an AVX2 and an AVX-512 machine, enough to move a pixel of a
+    # frame. Each start's cost is summed here (five squares, in order), not taken from least_squares (a BLAS dot).
+    best, best_cost = None, math.inf
     for start in ((-0.05, 0.0, 0.0), (0.05, 0.0, 0.0), (0.0, -0.05, 0.0), (0.0, 0.0, -0.05), (0.0, 0.0, 0.05)):
-        r = least_squares(residual, start, xtol=1e-15, ftol=1e-15, gtol=1e-15)
-        if best is None or r.cost < best.cost:
-            best = r
-    coefficients = tuple(float(v) for v in best.x)
-    lo, hi = reached(best.x)
+        x_end = least_squares(residual, start, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+        cost = sum(float(v) ** 2 for v in residual(x_end))
+        if cost < best_cost:
+            best, best_cost = x_end, cost
+    coefficients = tuple(float(v) for v in best)
+    lo, hi = reached(best)
     s = np.linspace(0.0, 1.0, 1001)
     a, b, c = coefficients
     monotone = bool(np.all(1.0 + 2 * a * s + 3 * b * s * s + 4 * c * s**3 > 0))
