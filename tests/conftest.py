@@ -54,6 +54,14 @@ def pytest_collection_modifyitems(items):
     items.sort(key=lambda item: (item.name != FIRST_RUN_TEST, item.path.name != LONGEST_FILE))  # stable
 
 
+#: what another x86-64 CPU would change, changed in a child process on this one: NumPy's SIMD loops off (its float64
+#: exp, log, power and sin give other last bits without its AVX2 loops, measured), OpenBLAS's Prescott kernels (other
+#: sums in a dot or a LAPACK solve), and glibc's libm without its FMA and AVX2 variants (exp, sin, log and erfc,
+#: which compiled loops call through math.*, give other last bits, measured on glibc 2.36)
+ANOTHER_CPU = {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR", "OPENBLAS_CORETYPE": "Prescott",
+               "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F"}
+
+
 #: number of standard errors a statistic may stray before a test fails.
 #: 5 sigma: a correct implementation fails about once in 1.7 million runs.
 Z = 5.0

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 import yaml
-from conftest import cli, free_port, stop_process, wait_for_port
+from conftest import ANOTHER_CPU, cli, free_port, stop_process, wait_for_port
 
 from cmosnoise import Sensor
 from cmosnoise.analysis import ground_truth as gt
@@ -99,6 +99,32 @@ def test_a_sample_depends_on_its_index_alone():
     assert ca["window_row"] % 2 == 0 and ca["window_col"] % 2 == 0
     img = scene_mod.source_image(ca["source"], (ds.BUILTIN_SIZE, ds.BUILTIN_SIZE))
     assert 0 <= ca["window_row"] <= img.shape[0] - 32
+
+
+_DIGEST_SAMPLES = ("import hashlib, sys\n"
+                   "import numpy as np\n"
+                   "from cmosnoise.app import dataset as ds\n"
+                   "r = ds.Recipe(samples=6, crop=(128, 128), cameras=('led', 'eld', 'sony-imx900'), seed=3,\n"
+                   "              overrides=('defects.enabled=true', 'defects.dead_ppm=2000', 'defects.stuck_ppm=2000'))\n"
+                   "h = hashlib.sha256()\n"
+                   "for i in range(r.samples):\n"
+                   "    a, _ = ds.make_sample(r, i)\n"
+                   "    for k in ds.ARRAYS:\n"
+                   "        h.update(np.ascontiguousarray(a[k]).tobytes())\n"
+                   "print(h.hexdigest())\n")
+
+
+@pytest.mark.skipif(sys.platform != "linux" or os.uname().machine != "x86_64",
+                    reason="x86-64 dispatch targets, BLAS kernels and glibc's tunables")
+def test_samples_and_their_truths_do_not_depend_on_the_cpu():
+    """The noisy raws and every truth (expected raw, perfect image, mask) of samples over three camera families,
+    made in a child process as another CPU would make them (conftest.ANOTHER_CPU: NumPy's baseline loops, OpenBLAS's
+    Prescott kernels, libm without its FMA variants, each of which gives other last bits), are the same bytes: the
+    expected raw's compiled pass calls exp, sin and erfc through libm, and the truths' NumPy parts take exp and
+    log from NumPy."""
+    made = [subprocess.run([sys.executable, "-c", _DIGEST_SAMPLES], capture_output=True, text=True, check=True,
+                           env={**os.environ, **extra}).stdout for extra in ({}, ANOTHER_CPU)]
+    assert made[0] == made[1] and len(made[0].strip()) == 64, made
 
 
 @pytest.mark.parametrize("fmt", ["npz", "fits"])

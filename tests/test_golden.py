@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ANOTHER_CPU
 
 import cmosnoise
 from cmosnoise import Sensor
@@ -68,19 +69,13 @@ def test_frames_and_maps_have_the_pinned_bits(name):
                                        "and pin the new bits in a new golden file, or undo the change")
 
 
-#: NumPy's SIMD dispatch targets above its x86-64 baseline, switched off in a child process (NPY_DISABLE_CPU_FEATURES):
-#: its float64 exp, log, power and sin give other last bits there (measured on an AVX2 machine)
-_NUMPY_SIMD = "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"
-
-
 @pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86-64 dispatch targets and BLAS kernels")
-def test_the_pinned_bits_do_not_depend_on_numpys_simd_or_the_blas_kernel():
-    """What another CPU would change, changed on this one: every digest made again in a child process whose NumPy
-    runs its baseline loops (no AVX2 or AVX-512 dispatch: other last bits of float64 exp, log, power, sin) and
-    whose OpenBLAS runs its Prescott kernels (SSE3: other sums in a dot or a LAPACK solve) is the pinned one. The
-    nonlinearity's cubic, solved through LAPACK under scheme 3, gave another machine other frames of the
-    sony-imx900 preset (docs/reproducibility.md)."""
-    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": _NUMPY_SIMD, "OPENBLAS_CORETYPE": "Prescott"}
+def test_the_pinned_bits_do_not_depend_on_numpys_simd_the_blas_kernel_or_libm():
+    """What another CPU would change, changed on this one (conftest.ANOTHER_CPU): every digest made again in a child
+    process whose NumPy, OpenBLAS and libm take other code paths is the pinned one. The nonlinearity's cubic,
+    solved through LAPACK under scheme 3, gave another machine other frames of the sony-imx900 preset
+    (docs/reproducibility.md)."""
+    env = {**os.environ, **ANOTHER_CPU}
     out = subprocess.run([sys.executable, __file__], capture_output=True, text=True, env=env, check=True)
     made, pinned = json.loads(out.stdout), json.loads(GOLDEN.read_text())
     moved = [(name, part, key) for name in pinned for part in pinned[name] for key in pinned[name][part]
