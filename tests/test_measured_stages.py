@@ -311,6 +311,18 @@ def test_tabulated_tukey_lambda_of_a_normal_is_scipys(shape):
     np.testing.assert_allclose(ours, exact, rtol=1e-5, atol=0)
 
 
+@pytest.mark.parametrize("shape", [-0.49, -0.2, -0.05, 0.0, 1e-12, 0.1474653, 1.0, 2.0])
+def test_the_kernels_tukey_table_is_the_specifications_bits(shape):
+    """The frame kernel's Tukey-lambda table (compiled, made for every new shape: a data set of virtual cameras
+    asks for one every sample) is samplers.tukey_lambda_table's, bit for bit, and read-only."""
+    from cmosnoise.engine import kernel
+    from cmosnoise.engine.samplers import tukey_lambda_table
+
+    ours, spec = kernel.tukey_table(shape), tukey_lambda_table(shape)
+    assert ours.dtype == spec.dtype and ours.tobytes() == spec.tobytes()
+    assert not ours.flags.writeable
+
+
 def test_the_normal_tail_at_the_tables_nodes_is_scipys():
     """Phi(-z) at the Tukey table's nodes (Gauss-Legendre steps with fdmath's exp, summed from z = 12) against
     scipy.special.ndtr: 5-point rules on steps of 0.001 are exact to rounding, and a sum of 11 000 positive

@@ -91,7 +91,7 @@ def normal_tail_nodes() -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=1)
-def _tukey_node_logs() -> tuple[np.ndarray, np.ndarray]:
+def tukey_node_logs() -> tuple[np.ndarray, np.ndarray]:
     """``log(v)`` and ``log(1 - v)`` at :func:`tukey_lambda_table`'s nodes (``v = Phi(-z_k)``): the same for every
     shape, made once (a data set of virtual cameras asks for a new shape every sample). Read-only."""
     v = normal_tail_nodes()
@@ -111,7 +111,7 @@ def tukey_lambda_table(lam: float) -> np.ndarray:
     Computed with :mod:`.fdmath`'s log and exp (the same bits everywhere);
     node 0 is 0 (the law is odd); read-only.
     """
-    a, b = _tukey_node_logs()
+    a, b = tukey_node_logs()
     q = a - b if lam == 0.0 else (exp(lam * a) - exp(lam * b)) / lam
     out = np.ascontiguousarray(0.0 - q)
     out[0] = 0.0
