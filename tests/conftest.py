@@ -4,6 +4,7 @@ import atexit
 import contextlib
 import io
 import os
+import platform
 import shutil
 import subprocess
 import sys
@@ -60,6 +61,9 @@ def pytest_collection_modifyitems(items):
 #: which compiled loops call through math.*, give other last bits, measured on glibc 2.36)
 ANOTHER_CPU = {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR", "OPENBLAS_CORETYPE": "Prescott",
                "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F"}
+#: where ANOTHER_CPU's names mean something (x86-64 dispatch targets and BLAS kernels; glibc's tunables elsewhere
+#: are ignored)
+X86_64 = platform.machine() in ("x86_64", "AMD64")
 
 
 #: number of standard errors a statistic may stray before a test fails.

@@ -127,17 +127,18 @@ def test_sony_imx900_characterizes_as_its_data_sheet_in_both_conversion_gains(ga
     (EMVA's photon-transfer K and saturation read through the sheet's linearity error, which the preset
     reproduces as a curve: -3.4 % and -4.7 % in LCG), dark noise 4 %, DSNU and PRNU 10 % (on 256 x 192 pixels
     a spatial sigma's 5-sigma sampling error is 5 / sqrt(2 49152) = 1.6 %; the rest is the dark current's share),
-    SNR max and dynamic range within 1 dB. The HCG row's saturation 7 %: its cubic meets the sheet's linearity
+    SNR max and dynamic range within 1 dB. The HCG row's saturation 11 %: its cubic meets the sheet's linearity
     error (-0.55, 0.294) exactly since scheme 4 (MINPACK's fit; the trust-region fit stopped at (-0.56, 0.27)),
-    and EMVA's saturation read through that curve is 6.6 % below the sheet's 2183 e- (2039, measured): a cubic
-    cannot give both of the sheet's figures at once."""
+    and EMVA's saturation read through that curve at the series' point 28 is 6.6 % below the sheet's 2183 e-
+    (2040, measured; a cubic cannot give both of the sheet's figures at once), plus one step of the series
+    (3.6 %: the variance maximum falls on point 27 with other seeds, 1959 e- measured at seed 1)."""
     r = cli("-q", "characterize", "-p", "sony-imx900", "--set", f"sensor.gain_db={gain_db}", "--set",
             "sensor.width=256", "--set", "sensor.height=192", "--out", tmp_path / "c")
     assert r.returncode == 0, r.stderr
     m = json.loads((tmp_path / "c" / "characterization.json").read_text())["measured"]
     sheet = IMX900[gain_db]
     for key, rel in (("system_gain_K_dn_per_e", 0.04), ("temporal_dark_noise_e", 0.04),
-                     ("saturation_capacity_e", 0.06 if gain_db == 0 else 0.07), ("dsnu_e", 0.10), ("prnu_pct", 0.10)):
+                     ("saturation_capacity_e", 0.06 if gain_db == 0 else 0.11), ("dsnu_e", 0.10), ("prnu_pct", 0.10)):
         assert m[key] == pytest.approx(sheet[key], rel=rel), key
     for key in ("snr_max_db", "dynamic_range_db"):
         assert m[key] == pytest.approx(sheet[key], abs=1.0), key

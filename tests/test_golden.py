@@ -14,14 +14,13 @@ unnoticed.
 import hashlib
 import json
 import os
-import platform
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ANOTHER_CPU
+from conftest import ANOTHER_CPU, X86_64
 
 import cmosnoise
 from cmosnoise import Sensor
@@ -69,7 +68,7 @@ def test_frames_and_maps_have_the_pinned_bits(name):
                                        "and pin the new bits in a new golden file, or undo the change")
 
 
-@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86-64 dispatch targets and BLAS kernels")
+@pytest.mark.skipif(not X86_64, reason="x86-64 dispatch targets and BLAS kernels")
 def test_the_pinned_bits_do_not_depend_on_numpys_simd_the_blas_kernel_or_libm():
     """What another CPU would change, changed on this one (conftest.ANOTHER_CPU): every digest made again in a child
     process whose NumPy, OpenBLAS and libm take other code paths is the pinned one. The nonlinearity's cubic,

@@ -3,13 +3,12 @@ photo-response nonlinearity, read noise after the gain (normal or Tukey-lambda).
 
 import math
 import os
-import platform
 import subprocess
 import sys
 
 import numpy as np
 import pytest
-from conftest import Z, assert_close, cli, quiet_config
+from conftest import X86_64, Z, assert_close, cli, quiet_config
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
@@ -189,7 +188,7 @@ def test_linearity_error_is_recovered_from_simulated_flats(pair):
     assert abs(lo - reached[0]) <= Z * se and abs(hi - reached[1]) <= Z * se, ((lo, hi), reached, se)
 
 
-@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64") or "avx2" not in _cpu_flags(),
+@pytest.mark.skipif(not X86_64 or "avx2" not in _cpu_flags(),
                     reason="OPENBLAS_CORETYPE names x86-64 kernels; Haswell's needs AVX2")
 def test_the_solved_cubic_is_the_same_bits_under_any_blas_kernel():
     """The cubic solved from a linearity error does not depend on the CPU: solved in two processes whose OpenBLAS
