@@ -226,11 +226,56 @@ def dataset_samples(camera: str, batch: int, repeats: int, crop: int = 512) -> d
         cuda.synchronize()
 
     t_launch = timed(launch, repeats) / batch
+    parts = sample_parts(recipe, sources, batch, repeats)
+    # the same samples on this machine's CPU, in the same run: one process, then the per-sample rate times the
+    # cores (the data set's --workers runs one process a core; its shards share nothing)
+    cpu_starts = iter(range(0, ds.MAX_SAMPLES, 8))
+
+    def cpu_whole():
+        s = next(cpu_starts)
+        ds.make_samples(recipe, range(s, s + 8), sources, device="cpu")
+
+    t_cpu = timed(cpu_whole, max(2, repeats // 3)) / 8
+    cores = os.cpu_count() or 1
     row = {"what": f"{crop} x {crop} data set samples ({camera}: a sensor each), launches of {batch}",
            "batch": batch, "samples_per_s": 1 / t_whole, "upload_per_s": 1 / t_upload,
-           "launch_per_s": 1 / t_launch}
+           "launch_per_s": 1 / t_launch, "cpu_samples_per_s_one_process": 1 / t_cpu,
+           "cpu_samples_per_s_all_cores": cores / t_cpu, "cores": cores,
+           "gpu_over_cpu_one_process": t_cpu / t_whole, "gpu_over_cpu_all_cores": t_cpu / (cores * t_whole),
+           "ms_per_sample": parts}
     print(json.dumps(row), flush=True)
     return row
+
+
+def sample_parts(recipe, sources, batch: int, repeats: int) -> dict:
+    """Where a GPU data set sample's time goes, in ms a sample (median over ``repeats`` batches of ``batch``):
+    the host's set-up (settings, sensor, maps, the crop exposed), the plans' upload, the launch, the copy back,
+    and the truth (perfect image, expected raw, mask) with the sample's columns, made on the host."""
+    from cmosnoise.app import dataset as ds
+
+    cuda = cuda_kernel.kernels().cuda
+    starts = iter(range(10**6, ds.MAX_SAMPLES, batch))
+    times = {"set_up": [], "upload": [], "launch": [], "copy_back": [], "truth": []}
+    for _ in range(repeats + 1):
+        s = next(starts)
+        t0 = time.perf_counter()
+        made = [ds._exposure(recipe, i, sources, "cuda") for i in range(s, s + batch)]
+        t1 = time.perf_counter()
+        plan = cuda_kernel.DevicePlan([shot.plan() for shot, _ in made], [shot.stuck_pixels() for shot, _ in made])
+        cuda.synchronize()
+        t2 = time.perf_counter()
+        raw, _ = plan.render(list(range(batch)))
+        cuda.synchronize()
+        t3 = time.perf_counter()
+        raws = raw.copy_to_host()
+        t4 = time.perf_counter()
+        for b, (shot, st) in enumerate(made):
+            ds._finish(recipe, shot, st, raws[b])
+        t5 = time.perf_counter()
+        for key, a, b in (("set_up", t0, t1), ("upload", t1, t2), ("launch", t2, t3), ("copy_back", t3, t4),
+                          ("truth", t4, t5)):
+            times[key].append((b - a) / batch * 1e3)
+    return {key: float(np.median(v[1:])) for key, v in times.items()}  # the first batch compiles: left out
 
 
 def main() -> None:
@@ -239,6 +284,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="fewer frames and repeats")
     ap.add_argument("--skip-bits", action="store_true")
     ap.add_argument("--only-training", action="store_true", help="the training crops alone")
+    ap.add_argument("--only-dataset", action="store_true", help="the data set's samples alone (GPU and CPU)")
     a = ap.parse_args()
     cuda_kernel.check()
     import numba
@@ -257,6 +303,11 @@ def main() -> None:
             print(f"{row['what']}: {row['samples_per_s']:.0f} / s (plans uploaded {row['upload_per_s']:.0f} / s, "
                   f"frames made {row['launch_per_s']:.0f} / s)")
         return
+    if a.only_dataset:
+        doc["dataset"] = [dataset_samples(camera, 64, repeats) for camera in ("led", "sony-imx900")]
+        if a.json:
+            a.json.write_text(json.dumps(doc, indent=1))
+        return
     t0 = time.perf_counter()
     doc["bits"] = {} if a.skip_bits else check_bits(a.quick)
     doc["bits_s"] = time.perf_counter() - t0
@@ -272,8 +323,12 @@ def main() -> None:
     for r in doc["speed"]:
         print(f"{r['size']:>12} {r['sensor']:>12} {r['gpu_kernel_fps']:>11.0f} {r['gpu_to_host_fps']:>10.0f} "
               f"{r['cpu_kernel_fps']:>11.1f} {r['numpy_reference_fps']:>10.1f}")
-    for r in doc["training"] + doc["dataset"]:
+    for r in doc["training"]:
         print(f"{r['what']}: {r['samples_per_s']:.0f} / s")
+    for r in doc["dataset"]:
+        print(f"{r['what']}: {r['samples_per_s']:.0f} / s on the GPU, {r['cpu_samples_per_s_one_process']:.1f} / s "
+              f"in one CPU process ({r['cpu_samples_per_s_all_cores']:.0f} / s on {r['cores']} cores); ms a sample: "
+              + ", ".join(f"{k} {v:.2f}" for k, v in r["ms_per_sample"].items()))
     print("threads per block:", ", ".join(f"{r['block']}: {r['gpu_kernel_fps']:.0f} fps" for r in doc["blocks"]),
           f"({doc['blocks'][0]['registers']} registers a thread)")
 
