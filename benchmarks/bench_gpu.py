@@ -81,6 +81,7 @@ def check_bits(quick: bool) -> dict:
     n = 20 if quick else 100
     raw = gpu.frames_on_device(list(range(n)))[0].copy_to_host()
     out[f"1080p default: {n} frames in one batch"] = all(np.array_equal(raw[k], cpu.frame(k)) for k in range(n))
+    print(f"bits {n} frames in one batch: {out[f'1080p default: {n} frames in one batch']}", flush=True)
     rng = np.random.default_rng(1)
     corners = np.stack([rng.integers(0, 1080 - 512, 16), rng.integers(0, 1920 - 512, 16)], axis=1)
     frames = rng.integers(0, 1000, 16)
@@ -89,12 +90,15 @@ def check_bits(quick: bool) -> dict:
     out["512 x 512 crops of every stage at 16 random corners and frames"] = all(
         np.array_equal(crops[b], cpu.frame(int(k), region=(r, r + 512, c, c + 512)))
         for b, (k, (r, c)) in enumerate(zip(frames, corners)))
+    print(f"bits crops: {out['512 x 512 crops of every stage at 16 random corners and frames']}", flush=True)
     # different sensors in one launch: every preset's 512 x 512 sensor, a frame each (the data set's batches)
     shots = [Sensor(load_config(preset=name, extra=sized(None, 512, 512)), seed=11 + q).expose("photo")
              for q, name in enumerate(preset_names())]
     raw = frames_together(shots, frames=list(range(len(shots))))[0].copy_to_host()
-    out[f"512 x 512: {len(shots)} presets' sensors in one launch"] = all(
+    key = f"512 x 512: {len(shots)} presets' sensors in one launch"
+    out[key] = all(
         np.array_equal(raw[b], shot.frame(b)) for b, shot in enumerate(shots))
+    print(f"bits {key}: {out[key]}", flush=True)
     try:
         import torch
 
@@ -308,16 +312,24 @@ def main() -> None:
         if a.json:
             a.json.write_text(json.dumps(doc, indent=1))
         return
+    def save():  # after every section: a run cut by a time limit keeps what it measured
+        if a.json:
+            a.json.write_text(json.dumps(doc, indent=1))
+
     t0 = time.perf_counter()
     doc["bits"] = {} if a.skip_bits else check_bits(a.quick)
     doc["bits_s"] = time.perf_counter() - t0
-    doc["speed"] = [speed(1920, 1080, "default", None, 32, repeats), speed(1920, 1080, "every stage", EVERY, 32, repeats),
-                    speed(3840, 2160, "default", None, 8, repeats), speed(3840, 2160, "every stage", EVERY, 8, repeats)]
+    save()
+    doc["speed"] = []
+    for args in ((1920, 1080, "default", None, 32), (1920, 1080, "every stage", EVERY, 32),
+                 (3840, 2160, "default", None, 8), (3840, 2160, "every stage", EVERY, 8)):
+        doc["speed"].append(speed(*args, repeats))
+        save()
     doc["blocks"] = blocks(repeats)
     doc["training"] = [training_crops("default", None, 256, repeats), training_crops("every stage", EVERY, 256, repeats)]
+    save()
     doc["dataset"] = [dataset_samples(camera, 64, repeats) for camera in ("led", "sony-imx900")]
-    if a.json:
-        a.json.write_text(json.dumps(doc, indent=1))
+    save()
     print("\nbits:", "all equal" if all(v is True for v in doc["bits"].values()) else doc["bits"], list(doc["bits"]))
     print(f"{'size':>12} {'sensor':>12} {'GPU kernel':>11} {'GPU->host':>10} {'CPU kernel':>11} {'NumPy ref':>10}")
     for r in doc["speed"]:

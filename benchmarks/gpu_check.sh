@@ -25,8 +25,10 @@ if ls .whl/*.whl >/dev/null 2>&1; then
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" $others
 fi
 export PYTHONPATH="$SITE:$PWD/src"
-if ! python3 -c "import numba.cuda" >"$OUT/numpy_probe.log" 2>&1 && ls .whl/numpy-*.whl >/dev/null 2>&1; then
-  echo "numba-cuda does not import beside this NumPy ($(tail -1 "$OUT/numpy_probe.log")): the carried NumPy"
+# numba-cuda 0.30 overloads np.row_stack, which NumPy 2.5 no longer has: it imports, then fails at the first use
+if ! python3 -c "import numpy, sys; sys.exit(tuple(map(int, numpy.__version__.split('.')[:2])) >= (2, 5))" \
+    && ls .whl/numpy-*.whl >/dev/null 2>&1; then
+  echo "NumPy $(python3 -c 'import numpy; print(numpy.__version__)') is too new for numba-cuda 0.30: the carried one"
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE-numpy" .whl/numpy-*.whl
   export PYTHONPATH="$SITE-numpy:$PYTHONPATH"
 fi
@@ -37,6 +39,7 @@ print(sys.version.split()[0], 'numpy', numpy.__version__, 'numba', numba.__versi
       'scipy', scipy.__version__)
 import numba.cuda as c; print('cuda available:', c.is_available()); c.detect()"
   nproc
+  python3 -c "import cmosnoise.model.sensor, cmosnoise.engine.cuda_kernel; print('cmosnoise imports')"
 } 2>&1 | tee "$OUT/environment.txt"
 
 echo "== GPU tests (CMOSNOISE_TEST_GPU=1)"

@@ -455,7 +455,8 @@ def render_dataset_speed(d: dict) -> str:
 
 
 def render_gpu_speed(d: dict) -> str:
-    lines = [f"Measured with `{d['command']}` on one {d['device']} (numba-cuda {d['numba_cuda']}, numba {d['numba']}; "
+    driver = f"driver {d['driver']}, " if d.get("driver") else ""
+    lines = [f"Measured with `{d['command']}` on one {d['device']} ({driver}numba-cuda {d['numba_cuda']}, numba {d['numba']}; "
              f"host: {d['host']['cpu']}, {d['host']['cores']} cores, {d['host']['vectors']}). Frames per second, the "
              "CPU kernel and the NumPy reference timed in the same run on that host:", "",
              "| frame | sensor | GPU kernel (frames left on the GPU) | GPU, copied to host memory | CPU kernel "
@@ -467,9 +468,25 @@ def render_gpu_speed(d: dict) -> str:
     lines += ["", "| training data | samples / s |", "|---|---|"]
     for r in d["training"]:
         lines.append(f"| {r['what']}, batches of {r['batch']} | {_int(round(r['samples_per_s']))} |")
+    if d.get("dataset"):
+        lines += ["", "| `cmosnoise dataset` samples (a sensor each) | GPU, samples / s | CPU, one process | CPU, "
+                      "all cores | ms a GPU sample: set-up, upload, launch, copy back, truth |", "|---|---|---|---|---|"]
+        for r in d["dataset"]:
+            parts = r["ms_per_sample"]
+            lines.append(f"| {r['what']} | {r['samples_per_s']:.0f} | {r['cpu_samples_per_s_one_process']:.0f} | "
+                         f"{r['cpu_samples_per_s_all_cores']:.0f} ({r['cores']}) | "
+                         + " / ".join(f"{parts[k]:.2f}" for k in ("set_up", "upload", "launch", "copy_back", "truth"))
+                         + " |")
     ok = all(v is True for v in d["bits"].values())
     lines += ["", f"Bit for bit equal to the CPU kernel in the same run ({'every check' if ok else 'NOT every check'}): "
               + "; ".join(d["bits"]) + "."]
+    if d.get("device_tests"):
+        t = d["device_tests"]
+        lines += ["", f"The GPU tests on the device (`{t['command']}`): {t['passed']} passed, {t['skipped']} skipped, "
+                      f"{t['failed']} failed ({t['failed_test']}), {t.get('not_run', 0)} not run ("
+                      + ", ".join(t.get("not_run_tests", [])) + f": {t.get('not_run_note', '')})."]
+    if d.get("run_note"):
+        lines += ["", f"The run: {d['run_note']}."]
     if d.get("training_note"):
         lines += ["", f"The training rows were {d['training_note']}."]
     if d.get("later_quick_run"):

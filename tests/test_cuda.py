@@ -157,10 +157,15 @@ def test_plans_of_one_batch_must_share_a_shape_and_the_adc():
     with pytest.raises(ValueError, match="plan numbers from 0 to 1"):
         plan.render([0, 1], plans=[0, 2])
     # the mean charge of several plans from one (P, rows, cols) array on the GPU; one plan's alone is refused
+    # (a GPU array of the wrong shape: a NumPy array is host memory, which a real GPU refuses before its shape)
+    cuda = cuda_kernel.kernels().cuda
     means = np.stack([a.plan().noisy_e] * 2).astype(np.float32)
     with pytest.raises(CmosnoiseError, match=rf"expected a float32 array of \(2, {HEIGHT}, {WIDTH}\)"):
-        plan.with_means(noisy_e=means[0])
-    given = plan.with_means(noisy_e=cuda_kernel.kernels().cuda.to_device(means))
+        plan.with_means(noisy_e=cuda.to_device(means[0]))
+    if not SIMULATED:  # the simulator's "GPU" arrays are host memory
+        with pytest.raises(CmosnoiseError, match="noisy_e: .*expected one on the GPU"):
+            plan.with_means(noisy_e=means)
+    given = plan.with_means(noisy_e=cuda.to_device(means))
     np.testing.assert_array_equal(given.render([3, 4], shape=(4, 6))[0].copy_to_host(),
                                   plan.render([3, 4], shape=(4, 6))[0].copy_to_host())
 
