@@ -53,6 +53,9 @@ def pytest_collection_modifyitems(items):
     longest file. xdist hands files to its two workers in this order (pyproject's ``--no-loadscope-reorder``):
     the first-run test's file to one, the longest file to the other."""
     items.sort(key=lambda item: (item.name != FIRST_RUN_TEST, item.path.name != LONGEST_FILE))  # stable
+    for item in items:  # a GPU test is slow too: `-m "not slow"` leaves the CUDA simulator's tests out
+        if item.get_closest_marker("gpu") and not item.get_closest_marker("slow"):
+            item.add_marker(pytest.mark.slow)
 
 
 #: what another x86-64 CPU would change, changed in a child process on this one: NumPy's SIMD loops off (its float64

@@ -26,6 +26,7 @@ def _ols_coefficients(t):
     return np.linalg.solve(x.T @ x, x.T)
 
 
+@pytest.mark.slow
 def test_recovers_k_temporal_dark_noise_dark_current_dsnu_prnu(default_run):
     sensor, m, res, model = default_run
     k = model["system_gain_K_dn_per_e"]
@@ -167,6 +168,7 @@ NO_K = {"paper-fig3-prnu", "paper-fig4-crosstalk"}
 
 
 @pytest.mark.parametrize("preset", preset_names())
+@pytest.mark.slow
 def test_characterize_agrees_with_the_model_on_every_preset(preset):
     """Measured against the model within Z standard errors (sampling theory), or n/a with a reason.
 

@@ -2,6 +2,7 @@
 
 import json
 
+import pytest
 from conftest import cli
 
 from cmosnoise.app import compare as cmp
@@ -35,6 +36,7 @@ def test_runs_of_one_sensor_with_other_seeds_differ_within_sampling_error(tmp_pa
     assert flagged <= 0.05 * total, (flagged, total)
 
 
+@pytest.mark.slow
 def test_25_against_65_c_flags_the_dark_current_figures(tmp_path):
     """At VGA (the default size): 200 ppm above 250 aA at 65 C are 61 white pixels against 0 to 1 at 25 C, a
     difference of 7 or more standard errors (a small sensor's handful would be within sampling error, rightly)."""

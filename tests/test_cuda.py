@@ -70,6 +70,7 @@ VARIANTS = {
 
 
 @pytest.mark.parametrize("name", list(VARIANTS))
+@pytest.mark.gpu
 def test_every_stage_on_equals_the_cpu_kernel_bit_for_bit_with_electrons_and_far_frames(name):
     cpu, gpu = _pair(VARIANTS[name])
     frames = [0, 3, 1_000_000] if SIMULATED else list(range(8)) + [4_000_000_000]
@@ -84,6 +85,7 @@ def test_every_stage_on_equals_the_cpu_kernel_bit_for_bit_with_electrons_and_far
 
 
 @pytest.mark.parametrize("preset", ["sony-a7s2", "sony-imx900", "sony-imx571", "paper-fig11-full", None])
+@pytest.mark.gpu
 def test_each_preset_equals_the_cpu_kernel(preset):
     cpu, gpu = _pair(preset=preset, seed=9)
     for k in (0, 2):
@@ -91,6 +93,7 @@ def test_each_preset_equals_the_cpu_kernel(preset):
 
 
 @pytest.mark.parametrize("kind", ["normal", "tukey_lambda"])
+@pytest.mark.gpu
 def test_read_noise_without_the_source_follower_equals_the_cpu_kernel(kind):
     """Read noise after the gain takes the sine normal of the source follower's block: with that stage off the
     block is still drawn, on either device."""
@@ -100,6 +103,7 @@ def test_read_noise_without_the_source_follower_equals_the_cpu_kernel(kind):
         np.testing.assert_array_equal(gpu.frame(k), cpu.frame(k), err_msg=f"{kind} frame {k}")
 
 
+@pytest.mark.gpu
 def test_a_batch_of_crops_at_different_corners_equals_the_crops_of_the_whole_frames():
     cpu, gpu = _pair(EVERY, seed=7)
     h, w = HEIGHT // 2, WIDTH // 3
@@ -113,6 +117,7 @@ def test_a_batch_of_crops_at_different_corners_equals_the_crops_of_the_whole_fra
     np.testing.assert_array_equal(gpu.frame(9, region=(3, h + 3, 5, w + 5)), cpu.frame(9, region=(3, h + 3, 5, w + 5)))
 
 
+@pytest.mark.gpu
 def test_a_batch_of_different_sensors_in_one_launch_equals_each_sensors_own_frames():
     """#31: crops from different samples (each its own sensor: presets, stages, populations, tables and seeds
     differ) in one launch; each item is its plan's frame bit for bit, whatever the other plans hold."""
@@ -170,6 +175,7 @@ def test_plans_of_one_batch_must_share_a_shape_and_the_adc():
                                   plan.render([3, 4], shape=(4, 6))[0].copy_to_host())
 
 
+@pytest.mark.gpu
 def test_the_device_arrays_are_the_cuda_array_interface_and_the_plan_is_uploaded_once():
     _, gpu = _pair(seed=3)
     raw, e = gpu.frames_on_device(1)
@@ -204,6 +210,7 @@ def test_without_a_gpu_device_cuda_is_one_line_and_exit_2():
     assert "device = 'cuda'" in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.gpu
 def test_simulate_with_device_cuda_writes_the_cpu_runs_frames(tmp_path):
     common = ["-q", "simulate", "--frames", "2", "--set", f"sensor.width={WIDTH}", "--set", f"sensor.height={HEIGHT}"]
     assert cli(*common, "--out", tmp_path / "cpu").returncode == 0
@@ -277,6 +284,7 @@ _PTX_PROBE = textwrap.dedent('''
 ''')
 
 
+@pytest.mark.gpu
 def test_nvvm_compiles_the_kernels_without_multiply_add_contraction():
     """NVVM contracts ``a * b + c`` into ``fma`` unless told ``-fma=0``: compiled as launched (PTX for compute
     9.0, NVVM alone), every kernel under strict_arithmetic has no float64 ``fma`` and rounds each product on its
@@ -298,6 +306,7 @@ def test_nvvm_compiles_the_kernels_without_multiply_add_contraction():
     assert all(counts[k]["loose_fma"] > 0 for k in ("lines", "trap_values", "blink_values", "heavy_tail_map"))
 
 
+@pytest.mark.gpu
 def test_crops_of_a_map_on_the_device_are_the_maps_crops():
     """The truth of a batch of crops: one launch cuts the same corners out of an exposure's map."""
     rng = np.random.default_rng(0)
@@ -310,6 +319,7 @@ def test_crops_of_a_map_on_the_device_are_the_maps_crops():
         cuda_kernel.crops(source, [(HEIGHT - 5, 0)], (10, 12))
 
 
+@pytest.mark.gpu
 def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_path, monkeypatch):
     from cmosnoise.app import dataset as ds
     from cmosnoise.app import sweep as sw
@@ -329,6 +339,7 @@ def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_
         sw.run(base, [], 1, tmp_path / "s", device="tpu")
 
 
+@pytest.mark.gpu
 def test_the_torch_dataset_on_the_gpu_gives_the_cpus_tensors():
     from cmosnoise.torch import NoisyRawDataset
 
@@ -349,6 +360,7 @@ def torch_equal(a, b) -> bool:
     return bool(torch.equal(a, b))
 
 
+@pytest.mark.gpu
 def test_the_fixed_maps_made_on_the_gpu_are_the_cpus():
     """#33: every fixed map's two loops (a normal map; a heavy-tailed map at a point, scaled from it, and between
     two points) run on the GPU from the same sources, and give the compiled CPU loops' bits on a rectangle away

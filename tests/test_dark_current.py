@@ -165,6 +165,7 @@ def test_every_pixel_warms_with_the_default_points():
     assert dark_current.cooling_fraction(pts, _no_draw) == 0.0  # ordered points: decided without drawing pixels
 
 
+@pytest.mark.slow
 def test_expected_ppm_between_points_matches_the_map():
     pts = _default_points()
     u = variates((1000, 1000), np.random.default_rng(4))

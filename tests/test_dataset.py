@@ -38,6 +38,7 @@ def same_bytes(folder, expected):
                         f"{len(expected[name])}); the arrays {list(arrays)} were read back")
 
 
+@pytest.mark.slow
 def test_the_same_bytes_in_one_process_on_a_local_cluster_and_on_a_scheduler(tmp_path):
     args = ["-q", "dataset", "-n", "7", *SMALL, *CAMERAS, "--set", "defects.enabled=true",
             "--set", "defects.dead_ppm=5000"]
@@ -115,6 +116,7 @@ _DIGEST_SAMPLES = ("import hashlib\n"
 
 
 @pytest.mark.skipif(not X86_64, reason="x86-64 dispatch targets and BLAS kernels")
+@pytest.mark.slow
 def test_samples_and_their_truths_do_not_depend_on_the_cpu():
     """The noisy raws and every truth (expected raw, perfect image, mask) of samples over three camera families,
     made in a child process as another CPU would make them (conftest.ANOTHER_CPU: NumPy's baseline loops, OpenBLAS's
@@ -141,6 +143,7 @@ def test_npz_and_fits_hold_what_hdf5_holds(tmp_path, fmt):
     assert shard_bytes(again) == shard_bytes(tmp_path / fmt)
 
 
+@pytest.mark.slow
 def test_resume_after_sigterm_loses_nothing_and_repeats_nothing(tmp_path):
     args = ["dataset", "-n", "24", "--crop", "64", "--shard-size", "2", "--camera", "sony-imx900"]
     assert cli("-q", *args, "--out", tmp_path / "full").returncode == 0

@@ -9,11 +9,12 @@ import weakref
 
 import numpy as np
 import pytest
-import torch
 
 from cmosnoise import Sensor
 from cmosnoise.engine import cuda_kernel, dlpack
 from cmosnoise.errors import CmosnoiseError
+
+torch = pytest.importorskip("torch", reason="the DLPack tests read and write PyTorch tensors: pip install '.[torch]'")
 
 
 class Owner:
@@ -72,6 +73,7 @@ def test_we_read_numpys_and_pytorchs_tensors():
         dlpack.capsule(a.ctypes.data, (1,), (8,), np.complex64, (dlpack.CPU, 0), a)
 
 
+@pytest.mark.gpu
 def test_frames_left_on_the_device_go_out_and_come_in_by_dlpack():
     """A batch of frames made on the device leaves by DLPack without PyTorch in the way, and a mean charge offered
     only by DLPack comes in (the simulator's device memory is host memory: device type CPU)."""

@@ -107,6 +107,7 @@ PYTHON = [(page.relative_to(ROOT).as_posix(), text) for page, text in blocks("py
 
 
 @pytest.mark.parametrize("page, code", PYTHON, ids=[f"{p}:{i}" for i, (p, _) in enumerate(PYTHON)])
+@pytest.mark.slow
 def test_every_python_example_in_the_docs_runs(page, code, tmp_path):
     """In a fresh interpreter, in an empty folder; a ``# cmosnoise ...`` comment in the example is the command
     that makes its input, run first. An example for the GPU runs where one is, and is compiled elsewhere."""
@@ -172,6 +173,7 @@ COMMAND_PAGES = ["presets", "config", "simulate", "process", "figures", "charact
                  "fit", "dataset", "evaluate", "explore"]
 
 
+@pytest.mark.slow
 def test_every_commands_page_example_runs_as_written(tmp_path):
     """Each command's page shows an example, and it runs as written, in an empty folder (a page makes what it
     reads); explore, a server, is started, asked for its page and stopped by its id."""

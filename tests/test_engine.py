@@ -378,6 +378,7 @@ def _first_of_two_processes(code: str, tmp_path) -> str:
     return said[0].stderr
 
 
+@pytest.mark.slow
 def test_the_run_statistics_truth_and_picture_loops_say_once_that_they_compile(tmp_path):
     """#33: a compile of any variant says so once. With an empty compile cache the run statistics, the ground
     truth's expected raw, the pictures' one-pass demosaicing and the random telegraph loops each say once that
@@ -405,6 +406,7 @@ def test_the_run_statistics_truth_and_picture_loops_say_once_that_they_compile(t
         assert said.count(f"compiling {what} for this machine") == 1, said
 
 
+@pytest.mark.slow
 def test_the_summarys_compiled_loops_say_once_that_they_compile(tmp_path):
     """#33: a compile of any variant says so once. With an empty compile cache the summary's reductions (one
     module's loops, several of them compiled in turn) are announced once; a second process, which loads them

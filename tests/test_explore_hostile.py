@@ -144,6 +144,7 @@ def test_bombs_of_many_frames_or_pages_are_refused_from_the_header(server, tmp_p
     assert _memory_mb(proc.pid) < 500
 
 
+@pytest.mark.slow
 def test_slow_connections_do_not_stop_a_normal_request_and_are_closed(server):
     url, _ = server
     port = int(url.rsplit(":", 1)[1].strip("/"))

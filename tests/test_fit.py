@@ -135,6 +135,7 @@ def test_rate_map_from_dark_stacks_is_unbiased_with_the_predicted_noise():
         fit.rate_map_from_stacks(means[:1], times[:1], k)
 
 
+@pytest.mark.slow
 def test_fit_command_round_trip_from_an_emva_data_set(tmp_path):
     """Frames of simulated sensors, exported as EMVA 1288 data sets and fitted back (5 seeds): each 95 % interval
     holds the configured K, black level, dark mean and std and the QE in at least 4 of the 5 (P(3 or fewer) =

@@ -276,6 +276,7 @@ def test_sigma_cdf_is_the_configured_heavy_tail():
 
 
 @pytest.mark.parametrize("noise", ["gaussian", "poisson"])
+@pytest.mark.slow
 def test_source_follower_fit_on_variances_drawn_as_the_likelihood_assumes(noise):
     """Variances drawn as the likelihood assumes: exact scaled chi-squares (v chi2(N-1)/(N-1), v = known +
     thermal^2 + sigma_i^2), or sample variances of Gaussian noise plus Poisson dark charge (its mean the

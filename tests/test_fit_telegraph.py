@@ -37,6 +37,7 @@ def fitted():
     return sensor, fit_telegraph.fit(frames, sensor.transfer.gain_dn_per_e, 1 / 30)
 
 
+@pytest.mark.slow
 def test_the_fit_finds_exactly_the_trap_pixels_and_their_amplitudes(fitted):
     """Every trap pixel and no other (the flicker tail's noisy but white pixels included: the default config
     has them); each amplitude within 5 standard errors of its level difference (se of two level means over
@@ -66,6 +67,7 @@ def test_dwell_times_per_pixel_are_unbiased_and_the_ppm_interval_holds_the_truth
     assert lo <= CONFIG["source_follower"]["rts"]["ppm"] <= hi
 
 
+@pytest.mark.slow
 def test_round_trip_a_sensor_made_from_the_fit_fits_alike(fitted):
     """The fitted section, simulated on a sensor of another seed, fits again to medians within each other's
     95 % intervals and a ppm within the first fit's interval."""
@@ -87,6 +89,7 @@ def test_a_short_stack_is_refused_in_one_line():
 
 
 # ------------------------------------------------------------------ cmosnoise fit
+@pytest.mark.slow
 def test_cmosnoise_fit_finds_the_random_telegraph_pixels_of_a_measurement_and_its_round_trip_agrees(tmp_path):
     """``measure`` writes a 300-frame dark stack with its frame period; ``fit`` reads it again, finds the trap
     pixels (ppm interval holding the sensor's own count, Clopper-Pearson), puts a ``source_follower.rts`` section

@@ -32,6 +32,7 @@ SETS = {
 
 
 @pytest.mark.parametrize("name", list(SETS))
+@pytest.mark.slow
 def test_fit_then_characterize_reproduces_emva1288s_evaluation(name, tmp_path):
     data = tmp_path / "data"
     proc = subprocess.run([sys.executable, str(HERE / "emva_dataset.py"), str(data), *map(str, SETS[name])],

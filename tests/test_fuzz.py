@@ -11,6 +11,7 @@ import json
 import math
 import shutil
 
+import pytest
 import yaml
 from conftest import cli
 from hypothesis import HealthCheck, event, given, settings
@@ -89,6 +90,7 @@ def _no_constants(name):
 @settings(max_examples=300, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(assignments=ASSIGNMENTS)
+@pytest.mark.slow
 def test_any_configuration_value_gives_output_or_one_line(tmp_path_factory, assignments):
     base = tmp_path_factory.mktemp("fuzz")
     out = base / "run"

@@ -69,6 +69,7 @@ def test_frames_and_maps_have_the_pinned_bits(name):
 
 
 @pytest.mark.skipif(not X86_64, reason="x86-64 dispatch targets and BLAS kernels")
+@pytest.mark.slow
 def test_the_pinned_bits_do_not_depend_on_numpys_simd_the_blas_kernel_or_libm():
     """What another CPU would change, changed on this one (conftest.ANOTHER_CPU): every digest made again in a child
     process whose NumPy, OpenBLAS and libm take other code paths is the pinned one. The nonlinearity's cubic,

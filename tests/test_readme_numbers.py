@@ -39,6 +39,7 @@ def test_check_command_fails_on_a_hand_edited_number(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("name", [n for n, (compute, _) in numbers.SECTIONS.items() if compute is not None
                                   and n not in numbers.SLOW])
+@pytest.mark.slow
 def test_stored_numbers_are_what_the_code_gives_now(name):
     """Deterministic (fixed seeds): measuring again gives the stored data to 9 digits."""
     stored = numbers.load(name)

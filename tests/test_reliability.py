@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 import pandas as pd
+import pytest
 import tifffile
 from conftest import cli, stop_process
 
@@ -41,6 +42,7 @@ def _wait_rows(path, n, proc, timeout_s=120):
         time.sleep(0.2)
 
 
+@pytest.mark.slow
 def test_an_interrupted_sweep_overwrite_keeps_the_old_sweep_byte_identical(tmp_path):
     out = tmp_path / "sweep"
     r = _sweep(out)
@@ -79,6 +81,7 @@ def test_a_second_sweep_on_a_running_sweeps_folder_exits_2(tmp_path):
         stop_process(proc)
 
 
+@pytest.mark.slow
 def test_resume_repairs_a_cut_last_row_and_equals_an_undisturbed_run(tmp_path):
     whole, cut = tmp_path / "whole", tmp_path / "cut"
     assert _sweep(whole).returncode == 0

@@ -80,6 +80,7 @@ def test_bad_input_is_one_line_before_any_task(tmp_path, args, needle):
     assert not (tmp_path / "s").exists()
 
 
+@pytest.mark.slow
 def test_results_do_not_depend_on_the_workers_or_the_cluster(tmp_path):
     base = ["sweep", *SMALL, "--vary", "sensor.temperature_c=25,65", "--vary", "prnu.sigma_pct=0.5,2",
             "--instances", "3", "--spec", "couplets<=0"]
@@ -113,6 +114,7 @@ def test_results_do_not_depend_on_the_workers_or_the_cluster(tmp_path):
     pd.testing.assert_frame_equal(one, _sorted(tmp_path / "again" / "results.csv"))
 
 
+@pytest.mark.slow
 def test_resume_finishes_an_interrupted_sweep_with_the_same_rows(tmp_path):
     args = ["sweep", *SMALL, "--vary", "sensor.temperature_c=25,65", "--instances", "3", "--workers", "1"]
     assert cli(*args, "--out", tmp_path / "full").returncode == 0
@@ -129,6 +131,7 @@ def test_resume_finishes_an_interrupted_sweep_with_the_same_rows(tmp_path):
     assert r.returncode == 2 and "another sweep" in r.stderr
 
 
+@pytest.mark.slow
 def test_a_yield_study_over_a_list_item_runs_in_one_command(tmp_path):
     """The white-pixel target of one characterization point, varied in one sweep (a list item, by its index): the
     yield on the default flat field falls with the ppm, and each point's rows are those of a sweep with the value
@@ -176,6 +179,7 @@ def test_python_api_returns_a_dataframe():
     assert all(math.isfinite(v) for v in df["temporal_noise_e"])
 
 
+@pytest.mark.slow
 def test_a_worker_that_dies_mid_sweep_changes_nothing(tmp_path):
     """Two separately started workers; one is killed (SIGKILL) while tasks run: its tasks run again elsewhere."""
     args = [*SMALL, "--vary", "prnu.sigma_pct=0.5,1,2", "--instances", "6"]

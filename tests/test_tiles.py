@@ -244,6 +244,7 @@ def test_run_statistics_of_parts_are_those_of_the_whole():
         total.absorb(short)
 
 
+@pytest.mark.slow
 def test_tiles_on_dask_workers_give_the_same_file(tmp_path):
     cfg = _config({}, rows=100, cols=160, run={"frames": 2}, scene={"source": "photo"})
     simulate(cfg, tmp_path / "here", tile=32)
