@@ -258,3 +258,40 @@ def test_explore_refuses_unusable_settings_and_scenes_before_it_starts(tmp_path)
         r = cli("explore", "--no-browser", "--port", port, *args)
         assert r.returncode == 2 and needle in r.stderr and r.stderr.count("\n") == 1, (args, r.stderr)
         assert time.monotonic() - t0 < 10
+
+
+def test_a_looping_or_many_page_tiff_upload_is_refused_at_once_and_the_explorer_renders_after_it(server, base,
+                                                                                                 tmp_path):
+    """#59: a TIFF whose chain of pages loops back on itself hung the input gate (and every later render); a
+    30 MB TIFF of 300 000 one-pixel pages held it for 30 to 50 s. Both are refused from their structure."""
+    from test_hostile_round4 import looping_tiff, many_page_tiff
+
+    url, proc = server
+    for make, needle in ((looping_tiff, "loops back"), (many_page_tiff, "more than 100000 pages")):
+        f = tmp_path / "bad.tif"
+        make(f)
+        t0 = time.monotonic()
+        status, body = _post(url + "api/upload", f.read_bytes(), {"X-Cmosnoise": "1", "X-Filename": "bad.tif",
+                                                                   "Content-Type": "application/octet-stream"})
+        assert time.monotonic() - t0 < 3 and 400 <= status < 500 and needle in json.loads(body)["error"], body
+    status, _ = _post(url + "api/render", json.dumps({"config": base, "pane": "A", "client": "after"}).encode(), PAGE)
+    assert status == 200
+
+
+@pytest.mark.slow
+def test_a_huge_seq_does_not_make_later_renders_of_its_pane_dropped_for_ever(server, base):
+    """#59: a seq beyond what a page counts is refused; the newest seq holds for LATEST_S seconds only, so one
+    request cannot make every later request of its pane look old for ever."""
+    from cmosnoise.app import explore
+
+    url, _ = server
+    body = {"config": base, "pane": "A", "client": "seq-test"}
+    status, _ = _post(url + "api/render", json.dumps({**body, "seq": 2**62}).encode(), PAGE)
+    assert status == 400
+    status, _ = _post(url + "api/render", json.dumps({**body, "seq": 2**53 - 1}).encode(), PAGE)
+    assert status == 200
+    status, _ = _post(url + "api/render", json.dumps({**body, "seq": 1}).encode(), PAGE)
+    assert status == 204  # stale while the newest is recent
+    time.sleep(explore.LATEST_S + 0.5)
+    status, _ = _post(url + "api/render", json.dumps({**body, "seq": 2}).encode(), PAGE)
+    assert status == 200  # served again once the huge one has aged

@@ -5,6 +5,8 @@ exit status 2; anything else is a bug and keeps its traceback. It is a
 ``ValueError``, so code that catches bad values catches it too.
 """
 
+import contextlib
+
 
 class CmosnoiseError(ValueError):
     """Bad input: the message names the parameter, the value and what is allowed.
@@ -39,10 +41,107 @@ class Terminated(BaseException):
 _received: list[int] = []
 
 
+#: how many :func:`signals_deferred` blocks are open (a commit's renames): a signal inside one is remembered and
+#: acted on after it, never in the middle
+_deferring = [0]
+#: output folders committed whole during the current command (what a signal after the commit must not deny)
+_written: list[str] = []
+
+
+#: seconds a command has, after its first signal, to unwind by itself (an exception that a compiler's callback
+#: swallowed, a library's C loop): past them the watchdog removes its temporary output and ends the process
+GRACE_S = 4.0
+#: what the watchdog runs before it ends the process (each removes a temporary output folder)
+_cleanups: dict[int, object] = {}
+#: set when the current command is over (the watchdog of its signal then does nothing)
+_over = [None]
+
+
 def signal_received(signum: int, _frame=None):
-    """The signal handler of a command: remember the signal, and unwind with :class:`Terminated`."""
+    """The signal handler of a command: remember the signal, and unwind with :class:`Terminated` (after the
+    open :func:`signals_deferred` block, if one is open). The first signal also starts a watchdog: a command
+    still running :data:`GRACE_S` seconds later (its exception swallowed inside a compile, say) is ended then,
+    its temporary output removed first, so that no command outlives a signal by more than a few seconds."""
+    first = not _received
     _received.append(signum)
+    if first and _over[0] is not None:
+        import threading
+
+        threading.Thread(target=_watchdog, args=(signum, _over[0]), name="cmosnoise-signal-watchdog",
+                         daemon=True).start()
+    if _deferring[0]:
+        return
     raise Terminated(signum)
+
+
+def _watchdog(signum: int, over) -> None:
+    import os
+    import signal as signals
+    import sys
+
+    if over.wait(GRACE_S):
+        return
+    while _deferring[0] and not over.wait(0.05):  # a commit's renames finish first
+        pass
+    if over.is_set():
+        return
+    for fn in list(_cleanups.values()):
+        try:
+            fn()
+        except Exception:  # noqa: BLE001 - the process ends either way
+            pass
+    name = "Ctrl-C" if signum == signals.SIGINT else signals.Signals(signum).name
+    done = f"; {', '.join(_written)} had been written whole before it" if _written else "; nothing was written"
+    try:
+        sys.stderr.write(f"cmosnoise: interrupted ({name}): stopped after {GRACE_S:g} s{done}\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(128 + signum)
+
+
+def command_started() -> None:
+    """A command begins: no signal, nothing written, a fresh watchdog state."""
+    import threading
+
+    clear_terminated()
+    _over[0] = threading.Event()
+
+
+def command_over() -> None:
+    """The command has ended (by itself, or unwound by its signal): its watchdog stands down."""
+    if _over[0] is not None:
+        _over[0].set()
+    _over[0] = None
+
+
+def on_hard_exit(key: int, fn=None) -> None:
+    """Register ``fn`` (under ``key``) to run before the watchdog ends the process; ``fn`` None removes it."""
+    if fn is None:
+        _cleanups.pop(key, None)
+    else:
+        _cleanups[key] = fn
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """A block that a signal does not cut in two (an output folder's renames): the signal is acted on by the
+    next :func:`check_terminated` after it."""
+    _deferring[0] += 1
+    try:
+        yield
+    finally:
+        _deferring[0] -= 1
+
+
+def note_written(path) -> None:
+    """Record that the output folder ``path`` was committed whole (the command line says so if a signal stops the
+    command after it)."""
+    _written.append(str(path))
+
+
+def written() -> list[str]:
+    """The output folders committed whole during this command."""
+    return list(_written)
 
 
 def check_terminated() -> None:
@@ -53,3 +152,15 @@ def check_terminated() -> None:
 
 def clear_terminated() -> None:
     _received.clear()
+    _written.clear()
+
+
+def note_kept(exc: BaseException, what: str) -> None:
+    """Say on ``exc`` (a signal's, a full disk's, any that stops a command) what the command kept on disk before
+    it stopped: the command line prints it instead of "nothing was written" (e.g. "10 of 24 rows kept in
+    results.csv; --resume completes it"). The first note stands."""
+    if not getattr(exc, "kept", None):
+        try:
+            exc.kept = what
+        except AttributeError:  # pragma: no cover - an exception type without a __dict__
+            pass

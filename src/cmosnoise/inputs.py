@@ -25,7 +25,13 @@ MAX_STREAM_PIXELS = 20_000_000_000
 #: pixels of a file read into memory at once (a dark stack: 2 bytes a pixel as uint16, 8 while averaged)
 MAX_LOADED_PIXELS = 500_000_000
 
-__all__ = ["check_regular", "open_regular", "read_bytes", "read_text", "image_planes", "check_image_pixels"]
+#: pages (image file directories, sub-IFDs included) of one TIFF or DNG walked before it is refused: a raw series of
+#: 100 000 frames is a long video; 300 000 one-pixel pages are a file built to keep a reader busy
+MAX_TIFF_PAGES = 100_000
+
+__all__ = ["check_regular", "open_regular", "read_bytes", "read_text", "read_json", "image_planes", "tiff_planes",
+           "check_image_pixels", "available_bytes", "check_memory", "check_decoded", "npz_members",
+           "fits_data_bytes", "MAX_TIFF_PAGES"]
 
 
 def _kind(mode: int) -> str:
@@ -97,11 +103,129 @@ def read_text(path: str | Path, what: str, limit: int) -> str:
         raise CmosnoiseError(f"{what} {str(path)!r} is not a text file (not UTF-8)") from None
 
 
+def available_bytes() -> int | None:
+    """Memory the system can give without swapping (Linux MemAvailable), or None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(need: int, what: str, hint: str = "") -> None:
+    """Refuse work that would need ``need`` bytes where the machine has fewer available (one line naming
+    ``what`` and both sizes); nothing happens where the available memory is unknown."""
+    have = available_bytes()
+    if have is not None and need > have:
+        raise CmosnoiseError(f"{what} needs about {_size(need)} of memory; this machine has {_size(have)} "
+                             f"available{hint}")
+
+
+def check_decoded(nbytes: int, path: str | Path, what: str, limit: int) -> None:
+    """Refuse a file whose header promises more than ``limit`` decoded bytes (or more than the machine's
+    available memory), before a byte of it is decoded."""
+    if nbytes > limit:
+        raise CmosnoiseError(f"{what} {str(path)!r} decodes to {_size(nbytes)}; at most {_size(limit)} are read "
+                             "from one file")
+    check_memory(nbytes, f"{what} {str(path)!r}")
+
+
+def npz_members(path: str | Path, what: str, limit: int) -> dict[str, int]:
+    """The members of an .npz file and their decoded sizes (bytes) from its zip directory, all checked against
+    ``limit`` together before anything is inflated (a zip bomb is refused by what it says it holds; zipfile
+    never inflates a member past the size its directory gives)."""
+    import zipfile
+
+    p = check_regular(path, what)
+    try:
+        with zipfile.ZipFile(p) as z:
+            members = {i.filename: int(i.file_size) for i in z.infolist()}
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+        raise CmosnoiseError(f"{what} {str(p)!r} is not a readable .npz file: {exc}") from None
+    check_decoded(sum(members.values()), p, what, limit)
+    return members
+
+
+def fits_data_bytes(path: str | Path, what: str, limit: int) -> int:
+    """Bytes of a FITS file's data units from their headers alone (NAXISn, BITPIX, PCOUNT, GCOUNT), each
+    checked against what the file holds (a header promising more than is there is refused) and all against
+    ``limit``."""
+    p = check_regular(path, what)
+    size = os.stat(p).st_size
+    total, at = 0, 0
+    with open_regular(p, what) as fh:
+        while at < size:
+            cards, ended = {}, False
+            while not ended:  # the header: 2880-byte blocks of 36 cards of 80 characters
+                block = fh.read(2880)
+                at += len(block)
+                if len(block) < 2880:
+                    raise CmosnoiseError(f"{what} {str(p)!r}: a FITS header runs past the file's end (a truncated "
+                                         "file)")
+                for k in range(36):
+                    card = block[80 * k:80 * k + 80].decode("ascii", "replace")
+                    key = card[:8].strip()
+                    if key == "END":
+                        ended = True
+                        break
+                    if card[8:10] == "= ":
+                        cards[key] = card[10:].split("/")[0].strip()
+                if len(cards) > 100_000:
+                    raise CmosnoiseError(f"{what} {str(p)!r}: a FITS header of more than 100 000 cards")
+            try:
+                naxis = int(cards.get("NAXIS", "0"))
+                bits = abs(int(cards.get("BITPIX", "8")))
+                n = 1 if naxis else 0
+                for i in range(1, naxis + 1):
+                    n *= int(cards.get(f"NAXIS{i}", "0"))
+                n = (n + int(cards.get("PCOUNT", "0"))) * int(cards.get("GCOUNT", "1"))
+            except ValueError:
+                raise CmosnoiseError(f"{what} {str(p)!r}: a FITS header with a size that is not a number") from None
+            if naxis < 0 or naxis > 999 or n < 0:
+                raise CmosnoiseError(f"{what} {str(p)!r}: a FITS header with an impossible size")
+            nbytes = n * bits // 8
+            padded = -(-nbytes // 2880) * 2880
+            if at + nbytes > size:
+                raise CmosnoiseError(f"{what} {str(p)!r}: a FITS header promises {_size(nbytes)} of data that the "
+                                     "file does not hold (a truncated file)")
+            total += nbytes
+            if total > limit:
+                check_decoded(total, p, what, limit)
+            at += padded
+            fh.seek(at)
+    check_decoded(total, p, what, limit)
+    return total
+
+
+def read_json(path: str | Path, what: str, limit: int, kind: type | None = dict):
+    """A JSON file of at most ``limit`` bytes, parsed; one line for a file that is not JSON, nested beyond what
+    the parser takes, or (``kind``) not a JSON object."""
+    import json
+
+    text = read_text(path, what, limit)
+    try:
+        value = json.loads(text)
+    except RecursionError:
+        raise CmosnoiseError(f"{what} {str(path)!r} is nested too deeply to read") from None
+    except ValueError as exc:
+        raise CmosnoiseError(f"{what} {str(path)!r} is not JSON: {exc}") from None
+    if kind is not None and not isinstance(value, kind):
+        raise CmosnoiseError(f"{what} {str(path)!r} holds a JSON {type(value).__name__}; expected a JSON "
+                             f"{'object' if kind is dict else kind.__name__}")
+    return value
+
+
 def _size(n: int) -> str:
     return f"{n / 1e9:g} GB" if n >= 1e9 else (f"{n / 1e6:g} MB" if n >= 1e6 else f"{n / 1e3:g} kB")
 
 
-def image_planes(path: str | Path) -> tuple[int, int, int]:
+def image_planes(path: str | Path, what: str = "image") -> tuple[int, int, int]:
     """(rows, cols, planes) of an image file from its header alone: planes counts every frame and page.
 
     ``rows`` and ``cols`` are the largest plane's (a TIFF's pages may differ
@@ -116,15 +240,10 @@ def image_planes(path: str | Path) -> tuple[int, int, int]:
 
         shape = np.load(p, mmap_mode="r", allow_pickle=False).shape
         return _from_shape(tuple(int(x) for x in shape))
-    if suffix in (".tif", ".tiff", ".dng"):
-        import tifffile
-
-        with tifffile.TiffFile(p) as tf:
-            sizes = [(int(getattr(page, "imagelength", 0)),  # page headers only: no pixel is decoded
-                      int(getattr(page, "imagewidth", 0)) * max(int(getattr(page, "imagedepth", 1)), 1))
-                     for page in tf.pages]
-        rows, cols = max(sizes, key=lambda rc: rc[0] * rc[1], default=(0, 0))
-        return rows, cols, len(sizes)
+    with open_regular(p, what) as fh:
+        head = fh.read(4)
+    if head[:4] in _TIFF_MAGIC:  # by its bytes, whatever its name: a TIFF named .png is walked as a TIFF
+        return tiff_planes(p, what)
     import warnings
 
     from PIL import Image
@@ -146,6 +265,89 @@ def image_planes(path: str | Path) -> tuple[int, int, int]:
             rows, cols, _ = _from_shape(shape[1:])
             return rows, cols, shape[0]
         return _from_shape(shape)
+
+
+_TIFF_MAGIC = (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+")
+#: bytes of one value of a TIFF field type (BYTE, ASCII, SHORT, LONG, RATIONAL, ..., IFD, LONG8, SLONG8, IFD8)
+_TIFF_TYPE_BYTES = {1: 1, 2: 1, 3: 2, 4: 4, 5: 8, 6: 1, 7: 1, 8: 2, 9: 4, 10: 8, 11: 4, 12: 8, 13: 4, 16: 8, 17: 8, 18: 8}
+_TIFF_INTS = {1: "B", 3: "H", 4: "I", 13: "I", 16: "Q", 18: "Q"}
+#: the fields the walk reads: ImageWidth, ImageLength, SubIFDs, ImageDepth
+_TIFF_WANTED = frozenset((256, 257, 330, 32997))
+
+
+def tiff_planes(path: str | Path, what: str) -> tuple[int, int, int]:
+    """(rows, cols, planes) of a TIFF or DNG from its chain of image file directories alone.
+
+    The chain is walked by hand (classic and BigTIFF, either byte order,
+    sub-IFDs included: a DNG's raw lies in one), each directory read once
+    from a read-only map of the file: a chain that loops back on itself, a
+    directory past the file's end, or more than :data:`MAX_TIFF_PAGES`
+    directories is refused in one line before any library walks it (tifffile
+    follows a looping chain for ever). ``rows`` and ``cols`` are the largest
+    directory's, ``planes`` their number.
+    """
+    import mmap
+    import struct
+
+    p = Path(path)
+    name = f"{what} {str(p)!r}"
+    with open_regular(p, what) as fh:
+        size = os.fstat(fh.fileno()).st_size
+        if size < 8:
+            raise CmosnoiseError(f"{name} is not a TIFF file (it is {size} bytes long)")
+        m = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    try:
+        order = {b"II": "<", b"MM": ">"}.get(m[:2])
+        magic = struct.unpack_from(order + "H", m, 2)[0] if order else None
+        if magic not in (42, 43):
+            raise CmosnoiseError(f"{name} is not a TIFF file (no TIFF header)")
+        big = magic == 43
+        count_fmt, entry, off_fmt, value_bytes = ("Q", 20, "Q", 8) if big else ("H", 12, "I", 4)
+        first = struct.unpack_from(order + off_fmt, m, 8 if big else 4)[0]
+        len_next = struct.calcsize(off_fmt)
+        seen: set[int] = set()
+        sizes: list[tuple[int, int]] = []
+        chains = [first]
+        while chains:
+            off = chains.pop()
+            while off:
+                if off in seen:
+                    raise CmosnoiseError(f"{name}: its chain of pages loops back to an earlier page (a damaged file)")
+                if len(seen) >= MAX_TIFF_PAGES:
+                    raise CmosnoiseError(f"{name} has more than {MAX_TIFF_PAGES} pages; at most {MAX_TIFF_PAGES} "
+                                         "pages of a TIFF are read")
+                head = struct.calcsize(count_fmt)
+                if off + head > size:
+                    raise CmosnoiseError(f"{name}: a page lies past the file's end (a truncated or damaged file)")
+                seen.add(off)
+                n = struct.unpack_from(order + count_fmt, m, off)[0]
+                end = off + head + n * entry + struct.calcsize(off_fmt)
+                if end > size:
+                    raise CmosnoiseError(f"{name}: a page's {n} fields run past the file's end (a truncated or "
+                                         "damaged file)")
+                fields: dict[int, list[int]] = {}
+                entries = struct.iter_unpack(order + ("HH16x" if big else "HH8x"), m[off + head:end - len_next])
+                for k, (tag, typ) in enumerate(entries):
+                    if tag not in _TIFF_WANTED or typ not in _TIFF_INTS:
+                        continue
+                    at = off + head + k * entry
+                    cnt = struct.unpack_from(order + ("Q" if big else "I"), m, at + 4)[0]
+                    cnt = min(cnt, MAX_TIFF_PAGES + 1)
+                    nbytes = cnt * _TIFF_TYPE_BYTES[typ]
+                    where = at + 4 + (8 if big else 4)
+                    if nbytes > value_bytes:
+                        where = struct.unpack_from(order + off_fmt, m, where)[0]
+                        if where + nbytes > size:
+                            raise CmosnoiseError(f"{name}: a field points past the file's end (a damaged file)")
+                    fields[tag] = list(struct.unpack_from(f"{order}{cnt}{_TIFF_INTS[typ]}", m, where))
+                width, length = (fields.get(t, [0])[0] for t in (256, 257))
+                sizes.append((int(length), int(width) * max(int(fields.get(32997, [1])[0]), 1)))
+                chains += [int(v) for v in fields.get(330, [])]  # sub-IFDs: each a chain of its own
+                off = struct.unpack_from(order + off_fmt, m, end - struct.calcsize(off_fmt))[0]
+    finally:
+        m.close()
+    rows, cols = max(sizes, key=lambda rc: rc[0] * rc[1], default=(0, 0))
+    return rows, cols, len(sizes)
 
 
 def _from_shape(shape: tuple[int, ...]) -> tuple[int, int, int]:
@@ -176,7 +378,7 @@ def check_image_pixels(path: str | Path, what: str, max_pixels: int, max_plane_p
     ``hint`` ends a refusal for size (what to do instead)."""
     p = check_regular(path, what)
     try:
-        rows, cols, planes = image_planes(p)
+        rows, cols, planes = image_planes(p, what)
     except CmosnoiseError:
         raise
     except Exception as exc:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import CmosnoiseError
 from ..estimators import robust_sigma
 from ..isp.defects import neighbours_at
 from .ground_truth import MASK_BITS
@@ -45,6 +46,15 @@ def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: fl
     """PSNR (dB) and SSIM of ``output`` against ``target`` (both (H, W), DN), normalized to [0, 1] of the range."""
     from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
+    output, target = _frame(output, "output"), _frame(target, "target")
+    if output.shape != target.shape:
+        raise CmosnoiseError(f"output: shape {output.shape}, target {target.shape}; they must be the same frame")
+    try:
+        black, white = float(black), float(white)
+    except (TypeError, ValueError):
+        raise CmosnoiseError(f"black, white = {black!r}, {white!r}: expected two numbers (DN)") from None
+    if not (np.isfinite(black) and np.isfinite(white) and white > black):
+        raise CmosnoiseError(f"black, white = {black!r}, {white!r}: expected finite levels, white above black")
     scale = 1.0 / (white - black)
     out = (np.asarray(output, np.float64) - black) * scale
     ref = (np.asarray(target, np.float64) - black) * scale
@@ -52,6 +62,22 @@ def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: fl
     win = min(7, min(p_ref.shape[1:]) // 2 * 2 - 1)
     return {"psnr_db": float(peak_signal_noise_ratio(ref, out, data_range=1.0)),
             "ssim": float(structural_similarity(p_ref, p_out, data_range=1.0, channel_axis=0, win_size=win))}
+
+
+def _frame(a, name: str) -> np.ndarray:
+    """``a`` as a float64 frame (rows, cols) of at least 2 x 2 finite real values; else one line naming it."""
+    try:
+        arr = np.asarray(a)
+    except (TypeError, ValueError):
+        raise CmosnoiseError(f"{name}: expected a frame of numbers, got {type(a).__name__}") from None
+    if arr.dtype.kind not in "uifb":
+        raise CmosnoiseError(f"{name}: an array of {arr.dtype}; expected real numbers (DN)")
+    if arr.ndim != 2 or min(arr.shape) < 2:
+        raise CmosnoiseError(f"{name}: shape {arr.shape}; expected one frame (rows, cols), at least 2 x 2")
+    arr = arr.astype(np.float64)
+    if not np.isfinite(arr).all():
+        raise CmosnoiseError(f"{name}: {int((~np.isfinite(arr)).sum())} NaN or infinite values")
+    return arr
 
 
 def defect_free(expected: np.ndarray, mask: np.ndarray, pattern: str) -> np.ndarray:

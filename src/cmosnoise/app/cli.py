@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import re
 import signal
 import sys
@@ -17,7 +18,15 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from ..config import load_config, preset_data, preset_names
-from ..errors import CmosnoiseError, Terminated, check_terminated, clear_terminated, signal_received
+from ..errors import (
+    CmosnoiseError,
+    Terminated,
+    check_terminated,
+    command_over,
+    command_started,
+    signal_received,
+    written,
+)
 
 if TYPE_CHECKING:
     from ..model.spec import SensorSpec
@@ -698,7 +707,7 @@ def run(argv: list[str] | None = None) -> int:
     A :class:`CmosnoiseError` becomes one line on stderr and status 2, a
     usage error click's message and status 2, Ctrl-C status 130.
     """
-    clear_terminated()
+    command_started()
     previous = _catch_termination()
     unraisable = sys.unraisablehook
     sys.unraisablehook = _quiet_interrupts(unraisable)
@@ -719,21 +728,23 @@ def run(argv: list[str] | None = None) -> int:
         return exc.exit_code
     except CmosnoiseError as exc:
         message = " ".join(str(exc).split())  # one line, whatever a library put in it
-        print(f"cmosnoise: error: {message}", file=sys.stderr)
+        done = f" ({', '.join(written())} had been written whole before it)" if written() else ""
+        print(f"cmosnoise: error: {message}{done}", file=sys.stderr)
         return 2
     except OSError as exc:  # the machine's fault, not the input's: a full disk, a vanished folder
         where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
-        print(f"cmosnoise: error: cannot read or write{where}: {exc.strerror or exc}; nothing was written",
+        print(f"cmosnoise: error: cannot read or write{where}: {exc.strerror or exc}{_unwritten(argv, exc)}",
               file=sys.stderr)
         return 1
     except Terminated as exc:
         name = "Ctrl-C" if exc.signum == signal.SIGINT else signal.Signals(exc.signum).name
-        print(f"cmosnoise: {_stopped(argv)} ({name}){_unwritten(argv)}", file=sys.stderr)
+        print(f"cmosnoise: {_stopped(argv)} ({name}){_unwritten(argv, exc)}", file=sys.stderr)
         return 128 + exc.signum
-    except (KeyboardInterrupt, typer.Abort):
-        print(f"cmosnoise: {_stopped(argv)}{_unwritten(argv)}", file=sys.stderr)
+    except (KeyboardInterrupt, typer.Abort) as exc:
+        print(f"cmosnoise: {_stopped(argv)}{_unwritten(argv, exc)}", file=sys.stderr)
         return 130
     finally:
+        command_over()
         sys.unraisablehook = unraisable
         for signum, handler in previous.items():
             signal.signal(signum, handler)
@@ -752,7 +763,15 @@ def _stopped(argv) -> str:
     return "stopped" if _command(argv) == "explore" else "interrupted"
 
 
-def _unwritten(argv) -> str:
+def _unwritten(argv, exc: BaseException | None = None) -> str:
+    """What a stopped command leaves: what its job said it kept (:func:`~cmosnoise.errors.note_kept`), else
+    nothing (an output folder is whole or absent)."""
+    kept = getattr(exc, "kept", None)
+    if kept:
+        return f"; {kept}"
+    done = written()
+    if done:
+        return f"; {', '.join(done)} had been written whole before it stopped"
     return "" if _command(argv) in _NO_OUTPUT else "; nothing was written"
 
 
@@ -794,7 +813,25 @@ def _catch_termination() -> dict:
 
 
 def main() -> None:
-    sys.exit(run())
+    status = run()
+    exit_quietly(status)
+    sys.exit(status)
+
+
+def exit_quietly(status: int) -> None:
+    """From here the command is over: a signal while the interpreter shuts down (Dask's threads, atexit) says so
+    in one line and ends with the command's own status, instead of dying silently by the signal."""
+    if threading.current_thread() is not threading.main_thread():  # pragma: no cover - the console script
+        return
+
+    def done(signum, _frame=None):
+        name = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+        print(f"cmosnoise: {name} while exiting; the command had already finished (status {status})",
+              file=sys.stderr, flush=True)
+        os._exit(status)
+
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, done)
 
 
 if __name__ == "__main__":

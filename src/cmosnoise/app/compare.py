@@ -26,7 +26,6 @@ threshold would make counts at 25 C and 65 C incomparable).
 from __future__ import annotations
 
 import html
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +33,7 @@ from typing import Callable
 
 import numpy as np
 
+from .. import inputs
 from ..analysis.figures_of_merit import FIGURE_NAMES
 from ..analysis.noise_budget import SOURCE_NAMES
 from ..analysis.run_stats import RunStats
@@ -79,13 +79,45 @@ def load_run(path: str | Path, what: str) -> Run:
     if missing:
         raise CmosnoiseError(f"{what} {str(path)!r} is not a cmosnoise simulate folder: it has no "
                              f"{' or '.join(missing)}")
-    try:
-        summary = json.loads((path / "summary.json").read_text())
-    except (OSError, ValueError) as exc:
-        raise CmosnoiseError(f"{what} {str(path / 'summary.json')!r} cannot be read: {exc}") from None
-    if not isinstance(summary, dict) or "key_figures" not in summary:
-        raise CmosnoiseError(f"{what} {str(path / 'summary.json')!r} is not a cmosnoise run summary")
+    summary = inputs.read_json(path / "summary.json", f"{what}'s summary", MAX_SUMMARY_BYTES)
+    _check_summary(summary, f"{what} {str(path / 'summary.json')!r}")
     return Run(path, summary, load_config(path / "config.yaml"))
+
+
+#: the most bytes of a run's summary.json that are read (a run's own is some tens of kB)
+MAX_SUMMARY_BYTES = 20_000_000
+#: the parts of a summary that :func:`figures` reads: dotted path -> the JSON type it must have where present
+_SUMMARY_PARTS = {"signal": dict, "temporal_noise": dict, "key_figures": dict, "noise_budget": dict,
+                  "noise_budget.scene_mean": dict, "noise_budget.scene_mean.temporal_rms_e": dict,
+                  "noise_budget.scene_mean.fixed_pattern_rms_e": dict, "key_figures.snr_temporal_db_at_signal_e": dict,
+                  "key_figures.snr_total_db_at_signal_e": dict, "dark_current": dict, "dark_current.map": dict,
+                  "dark_current.frame0": dict}
+_SUMMARY_NEEDED = ("signal", "temporal_noise", "key_figures", "noise_budget.scene_mean.temporal_rms_e",
+                   "noise_budget.scene_mean.fixed_pattern_rms_e")
+
+
+def _check_summary(summary, name: str) -> None:
+    """One line unless ``summary`` has the parts :func:`figures` reads, each of its type."""
+    def part(key):
+        v = summary
+        for k in key.split("."):
+            if not isinstance(v, dict) or k not in v:
+                return None
+            v = v[k]
+        return v
+
+    if not isinstance(summary, dict):
+        raise CmosnoiseError(f"{name} is not a cmosnoise run summary (a JSON object)")
+    for key in _SUMMARY_NEEDED:
+        if part(key) is None:
+            raise CmosnoiseError(f"{name} is not a cmosnoise run summary: it has no {key}")
+    for key, kind in _SUMMARY_PARTS.items():
+        v = part(key)
+        if v is not None and not isinstance(v, kind):
+            raise CmosnoiseError(f"{name}: {key} is a JSON {type(v).__name__}; a run summary's is an object")
+    frames = summary.get("frames", 1)
+    if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
+        raise CmosnoiseError(f"{name}: frames is {frames!r}; a run summary's is a whole number from 1")
 
 
 # ------------------------------------------------------------------ the figures

@@ -52,14 +52,16 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from .. import inputs
 from .._version import __version__
 from ..analysis import ground_truth
 from ..config import load_config, virtual_cameras
 from ..config.loading import deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
-from ..errors import CmosnoiseError
+from ..errors import CmosnoiseError, note_kept
 from ..io.output import atomic_file, resumable_mode
 from ..model import scene as scene_mod
+from ..model.cfa import BAYER_PATTERNS
 from ..model.sensor import Sensor, check_device, frames_together
 
 FORMATS = {"hdf5": ".h5", "npz": ".npz", "fits": ".fits"}
@@ -570,7 +572,13 @@ def _fits(arrays: dict, columns: dict, recipe: Recipe) -> bytes:
 
 
 def read_shard(path: str | Path) -> tuple[dict, dict]:
-    """(arrays, columns) of a shard file of any format.
+    """(arrays, columns) of a shard file of any format, checked before and after it is decoded.
+
+    The file must be a regular file (a FIFO never blocks the reader); its decoded size, read from its headers
+    (HDF5 datasets' shapes, an npz's zip directory, FITS headers), is bounded by :data:`MAX_SHARD_BYTES` and the
+    machine's available memory before a byte is decoded; its arrays must be numeric, of one shape
+    (samples, rows, cols), with a column of each setting per sample, finite black and white levels and a known
+    CFA. Anything else is one :class:`CmosnoiseError` naming the shard and what is wrong.
 
     Parameters
     ----------
@@ -583,24 +591,95 @@ def read_shard(path: str | Path) -> tuple[dict, dict]:
         The arrays (each (samples, rows, cols)) and the columns (each (samples,)).
     """
     p = Path(path)
-    if p.suffix == ".h5":
-        import h5py
+    what = "shard"
+    if p.suffix not in (".h5", ".npz", ".fits"):
+        raise CmosnoiseError(f"{str(path)!r} is not a shard (.h5, .npz or .fits)")
+    inputs.check_regular(p, what)
+    try:
+        if p.suffix == ".h5":
+            arrays, columns = _read_h5(p)
+        elif p.suffix == ".npz":
+            members = inputs.npz_members(p, what, MAX_SHARD_BYTES)
+            for k in (*ARRAYS, *(f"settings.{c}" for c in COLUMNS)):
+                if f"{k}.npy" not in members:
+                    raise CmosnoiseError(f"shard {str(p)!r} has no {k!r} array ({_HOLDS})")
+            with np.load(p, allow_pickle=False) as z:
+                arrays, columns = {k: z[k] for k in ARRAYS}, {k: z[f"settings.{k}"] for k in COLUMNS}
+        else:
+            from astropy.io import fits
 
-        with h5py.File(p, "r") as f:
-            arrays = {k: f[k][()] for k in ARRAYS}
-            columns = {k: _decoded(f["settings"][k][()]) for k in COLUMNS}
-        return arrays, columns
-    if p.suffix == ".npz":
-        with np.load(p, allow_pickle=False) as z:
-            return {k: z[k] for k in ARRAYS}, {k: z[f"settings.{k}"] for k in COLUMNS}
-    if p.suffix == ".fits":
-        from astropy.io import fits
+            inputs.fits_data_bytes(p, what, MAX_SHARD_BYTES)
+            with fits.open(p, memmap=False) as h:
+                names = {hdu.name for hdu in h}
+                for k in (*(a.upper() for a in ARRAYS), "SETTINGS"):
+                    if k not in names:
+                        raise CmosnoiseError(f"shard {str(p)!r} has no {k} extension ({_HOLDS})")
+                arrays = {k: np.asarray(h[k.upper()].data) for k in ARRAYS}
+                t = h["SETTINGS"].data
+                missing = [k for k in COLUMNS if t is None or k not in t.names]
+                if missing:
+                    raise CmosnoiseError(f"shard {str(p)!r} has no {missing[0]!r} setting ({_HOLDS})")
+                columns = {k: np.asarray(t[k]) for k in COLUMNS}
+    except CmosnoiseError:
+        raise
+    except Exception as exc:  # a damaged file of any format: the reader's own words, one line
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise CmosnoiseError(f"shard {str(p)!r} cannot be read: {first}") from None
+    return _checked_shard(p, arrays, columns)
 
-        with fits.open(p) as h:
-            arrays = {k: np.asarray(h[k.upper()].data) for k in ARRAYS}
-            t = h["SETTINGS"].data
-            return arrays, {k: np.asarray(t[k]) for k in COLUMNS}
-    raise CmosnoiseError(f"{str(path)!r} is not a shard (.h5, .npz or .fits)")
+
+#: the most bytes one shard decodes to (arrays and settings): 64 samples of 1024 x 1024 take 0.74 GB
+MAX_SHARD_BYTES = 2_000_000_000
+_HOLDS = "a shard holds raw, expected_raw, perfect_dn and mask, and a setting of each sample: make it with cmosnoise dataset"
+
+
+def _read_h5(p: Path) -> tuple[dict, dict]:
+    import h5py
+
+    with h5py.File(p, "r") as f:
+        total = 0
+        for k in (*ARRAYS, *(f"settings/{c}" for c in COLUMNS)):
+            d = f.get(k)
+            if not isinstance(d, h5py.Dataset):
+                raise CmosnoiseError(f"shard {str(p)!r} has no {k!r} array ({_HOLDS})")
+            if d.dtype.kind in "OV" or (d.dtype.kind not in "SU" and d.dtype.kind not in "uifb"):
+                raise CmosnoiseError(f"shard {str(p)!r}: {k!r} holds {d.dtype} values; expected numbers or text")
+            total += int(np.prod(d.shape, dtype=np.int64)) * max(d.dtype.itemsize, 1)
+        inputs.check_decoded(total, p, "shard", MAX_SHARD_BYTES)  # from the datasets' shapes: nothing inflated yet
+        arrays = {k: f[k][()] for k in ARRAYS}
+        columns = {k: _decoded(f["settings"][k][()]) for k in COLUMNS}
+    return arrays, columns
+
+
+def _checked_shard(p: Path, arrays: dict, columns: dict) -> tuple[dict, dict]:
+    """The shard's arrays and columns if they are a shard's: one shape, numbers, a setting per sample."""
+    name = f"shard {str(p)!r}"
+    shape = None
+    for k in ARRAYS:
+        a = np.asarray(arrays[k])
+        if a.dtype.kind not in "uifb":
+            raise CmosnoiseError(f"{name}: {k!r} holds {a.dtype} values; expected numbers")
+        if a.ndim != 3 or min(a.shape) < 1:
+            raise CmosnoiseError(f"{name}: {k!r} has shape {a.shape}; expected (samples, rows, cols)")
+        if shape is not None and a.shape != shape:
+            raise CmosnoiseError(f"{name}: {k!r} has shape {a.shape}, {ARRAYS[0]!r} {shape}; the arrays of a shard "
+                                 "share one shape")
+        shape = a.shape
+    for k in COLUMNS:
+        c = np.asarray(columns[k])
+        if c.ndim != 1 or len(c) != shape[0]:
+            raise CmosnoiseError(f"{name}: the setting {k!r} has {c.size} values for {shape[0]} samples")
+        if COLUMNS[k] != "str" and c.dtype.kind not in "uif":
+            raise CmosnoiseError(f"{name}: the setting {k!r} holds {c.dtype} values; expected numbers")
+    black = np.asarray(columns["black_level_dn"], np.float64)
+    white = np.asarray(columns["white_level_dn"], np.float64)
+    if not (np.all(np.isfinite(black)) and np.all(np.isfinite(white)) and np.all(white > black)):
+        raise CmosnoiseError(f"{name}: black_level_dn and white_level_dn must be finite, white above black "
+                             f"(black {black.tolist()[:3]}, white {white.tolist()[:3]})")
+    for cfa in set(str(v) for v in columns["cfa"]):
+        if cfa not in (*BAYER_PATTERNS, "none"):
+            raise CmosnoiseError(f"{name}: cfa {cfa!r}; expected one of {', '.join(BAYER_PATTERNS)} or none")
+    return arrays, columns
 
 
 def _decoded(a: np.ndarray) -> np.ndarray:
@@ -738,11 +817,20 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
                 made = _shards_on(client, recipe, todo, device)
             else:
                 made = _shards_here(recipe, todo, device)
-            for s, data in made:
-                _write(work, recipe.shard_name(s), data)
-                done += len(recipe.shard_range(s))
-                if progress:
-                    progress(done, total)
+            try:
+                for s, data in made:
+                    _write(work, recipe.shard_name(s), data)
+                    done += len(recipe.shard_range(s))
+                    if progress:
+                        progress(done, total)
+            except BaseException as exc:  # the shards made so far stay where they are resumable
+                if mode != "replace":
+                    shards = recipe.shards() - len(missing(recipe, work))
+                    note_kept(exc, f"{shards} of {recipe.shards()} shards ({done} of {total} samples) kept in "
+                                   f"{out}; --resume completes it")
+                else:
+                    note_kept(exc, f"nothing was written: {out} keeps the data set it held")
+                raise
     except OSError as exc:
         raise CmosnoiseError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from None
     return out
@@ -762,9 +850,47 @@ def read(folder: str | Path) -> Iterator[tuple[dict, dict]]:
         Each shard's arrays (each (samples, rows, cols)) and columns (each (samples,)).
     """
     folder = Path(folder)
-    manifest = json.loads((folder / _MANIFEST).read_text())
+    manifest = read_manifest(folder)
     for name in manifest["shards"]:
         yield read_shard(folder / name)
+
+
+#: the most bytes of a dataset.json (a million shards' names take some 25 MB)
+MAX_MANIFEST_BYTES = 50_000_000
+
+
+def read_manifest(folder: str | Path) -> dict:
+    """A data set folder's ``dataset.json``, checked: a JSON object with a recipe (its samples a whole number)
+    and a list of shard files of that folder; one line for anything else.
+
+    Parameters
+    ----------
+    folder : str or Path
+        A data set folder.
+
+    Returns
+    -------
+    dict
+        The manifest (``recipe``, ``shards``, ...).
+    """
+    folder = Path(folder)
+    path = folder / _MANIFEST
+    if not path.exists():
+        raise CmosnoiseError(f"--data {str(folder)!r} is not a data set (no dataset.json): make one with "
+                             "cmosnoise dataset")
+    m = inputs.read_json(path, "dataset.json", MAX_MANIFEST_BYTES)
+    recipe, shards = m.get("recipe"), m.get("shards")
+    if not isinstance(recipe, dict) or not isinstance(shards, list):
+        raise CmosnoiseError(f"{str(path)!r} has no recipe or no list of shards: not a data set's manifest "
+                             "(make one with cmosnoise dataset)")
+    samples = recipe.get("samples")
+    if isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= MAX_SAMPLES:
+        raise CmosnoiseError(f"{str(path)!r}: recipe.samples is {samples!r}; expected a whole number from 1 to "
+                             f"{MAX_SAMPLES}")
+    for name in shards:
+        if not isinstance(name, str) or Path(name).name != name or not name.startswith("shard-"):
+            raise CmosnoiseError(f"{str(path)!r}: shard {name!r} is not a shard file's name in the folder")
+    return m
 
 
 def load_sample_config(text: str):

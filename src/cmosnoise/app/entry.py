@@ -42,6 +42,9 @@ def main() -> None:
         _interrupted(received[0])
     try:
         status = run()
+        from .cli import exit_quietly
+
+        exit_quietly(status)  # the command is over: a signal from here on says so and keeps its status
     finally:
         # The interpreter's exit collects garbage over every object numba, LLVM and SciPy made: 0.15 to 0.2 s
         # after a frame kernel ran, an eighth of a one-frame run. Frozen objects are not scanned; everything

@@ -16,7 +16,6 @@ from __future__ import annotations
 import html
 import importlib
 import inspect
-import json
 import math
 import sys
 from pathlib import Path
@@ -24,6 +23,7 @@ from typing import Callable
 
 import numpy as np
 
+from .. import inputs
 from .._version import __version__
 from ..analysis import scoring
 from ..errors import CmosnoiseError
@@ -124,15 +124,24 @@ def method(spec: str) -> Callable:
             "gaussian": _gaussian, "bm3d": _bm3d}.get(spec) or _user_method(spec)
 
 
-def _read_output(folder: Path, index: int) -> np.ndarray:
+def _read_output(folder: Path, index: int, shape: tuple[int, int]) -> np.ndarray:
+    """A method's output for sample ``index``, read only where its header says it is one frame of ``shape``."""
     for suffix in (".npy", ".tif", ".tiff"):
         p = folder / f"sample_{index:06d}{suffix}"
-        if p.is_file():
-            if suffix == ".npy":
-                return np.load(p, allow_pickle=False)
-            import tifffile
+        if p.exists() or p.is_symlink():
+            rows, cols, planes = inputs.check_image_pixels(p, "--outputs file", inputs.MAX_FRAME_PIXELS)
+            if (rows, cols, planes) != (*shape, 1):
+                raise CmosnoiseError(f"--outputs file {str(p)!r} is {cols} x {rows} in {planes} plane(s); sample "
+                                     f"{index} is one {shape[1]} x {shape[0]} frame")
+            try:
+                if suffix == ".npy":
+                    return np.load(p, allow_pickle=False)
+                import tifffile
 
-            return tifffile.imread(p)
+                return tifffile.imread(p, key=0)
+            except Exception as exc:
+                raise CmosnoiseError(f"--outputs file {str(p)!r} cannot be read: "
+                                     f"{inputs.decoder_message(exc)}") from None
     raise CmosnoiseError(f"--outputs {str(folder)!r} has no sample_{index:06d}.npy or .tif")
 
 
@@ -142,8 +151,7 @@ def score(data: str | Path, methods: list[str], outputs: str | Path | None = Non
     import pandas as pd
 
     data = Path(data)
-    if not (data / "dataset.json").is_file():
-        raise CmosnoiseError(f"--data {str(data)!r} is not a data set (no dataset.json): make one with cmosnoise dataset")
+    total = ds.read_manifest(data)["recipe"]["samples"]  # checked: a JSON object of a recipe and its shards
     if target not in ("expected", "perfect"):
         raise CmosnoiseError(f"--target {target!r}: expected (the expected raw) or perfect (the perfect image)")
     runs = {m: method(m) for m in methods}
@@ -151,8 +159,7 @@ def score(data: str | Path, methods: list[str], outputs: str | Path | None = Non
         outputs = Path(outputs)
         if not outputs.is_dir():
             raise CmosnoiseError(f"--outputs {str(outputs)!r} is not a folder")
-        runs["outputs"] = lambda raw, meta: _read_output(outputs, meta["sample"])
-    total = json.loads((data / "dataset.json").read_text())["recipe"]["samples"]
+        runs["outputs"] = lambda raw, meta: _read_output(outputs, meta["sample"], raw.shape)
     rows, done = [], 0
     for arrays, columns in ds.read(data):
         for i in range(len(arrays["raw"])):
@@ -261,7 +268,7 @@ def _plots(scores) -> dict[str, bytes]:
 
 
 def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target: str) -> str:
-    manifest = json.loads((Path(data) / "dataset.json").read_text())
+    manifest = ds.read_manifest(data)
     r = manifest["recipe"]
     per_method = scores.groupby("method", sort=False).agg(
         psnr_db=("psnr_db", "mean"), ssim=("ssim", "mean"),

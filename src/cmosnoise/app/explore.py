@@ -52,6 +52,8 @@ from .workbench import MAX_SENSOR_PIXELS, MAX_UPLOAD, BadRequest, Workbench, _cl
 #: limits: request bodies, picture sent per request (the workbench bounds uploads and sensors)
 MAX_BODY = 1_000_000
 MAX_OUT_SIDE = 4096
+#: seconds a pane's newest request number stays the mark that older ones are dropped against
+LATEST_S = 10.0
 #: seconds a connection may take to send a request's headers, and a request's body
 HEADER_TIMEOUT_S = 10.0
 BODY_TIMEOUT_S = 30.0
@@ -212,11 +214,14 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         t_in = time.perf_counter()
         data = await json_body(request)
         pane, seq = str(data.get("pane", "A"))[:8], data.get("seq", 0)
-        if not isinstance(seq, int):
-            raise BadRequest("seq must be an integer")
+        if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < 2**53:
+            raise BadRequest("seq must be a whole number from 0 to 2**53 - 1 (the page's count of its requests)")
         client = str(data.get("client", ""))[:40]
         token = f"{client}/{pane}"
-        bench.latest[token] = max(bench.latest.get(token, -1), seq)
+        now = time.monotonic()
+        newest, since = bench.latest.get(token, (-1, 0.0))
+        if seq >= newest or now - since > LATEST_S:  # a newest seq holds only while it is recent: one huge seq
+            bench.latest[token] = (seq, now)          # cannot make the pane's later requests look old for ever
         spec = validate(data.get("config"))
         rows, cols = spec.shape
         frame, step = data.get("frame", 0), data.get("step", 1)
@@ -229,7 +234,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
             raise BadRequest(f"the picture would be larger than {MAX_OUT_SIDE} pixels a side: use a larger step")
 
         def work():
-            if bench.latest.get(token, -1) > seq:  # a newer request of this pane is waiting: drop this one
+            if bench.latest.get(token, (-1, 0.0))[0] > seq:  # a newer request of this pane came in: drop this one
                 return None
             t0 = time.perf_counter()
             img, info = bench.picture(spec, scene_of(data), str(data.get("view", "pre")), frame,

@@ -37,6 +37,7 @@ from ..io.video import VideoWriter
 from ..isp import calibration
 from ..isp.process import Processor, read_dark
 from ..model import footprint, tiles
+from ..model import scene as scene_mod
 from ..model.raw_info import RawInfo
 from ..model.sensor import Sensor, check_device
 from ..model.spec import SensorSpec, resolve
@@ -64,6 +65,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     spec = resolve(config)
     source = spec.config.scene.source
     if Path(source).is_file():  # record a file scene by its absolute path: config.yaml reruns from anywhere
+        scene_mod.check_file(source)  # a bad scene file is refused before the sensor is set up
         spec = spec.with_config(merge_updates(spec.config, {"scene": {"source": str(Path(source).resolve())}}))
     config = spec.config
     if config.run.dng and not config.adc.enabled:

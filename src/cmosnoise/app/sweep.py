@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 
 from ..config.loading import load_yaml_text
-from ..errors import CmosnoiseError
+from ..errors import CmosnoiseError, note_kept
 from ..io.output import OutputFolder, resumable_mode
 
 #: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
@@ -538,8 +538,21 @@ def connect(scheduler: str | None, workers: int | None, say: Callable[[str], Non
         except ValueError as exc:
             raise CmosnoiseError(f"--scheduler {scheduler!r}: {exc}") from None
     n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0", env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
+    # the worker processes' own Dask logging at ERROR: a signal cancels their tasks, which Dask logs as warnings
+    # on the console (read from the environment when a spawned process imports distributed)
+    quiet = {"DASK_LOGGING__DISTRIBUTED": "error"}
+    saved = {k: os.environ.get(k) for k in quiet}
+    os.environ.update(quiet)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0",
+                               env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", **quiet})
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
     client = Client(cluster)
     say(f"Dask: a LocalCluster of {n} worker process(es); dashboard {client.dashboard_link}")
     return client, cluster
@@ -669,6 +682,15 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
     finally:
         fh.close()
     return results
+
+
+def _rows_kept(results: Path) -> int:
+    """Whole rows in ``results.csv`` (its header and a half-written last line left out)."""
+    try:
+        data = results.read_bytes()
+    except OSError:
+        return 0
+    return max(0, data.count(b"\n") - 1)
 
 
 def _cell(v):
@@ -865,9 +887,16 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
                     work.mkdir(parents=True, exist_ok=True)
                     _write_plan(work, p)
                 execute(p, work, client, mode == "resume", progress, device)
-            except BaseException:
+            except BaseException as exc:
                 if mode == "new" and not (out / "results.csv").exists():
                     shutil.rmtree(out, ignore_errors=True)
+                elif mode != "replace":  # the rows went straight into out: they stay, for --resume
+                    rows = _rows_kept(out / "results.csv")
+                    total = len(p.points) * p.instances
+                    note_kept(exc, f"{rows} of {total} rows kept in {out / 'results.csv'}; --resume completes "
+                                   "them" if rows else f"the sweep's plan kept in {out}; --resume starts it")
+                else:
+                    note_kept(exc, f"nothing was written: {out} keeps the sweep it held")
                 raise
             summarize(p, work)
     except OSError as exc:

@@ -42,6 +42,10 @@ from ..model.spec import SensorSpec, resolve
 MAX_UPLOAD = 50_000_000
 MAX_UPLOAD_PIXELS = 50_000_000
 MAX_SENSOR_PIXELS = 50_000_000
+#: the dark frames a pane's master dark averages (each render holds the lock while they are made): at most this
+#: many, and this many pixels of them in all (64 frames of a 3 MP sensor, about 2 s)
+MAX_DARK_FRAMES = 256
+MAX_DARK_PIXELS = 200_000_000
 #: uploads kept at once, and their total bytes: past either the oldest upload is removed
 MAX_UPLOADS = 16
 MAX_UPLOADS_BYTES = 200_000_000
@@ -84,6 +88,12 @@ def validate(data) -> SensorSpec:
     if cfg.sensor.width * cfg.sensor.height > MAX_SENSOR_PIXELS:
         msg = f"the explorer takes sensors up to {MAX_SENSOR_PIXELS / 1e6:g} MP; use cmosnoise simulate for larger ones"
         raise BadRequest(msg, 422, {"sensor.width": msg})
+    n = cfg.processing.dark_frames
+    if n > MAX_DARK_FRAMES or n * cfg.sensor.width * cfg.sensor.height > MAX_DARK_PIXELS:
+        msg = (f"processing.dark_frames = {n}: the explorer averages at most {MAX_DARK_FRAMES} dark frames and "
+               f"{MAX_DARK_PIXELS / 1e6:g} megapixels of them ({max(1, MAX_DARK_PIXELS // (cfg.sensor.width * cfg.sensor.height))} "
+               "frames of this sensor); cmosnoise simulate --dark-frames takes more")
+        raise BadRequest(msg, 422, {"processing.dark_frames": msg})
     try:
         return resolve(cfg)
     except CmosnoiseError as exc:
@@ -112,7 +122,8 @@ class Workbench:
         self._figures = PatternCache(int(1e8), max_items=8)  # figures of a pane's configuration and scene
         self.lock = threading.Lock()  # pictures, one at a time (the kernel uses every core)
         self.figures_lock = threading.Lock()  # figures beside them: never in a picture's way
-        self.latest: dict[str, int] = {}
+        #: each pane's newest render request: (the page's number for it, when it came)
+        self.latest: dict[str, tuple[int, float]] = {}
 
     # scenes: built-in names, or uploads stored here; never a path from the page
     def scene_source(self, scene: str) -> str:

@@ -41,16 +41,17 @@ def _merge_into(out: dict, override: dict) -> None:
 
 def parse_override(text: str) -> tuple[list[str], Any]:
     """Parse ``a.b.c=value`` (value in YAML syntax) into (["a", "b", "c"], value)."""
+    shown = text if len(text) <= 120 else f"{text[:100]}...({len(text)} characters)"
     if "=" not in text:
-        raise CmosnoiseError(f"--set {text!r}: expected KEY=VALUE, e.g. prnu.sigma_pct=2")
+        raise CmosnoiseError(f"--set {shown!r}: expected KEY=VALUE, e.g. prnu.sigma_pct=2")
     key, _, raw = text.partition("=")
     key = key.strip()
     if not key or any(not p for p in key.split(".")):
-        raise CmosnoiseError(f"--set {text!r}: the key must be a dotted path such as prnu.sigma_pct")
+        raise CmosnoiseError(f"--set {shown!r}: the key must be a dotted path such as prnu.sigma_pct")
     try:
         value = load_yaml_text(raw) if raw.strip() else None
     except yaml.constructor.ConstructorError as exc:
-        raise CmosnoiseError(f"--set {text!r}: {exc.problem}") from None
+        raise CmosnoiseError(f"--set {shown!r}: {exc.problem}") from None
     except yaml.YAMLError:
         value = raw
     return key.split("."), value
@@ -144,15 +145,20 @@ def preset_names() -> list[str]:
 
 
 def preset_data(name: str) -> dict:
-    path = _preset_dir() / f"{name}.yaml"
-    if not path.is_file():
-        raise CmosnoiseError(f"unknown preset {name!r}; available: {', '.join(preset_names())}")
-    return yaml.safe_load(path.read_text()) or {}
+    """A shipped preset's data, by name alone (a path is no preset: ``--config`` reads a file), read with the
+    same strict loader as a configuration file."""
+    if not isinstance(name, str) or name not in preset_names():
+        raise CmosnoiseError(f"unknown preset {name!r}; available: {', '.join(preset_names())}"
+                             + (" (a configuration file is given with --config)" if isinstance(name, str)
+                                and ("/" in name or "\\" in name or name.endswith((".yaml", ".yml"))) else ""))
+    return load_yaml_text((_preset_dir() / f"{name}.yaml").read_text()) or {}
 
 
 #: a configuration file is at most this large (bytes) and this deeply nested
 MAX_CONFIG_BYTES = 1_000_000
 MAX_NESTING = 32
+#: digits of one number in a configuration (a seed is at most 20; Python refuses to read past 4300)
+MAX_NUMBER_DIGITS = 100
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -187,6 +193,12 @@ def _strict_number(kind: str):
         if kind == "int" and len(digits) > 1 and digits[0] == "0" and digits[1:].isdigit():
             raise yaml.constructor.ConstructorError(None, None, f"{node.value!r} would be read as an octal number; "
                                                     "write it without the leading zero", node.start_mark)
+        if kind == "int" and digits[:2].lower() == "0b":
+            raise yaml.constructor.ConstructorError(None, None, f"{node.value!r} would be read as a binary number; "
+                                                    "write the number in decimal", node.start_mark)
+        if len(digits) > MAX_NUMBER_DIGITS:
+            raise yaml.constructor.ConstructorError(None, None, f"a number of {len(digits)} digits; at most "
+                                                    f"{MAX_NUMBER_DIGITS} are read", node.start_mark)
         return base(loader, node)
 
     return construct

@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CmosnoiseError, Terminated, check_terminated
+from .. import inputs
+from ..errors import CmosnoiseError, Terminated, check_terminated, note_written, on_hard_exit, signals_deferred
 
 _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
 
@@ -262,8 +263,16 @@ class OutputFolder:
                 self._wrapper = Path(tempfile.mkdtemp(prefix=_helper_name(_TMP), dir=self.anchor))
                 os.chmod(self._wrapper, 0o700)
                 self.tmp = self._wrapper / "out"
+                wrapper, lock = self._wrapper, self.lock
+
+                def hard_exit():  # what a signal's watchdog does before it ends the process: nothing left behind
+                    shutil.rmtree(wrapper, ignore_errors=True)
+                    lock.release()
+
+                on_hard_exit(id(self), hard_exit)
                 self.tmp.mkdir(mode=0o777 & ~_umask())
             except BaseException:
+                on_hard_exit(id(self))
                 if self._wrapper is not None:
                     shutil.rmtree(self._wrapper, ignore_errors=True)
                 self.lock.release()
@@ -273,6 +282,12 @@ class OutputFolder:
         return self.tmp
 
     def __exit__(self, exc_type, exc, tb):
+        try:
+            return self._finish(exc_type)
+        finally:
+            on_hard_exit(id(self))
+
+    def _finish(self, exc_type):
         try:
             if exc_type is None:
                 try:  # an interrupt whose exception a library swallowed still means: no output
@@ -285,6 +300,8 @@ class OutputFolder:
                 return False
             old = None
             target = str(Path(os.path.abspath(self.out)))
+            commit = signals_deferred()  # a signal during the renames is acted on after them, not between them
+            commit.__enter__()
             try:
                 _write_marker(self._wrapper / "target", target)  # complete: from here on, a kill is recoverable
                 if self.out.exists():  # empty, or --overwrite: moved aside, removed once the new one is in place
@@ -304,6 +321,8 @@ class OutputFolder:
             finally:
                 if old is not None:
                     shutil.rmtree(old, ignore_errors=True)
+                commit.__exit__(None, None, None)
+            note_written(self.out)
             shutil.rmtree(self._wrapper, ignore_errors=True)
             return False
         finally:
@@ -462,7 +481,10 @@ def resumable_mode(out: Path, record: str, expected: str, resume: bool, overwrit
     if not (out.is_dir() and any(out.iterdir())):
         return "new"
     if resume:
-        old = (out / record).read_text() if (out / record).is_file() else None
+        old = None
+        if (out / record).is_file():  # through the gate: at most a little more than the record this job writes
+            data = inputs.read_bytes(out / record, f"--resume {record}", len(expected.encode()) + 4096)
+            old = data.decode("utf-8", "replace")
         if old != expected:
             raise CmosnoiseError(f"--resume: {str(out)!r} holds another {what} (its {record} differs); resume with the "
                                  "same options")

@@ -204,6 +204,11 @@ class Dataset:
 
 
 # ------------------------------------------------------------------ files
+#: bytes a frame's pixel takes while a stack is reduced and fitted: the frame as float64, six float64 sums, the
+#: stack's mean, variance and fourth moment kept, and the fit's maps (measured peaks are 70 to 80 bytes a pixel)
+REDUCE_BYTES_PER_PIXEL = 80
+
+
 @dataclass
 class _Meta:
     cfa: Optional[str] = None
@@ -242,7 +247,10 @@ def _frames_of(path: Path, meta: _Meta) -> Iterator[np.ndarray]:
     if not path.exists() and not path.is_symlink():
         raise CmosnoiseError(f"{str(path)!r}: no such file")
     if suffix in (".tif", ".tiff", ".npy"):  # from the header: no frame larger than a sensor, no endless file
-        inputs.check_image_pixels(path, "frames file", inputs.MAX_STREAM_PIXELS, inputs.MAX_FRAME_PIXELS)
+        rows, cols, _ = inputs.check_image_pixels(path, "frames file", inputs.MAX_STREAM_PIXELS, inputs.MAX_FRAME_PIXELS)
+        # and no frame whose reduction would not fit in memory (the stack's float64 sums, the fits' maps)
+        inputs.check_memory(rows * cols * REDUCE_BYTES_PER_PIXEL, f"frames file {str(path)!r} ({cols} x {rows} "
+                            "frames)", " (crop the frames to a region first)")
     else:
         inputs.check_regular(path, "frames file")
     if suffix == ".dng":

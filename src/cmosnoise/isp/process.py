@@ -89,6 +89,24 @@ class Processor:
         white = s.white_dn if s.white_dn is not None else (i.white_dn if i.white_dn is not None else i.white_level_dn)
         return max(float(white) - i.black_level_dn, 1e-9)
 
+    def check_raw(self, raw) -> np.ndarray:
+        """``raw`` as an array if it is a raw frame this processor can take: 2-D (rows, cols) of at least 2 x 2,
+        integer or real codes (float: every value finite), of the master dark's shape where there is one; else
+        one :class:`CmosnoiseError` naming the argument (a NaN would reach the compiled demosaicing)."""
+        if not isinstance(raw, np.ndarray):
+            try:
+                raw = np.asarray(raw)
+            except (TypeError, ValueError):
+                raise CmosnoiseError(f"raw: expected an array of codes, got {type(raw).__name__}") from None
+        if raw.dtype.kind not in "uif":
+            raise CmosnoiseError(f"raw: an array of {raw.dtype}; expected integer or real codes (DN)")
+        if raw.ndim != 2 or min(raw.shape) < 2:
+            raise CmosnoiseError(f"raw: an array of shape {raw.shape}; expected one frame (rows, cols), at least 2 x 2")
+        if raw.dtype.kind == "f" and not np.isfinite(raw).all():
+            raise CmosnoiseError(f"raw: {int((~np.isfinite(raw)).sum())} NaN or infinite values; codes are finite")
+        self.check_shape(raw.shape)
+        return raw
+
     def check_shape(self, shape: tuple[int, int]) -> None:
         if self.master_dark is not None and self.master_dark.shape != tuple(shape):
             raise CmosnoiseError(
@@ -99,7 +117,7 @@ class Processor:
     # ------------------------------------------------------------ CFA domain
     def cfa_image(self, raw: np.ndarray, pre: bool = False) -> np.ndarray:
         """Steps 1 to 3: signal above black (DN), dark-calibrated and defect-corrected, float32."""
-        self.check_shape(raw.shape)
+        raw = self.check_raw(raw)
         img = calibration.subtract_black(raw, self.info.black_level_dn)
         if pre:
             return img
@@ -155,6 +173,7 @@ class Processor:
         bilinear demosaicing (:func:`reconstruction.bilinear_srgb8`); grey
         world, if chosen, takes its gains from the first frame's steps.
         """
+        raw = self.check_raw(raw)
         one_pass = (half or (self.settings.demosaic == "bilinear" and min(raw.shape) > reconstruction.EDGE_PAD))
         if (one_pass and not self.mono and reconstruction.COMPILED
                 and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None)):

@@ -10,10 +10,9 @@ the report (1080p: 473 and 545 MB in all), and Menon 2007 demosaicing about
 
 from __future__ import annotations
 
-import os
-
 from ..config import Config
 from ..errors import CmosnoiseError
+from ..inputs import available_bytes  # noqa: F401 (one place for the fact; callers read it here too)
 
 BASE_BYTES = 300_000_000
 PER_PIXEL = {"sensor": 60, "run": 130, "processing": 50, "malvar2004": 60, "menon2007": 130}
@@ -28,21 +27,6 @@ def estimate_bytes(config: Config, run: bool = True, pixels: int | None = None) 
     if run and (config.processing.enabled or config.run.report or config.processing.dark_frames > 0):
         per += PER_PIXEL["processing"] + PER_PIXEL.get(config.processing.demosaic, 0)
     return BASE_BYTES + per * pixels
-
-
-def available_bytes() -> int | None:
-    """Memory the system can give without swapping (Linux MemAvailable), or None where unknown."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def check_fits(config: Config, run: bool = True, available: int | None = None, pixels: int | None = None,

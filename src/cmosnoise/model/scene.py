@@ -361,6 +361,26 @@ MAX_SCENE_BYTES = 2_000_000_000
 MAX_SCENE_PIXELS = 64_000_000
 
 
+def check_file(path: str | Path, max_pixels: int = MAX_SCENE_PIXELS) -> None:
+    """The input gate alone for a scene file (its structure and decoded size from its header), so that a command
+    refuses a bad scene before any other work (a sensor's maps, a compile).
+
+    Parameters
+    ----------
+    path : str or Path
+        The scene file.
+    max_pixels : int
+        The most decoded pixels over all its frames and pages.
+
+    Raises
+    ------
+    CmosnoiseError
+        Not a regular file, a damaged or hostile structure, or too many pixels.
+    """
+    inputs.check_image_pixels(path, "scene", max_pixels,
+                              hint=" (a scene is resampled to the sensor anyway: scale it down first)")
+
+
 def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MAX_SCENE_PIXELS) -> np.ndarray:
     """Read an image file as linear RGB in [0, 1] (see module docstring).
 
@@ -390,8 +410,7 @@ def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MA
         raise CmosnoiseError(f"scene {name!r}: no such file (built-in scenes: {', '.join(BUILTINS)})")
     if p.is_dir():
         raise CmosnoiseError(f"scene {name!r} is a folder, not an image file")
-    inputs.check_image_pixels(p, "scene", max_pixels,
-                              hint=" (a scene is resampled to the sensor anyway: scale it down first)")
+    check_file(p, max_pixels)
     if p.stat().st_size > MAX_SCENE_BYTES:
         raise CmosnoiseError(f"scene {name!r} is {p.stat().st_size / 1e9:.1f} GB; images up to "
                              f"{MAX_SCENE_BYTES / 1e9:g} GB are read")

@@ -394,9 +394,13 @@ class Sensor:
             draw = scene_mod.prepare(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size)
             return scene_mod.cfa_signal(draw, self.cfa, self.spec.channel_responsivity, region=self.window)
         try:
-            rgb = np.asarray(scene, dtype=np.float64)
+            given = np.asarray(scene)
+            if given.dtype.kind not in "uifb":  # complex, object, text: not light levels (a cast would drop parts)
+                raise TypeError
+            rgb = given.astype(np.float64)
         except (TypeError, ValueError):
-            raise CmosnoiseError(f"scene: expected a name, a path or an array of numbers, got {type(scene).__name__}") from None
+            kind = f"an array of {given.dtype}" if "given" in locals() else type(scene).__name__
+            raise CmosnoiseError(f"scene: expected a name, a path or an array of real numbers, got {kind}") from None
         shape = self.map_shape
         if rgb.ndim not in (2, 3) or rgb.shape[:2] != shape or (rgb.ndim == 3 and rgb.shape[2] not in (1, 3)):
             whose = "sensor's" if self.window is None else "window's"
@@ -857,14 +861,14 @@ class Exposure:
 
     def frames(self, n: int, first: int = 0) -> Iterator[np.ndarray]:
         """Raw frames ``first`` to ``first + n - 1``, one at a time."""
-        for k in range(first, first + n):
-            yield self.frame(k)
+        n, first = _whole(n, "n"), _frame_index(first)
+        return (self.frame(k) for k in range(first, first + n))
 
     def frames_with_electrons(self, n: int, first: int = 0, region=None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """(raw, charge at the ADC input in e-) for frames ``first`` onwards, one at a time (of ``region`` only,
         where given)."""
-        for k in range(first, first + n):
-            yield self._render(k, region=region)
+        n, first = _whole(n, "n"), _frame_index(first)
+        return (self._render(k, region=region) for k in range(first, first + n))
 
 
 def frames_together(exposures, frames=0, electrons: bool = False):
