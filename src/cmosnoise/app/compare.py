@@ -84,6 +84,8 @@ def load_run(path: str | Path, what: str) -> Run:
     return Run(path, summary, load_config(path / "config.yaml"))
 
 
+#: the most pixels of a run's preview.png that are decoded (the pictures are left out past it)
+MAX_PREVIEW_PIXELS = 100_000_000
 #: the most bytes of a run's summary.json that are read (a run's own is some tens of kB)
 MAX_SUMMARY_BYTES = 20_000_000
 #: the parts of a summary that :func:`figures` reads: dotted path -> the JSON type it must have where present
@@ -282,8 +284,9 @@ def _read_png(path: Path) -> np.ndarray | None:
     import imageio.v3 as iio
 
     try:
+        inputs.check_image_pixels(path, "preview", MAX_PREVIEW_PIXELS)  # a run's own is at most the sensor's size
         img = iio.imread(path)
-    except Exception:  # no preview (an older or partial folder): the pictures are left out
+    except Exception:  # no preview (an older or partial folder, or one past the bound): the pictures are left out
         return None
     return img[..., :3] if img.ndim == 3 else np.repeat(img[..., None], 3, axis=2)
 
