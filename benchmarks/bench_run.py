@@ -8,7 +8,7 @@ Two measurements, each in a child process of its own:
   the frame, the summary after the frames, and the sensor's own figures made beside the scene and the frames);
 - the summary alone, on a sensor of the same size: the frame kernel's time (the fastest of ``--repeats`` frames)
   and the whole summary's work done in one thread after the frame, without the pictures beside it
-  (``run.sensor_figures`` then ``run.build_summary``, on a fresh sensor each time so nothing is kept from the
+  (``summary.sensor_figures`` then ``summary.build_summary``, on a fresh sensor each time so nothing is kept from the
   last), the fastest of ``--repeats``. "frames' worth": the summary's time over the frame's.
 
     python benchmarks/bench_run.py [--megapixels 50] [--repeats 3] [--threads 2] [--json FILE]
@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 #: (width, height) of each size in megapixels
-SIZES = {12: (4000, 3000), 50: (8192, 6144), 100: (11552, 8672)}
+SIZES = {1: (1152, 864), 12: (4000, 3000), 50: (8192, 6144), 100: (11552, 8672)}  # 1: the suite's smoke run
 
 
 def command_line(width: int, height: int, env: dict) -> dict:
@@ -52,7 +52,7 @@ def summary_alone(width: int, height: int, repeats: int) -> dict:
     """The frame kernel's time and the whole summary's, one after the other in this process."""
     from cmosnoise import Sensor
     from cmosnoise.analysis.run_stats import RunStats
-    from cmosnoise.app import run
+    from cmosnoise.app import summary
 
     config = {"sensor": {"width": width, "height": height}}
     frame_s, summary_s = math.inf, math.inf
@@ -65,7 +65,7 @@ def summary_alone(width: int, height: int, repeats: int) -> dict:
         t1 = time.perf_counter()
         stats.update(raw, electrons)
         t2 = time.perf_counter()
-        run.build_summary(sensor, shot, stats, 0.0, 1, electrons, run.sensor_figures(sensor))
+        summary.build_summary(sensor, shot, stats, 0.0, 1, electrons, summary.sensor_figures(sensor))
         t3 = time.perf_counter()
         if k:
             frame_s, summary_s = min(frame_s, t1 - t0), min(summary_s, t3 - t2)

@@ -101,3 +101,92 @@ def test_architecture_doc_names_every_layer_and_module():
     missing = sorted(str(p.relative_to(src)) for p in src.rglob("*.py")
                      if p.stem not in ("__init__", "__main__") and p.stem not in doc)
     assert not missing, f"modules ARCHITECTURE.md does not name: {missing}"
+
+
+# ------------------------------------------------------------------ circles
+def import_graph(root: Path = ROOT) -> dict[str, set[str]]:
+    """module -> the package's modules it imports (at any level: a function's import is an arrow too); a
+    package's ``__init__`` is the package's own name, ``from .x import name`` points to ``x.name`` where that is
+    a module."""
+    mods = {}
+    for p in root.rglob("*.py"):
+        m = ".".join(p.relative_to(root.parent).with_suffix("").parts)
+        mods[m.removesuffix(".__init__")] = p
+    edges: dict[str, set[str]] = {m: set() for m in mods}
+    for m, p in mods.items():
+        package = m if p.name == "__init__.py" else m.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = package.split(".")[: len(package.split(".")) - (node.level - 1)] if node.level else []
+                t = ".".join(base + ([node.module] if node.module else [])) if node.level else node.module
+                targets = [f"{t}.{a.name}" if f"{t}.{a.name}" in mods else t for a in node.names]
+            else:
+                continue
+            for t in targets:
+                while t and t not in mods:
+                    t = t.rpartition(".")[0]
+                if t and t != m:
+                    edges[m].add(t)
+    return edges
+
+
+def circles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """The import circles: strongly connected groups of more than one module (Tarjan's algorithm, iterative)."""
+    index, low, on, stack, out, count = {}, {}, set(), [], [], 0
+    for start in edges:
+        if start in index:
+            continue
+        work = [(start, iter(sorted(edges[start])))]
+        index[start] = low[start] = count
+        count += 1
+        stack.append(start)
+        on.add(start)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = count
+                    count += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(edges.get(w, ())))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                group = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    group.append(w)
+                    if w == v:
+                        break
+                if len(group) > 1:
+                    out.append(sorted(group))
+    return out
+
+
+def test_no_import_circle_inside_a_layer_or_between_layers():
+    """#58: a circle inside a layer (app/run <-> app/tiled, engine's kernel -> fixed_maps -> cuda_kernel <->
+    cuda_device -> kernel) passed the layer test; any circle fails now."""
+    found = circles(import_graph())
+    assert not found, f"import circles: {found}"
+
+
+def test_the_circle_check_sees_a_circle(tmp_path):
+    pkg = tmp_path / "cmosnoise"
+    (pkg / "app").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "app" / "__init__.py").write_text("")
+    (pkg / "app" / "a.py").write_text("def f():\n    from . import b\n")
+    (pkg / "app" / "b.py").write_text("from .c import g\n")
+    (pkg / "app" / "c.py").write_text("from cmosnoise.app.a import f\n")
+    assert circles(import_graph(pkg)) == [["cmosnoise.app.a", "cmosnoise.app.b", "cmosnoise.app.c"]]
+    (pkg / "app" / "c.py").write_text("import numpy\n")
+    assert circles(import_graph(pkg)) == []

@@ -42,7 +42,7 @@ from ..errors import CmosnoiseError
 from ..io.output import OutputFolder, png_bytes, write_json
 from ..model.sensor import Sensor
 from ..model.spec import resolve
-from .run import build_summary
+from .summary import build_summary
 from .sweep import instance_seed
 
 #: a difference is flagged beyond this many standard errors of the difference (with 8 instances a side, a

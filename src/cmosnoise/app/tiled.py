@@ -34,7 +34,7 @@ from ..io.raw_tiff import TileWriter, create_tiled_raw_tiff
 from ..model import footprint, tiles
 from ..model.sensor import Sensor
 from ..model.spec import SensorSpec, resolve
-from .run import run_metadata, signal_figures, summary_head
+from .summary import run_metadata, signal_figures, summary_head
 
 #: what a tiled run leaves out, and why (the summary's ``tiles.not_made``)
 NOT_MADE = {

@@ -13,7 +13,7 @@ import numpy as np
 from numba import cuda
 
 from . import kernel, telegraph
-from .cuda_kernel import (
+from .cuda_table import (
     BLACK,
     CDS,
     CDS_INTERVAL,

@@ -35,12 +35,33 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import types
 
 import numpy as np
 
 from ..errors import CmosnoiseError
 from . import dlpack, kernel
+from .cuda_table import (  # noqa: F401 - the table's columns, read by name here and in cuda_device
+    BLACK,
+    CDS,
+    CDS_INTERVAL,
+    EXPOSURE,
+    FRAME_BLACK_SIGMA,
+    FRAME_PERIOD,
+    FULL_WELL,
+    K_ADC,
+    NL_A,
+    NL_B,
+    NL_C,
+    NL_SCALE,
+    NL_SIZE,
+    NORMAL_ABOVE,
+    READ_KIND,
+    READ_SCALE,
+    ROW_SIGMA,
+    TOP,
+    scalar_numpy,
+    simulated,
+)
 from .jit import numba
 
 #: threads per block of the pixel kernel (along a row: coalesced loads of the maps and stores of the frame)
@@ -58,11 +79,6 @@ def _cuda():
         raise CmosnoiseError(f"device = 'cuda': numba's CUDA target cannot be imported ({exc}); "
                              "install cmosnoise[cuda]") from None
     return cuda
-
-
-def simulated() -> bool:
-    """Whether numba's CUDA simulator stands in for a GPU (``NUMBA_ENABLE_CUDASIM=1``)."""
-    return numba is not None and bool(numba.config.ENABLE_CUDASIM)
 
 
 def check() -> None:
@@ -115,20 +131,6 @@ def strict_arithmetic():
             yield
         finally:
             nvvm.compile_ir = original
-
-
-def scalar_numpy(cuda) -> types.ModuleType:
-    """What ``np`` stands for in the helpers' sources on the device: numpy's scalar types, and its ufuncs as the
-    CUDA target's scalar functions with the same IEEE results (libdevice's floor, rint, fabs, sqrt and fmax are
-    exact or correctly rounded)."""
-    if simulated():
-        return np  # the simulator runs the sources as Python on numpy scalars
-    shim = types.ModuleType("cmosnoise_cuda_numpy")
-    for name in ("uint64", "int64", "uint32", "int32", "uint16", "float64", "float32", "inf"):
-        setattr(shim, name, getattr(np, name))
-    lib = cuda.libdevice
-    shim.floor, shim.rint, shim.abs, shim.sqrt, shim.maximum = lib.floor, lib.rint, lib.fabs, lib.sqrt, lib.fmax
-    return shim
 
 
 def kernels():
@@ -256,17 +258,6 @@ def _rows_of(index: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.
     index = np.asarray(index).astype(np.int64)
     ptr = np.searchsorted(index // cols, np.arange(rows + 1)).astype(np.int64)
     return ptr, (index % cols).astype(np.int64)
-
-
-#: the columns of :attr:`DevicePlan.numbers`, each plan's scalars (float64): the Poisson draw's normal
-#: approximation from, the full well (e-); K (DN/e-), black level and top code (DN); the curve's charge scale and
-#: cubic; the read noise's scale (DN); the row noise's sigma (e-), the black level's error per frame (DN); the
-#: frame period, CDS interval and exposure (s; telegraph noise and blinking pixels)
-(NORMAL_ABOVE, FULL_WELL, K_ADC, BLACK, TOP, NL_SCALE, NL_A, NL_B, NL_C, READ_SCALE, ROW_SIGMA, FRAME_BLACK_SIGMA,
- FRAME_PERIOD, CDS_INTERVAL, EXPOSURE) = range(15)
-#: the columns of :attr:`DevicePlan.ints` (int64): the read noise's law (0 normal, 1 Tukey-lambda), the curve
-#: table's length (2: the cubic), whether the traps are read by CDS
-READ_KIND, NL_SIZE, CDS = range(3)
 
 
 def _row_lists(indices: list, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

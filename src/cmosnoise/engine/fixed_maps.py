@@ -23,7 +23,8 @@ Two kinds of per-pixel map cover every stage's:
   points' values (the same variates).
 
 The functions :func:`ppf_cell`, :func:`heavy_tail_value`, :func:`two_point`
-and :func:`normal_value` are written once, on scalars or NumPy arrays: the
+and :func:`normal_value` (in :mod:`.map_values`, which the kernel compiles
+without importing this dispatcher) are written once, on scalars or NumPy arrays: the
 NumPy path (``engine="numpy"``) runs them over arrays, row band by row band,
 and is the specification; the compiled path (:mod:`.kernel` compiles the same
 sources) runs them pixel by pixel in a parallel loop and must give the same
@@ -36,57 +37,15 @@ from __future__ import annotations
 import numpy as np
 
 from . import buffers
-from .fdmath import exp, floor, log, where
 from .jit import ONE_LAUNCH, numba
+from .map_values import heavy_tail_value, normal_value, offset_value, ppf_cell, two_point  # noqa: F401 - the spec
 from .philox import uniform_pair
-from .samplers import Stream, normal_from
+from .samplers import Stream
 
 _ZERO = np.uint64(0)
 _ONE = np.uint64(1)
 #: the NumPy path's row bands hold about this many pixels (its temporaries: some tens of bytes a pixel)
 BAND_PIXELS = 1 << 18
-
-
-def ppf_cell(u, start, step, last):
-    """Where an open uniform ``u`` falls on the grid uniform in ``logit(u)`` (``start + j step``, ``j = 0 .. last``):
-    (the node below, held as float; the weight of the next node), clipped to the grid's ends."""
-    pos = (log(u / (1.0 - u)) - start) / step
-    pos = where(pos < 0.0, 0.0, where(pos > last, last, pos))
-    i = floor(pos)
-    i = where(i > last - 1.0, last - 1.0, i)
-    return i, pos - i
-
-
-def heavy_tail_value(lo, hi, w, u_member, u_tail, body_scale, fraction, tail_max, tail_scale):
-    """A heavy-tailed map's value from its body's two table nodes ``lo``, ``hi`` and the weight ``w`` of ``hi``."""
-    body = lo * (1.0 - w) + hi * w
-    body = where(body > 0.0, body, 0.0) * body_scale
-    return body + where(u_member < fraction, u_tail * tail_max * tail_scale, 0.0)
-
-
-def two_point(v_lo, v_hi, floor_lo, floor_hi, w):
-    """A pixel's rate between two characterization points: log-linear between its rates there, each floored."""
-    a = log(where(v_lo > floor_lo, v_lo, floor_lo))
-    b = log(where(v_hi > floor_hi, v_hi, floor_hi))
-    return exp((1.0 - w) * a + w * b)
-
-
-def normal_value(u1, u2, mean, sigma, low):
-    """A normal map's value: ``max(mean + sigma z, low)``, z by Box-Muller from (u1, u2)."""
-    v = mean + sigma * normal_from(u1, u2)
-    return where(v > low, v, low)
-
-
-def offset_value(index, k0, k1, sigma, fraction, tail_max):
-    """A pixel offset: ``sigma z`` (block 0 of the pixel's counter, Box-Muller), plus ``u * tail_max`` where the
-    pixel is in the tail (block 1: its first uniform below ``fraction``, ``u`` its second; drawn only where
-    ``fraction > 0``)."""
-    u1, u2 = uniform_pair(index, _ZERO, _ZERO, _ZERO, k0, k1)
-    v = sigma * normal_from(u1, u2)
-    if fraction > 0.0:
-        member, u = uniform_pair(index, _ZERO, _ZERO, _ONE, k0, k1)
-        v = v + where(member < fraction, u * tail_max, 0.0)
-    return v
 
 
 def _check(region, cols):

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import fdmath, fixed_maps, jit, philox, samplers, telegraph
+from . import fdmath, jit, map_values, philox, samplers, telegraph
 from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
 
 _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
@@ -119,7 +119,7 @@ HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
            (samplers, ["normal_from", "normal_pair_from", "tukey_lambda_cell", "tukey_lambda_at", "ptrs_constants",
                        "ptrs_candidate", "ptrs_quick_accept", "ptrs_early_reject", "ptrs_log_test", "ptrs_log_accept",
                        "ptrs_try", "poisson_one"]),
-           (fixed_maps, ["ppf_cell", "heavy_tail_value", "two_point", "normal_value", "offset_value"])]
+           (map_values, ["ppf_cell", "heavy_tail_value", "two_point", "normal_value", "offset_value"])]
 
 
 def compile_helpers(jit, numpy=np, skip=()) -> dict:
