@@ -30,10 +30,13 @@ def test_simulate_writes_the_four_outputs(tmp_path):
     assert summary["signal"]["mean_e"] > 0 and summary["temporal_noise"]["rms_e"] > 0
     # the run's total counts its parts after the set-up: the frames, the summary, the wait for the pictures
     t = summary["timings_s"]
-    parts = t["set_up"] + 3 * t["frame_s"] + t["summary"] + t["pictures_after_summary"]  # 3 frames: a steady time
     assert min(t["summary_aside"], t["summary"], t["pictures_after_summary"]) >= 0
-    # each figure is rounded to 1 us (at most 0.5 us off): total, set_up, summary, pictures and 3 times frame_s
-    assert abs(t["total"] - parts) <= 0.5e-6 * 7 + 1e-12
+    if t["frame_s"] is None:  # this run compiled the kernel (the first test of a session to make a frame): no
+        assert t["stages"]["kernel_compile"] > 0  # steady frame time, by design
+    else:
+        parts = t["set_up"] + 3 * t["frame_s"] + t["summary"] + t["pictures_after_summary"]  # 3 frames: steady
+        # each figure is rounded to 1 us (at most 0.5 us off): total, set_up, summary, pictures and 3 times frame_s
+        assert abs(t["total"] - parts) <= 0.5e-6 * 7 + 1e-12
     import imageio.v3 as iio
     assert iio.imread(out / "preview.png").shape == (64, 96, 3)
 
