@@ -487,3 +487,37 @@ def test_a_signal_while_the_interpreter_exits_says_the_command_had_finished(tmp_
     proc.send_signal(signal.SIGTERM)
     err = proc.communicate(timeout=20)[1]
     assert proc.returncode == 0 and "SIGTERM while exiting; the command had already finished (status 0)" in err, err
+
+
+# ------------------------------------------------------------------ what a new user meets (#63)
+def test_a_camera_raw_given_as_the_scene_is_refused_in_one_line(tmp_path):
+    """#63: a DNG was read as a linear grey picture (its mosaic and black level as light): now refused, by its
+    suffix, or by its tags whatever its name."""
+    from cmosnoise.io.dng import write_dng
+
+    sensor = Sensor({"sensor": {"width": 64, "height": 48}})
+    write_dng(tmp_path / "frame.dng", sensor.expose().frame(0), "RGGB", 64.0, 4095)
+    (tmp_path / "frame.tif").write_bytes((tmp_path / "frame.dng").read_bytes())
+    (tmp_path / "photo.nef").write_bytes(b"not really")
+    for scene in ("frame.dng", "frame.tif", "photo.nef"):
+        r = cli("simulate", "--scene", tmp_path / scene, "--set", "sensor.width=64", "--set", "sensor.height=48",
+                "--out", tmp_path / "out")
+        assert r.returncode == 2 and "is a camera raw" in r.stderr and _one_line(r.stderr), (scene, r.stderr)
+        assert not (tmp_path / "out").exists()
+
+
+def test_the_first_runs_hint_names_how_to_run_again():
+    from cmosnoise.app.cli import _speed
+
+    said = _speed({"frame_s": None, "set_up": 40.0, "stages": {"kernel_compile": 31.0}})
+    assert "run again (with --overwrite, or another --out)" in said
+
+
+def test_help_shows_every_option_name_whole_at_80_columns():
+    import os
+
+    env = {**os.environ, "COLUMNS": "80"}
+    r = subprocess.run([sys.executable, "-m", "cmosnoise", "simulate", "--help"], capture_output=True, text=True,
+                       env=env, timeout=60)
+    assert r.returncode == 0 and "--white-threshold" in r.stdout and "--threshold-e-..." not in r.stdout
+    assert max(len(x) for x in r.stdout.splitlines()) <= 80

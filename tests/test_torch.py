@@ -9,11 +9,12 @@ import pytest
 from conftest import cli
 
 from cmosnoise.app import dataset as ds
+from cmosnoise.errors import CmosnoiseError
 
 torch = pytest.importorskip("torch", reason="the torch extra: pip install 'cmosnoise[torch]'")
 from torch.utils.data import DataLoader  # noqa: E402
 
-from cmosnoise.torch import NoisyRawDataset, NoisyRawIterableDataset, collate, pack  # noqa: E402
+from cmosnoise.torch import NoisyRawDataset, NoisyRawIterableDataset, ShardDataset, collate, pack  # noqa: E402
 
 KW = dict(crop=(48, 64), cameras=("led", "sony-imx900", "eld:canon-70d"), seed=3, light_e=(20, 2000))
 
@@ -33,6 +34,27 @@ def test_the_dataset_gives_the_shards_samples_bit_for_bit(tmp_path):
         assert np.array_equal(item["expected"].numpy(), expect)
         assert item["noisy"].shape == (4, 24, 32) and item["mask"].dtype == torch.int32
         assert item["meta"]["camera"] == columns["camera"][i]
+
+
+def test_a_data_set_on_disk_reads_as_the_same_tensors_as_the_samples_made_on_the_fly(tmp_path):
+    """#63: `cmosnoise dataset`'s shards into a DataLoader without hand-written h5py: ShardDataset's sample i is
+    NoisyRawDataset's sample i (the same recipe), tensor for tensor, across shards and in worker processes."""
+    r = cli("-q", "dataset", "-n", "5", "--crop", "48x64", "--camera", "led", "--camera", "sony-imx900", "--camera",
+            "eld:canon-70d", "--seed", "3", "--light", "20:2000", "--shard-size", "2", "--out", tmp_path / "d")
+    assert r.returncode == 0, r.stderr
+    disk, made = ShardDataset(tmp_path / "d"), NoisyRawDataset(5, **KW)
+    assert len(disk) == 5
+    for i in (0, 3, 4, 1):  # out of order: shards read again
+        a, b = disk[i], made[i]
+        for k in ("noisy", "expected", "perfect", "mask", "raw"):
+            assert torch.equal(a[k], b[k]), (i, k)
+        assert a["meta"]["camera"] == b["meta"]["camera"] and a["meta"]["sample"] == i
+    batches = list(DataLoader(disk, batch_size=2, num_workers=2, collate_fn=collate))
+    assert [b["noisy"].shape[0] for b in batches] == [2, 2, 1]
+    assert torch.equal(batches[1]["expected"][1], made[3]["expected"])
+    (tmp_path / "d" / "shard-00001.h5").unlink()
+    with pytest.raises(CmosnoiseError, match="lacks 1 of its 3 shards"):
+        ShardDataset(tmp_path / "d")
 
 
 def test_pack_puts_red_first_whatever_the_pattern():

@@ -47,6 +47,9 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    # click's own help layout: option names whole at any width (rich's table cut them at 80 columns), flags
+    # without a metavar, a value's type in capitals
+    rich_markup_mode=None,
 )
 err_console = Console(stderr=True)
 
@@ -165,7 +168,7 @@ def _speed(timings: dict, pixels: int | None = None) -> str:
         return f"{timings['total']:.1f} s in all, {1e9 * timings['total'] / pixels / max(timings['frames'], 1):.1f} ns/pixel"
     if timings["frame_s"] is None:  # a run that compiled the kernel (a machine's first): no frame of it is steady
         return (f"{timings['set_up']:.1f} s, the frame kernel's compile ({timings['stages']['kernel_compile']:.0f} s) "
-                "included: run again for the time per frame")
+                "included: run again (with --overwrite, or another --out) for the time per frame")
     return f"{timings['frame_s'] * 1000:.1f} ms/frame after {timings['set_up']:.2f} s of set-up"
 
 

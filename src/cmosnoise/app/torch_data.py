@@ -18,12 +18,14 @@ A sample is a dict of tensors:
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
+from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
 from ..model.sensor import check_device
 from . import dataset as ds
@@ -172,6 +174,65 @@ class NoisyRawDataset(Dataset):
         made = ds.make_samples(self.recipe, [self._index(i) for i in indices], self.sources, self.epoch if self.fresh_noise else 0,
                                device="cuda", on_device=True)
         return [to_tensors(arrays, columns, device=self._target()) for arrays, columns in made]
+
+
+class ShardDataset(Dataset):
+    """A map-style dataset of a data set folder that ``cmosnoise dataset`` wrote (HDF5, npz or FITS shards):
+    sample ``i`` as :class:`NoisyRawDataset` gives it, read from disk instead of made.
+
+    The folder's ``dataset.json`` and each shard pass the input gate (:func:`cmosnoise.app.dataset.read_shard`);
+    a worker process keeps the last shard it read, so a ``DataLoader`` that reads in order (or a sampler over
+    whole shards) decodes each shard once.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The data set's folder.
+
+    Examples
+    --------
+    ::
+
+        from torch.utils.data import DataLoader
+        from cmosnoise.torch import ShardDataset, collate
+
+        for batch in DataLoader(ShardDataset("train"), batch_size=16, num_workers=4, collate_fn=collate):
+            noisy, target = batch["noisy"], batch["expected"]
+    """
+
+    def __init__(self, folder):
+        from pathlib import Path
+
+        self.folder = Path(folder)
+        manifest = ds.read_manifest(self.folder)
+        self.recipe = ds.Recipe.from_json(json.dumps(manifest["recipe"]))
+        self.shards = list(manifest["shards"])
+        expected = [self.recipe.shard_name(k) for k in range(self.recipe.shards())]
+        if self.shards != expected:
+            raise CmosnoiseError(f"{self.folder / 'dataset.json'}: its shards are not the recipe's "
+                                    f"({len(self.shards)} named, {len(expected)} expected)")
+        missing = [name for name in self.shards if not (self.folder / name).is_file()]
+        if missing:
+            raise CmosnoiseError(f"--data {str(self.folder)!r} lacks {len(missing)} of its {len(self.shards)} "
+                                    f"shards ({missing[0]}, ...): complete it with cmosnoise dataset --resume")
+        self._cached: tuple[int, tuple[dict, dict]] | None = None
+
+    def __len__(self) -> int:
+        return self.recipe.samples
+
+    def sample(self, index: int) -> tuple[dict, dict]:
+        """(arrays, columns) of sample ``index`` as its shard holds them (each array (rows, cols))."""
+        index = int(index)
+        if not 0 <= index < len(self):
+            raise IndexError(f"index {index} is outside 0 .. {len(self) - 1}")
+        shard, at = divmod(index, self.recipe.shard_size)
+        if self._cached is None or self._cached[0] != shard:
+            self._cached = (shard, ds.read_shard(self.folder / self.shards[shard]))
+        arrays, columns = self._cached[1]
+        return {k: v[at] for k, v in arrays.items()}, {k: v[at] for k, v in columns.items()}
+
+    def __getitem__(self, index: int) -> dict:
+        return to_tensors(*self.sample(index))
 
 
 class NoisyRawIterableDataset(IterableDataset):

@@ -377,8 +377,31 @@ def check_file(path: str | Path, max_pixels: int = MAX_SCENE_PIXELS) -> None:
     CmosnoiseError
         Not a regular file, a damaged or hostile structure, or too many pixels.
     """
-    inputs.check_image_pixels(path, "scene", max_pixels,
-                              hint=" (a scene is resampled to the sensor anyway: scale it down first)")
+    p = inputs.check_regular(path, "scene")
+    raw = p.suffix.lower() in RAW_SUFFIXES
+    if not raw:
+        inputs.check_image_pixels(path, "scene", max_pixels,
+                                  hint=" (a scene is resampled to the sensor anyway: scale it down first)")
+        with inputs.open_regular(p, "scene") as fh:
+            tiff = fh.read(4) in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+")
+        if tiff:  # a DNG or a CFA mosaic under another name (its chain of pages already walked by the gate)
+            import tifffile
+
+            try:
+                with tifffile.TiffFile(p) as tf:
+                    page = tf.pages.first
+                    raw = "DNGVersion" in page.tags or int(page.photometric) in (32803, 34892)
+            except Exception:  # the decoder's own refusal comes when the picture is read
+                raw = False
+    if raw:
+        raise CmosnoiseError(f"scene {str(path)!r} is a camera raw (a colour-filter mosaic above a black level), "
+                             "not a picture of the scene's light: give a processed picture (PNG, JPEG, TIFF or "
+                             ".npy of linear RGB); a raw photograph is not read as a scene")
+
+
+#: camera raw formats: a mosaic of codes with a black level, never read as a picture of light
+RAW_SUFFIXES = (".dng", ".nef", ".nrw", ".cr2", ".cr3", ".crw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2",
+                ".pef", ".srw", ".3fr", ".erf", ".kdc", ".mos", ".mrw", ".x3f", ".iiq", ".raw")
 
 
 def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MAX_SCENE_PIXELS) -> np.ndarray:
