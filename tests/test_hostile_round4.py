@@ -521,3 +521,37 @@ def test_help_shows_every_option_name_whole_at_80_columns():
                        env=env, timeout=60)
     assert r.returncode == 0 and "--white-threshold" in r.stdout and "--threshold-e-..." not in r.stdout
     assert max(len(x) for x in r.stdout.splitlines()) <= 80
+
+
+def test_the_video_runs_at_the_sensors_rate_stretched_for_a_dark_scene_and_the_flickering_pixels_are_named(tmp_path):
+    """#63: processed.mp4 at the sensor's frame rate (not 10 frames/s), a dark scene's video stretched for display
+    (the gain in summary.json), and every random telegraph pixel's position in rts_pixels.csv: the populations
+    the sensor drew."""
+    import imageio.v3 as iio
+    import pandas as pd
+
+    sets = ["--set", "sensor.width=96", "--set", "sensor.height=64", "--set", "source_follower.rts.enabled=true",
+            "--set", "source_follower.rts.ppm=3000", "--set", "dark_current.rts.enabled=true",
+            "--set", "dark_current.rts.ppm=3000", "--set", "exposure.integration_time_s=0.04"]
+    r = cli("-q", "simulate", "--scene", "flat:0.02", *sets, "--frames", "4", "--process", "--out", tmp_path / "v")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "v" / "summary.json").read_text())
+    video = summary["processing"]["video"]
+    assert video["fps"] == 25.0 and iio.immeta(tmp_path / "v" / "processed.mp4")["fps"] == 25.0
+    assert video["display_gain"] > 1.5
+    rts = pd.read_csv(tmp_path / "v" / "rts_pixels.csv")
+    from cmosnoise import load_config
+
+    sensor = Sensor(load_config(tmp_path / "v" / "config.yaml"))
+    fp = sensor.fixed_pattern
+    for kind, pop in (("trap", fp.traps), ("blinking", fp.blinkers)):
+        got = rts[rts["kind"] == kind]
+        assert len(got) == pop.index.size > 0
+        assert np.array_equal(got["row"] * 96 + got["col"], pop.index.astype(np.int64))
+        assert np.array_equal(got["size"], pop.size)
+    largest = summary["random_telegraph"]["source_follower"]["largest"][0]
+    top = int(np.argmax(fp.traps.size))
+    assert (largest["row"], largest["col"]) == divmod(int(fp.traps.index[top]), 96)
+    bright = cli("-q", "simulate", "--scene", "flat:0.5", *sets, "--frames", "2", "--process", "--out", tmp_path / "b")
+    assert bright.returncode == 0
+    assert json.loads((tmp_path / "b" / "summary.json").read_text())["processing"]["video"]["display_gain"] == 1.0

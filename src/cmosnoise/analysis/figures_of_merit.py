@@ -294,6 +294,18 @@ def pane(sensor: Sensor, shot: Exposure, levels_e=(10.0, 100.0, 1000.0)) -> dict
     return out
 
 
+#: random telegraph pixels a summary names by position, the largest first (simulate writes every one to
+#: rts_pixels.csv)
+LARGEST_TELEGRAPHS = 10
+
+
+def _largest(pop, cols: int, name: str) -> list[dict]:
+    """The :data:`LARGEST_TELEGRAPHS` largest signals of ``pop``: their row, column, size and dwell times."""
+    order = np.argsort(-pop.size, kind="stable")[:LARGEST_TELEGRAPHS]
+    return [{"row": int(pop.index[i]) // cols, "col": int(pop.index[i]) % cols, name: float(pop.size[i]),
+             "tau_low_s": float(pop.tau_low_s[i]), "tau_high_s": float(pop.tau_high_s[i])} for i in order]
+
+
 def telegraph(sensor: Sensor, frame_period_s: float) -> dict | None:
     """The random telegraph pixels of ``sensor`` (None with both stages off).
 
@@ -303,6 +315,8 @@ def telegraph(sensor: Sensor, frame_period_s: float) -> dict | None:
     e^-s tau) >= 0.01``: those a dark stack shows; with CDS off, those whose
     level is not all but always one state, ``min(pi0, pi1) >= 0.01``).
     ``blinking``: pixels, ppm, median step (e-/s) and median dwell times (s).
+    Each also names its ``largest`` signals by row and column (at most
+    :data:`LARGEST_TELEGRAPHS`, the largest first).
 
     Parameters
     ----------
@@ -333,6 +347,7 @@ def telegraph(sensor: Sensor, frame_period_s: float) -> dict | None:
             "median_amplitude_e": float(np.median(t.size)) if t.index.size else None,
             "visible_fraction": float(np.mean(seen >= 0.01)) if t.index.size else None,
             "cds": rts.cds,
+            "largest": _largest(t, sensor.shape[1], "amplitude_e"),
         }
     if fp.blinkers is not None:
         b = fp.blinkers
@@ -341,6 +356,7 @@ def telegraph(sensor: Sensor, frame_period_s: float) -> dict | None:
             "median_step_e_per_s": float(np.median(b.size)) if b.index.size else None,
             "median_tau_low_s": float(np.median(b.tau_low_s)) if b.index.size else None,
             "median_tau_high_s": float(np.median(b.tau_high_s)) if b.index.size else None,
+            "largest": _largest(b, sensor.shape[1], "step_e_per_s"),
         }
     if not out:
         return None

@@ -115,7 +115,9 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         stats = RunStats(transfer.max_code)
         frame0: list[np.ndarray] = []
         rendered0: list[np.ndarray] = []
-        video = VideoWriter(tmp / "processed.mp4", proc_cfg.video_fps) if proc_cfg.enabled and n > 1 else None
+        video = None
+        video_info = None
+        fps = video_rate(proc_cfg.video_fps, shot.frame_period_s)
         if config.run.dng:
             (tmp / "dng").mkdir()
         t_process = 0.0
@@ -136,7 +138,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         stamps: list[float] = []  # when each frame was made: the steady time per frame, apart from the set-up
 
         def frames(advance):
-            nonlocal t_process
+            nonlocal t_process, video, video_info
             stamps.append(time.perf_counter())
             for k, (raw, electrons) in enumerate(shot.frames_with_electrons(n, first), start=first):
                 stats.update(raw, electrons)
@@ -145,9 +147,15 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
                 if config.run.dng:
                     write_dng(tmp / "dng" / f"frame_{k:06d}.dng", raw, sensor.cfa, transfer.black_level_dn,
                               transfer.max_code, processor.mixing, info.responsivity)
-                if video is not None:
+                if proc_cfg.enabled and n > 1:
                     tp = time.perf_counter()
                     picture = processor.render(raw)
+                    if video is None:  # frame 0's picture sets the display gain, the same for every frame
+                        gain = display_gain(picture) if proc_cfg.video_stretch else 1.0
+                        video_info = {"fps": fps, "display_gain": gain, "frames": n}
+                        video = VideoWriter(tmp / "processed.mp4", fps, comment=(
+                            f"cmosnoise {config.seed}: {n} frames at {fps:g} frames/s; display gain {gain:g} "
+                            "(1: the processed pictures as they are)"), gain=gain)
                     video.append(picture)
                     if k == first:
                         rendered0.append(picture)  # frame 0's processed picture, reused below
@@ -199,6 +207,11 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         # everything from the set-up to the last output but the report: set-up, frames, summary and pictures
         summary["timings_s"]["total"] = round(t_frames + t_summary + t_pictures, 6)
         summary["processing"] = processing_summary(processor, t_dark, t_process)
+        if video_info is not None:
+            summary["processing"]["video"] = video_info
+        rts = telegraph_pixels(sensor)
+        if rts is not None:  # where the flickering pixels are: every one, beside the summary's worst few
+            rts.to_csv(tmp / "rts_pixels.csv", index=False)
         write_json(tmp / "summary.json", summary)
         if config.run.report:
             from . import report
@@ -228,6 +241,41 @@ def processing_summary(processor: Processor, t_dark: float, t_process: float) ->
         out["note"] = ("processed.png equals preview.png: no step beyond the preview's is on "
                        "(add --dark-frames N or set processing.defects.method)")
     return out
+
+
+def video_rate(video_fps: float | None, frame_period_s: float) -> float:
+    """processed.mp4's frames per second: ``video_fps`` where set, else the sensor's own rate (1 / its frame
+    period), kept within 1 to 240 (what players show)."""
+    if video_fps is not None:
+        return float(video_fps)
+    return float(min(240.0, max(1.0, 1.0 / frame_period_s)))
+
+
+def display_gain(picture: np.ndarray) -> float:
+    """The display stretch of a dark scene's video: the gain that lifts the 99.5th percentile of ``picture`` (8-bit)
+    to 235 where it is below 128 (mid-grey), at most 16; 1 for a scene bright enough to be seen as it is."""
+    top = float(np.percentile(picture, 99.5))
+    if top >= 128:
+        return 1.0
+    return round(min(16.0, 235.0 / max(top, 1.0)), 3)
+
+
+def telegraph_pixels(sensor: Sensor):
+    """Every random telegraph pixel of ``sensor``, as a pandas DataFrame (None with both stages off): ``kind``
+    (trap: the source follower's, through CDS; blinking: dark current), ``row``, ``col``, ``slot`` (the trap's
+    number in its pixel), ``size`` (e- for a trap, e-/s for a blinking pixel), ``tau_low_s``, ``tau_high_s``."""
+    import pandas as pd
+
+    fp, cols = sensor.fixed_pattern, sensor.shape[1]
+    parts = []
+    for kind, pop in (("trap", fp.traps if sensor.config.source_follower.enabled else None), ("blinking", fp.blinkers)):
+        if pop is None:
+            continue
+        index = pop.index.astype(np.int64)
+        parts.append(pd.DataFrame({"kind": kind, "row": index // cols, "col": index % cols,
+                                   "slot": pop.slot.astype(np.int64), "size": pop.size, "tau_low_s": pop.tau_low_s,
+                                   "tau_high_s": pop.tau_high_s}))
+    return pd.concat(parts, ignore_index=True) if parts else None
 
 
 def output_bytes(config) -> int:
@@ -262,7 +310,8 @@ def process_file(raw_path, settings: ProcessingSection, out, dark_path=None, ove
         folder = OutputFolder(out, overwrite)
         with folder as tmp:
             t0 = time.perf_counter()
-            video = VideoWriter(tmp / "processed.mp4", settings.video_fps) if len(reader) > 1 else None
+            # a raw file records no frame rate: 10 frames/s unless processing.video_fps says
+            video = VideoWriter(tmp / "processed.mp4", settings.video_fps or 10.0) if len(reader) > 1 else None
             try:
                 for k, frame in enumerate(reader):
                     if int(frame.max()) > info.white_level_dn:

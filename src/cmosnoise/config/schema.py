@@ -118,7 +118,11 @@ class ProcessingSection(Section):
     white_balance: WhiteBalanceSection = Field(default_factory=WhiteBalanceSection)
     demosaic: Literal["bilinear", "malvar2004", "menon2007"] = Field("bilinear", description="demosaicing method")
     white_dn: Optional[float] = Field(None, gt=0, le=1e6, description="raw code shown as white; null: the scene's white (simulation) or the white level (files)")
-    video_fps: float = Field(10.0, gt=0, le=240, description="frame rate of processed.mp4, frames/s")
+    video_fps: Optional[float] = Field(None, gt=0, le=240, description="frame rate of processed.mp4, frames/s; "
+                                       "null: the sensor's own (1 / its frame period), within 1 to 240")
+    video_stretch: bool = Field(True, description="processed.mp4 brightened for display where the scene is dark "
+                                "(frame 0's 99.5th percentile below mid-grey lifted to 235, at most 16 times; the "
+                                "same gain for every frame, said in summary.json and the video's metadata)")
 
 
 # ------------------------------------------------------------------------ sensor
