@@ -11,7 +11,7 @@ from scipy import stats
 
 from cmosnoise import Sensor, load_config
 
-#: ../shared/published-sensors.md section 1: ISO -> (K DN/e-, lam, sigTL DN, sigR DN)
+#: docs/sensor/published-figures.md section 1: ISO -> (K DN/e-, lam, sigTL DN, sigR DN)
 A7S2 = {100: (0.09563, 0.14875287, 0.70181876, 0.1391465), 1600: (1.53008, -0.0441045, 3.2283993, 0.988786),
         2000: (1.9126, -0.012963797, 1.4356787, 0.33124214), 6400: (6.12032, -0.07517104, 3.4502964, 0.7218788)}
 
@@ -114,7 +114,7 @@ def test_fit_builds_a_gain_table_from_stacks_at_several_settings(tmp_path):
     assert m["temporal_dark_noise_e"] == pytest.approx(implied, rel=0.03)
 
 
-#: ../shared/published-sensors.md section 3: gain_db -> EMVA 1288 figures of the Sony IMX900 data sheet
+#: docs/sensor/published-figures.md section 3: gain_db -> EMVA 1288 figures of the Sony IMX900 data sheet
 IMX900 = {0: {"system_gain_K_dn_per_e": 0.399, "temporal_dark_noise_e": 5.560, "saturation_capacity_e": 9458,
               "dsnu_e": 3.7, "prnu_pct": 0.7, "snr_max_db": 39.76, "dynamic_range_db": 63.8},
           3: {"system_gain_K_dn_per_e": 1.673, "temporal_dark_noise_e": 1.954, "saturation_capacity_e": 2183,

@@ -3,7 +3,7 @@
 The learned-denoising literature synthesizes noise from per-camera
 calibrations (ELD, Wei et al., CVPR 2020) and pre-trains on "virtual
 cameras" sampled across them (LED, Jin et al., ICCV 2023). The families
-here are those calibrations, as ``../shared/published-sensors.md`` section 2
+here are those calibrations, as ``docs/sensor/published-figures.md`` section 2
 quotes them (Vandermode/ELD ``camera_params/release/<camera>_params.npy``;
 Srameo/LED ``options/base/noise_g/noise_g_virtual.yaml``):
 
