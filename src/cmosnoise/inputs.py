@@ -31,7 +31,7 @@ MAX_TIFF_PAGES = 100_000
 
 __all__ = ["check_regular", "open_regular", "read_bytes", "read_text", "read_json", "image_planes", "tiff_planes",
            "check_image_pixels", "available_bytes", "check_memory", "check_decoded", "npz_members",
-           "fits_data_bytes", "MAX_TIFF_PAGES"]
+           "fits_data_bytes", "check_frame", "MAX_TIFF_PAGES"]
 
 
 def _kind(mode: int) -> str:
@@ -201,6 +201,25 @@ def fits_data_bytes(path: str | Path, what: str, limit: int) -> int:
             fh.seek(at)
     check_decoded(total, p, what, limit)
     return total
+
+
+def check_frame(a, name: str, finite: bool = True):
+    """``a`` as an array if it is one frame (rows, cols) of at least 2 x 2 integer or real values (every value
+    finite where ``finite``); else one :class:`CmosnoiseError` naming ``name``, what it got and what is allowed.
+    The API's frames (a raw to process, an output to score) pass here, as a file passes the gate."""
+    import numpy as np
+
+    try:
+        arr = np.asarray(a)
+    except (TypeError, ValueError):
+        raise CmosnoiseError(f"{name}: expected an array of codes, got {type(a).__name__}") from None
+    if arr.dtype.kind not in "uif":
+        raise CmosnoiseError(f"{name}: an array of {arr.dtype}; expected integer or real codes (DN)")
+    if arr.ndim != 2 or min(arr.shape) < 2:
+        raise CmosnoiseError(f"{name}: an array of shape {arr.shape}; expected one frame (rows, cols), at least 2 x 2")
+    if finite and arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        raise CmosnoiseError(f"{name}: {int((~np.isfinite(arr)).sum())} NaN or infinite values; codes are finite")
+    return arr
 
 
 def read_json(path: str | Path, what: str, limit: int, kind: type | None = dict):

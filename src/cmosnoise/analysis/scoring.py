@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import inputs
 from ..errors import CmosnoiseError
 from ..estimators import robust_sigma
 from ..isp.defects import neighbours_at
@@ -65,19 +66,8 @@ def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: fl
 
 
 def _frame(a, name: str) -> np.ndarray:
-    """``a`` as a float64 frame (rows, cols) of at least 2 x 2 finite real values; else one line naming it."""
-    try:
-        arr = np.asarray(a)
-    except (TypeError, ValueError):
-        raise CmosnoiseError(f"{name}: expected a frame of numbers, got {type(a).__name__}") from None
-    if arr.dtype.kind not in "uifb":
-        raise CmosnoiseError(f"{name}: an array of {arr.dtype}; expected real numbers (DN)")
-    if arr.ndim != 2 or min(arr.shape) < 2:
-        raise CmosnoiseError(f"{name}: shape {arr.shape}; expected one frame (rows, cols), at least 2 x 2")
-    arr = arr.astype(np.float64)
-    if not np.isfinite(arr).all():
-        raise CmosnoiseError(f"{name}: {int((~np.isfinite(arr)).sum())} NaN or infinite values")
-    return arr
+    """``a`` as a float64 frame, checked as the API's frames are (:func:`cmosnoise.inputs.check_frame`)."""
+    return inputs.check_frame(a, name).astype(np.float64)
 
 
 def defect_free(expected: np.ndarray, mask: np.ndarray, pattern: str) -> np.ndarray:

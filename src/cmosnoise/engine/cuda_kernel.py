@@ -39,29 +39,12 @@ import threading
 import numpy as np
 
 from ..errors import CmosnoiseError
-from . import dlpack, kernel
-from .cuda_table import (  # noqa: F401 - the table's columns, read by name here and in cuda_device
-    BLACK,
-    CDS,
-    CDS_INTERVAL,
-    EXPOSURE,
-    FRAME_BLACK_SIGMA,
-    FRAME_PERIOD,
-    FULL_WELL,
-    K_ADC,
-    NL_A,
-    NL_B,
-    NL_C,
-    NL_SCALE,
-    NL_SIZE,
-    NORMAL_ABOVE,
-    READ_KIND,
-    READ_SCALE,
-    ROW_SIGMA,
-    TOP,
-    scalar_numpy,
-    simulated,
+from . import (
+    cuda_table,  # the per-plan table's columns, by name (cuda_device reads the same)
+    dlpack,
+    kernel,
 )
+from .cuda_table import scalar_numpy, simulated  # noqa: F401 - callers ask cuda_kernel
 from .jit import numba
 
 #: threads per block of the pixel kernel (along a row: coalesced loads of the maps and stores of the frame)
@@ -351,20 +334,20 @@ class DevicePlan:
         self.keys = up(np.stack([p.keys for p in plans]), np.uint64)
         self.seqs = up(np.array([p.sequence for p in plans], np.uint64))
         self.cell_offsets = up(np.array([p.cell_offsets_dn for p in plans], np.float64))
-        numbers = np.zeros((len(plans), EXPOSURE + 1))
-        ints = np.zeros((len(plans), CDS + 1), np.int64)
+        numbers = np.zeros((len(plans), cuda_table.EXPOSURE + 1))
+        ints = np.zeros((len(plans), cuda_table.CDS + 1), np.int64)
         nl_tables, read_tables = [], []
         for q, p in enumerate(plans):
             table, nl_scale, (a, b, c) = kernel.curve_constants(p)
             read_kind, read_scale, read_table = kernel.read_constants(p)
             k_adc, black, top = p.adc if p.adc is not None else (1.0, 0.0, 0)
-            for column, value in ((NORMAL_ABOVE, p.normal_above_e), (FULL_WELL, p.full_well_e), (K_ADC, k_adc),
-                                  (BLACK, black), (TOP, top), (NL_SCALE, nl_scale), (NL_A, a), (NL_B, b), (NL_C, c),
-                                  (READ_SCALE, read_scale), (ROW_SIGMA, p.row_sigma_e or 0.0),
-                                  (FRAME_BLACK_SIGMA, p.frame_black_sigma_dn), (FRAME_PERIOD, p.frame_period_s),
-                                  (CDS_INTERVAL, p.cds_interval_s or 0.0), (EXPOSURE, p.exposure_s)):
+            for column, value in ((cuda_table.NORMAL_ABOVE, p.normal_above_e), (cuda_table.FULL_WELL, p.full_well_e), (cuda_table.K_ADC, k_adc),
+                                  (cuda_table.BLACK, black), (cuda_table.TOP, top), (cuda_table.NL_SCALE, nl_scale), (cuda_table.NL_A, a), (cuda_table.NL_B, b), (cuda_table.NL_C, c),
+                                  (cuda_table.READ_SCALE, read_scale), (cuda_table.ROW_SIGMA, p.row_sigma_e or 0.0),
+                                  (cuda_table.FRAME_BLACK_SIGMA, p.frame_black_sigma_dn), (cuda_table.FRAME_PERIOD, p.frame_period_s),
+                                  (cuda_table.CDS_INTERVAL, p.cds_interval_s or 0.0), (cuda_table.EXPOSURE, p.exposure_s)):
                 numbers[q, column] = value
-            ints[q, READ_KIND], ints[q, NL_SIZE], ints[q, CDS] = read_kind, table.size, p.cds_interval_s is not None
+            ints[q, cuda_table.READ_KIND], ints[q, cuda_table.NL_SIZE], ints[q, cuda_table.CDS] = read_kind, table.size, p.cds_interval_s is not None
             nl_tables.append(table)
             read_tables.append(read_table)
         #: each plan's scalars (P, EXPOSURE + 1) float64 and (P, CDS + 1) int64 (the columns named above)

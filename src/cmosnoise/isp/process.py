@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import inputs
 from ..config import ProcessingSection
 from ..errors import CmosnoiseError
 from ..model import cfa as cfa_mod
@@ -93,17 +94,7 @@ class Processor:
         """``raw`` as an array if it is a raw frame this processor can take: 2-D (rows, cols) of at least 2 x 2,
         integer or real codes (float: every value finite), of the master dark's shape where there is one; else
         one :class:`CmosnoiseError` naming the argument (a NaN would reach the compiled demosaicing)."""
-        if not isinstance(raw, np.ndarray):
-            try:
-                raw = np.asarray(raw)
-            except (TypeError, ValueError):
-                raise CmosnoiseError(f"raw: expected an array of codes, got {type(raw).__name__}") from None
-        if raw.dtype.kind not in "uif":
-            raise CmosnoiseError(f"raw: an array of {raw.dtype}; expected integer or real codes (DN)")
-        if raw.ndim != 2 or min(raw.shape) < 2:
-            raise CmosnoiseError(f"raw: an array of shape {raw.shape}; expected one frame (rows, cols), at least 2 x 2")
-        if raw.dtype.kind == "f" and not np.isfinite(raw).all():
-            raise CmosnoiseError(f"raw: {int((~np.isfinite(raw)).sum())} NaN or infinite values; codes are finite")
+        raw = inputs.check_frame(raw, "raw")
         self.check_shape(raw.shape)
         return raw
 
