@@ -205,3 +205,20 @@ def test_a_worker_that_dies_mid_sweep_changes_nothing(tmp_path):
         for proc in reversed(procs):
             stop_process(proc)
     pd.testing.assert_frame_equal(_sorted(tmp_path / "ref" / "results.csv"), _sorted(results))
+
+
+def test_the_sweep_page_fits_a_1440_pixel_window_with_readable_names(tmp_path, page):
+    """#63: the index's table overflowed a 1440-pixel window (the yield interval's columns off screen) and showed
+    raw names (snr_db_at_100e_mean). Two keys varied, a spec: every column is on screen, named for a person."""
+    r = cli("-q", "sweep", *SMALL, "--vary", "sensor.temperature_c=25,65", "--vary", "prnu.sigma_pct=0.5,2",
+            "--instances", "2", "--spec", "couplets<=0", "--workers", "1", "--out", tmp_path / "s")
+    assert r.returncode == 0, r.stderr
+    index = tmp_path / "s" / "index.html"
+    text = index.read_text()
+    assert "SNR at 100 e- (dB; hot pixels in the rms)" in text and "snr_db_at_100e_mean" not in text
+    assert "yield (Wilson 95 %)" in text
+    page.set_viewport_size({"width": 1440, "height": 900})
+    page.goto(index.as_uri())
+    box = page.evaluate("(() => { const t = document.querySelector('.table'); "
+                        "return [t.scrollWidth, t.clientWidth, document.documentElement.scrollWidth]; })()")
+    assert box[0] <= box[1] and box[2] <= 1440, box

@@ -228,6 +228,18 @@ METRICS = ("mean_e", "temporal_noise_e", "temporal_noise_predicted_e", "snr_db_a
            "couplets_expected_random", "residual_defects", "couplets_after_correction")
 
 
+#: what a person reads for each metric (the page's table; results.csv keeps the names above)
+METRIC_LABELS = {
+    "mean_e": "mean signal (e-)", "temporal_noise_e": "temporal noise (e- rms)",
+    "temporal_noise_predicted_e": "temporal noise, predicted (e- rms)",
+    "snr_db_at_100e": "SNR at 100 e- (dB; hot pixels in the rms)",
+    "snr_db_at_1000e": "SNR at 1000 e- (dB; hot pixels in the rms)", "dynamic_range_db": "dynamic range (dB)",
+    "dark_mean_e_per_s": "dark current, mean (e-/s)", "ppm_above_threshold": "dark current above threshold (ppm)",
+    "white_pixels": "white pixels", "couplets": "couplets", "couplets_expected_random": "couplets expected at random",
+    "residual_defects": "defects left after correction", "couplets_after_correction": "couplets left after correction",
+}
+
+
 def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=None, device: str = "cpu") -> dict:
     """The metrics of one sensor instance: a dict of numbers (what a Dask task returns).
 
@@ -776,8 +788,9 @@ def _plots(p: Plan, summary, out: Path) -> list[str]:
                 if m == "couplets" and "couplets_expected_random_mean" in s:
                     ax.plot(xs, s["couplets_expected_random_mean"], ls=":", color=line.get_color())
         ax.set_xlabel(xkey)
-        ax.set_ylabel(m + (" (Wilson 95 % interval)" if m == "yield" else " (mean; band: 5th to 95th percentile)"))
-        title = f"{m} over {p.instances} instance(s) per point"
+        name = METRIC_LABELS.get(m, m)
+        ax.set_ylabel(name + (" (Wilson 95 % interval)" if m == "yield" else "\nmean; band: 5th to 95th percentile"))
+        title = f"{name} over {p.instances} instance(s) per point"
         if m == "couplets":
             title += "\n(dotted: expected at random)"
         if m == "yield":
@@ -797,15 +810,20 @@ def _index(p: Plan, summary, plots: list[str], out: Path) -> None:
     import html
 
     varied = ", ".join(" & ".join(a.keys) for a in p.axes) or "nothing (one point)"
-    shown = summary[[c for c in summary.columns if c in ("point", *p.keys, "instances", "yield", "yield_lo", "yield_hi")
-                     or c.endswith("_mean")]]
+    shown = summary[[c for c in summary.columns if c in ("point", *p.keys, "instances") or c.endswith("_mean")]].copy()
+    if "yield" in summary:  # the yield and its interval in one column
+        shown.insert(len(p.keys) + 2, "yield", [f"{y:.2f} ({lo:.2f} to {hi:.2f})" for y, lo, hi in
+                                                zip(summary["yield"], summary["yield_lo"], summary["yield_hi"])])
+    shown = shown.rename(columns=lambda c: METRIC_LABELS.get(c[:-5], c) if c.endswith("_mean") else
+                         ("yield (Wilson 95 %)" if c == "yield" else c))
     shown = shown.rename(columns=lambda c: re.sub(r"([_.])", "\\1\u200b", c))  # long names break at _ and ., not mid-word
     table = shown.to_html(index=False, float_format=lambda v: f"{v:.4g}", border=0)
     imgs = "\n".join(f'<figure><img src="{html.escape(n)}" alt="{html.escape(n)}"></figure>' for n in plots)
     (out / "index.html").write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>cmosnoise sweep</title>
 <style>body{{font:14px system-ui,sans-serif;margin:20px}}figure{{display:inline-block;margin:4px;width:600px;max-width:100%;vertical-align:top}}
-.table{{overflow-x:auto;max-width:100%}}table{{border-collapse:collapse}}
-td,th{{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right}}th{{max-width:10em;font-weight:600}}img{{width:100%;height:auto}}</style></head><body>
+.table{{overflow-x:auto;max-width:100%}}table{{border-collapse:collapse;font-size:13px}}
+td,th{{padding:2px 6px;border-bottom:1px solid #ddd;text-align:right}}th{{max-width:7.5em;font-weight:600;vertical-align:bottom}}
+img{{width:100%;height:auto}}</style></head><body>
 <h1>cmosnoise sweep</h1><p>Varied: {html.escape(varied)}; {p.instances} instance(s) per point; scene {html.escape(p.scene)}
 ({html.escape(p.scene_why)}).
 Rows: results.csv; per point: summary.csv; the sweep itself: sweep.yaml.</p>
