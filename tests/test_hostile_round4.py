@@ -18,7 +18,7 @@ import tracemalloc
 import h5py
 import numpy as np
 import pytest
-from conftest import cli
+from conftest import cli, stop_process
 
 from cmosnoise import Sensor, inputs
 from cmosnoise.errors import CmosnoiseError
@@ -64,6 +64,13 @@ def huge_tiff(path, side: int = 20000) -> None:
     """One page whose header says ``side`` x ``side`` (0.8 MB zlib in the probe; a few bytes here: the header
     is all a refusal reads)."""
     path.write_bytes(b"II*\0" + struct.pack("<I", 16) + b"\0" * 8 + _ifd(side, side, 0))
+
+
+def _popen(request, args, **kw) -> subprocess.Popen:
+    """A process this test starts, stopped by its id when the test ends, whatever happened."""
+    proc = subprocess.Popen(args, **kw)
+    request.addfinalizer(lambda: stop_process(proc))
+    return proc
 
 
 def _one_line(stderr: str) -> bool:
@@ -351,11 +358,11 @@ def _until_rows(path, rows, proc, limit=180):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_a_stopped_sweep_says_which_rows_it_kept_and_dask_stays_quiet(tmp_path, sig):
+def test_a_stopped_sweep_says_which_rows_it_kept_and_dask_stays_quiet(tmp_path, sig, request):
     out = tmp_path / "sw"
     args = [sys.executable, "-m", "cmosnoise", "sweep", "--set", "sensor.width=64", "--set", "sensor.height=48",
             "--vary", "sensor.temperature_c=25,35,45,55,65,75", "--instances", "4", "--workers", "1", "--out", out]
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = _popen(request, args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     _until_rows(out / "results.csv", 3, proc)
     proc.send_signal(sig)
     t0 = time.monotonic()
@@ -368,18 +375,18 @@ def test_a_stopped_sweep_says_which_rows_it_kept_and_dask_stays_quiet(tmp_path, 
 
 
 @pytest.mark.slow
-def test_a_stopped_dataset_resume_says_which_shards_it_kept(tmp_path):
+def test_a_stopped_dataset_resume_says_which_shards_it_kept(tmp_path, request):
     out = tmp_path / "ds"
     base = [sys.executable, "-m", "cmosnoise", "-q", "dataset", "-n", "400", "--crop", "64", "--shard-size", "4",
             "--out", out]
-    proc = subprocess.Popen(base, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = _popen(request, base, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     t0 = time.monotonic()
     while len(list(out.glob("shard-*.h5"))) < 2 and time.monotonic() - t0 < 120:
         time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
     err = proc.communicate(timeout=30)[1]
     assert proc.returncode == 130 and "of 100 shards" in err and "--resume completes it" in err, err
-    proc = subprocess.Popen([*base, "--resume"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = _popen(request, [*base, "--resume"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     before = len(list(out.glob("shard-*.h5")))
     while len(list(out.glob("shard-*.h5"))) < before + 2 and time.monotonic() - t0 < 240:
         time.sleep(0.05)
@@ -405,7 +412,7 @@ def test_a_full_disk_after_one_folder_was_committed_says_so(tmp_path, monkeypatc
     assert (tmp_path / "out" / "characterization.json").exists() and not (tmp_path / "emva").exists()
 
 
-def test_a_command_that_swallows_its_signal_is_ended_within_seconds_with_its_folder_absent(tmp_path):
+def test_a_command_that_swallows_its_signal_is_ended_within_seconds_with_its_folder_absent(tmp_path, request):
     """The watchdog: a job stuck where the signal's exception is swallowed (as inside a compiler's callback) is
     ended GRACE_S after the signal, its temporary output removed, with one line and status 128 + the signal."""
     code = textwrap.dedent(f"""
@@ -430,7 +437,7 @@ def test_a_command_that_swallows_its_signal_is_ended_within_seconds_with_its_fol
         from cmosnoise.app.cli import run
         sys.exit(run(['simulate', '--set', 'sensor.width=64', '--set', 'sensor.height=48']))
         """)
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = _popen(request, [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "ready", proc.stderr.read()
     proc.send_signal(signal.SIGTERM)
     t0 = time.monotonic()
@@ -470,7 +477,7 @@ def test_a_huge_data_set_with_a_crop_no_source_holds_is_refused_before_any_work(
     assert not (tmp_path / "d").exists()
 
 
-def test_a_signal_while_the_interpreter_exits_says_the_command_had_finished(tmp_path):
+def test_a_signal_while_the_interpreter_exits_says_the_command_had_finished(tmp_path, request):
     """The command is over (its folder committed); a SIGTERM while the interpreter shuts down (here an atexit
     hook that takes a while, as Dask's threads can) says so in one line and keeps the command's status."""
     code = textwrap.dedent("""
@@ -480,7 +487,7 @@ def test_a_signal_while_the_interpreter_exits_says_the_command_had_finished(tmp_
         from cmosnoise.app.entry import main
         main()
         """)
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = _popen(request, [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = proc.stdout.readline()
     while line and line.strip() != "exiting":
         line = proc.stdout.readline()
