@@ -166,6 +166,12 @@ def test_the_sensor_guide_runs_as_written(tmp_path):
         r = cli(*shlex.split(line)[1:], cwd=tmp_path)
         assert r.returncode == 0, f"{line}: {r.stderr}"
     assert (tmp_path / "cmp" / "compare.html").is_file() and (tmp_path / "run65" / "report.html").is_file()
+    # #63: the first example shows the effect it is about, where the page points (the dark top-left corner):
+    # the 65 C preview is brighter there by far more than the noise of one preview's 8-bit codes
+    import imageio.v3 as iio
+
+    a, b = (iio.imread(tmp_path / run / "preview.png")[:120, :160].astype(float) for run in ("run25", "run65"))
+    assert b.mean() - a.mean() > 20 and (b - a).std() > 5, (a.mean(), b.mean(), (b - a).std())
 
 
 #: every command's page (each example runs in a folder of its own, as a reader would run one page)
