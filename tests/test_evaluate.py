@@ -89,3 +89,16 @@ def test_bm3d_denoises_better_than_the_noisy_frame(tmp_path):
     assert r.returncode == 0, r.stderr
     means = pd.read_csv(tmp_path / "e" / "scores.csv").groupby("method")["psnr_db"].mean()
     assert means["bm3d"] > means["none"] + 1.0
+
+
+def test_psnr_over_the_targets_own_range_is_the_literatures():
+    """#63: beside the PSNR over the white-minus-black range, the PSNR over the target's own range (max - min), as
+    the low-light denoising literature normalises: a ramp of range 100 DN off by 1 DN everywhere is 40 dB
+    exactly; a flat target has no own range (NaN)."""
+    from cmosnoise.analysis import scoring
+
+    target = np.tile(np.linspace(200.0, 300.0, 64), (32, 1))
+    s = scoring.image_scores(target + 1.0, target, 64.0, 4095.0)
+    assert s["psnr_own_range_db"] == pytest.approx(40.0, abs=1e-9)
+    assert s["psnr_db"] == pytest.approx(10 * np.log10((4095.0 - 64.0) ** 2), abs=1e-9)
+    assert np.isnan(scoring.image_scores(np.full((8, 8), 5.0), np.full((8, 8), 4.0), 0.0, 255.0)["psnr_own_range_db"])

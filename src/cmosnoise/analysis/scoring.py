@@ -44,7 +44,12 @@ def planes(a: np.ndarray) -> np.ndarray:
 
 
 def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: float) -> dict:
-    """PSNR (dB) and SSIM of ``output`` against ``target`` (both (H, W), DN), normalized to [0, 1] of the range."""
+    """PSNR (dB) and SSIM of ``output`` against ``target`` (both (H, W), DN), normalized to [0, 1] of the range.
+
+    ``psnr_db`` is over the white-minus-black range (the camera's whole code range: comparable across samples
+    of one camera, high for dark samples); ``psnr_own_range_db`` over the target's own range (its largest minus
+    its smallest value, DN), as the low-light denoising literature normalises each image (NaN for a flat target).
+    """
     from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
     output, target = _frame(output, "output"), _frame(target, "target")
@@ -61,7 +66,12 @@ def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: fl
     ref = (np.asarray(target, np.float64) - black) * scale
     p_out, p_ref = planes(out), planes(ref)
     win = min(7, min(p_ref.shape[1:]) // 2 * 2 - 1)
+    own = float(np.max(target) - np.min(target))
+    mse = float(np.mean((np.asarray(output, np.float64) - np.asarray(target, np.float64)) ** 2))
+    with np.errstate(divide="ignore"):
+        own_db = float(10.0 * np.log10(own * own / mse)) if own > 0 else float("nan")
     return {"psnr_db": float(peak_signal_noise_ratio(ref, out, data_range=1.0)),
+            "psnr_own_range_db": own_db,
             "ssim": float(structural_similarity(p_ref, p_out, data_range=1.0, channel_axis=0, win_size=win))}
 
 

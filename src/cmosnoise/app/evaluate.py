@@ -200,7 +200,8 @@ def summarize(scores):
     s["light"] = _light_bin(s["light_e"])
     counts = [c for c in s.columns if c.endswith("_visible") or c.endswith("_left")]
     g = s.groupby(["method", "camera", "mode", "light"], sort=True, dropna=False)
-    out = g.agg(samples=("sample", "count"), psnr_db=("psnr_db", "mean"), ssim=("ssim", "mean"),
+    out = g.agg(samples=("sample", "count"), psnr_db=("psnr_db", "mean"),
+                psnr_own_range_db=("psnr_own_range_db", "mean"), ssim=("ssim", "mean"),
                 **{c: (c, "sum") for c in counts}).reset_index()
     return out
 
@@ -271,7 +272,7 @@ def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target:
     manifest = ds.read_manifest(data)
     r = manifest["recipe"]
     per_method = scores.groupby("method", sort=False).agg(
-        psnr_db=("psnr_db", "mean"), ssim=("ssim", "mean"),
+        psnr_db=("psnr_db", "mean"), psnr_own_range_db=("psnr_own_range_db", "mean"), ssim=("ssim", "mean"),
         **{c: (c, "sum") for c in scores.columns if c.endswith("_visible") or c.endswith("_left")})
     per_scene = scene_table(scores)
 
@@ -299,7 +300,9 @@ def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target:
             f"<style>{css}</style></head><body><h1>cmosnoise evaluation</h1>"
             f"<p>cmosnoise {__version__}; data set {html.escape(str(data))}: {r['samples']} samples of "
             f"{r['crop'][0]} x {r['crop'][1]}, cameras {html.escape(', '.join(r['cameras']))}, light "
-            f"{r['light_e'][0]:g} to {r['light_e'][1]:g} e-. PSNR and SSIM against the "
+            f"{r['light_e'][0]:g} to {r['light_e'][1]:g} e-. PSNR (psnr_db) over the white-minus-black range, "
+            f"and (psnr_own_range_db) over each target's own range, as the low-light denoising literature "
+            f"normalises; PSNR and SSIM against the "
             f"{'expected raw without its defects (the fixed pattern kept)' if target == 'expected' else 'perfect image'}; a defect is "
             f"visible when the noisy frame departs from its healthy neighbours by {scoring.Z_VISIBLE:g} robust "
             f"sigmas, left when the output still does.</p><h2>Methods</h2><ul>{methods}</ul>"
