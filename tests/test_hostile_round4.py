@@ -465,6 +465,7 @@ def test_the_api_validates_its_arguments_in_one_line():
         (lambda: p.render(np.zeros((2, 48, 64))), "one frame"),
         (lambda: p.render(np.zeros((48, 64), complex)), "integer or real codes"),
         (lambda: p.render("raw"), "integer or real codes"),
+        (lambda: p.render(np.full((48, 64), 1e300)), "within"),  # finite, but float32 overflows: it crashed too
     ]:
         with pytest.raises(CmosnoiseError, match=needle):
             call()
@@ -562,3 +563,22 @@ def test_the_video_runs_at_the_sensors_rate_stretched_for_a_dark_scene_and_the_f
     bright = cli("-q", "simulate", "--scene", "flat:0.5", *sets, "--frames", "2", "--process", "--out", tmp_path / "b")
     assert bright.returncode == 0
     assert json.loads((tmp_path / "b" / "summary.json").read_text())["processing"]["video"]["display_gain"] == 1.0
+
+
+def test_the_compiled_picture_never_indexes_outside_its_table(tmp_path):
+    """Codes that overflow float32 on their way through the compensation matrix gave NaN, and NaN an index far
+    outside the sRGB table: a segmentation fault (found by the API fuzz test in CI). In a child process, so a
+    crash fails this test and not the run."""
+    code = textwrap.dedent("""
+        import numpy as np
+        from cmosnoise.isp import reconstruction as rc
+        img = np.full((24, 32), 3e38, np.float32)
+        img[::2, 1::2] = -3e38
+        matrix = np.array([[1.2, -0.1, -0.1], [-0.1, 1.2, -0.1], [-0.1, -0.1, 1.2]], np.float32)
+        for f in (rc.bilinear_srgb8, rc.superpixel_srgb8):
+            out = f(img, "RGGB", 0.0, 1.0, matrix, np.ones(3, np.float32))
+            assert out.dtype == np.uint8
+        print("ok")
+        """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", (r.returncode, r.stderr[-2000:])

@@ -25,6 +25,8 @@ MAX_STREAM_PIXELS = 20_000_000_000
 #: pixels of a file read into memory at once (a dark stack: 2 bytes a pixel as uint16, 8 while averaged)
 MAX_LOADED_PIXELS = 500_000_000
 
+#: the largest magnitude of a raw code the API takes (a 32-bit sensor's): beyond it float32 arithmetic overflows
+MAX_CODE = float(2**32)
 #: pages (image file directories, sub-IFDs included) of one TIFF or DNG walked before it is refused: a raw series of
 #: 100 000 frames is a long video; 300 000 one-pixel pages are a file built to keep a reader busy
 MAX_TIFF_PAGES = 100_000
@@ -219,6 +221,9 @@ def check_frame(a, name: str, finite: bool = True):
         raise CmosnoiseError(f"{name}: an array of shape {arr.shape}; expected one frame (rows, cols), at least 2 x 2")
     if finite and arr.dtype.kind == "f" and not np.isfinite(arr).all():
         raise CmosnoiseError(f"{name}: {int((~np.isfinite(arr)).sum())} NaN or infinite values; codes are finite")
+    if arr.size and arr.dtype.kind in "if" and (float(arr.max()) > MAX_CODE or float(arr.min()) < -MAX_CODE):
+        raise CmosnoiseError(f"{name}: codes from {float(arr.min()):g} to {float(arr.max()):g}; a raw code lies "
+                             f"within +-{MAX_CODE:g} DN (32 bits)")
     return arr
 
 

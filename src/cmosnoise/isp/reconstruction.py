@@ -198,7 +198,8 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
     uint8 array, ``linear``'s shape
         sRGB codes.
     """
-    idx = np.clip(linear * np.float32(_LUT_SIZE - 1) + np.float32(0.5), 0, _LUT_SIZE - 1).astype(np.intp)
+    idx = np.clip(np.nan_to_num(linear * np.float32(_LUT_SIZE - 1) + np.float32(0.5), nan=0.0), 0,
+                  _LUT_SIZE - 1).astype(np.intp)  # NaN (an overflow of huge codes) to 0, as the compiled pass
     return _SRGB8_LUT[idx]
 
 
@@ -222,7 +223,7 @@ if numba is not None:
         for i in range(3):
             y = matrix[i, 0] * r_ + matrix[i, 1] * g_ + matrix[i, 2] * b_ if has_matrix else px[i]
             y = y * gains[i] * top + half
-            if y < np.float32(0.0):
+            if not y >= np.float32(0.0):  # NaN too (an overflow of huge codes): never an index outside the table
                 y = np.float32(0.0)
             elif y > top:
                 y = top
