@@ -190,3 +190,21 @@ def test_the_circle_check_sees_a_circle(tmp_path):
     assert circles(import_graph(pkg)) == [["cmosnoise.app.a", "cmosnoise.app.b", "cmosnoise.app.c"]]
     (pkg / "app" / "c.py").write_text("import numpy\n")
     assert circles(import_graph(pkg)) == []
+
+
+def test_the_type_stub_names_what_the_lazy_init_exports():
+    """#58: ``py.typed`` promises types, but ``__init__`` exports lazily (``__getattr__``), which type checkers
+    cannot follow: ``__init__.pyi`` imports each public name from its module. It must say exactly what the
+    tables say."""
+    stub = ast.parse((ROOT / "__init__.pyi").read_text())
+    found = {}
+    for node in stub.body:
+        if isinstance(node, ast.ImportFrom):
+            for a in node.names:
+                found[a.asname or a.name] = (("." * node.level) + (node.module or ""), a.name)
+    want = {name: (f".{mod}", name) for name, mod in cmosnoise._NAMES.items()}
+    want.update({name: (f".{mod.rpartition('.')[0]}", mod.rpartition(".")[2]) for name, mod in cmosnoise._MODULES.items()})
+    want.update({"CmosnoiseError": (".errors", "CmosnoiseError"), "__version__": ("._version", "__version__"),
+                 "errors": (".", "errors")})
+    assert found == want
+    assert set(cmosnoise.__all__) <= set(found)
