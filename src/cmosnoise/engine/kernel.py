@@ -763,7 +763,7 @@ def _needs_compile() -> int:
         return -1
     held = len(_render.signatures)
     if not held and not jit.cached_for_this_machine(_render):
-        _logger.info(f"compiling the frame kernel for this machine ({jit.vectors()}; once; about half a minute) ...")
+        _logger.info(f"compiling the frame kernel for this machine ({jit.vectors()}; once; about half a minute on idle cores, up to two minutes on a busy machine) ...")
     return held
 
 
