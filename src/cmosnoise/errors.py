@@ -91,7 +91,7 @@ def _watchdog(signum: int, over) -> None:
         except Exception:  # noqa: BLE001 - the process ends either way
             pass
     name = "Ctrl-C" if signum == signals.SIGINT else signals.Signals(signum).name
-    done = f"; {', '.join(_written)} had been written whole before it" if _written else "; nothing was written"
+    done = f"; {written_note() or 'nothing was written'}"
     try:
         sys.stderr.write(f"cmosnoise: interrupted ({name}): stopped after {GRACE_S:g} s{done}\n")
         sys.stderr.flush()
@@ -142,6 +142,11 @@ def note_written(path) -> None:
 def written() -> list[str]:
     """The output folders committed whole during this command."""
     return list(_written)
+
+
+def written_note() -> str:
+    """How a stopped command's message names the output folders committed before it stopped ("" for none)."""
+    return f"{', '.join(_written)} had been written whole before it stopped" if _written else ""
 
 
 def check_terminated() -> None:

@@ -26,6 +26,7 @@ from ..errors import (
     command_started,
     signal_received,
     written,
+    written_note,
 )
 
 if TYPE_CHECKING:
@@ -731,7 +732,7 @@ def run(argv: list[str] | None = None) -> int:
         return exc.exit_code
     except CmosnoiseError as exc:
         message = " ".join(str(exc).split())  # one line, whatever a library put in it
-        done = f" ({', '.join(written())} had been written whole before it)" if written() else ""
+        done = f" ({written_note()})" if written() else ""
         print(f"cmosnoise: error: {message}{done}", file=sys.stderr)
         return 2
     except OSError as exc:  # the machine's fault, not the input's: a full disk, a vanished folder
@@ -772,9 +773,8 @@ def _unwritten(argv, exc: BaseException | None = None) -> str:
     kept = getattr(exc, "kept", None)
     if kept:
         return f"; {kept}"
-    done = written()
-    if done:
-        return f"; {', '.join(done)} had been written whole before it stopped"
+    if written():
+        return f"; {written_note()}"
     return "" if _command(argv) in _NO_OUTPUT else "; nothing was written"
 
 

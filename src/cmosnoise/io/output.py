@@ -300,28 +300,27 @@ class OutputFolder:
                 return False
             old = None
             target = str(Path(os.path.abspath(self.out)))
-            commit = signals_deferred()  # a signal during the renames is acted on after them, not between them
-            commit.__enter__()
-            try:
-                _write_marker(self._wrapper / "target", target)  # complete: from here on, a kill is recoverable
-                if self.out.exists():  # empty, or --overwrite: moved aside, removed once the new one is in place
-                    old = Path(tempfile.mkdtemp(prefix=_helper_name(_OLD), dir=self.out.resolve().parent))
-                    _write_marker(old / "target", target)
-                    os.rename(self.out, old / "out")
-                self.out.parent.mkdir(parents=True, exist_ok=True)
+            # a signal during the renames is acted on after them, not between them
+            with signals_deferred():
                 try:
-                    os.rename(self.tmp, self.out)
-                except OSError:
+                    _write_marker(self._wrapper / "target", target)  # complete: from here on, a kill is recoverable
+                    if self.out.exists():  # empty, or --overwrite: moved aside, removed once the new one is in place
+                        old = Path(tempfile.mkdtemp(prefix=_helper_name(_OLD), dir=self.out.resolve().parent))
+                        _write_marker(old / "target", target)
+                        os.rename(self.out, old / "out")
+                    self.out.parent.mkdir(parents=True, exist_ok=True)
+                    try:
+                        os.rename(self.tmp, self.out)
+                    except OSError:
+                        if old is not None:
+                            os.rename(old / "out", self.out)  # put the old one back
+                        raise
+                except OSError as exc:
+                    shutil.rmtree(self._wrapper, ignore_errors=True)
+                    raise CmosnoiseError(f"{self.option} {str(self.out)!r} cannot be written: {exc.strerror or exc}") from None
+                finally:
                     if old is not None:
-                        os.rename(old / "out", self.out)  # put the old one back
-                    raise
-            except OSError as exc:
-                shutil.rmtree(self._wrapper, ignore_errors=True)
-                raise CmosnoiseError(f"{self.option} {str(self.out)!r} cannot be written: {exc.strerror or exc}") from None
-            finally:
-                if old is not None:
-                    shutil.rmtree(old, ignore_errors=True)
-                commit.__exit__(None, None, None)
+                        shutil.rmtree(old, ignore_errors=True)
             note_written(self.out)
             shutil.rmtree(self._wrapper, ignore_errors=True)
             return False
