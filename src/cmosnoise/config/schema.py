@@ -186,6 +186,92 @@ class ExposureSection(Section):
                                          "(times sensor.quantum_efficiency: e-/s); null: peak_rate_e_per_s")
 
 
+# ------------------------------------------------------------------------- light
+#: a spectral table given inline: rows of (wavelength nm, value) or (wavelength nm, R, G, B)
+SpectrumRows = list[list[float]]
+
+
+class LightSection(Section):
+    """Light in physical units (docs/model.md section 2b): an illuminant of a stated illuminance on a reflective
+    scene, through the lens of ``optics``, onto pixels of a spectral quantum efficiency. Off: the light is
+    ``exposure.peak_rate_e_per_s`` (or ``peak_rate_photons_per_s``), as before."""
+
+    enabled: bool = Field(False, description="light in lux through a lens (this section and optics); off: "
+                                             "exposure.peak_rate_e_per_s")
+    illuminance_lux: Optional[float] = Field(
+        None, ge=0, le=1e6, description="illuminance on the scene, lux; scene values are reflectances (1: a white "
+                                        "diffuser, 0.18: the reference grey)")
+    luminance_cd_m2: Optional[float] = Field(
+        None, ge=0, le=1e9, description="luminance of a scene value of 1, cd/m2 (instead of illuminance_lux; a "
+                                        "Lambertian white under E lux has E / pi)")
+    illuminant: str = Field("D65", description="CIE D50, D55, D65, D75, A, FL1..FL12, LED-B1..LED-V2 (colour-science's "
+                                               "names), blackbody:KELVIN, or a CSV file (wavelength nm, relative power)")
+    spectral_qe: Union[str, SpectrumRows, None] = Field(
+        None, description="the pixels' quantum efficiency against wavelength (colour filter, photodiode, microlens): "
+                          "a CSV file or inline rows of (nm, QE) or (nm, QE_R, QE_G, QE_B), or a camera set that "
+                          "colour-science ships ('Nikon 5100 (NPL)', 'Sigma SDMerill (NPL)': relative, give qe_peak); "
+                          "null: sensor.quantum_efficiency at every wavelength from 380 to 780 nm")
+    qe_peak: Optional[float] = Field(None, gt=0, le=1, description="scale the spectral QE so its highest value is "
+                                                                  "this (a relative table made absolute); null: as given")
+    ir_cut_nm: Optional[float] = Field(None, ge=300, le=1200, description="an ideal IR-cut filter: no light beyond "
+                                                                           "this wavelength, nm; null: none")
+    fill_factor: float = Field(1.0, gt=0, le=1, description="the share of the pixel's area that collects light, "
+                                                            "where the QE does not include it (a measured QE does)")
+
+    @field_validator("illuminant")
+    @classmethod
+    def _illuminant_text(cls, v):
+        if not v.strip():
+            raise ValueError("name an illuminant (D65, A, blackbody:3200, ...) or a CSV file")
+        return v.strip()
+
+    @field_validator("spectral_qe")
+    @classmethod
+    def _rows(cls, v):
+        if isinstance(v, list):
+            widths = {len(r) for r in v}
+            if len(v) < 2 or len(widths) != 1 or widths.pop() not in (2, 4):
+                raise ValueError("give at least two rows, each (nm, QE) or (nm, QE_R, QE_G, QE_B)")
+        return v
+
+    @model_validator(mode="after")
+    def _light_once(self):
+        if self.illuminance_lux is not None and self.luminance_cd_m2 is not None:
+            raise ValueError("give the light once: light.illuminance_lux or light.luminance_cd_m2")
+        if self.enabled and self.illuminance_lux is None and self.luminance_cd_m2 is None:
+            raise ValueError("light.enabled needs light.illuminance_lux (lux on the scene) or light.luminance_cd_m2")
+        return self
+
+
+class OpticsSection(Section):
+    """The lens between the scene and the pixels (docs/model.md section 2b): the camera equation's numbers, the
+    relative illumination across the field and the point spread function. With ``relative_illumination`` and
+    ``psf`` at ``none`` the picture is the scene's, pixel for pixel (the lens numbers act only with light on)."""
+
+    f_number: float = Field(2.8, ge=0.5, le=1000, description="the lens's f-number N")
+    transmittance: float = Field(0.9, gt=0, le=1, description="the lens's transmittance T (ISO 12232's default 0.9)")
+    magnification: float = Field(0.0, ge=0, le=100, description="the image's magnification |m| (0: a distant scene)")
+    focal_length_mm: float = Field(4.0, gt=0, le=10000, description="focal length, mm: the field angle of each "
+                                                                    "pixel (tan = image height / focal length)")
+    camera_equation: Literal["iso12232", "non_paraxial"] = Field(
+        "iso12232", description="iso12232: E = pi L T / (4 N^2 (1 + m)^2), an aplanatic lens; non_paraxial: "
+                                "pi L T / (1 + 4 N^2 (1 + m)^2), ISETCam's")
+    relative_illumination: str = Field(
+        "none", description="none; cos4: cos^4 of the field angle; or a CSV file of (image height mm, relative "
+                            "illumination) from the optical centre outwards")
+    psf: str = Field("none", description="none; diffraction: the polychromatic Airy pattern of each channel at "
+                                         "f_number; gaussian: psf_sigma_px; or a .npy/.fits file of one 2-D PSF at "
+                                         "the pixel pitch (or psf_sampling_um)")
+    psf_sigma_px: float = Field(0.5, gt=0, le=100, description="sigma of the gaussian PSF, pixels")
+    psf_sampling_um: Optional[float] = Field(None, gt=0, le=100, description="a PSF file's sample spacing, um; "
+                                                                              "null: the pixel pitch")
+
+    @field_validator("relative_illumination", "psf")
+    @classmethod
+    def _named(cls, v):
+        return v.strip()
+
+
 # ------------------------------------------------------------------------ stages
 class PrnuSection(Section):
     enabled: bool = True
@@ -711,6 +797,8 @@ class Config(Section):
         What is simulated (the scene, frames, outputs) and how the frames become pictures.
     sensor, exposure : sections
         The array (size, CFA, pixel, temperature, gain setting) and the exposure.
+    light, optics : sections
+        Light in lux through a lens (off by default: the exposure's peak rate is the light).
     prnu, crosstalk, dark_current, shot_noise, source_follower, row_noise, column_noise, adc : sections
         The paper's stages.
     pixel_offset, nonlinearity, black_level, read_noise, defects : sections
@@ -736,6 +824,8 @@ class Config(Section):
     run: RunSection = Field(default_factory=RunSection)
     sensor: SensorSection = Field(default_factory=SensorSection)
     exposure: ExposureSection = Field(default_factory=ExposureSection)
+    light: LightSection = Field(default_factory=LightSection)
+    optics: OpticsSection = Field(default_factory=OpticsSection)
     prnu: PrnuSection = Field(default_factory=PrnuSection)
     crosstalk: CrosstalkSection = Field(default_factory=CrosstalkSection)
     dark_current: DarkCurrentSection = Field(default_factory=DarkCurrentSection)
@@ -778,6 +868,8 @@ class Config(Section):
                 raise ValueError("exposure.peak_rate_photons_per_s needs sensor.quantum_efficiency (electrons per photon)")
             if "peak_rate_e_per_s" in ex.model_fields_set:
                 raise ValueError("give the light once: exposure.peak_rate_e_per_s or exposure.peak_rate_photons_per_s")
+        if self.light.enabled and ex.peak_rate_photons_per_s is not None:
+            raise ValueError("give the light once: light (lux) or exposure.peak_rate_photons_per_s")
         if isinstance(self.crosstalk.kernel_pct, dict) and self.sensor.cfa == "none" and self.crosstalk.enabled:
             raise ValueError("crosstalk.kernel_pct: a per-colour kernel needs a colour sensor (sensor.cfa is 'none')")
         return self

@@ -14,6 +14,8 @@ the sensor's peak rate). It comes from a file or a built-in:
                           from top to bottom (N = 4 by default)
 ``spot``                  one lit pixel (value 1) at the centre, on black:
                           the crosstalk measurement of the paper's Fig. 4
+``edge[:ANGLE[:LOW:HIGH]]``  a slanted edge, 5 degrees, 4:1 (ISO 12233 e-SFR; :mod:`.charts`)
+``greys[:N]``             N grey patches from 1 to 0.001 in equal density steps (:mod:`.charts`)
 a path                    8-bit PNG/JPEG/TIFF: sRGB-encoded, decoded to linear;
                           16-bit or float TIFF/PNG and ``.npy``: already linear,
                           scaled by the file's maximum (or a given ``scale``)
@@ -24,6 +26,12 @@ pixel collects the light falling on its area), or bilinear interpolation
 where the sensor has more pixels than the scene. The CFA then keeps each
 pixel's channel (times the channel's relative responsivity); a monochrome
 sensor takes the luminance.
+
+With light in lux (``light.enabled``, :mod:`.light`) a scene's values are
+reflectances: ``prepare(..., light=...)`` turns each RGB value into the
+colour channels' relative signal through the light's 3 x 3 ``mix`` (for a
+picture, at its own resolution, before it is resampled), and the
+ColorChecker's patches come from their reflectance spectra.
 
 Examples
 --------
@@ -45,24 +53,14 @@ from ..engine import layout
 from ..engine import resample as resample_engine
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
+from . import charts
+from .charts import COLORCHECKER_SRGB8, colorchecker, colorchecker_patches  # noqa: F401 (the scene's names)
 
 #: Rec. 709 / sRGB luminance weights for linear RGB
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
-BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate", "siemens", "steps:N", "spot")
-
-#: ColorChecker Classic patches, sRGB 8-bit (X-Rite, post-2014 values),
-#: row by row from "dark skin" to "black".
-COLORCHECKER_SRGB8 = np.array(
-    [
-        [115, 82, 68], [194, 150, 130], [98, 122, 157], [87, 108, 67], [133, 128, 177], [103, 189, 170],
-        [214, 126, 44], [80, 91, 166], [193, 90, 99], [94, 60, 108], [157, 188, 64], [224, 163, 46],
-        [56, 61, 150], [70, 148, 73], [175, 54, 60], [231, 199, 31], [187, 86, 149], [8, 133, 161],
-        [243, 243, 242], [200, 200, 200], [160, 160, 160], [122, 122, 121], [85, 85, 85], [52, 52, 52],
-    ],
-    dtype=np.float64,
-)
-
+BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate", "siemens", "steps:N", "spot", "edge",
+            "greys:N")
 
 # ------------------------------------------------------------------ encoding
 def srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -146,60 +144,6 @@ def ramp(shape: tuple[int, int], region=None) -> np.ndarray:
     r0, r1, c0, c1 = _span(shape, region)
     x = (np.arange(c0, c1) + 0.5) / cols
     return np.broadcast_to(x[None, :, None], (r1 - r0, c1 - c0, 3)).copy()
-
-
-def colorchecker(shape: tuple[int, int], region=None) -> np.ndarray:
-    """The 24-patch ColorChecker on a dark grey surround (linear light).
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-        The picture's size, pixels.
-
-    region : (row0, row1, col0, col1), optional
-        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
-
-    Returns
-    -------
-    (rows, cols, 3) float64 array
-        Linear light, 0 to 1 (1: the peak rate).
-    """
-    rows, cols = shape
-    g0, g1, h0, h1 = _span(shape, region)
-    lin = srgb_to_linear(COLORCHECKER_SRGB8 / 255.0)
-    img = np.full((g1 - g0, h1 - h0, 3), srgb_to_linear(np.array(30 / 255.0)))
-    ph, pw = rows / 4, cols / 6
-    border = 0.12
-    for i in range(4):
-        for j in range(6):
-            r0, r1 = int(round((i + border) * ph)), int(round((i + 1 - border) * ph))
-            c0, c1 = int(round((j + border) * pw)), int(round((j + 1 - border) * pw))
-            img[max(r0 - g0, 0):max(r1 - g0, 0), max(c0 - h0, 0):max(c1 - h0, 0)] = lin[i * 6 + j]
-    return img
-
-
-def colorchecker_patches(shape: tuple[int, int]) -> list[tuple[slice, slice]]:
-    """Central regions (half of each patch) of the 24 patches, for measuring them.
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-        The picture's size, pixels.
-
-    Returns
-    -------
-    list of (slice, slice)
-        The 24 patches' central regions, row by row.
-    """
-    rows, cols = shape
-    ph, pw = rows / 4, cols / 6
-    out = []
-    for i in range(4):
-        for j in range(6):
-            out.append(
-                (slice(int((i + 0.3) * ph), int((i + 0.7) * ph)), slice(int((j + 0.3) * pw), int((j + 0.7) * pw)))
-            )
-    return out
 
 
 def zoneplate(shape: tuple[int, int], region=None) -> np.ndarray:
@@ -673,8 +617,8 @@ def builtin_name(source: str) -> str | None:
     """
     low = str(source).strip().lower()
     head = low.partition(":")[0]
-    if head in ("flat", "steps") or (low == head and low in ("photo", "ramp", "colorchecker", "zoneplate", "siemens",
-                                                                "spot")):
+    if head in ("flat", "steps", "edge", "greys") or (low == head and low in ("photo", "ramp", "colorchecker",
+                                                                                  "zoneplate", "siemens", "spot")):
         return head
     return None
 
@@ -696,7 +640,7 @@ def is_builtin(source: str) -> bool:
 
 def render(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
            window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None,
-           region: tuple[int, int, int, int] | None = None) -> np.ndarray:
+           region: tuple[int, int, int, int] | None = None, light=None) -> np.ndarray:
     """The scene ``source`` as linear RGB at the sensor's ``shape``, (rows, cols, 3), float64.
 
     With ``window = (row, col)``: the ``shape`` of the source at that corner, at the source's own resolution
@@ -719,24 +663,26 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
     region : (row0, row1, col0, col1), optional
         The rectangle of the sensor to render (a tile): bit for bit that crop of the whole, without making the
         whole (a built-in draws only the region; a picture is resampled only there).
+    light : cmosnoise.model.light.ChannelLight, optional
+        Light in lux: the values become the colour channels' relative signals (see the module docstring).
 
     Returns
     -------
     (rows, cols, 3) float64 array
         Linear light, 0 to 1: ``shape``, or the region's size.
     """
-    return prepare(source, shape, scale, fit, window, source_size)(region)
+    return prepare(source, shape, scale, fit, window, source_size, light)(region)
 
 
 def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
-            window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None):
+            window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None, light=None):
     """:func:`render` in two steps: the source read (an image file decoded, cropped; a built-in's name checked)
     once, then any region rendered from it. What a sensor made in tiles uses, so that a picture is decoded once,
     not once a tile.
 
     Parameters
     ----------
-    source, shape, scale, fit, window, source_size
+    source, shape, scale, fit, window, source_size, light
         As :func:`render` takes them.
 
     Returns
@@ -753,8 +699,8 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     ((10, 15, 3), True)
     """
     if window is None:
-        return _fitted(source, shape, scale, fit)
-    img = source_image(source, source_size or shape, scale, fit)
+        return _fitted(source, shape, scale, fit, light)
+    img = source_image(source, source_size or shape, scale, fit, light)
     _check_window(img.shape, window, shape)  # the whole window must lie in the source (checked, not copied)
 
     def draw(region=None):
@@ -764,7 +710,8 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     return draw
 
 
-def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop") -> np.ndarray:
+def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop",
+                 light=None) -> np.ndarray:
     """The whole source, linear RGB (rows, cols, 3) float64: an image file's own pixels, or a built-in (the
     bundled photo included) drawn at ``size``. What :func:`render` takes a window of.
 
@@ -778,6 +725,8 @@ def source_image(source: str, size: tuple[int, int], scale: float | None = None,
         The value that is white in an image file (:func:`load_file`).
     fit : str
         "crop": a picture of another aspect ratio is cropped to ``size``'s at its centre; else it is stretched.
+    light : cmosnoise.model.light.ChannelLight, optional
+        Light in lux (see the module docstring).
 
     Returns
     -------
@@ -785,8 +734,8 @@ def source_image(source: str, size: tuple[int, int], scale: float | None = None,
         Linear light, 0 to 1.
     """
     if is_builtin(source):
-        return _fitted(source, tuple(size), scale, fit)()
-    return load_file(source, scale)
+        return _fitted(source, tuple(size), scale, fit, light)()
+    return mixed(load_file(source, scale), light)
 
 
 def window_of(img: np.ndarray, window: tuple[int, int], shape: tuple[int, int]) -> np.ndarray:
@@ -859,11 +808,43 @@ def _check_window(source_shape, window: tuple[int, int], shape: tuple[int, int])
                              f"[{source_shape[0] - shape[0]}, {source_shape[1] - shape[1]}]")
 
 
-def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop"):
+def mixed(rgb: np.ndarray, light=None) -> np.ndarray:
+    """Linear-sRGB reflectances ``rgb`` (rows, cols, 3) as the colour channels' relative signals under ``light``
+    (its 3 x 3 ``mix``, :class:`cmosnoise.model.light.ChannelLight`); ``rgb`` itself without light."""
+    if light is None:
+        return rgb
+    return np.ascontiguousarray(np.asarray(rgb, np.float64) @ light.mix.T)
+
+
+def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop", light=None):
     """The source at ``shape``, prepared: a function of a region (None: the whole) that draws it there."""
     if not isinstance(source, str) or not source:
         raise CmosnoiseError(f"scene.source = {source!r}: give a built-in ({', '.join(BUILTINS)}) or an image path")
     name = source.strip()
+    low = name.lower()
+    if light is not None and low == "colorchecker":  # the patches' reflectance spectra under the light
+        from . import light as light_mod
+
+        wl, refl = light_mod.colorchecker_reflectances()
+        values = light.reflectance_channels(refl, wl)
+        surround = float(srgb_to_linear(np.array(charts.SURROUND_SRGB8 / 255.0)))
+        return lambda region=None: colorchecker(shape, region, values, surround)
+    if not is_builtin(name) or low == "photo":
+        if low == "photo":
+            img = load_file(bundled_photo_path())
+        else:
+            img = load_file(name, scale)
+        if fit == "crop":
+            img = crop_to_aspect(img, shape)
+        return Resampled(mixed(img, light), shape)
+    draw = _builtin(name, shape)
+    if light is None:
+        return draw
+    return lambda region=None: mixed(draw(region), light)
+
+
+def _builtin(name: str, shape: tuple[int, int]):
+    """A built-in scene other than the photo, prepared: a function of a region that draws it."""
     low = name.lower()
     if low.startswith("flat:") or low == "flat":
         text = name.partition(":")[2]
@@ -887,18 +868,16 @@ def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit
         return lambda region=None: siemens(shape, region=region)
     if low == "spot":
         return lambda region=None: spot(shape, region)
-    if low.startswith("steps"):
-        text = name.partition(":")[2] or "4"
-        if not text.isdigit() or not 1 <= int(text) <= 16:
-            raise CmosnoiseError(f"scene 'steps:{text}': N must be a whole number of bands from 1 to 16")
-        return lambda region=None: steps(shape, int(text), region)
-    if low == "photo":
-        img = load_file(bundled_photo_path())
-    else:
-        img = load_file(name, scale)
-    if fit == "crop":
-        img = crop_to_aspect(img, shape)
-    return Resampled(img, shape)
+    if low.startswith("edge"):
+        angle, lo, hi = charts.edge_parameters(low)
+        return lambda region=None: charts.edge(shape, angle, lo, hi, region)
+    if low.startswith("greys"):
+        n = charts.greys_count(low)
+        return lambda region=None: charts.greys(shape, n, region)
+    text = name.partition(":")[2] or "4"  # steps
+    if not text.isdigit() or not 1 <= int(text) <= 16:
+        raise CmosnoiseError(f"scene 'steps:{text}': N must be a whole number of bands from 1 to 16")
+    return lambda region=None: steps(shape, int(text), region)
 
 
 def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:

@@ -31,6 +31,7 @@ from ..engine import cuda_kernel, fixed_maps, kernel, reduce
 from ..engine.telegraph import per_pixel, positions
 from ..errors import CmosnoiseError
 from . import footprint
+from . import optics as optics_mod
 from . import scene as scene_mod
 from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
 from .raw_info import RawInfo
@@ -391,7 +392,10 @@ class Sensor:
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            draw = scene_mod.prepare(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size)
+            draw = scene_mod.prepare(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size,
+                                     self.spec.light)
+            if optics_mod.active(c):
+                return optics_mod.cfa_signal(draw, c, self.cfa, self.spec.channel_responsivity, self.shape, self.window)
             return scene_mod.cfa_signal(draw, self.cfa, self.spec.channel_responsivity, region=self.window)
         try:
             given = np.asarray(scene)
@@ -414,6 +418,15 @@ class Sensor:
             return rgb
         if rgb.shape[2] == 1:
             rgb = np.repeat(rgb, 3, axis=2)
+        rgb = scene_mod.mixed(rgb, self.spec.light)
+        if optics_mod.active(c):
+            if self.window is not None:
+                raise CmosnoiseError("scene array: with optics.psf or optics.relative_illumination on, give a sensor "
+                                     "of the whole array the scene (the lens acts across the whole picture), or a "
+                                     "CFA signal (rows, cols) already through it")
+            return optics_mod.cfa_signal(lambda region=None: rgb if region is None else rgb[region[0]:region[1],
+                                                                                             region[2]:region[3]],
+                                         c, self.cfa, self.spec.channel_responsivity, self.shape)
         return scene_mod.to_cfa(rgb, self.cfa, self.spec.channel_responsivity)
 
     def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> "Exposure":
@@ -431,6 +444,8 @@ class Sensor:
         c = self.config
         signal_parts = (scene, self.shape, self.window, self.cfa, list(self.spec.channel_responsivity), c.scene.scale,
                         c.scene.fit, c.scene.window, c.scene.source_size)
+        if c.light.enabled or optics_mod.active(c):  # what the light and the lens make of it (absent: the same keys)
+            signal_parts += (c.light, c.optics, c.sensor.pixel_pitch_um, c.sensor.quantum_efficiency)
         signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))
         return Exposure(self, signal, sequence, signal_parts)
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Config, merge_updates
+from . import light as light_mod
 from . import physics
 from .heavy_tail import HeavyTail
 from .stages import adc
@@ -114,15 +115,27 @@ class SensorSpec:
     def peak_rate_e_per_s(self) -> float:
         """Photo-electrons per second per pixel at a scene value of 1: the configuration's, or its photons times
         the quantum efficiency (the channels' mean; :attr:`channel_responsivity` carries their ratios)."""
+        if self.light is not None:
+            return float(self.light.rates_e_per_s.mean())
         ex, q = self.config.exposure, self.config.sensor.qe_mean()
         return ex.peak_rate_e_per_s if ex.peak_rate_photons_per_s is None else ex.peak_rate_photons_per_s * q
 
     @property
+    def light(self) -> light_mod.ChannelLight | None:
+        """The light in lux at the pixels, per channel (:func:`.light.channel_light`, made once per light and
+        lens), or None where the light is ``exposure``'s peak rate."""
+        return light_mod.channel_light(self.config) if self.config.light.enabled else None
+
+    @property
     def channel_responsivity(self) -> tuple[float, float, float]:
         """Relative R, G, B responsivity: the filters', times each channel's quantum efficiency over their mean
-        when light is given in photons with a QE per channel."""
+        when light is given in photons with a QE per channel, or each channel's rate over their mean with light
+        in lux."""
         sen = self.config.sensor
         r = tuple(sen.channel_responsivity)
+        if self.light is not None:  # each channel's rate over their mean, times the filters' given ratios
+            rates = self.light.rates_e_per_s
+            return tuple(float(ri * qi / rates.mean()) for ri, qi in zip(r, rates))
         q = sen.quantum_efficiency
         if self.config.exposure.peak_rate_photons_per_s is None or q is None or isinstance(q, (int, float)):
             return r

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..config import Config
 from ..errors import CmosnoiseError
+from . import optics as optics_mod
 from . import scene as scene_mod
 from .fixed_pattern import FixedPattern
 from .sensor import Exposure, Sensor, as_spec
@@ -187,7 +188,7 @@ class Tiling:
         self._picture = None
         if scene_mod.builtin_name(source) in (None, "photo") or c.scene.window is not None:
             self._picture = scene_mod.prepare(source, self.spec.shape, c.scene.scale, c.scene.fit, c.scene.window,
-                                              c.scene.source_size)
+                                              c.scene.source_size, self.spec.light)
 
     @property
     def populations(self) -> FixedPattern | None:
@@ -243,7 +244,12 @@ class Tiling:
             self._populations = sensor.fixed_pattern
         if self._picture is None:
             return sensor.expose(self._source, sequence=self.sequence)
-        signal = scene_mod.cfa_signal(self._picture, sensor.cfa, self.spec.channel_responsivity, region=window)
+        c = self.spec.config
+        if optics_mod.active(c):  # the lens's blocks are fixed to the whole sensor: the tile's crop of the whole
+            signal = optics_mod.cfa_signal(self._picture, c, sensor.cfa, self.spec.channel_responsivity,
+                                           self.spec.shape, window)
+        else:
+            signal = scene_mod.cfa_signal(self._picture, sensor.cfa, self.spec.channel_responsivity, region=window)
         return sensor.expose(signal, sequence=self.sequence)
 
     def frames(self, region: tuple[int, int, int, int], n: int, first: int = 0,

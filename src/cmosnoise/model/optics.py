@@ -1,0 +1,386 @@
+"""The lens between the scene and the pixels: relative illumination across the field and the point spread function.
+
+docs/model.md section 2b is the specification. Both act on the scene's light at the sensor's pixels, before the
+colour filter array takes each pixel's channel:
+
+- **the point spread function** (``optics.psf``), one per colour channel: the polychromatic Airy pattern of a
+  diffraction-limited lens at its f-number, weighted by the channel's photo-electron spectrum (with light in lux;
+  otherwise at :data:`DEFAULT_WAVELENGTHS_NM`), a Gaussian, or a user's 2-D array. Each kernel is the continuous
+  PSF averaged over a pixel's square around each offset, so a point PSF leaves the picture as it is; it sums to 1.
+  It is applied by FFT convolution in blocks of :data:`BLOCK` pixels on a grid fixed to the whole sensor, each
+  block with a margin of the kernel's radius (the picture's edge pixels repeated beyond it): a tile of a sensor is
+  made of the same blocks as the whole, so it equals that crop bit for bit;
+- **the relative illumination** (``optics.relative_illumination``): cos^4 of each pixel's field angle
+  (``tan theta = h / f``, h the pixel centre's distance from the sensor's centre), or a table of image height
+  against relative illumination. It multiplies each pixel's signal.
+
+With ``psf`` and ``relative_illumination`` at ``none``, :func:`cfa_signal` is :func:`.scene.cfa_signal`.
+
+Examples
+--------
+>>> import numpy as np
+>>> from cmosnoise.model import optics
+>>> k = optics.gaussian_kernel(0.8)
+>>> k.shape, round(float(k.sum()), 12)
+((11, 11), 1.0)
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .. import inputs
+from ..errors import CmosnoiseError
+from . import scene as scene_mod
+
+#: the FFT blocks' side, pixels (a block and its margins make one transform)
+BLOCK = 256
+#: the wavelengths of a diffraction PSF without light in lux (R, G, B), nm
+DEFAULT_WAVELENGTHS_NM = (610.0, 540.0, 465.0)
+#: sub-samples a pixel is averaged over along each axis when a continuous PSF becomes a kernel
+SUBSAMPLES = 8
+#: the radius of an Airy kernel, in first-dark-ring radii of the longest wavelength
+AIRY_RINGS = 6
+#: the largest PSF kernel, pixels across
+MAX_KERNEL = 257
+#: the largest PSF file (a float64 array of MAX_KERNEL^2 with room for its header) and relative-illumination table
+MAX_FILE_BYTES = 64 * 2**20
+
+__all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "field_angle",
+           "cfa_signal", "blur", "active", "BLOCK"]
+
+
+# ------------------------------------------------------------------ point spread functions
+def airy(r_um: np.ndarray, wavelength_um: float, f_number: float) -> np.ndarray:
+    """The Airy pattern of a circular pupil: ``(2 J1(v) / v)^2``, ``v = pi r / (lambda N)``; 1 at the centre.
+
+    Parameters
+    ----------
+    r_um : array
+        Distance from the centre in the image plane, um.
+    wavelength_um : float
+        lambda, um.
+    f_number : float
+        N.
+
+    Returns
+    -------
+    array
+        The irradiance relative to the centre's; its first zero lies at ``1.2197 lambda N``.
+    """
+    from scipy.special import j1
+
+    v = np.pi * np.asarray(r_um, float) / (wavelength_um * f_number)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = (2.0 * j1(v) / v) ** 2
+    return np.where(v == 0, 1.0, out)
+
+
+def _pixel_averaged(psf, radius: int, step: float) -> np.ndarray:
+    """A continuous PSF ``psf(x, y)`` (pixels) averaged over each pixel's square at offsets -radius..radius, summing
+    to 1: (2 radius + 1, 2 radius + 1)."""
+    n = 2 * radius + 1
+    sub = (np.arange(SUBSAMPLES) + 0.5) / SUBSAMPLES - 0.5
+    axis = (np.arange(n) - radius)[:, None] + sub[None, :]  # (n, SUBSAMPLES) sample positions, pixels
+    x = axis.reshape(-1)
+    values = psf(x[None, :] * step, x[:, None] * step)
+    k = values.reshape(n, SUBSAMPLES, n, SUBSAMPLES).mean(axis=(1, 3))
+    return k / k.sum()
+
+
+def airy_kernel(wavelengths_nm: np.ndarray, weights: np.ndarray, f_number: float, pitch_um: float) -> np.ndarray:
+    """The polychromatic Airy pattern, averaged over each pixel, as a kernel summing to 1.
+
+    Parameters
+    ----------
+    wavelengths_nm : (n,) array
+        Wavelengths, nm.
+    weights : (n,) array
+        Each wavelength's share of the channel's photo-electrons (any scale).
+    f_number : float
+        N.
+    pitch_um : float
+        The pixel pitch, um.
+
+    Returns
+    -------
+    (k, k) float64 array
+        k odd, the kernel's radius :data:`AIRY_RINGS` first dark rings of the longest wavelength (at most
+        :data:`MAX_KERNEL` across).
+    """
+    wl = np.asarray(wavelengths_nm, float) * 1e-3
+    w = np.asarray(weights, float)
+    keep = w > 0
+    wl, w = wl[keep], w[keep] / w[keep].sum()
+    ring = 1.22 * wl.max() * f_number / pitch_um
+    radius = int(min(max(math.ceil(AIRY_RINGS * ring), 2), (MAX_KERNEL - 1) // 2))
+    # each wavelength's Airy pattern carries its share of the power: normalised by its integral, pi/4 (lambda N)^2 * 4/pi
+    norms = (wl * f_number) ** 2 / np.pi * 4.0
+
+    # the polychromatic profile on a fine radial grid (1/64 of the shortest first ring), read at each sub-sample
+    r_grid = np.linspace(0.0, (radius + 1) * math.sqrt(2) * pitch_um,
+                         int((radius + 1) * math.sqrt(2) * pitch_um / (1.22 * wl.min() * f_number / 64)) + 2)
+    profile = sum(wi * airy(r_grid, li, f_number) / ni for wi, li, ni in zip(w, wl, norms))
+
+    def psf(x_um, y_um):
+        return np.interp(np.hypot(x_um, y_um), r_grid, profile)
+
+    return _pixel_averaged(psf, radius, pitch_um)
+
+
+def gaussian_kernel(sigma_px: float) -> np.ndarray:
+    """A Gaussian of ``sigma_px`` integrated exactly over each pixel (the normal CDF's differences), summing to 1.
+
+    Parameters
+    ----------
+    sigma_px : float
+        sigma, pixels.
+
+    Returns
+    -------
+    (k, k) float64 array
+        Radius ``ceil(4 sigma) + 1`` (at most :data:`MAX_KERNEL` across).
+    """
+    from scipy.special import ndtr
+
+    radius = int(min(math.ceil(4 * sigma_px) + 1, (MAX_KERNEL - 1) // 2))
+    edges = (np.arange(-radius, radius + 2) - 0.5) / sigma_px
+    line = np.diff(ndtr(edges))
+    k = np.outer(line, line)
+    return k / k.sum()
+
+
+def _file_kernel(path: str, sampling_um: float | None, pitch_um: float) -> np.ndarray:
+    """A user's PSF (.npy or FITS, one 2-D array) at the pixel pitch, odd-sized, summing to 1."""
+    key = "optics.psf"
+    suffix = Path(path).suffix.lower()
+    if suffix == ".npy":
+        with inputs.open_regular(path, f"{key} file") as f:
+            a = np.load(f, allow_pickle=False)
+    elif suffix in (".fits", ".fit", ".fts"):
+        from astropy.io import fits
+
+        inputs.fits_data_bytes(path, f"{key} file", MAX_FILE_BYTES)
+        with fits.open(inputs.check_regular(path, f"{key} file"), memmap=False) as hdus:
+            a = next((h.data for h in hdus if h.data is not None), None)
+    else:
+        raise CmosnoiseError(f"{key} = {path!r}: give none, diffraction, gaussian, or a .npy or .fits file")
+    a = np.asarray(a) if a is not None else np.zeros(0)
+    if a.ndim != 2 or min(a.shape) < 1 or a.dtype.kind not in "uif":
+        raise CmosnoiseError(f"{key} {path}: a PSF is one 2-D array of real numbers; this is {a.shape} {a.dtype}")
+    a = a.astype(np.float64)
+    if not np.isfinite(a).all() or (a < 0).any() or a.sum() <= 0:
+        raise CmosnoiseError(f"{key} {path}: a PSF's values must be finite, >= 0 and sum to more than 0")
+    if sampling_um is not None and sampling_um != pitch_um:
+        from scipy.ndimage import zoom
+
+        a = np.clip(zoom(a, sampling_um / pitch_um, order=1), 0, None)
+    pad = [(0, 1 - s % 2) for s in a.shape]  # odd sides: the centre is the middle sample
+    a = np.pad(a, pad)
+    if max(a.shape) > MAX_KERNEL:
+        raise CmosnoiseError(f"{key} {path}: {a.shape[0]} x {a.shape[1]} samples at the pixel pitch; at most "
+                             f"{MAX_KERNEL} across")
+    side = max(a.shape)
+    a = np.pad(a, [((side - a.shape[0]) // 2,) * 2, ((side - a.shape[1]) // 2,) * 2])
+    return a / a.sum()
+
+
+def psf_kernels(config) -> np.ndarray | None:
+    """The configured PSF, one kernel per colour channel (R, G, B), or None for ``optics.psf: none``.
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    (3, k, k) float64 array or None
+        Each kernel sums to 1.
+    """
+    op = config.optics
+    if op.psf.lower() == "none":
+        return None
+    spectra = None
+    if config.light.enabled and op.psf.lower() == "diffraction":  # each channel's photo-electron spectrum
+        from . import light as light_mod
+
+        li = light_mod.channel_light(config)
+        spectra = (tuple(li.wavelengths), tuple(tuple(li.photon_flux * li.qe[:, ch]) for ch in range(3)))
+    parts = json.dumps({"optics": op.model_dump(mode="json"), "pitch": config.sensor.pixel_pitch_um}, sort_keys=True)
+    return _psf_kernels(parts, spectra)
+
+
+@functools.lru_cache(maxsize=8)
+def _psf_kernels(parts: str, spectra: tuple | None) -> np.ndarray:
+    p = json.loads(parts)
+    op, pitch = p["optics"], p["pitch"]
+    kind = op["psf"].lower()
+    if kind == "gaussian":
+        k = gaussian_kernel(op["psf_sigma_px"])
+        out = np.stack([k, k, k])
+    elif kind == "diffraction":
+        if spectra is not None:
+            out = np.stack([airy_kernel(spectra[0], w, op["f_number"], pitch) for w in spectra[1]])
+        else:
+            out = np.stack([airy_kernel([w], [1.0], op["f_number"], pitch) for w in DEFAULT_WAVELENGTHS_NM])
+    else:
+        k = _file_kernel(op["psf"], op["psf_sampling_um"], pitch)
+        out = np.stack([k, k, k])
+    out.setflags(write=False)
+    return out
+
+
+# ------------------------------------------------------------------ relative illumination
+def field_angle(shape: tuple[int, int], region, pitch_um: float, focal_length_mm: float) -> np.ndarray:
+    """Each pixel's field angle: ``atan(h / f)``, h its centre's distance from the sensor's centre (rad).
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1) or None
+        The pixels to give (None: all).
+    pitch_um, focal_length_mm : float
+
+    Returns
+    -------
+    (rows, cols) float64 array, rad
+    """
+    return np.arctan(_image_height_mm(shape, region, pitch_um) / focal_length_mm)
+
+
+def _image_height_mm(shape, region, pitch_um: float) -> np.ndarray:
+    rows, cols = shape
+    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
+    y = (np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch_um * 1e-3
+    x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch_um * 1e-3
+    return np.hypot(y[:, None], x[None, :])
+
+
+@functools.lru_cache(maxsize=8)
+def _ri_table(path: str) -> tuple[np.ndarray, np.ndarray]:
+    from .light import _table
+
+    t = _table(path, "optics.relative_illumination")
+    if t.shape[1] != 2:
+        raise CmosnoiseError(f"optics.relative_illumination {path}: give two columns, image height (mm) and "
+                             "relative illumination")
+    h, ri = t[:, 0], t[:, 1]
+    if not np.isfinite(t).all() or (np.diff(h) <= 0).any() or h[0] < 0:
+        raise CmosnoiseError(f"optics.relative_illumination {path}: the image heights must be finite, >= 0 and "
+                             "increasing")
+    if (ri <= 0).any() or (ri > 1).any():
+        raise CmosnoiseError(f"optics.relative_illumination {path}: each relative illumination must be in (0, 1]; "
+                             f"this table spans {ri.min():g} to {ri.max():g}")
+    return h, ri
+
+
+def relative_illumination(config, shape: tuple[int, int], region=None) -> np.ndarray | None:
+    """The relative illumination of each pixel (1 on the axis), or None for ``none``.
+
+    Parameters
+    ----------
+    config : Config
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1), optional
+        The pixels to give.
+
+    Returns
+    -------
+    (rows, cols) float64 array or None
+        ``cos(theta)^4`` for ``cos4``; the table interpolated at each pixel's image height (its end values
+        beyond it) for a file.
+    """
+    op, pitch = config.optics, config.sensor.pixel_pitch_um
+    kind = op.relative_illumination
+    if kind.lower() == "none":
+        return None
+    if kind.lower() == "cos4":
+        return np.cos(field_angle(shape, region, pitch, op.focal_length_mm)) ** 4
+    h, ri = _ri_table(kind)
+    return np.interp(_image_height_mm(shape, region, pitch), h, ri)
+
+
+# ------------------------------------------------------------------ the picture through the lens
+def active(config) -> bool:
+    """Whether the lens changes the picture: a PSF or a relative illumination configured."""
+    op = config.optics
+    return op.psf.lower() != "none" or op.relative_illumination.lower() != "none"
+
+
+def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.ndarray:
+    """The picture ``draw`` convolved with one kernel per channel, in blocks of :data:`BLOCK` on the sensor's grid.
+
+    Parameters
+    ----------
+    draw : callable
+        ``region -> (rows, cols, 3)``: a prepared scene (:func:`.scene.prepare`).
+    shape : (rows, cols)
+        The whole sensor.
+    kernels : (3, k, k) array
+        One kernel per channel, k odd.
+    region : (row0, row1, col0, col1), optional
+        The pixels to make (None: all); any region is bit for bit that crop of the whole.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+    """
+    from scipy.signal import fftconvolve
+
+    rows, cols = shape
+    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
+    m = kernels.shape[1] // 2
+    out = np.empty((r1 - r0, c1 - c0, 3))
+    for br in range(r0 // BLOCK * BLOCK, r1, BLOCK):
+        for bc in range(c0 // BLOCK * BLOCK, c1, BLOCK):
+            be_r, be_c = min(br + BLOCK, rows), min(bc + BLOCK, cols)
+            # the block with its margins, clamped to the picture, its edge pixels repeated beyond it
+            g0, g1, h0, h1 = max(br - m, 0), min(be_r + m, rows), max(bc - m, 0), min(be_c + m, cols)
+            src = np.asarray(draw((g0, g1, h0, h1)), np.float64)
+            src = np.pad(src, ((g0 - (br - m), be_r + m - g1), (h0 - (bc - m), be_c + m - h1), (0, 0)), mode="edge")
+            block = np.stack([fftconvolve(src[..., ch], kernels[ch], mode="valid") for ch in range(3)], axis=-1)
+            # the part of the block the region asks for
+            a0, a1, b0, b1 = max(r0, br), min(r1, be_r), max(c0, bc), min(c1, be_c)
+            out[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = block[a0 - br:a1 - br, b0 - bc:b1 - bc]
+    return np.clip(out, 0.0, None, out=out)  # the FFT's rounding leaves -1e-17 where the picture is black
+
+
+def cfa_signal(draw, config, pattern: str, responsivity, shape: tuple[int, int], region=None) -> np.ndarray:
+    """A prepared scene through the lens (PSF, relative illumination) and the CFA: relative signal per pixel.
+
+    Parameters
+    ----------
+    draw : callable
+        :func:`.scene.prepare`'s result.
+    config : Config
+        Its ``optics`` (and ``light``, for a diffraction PSF's spectra).
+    pattern : str
+        The CFA.
+    responsivity : (float, float, float)
+        The channels' relative responsivity.
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1), optional
+        The pixels to make.
+
+    Returns
+    -------
+    (rows, cols) float64 array
+        :func:`.scene.cfa_signal` where the lens changes nothing.
+    """
+    kernels = psf_kernels(config)
+    if kernels is None:
+        signal = scene_mod.cfa_signal(draw, pattern, responsivity, region)
+    else:
+        signal = scene_mod.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)
+    ri = relative_illumination(config, shape, region)
+    if ri is not None:
+        signal = np.multiply(signal, ri, out=signal if signal.flags.writeable else None)
+    return signal
