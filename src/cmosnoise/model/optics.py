@@ -225,9 +225,11 @@ def _psf_kernels(parts: str, spectra: tuple | None) -> np.ndarray:
         out = np.stack([k, k, k])
     elif kind == "diffraction":
         if spectra is not None:
-            out = np.stack([airy_kernel(spectra[0], w, op["f_number"], pitch) for w in spectra[1]])
+            each = [airy_kernel(spectra[0], w, op["f_number"], pitch) for w in spectra[1]]
         else:
-            out = np.stack([airy_kernel([w], [1.0], op["f_number"], pitch) for w in DEFAULT_WAVELENGTHS_NM])
+            each = [airy_kernel([w], [1.0], op["f_number"], pitch) for w in DEFAULT_WAVELENGTHS_NM]
+        side = max(k.shape[0] for k in each)  # one size for the three (each padded with zeros about its centre)
+        out = np.stack([np.pad(k, (side - k.shape[0]) // 2) for k in each])
     else:
         k = _file_kernel(op["psf"], op["psf_sampling_um"], pitch)
         out = np.stack([k, k, k])

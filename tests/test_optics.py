@@ -1,0 +1,207 @@
+"""The lens (#60): PSFs that sum to 1 and put the Airy ring where diffraction does, a blur whose tiles are the
+whole's crop bit for bit (a 50 MP sensor's included), relative illumination against its law and its SNR, and the
+test charts with their truth."""
+
+import numpy as np
+import pytest
+from scipy.special import jn_zeros
+
+from cmosnoise import Sensor, load_config
+from cmosnoise.errors import CmosnoiseError
+from cmosnoise.model import charts, optics, scene, tiles
+
+QUIET = ["shot_noise.enabled=false", "source_follower.enabled=false", "row_noise.enabled=false",
+         "column_noise.enabled=false", "dark_current.enabled=false", "prnu.enabled=false",
+         "crosstalk.enabled=false", "adc.enabled=false"]
+
+
+# ------------------------------------------------------------------ PSFs
+@pytest.mark.parametrize("wavelength_um, f_number", [(0.55, 2.8), (0.45, 8.0), (0.7, 1.4)])
+def test_the_airy_patterns_first_dark_ring_is_at_1_22_lambda_n(wavelength_um, f_number):
+    ring = 1.22 * wavelength_um * f_number
+    r = np.linspace(0.5 * ring, 1.5 * ring, 200001)
+    first_min = r[np.argmin(optics.airy(r, wavelength_um, f_number))]
+    exact = jn_zeros(1, 1)[0] / np.pi * wavelength_um * f_number  # 1.2197 lambda N
+    assert first_min == pytest.approx(exact, abs=1e-5 * ring) and first_min == pytest.approx(ring, rel=0.001)
+
+
+@pytest.mark.parametrize("psf, extra", [("gaussian", ["optics.psf_sigma_px=0.3"]), ("gaussian", ["optics.psf_sigma_px=3"]),
+                                        ("diffraction", ["optics.f_number=1.4"]), ("diffraction", ["optics.f_number=16"]),
+                                        ("diffraction", ["optics.f_number=4", "light.enabled=true",
+                                                         "light.illuminance_lux=10", "sensor.quantum_efficiency=0.5"])])
+def test_every_psf_kernel_sums_to_one_is_odd_and_centred(psf, extra):
+    k = optics.psf_kernels(load_config(overrides=[f"optics.psf={psf}"] + extra))
+    assert k.shape[0] == 3 and k.shape[1] == k.shape[2] and k.shape[1] % 2 == 1
+    assert np.allclose(k.sum(axis=(1, 2)), 1.0, rtol=0, atol=1e-12) and (k >= 0).all()
+    for ch in range(3):  # symmetric about its centre: the picture is not shifted
+        assert np.allclose(k[ch], k[ch][::-1, ::-1], atol=1e-15)
+
+
+def test_the_diffraction_kernels_widen_with_wavelength_and_f_number():
+    k = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=8"]))
+    centre = k.shape[1] // 2
+    assert k[0, centre, centre] < k[1, centre, centre] < k[2, centre, centre]  # red (610 nm) widest, blue narrowest
+    wide = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=16"]))
+    assert wide[1, wide.shape[1] // 2, wide.shape[1] // 2] < k[1, centre, centre]
+
+
+def test_the_gaussian_kernel_has_its_sigma():
+    k = optics.gaussian_kernel(1.7)
+    x = np.arange(k.shape[0]) - k.shape[0] // 2
+    line = k.sum(axis=0)
+    # the variance of the pixel-integrated Gaussian is sigma^2 + 1/12 (a uniform pixel added); the kernel ends at
+    # 5 sigma here (radius ceil(4 sigma) + 1), which drops 2e-5 of the variance
+    assert np.sum(line * x**2) == pytest.approx(1.7**2 + 1 / 12, rel=5e-5)
+
+
+def test_a_psf_file_is_read_and_bad_ones_are_one_line(tmp_path):
+    good = np.zeros((5, 5))
+    good[2, 2], good[2, 3] = 3.0, 1.0
+    np.save(tmp_path / "psf.npy", good)
+    k = optics.psf_kernels(load_config(overrides=[f"optics.psf={tmp_path / 'psf.npy'}"]))
+    assert k[0, 2, 2] == 0.75 and k.sum() == pytest.approx(3.0)
+    np.save(tmp_path / "cube.npy", np.ones((3, 3, 3)))
+    nan = good.copy()
+    nan[0, 0] = np.nan
+    np.save(tmp_path / "nan.npy", nan)
+    for name, needle in [("cube.npy", "2-D"), ("nan.npy", "finite")]:
+        with pytest.raises(CmosnoiseError, match=needle) as info:
+            optics.psf_kernels(load_config(overrides=[f"optics.psf={tmp_path / name}"]))
+        assert "optics.psf" in str(info.value) and "\n" not in str(info.value)
+    with pytest.raises(CmosnoiseError, match="give none, diffraction, gaussian"):
+        optics.psf_kernels(load_config(overrides=["optics.psf=airy"]))
+
+
+def test_a_point_through_the_blur_is_the_kernel():
+    c = load_config(overrides=QUIET + ["optics.psf=gaussian", "optics.psf_sigma_px=1.2", "sensor.cfa=none",
+                                       "sensor.width=40", "sensor.height=30"])
+    signal = Sensor(c).scene_signal("spot")
+    k = optics.psf_kernels(c)[1]
+    r = k.shape[0] // 2
+    # a monochrome sensor takes the luminance of three equal channels: the kernel, to rounding
+    assert np.allclose(signal[15 - r:15 + r + 1, 20 - r:20 + r + 1], k, rtol=1e-12, atol=1e-17)
+    assert signal.sum() == pytest.approx(1.0, rel=1e-12)
+
+
+# ------------------------------------------------------------------ tiles keep their bits
+@pytest.mark.parametrize("source", ["photo", "edge", "colorchecker"])
+def test_with_optics_every_tile_is_that_rectangle_of_the_whole_frame(source):
+    # 300 x 530 crosses the FFT blocks of 256 in both axes; tiles of 96 straddle them
+    cfg = load_config(overrides=["optics.psf=diffraction", "optics.f_number=11", "optics.relative_illumination=cos4",
+                                 "optics.focal_length_mm=1.5", "sensor.width=530", "sensor.height=300"])
+    whole = Sensor(cfg).expose(source).frame(0)
+    tiling = tiles.Tiling(cfg, 96, source)
+    for region in tiling.regions:
+        r0, r1, c0, c1 = region
+        raw = next(tiling.frames(region, 1))
+        assert np.array_equal(raw, whole[r0:r1, c0:c1]), region
+
+
+def test_a_tile_of_a_50_mp_sensor_is_the_crop_of_a_larger_part_bit_for_bit():
+    # a 50 MP sensor (8688 x 5792): the blur of one tile against that of a part four blocks wide around it; the
+    # whole frame is the union of such parts (the blocks are fixed to the sensor), so this is its crop
+    shape = (5792, 8688)
+    cfg = load_config(overrides=["optics.psf=gaussian", "optics.psf_sigma_px=2", "sensor.width=8688",
+                                 "sensor.height=5792"])
+    draw = scene.prepare("photo", shape)
+    kernels = optics.psf_kernels(cfg)
+    big = (2048, 3072, 4096, 5120)
+    part = optics.blur(draw, shape, kernels, big)
+    for tile in [(2100, 2400, 4200, 4500), (2048, 2304, 4350, 4700), (2500, 3000, 4097, 4300)]:
+        got = optics.blur(draw, shape, kernels, tile)
+        assert np.array_equal(got, part[tile[0] - big[0]:tile[1] - big[0], tile[2] - big[2]:tile[3] - big[2]]), tile
+
+
+def test_the_blur_conserves_light_away_from_the_edges():
+    c = load_config(overrides=QUIET + ["optics.psf=diffraction", "optics.f_number=5.6", "sensor.width=300",
+                                       "sensor.height=280"])
+    blurred = Sensor(c).scene_signal("siemens")
+    sharp = Sensor(load_config(overrides=QUIET + ["sensor.width=300", "sensor.height=280"])).scene_signal("siemens")
+    inner = (slice(40, -40), slice(40, -40))
+    assert blurred[inner].mean() == pytest.approx(sharp[inner].mean(), rel=2e-3)
+    assert blurred[inner].std() < sharp[inner].std()  # the spokes' contrast drops near the centre
+
+
+# ------------------------------------------------------------------ relative illumination
+def test_cos4_is_the_field_angles_fourth_power():
+    c = load_config(overrides=["optics.relative_illumination=cos4", "optics.focal_length_mm=2",
+                               "sensor.pixel_pitch_um=2.2", "sensor.width=640", "sensor.height=480"])
+    ri = optics.relative_illumination(c, (480, 640))
+    h = np.hypot(239.5, 319.5) * 2.2e-3  # the corner pixel's centre, mm
+    assert ri[0, 0] == pytest.approx(np.cos(np.arctan(h / 2.0)) ** 4, rel=1e-12)
+    assert ri.max() == pytest.approx(1.0, abs=1e-5) and ri[240, 320] > ri[0, 320] > ri[0, 0]
+
+
+def test_a_relative_illumination_table_is_interpolated_and_bad_ones_refused(tmp_path):
+    (tmp_path / "ri.csv").write_text("height_mm,ri\n0,1\n1,0.5\n")
+    c = load_config(overrides=[f"optics.relative_illumination={tmp_path / 'ri.csv'}", "sensor.pixel_pitch_um=2.2"])
+    ri = optics.relative_illumination(c, (480, 640))
+    h = np.hypot(239.5, 319.5) * 2.2e-3
+    assert ri[0, 0] == pytest.approx(1 - 0.5 * h, rel=1e-12)
+    (tmp_path / "bad.csv").write_text("0,1\n1,1.5\n")
+    with pytest.raises(CmosnoiseError, match=r"optics.relative_illumination .*\(0, 1\]"):
+        optics.relative_illumination(load_config(overrides=[f"optics.relative_illumination={tmp_path / 'bad.csv'}"]),
+                                     (10, 10))
+
+
+def test_lens_shading_takes_the_corners_light_and_their_snr_by_its_square_root():
+    # shot noise alone, float e-: the corner's mean over the centre's is the relative illumination's (times a QE
+    # ratio of 1); the SNR ratio is its square root. Blocks of 64 x 64 pixels over 8 frames: the mean ratio's
+    # standard error is about sqrt(2 / (4096 * 8 * 3000)) = 5e-5, the SNR ratio's about
+    # sqrt(2 / (4096 * 7)) * sqrt(2) / 2 = 0.6 %; the tolerances are 5 of them.
+    sets = QUIET + ["shot_noise.enabled=true", "optics.relative_illumination=cos4", "optics.focal_length_mm=1.0",
+                    "sensor.cfa=none", "sensor.width=512", "sensor.height=384", "exposure.peak_rate_e_per_s=100000"]
+    c = load_config(overrides=sets)
+    shot = Sensor(c, seed=3).expose("flat:1")
+    frames = np.stack(list(shot.frames(8))).astype(np.float64)
+    ri = optics.relative_illumination(c, (384, 512))
+    centre, corner = (slice(160, 224), slice(224, 288)), (slice(0, 64), slice(0, 64))
+    want = ri[corner].mean() / ri[centre].mean()
+    assert want < 0.6  # a real effect: the corner gets under 60 % of the centre's light
+    got = frames[:, corner[0], corner[1]].mean() / frames[:, centre[0], centre[1]].mean()
+    assert got == pytest.approx(want, abs=5 * 5e-5)
+
+    def snr(block):
+        x = frames[:, block[0], block[1]]
+        return x.mean() / np.sqrt(x.var(axis=0, ddof=1).mean())
+    assert snr(corner) / snr(centre) == pytest.approx(np.sqrt(want), rel=5 * 0.006)
+
+
+def test_optics_off_changes_no_bit():
+    base = Sensor(load_config()).expose("photo").frame(0)
+    same = Sensor(load_config(overrides=["optics.f_number=1.4", "optics.focal_length_mm=3"])).expose("photo").frame(0)
+    assert np.array_equal(base, same)
+
+
+# ------------------------------------------------------------------ charts
+def test_the_slanted_edge_is_the_exact_area_share():
+    shape = (64, 80)
+    img = charts.edge(shape, 5.0, 0.0, 1.0)[..., 0]
+    # each row's sum is the length of the row to the right of the line, integrated over the row's height
+    t = np.tan(np.radians(5.0))
+    for r in (0, 17, 63):
+        x_mid = 40 + (r + 0.5 - 32) * t  # the edge's mean position across row r
+        assert img[r].sum() == pytest.approx(80 - x_mid, abs=1e-12)
+    # a fine-grid integral of a few pixels near the edge
+    for r, c in [(10, 38), (40, 41), (55, 42)]:
+        y, x = np.meshgrid(r + (np.arange(400) + 0.5) / 400, c + (np.arange(400) + 0.5) / 400, indexing="ij")
+        share = (x > 40 + (y - 32) * t).mean()
+        assert img[r, c] == pytest.approx(share, abs=2e-3)
+    assert np.array_equal(charts.edge(shape, region=(5, 30, 20, 70)), charts.edge(shape)[5:30, 20:70])
+
+
+def test_chart_truths_say_where_the_parts_are():
+    t = charts.truth("greys:12", (240, 600))
+    img = charts.greys((240, 600), 12)
+    for (r0, r1, c0, c1), level in zip(t["patches"], t["levels"]):
+        assert np.all(img[r0:r1, c0:c1] == level)
+    assert t["levels"][0] == 1.0 and t["levels"][-1] == pytest.approx(1e-3)
+    e = charts.truth("edge:-7:0.2:0.8", (100, 200))
+    assert (e["angle_deg"], e["low"], e["high"]) == (-7.0, 0.2, 0.8)
+    cc = charts.truth("colorchecker", (160, 240))
+    assert len(cc["patches"]) == 24 and cc["names"][18] == "white 9.5"
+    for bad in ["edge:0", "edge:5:0.5:0.5", "greys:1", "edge:a"]:
+        with pytest.raises(CmosnoiseError, match="scene"):
+            scene.render(bad, (20, 20))
+    with pytest.raises(CmosnoiseError, match="not a chart"):
+        charts.truth("photo", (20, 20))
