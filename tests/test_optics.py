@@ -205,3 +205,83 @@ def test_chart_truths_say_where_the_parts_are():
             scene.render(bad, (20, 20))
     with pytest.raises(CmosnoiseError, match="not a chart"):
         charts.truth("photo", (20, 20))
+
+
+# ------------------------------------------------------------------ chief-ray angle
+QUIET_XT = [s for s in QUIET if not s.startswith("crosstalk")]
+LEAN = ["optics.chief_ray_angle=[[0, 0], [1, 30]]", "crosstalk.kernel_at_angle_pct=[[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]"]
+
+
+def _spot_at(r, c, shape=(480, 640)):
+    a = np.zeros(shape)
+    a[r, c] = 1.0
+    return a
+
+
+def test_with_the_angle_zero_or_taken_back_the_frames_keep_their_bits():
+    base = Sensor(load_config()).expose("photo").frame(0)
+    for extra in (["optics.chief_ray_angle=[[0, 0], [5, 0]]"], LEAN + ["optics.microlens_compensation=1"],
+                  ["optics.chief_ray_angle=[[0, 0], [5, 20]]"]):  # an angle, but nothing that reads it
+        assert np.array_equal(Sensor(load_config(overrides=extra)).expose("photo").frame(0), base), extra
+
+
+def test_leaning_crosstalk_keeps_the_charge_and_leans_outward():
+    c = load_config(overrides=QUIET_XT + LEAN + ["sensor.cfa=none", "exposure.peak_rate_e_per_s=1e6"])
+    sensor = Sensor(c)
+    perfect = np.random.default_rng(2).random(sensor.shape) * 1000
+    after, mean = sensor.photo_response(perfect)  # float64: the sums differ by rounding alone
+    # pixel sum for pixel sum: the lean only moves charge (the default kernel keeps 100 %)
+    assert mean.sum() == pytest.approx(after.sum(), rel=1e-12) and not np.allclose(mean, after)
+    for (r, col), direction in [((240, 600), (0, 1)), ((240, 40), (0, -1)), ((460, 320), (1, 0)), ((20, 320), (-1, 0))]:
+        out = sensor.expose(_spot_at(r, col)).photo_mean_e.astype(np.float64)
+        rr, cc = np.indices(out.shape)
+        shift = ((rr * out).sum() / out.sum() - r, (cc * out).sum() / out.sum() - col)
+        # outward along the spot's direction from the centre (its other coordinate is half a pixel off the axis)
+        along = int(np.argmax(np.abs(direction)))
+        assert shift[along] * direction[along] > 0.05 and abs(shift[1 - along]) < 0.01 * abs(shift[along]), shift
+        assert out.sum() == pytest.approx(1e6 * 0.03, rel=1e-6)  # the spot's charge, all of it, around it
+    # next to the centre (its centre half a pixel off each axis: h = 1.556 um, 0.0467 degrees) the spread is all but
+    # symmetric: shares a = b = 0.0467 / 20 * cos 45 along the columns and the rows; the right neighbour gets
+    # 4.5 + 3.5 a - 0.5 b %, the left 4.5 - 1.5 a - 0.5 b % (the kernels' differences)
+    out = sensor.expose(_spot_at(240, 320)).photo_mean_e
+    a = np.hypot(0.5, 0.5) * 2.2e-3 * 30 / 20 * np.sqrt(0.5)
+    assert out[240, 321] / out[240, 319] == pytest.approx((4.5 + 3.5 * a - 0.5 * a) / (4.5 - 1.5 * a - 0.5 * a),
+                                                          rel=1e-5)
+
+
+def test_the_angle_costs_each_channel_its_own_qe():
+    c = load_config(overrides=QUIET + ["optics.chief_ray_angle=[[0, 0], [0.88, 30]]",
+                                       "optics.angle_relative_qe=[[0, 1, 1, 1], [30, 0.7, 0.8, 0.9]]",
+                                       "sensor.width=640", "sensor.height=480"])
+    signal = Sensor(c).scene_signal("flat:1")
+    seen = optics.incidence(c, (480, 640))
+    corner_angle = seen[0][0, 0]
+    for (r, col), ch in [((0, 0), 0), ((0, 1), 1), ((1, 1), 2)]:
+        want = np.interp(seen[0][r, col], [0, 30], [1, [0.7, 0.8, 0.9][ch]])
+        assert signal[r, col] == pytest.approx(want, rel=1e-12)
+    half = load_config(overrides=QUIET + ["optics.chief_ray_angle=[[0, 0], [0.88, 30]]",
+                                          "optics.angle_relative_qe=[[0, 1], [30, 0.7]]",
+                                          "optics.microlens_compensation=0.5"])
+    assert Sensor(half).scene_signal("flat:1")[0, 0] == pytest.approx(1 - 0.3 * corner_angle / 2 / 30, rel=1e-12)
+
+
+def test_with_a_leaning_kernel_every_tile_is_that_rectangle_of_the_whole_frame():
+    cfg = load_config(overrides=LEAN + ["optics.angle_relative_qe=[[0, 1, 1, 1], [30, 0.7, 0.8, 0.9]]",
+                                        "sensor.width=200", "sensor.height=150"])
+    whole = Sensor(cfg).expose("photo").frame(0)
+    tiling = tiles.Tiling(cfg, 64, "photo")
+    for region in tiling.regions:
+        r0, r1, c0, c1 = region
+        assert np.array_equal(next(tiling.frames(region, 1)), whole[r0:r1, c0:c1]), region
+
+
+@pytest.mark.parametrize("sets, needle", [
+    (["crosstalk.kernel_at_angle_pct=[[1, 4, 1], [4, 70, 4], [1, 4, 1]]"], "same sum"),
+    (["optics.chief_ray_angle=[[0, 0]]"], "at least two rows"),
+    (["optics.chief_ray_angle=[[1, 0], [0, 10]]", "optics.angle_relative_qe=[[0, 1], [30, 0.5]]"], "increasing"),
+    (["optics.chief_ray_angle=[[0, 0], [1, 10]]", "optics.angle_relative_qe=[[0, 1], [30, 1.5]]"], r"\(0, 1\]"),
+])
+def test_bad_chief_ray_tables_are_one_line(sets, needle):
+    with pytest.raises(CmosnoiseError, match=needle) as info:
+        Sensor(load_config(overrides=sets + ["sensor.width=32", "sensor.height=24"])).expose("flat:0.5")
+    assert "\n" not in str(info.value)

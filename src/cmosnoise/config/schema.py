@@ -262,6 +262,16 @@ class OpticsSection(Section):
     psf: str = Field("none", description="none; diffraction: the polychromatic Airy pattern of each channel at "
                                          "f_number; gaussian: psf_sigma_px; or a .npy/.fits file of one 2-D PSF at "
                                          "the pixel pitch (or psf_sampling_um)")
+    chief_ray_angle: Union[str, SpectrumRows, None] = Field(
+        None, description="the chief ray's angle of incidence against image height: a CSV file or inline rows of "
+                          "(image height mm, degrees) from the optical centre outwards; null: 0 everywhere "
+                          "(an image-space telecentric lens)")
+    microlens_compensation: float = Field(0.0, ge=0, le=1, description="the share of the chief-ray angle the "
+                                                                       "microlenses' shift takes back (0: none, 1: all)")
+    angle_relative_qe: Union[str, SpectrumRows, None] = Field(
+        None, description="the pixels' QE against the angle of incidence left after the microlenses, relative to "
+                          "normal incidence: rows of (degrees, QE) or (degrees, QE_R, QE_G, QE_B), or a CSV; null: "
+                          "no loss with angle")
     psf_sigma_px: float = Field(0.5, gt=0, le=100, description="sigma of the gaussian PSF, pixels")
     psf_sampling_um: Optional[float] = Field(None, gt=0, le=100, description="a PSF file's sample spacing, um; "
                                                                               "null: the pixel pitch")
@@ -270,6 +280,17 @@ class OpticsSection(Section):
     @classmethod
     def _named(cls, v):
         return v.strip()
+
+    @field_validator("chief_ray_angle", "angle_relative_qe")
+    @classmethod
+    def _table_rows(cls, v, info):
+        if isinstance(v, list):
+            widths = {len(r) for r in v}
+            allowed = (2,) if info.field_name == "chief_ray_angle" else (2, 4)
+            if len(v) < 2 or len(widths) != 1 or widths.pop() not in allowed:
+                what = "(mm, degrees)" if info.field_name == "chief_ray_angle" else "(degrees, QE) or (degrees, R, G, B)"
+                raise ValueError(f"give at least two rows, each {what}")
+        return v
 
 
 # ------------------------------------------------------------------------ stages
@@ -314,6 +335,32 @@ class CrosstalkSection(Section):
         description="3 x 3 kernel, % of a pixel's photo-charge landing in itself and each neighbour (sum <= 100), "
                     "or one kernel per colour {R: ..., G: ..., B: ...}",
     )
+
+    kernel_at_angle_pct: Optional[Kernel] = Field(
+        None, description="3 x 3 kernel, %, for light arriving at reference_angle_deg from the left (a pixel right of "
+                          "the optical centre): the charge leans outward; between 0 and that angle the kernel is "
+                          "interpolated (optics.chief_ray_angle sets each pixel's angle). Same sum as kernel_pct. "
+                          "null: one kernel at every angle")
+    reference_angle_deg: float = Field(20.0, gt=0, le=60, description="the angle of incidence kernel_at_angle_pct is "
+                                                                      "given at, degrees")
+
+    @field_validator("kernel_at_angle_pct")
+    @classmethod
+    def _angle_kernel(cls, v):
+        return None if v is None else _check_kernel(v, "kernel_at_angle_pct")
+
+    @model_validator(mode="after")
+    def _lean_keeps_the_charge(self):
+        k1 = self.kernel_at_angle_pct
+        if k1 is None:
+            return self
+        if isinstance(self.kernel_pct, dict):
+            raise ValueError("crosstalk.kernel_at_angle_pct leans one kernel: give kernel_pct as one 3 x 3 kernel")
+        a, b = sum(map(sum, self.kernel_pct)), sum(map(sum, k1))
+        if abs(a - b) > 1e-9 * max(a, 1):
+            raise ValueError(f"crosstalk.kernel_at_angle_pct sums to {b:g} %, kernel_pct to {a:g} %: leaning moves "
+                             "charge, it neither makes nor loses it; give the same sum")
+        return self
 
     @field_validator("kernel_pct")
     @classmethod

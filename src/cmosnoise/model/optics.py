@@ -36,6 +36,7 @@ import numpy as np
 
 from .. import inputs
 from ..errors import CmosnoiseError
+from . import cfa as cfa_mod
 from . import scene as scene_mod
 
 #: the FFT blocks' side, pixels (a block and its margins make one transform)
@@ -52,7 +53,7 @@ MAX_KERNEL = 257
 MAX_FILE_BYTES = 64 * 2**20
 
 __all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "field_angle",
-           "cfa_signal", "blur", "active", "BLOCK"]
+           "incidence", "angle_qe", "lean_weights", "cfa_signal", "blur", "active", "BLOCK"]
 
 
 # ------------------------------------------------------------------ point spread functions
@@ -309,11 +310,124 @@ def relative_illumination(config, shape: tuple[int, int], region=None) -> np.nda
     return np.interp(_image_height_mm(shape, region, pitch), h, ri)
 
 
+# ------------------------------------------------------------------ chief-ray angle
+def _rows(value, key: str, widths: tuple[int, ...]) -> np.ndarray:
+    """A table given inline (rows) or as a CSV file, checked: finite, first column increasing and >= 0."""
+    if isinstance(value, str):
+        from .light import _table
+
+        t = _table(value, key)
+    else:
+        t = np.asarray(value, np.float64)
+    if t.ndim != 2 or t.shape[1] not in widths or t.shape[0] < 2:
+        raise CmosnoiseError(f"{key}: give at least two rows of {' or '.join(map(str, widths))} columns")
+    if not np.isfinite(t).all() or (np.diff(t[:, 0]) <= 0).any() or t[0, 0] < 0:
+        raise CmosnoiseError(f"{key}: the first column must be finite, >= 0 and increasing")
+    return t
+
+
+def incidence(config, shape: tuple[int, int], region=None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Each pixel's angle of incidence after the microlenses, and its direction from the optical centre.
+
+    The chief ray's angle ``optics.chief_ray_angle`` at the pixel's image height (the table interpolated, held at
+    its ends), times ``1 - optics.microlens_compensation``.
+
+    Parameters
+    ----------
+    config : Config
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1), optional
+        The pixels to give.
+
+    Returns
+    -------
+    (angle_deg, cos_phi, sin_phi), each (rows, cols) float64, or None
+        None where no chief-ray angle is configured or the microlenses take all of it back. ``phi`` is the
+        pixel's direction from the centre (cos: along the columns, sin: along the rows, down).
+    """
+    op, pitch = config.optics, config.sensor.pixel_pitch_um
+    if op.chief_ray_angle is None or op.microlens_compensation >= 1:
+        return None
+    t = _rows(op.chief_ray_angle, "optics.chief_ray_angle", (2,))
+    if (np.abs(t[:, 1]) > 60).any():
+        raise CmosnoiseError("optics.chief_ray_angle: angles must be from -60 to 60 degrees")
+    rows, cols = shape
+    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
+    y = (np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch * 1e-3
+    x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch * 1e-3
+    h = np.hypot(y[:, None], x[None, :])
+    angle = np.interp(h, t[:, 0], t[:, 1]) * (1.0 - op.microlens_compensation)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_phi = np.where(h > 0, x[None, :] / h, 0.0)
+        sin_phi = np.where(h > 0, y[:, None] / h, 0.0)
+    return angle, cos_phi, sin_phi
+
+
+def angle_qe(config, pattern: str, shape: tuple[int, int], region=None) -> np.ndarray | None:
+    """Each pixel's QE at its angle of incidence relative to normal incidence (its own CFA channel's), or None.
+
+    Parameters
+    ----------
+    config : Config
+    pattern : str
+        The CFA.
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1), optional
+        The pixels to give.
+
+    Returns
+    -------
+    (rows, cols) float64 array or None
+        ``optics.angle_relative_qe`` interpolated at each pixel's angle (:func:`incidence`); None without one.
+    """
+    op = config.optics
+    if op.angle_relative_qe is None:
+        return None
+    seen = incidence(config, shape, region)
+    if seen is None:
+        return None
+    t = _rows(op.angle_relative_qe, "optics.angle_relative_qe", (2, 4))
+    if (t[:, 1:] <= 0).any() or (t[:, 1:] > 1).any():
+        raise CmosnoiseError("optics.angle_relative_qe: each relative QE must be in (0, 1]")
+    angle = np.abs(seen[0])
+    if t.shape[1] == 2 or cfa_mod.is_mono(pattern):
+        return np.interp(angle, t[:, 0], t[:, 1])
+    out = np.empty_like(angle)
+    r0, c0 = (0, 0) if region is None else (region[0], region[2])
+    channels = cfa_mod.channel_map(cfa_mod.crop_pattern(pattern, r0, c0), angle.shape)
+    for ch in range(3):
+        m = channels == ch
+        out[m] = np.interp(angle[m], t[:, 0], t[:, 1 + ch])
+    return out
+
+
+def lean_weights(config, shape: tuple[int, int], region=None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The signed shares of crosstalk's lean along the columns and the rows per pixel (:func:`.stages.crosstalk.lean`),
+    or None where the kernel does not lean (no ``crosstalk.kernel_at_angle_pct`` or no angle).
+
+    Returns
+    -------
+    (toward_col, toward_row), each (rows, cols) float64
+        ``min(|angle| / reference_angle, 1) * cos(phi)`` and ``* sin(phi)``, the sign of the angle kept.
+    """
+    if config.crosstalk.kernel_at_angle_pct is None or not config.crosstalk.enabled:
+        return None
+    seen = incidence(config, shape, region)
+    if seen is None:
+        return None
+    angle, cos_phi, sin_phi = seen
+    share = np.clip(angle / config.crosstalk.reference_angle_deg, -1.0, 1.0)
+    return share * cos_phi, share * sin_phi
+
+
 # ------------------------------------------------------------------ the picture through the lens
 def active(config) -> bool:
-    """Whether the lens changes the picture: a PSF or a relative illumination configured."""
+    """Whether the lens changes the picture: a PSF, a relative illumination or an angle-dependent QE configured."""
     op = config.optics
-    return op.psf.lower() != "none" or op.relative_illumination.lower() != "none"
+    return (op.psf.lower() != "none" or op.relative_illumination.lower() != "none"
+            or (op.angle_relative_qe is not None and op.chief_ray_angle is not None))
 
 
 def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.ndarray:
@@ -382,7 +496,7 @@ def cfa_signal(draw, config, pattern: str, responsivity, shape: tuple[int, int],
         signal = scene_mod.cfa_signal(draw, pattern, responsivity, region)
     else:
         signal = scene_mod.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)
-    ri = relative_illumination(config, shape, region)
-    if ri is not None:
-        signal = np.multiply(signal, ri, out=signal if signal.flags.writeable else None)
+    for factor in (relative_illumination(config, shape, region), angle_qe(config, pattern, shape, region)):
+        if factor is not None:
+            signal = np.multiply(signal, factor, out=signal if signal.flags.writeable else None)
     return signal

@@ -284,7 +284,16 @@ class Sensor:
         after_prnu = perfect_e if gain is None else prnu.apply(perfect_e, gain)
         mean = after_prnu
         if c.crosstalk.enabled:
-            mean = crosstalk.apply(mean, crosstalk.kernel_fractions(c.crosstalk.kernel_pct), c.sensor.cfa)
+            kernel = crosstalk.kernel_fractions(c.crosstalk.kernel_pct)
+            mean = crosstalk.apply(mean, kernel, c.sensor.cfa)
+            if c.crosstalk.kernel_at_angle_pct is not None:  # the kernel leans outward with the chief-ray angle
+                r0, r1, c0, c1 = self.region
+                if rows is not None:
+                    r0, r1 = r0 + rows[0], r0 + rows[1]
+                weights = optics_mod.lean_weights(c, self.shape, (r0, r1, c0, c1))
+                if weights is not None:
+                    leans = crosstalk.lean_kernels(kernel, crosstalk.kernel_fractions(c.crosstalk.kernel_at_angle_pct))
+                    mean = mean + crosstalk.lean(after_prnu, leans, *weights)
         return after_prnu, mean
 
     @property
@@ -508,6 +517,8 @@ class Exposure:
 
         photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.window, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
                        deps["prnu_gain"], c.crosstalk, c.nonlinearity if on_mean is not None else None)
+        if c.crosstalk.kernel_at_angle_pct is not None:  # the lean reads the chief-ray angle
+            photo_parts += (c.optics, c.sensor.pixel_pitch_um)
         #: stage 1: mean photo-electrons of the perfect image; after PRNU (stage 2); after crosstalk (stage 3):
         #: the mean photo-charge that shot noise acts on
         self.perfect_e, self.after_prnu_e, self.photo_mean_e = cached(cache, "photo_mean", photo_parts, photo)

@@ -107,6 +107,56 @@ def apply(mean_e: np.ndarray, kernel, pattern: str = "none") -> np.ndarray:
     return out
 
 
+def lean_kernels(kernel, kernel_at_angle) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's change from normal incidence to the reference angle, for light leaning each way.
+
+    Parameters
+    ----------
+    kernel, kernel_at_angle : (3, 3) arrays of fractions
+        At normal incidence, and at the reference angle for a pixel right of the optical centre.
+
+    Returns
+    -------
+    (right, left, down, up) : four (3, 3) arrays
+        ``kernel_at_angle - kernel`` for charge leaning toward +column, mirrored for -column, transposed for
+        +row (down), and mirrored again for -row. Each sums to 0.
+    """
+    d = np.asarray(kernel_at_angle, np.float64) - np.asarray(kernel, np.float64)
+    return d, d[:, ::-1], d.T, d.T[::-1, :]
+
+
+def lean(mean_e: np.ndarray, leans: tuple, toward_col: np.ndarray, toward_row: np.ndarray) -> np.ndarray:
+    """The charge that leaning crosstalk moves: what :func:`spread` adds for a kernel that depends on the pixel.
+
+    Pixel q spreads with ``kernel + a(q) D_col + b(q) D_row``, where ``a`` and ``b`` are the signed shares of
+    the reference angle's change along the columns and the rows (``(angle / reference) * cos(phi)`` and
+    ``* sin(phi)``, phi the pixel's direction from the optical centre) and ``D`` the kernels of
+    :func:`lean_kernels` for the sign's direction. Spread is linear in the charge and the kernel, so this is
+    four spreads of weighted charge; each ``D`` sums to 0, so the array's total charge is unchanged (to rounding).
+
+    Parameters
+    ----------
+    mean_e : (rows, cols) array, e-
+        Charge per pixel before diffusion.
+    leans : tuple of four (3, 3) arrays
+        :func:`lean_kernels`.
+    toward_col, toward_row : (rows, cols) arrays
+        ``a`` and ``b`` per pixel, each from -1 to 1.
+
+    Returns
+    -------
+    (rows, cols) float64 array, e-
+        To add to :func:`apply`'s result.
+    """
+    right, left, down, up = leans
+    q = np.asarray(mean_e, np.float64)
+    out = spread(q * np.clip(toward_col, 0, None), right)
+    out += spread(q * np.clip(-toward_col, 0, None), left)
+    out += spread(q * np.clip(toward_row, 0, None), down)
+    out += spread(q * np.clip(-toward_row, 0, None), up)
+    return out
+
+
 def channel_mixing_matrix(kernel, pattern: str) -> np.ndarray:
     """3 x 3 matrix M with ``measured_channel_means = M @ true_channel_means``.
 
