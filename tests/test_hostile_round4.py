@@ -498,19 +498,25 @@ def test_a_signal_while_the_interpreter_exits_says_the_command_had_finished(tmp_
 
 
 # ------------------------------------------------------------------ what a new user meets (#63)
-def test_a_camera_raw_given_as_the_scene_is_refused_in_one_line(tmp_path):
-    """#63: a DNG was read as a linear grey picture (its mosaic and black level as light): now refused, by its
-    suffix, or by its tags whatever its name."""
+def test_a_camera_raw_given_as_the_scene_is_read_as_a_mosaic_or_refused_in_one_line(tmp_path):
+    """#63: a DNG was read as a linear grey picture (its mosaic and black level as light). Now a raw photograph is
+    read as a mosaic (#60, tests/test_raw_scene.py), by its suffix or by its tags whatever its name; one that
+    LibRaw cannot read, or one of the wrong size, is refused in one line."""
     from cmosnoise.io.dng import write_dng
 
     sensor = Sensor({"sensor": {"width": 64, "height": 48}})
     write_dng(tmp_path / "frame.dng", sensor.expose().frame(0), "RGGB", 64.0, 4095)
     (tmp_path / "frame.tif").write_bytes((tmp_path / "frame.dng").read_bytes())
     (tmp_path / "photo.nef").write_bytes(b"not really")
-    for scene in ("frame.dng", "frame.tif", "photo.nef"):
+    for scene in ("frame.dng", "frame.tif"):
         r = cli("simulate", "--scene", tmp_path / scene, "--set", "sensor.width=64", "--set", "sensor.height=48",
+                "--out", tmp_path / scene.replace(".", "_"))
+        assert r.returncode == 0, (scene, r.stderr)
+    for scene, size, needle in [("photo.nef", 48, "not a raw photograph LibRaw reads"),
+                                ("frame.dng", 40, "a raw scene is used at its own resolution")]:
+        r = cli("simulate", "--scene", tmp_path / scene, "--set", "sensor.width=64", "--set", f"sensor.height={size}",
                 "--out", tmp_path / "out")
-        assert r.returncode == 2 and "is a camera raw" in r.stderr and _one_line(r.stderr), (scene, r.stderr)
+        assert r.returncode == 2 and needle in r.stderr and _one_line(r.stderr), (scene, r.stderr)
         assert not (tmp_path / "out").exists()
 
 

@@ -41,7 +41,8 @@ class SceneSection(Section):
     """What the sensor looks at (stage 1, the perfect image).
 
     ``source`` is a built-in (``photo``, ``flat:LEVEL``, ``ramp``,
-    ``colorchecker``, ``zoneplate``, ``siemens``) or a path to an image.
+    ``colorchecker``, ``zoneplate``, ``siemens``, ``edge``, ``greys``), a path to an image, or a raw photograph
+    (a camera raw, or a ``.npy`` mosaic with ``raw_cfa``).
     """
 
     source: str = Field("photo", description="photo, flat:LEVEL (0..1), ramp, colorchecker, zoneplate, siemens, or an image path")
@@ -57,6 +58,12 @@ class SceneSection(Section):
     source_size: Optional[tuple[int, int]] = Field(
         None, description="(rows, cols) a built-in scene (the photo included) is drawn at before the window is "
                           "taken; null: the sensor's")
+    raw_cfa: Optional[Literal["RGGB", "BGGR", "GRBG", "GBRG"]] = Field(
+        None, description="a 2-D .npy scene is a raw photograph's mosaic with this pattern at (0, 0) (a camera raw "
+                          "file carries its own); null: a .npy is linear RGB or grey")
+    raw_black_dn: float = Field(0.0, ge=0, le=1e6, description="a .npy mosaic's black level, DN")
+    raw_white_dn: Optional[float] = Field(None, gt=0, le=1e9, description="a .npy mosaic's white level, DN; null: "
+                                                                          "its largest code")
 
     @field_validator("window", "source_size")
     @classmethod

@@ -491,6 +491,9 @@ def cfa_signal(draw, config, pattern: str, responsivity, shape: tuple[int, int],
     (rows, cols) float64 array
         :func:`.scene.cfa_signal` where the lens changes nothing.
     """
+    if isinstance(draw, scene_mod.RawDraw):
+        raise CmosnoiseError("scene: a raw photograph already went through its own lens; set optics.psf, "
+                             "optics.relative_illumination and optics.angle_relative_qe to none for it")
     kernels = psf_kernels(config)
     if kernels is None:
         signal = scene_mod.cfa_signal(draw, pattern, responsivity, region)

@@ -53,7 +53,7 @@ from ..engine import layout
 from ..engine import resample as resample_engine
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
-from . import charts
+from . import charts, raw_scene
 from .charts import COLORCHECKER_SRGB8, colorchecker, colorchecker_patches  # noqa: F401 (the scene's names)
 
 #: Rec. 709 / sRGB luminance weights for linear RGB
@@ -322,30 +322,15 @@ def check_file(path: str | Path, max_pixels: int = MAX_SCENE_PIXELS) -> None:
         Not a regular file, a damaged or hostile structure, or too many pixels.
     """
     p = inputs.check_regular(path, "scene")
-    raw = p.suffix.lower() in RAW_SUFFIXES
-    if not raw:
-        inputs.check_image_pixels(path, "scene", max_pixels,
-                                  hint=" (a scene is resampled to the sensor anyway: scale it down first)")
-        with inputs.open_regular(p, "scene") as fh:
-            tiff = fh.read(4) in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+")
-        if tiff:  # a DNG or a CFA mosaic under another name (its chain of pages already walked by the gate)
-            import tifffile
-
-            try:
-                with tifffile.TiffFile(p) as tf:
-                    page = tf.pages.first
-                    raw = "DNGVersion" in page.tags or int(page.photometric) in (32803, 34892)
-            except Exception:  # the decoder's own refusal comes when the picture is read
-                raw = False
-    if raw:
-        raise CmosnoiseError(f"scene {str(path)!r} is a camera raw (a colour-filter mosaic above a black level), "
-                             "not a picture of the scene's light: give a processed picture (PNG, JPEG, TIFF or "
-                             ".npy of linear RGB); a raw photograph is not read as a scene")
+    if raw_scene.is_raw(p):  # a raw photograph: read whole here, so a damaged one is refused before any work
+        raw_scene.read(p)
+        return
+    inputs.check_image_pixels(path, "scene", max_pixels,
+                              hint=" (a scene is resampled to the sensor anyway: scale it down first)")
 
 
-#: camera raw formats: a mosaic of codes with a black level, never read as a picture of light
-RAW_SUFFIXES = (".dng", ".nef", ".nrw", ".cr2", ".cr3", ".crw", ".arw", ".srf", ".sr2", ".raf", ".orf", ".rw2",
-                ".pef", ".srw", ".3fr", ".erf", ".kdc", ".mos", ".mrw", ".x3f", ".iiq", ".raw")
+#: camera raw formats, read as raw photographs (:mod:`.raw_scene`)
+RAW_SUFFIXES = raw_scene.RAW_SUFFIXES
 
 
 def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MAX_SCENE_PIXELS) -> np.ndarray:
@@ -377,6 +362,10 @@ def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MA
         raise CmosnoiseError(f"scene {name!r}: no such file (built-in scenes: {', '.join(BUILTINS)})")
     if p.is_dir():
         raise CmosnoiseError(f"scene {name!r} is a folder, not an image file")
+    if raw_scene.is_raw(p):
+        raise CmosnoiseError(f"scene {name!r} is a camera raw (a colour-filter mosaic above a black level), not a "
+                             "picture of linear RGB: it is read as a raw photograph (scene.prepare), at its own "
+                             "resolution, not resampled")
     check_file(p, max_pixels)
     if p.stat().st_size > MAX_SCENE_BYTES:
         raise CmosnoiseError(f"scene {name!r} is {p.stat().st_size / 1e9:.1f} GB; images up to "
@@ -534,6 +523,38 @@ class Resampled:
         return resample_engine.mosaic(planes, wc, cfa_mod.tile(pattern), np.asarray(responsivity, np.float64))
 
 
+class RawDraw:
+    """A raw photograph prepared as a scene (:mod:`.raw_scene`): its mosaic at the sensor's pixels.
+
+    Parameters
+    ----------
+    photo : RawPhoto
+    corner : (row, col)
+        Where the sensor's pixel (0, 0) lies in the photograph (``scene.window``; (0, 0) without one).
+    shape : (rows, cols)
+        The sensor's size.
+    """
+
+    def __init__(self, photo, corner: tuple[int, int], shape: tuple[int, int]):
+        self.photo, self.corner, self.shape = photo, corner, shape
+        if corner == (0, 0) and photo.signal.shape != shape:
+            rows, cols = photo.signal.shape
+            raise CmosnoiseError(f"scene: the raw photograph is {rows} x {cols} pixels, the sensor {shape[0]} x "
+                                 f"{shape[1]}; a raw scene is used at its own resolution: set sensor.height={rows} "
+                                 f"and sensor.width={cols}, or take a scene.window of it")
+
+    def signal(self, pattern: str, region=None) -> np.ndarray:
+        """The relative signal of the sensor's pixels in ``region`` (None: all), checked against its ``pattern``."""
+        whole = self.photo.window(self.corner, self.shape, pattern)
+        r0, r1, c0, c1 = _span(self.shape, region)
+        return np.array(whole[r0:r1, c0:c1])
+
+    def __call__(self, region=None) -> np.ndarray:
+        r0, r1, c0, c1 = _span(self.shape, region)
+        r, c = self.corner
+        return np.array(self.photo.signal[r + r0:r + r1, c + c0:c + c1])
+
+
 def cfa_signal(draw, pattern: str, responsivity=(1.0, 1.0, 1.0), region=None) -> np.ndarray:
     """A prepared scene (:func:`prepare`) through the CFA: ``to_cfa(draw(region), pattern, responsivity)``, made
     without the full-size RGB where the scene is a resampled picture (:meth:`Resampled.cfa`).
@@ -563,6 +584,8 @@ def cfa_signal(draw, pattern: str, responsivity=(1.0, 1.0, 1.0), region=None) ->
     """
     if isinstance(draw, Resampled):
         return draw.cfa(pattern, responsivity, region)
+    if isinstance(draw, RawDraw):  # a mosaic already: its own colours, no responsivity
+        return draw.signal(pattern, region)
     return to_cfa(draw(region), pattern, responsivity)
 
 
@@ -675,7 +698,8 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
 
 
 def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
-            window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None, light=None):
+            window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None, light=None,
+            raw: tuple | None = None):
     """:func:`render` in two steps: the source read (an image file decoded, cropped; a built-in's name checked)
     once, then any region rendered from it. What a sensor made in tiles uses, so that a picture is decoded once,
     not once a tile.
@@ -684,6 +708,8 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     ----------
     source, shape, scale, fit, window, source_size, light
         As :func:`render` takes them.
+    raw : (raw_cfa, raw_black_dn, raw_white_dn), optional
+        ``scene``'s keys for a ``.npy`` mosaic (a camera raw carries its own).
 
     Returns
     -------
@@ -698,6 +724,8 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     >>> part.shape, bool((part == scene.render("photo", (60, 80))[10:20, 30:45]).all())
     ((10, 15, 3), True)
     """
+    if isinstance(source, str) and not is_builtin(source) and raw_scene.is_raw(source, (raw or (None,))[0]):
+        return RawDraw(raw_scene.read(source, *(raw or ())), tuple(window or (0, 0)), tuple(shape))
     if window is None:
         return _fitted(source, shape, scale, fit, light)
     img = source_image(source, source_size or shape, scale, fit, light)
@@ -735,6 +763,8 @@ def source_image(source: str, size: tuple[int, int], scale: float | None = None,
     """
     if is_builtin(source):
         return _fitted(source, tuple(size), scale, fit, light)()
+    if raw_scene.is_raw(source):  # a mosaic: each pixel's relative signal in its own colour (no light mix)
+        return raw_scene.read(source).signal
     return mixed(load_file(source, scale), light)
 
 

@@ -402,7 +402,7 @@ class Sensor:
             scene = c.scene.source
         if isinstance(scene, str):
             draw = scene_mod.prepare(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size,
-                                     self.spec.light)
+                                     self.spec.light, (c.scene.raw_cfa, c.scene.raw_black_dn, c.scene.raw_white_dn))
             if optics_mod.active(c):
                 return optics_mod.cfa_signal(draw, c, self.cfa, self.spec.channel_responsivity, self.shape, self.window)
             return scene_mod.cfa_signal(draw, self.cfa, self.spec.channel_responsivity, region=self.window)
@@ -453,6 +453,8 @@ class Sensor:
         c = self.config
         signal_parts = (scene, self.shape, self.window, self.cfa, list(self.spec.channel_responsivity), c.scene.scale,
                         c.scene.fit, c.scene.window, c.scene.source_size)
+        if c.scene.raw_cfa is not None:
+            signal_parts += (c.scene.raw_cfa, c.scene.raw_black_dn, c.scene.raw_white_dn)
         if c.light.enabled or optics_mod.active(c):  # what the light and the lens make of it (absent: the same keys)
             signal_parts += (c.light, c.optics, c.sensor.pixel_pitch_um, c.sensor.quantum_efficiency)
         signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))

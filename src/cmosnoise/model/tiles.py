@@ -188,7 +188,8 @@ class Tiling:
         self._picture = None
         if scene_mod.builtin_name(source) in (None, "photo") or c.scene.window is not None:
             self._picture = scene_mod.prepare(source, self.spec.shape, c.scene.scale, c.scene.fit, c.scene.window,
-                                              c.scene.source_size, self.spec.light)
+                                              c.scene.source_size, self.spec.light,
+                                              (c.scene.raw_cfa, c.scene.raw_black_dn, c.scene.raw_white_dn))
 
     @property
     def populations(self) -> FixedPattern | None:
