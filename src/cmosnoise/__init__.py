@@ -40,7 +40,8 @@ _NAMES = {
 
 #: modules reachable as ``cmosnoise.<name>`` (the stable names of the flat layout)
 _MODULES = {
-    "scene": "model.scene", "cfa": "model.cfa", "units": "model.units", "seeds": "model.seeds",
+    "scene": "model.scene", "light": "model.light", "optics": "model.optics", "charts": "model.charts",
+    "raw_scene": "model.raw_scene", "cfa": "model.cfa", "units": "model.units", "seeds": "model.seeds",
     "distributions": "model.distributions", "heavy_tail": "model.heavy_tail",
     "prnu": "model.stages.prnu", "crosstalk": "model.stages.crosstalk", "dark_current": "model.stages.dark_current",
     "shot_noise": "model.stages.shot_noise", "source_follower": "model.stages.source_follower",

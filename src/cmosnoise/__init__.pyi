@@ -25,9 +25,13 @@ from .isp import process as process
 from .isp import reconstruction as reconstruction
 from .isp.process import Processor as Processor
 from .model import cfa as cfa
+from .model import charts as charts
 from .model import distributions as distributions
 from .model import fixed_pattern as fixed_pattern
 from .model import heavy_tail as heavy_tail
+from .model import light as light
+from .model import optics as optics
+from .model import raw_scene as raw_scene
 from .model import scene as scene
 from .model import seeds as seeds
 from .model import spec as spec

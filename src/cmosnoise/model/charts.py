@@ -159,7 +159,17 @@ def edge(shape: tuple[int, int], angle_deg: float = EDGE_ANGLE_DEG, low: float =
 
 
 def edge_parameters(text: str) -> tuple[float, float, float]:
-    """``edge[:ANGLE[:LOW:HIGH]]`` read: (angle degrees, low, high), or a one-line error."""
+    """``edge[:ANGLE[:LOW:HIGH]]`` read, or a one-line error.
+
+    Parameters
+    ----------
+    text : str
+        The scene's name.
+
+    Returns
+    -------
+    (angle_deg, low, high) : floats
+    """
     parts = text.split(":")[1:]
     try:
         values = [float(p) for p in parts]
@@ -178,13 +188,35 @@ def edge_parameters(text: str) -> tuple[float, float, float]:
 
 # ------------------------------------------------------------------ grey patches
 def greys_levels(n: int = GREYS_N) -> np.ndarray:
-    """The grey patches' levels, left to right: 1 down to ``10**-GREYS_DENSITY`` in equal steps of density."""
+    """The grey patches' levels, left to right: 1 down to ``10**-GREYS_DENSITY`` in equal steps of density.
+
+    Parameters
+    ----------
+    n : int
+        How many patches.
+
+    Returns
+    -------
+    (n,) float64 array
+    """
     return 10.0 ** (-GREYS_DENSITY * np.arange(n) / max(n - 1, 1))
 
 
 def greys_patches(shape: tuple[int, int], n: int = GREYS_N) -> list[tuple[int, int, int, int]]:
-    """Where the ``n`` grey patches lie: (row0, row1, col0, col1) each, left to right (the middle half of the
-    picture's height; each patch 60 % of its column, centred)."""
+    """Where the ``n`` grey patches lie: the middle half of the picture's height, each patch 60 % of its column.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, pixels.
+    n : int
+        How many patches.
+
+    Returns
+    -------
+    list of (row0, row1, col0, col1)
+        Left to right.
+    """
     rows, cols = shape
     out = []
     for i in range(n):
@@ -217,7 +249,18 @@ def greys(shape: tuple[int, int], n: int = GREYS_N, region=None) -> np.ndarray:
 
 
 def greys_count(text: str) -> int:
-    """``greys[:N]`` read: N, or a one-line error."""
+    """``greys[:N]`` read, or a one-line error.
+
+    Parameters
+    ----------
+    text : str
+        The scene's name.
+
+    Returns
+    -------
+    int
+        N, 2 to 64.
+    """
     part = text.partition(":")[2] or str(GREYS_N)
     if not part.isdigit() or not 2 <= int(part) <= 64:
         raise CmosnoiseError(f"scene {text!r}: N must be a whole number of patches from 2 to 64")

@@ -255,7 +255,7 @@ def focal_plane_illuminance_lux(config) -> float:
 class ChannelLight:
     """The configured light at the pixels, per colour channel, integrated once.
 
-    Attributes
+    Parameters
     ----------
     wavelengths : (n,) float64, nm
         The working grid.

@@ -407,6 +407,14 @@ def lean_weights(config, shape: tuple[int, int], region=None) -> tuple[np.ndarra
     """The signed shares of crosstalk's lean along the columns and the rows per pixel (:func:`.stages.crosstalk.lean`),
     or None where the kernel does not lean (no ``crosstalk.kernel_at_angle_pct`` or no angle).
 
+    Parameters
+    ----------
+    config : Config
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1), optional
+        The pixels to give.
+
     Returns
     -------
     (toward_col, toward_row), each (rows, cols) float64
@@ -424,7 +432,17 @@ def lean_weights(config, shape: tuple[int, int], region=None) -> tuple[np.ndarra
 
 # ------------------------------------------------------------------ the picture through the lens
 def active(config) -> bool:
-    """Whether the lens changes the picture: a PSF, a relative illumination or an angle-dependent QE configured."""
+    """Whether the lens changes the picture: a PSF, a relative illumination or an angle-dependent QE configured.
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    bool
+        False: :func:`cfa_signal` is :func:`.scene.cfa_signal`, bit for bit.
+    """
     op = config.optics
     return (op.psf.lower() != "none" or op.relative_illumination.lower() != "none"
             or (op.angle_relative_qe is not None and op.chief_ray_angle is not None))

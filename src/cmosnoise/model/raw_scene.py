@@ -17,8 +17,10 @@ Examples
 >>> import numpy as np
 >>> from cmosnoise.model import raw_scene
 >>> photo = raw_scene.from_array(np.array([[64, 1088], [576, 4095]]), "RGGB", black=64, white=4095)
->>> photo.pattern, photo.signal.tolist()
-('RGGB', [[0.0, 0.25403125775241875], [0.12701562887620938, 1.0]])
+>>> photo.pattern
+'RGGB'
+>>> [round(v, 4) for v in photo.signal.ravel()]
+[0.0, 0.254, 0.127, 1.0]
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ __all__ = ["RawPhoto", "is_raw", "read", "from_array", "RAW_SUFFIXES"]
 class RawPhoto:
     """A raw photograph as a scene.
 
-    Attributes
+    Parameters
     ----------
     signal : (rows, cols) float64 array
         Relative signal per pixel, 0 to 1 (1: the white level).

@@ -839,8 +839,20 @@ def _check_window(source_shape, window: tuple[int, int], shape: tuple[int, int])
 
 
 def mixed(rgb: np.ndarray, light=None) -> np.ndarray:
-    """Linear-sRGB reflectances ``rgb`` (rows, cols, 3) as the colour channels' relative signals under ``light``
-    (its 3 x 3 ``mix``, :class:`cmosnoise.model.light.ChannelLight`); ``rgb`` itself without light."""
+    """Linear-sRGB reflectances as the colour channels' relative signals under ``light``.
+
+    Parameters
+    ----------
+    rgb : (rows, cols, 3) array
+        Linear sRGB, read as reflectances.
+    light : cmosnoise.model.light.ChannelLight, optional
+        Its 3 x 3 ``mix`` turns each RGB value into the channels' signals; None: ``rgb`` itself.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        Each channel's signal relative to a white's.
+    """
     if light is None:
         return rgb
     return np.ascontiguousarray(np.asarray(rgb, np.float64) @ light.mix.T)

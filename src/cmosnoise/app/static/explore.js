@@ -77,7 +77,8 @@ function loadUrl() {
 const SKIP = /^(description|run\.)/;
 // the keys carry their units in their names (docs/model.md's convention): sigma_e is e-, integration_time_s is s, ...
 const UNITS = [["_e_per_s", "e-/s"], ["_nA_per_cm2", "nA/cm2"], ["_aA", "aA"], ["_pct", "%"], ["_um", "um"], ["_dn", "DN"],
-  ["_fps", "1/s"], ["_c", "C"], ["_s", "s"], ["_e", "e-"]];
+  ["_fps", "1/s"], ["_lux", "lux"], ["_cd_m2", "cd/m2"], ["_mm", "mm"], ["_nm", "nm"], ["_deg", "deg"], ["_px", "px"],
+  ["_c", "C"], ["_s", "s"], ["_e", "e-"]];
 function unitOf(key) { const last = key.split(".").pop(); const u = UNITS.find(([s]) => last.endsWith(s)); return u ? u[1] : ""; }
 
 function buildPanel() {
@@ -87,7 +88,8 @@ function buildPanel() {
   const keys = S.meta.fields.filter((f) => !SKIP.test(f.key));
   const parents = new Set(keys.map((f) => f.key.split(".").slice(0, -1).join(".")));
   const sections = {};
-  const quick = ["seed", "sensor.iso", "sensor.gain_db", "sensor.temperature_c", "exposure.integration_time_s", "adc.full_scale_e",
+  const quick = ["seed", "sensor.iso", "sensor.gain_db", "sensor.temperature_c", "exposure.integration_time_s",
+                 "light.enabled", "light.illuminance_lux", "optics.f_number", "adc.full_scale_e",
                  "dark_current.white_threshold_e_per_s", "source_follower.rts.enabled", "dark_current.rts.enabled",
                  "sensor.frame_rate_hz"];  // RTS: press play
   const add = (section, f, key) => {
