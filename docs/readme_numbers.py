@@ -9,6 +9,7 @@ page under docs/). Data live in ``docs/numbers/NAME.json``.
     python docs/readme_numbers.py render               # rewrite the pages' blocks from the JSON
     python docs/readme_numbers.py check                # exit 1 if a page and its JSON disagree
     python docs/readme_numbers.py images               # the pages' pictures, into docs/img
+    python docs/readme_numbers.py images light         # the light page's two pictures alone
 
 ``speed`` and ``kernel_parts`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and
 ``fit_coverage`` are measured by the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes
@@ -20,6 +21,7 @@ deterministic sections (``tests/test_readme_numbers.py``), so the README cannot 
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -275,6 +277,105 @@ def render_colour(d: dict) -> str:
     return (f"With crosstalk on, compensation brings the ColorChecker back to a mean CIEDE2000 of {d['on']['mean']:.2f}\n"
             f"(max {d['on']['max']:.2f}); without it the mean error is {d['off']['mean']:.2f} (max {d['off']['max']:.2f}): "
             "visibly desaturated.")
+
+
+#: the light page's camera: D65 on a reflective scene, f/2.8, 1/30 s, the Nikon D5100's spectral sensitivities at a
+#: peak QE of 0.55, the default 2.2 um pixel
+LIGHT_SETS = ["light.enabled=true", "light.spectral_qe=Nikon 5100 (NPL)", "light.qe_peak=0.55", "optics.f_number=2.8",
+              "exposure.integration_time_s=0.033333", "light.illuminance_lux=100"]
+LIGHT_LUX = [1, 10, 100, 1000]
+
+
+def compute_light() -> dict:
+    """The light page's camera at 1 to 1000 lux: the 18 % grey's green electrons from the light's integral, the
+    exposure's mean green charge (after crosstalk, with dark current) and what 16 frames measure (48 x 64 green
+    pixels), with its temporal SNR."""
+    import numpy as np
+
+    from cmosnoise import Sensor, load_config
+    from cmosnoise.model import light
+
+    rows = []
+    for lux in LIGHT_LUX:
+        c = load_config(overrides=[*LIGHT_SETS, f"light.illuminance_lux={lux}", "sensor.width=128", "sensor.height=96"])
+        t_s = c.exposure.integration_time_s
+        sensor = Sensor(c, seed=0)
+        shot = sensor.expose("flat:0.18")
+        frames = np.stack(list(shot.frames(16))).astype(np.float64)
+        t = sensor.transfer
+        green = (frames[:, 0::2, 1::2] - t.black_level_dn) / t.gain_dn_per_e
+        mean = float(green.mean())
+        snr = mean / float(np.sqrt(green.var(axis=0, ddof=1).mean()))
+        charge = shot.photo_mean_e + (shot.dark_mean_e if shot.dark_mean_e is not None else 0)
+        li = light.channel_light(c)
+        rows.append({"lux": lux, "focal_plane_lux_s": light.focal_plane_illuminance_lux(c) * 0.18 * t_s,
+                     "green_e_light": float(li.rates_e_per_s[1] * 0.18 * t_s),
+                     "green_e_mean": float(charge[0::2, 1::2].mean()), "green_e_measured": mean,
+                     "snr_measured": snr})
+    return {"rows": rows}
+
+
+def render_light(d: dict) -> str:
+    out = ["| scene illuminance | focal-plane exposure of the 18 % grey | its green electrons from the light | the "
+           "exposure's mean green charge | measured (16 frames) | temporal SNR, measured |", "|---|---|---|---|---|---|"]
+    for r in d["rows"]:
+        out.append(f"| {r['lux']:g} lux | {r['focal_plane_lux_s']:.3g} lux-s | {r['green_e_light']:.1f} e- | "
+                   f"{r['green_e_mean']:.1f} e- | {r['green_e_measured']:.1f} e- | {r['snr_measured']:.1f} "
+                   f"({20 * math.log10(r['snr_measured']):.0f} dB) |")
+    return "\n".join(out)
+
+
+def light_pictures(out: Path) -> None:
+    """The light page's pictures: the photo at 1, 10, 100 and 1000 lux (each shown up to its own white, as a camera's
+    auto gain would), and a lens's shading and chief-ray angle across the sensor."""
+    import numpy as np
+
+    from cmosnoise import Processor, Sensor, load_config
+    from cmosnoise.app import plots
+    from cmosnoise.config import ProcessingSection
+    from cmosnoise.model import optics
+
+    fig, axes = plots.figure(1, 4, figsize=(13, 2.9))
+    for ax, lux in zip(axes, LIGHT_LUX):
+        c = load_config(overrides=[*LIGHT_SETS, f"light.illuminance_lux={lux}"])
+        sensor = Sensor(c, seed=0)
+        raw = sensor.expose("photo").frame(0)
+        ax.imshow(Processor(ProcessingSection(), sensor.raw_info()).render(raw))
+        white = sensor.spec.peak_rate_e_per_s * c.exposure.integration_time_s
+        ax.set_title(f"{lux:g} lux (white: {white:,.0f} e-)".replace(",", " "), fontsize=9)
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    (out / "light_lux.png").write_bytes(plots.to_png_bytes(fig, dpi=80))
+
+    c = load_config(overrides=[*LENS_SETS])
+    shape = c.shape
+    ri = optics.relative_illumination(c, shape)
+    angle = optics.incidence(c, shape)[0]
+    qe = optics.angle_qe(c, "none", shape)
+    sensor = Sensor(load_config(overrides=[*LENS_SETS, "light.illuminance_lux=300"]), seed=0)
+    raw = sensor.expose("flat:0.5").frame(0).astype(np.float64) - sensor.transfer.black_level_dn
+    green = raw[0::2, 1::2]
+    h, w = green.shape[0] // 2, green.shape[1] // 2
+    fig, axes = plots.figure(1, 4, figsize=(13, 2.9))
+    for ax, (img, title, unit) in zip(axes, [(ri, "relative illumination (cos^4)", ""),
+                                             (angle, "angle at the photodiode", " deg"),
+                                             (qe, "QE at that angle", ""),
+                                             (green / green[h - 16:h + 16, w - 16:w + 16].mean(),
+                                              "a flat grey's green pixels / centre's", "")]):
+        im = ax.imshow(img, cmap="viridis")
+        ax.set_title(title + (f" ({unit.strip()})" if unit else ""), fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        fig.colorbar(im, ax=ax, fraction=0.04)
+    (out / "lens_shading.png").write_bytes(plots.to_png_bytes(fig, dpi=80))
+
+
+#: the lens of the shading picture: a 2 mm lens on the default 640 x 480 sensor, its chief ray 25 degrees at 1 mm
+#: from the centre, the microlenses taking 60 % of it back, a QE that falls to 70 % at 20 degrees
+LENS_SETS = [*LIGHT_SETS, "optics.relative_illumination=cos4", "optics.focal_length_mm=2",
+             "optics.chief_ray_angle=[[0, 0], [1, 25]]", "optics.microlens_compensation=0.6",
+             "optics.angle_relative_qe=[[0, 1], [5, 0.97], [10, 0.9], [20, 0.7]]"]
 
 
 def render_explore(d: dict) -> str:
@@ -566,6 +667,7 @@ SECTIONS = {
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
     "fig9_processing": (compute_fig9_processing, render_fig9_processing),
     "colour": (compute_colour, render_colour),
+    "light": (compute_light, render_light),
     "fig9_map": (compute_fig9_map, render_fig9_map),
     "dark_budget": (compute_dark_budget, render_dark_budget),
     "speed": (None, render_speed),
@@ -680,6 +782,7 @@ def images() -> None:
                 shutil.copyfile(f"{tmp}/f/{src}", out / name)
         shutil.copyfile(f"{tmp}/c/photon_transfer.png", out / "photon_transfer.png")
         dataset_picture(*_dataset_sample(tmp), out / "dataset_sample.png")
+    light_pictures(out)
 
 
 def dataset_picture(arrays: dict, columns: dict, path: Path) -> None:
@@ -735,7 +838,10 @@ def main(argv: list[str]) -> int:
             print(f"measured {name}")
         return 0
     if cmd == "images":
-        images()
+        if names == ["light"]:  # the light page's two pictures alone
+            light_pictures(ROOT / "docs" / "img")
+        else:
+            images()
         return 0
     if cmd == "render":
         for path in pages():

@@ -11,7 +11,7 @@ ROOT = Path(cmosnoise.__file__).parent
 
 #: lowest first; a module may import its own layer and the layers below it
 LAYERS = ["base", "config", "engine", "model", "io", "isp", "analysis", "app"]
-BASE = {"errors", "_version", "inputs", "estimators"}
+BASE = {"errors", "_version", "inputs", "estimators", "colour_lib"}
 FACADE = {"__init__", "__main__", "torch"}  # the package's public face: imports anything (torch: the optional extra)
 
 

@@ -180,3 +180,14 @@ def test_an_illuminant_and_a_qe_from_csv_files(tmp_path):
     assert li.rates_e_per_s[0] == li.rates_e_per_s[2] and np.allclose(li.mix, li.mix[0])
     e = light.illuminant_spectrum("E")  # the equal-energy illuminant closes the same way
     assert np.allclose(e[1], e[1][0])
+
+
+def test_light_leaves_numpys_print_options_as_they_were():
+    # colour-science's import sets numpy's legacy printing (12 digits) for the whole process; a CSV written after a
+    # light run lost digits through it. cmosnoise.colour_lib puts the options back.
+    before = np.get_printoptions()
+    light.channel_light(_config("light.illuminance_lux=3", "sensor.quantum_efficiency=0.4"))
+    from cmosnoise.isp import reconstruction
+
+    reconstruction.demosaic(np.ones((8, 8), np.float32), "RGGB", "malvar2004")
+    assert np.get_printoptions() == before

@@ -107,3 +107,25 @@ def test_a_raw_photograph_refuses_a_lens(tmp_path):
                            "optics": {"relative_illumination": "cos4"}})
     with pytest.raises(CmosnoiseError, match="already went through its own lens"):
         Sensor(c).expose(str(tmp_path / "photo.dng"))
+
+
+def test_a_data_set_crops_raw_photographs_and_checks_their_colours(tmp_path):
+    from cmosnoise.app import dataset as ds
+
+    codes = _photograph(tmp_path, cfa="RGGB", shape=(96, 128))
+    recipe = ds.Recipe(samples=2, crop=(32, 48), seed=3, cameras=("sony-imx900@gain_db=0",),
+                       sources=(str(tmp_path / "photo.dng"),), light_e=(500.0, 500.0))
+    sources = ds.Sources()
+    for i in range(2):
+        arrays, columns = ds.make_sample(recipe, i, sources)
+        r, c = int(columns["window_row"]), int(columns["window_col"])
+        want = (codes[r:r + 32, c:c + 48].astype(float) - 64) / (4095 - 64)
+        # the perfect image (in DN: the black level plus K times the photo-electrons) is the photograph's crop
+        perfect = np.asarray(arrays["perfect_dn"], np.float64).reshape(32, 48)
+        slope, offset = np.polyfit(want.ravel(), perfect.ravel(), 1)
+        assert slope > 0 and np.abs(perfect - (slope * want + offset)).max() < 1e-4 * slope
+    write_dng(tmp_path / "grbg.dng", codes, "GRBG", 64.0, 4095)
+    bad = ds.Recipe(samples=1, crop=(32, 48), seed=3, cameras=("sony-imx900@gain_db=0",),
+                    sources=(str(tmp_path / "grbg.dng"),), light_e=(500.0, 500.0))
+    with pytest.raises(CmosnoiseError, match="has the colour filters GRBG"):
+        ds.make_sample(bad, 0, ds.Sources())

@@ -60,13 +60,14 @@ from ..config.loading import deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError, note_kept
 from ..io.output import atomic_file, resumable_mode
+from ..model import raw_scene
 from ..model import scene as scene_mod
 from ..model.cfa import BAYER_PATTERNS
 from ..model.sensor import Sensor, check_device, frames_together
 
 FORMATS = {"hdf5": ".h5", "npz": ".npz", "fits": ".fits"}
 #: image files a --images folder may hold
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy", ".bmp", ".webp")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy", ".bmp", ".webp", ".dng")
 #: built-in scenes a set draws from when no --images are given (drawn at BUILTIN_SIZE)
 BUILTIN_SCENES = ("photo", "colorchecker", "zoneplate", "siemens", "ramp")
 BUILTIN_SIZE = 1024
@@ -252,11 +253,14 @@ class Sources:
         The presets' configurations, loaded once.
     preset_texts : dict
         The presets' files as data, read once.
+    patterns : dict
+        A raw photograph's CFA pattern, read once (:meth:`check_pattern`).
     """
 
     images: dict = field(default_factory=dict)
     presets: dict = field(default_factory=dict)
     preset_texts: dict = field(default_factory=dict)
+    patterns: dict = field(default_factory=dict)
 
     def preset(self, name: str | None):
         if name not in self.presets:
@@ -273,6 +277,18 @@ class Sources:
         if source not in self.images:
             self.images[source] = scene_mod.source_image(source, (BUILTIN_SIZE, BUILTIN_SIZE))
         return self.images[source]
+
+    def check_pattern(self, source: str, pattern: str) -> None:
+        """A raw photograph's mosaic keeps its colours: a camera of another CFA pattern is a one-line error (the
+        crops' corners are even, so every crop has the photograph's pattern)."""
+        if self.image(source).ndim != 2 or scene_mod.is_builtin(source) or not raw_scene.is_raw(source):
+            return
+        if source not in self.patterns:
+            self.patterns[source] = raw_scene.read(source).pattern
+        if self.patterns[source] != pattern:
+            raise CmosnoiseError(f"--images: the raw photograph {source!r} has the colour filters "
+                                 f"{self.patterns[source]}, a camera of this data set {pattern}: a mosaic keeps its "
+                                 "colours; give cameras of its pattern")
 
 
 @dataclass(frozen=True)
@@ -456,6 +472,7 @@ def _exposure(recipe: Recipe, index: int, sources: Sources, device: str) -> tupl
     st = settings(recipe, index, sources)
     c = st.config
     sensor = Sensor(c, device=device)
+    sources.check_pattern(c.scene.source, sensor.cfa)
     # the crop's pixels through the CFA, read from the source where they lie (no copy of the window)
     shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape,
                                               sensor.cfa, sensor.spec.channel_responsivity))

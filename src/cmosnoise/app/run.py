@@ -211,7 +211,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
             summary["processing"]["video"] = video_info
         rts = telegraph_pixels(sensor)
         if rts is not None:  # where the flickering pixels are: every one, beside the summary's worst few
-            rts.to_csv(tmp / "rts_pixels.csv", index=False)
+            rts.to_csv(tmp / "rts_pixels.csv", index=False, float_format="%.17g")  # every digit, whatever prints
         write_json(tmp / "summary.json", summary)
         if config.run.report:
             from . import report

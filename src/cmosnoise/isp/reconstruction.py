@@ -64,8 +64,9 @@ def demosaic(cfa_img: np.ndarray, pattern: str, method: str = "bilinear") -> np.
     if method == "bilinear":
         rgb = bilinear(padded, pattern)
     else:
-        import colour_demosaicing as cd
+        from .. import colour_lib
 
+        cd = colour_lib.colour_demosaicing()
         func = {"malvar2004": cd.demosaicing_CFA_Bayer_Malvar2004, "menon2007": cd.demosaicing_CFA_Bayer_Menon2007}[method]
         rgb = np.asarray(func(padded.astype(np.float64), pattern), dtype=np.float32)
     return np.ascontiguousarray(rgb[p:p + img.shape[0], p:p + img.shape[1]]) if p else rgb

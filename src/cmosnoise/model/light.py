@@ -60,10 +60,10 @@ __all__ = ["ChannelLight", "channel_light", "camera_factor", "illuminant_spectru
 
 
 def _colour():
-    """colour-science, imported when light is used (about a second the first time)."""
-    import colour
+    """colour-science, imported when light is used (about a second the first time; :mod:`cmosnoise.colour_lib`)."""
+    from .. import colour_lib
 
-    return colour
+    return colour_lib.colour()
 
 
 def _table(path: str, what: str) -> np.ndarray:

@@ -1,0 +1,86 @@
+"""What light in lux and a lens cost on a 12 MP exposure, against one frame of the kernel, in the same run.
+
+The issue's target (#60): the optics and spectral work of an exposure (the spectral integral, the RGB mix, the
+PSF, relative illumination, the chief-ray angle's QE and leaning crosstalk) costs at most one frame's worth of
+the kernel; the frames after it cost what they cost without it. Each is the fastest of ``--repeats``:
+
+- **frame**: ``shot.frame(k)`` of the default sensor at the size, the exposure made first (the reference);
+- **exposure, no lens**: ``sensor.expose("photo")`` of the same sensor, caches off (the scene resampled, PRNU,
+  crosstalk, dark current): what an exposure costs today;
+- **exposure, with light and lens**: the same with light in lux (a spectral QE), a diffraction PSF, cos^4
+  shading, a chief-ray angle with a QE loss and a leaning crosstalk kernel; the light's integral is made once
+  per light (cached), so it is timed apart (**light integral**, first call);
+- **frame with light and lens**: a frame of that exposure (must equal the reference's cost).
+
+"optics' worth" is (exposure with lens - exposure without) over a frame.
+
+    python benchmarks/bench_optics.py [--megapixels 12] [--repeats 5] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+
+LENS = ["light.enabled=true", "light.illuminance_lux=100", "light.spectral_qe=Nikon 5100 (NPL)", "light.qe_peak=0.55",
+        "optics.psf=diffraction", "optics.f_number=2.8", "optics.relative_illumination=cos4",
+        "optics.chief_ray_angle=[[0, 0], [3, 25]]", "optics.microlens_compensation=0.5",
+        "optics.angle_relative_qe=[[0, 1], [20, 0.7]]",
+        "crosstalk.kernel_at_angle_pct=[[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]"]
+
+
+def fastest(fn, repeats: int) -> float:
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--megapixels", type=float, default=12.0)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+
+    from cmosnoise import Sensor, load_config
+    from cmosnoise.model import light
+
+    width = int(round(math.sqrt(args.megapixels * 1e6 * 4 / 3) / 2) * 2)
+    height = int(round(width * 3 / 4 / 2) * 2)
+    size = [f"sensor.width={width}", f"sensor.height={height}"]
+    Sensor(load_config(overrides=["sensor.width=64", "sensor.height=48"])).expose().frame(0)  # compile first
+    plain = Sensor(load_config(overrides=size), seed=1)
+    lens_config = load_config(overrides=size + LENS)
+    t0 = time.perf_counter()
+    light.channel_light(lens_config)
+    integral = time.perf_counter() - t0
+    lens = Sensor(lens_config, seed=1)
+    shot, lens_shot = plain.expose("photo"), lens.expose("photo")
+    shot.frame(0), lens_shot.frame(0)
+    res = {
+        "megapixels": width * height / 1e6, "size": [height, width], "repeats": args.repeats,
+        "frame_s": fastest(lambda: shot.frame(1), args.repeats),
+        "exposure_s": fastest(lambda: plain.expose("photo"), args.repeats),
+        "exposure_lens_s": fastest(lambda: lens.expose("photo"), args.repeats),
+        "frame_lens_s": fastest(lambda: lens_shot.frame(1), args.repeats),
+        "light_integral_s": integral,
+    }
+    res["optics_frames_worth"] = (res["exposure_lens_s"] - res["exposure_s"]) / res["frame_s"]
+    print(f"{res['megapixels']:.1f} MP: frame {res['frame_s'] * 1e3:.0f} ms; exposure {res['exposure_s'] * 1e3:.0f} ms, "
+          f"with light and lens {res['exposure_lens_s'] * 1e3:.0f} ms ({res['optics_frames_worth']:.2f} frames' "
+          f"worth); a frame with them {res['frame_lens_s'] * 1e3:.0f} ms; the light's integral "
+          f"{res['light_integral_s'] * 1e3:.0f} ms once")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(res, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
