@@ -378,6 +378,18 @@ LENS_SETS = [*LIGHT_SETS, "optics.relative_illumination=cos4", "optics.focal_len
              "optics.angle_relative_qe=[[0, 1], [5, 0.97], [10, 0.9], [20, 0.7]]"]
 
 
+def render_optics_speed(d: dict) -> str:
+    mp = f"{d['megapixels']:.0f} MP"
+    rows = [f"{mp} ({d['size'][1]} x {d['size'][0]}), fastest of {d['repeats']}: a frame of the kernel "
+            f"{d['frame_s'] * 1e3:.0f} ms; an exposure of the photo {d['exposure_s'] * 1e3:.0f} ms, with every "
+            f"part below {d['exposure_lens_s'] * 1e3:.0f} ms ({d['optics_frames_worth']:.1f} frames' worth); a frame "
+            f"of that exposure {d['frame_lens_s'] * 1e3:.0f} ms; the light's spectral integral "
+            f"{d['light_integral_s'] * 1e3:.0f} ms, once per light.", "",
+            "| part, alone | its cost on an exposure, frames' worth |", "|---|---|"]
+    rows += [f"| {k} | {max(v, 0):.1f} |" for k, v in d["parts_frames_worth"].items()]
+    return "\n".join(rows)
+
+
 def render_explore(d: dict) -> str:
     lines = [f"Measured with `{d['command']}` ({d['machine']}); the median and the worst of the moves, and the",
              "server's own share:", "",
@@ -688,6 +700,7 @@ SECTIONS = {
     "setup_speed": (None, render_setup_speed),
     "tile_speed": (None, render_tile_speed),
     "run_speed": (None, render_run_speed),
+    "optics_speed": (None, render_optics_speed),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -709,7 +722,9 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "setup_speed": ["bench_setup.py", "--sizes", "1,12,50", "--repeats", "20", "--json", "setup_speed.json"],
               "tile_speed": ["bench_tiles.py", "--sizes", "50,400", "--many", "4", "--runs", "3", "--json",
                              "tile_speed.json"],
-              "run_speed": ["bench_run.py", "--megapixels", "50", "--json", "run_speed.json"]}
+              "run_speed": ["bench_run.py", "--megapixels", "50", "--json", "run_speed.json"],
+              "optics_speed": ["bench_optics.py", "--megapixels", "12", "--repeats", "3", "--json",
+                               "optics_speed.json"]}
 SLOW = {"sweep_fig9"}
 
 

@@ -40,7 +40,7 @@ from . import cfa as cfa_mod
 from . import scene as scene_mod
 
 #: the FFT blocks' side, pixels (a block and its margins make one transform)
-BLOCK = 256
+BLOCK = 512
 #: the wavelengths of a diffraction PSF without light in lux (R, G, B), nm
 DEFAULT_WAVELENGTHS_NM = (610.0, 540.0, 465.0)
 #: sub-samples a pixel is averaged over along each axis when a continuous PSF becomes a kernel
@@ -257,6 +257,14 @@ def field_angle(shape: tuple[int, int], region, pitch_um: float, focal_length_mm
     return np.arctan(_image_height_mm(shape, region, pitch_um) / focal_length_mm)
 
 
+def _image_height_squared_mm2(shape, region, pitch_um: float) -> np.ndarray:
+    rows, cols = shape
+    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
+    y = (np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch_um * 1e-3
+    x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch_um * 1e-3
+    return np.add.outer(y * y, x * x)
+
+
 def _image_height_mm(shape, region, pitch_um: float) -> np.ndarray:
     rows, cols = shape
     r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
@@ -304,8 +312,11 @@ def relative_illumination(config, shape: tuple[int, int], region=None) -> np.nda
     kind = op.relative_illumination
     if kind.lower() == "none":
         return None
-    if kind.lower() == "cos4":
-        return np.cos(field_angle(shape, region, pitch, op.focal_length_mm)) ** 4
+    if kind.lower() == "cos4":  # cos(atan(h / f))^4 = 1 / (1 + h^2 / f^2)^2, without the angle
+        h2 = _image_height_squared_mm2(shape, region, pitch) / op.focal_length_mm**2
+        h2 += 1.0
+        np.multiply(h2, h2, out=h2)
+        return np.divide(1.0, h2, out=h2)
     h, ri = _ri_table(kind)
     return np.interp(_image_height_mm(shape, region, pitch), h, ri)
 
@@ -358,10 +369,9 @@ def incidence(config, shape: tuple[int, int], region=None) -> tuple[np.ndarray, 
     x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch * 1e-3
     h = np.hypot(y[:, None], x[None, :])
     angle = np.interp(h, t[:, 0], t[:, 1]) * (1.0 - op.microlens_compensation)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos_phi = np.where(h > 0, x[None, :] / h, 0.0)
-        sin_phi = np.where(h > 0, y[:, None] / h, 0.0)
-    return angle, cos_phi, sin_phi
+    # h is 0 only where a pixel's centre is the sensor's (an odd size): its direction is then 0
+    inv = np.divide(1.0, h, out=np.zeros_like(h), where=h > 0)
+    return angle, x[None, :] * inv, y[:, None] * inv
 
 
 def angle_qe(config, pattern: str, shape: tuple[int, int], region=None) -> np.ndarray | None:
@@ -454,7 +464,8 @@ def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.n
     Parameters
     ----------
     draw : callable
-        ``region -> (rows, cols, 3)``: a prepared scene (:func:`.scene.prepare`).
+        ``region -> (rows, cols, 3)``: a prepared scene (:func:`.scene.prepare`), whose any region is that crop
+        of the whole.
     shape : (rows, cols)
         The whole sensor.
     kernels : (3, k, k) array
@@ -466,23 +477,36 @@ def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.n
     -------
     (rows, cols, 3) float64 array
     """
-    from scipy.signal import fftconvolve
+    import scipy.fft as sfft
 
     rows, cols = shape
     r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
     m = kernels.shape[1] // 2
+    # the blocks the region touches, and the picture under them with their margins, drawn once (each block's part
+    # of it is what a draw of the block alone gives: any region of a scene is that crop of the whole)
+    b_r0, b_c0 = r0 // BLOCK * BLOCK, c0 // BLOCK * BLOCK
+    b_r1, b_c1 = min(-(-r1 // BLOCK) * BLOCK, rows), min(-(-c1 // BLOCK) * BLOCK, cols)
+    g0, g1, h0, h1 = max(b_r0 - m, 0), min(b_r1 + m, rows), max(b_c0 - m, 0), min(b_c1 + m, cols)
+    picture = np.asarray(draw((g0, g1, h0, h1)), np.float64)
     out = np.empty((r1 - r0, c1 - c0, 3))
-    for br in range(r0 // BLOCK * BLOCK, r1, BLOCK):
-        for bc in range(c0 // BLOCK * BLOCK, c1, BLOCK):
+    spectra = {}
+    for br in range(b_r0, r1, BLOCK):
+        for bc in range(b_c0, c1, BLOCK):
             be_r, be_c = min(br + BLOCK, rows), min(bc + BLOCK, cols)
             # the block with its margins, clamped to the picture, its edge pixels repeated beyond it
-            g0, g1, h0, h1 = max(br - m, 0), min(be_r + m, rows), max(bc - m, 0), min(be_c + m, cols)
-            src = np.asarray(draw((g0, g1, h0, h1)), np.float64)
-            src = np.pad(src, ((g0 - (br - m), be_r + m - g1), (h0 - (bc - m), be_c + m - h1), (0, 0)), mode="edge")
-            block = np.stack([fftconvolve(src[..., ch], kernels[ch], mode="valid") for ch in range(3)], axis=-1)
-            # the part of the block the region asks for
-            a0, a1, b0, b1 = max(r0, br), min(r1, be_r), max(c0, bc), min(c1, be_c)
-            out[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = block[a0 - br:a1 - br, b0 - bc:b1 - bc]
+            a0, a1, d0, d1 = max(br - m, 0), min(be_r + m, rows), max(bc - m, 0), min(be_c + m, cols)
+            src = picture[a0 - g0:a1 - g0, d0 - h0:d1 - h0]
+            src = np.pad(src, ((a0 - (br - m), be_r + m - a1), (d0 - (bc - m), be_c + m - d1), (0, 0)), mode="edge")
+            # a linear convolution of the block and the kernels, the three channels in one real FFT each way
+            size = (sfft.next_fast_len(src.shape[0], real=True), sfft.next_fast_len(src.shape[1], real=True))
+            if size not in spectra:
+                spectra[size] = sfft.rfft2(kernels.transpose(1, 2, 0), s=size, axes=(0, 1))
+            # every core on each transform (pocketfft's threads split the other axes: the same bits on any number)
+            full = sfft.irfft2(sfft.rfft2(src, s=size, axes=(0, 1), workers=-1) * spectra[size], s=size, axes=(0, 1),
+                               workers=-1)
+            block = full[2 * m:src.shape[0], 2 * m:src.shape[1]]  # the 'valid' part: the block's own pixels
+            q0, q1, p0, p1 = max(r0, br), min(r1, be_r), max(c0, bc), min(c1, be_c)
+            out[q0 - r0:q1 - r0, p0 - c0:p1 - c0] = block[q0 - br:q1 - br, p0 - bc:p1 - bc]
     return np.clip(out, 0.0, None, out=out)  # the FFT's rounding leaves -1e-17 where the picture is black
 
 
