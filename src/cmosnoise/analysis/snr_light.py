@@ -1,0 +1,187 @@
+"""Signal-to-noise ratio against illuminance: the SNR curve of a grey patch from 0.1 to 10 000 lux, SNR10 and SNR1.
+
+For a configuration with light in lux (:mod:`cmosnoise.model.light`), at each illuminance a flat field of
+reflectance ``reflectance`` (0.18, the reference grey) is exposed and ``frames`` frames are drawn. The SNR is the
+raw green channel's, in electrons: the patch's mean photo-charge over its **temporal** noise (each pixel's standard
+deviation over the frames, their variances averaged over the green pixels), the noise a picture of a still scene
+shows from frame to frame. The model's own prediction, from the same sensor instance, is the exposure's mean green
+photo-charge over the square root of :func:`cmosnoise.analysis.noise_budget.temporal_variances` plus
+:func:`~cmosnoise.analysis.noise_budget.after_gain_variances` at that charge.
+
+**SNR10** (SNR1) is the illuminance at which the SNR reaches 10 (1): on the predicted curve, found exactly (the
+photo-charge is proportional to the illuminance); on the measured one, interpolated linearly in log SNR against
+log lux between the two illuminances around it. Both are stated with the f-number and exposure time they hold at
+(the mobile-camera practice; Sony's SNR1s states F1.4, 1/60 s and 3200 K).
+
+Examples
+--------
+>>> from cmosnoise import load_config
+>>> from cmosnoise.analysis import snr_light
+>>> c = load_config(overrides=["light.enabled=true", "light.illuminance_lux=1", "sensor.quantum_efficiency=0.5"])
+>>> curve = snr_light.snr_curve(c, [1, 10, 100], frames=4, shape=(32, 48))
+>>> [round(s, 1) for s in curve["snr_predicted"]]
+[1.5, 6.8, 22.7]
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..config import merge_updates
+from ..errors import CmosnoiseError
+from ..model.sensor import Sensor
+from . import noise_budget
+
+__all__ = ["snr_curve", "crossing_lux", "predicted_crossing_lux"]
+
+
+def _sensor(config, lux: float, shape, seed: int) -> Sensor:
+    c = merge_updates(config, {"light": {"illuminance_lux": float(lux)},
+                               "sensor": {"height": int(shape[0]), "width": int(shape[1])}})
+    return Sensor(c, seed=seed)
+
+
+def _green(a: np.ndarray, pattern: str) -> np.ndarray:
+    """The green pixels (a monochrome sensor: all of them), (frames, n)."""
+    if pattern == "none":
+        return a.reshape(a.shape[0], -1)
+    from ..model import cfa as cfa_mod
+
+    mask = cfa_mod.channel_map(pattern, a.shape[1:]) == 1
+    return a[:, mask]
+
+
+def _predicted(sensor: Sensor, shot) -> tuple[float, float]:
+    """(mean green photo-charge, its predicted temporal noise), e-."""
+    signal = float(_green(np.asarray(shot.photo_mean_e)[None], sensor.cfa).mean())
+    var = sum(noise_budget.temporal_variances(sensor, signal).values())
+    var += sum(noise_budget.after_gain_variances(sensor).values())
+    return signal, math.sqrt(var)
+
+
+def snr_curve(config, lux, frames: int = 8, shape=(96, 128), reflectance: float = 0.18, seed: int = 0) -> dict:
+    """The measured and predicted SNR of a grey patch at each illuminance (see the module docstring).
+
+    Parameters
+    ----------
+    config : Config
+        With ``light.enabled`` (its illuminance is replaced by each of ``lux``).
+    lux : sequence of float
+        Illuminances, lux, increasing.
+    frames : int
+        Frames drawn at each, at least 2.
+    shape : (rows, cols)
+        The patch's size: a sensor of this size is simulated (the sensor's own size does not matter to a flat field).
+    reflectance : float
+        The patch's reflectance, 0 to 1.
+    seed : int
+        The sensor instance.
+
+    Returns
+    -------
+    dict
+        ``lux``, ``signal_e`` and ``noise_e`` (predicted, e-), ``snr_predicted``, ``snr_measured`` (lists),
+        ``f_number``, ``integration_time_s``, ``reflectance``, ``frames``, ``pixels`` (green pixels measured),
+        ``snr10_lux`` and ``snr1_lux`` (measured, interpolated; None outside the curve), ``snr10_lux_predicted``
+        and ``snr1_lux_predicted``.
+    """
+    if not config.light.enabled:
+        raise CmosnoiseError("SNR against illuminance needs light in lux: set light.enabled=true (and the light's "
+                             "spectrum and the lens)")
+    lux = [float(v) for v in lux]
+    if not lux or any(v <= 0 for v in lux) or any(b <= a for a, b in zip(lux, lux[1:])):
+        raise CmosnoiseError(f"lux = {lux}: give increasing illuminances above 0")
+    if int(frames) < 2:
+        raise CmosnoiseError(f"frames = {frames}: the temporal noise needs at least 2")
+    if not 0 < reflectance <= 1:
+        raise CmosnoiseError(f"reflectance = {reflectance:g}: give a reflectance in (0, 1]")
+    out = {"lux": lux, "signal_e": [], "noise_e": [], "snr_predicted": [], "snr_measured": [],
+           "f_number": config.optics.f_number, "integration_time_s": config.exposure.integration_time_s,
+           "reflectance": reflectance, "frames": int(frames)}
+    for v in lux:
+        sensor = _sensor(config, v, shape, seed)
+        shot = sensor.expose(f"flat:{reflectance!r}")
+        t = sensor.transfer
+        stack = np.stack(list(shot.frames(int(frames)))).astype(np.float64)
+        green = (_green(stack, sensor.cfa) - t.black_level_dn) / t.gain_dn_per_e
+        signal, noise = _predicted(sensor, shot)
+        out["signal_e"].append(signal)
+        out["noise_e"].append(noise)
+        out["snr_predicted"].append(signal / noise)
+        out["snr_measured"].append(float(green.mean() - _dark_mean(sensor, shot)) /
+                                   math.sqrt(float(green.var(axis=0, ddof=1).mean())))
+        out["pixels"] = int(green.shape[1])
+    for target in (10.0, 1.0):
+        key = f"snr{target:g}_lux"
+        out[key] = crossing_lux(out["lux"], out["snr_measured"], target)
+        out[key + "_predicted"] = predicted_crossing_lux(config, target, shape, reflectance, seed)
+    return out
+
+
+def _dark_mean(sensor: Sensor, shot) -> float:
+    """The green pixels' mean dark charge (e-): the measured signal is the photo-charge alone."""
+    if shot.dark_mean_e is None:
+        return 0.0
+    return float(_green(np.asarray(shot.dark_mean_e)[None], sensor.cfa).mean())
+
+
+def crossing_lux(lux, snr, target: float = 10.0) -> float | None:
+    """Where a measured SNR curve first reaches ``target``: linear in log SNR against log lux between the two
+    illuminances around it; None if it never does within the curve.
+
+    Parameters
+    ----------
+    lux, snr : sequences of float
+        The curve.
+    target : float
+        The SNR, e.g. 10 or 1.
+
+    Returns
+    -------
+    float or None
+        lux.
+    """
+    x, y = np.log(np.asarray(lux, float)), np.asarray(snr, float)
+    for i in range(1, len(y)):
+        if y[i - 1] < target <= y[i] and y[i - 1] > 0:
+            a, b = math.log(y[i - 1]), math.log(y[i])
+            return float(math.exp(x[i - 1] + (math.log(target) - a) * (x[i] - x[i - 1]) / (b - a)))
+    return None
+
+
+def predicted_crossing_lux(config, target: float = 10.0, shape=(96, 128), reflectance: float = 0.18,
+                           seed: int = 0) -> float:
+    """The illuminance at which the model's SNR reaches ``target`` (the photo-charge is proportional to the lux).
+
+    Parameters
+    ----------
+    config : Config
+        With ``light.enabled``.
+    target : float
+        The SNR.
+    shape : (rows, cols)
+        The sensor simulated.
+    reflectance : float
+        The patch's reflectance.
+    seed : int
+        The sensor instance.
+
+    Returns
+    -------
+    float
+        lux.
+    """
+    from scipy.optimize import brentq
+
+    sensor = _sensor(config, 1.0, shape, seed)
+    per_lux = _predicted(sensor, sensor.expose(f"flat:{reflectance!r}"))[0]
+
+    def snr(log_lux):
+        s = per_lux * math.exp(log_lux)
+        var = sum(noise_budget.temporal_variances(sensor, s).values())
+        var += sum(noise_budget.after_gain_variances(sensor).values())
+        return s / math.sqrt(var) - target
+
+    return float(math.exp(brentq(snr, math.log(1e-6), math.log(1e7))))
