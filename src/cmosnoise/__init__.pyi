@@ -4,12 +4,16 @@ reads them here). ``tests/test_architecture.py`` holds it to ``__init__``'s tabl
 from . import errors as errors
 from ._version import __version__ as __version__
 from .analysis import characterize as characterize
+from .analysis import colour_error as colour_error
 from .analysis import emva as emva
 from .analysis import emva_evaluation as emva_evaluation
 from .analysis import emva_files as emva_files
 from .analysis import figures_of_merit as figures_of_merit
 from .analysis import ground_truth as ground_truth
 from .analysis import noise_budget as noise_budget
+from .analysis import sfr as sfr
+from .analysis import snr_light as snr_light
+from .analysis import visual_noise as visual_noise
 from .analysis import white_pixels as white_pixels
 from .app import dataset as dataset
 from .app import plots as plots
