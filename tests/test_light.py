@@ -191,3 +191,20 @@ def test_light_leaves_numpys_print_options_as_they_were():
 
     reconstruction.demosaic(np.ones((8, 8), np.float32), "RGGB", "malvar2004")
     assert np.get_printoptions() == before
+
+
+def test_characterize_reports_its_light_axis_in_lux_seconds(tmp_path):
+    import json
+
+    sets = ["light.enabled=true", "light.illuminance_lux=100", "sensor.quantum_efficiency=0.5", "sensor.width=96",
+            "sensor.height=64"]
+    args = [a for s in sets for a in ("--set", s)]
+    r = cli("characterize", *args, "--steps", "12", "--stack-frames", "4", "--out", tmp_path / "c")
+    assert r.returncode == 0, r.stderr
+    data = json.loads((tmp_path / "c" / "characterization.json").read_text())
+    h = np.asarray(data["series"]["focal_plane_lux_s"])
+    li = light.channel_light(load_config(overrides=sets))
+    # a white at this light gives rates.mean() e-/s at li.focal_plane_lux lux: each step's electrons over that ratio
+    electrons = np.asarray(data["series"]["mu_p"]) * 0.5
+    assert np.allclose(h, electrons * li.focal_plane_lux / li.rates_e_per_s.mean(), rtol=1e-12)
+    assert (np.diff(h) > 0).all() and data["light"]["illuminant"] == "D65"

@@ -63,13 +63,15 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
                                 shortest_texp_s=float(np.min(m.texp_s)))
     results = ev.evaluate(m)
     notes = ev.footnotes(results)
+    series = {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
+              "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark}
+    light = _light_axis(spec, m) if spec is not None else None
+    if light is not None:
+        series["focal_plane_lux_s"] = light.pop("focal_plane_lux_s")
     with folder as tmp:
         plot_curves(m, results, tmp)
-        write_json(tmp / "characterization.json", {
-            "measured": results, "model": model, "notes": notes,
-            "series": {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
-                       "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark},
-        })
+        write_json(tmp / "characterization.json", {"measured": results, "model": model, "notes": notes,
+                                                   "series": series, **({"light": light} if light else {})})
     reference = None
     if export_folder is not None:
         with export_folder as tmp:
@@ -79,6 +81,20 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
         except CmosnoiseError:
             reference = None  # emva1288 not installed: nothing to compare with
     return {"measured": results, "model": model, "notes": notes, "reference": reference}
+
+
+def _light_axis(spec, m: Measurement) -> dict | None:
+    """With light in lux: each step's focal-plane exposure (lux-seconds on the axis) that gives its photo-electrons
+    under the configured illuminant and spectral QE, and what converts one to the other; None without it."""
+    li = spec.light
+    if li is None:
+        return None
+    e_per_lux_s = float(li.rates_e_per_s.mean()) / li.focal_plane_lux  # e- per pixel per lux-second, a white's
+    electrons = np.asarray(m.mu_p, float) * (spec.config.sensor.qe_mean() or 1.0)
+    return {"focal_plane_lux_s": electrons / e_per_lux_s, "electrons_per_lux_s": e_per_lux_s,
+            "illuminant": spec.config.light.illuminant,
+            "note": "each step's photo-electrons (mean over the channels) as the focal-plane exposure that gives them "
+                    "under this illuminant and spectral QE"}
 
 
 def plot_curves(m: Measurement, res: dict, out: Path) -> list[Path]:
