@@ -180,7 +180,9 @@ class Sensor:
     def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
         """The same sensor instance at another exposure: the fixed pattern is shared, not redrawn.
 
-        Valid because nothing fixed-pattern depends on the exposure (docs/model.md section 1).
+        Valid because nothing fixed-pattern depends on the exposure (docs/model.md section 1). A
+        ``peak_rate_e_per_s`` is the light from here: light in lux (``light.enabled``) is switched off with it
+        (an EMVA 1288 series sets its own irradiation, the same in every channel).
         """
         updates = {}
         if integration_time_s is not None:
@@ -189,7 +191,10 @@ class Sensor:
             updates["peak_rate_e_per_s"] = float(peak_rate_e_per_s)
             updates["peak_rate_photons_per_s"] = None
         exposure = build_section(ExposureSection, {**self.config.exposure.model_dump(), **updates}, "exposure")
-        spec = self.spec.with_config(self.config.model_copy(update={"exposure": exposure}))
+        changed = {"exposure": exposure}
+        if peak_rate_e_per_s is not None and self.config.light.enabled:  # a rate in e-/s replaces light in lux
+            changed["light"] = self.config.light.model_copy(update={"enabled": False})
+        spec = self.spec.with_config(self.config.model_copy(update=changed))
         other = Sensor(spec, fixed_pattern=self._fixed, cache=self.cache, device=self.device, window=self.window)
         other.timings = self.timings
         other._statistics = self._statistics  # of the fixed maps: the same at any exposure
