@@ -208,3 +208,18 @@ def test_characterize_reports_its_light_axis_in_lux_seconds(tmp_path):
     electrons = np.asarray(data["series"]["mu_p"]) * 0.5
     assert np.allclose(h, electrons * li.focal_plane_lux / li.rates_e_per_s.mean(), rtol=1e-12)
     assert (np.diff(h) > 0).all() and data["light"]["illuminant"] == "D65"
+
+
+def test_a_run_with_light_says_what_a_white_gives(tmp_path):
+    import json
+
+    r = cli("-q", "simulate", "--set", "light.enabled=true", "--set", "light.illuminance_lux=50", "--set",
+            "sensor.quantum_efficiency=0.6", "--set", "sensor.width=64", "--set", "sensor.height=48",
+            "--out", tmp_path / "run")
+    assert r.returncode == 0, r.stderr
+    got = json.loads((tmp_path / "run" / "summary.json").read_text())["light"]
+    c = load_config(tmp_path / "run" / "config.yaml")
+    li = light.channel_light(c)
+    assert got["illuminance_lux"] == 50 and got["illuminant"] == "D65" and got["f_number"] == 2.8
+    assert got["focal_plane_lux"] == pytest.approx(light.focal_plane_illuminance_lux(c), rel=1e-12)
+    assert got["white_e"] == pytest.approx(list(li.rates_e_per_s * 0.03), rel=1e-12)

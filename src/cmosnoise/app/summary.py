@@ -91,7 +91,33 @@ def summary_head(sensor: Sensor, n: int) -> dict:
             "black_level_dn": t.black_level_dn,
             "bits": t.bits,
         },
+        **({"light": light_figures(sensor)} if sensor.spec.light is not None else {}),
     }
+
+
+def light_figures(sensor: Sensor) -> dict:
+    """With light in lux: the light, the lens, and what a white (reflectance 1) gives on the optical axis.
+
+    Parameters
+    ----------
+    sensor : Sensor
+        A sensor with ``light.enabled``.
+
+    Returns
+    -------
+    dict
+        ``illuminance_lux`` (or ``luminance_cd_m2``), ``illuminant``, ``f_number``, ``camera_equation``,
+        ``focal_plane_lux`` and ``focal_plane_lux_s`` of a white, its photo-electrons per second and per exposure
+        in each channel (R, G, B).
+    """
+    c, li = sensor.config, sensor.spec.light
+    t = c.exposure.integration_time_s
+    given = ({"illuminance_lux": c.light.illuminance_lux} if c.light.illuminance_lux is not None
+             else {"luminance_cd_m2": c.light.luminance_cd_m2})
+    return {**given, "illuminant": c.light.illuminant, "f_number": c.optics.f_number,
+            "camera_equation": c.optics.camera_equation, "focal_plane_lux": li.focal_plane_lux,
+            "focal_plane_lux_s": li.focal_plane_lux * t, "white_e_per_s": [float(v) for v in li.rates_e_per_s],
+            "white_e": [float(v * t) for v in li.rates_e_per_s]}
 
 
 def signal_figures(perfect_mean_e: float, expected_mean_e: float, measured: dict) -> dict:

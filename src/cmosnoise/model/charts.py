@@ -7,7 +7,8 @@ person. Values are linear light, 0 to 1; with light in lux (``light.enabled``) t
 ========================  ===================================================
 ``colorchecker``          the 24 patches of the ColorChecker Classic on a dark surround; with light in lux, each
                           patch's reflectance spectrum (Ohta's) under the illuminant and the pixels' QE
-``edge[:ANGLE[:LOW:HIGH]]``  a slanted edge (ISO 12233 e-SFR): dark on the left, light on the right, tilted
+``edge:ANGLE:LOW:HIGH``   a slanted edge (ISO 12233 e-SFR; ``edge`` and ``edge:ANGLE`` take the defaults): dark
+                          on the left, light on the right, tilted
                           ANGLE degrees (5) clockwise from vertical through the centre; LOW and HIGH the two
                           levels (0.1 and 0.4: the 4:1 contrast ISO 12233:2017 asks for), each pixel the exact share
                           of its square on either side

@@ -14,7 +14,8 @@ the sensor's peak rate). It comes from a file or a built-in:
                           from top to bottom (N = 4 by default)
 ``spot``                  one lit pixel (value 1) at the centre, on black:
                           the crosstalk measurement of the paper's Fig. 4
-``edge[:ANGLE[:LOW:HIGH]]``  a slanted edge, 5 degrees, 4:1 (ISO 12233 e-SFR; :mod:`.charts`)
+``edge:ANGLE:LOW:HIGH``   a slanted edge, 5 degrees, 4:1 by default (``edge``, ``edge:ANGLE``;
+                          ISO 12233 e-SFR; :mod:`.charts`)
 ``greys[:N]``             N grey patches from 1 to 0.001 in equal density steps (:mod:`.charts`)
 a path                    8-bit PNG/JPEG/TIFF: sRGB-encoded, decoded to linear;
                           16-bit or float TIFF/PNG and ``.npy``: already linear,
