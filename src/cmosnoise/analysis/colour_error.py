@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import CmosnoiseError
 from ..model import charts
+from ..model.encoding import srgb_to_linear
 
 __all__ = ["reference_linear_srgb", "fit_matrix", "ciede2000", "colour_error", "mosaic_patch_means"]
 
@@ -34,8 +35,7 @@ def reference_linear_srgb() -> np.ndarray:
     -------
     (24, 3) float64 array
     """
-    v = charts.COLORCHECKER_SRGB8 / 255.0
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+    return srgb_to_linear(charts.COLORCHECKER_SRGB8 / 255.0)
 
 
 def fit_matrix(camera: np.ndarray, reference: np.ndarray) -> np.ndarray:

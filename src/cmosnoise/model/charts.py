@@ -31,6 +31,7 @@ import math
 import numpy as np
 
 from ..errors import CmosnoiseError
+from .encoding import span, srgb_to_linear
 
 #: ColorChecker Classic patches, sRGB 8-bit (X-Rite, post-2014 values), row by row from "dark skin" to "black".
 COLORCHECKER_SRGB8 = np.array(
@@ -51,16 +52,6 @@ GREYS_N, GREYS_DENSITY, GREYS_SURROUND = 20, 3.0, 0.18
 
 __all__ = ["colorchecker", "colorchecker_patches", "edge", "edge_parameters", "greys", "greys_levels",
            "greys_patches", "truth", "COLORCHECKER_SRGB8"]
-
-
-def _span(shape: tuple[int, int], region) -> tuple[int, int, int, int]:
-    """``region`` (row0, row1, col0, col1) of a picture of ``shape``, or the whole of it."""
-    return (0, shape[0], 0, shape[1]) if region is None else tuple(int(v) for v in region)
-
-
-def _srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    v = np.asarray(v, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
 # ------------------------------------------------------------------ ColorChecker
@@ -85,9 +76,9 @@ def colorchecker(shape: tuple[int, int], region=None, patch_values: np.ndarray |
         Linear light, 0 to 1 (1: the peak rate).
     """
     rows, cols = shape
-    g0, g1, h0, h1 = _span(shape, region)
-    lin = _srgb_to_linear(COLORCHECKER_SRGB8 / 255.0) if patch_values is None else np.asarray(patch_values, float)
-    back = _srgb_to_linear(np.array(SURROUND_SRGB8 / 255.0)) if surround is None else float(surround)
+    g0, g1, h0, h1 = span(shape, region)
+    lin = srgb_to_linear(COLORCHECKER_SRGB8 / 255.0) if patch_values is None else np.asarray(patch_values, float)
+    back = srgb_to_linear(np.array(SURROUND_SRGB8 / 255.0)) if surround is None else float(surround)
     img = np.full((g1 - g0, h1 - h0, 3), back)
     ph, pw = rows / 4, cols / 6
     border = 0.12
@@ -147,7 +138,7 @@ def edge(shape: tuple[int, int], angle_deg: float = EDGE_ANGLE_DEG, low: float =
     (rows, cols, 3) float64 array
     """
     rows, cols = shape
-    r0, r1, c0, c1 = _span(shape, region)
+    r0, r1, c0, c1 = span(shape, region)
     t = math.tan(math.radians(angle_deg))
     xc, yc = cols / 2.0, rows / 2.0
     r = np.arange(r0, r1, dtype=np.float64)[:, None]
@@ -242,7 +233,7 @@ def greys(shape: tuple[int, int], n: int = GREYS_N, region=None) -> np.ndarray:
     -------
     (rows, cols, 3) float64 array
     """
-    g0, g1, h0, h1 = _span(shape, region)
+    g0, g1, h0, h1 = span(shape, region)
     img = np.full((g1 - g0, h1 - h0, 3), GREYS_SURROUND)
     for level, (r0, r1, c0, c1) in zip(greys_levels(n), greys_patches(shape, n)):
         img[max(r0 - g0, 0):max(r1 - g0, 0), max(c0 - h0, 0):max(c1 - h0, 0)] = level

@@ -56,6 +56,8 @@ from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
 from . import charts, raw_scene
 from .charts import COLORCHECKER_SRGB8, colorchecker, colorchecker_patches  # noqa: F401 (the scene's names)
+from .encoding import linear_to_srgb, srgb_to_linear  # noqa: F401 (the scene's names)
+from .encoding import span as _span
 
 #: Rec. 709 / sRGB luminance weights for linear RGB
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -63,47 +65,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate", "siemens", "steps:N", "spot", "edge",
             "greys:N")
 
-# ------------------------------------------------------------------ encoding
-def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    """Decode sRGB-encoded values in [0, 1] to linear light (IEC 61966-2-1).
-
-    Parameters
-    ----------
-    v : array
-        sRGB-encoded values, 0 to 1.
-
-    Returns
-    -------
-    array
-        Linear light, 0 to 1, ``v``'s shape.
-    """
-    v = np.asarray(v, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(v: np.ndarray) -> np.ndarray:
-    """Encode linear light in [0, 1] as sRGB in [0, 1].
-
-    Parameters
-    ----------
-    v : array
-        Linear light, 0 to 1.
-
-    Returns
-    -------
-    array
-        sRGB-encoded values, 0 to 1, ``v``'s shape.
-    """
-    v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
-    return np.where(v <= 0.0031308, v * 12.92, 1.055 * v ** (1 / 2.4) - 0.055)
-
-
 # ------------------------------------------------------------------ built-ins
-def _span(shape: tuple[int, int], region) -> tuple[int, int, int, int]:
-    """``region`` (row0, row1, col0, col1) of a picture of ``shape``, or the whole of it."""
-    return (0, shape[0], 0, shape[1]) if region is None else tuple(int(v) for v in region)
-
-
 def flat(shape: tuple[int, int], level: float, region=None) -> np.ndarray:
     """Uniform grey at ``level`` (fraction of the peak rate).
 
