@@ -129,3 +129,12 @@ def test_a_data_set_crops_raw_photographs_and_checks_their_colours(tmp_path):
                     sources=(str(tmp_path / "grbg.dng"),), light_e=(500.0, 500.0))
     with pytest.raises(CmosnoiseError, match="has the colour filters GRBG"):
         ds.make_sample(bad, 0, ds.Sources())
+
+
+def test_a_data_set_refuses_light_in_lux_on_top_of_its_own_light():
+    from cmosnoise.app import dataset as ds
+
+    recipe = ds.Recipe(samples=1, crop=(32, 48), seed=3, cameras=("sony-imx900@gain_db=0",), sources=("photo",),
+                       light_e=(500.0, 500.0), overrides=("light.enabled=true", "light.illuminance_lux=10"))
+    with pytest.raises(CmosnoiseError, match="leave light in lux off"):
+        ds.settings(recipe, 0)

@@ -377,6 +377,9 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
         config = load_config(extra=deep_merge(sources.preset_data(preset), merged), overrides=list(recipe.overrides))
     except CmosnoiseError as exc:
         raise CmosnoiseError(f"sample {index} ({camera}): {exc}") from None
+    if config.light.enabled:  # a data set's light is its own axis (--light, e- at the white): not lux as well
+        raise CmosnoiseError(f"sample {index} ({camera}): light.enabled is on, but a data set sets each sample's "
+                             "light itself (--light, electrons at the scene's white); leave light in lux off")
     sensor = config.sensor
     gain_row = next((r for r in config.gain_table
                      if (sensor.iso is not None and r.iso == sensor.iso)

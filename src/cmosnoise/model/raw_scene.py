@@ -19,7 +19,7 @@ Examples
 >>> photo = raw_scene.from_array(np.array([[64, 1088], [576, 4095]]), "RGGB", black=64, white=4095)
 >>> photo.pattern
 'RGGB'
->>> [round(v, 4) for v in photo.signal.ravel()]
+>>> [round(float(v), 4) for v in photo.signal.ravel()]
 [0.0, 0.254, 0.127, 1.0]
 """
 
