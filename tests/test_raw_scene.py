@@ -138,3 +138,13 @@ def test_a_data_set_refuses_light_in_lux_on_top_of_its_own_light():
                        light_e=(500.0, 500.0), overrides=("light.enabled=true", "light.illuminance_lux=10"))
     with pytest.raises(CmosnoiseError, match="leave light in lux off"):
         ds.settings(recipe, 0)
+
+
+def test_a_dng_without_a_colour_filter_array_is_one_line(tmp_path):
+    # a linear DNG (PhotometricInterpretation LinearRaw, three samples a pixel): LibRaw reads it, with no CFA
+    codes = (np.random.default_rng(0).random((32, 48, 3)) * 4000).astype(np.uint16)
+    tags = [(50706, 1, 4, (1, 4, 0, 0), True), (50708, 2, 0, "linear test", True), (50717, 3, 1, (4095,), True)]
+    tifffile.imwrite(tmp_path / "linear.dng", codes, photometric=34892, extratags=tags, planarconfig="contig")
+    with pytest.raises(CmosnoiseError, match="no 2 x 2 Bayer colour filter array") as info:
+        raw_scene.read(tmp_path / "linear.dng")
+    assert "\n" not in str(info.value)
