@@ -213,3 +213,20 @@ def test_large_pngs_are_written_in_bands_and_read_back_by_other_decoders():
     big[::7] = 200
     data = output.png_bytes(big, compress_level=1)
     assert data.startswith(b"\x89PNG") and np.array_equal(np.asarray(Image.open(io.BytesIO(data))), big)
+
+
+def test_the_budget_table_is_in_the_bar_charts_order_and_the_snr_says_what_it_holds(report_run):
+    """#63: the table listed the sources alphabetically beside a chart sorted by size; now both are largest first."""
+    from cmosnoise.analysis import noise_budget
+
+    out, summary = report_run
+    text = (out / "report.html").read_text()
+    table = text[text.index("<h2>Noise budget</h2>"):]
+    table = table[:table.index("</table>")]
+    nb = summary["noise_budget"]
+    order = noise_budget.by_size(nb["dark"], nb["scene_mean"])
+    positions = [table.index(">" + noise_budget.SOURCE_NAMES.get(n, n) + "<") for n in order]
+    assert positions == sorted(positions) and len(order) >= 3
+    values = [nb["scene_mean"]["temporal_rms_e"].get(n, 0.0) for n in order]
+    assert values == sorted(values, reverse=True)
+    assert "hot ones included" in text

@@ -667,6 +667,26 @@ def _rms(variances: dict[str, float]) -> dict[str, float]:
     return {k: math.sqrt(max(v, 0.0)) for k, v in variances.items()}
 
 
+def by_size(dark: dict, scene: dict, key: str = "temporal_rms_e") -> list[str]:
+    """The sources of two budgets, largest at the scene's mean first (then in the dark): the order the report's
+    table and its bar chart share.
+
+    Parameters
+    ----------
+    dark, scene : dict
+        :func:`budget` in the dark and at the scene's mean.
+    key : str
+        ``temporal_rms_e`` or ``fixed_pattern_rms_e``.
+
+    Returns
+    -------
+    list of str
+        Source names.
+    """
+    names = set(dark[key]) | set(scene[key])
+    return sorted(names, key=lambda n: (-scene[key].get(n, 0.0), -dark[key].get(n, 0.0), n))
+
+
 def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = None, _parts=None) -> dict:
     """Noise budget at ``signal_e`` (or over a scene's ``photo_e`` map, e-): rms per source (e-), totals in e- and DN.
 

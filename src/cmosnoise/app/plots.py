@@ -154,8 +154,9 @@ def noise_budget_bars(ax, dark: dict, scene: dict) -> None:
     dark, scene : dict
         :func:`cmosnoise.analysis.noise_budget.budget` in the dark and at the scene's mean.
     """
-    names = sorted(set(dark["temporal_rms_e"]) | set(scene["temporal_rms_e"]),
-                   key=lambda n: -scene["temporal_rms_e"].get(n, 0))
+    from ..analysis.noise_budget import by_size
+
+    names = by_size(dark, scene)
     y = np.arange(len(names))
     ax.barh(y - 0.2, [dark["temporal_rms_e"].get(n, 0) for n in names], 0.4, label="dark")
     ax.barh(y + 0.2, [scene["temporal_rms_e"].get(n, 0) for n in names], 0.4,

@@ -112,7 +112,8 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
         ("saturation", kf["saturation_e"], "e-"),
         ("dynamic range", kf["dynamic_range_db"], "dB"),
     ]
-    rows += [(f"SNR at {lvl} e-: temporal / with fixed pattern", f"{v:.1f} / {kf['snr_total_db_at_signal_e'][lvl]:.1f}", "dB")
+    rows += [(f"SNR at {lvl} e-: temporal / with fixed pattern (its rms holds every pixel, hot ones included)",
+              f"{v:.1f} / {kf['snr_total_db_at_signal_e'][lvl]:.1f}", "dB")
              for lvl, v in kf["snr_temporal_db_at_signal_e"].items()]
     dc = summary.get("dark_current")
     if dc and "map" in dc:
@@ -151,12 +152,12 @@ def build(sensor, summary: dict, raw0: np.ndarray, processor, pre_view: np.ndarr
 
     # ---- noise budget
     nb = summary["noise_budget"]
-    names = sorted(set(nb["dark"]["temporal_rms_e"]) | set(nb["scene_mean"]["temporal_rms_e"]))
+    names = noise_budget.by_size(nb["dark"], nb["scene_mean"])  # the bar chart's order: largest first
     label = noise_budget.SOURCE_NAMES.get
     rows = [(label(n, n), nb["dark"]["temporal_rms_e"].get(n, 0.0), nb["scene_mean"]["temporal_rms_e"].get(n, 0.0))
             for n in names]
     rows.append(("total (temporal)", nb["dark"]["temporal_total_e"], nb["scene_mean"]["temporal_total_e"]))
-    fp_names = sorted(set(nb["dark"]["fixed_pattern_rms_e"]) | set(nb["scene_mean"]["fixed_pattern_rms_e"]))
+    fp_names = noise_budget.by_size(nb["dark"], nb["scene_mean"], "fixed_pattern_rms_e")
     rows += [(f"fixed pattern: {label(n, n)}", nb["dark"]["fixed_pattern_rms_e"].get(n, 0.0), nb["scene_mean"]["fixed_pattern_rms_e"].get(n, 0.0)) for n in fp_names]
     fig, ax = plots.figure(figsize=(6.4, 3.6))
     plots.noise_budget_bars(ax, nb["dark"], nb["scene_mean"])
