@@ -129,7 +129,7 @@ function buildPanel() {
 
 function fieldRow(f, key, cfg, whole = false) {
   const row = document.createElement("div");
-  row.className = "field";
+  row.className = whole ? "field whole" : "field";  // a whole key's label on a line of its own, never cut
   row.dataset.key = key;
   const name = document.createElement("span");
   name.className = "name";
