@@ -588,3 +588,29 @@ def test_the_compiled_picture_never_indexes_outside_its_table(tmp_path):
         """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and r.stdout.strip() == "ok", (r.returncode, r.stderr[-2000:])
+
+
+def test_the_worst_flickering_pixels_get_a_close_up_video(tmp_path):
+    """#63: a crop video around the worst few random telegraph pixels, their positions in summary.json."""
+    import imageio.v3 as iio
+
+    from cmosnoise import load_config
+    from cmosnoise.app.run import CROP_ZOOM, telegraph_pixels
+
+    sets = ["--set", "sensor.width=96", "--set", "sensor.height=64", "--set", "source_follower.rts.enabled=true",
+            "--set", "source_follower.rts.ppm=3000", "--set", "dark_current.rts.enabled=true",
+            "--set", "dark_current.rts.ppm=3000"]
+    r = cli("-q", "simulate", "--scene", "flat:0.02", *sets, "--frames", "3", "--process", "--out", tmp_path / "v")
+    assert r.returncode == 0, r.stderr
+    crops = json.loads((tmp_path / "v" / "summary.json").read_text())["processing"]["video"]["rts_crops"]
+    table = telegraph_pixels(Sensor(load_config(tmp_path / "v" / "config.yaml")))
+    steps = np.where(table["kind"] == "trap", table["size"], table["size"] * 0.03)
+    worst = table.iloc[np.argsort(-steps, kind="stable")[:4]]
+    assert [(c["row"], c["col"]) for c in crops] == list(zip(worst["row"], worst["col"]))
+    assert [c["step_e"] for c in crops] == sorted((c["step_e"] for c in crops), reverse=True)
+    for c in crops:
+        r0, r1, c0, c1 = c["crop"]
+        assert r0 <= c["row"] < r1 and c0 <= c["col"] < c1 and (r1 - r0, c1 - c0) == (32, 32)
+    frames = iio.imread(tmp_path / "v" / "rts_crops.mp4", index=None)
+    assert frames.shape[0] == 3 and frames.shape[1] == 32 * CROP_ZOOM
+    assert frames.shape[2] == 4 * 32 * CROP_ZOOM + 3 * 2

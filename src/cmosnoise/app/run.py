@@ -137,8 +137,11 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
 
         stamps: list[float] = []  # when each frame was made: the steady time per frame, apart from the set-up
 
+        crops = worst_telegraph(sensor) if proc_cfg.enabled and n > 1 else []
+        crop_video = None
+
         def frames(advance):
-            nonlocal t_process, video, video_info
+            nonlocal t_process, video, video_info, crop_video
             stamps.append(time.perf_counter())
             for k, (raw, electrons) in enumerate(shot.frames_with_electrons(n, first), start=first):
                 stats.update(raw, electrons)
@@ -157,6 +160,15 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
                             f"cmosnoise {config.seed}: {n} frames at {fps:g} frames/s; display gain {gain:g} "
                             "(1: the processed pictures as they are)"), gain=gain)
                     video.append(picture)
+                    if crops:  # the worst flickering pixels, close up: the raw codes, each pixel its own
+                        if crop_video is None:
+                            crop_scale = crop_gain(raw, crops, transfer.black_level_dn)
+                            video_info["rts_crops_scale"] = crop_scale
+                            crop_video = VideoWriter(tmp / "rts_crops.mp4", fps, comment=(
+                                f"cmosnoise {config.seed}: the {len(crops)} largest random telegraph pixels (outlined "
+                                f"in red), {2 * CROP_HALF} raw pixels around each, {CROP_ZOOM} times; grey = "
+                                f"(code - black) x {crop_scale:.4g}"))
+                        crop_video.append(crop_strip(raw, crops, transfer.black_level_dn, crop_scale))
                     if k == first:
                         rendered0.append(picture)  # frame 0's processed picture, reused below
                     t_process += time.perf_counter() - tp
@@ -176,6 +188,10 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         finally:
             if video is not None:
                 video.close()
+            if crop_video is not None:
+                crop_video.close()
+        if video_info is not None and crops:
+            video_info["rts_crops"] = crops
         t_frames = time.perf_counter() - t_start
 
 
@@ -258,6 +274,65 @@ def display_gain(picture: np.ndarray) -> float:
     if top >= 128:
         return 1.0
     return round(min(16.0, 235.0 / max(top, 1.0)), 3)
+
+
+#: rts_crops.mp4: how many random telegraph pixels, the pixels on each side of each, and the magnification
+CROP_COUNT, CROP_HALF, CROP_ZOOM = 4, 16, 8
+
+
+def worst_telegraph(sensor: Sensor, count: int = CROP_COUNT) -> list[dict]:
+    """The ``count`` random telegraph pixels with the largest steps in electrons a frame: a trap's amplitude
+    (e-), a blinking pixel's rate step times the integration time; each with ``kind``, ``row``, ``col``,
+    ``step_e``, and the crop (row0, row1, col0, col1) of :data:`CROP_HALF` pixels on each side, inside the
+    sensor. Empty without random telegraph noise."""
+    table = telegraph_pixels(sensor)
+    if table is None or table.empty:
+        return []
+    t = sensor.config.exposure.integration_time_s
+    step = np.where(table["kind"] == "trap", table["size"], table["size"] * t)
+    rows, cols = sensor.shape
+    out, seen = [], set()
+    for i in np.argsort(-step, kind="stable"):
+        r, c = int(table["row"].iloc[i]), int(table["col"].iloc[i])
+        if (r, c) in seen:
+            continue
+        seen.add((r, c))
+        r0 = min(max(r - CROP_HALF, 0), max(rows - 2 * CROP_HALF, 0))
+        c0 = min(max(c - CROP_HALF, 0), max(cols - 2 * CROP_HALF, 0))
+        out.append({"kind": str(table["kind"].iloc[i]), "row": r, "col": c, "step_e": float(step[i]),
+                    "crop": [r0, min(r0 + 2 * CROP_HALF, rows), c0, min(c0 + 2 * CROP_HALF, cols)]})
+        if len(out) == count:
+            break
+    return out
+
+
+def crop_gain(raw: np.ndarray, crops: list[dict], black: float) -> float:
+    """The grey scale of rts_crops.mp4: frame 0's 99.5th percentile above black, over every crop, shown at 235
+    (the same for every frame, so a pixel that flickers is seen to)."""
+    values = np.concatenate([raw[a:b, c:d].ravel() for a, b, c, d in (cr["crop"] for cr in crops)]).astype(np.float64)
+    top = float(np.percentile(values - black, 99.5))
+    return 235.0 / top if top > 0 else 1.0
+
+
+def crop_strip(raw: np.ndarray, crops: list[dict], black: float, scale: float) -> np.ndarray:
+    """The crops of a raw frame side by side as grey (each pixel its own code: no demosaicing spreads a flicker),
+    each :data:`CROP_ZOOM` times, its telegraph pixel outlined in red, 2 black pixels apart: (h, w, 3) uint8."""
+    tiles = []
+    side = 2 * CROP_HALF
+    for crop in crops:
+        r0, r1, c0, c1 = crop["crop"]
+        part = np.zeros((side, side), np.float64)
+        got = raw[r0:r1, c0:c1].astype(np.float64) - black
+        part[:got.shape[0], :got.shape[1]] = got
+        grey = np.clip(np.rint(part * scale), 0, 255).astype(np.uint8)
+        big = np.repeat(np.repeat(grey, CROP_ZOOM, axis=0), CROP_ZOOM, axis=1)
+        rgb = np.repeat(big[..., None], 3, axis=2)
+        y, x = (crop["row"] - r0) * CROP_ZOOM, (crop["col"] - c0) * CROP_ZOOM
+        for edge in (rgb[y - 1:y, x - 1:x + CROP_ZOOM + 1], rgb[y + CROP_ZOOM:y + CROP_ZOOM + 1, x - 1:x + CROP_ZOOM + 1],
+                     rgb[y - 1:y + CROP_ZOOM + 1, x - 1:x], rgb[y - 1:y + CROP_ZOOM + 1, x + CROP_ZOOM:x + CROP_ZOOM + 1]):
+            edge[...] = (255, 40, 40)
+        tiles += [rgb, np.zeros((rgb.shape[0], 2, 3), np.uint8)]
+    return np.concatenate(tiles[:-1], axis=1)
 
 
 def telegraph_pixels(sensor: Sensor):
