@@ -367,8 +367,9 @@ def incidence(config, shape: tuple[int, int], region=None) -> tuple[np.ndarray, 
     r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
     y = (np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch * 1e-3
     x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch * 1e-3
-    h = np.hypot(y[:, None], x[None, :])
-    angle = np.interp(h, t[:, 0], t[:, 1]) * (1.0 - op.microlens_compensation)
+    h = np.sqrt(np.add.outer(y * y, x * x))
+    angle = np.interp(h, t[:, 0], t[:, 1])
+    angle *= 1.0 - op.microlens_compensation
     # h is 0 only where a pixel's centre is the sensor's (an odd size): its direction is then 0
     inv = np.divide(1.0, h, out=np.zeros_like(h), where=h > 0)
     return angle, x[None, :] * inv, y[:, None] * inv
@@ -406,10 +407,10 @@ def angle_qe(config, pattern: str, shape: tuple[int, int], region=None) -> np.nd
         return np.interp(angle, t[:, 0], t[:, 1])
     out = np.empty_like(angle)
     r0, c0 = (0, 0) if region is None else (region[0], region[2])
-    channels = cfa_mod.channel_map(cfa_mod.crop_pattern(pattern, r0, c0), angle.shape)
-    for ch in range(3):
-        m = channels == ch
-        out[m] = np.interp(angle[m], t[:, 0], t[:, 1 + ch])
+    cells = cfa_mod.tile(cfa_mod.crop_pattern(pattern, r0, c0))
+    for dr in (0, 1):  # each cell of the 2 x 2 pattern at once, by its own channel's column
+        for dc in (0, 1):
+            out[dr::2, dc::2] = np.interp(angle[dr::2, dc::2], t[:, 0], t[:, 1 + int(cells[dr, dc])])
     return out
 
 
