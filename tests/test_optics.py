@@ -285,3 +285,29 @@ def test_bad_chief_ray_tables_are_one_line(sets, needle):
     with pytest.raises(CmosnoiseError, match=needle) as info:
         Sensor(load_config(overrides=sets + ["sensor.width=32", "sensor.height=24"])).expose("flat:0.5")
     assert "\n" not in str(info.value)
+
+
+def test_the_compiled_lean_is_four_spreads_of_signed_charge():
+    # the definition (docs/model.md 2b): each pixel spreads with k0 + |a| D(sign a) + |b| D(sign b); spread is linear,
+    # so it is four spreads of the charge weighted by each sign's share. The compiled scatter (and its NumPy
+    # fallback) adds the same terms in another order: equal to rounding
+    import cmosnoise.engine.stencil as stencil
+    from cmosnoise.model.stages import crosstalk
+
+    rng = np.random.default_rng(0)
+    q = rng.random((90, 120)) * 1000
+    a, b = rng.uniform(-1, 1, q.shape), rng.uniform(-1, 1, q.shape)
+    leans = crosstalk.lean_kernels(crosstalk.kernel_fractions([[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]]),
+                                   crosstalk.kernel_fractions([[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]))
+    right, left, down, up = leans
+    want = (crosstalk.spread(q * np.clip(a, 0, None), right) + crosstalk.spread(q * np.clip(-a, 0, None), left)
+            + crosstalk.spread(q * np.clip(b, 0, None), down) + crosstalk.spread(q * np.clip(-b, 0, None), up))
+    got = crosstalk.lean(q, leans, a, b)
+    assert np.allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    assert abs(got.sum()) < 1e-9 * q.sum()  # it only moves charge
+    numba = stencil.numba
+    try:
+        stencil.numba = None
+        assert np.allclose(crosstalk.lean(q, leans, a, b), want, rtol=0, atol=1e-12 * np.abs(want).max())
+    finally:
+        stencil.numba = numba

@@ -1,4 +1,5 @@
-"""A small kernel's convolution over an array and a frame around it, compiled: what crosstalk spreads.
+"""A small kernel's convolution over an array and a frame around it, compiled: what crosstalk spreads; and the
+scatter of a kernel that leans pixel by pixel (:func:`leaning_spread`, the chief-ray angle's crosstalk).
 
 :func:`framed_convolve` gives, for an array ``x`` (rows, cols) and a 3 x 3 kernel, the (rows + 2, cols + 2)
 array that ``scipy.ndimage.convolve(np.pad(x, 1), k, mode="constant")`` gives, bit for bit: each value is a sum
@@ -38,6 +39,62 @@ if numba is not None:
                     dst[t] += np.float64(src[t]) * wq
             for j in range(cols + 2):
                 out[i, j] = acc[j]
+
+
+if numba is not None:
+    @numba.njit(cache=True, nogil=True)
+    def _leaning(q, a, b, right, left, down, up, out):  # pragma: no cover - compiled
+        rows, cols = q.shape
+        for y in range(rows):
+            for x in range(cols):
+                wa, wb = q[y, x] * a[y, x], q[y, x] * b[y, x]
+                if wa == 0.0 and wb == 0.0:
+                    continue
+                kx = right if wa >= 0.0 else left
+                ky = down if wb >= 0.0 else up
+                wa, wb = abs(wa), abs(wb)
+                for dy in range(3):
+                    ty = min(max(y + dy - 1, 0), rows - 1)  # off the array: back into the edge pixel it left
+                    for dx in range(3):
+                        tx = min(max(x + dx - 1, 0), cols - 1)
+                        out[ty, tx] += wa * kx[dy, dx] + wb * ky[dy, dx]
+
+
+def leaning_spread(q: np.ndarray, a: np.ndarray, b: np.ndarray, leans: tuple) -> np.ndarray:
+    """Charge scattered by a kernel that leans per pixel: pixel p sends ``q[p] (|a[p]| D_a + |b[p]| D_b)[d]`` to
+    p + d, D_a the column kernel of ``a``'s sign and D_b the row kernel of ``b``'s (off the array: into the edge
+    pixel it left). One compiled pass, in row order.
+
+    Parameters
+    ----------
+    q : (rows, cols) array
+        Charge, e-.
+    a, b : (rows, cols) arrays
+        The signed shares along the columns and the rows.
+    leans : tuple of four (3, 3) arrays
+        The kernels' changes toward +column, -column, +row, -row (:func:`cmosnoise.model.stages.crosstalk.lean_kernels`).
+
+    Returns
+    -------
+    (rows, cols) float64 array
+    """
+    q, a, b = (np.ascontiguousarray(v, np.float64) for v in np.broadcast_arrays(q, a, b))
+    ks = [np.ascontiguousarray(k, np.float64) for k in leans]
+    out = np.zeros(q.shape)
+    if numba is None:  # the same scatter in NumPy, slowly
+        rows, cols = q.shape
+        for name, w, (pos, neg) in (("a", a, (ks[0], ks[1])), ("b", b, (ks[2], ks[3]))):
+            for k, part in ((pos, np.clip(w, 0, None)), (neg, np.clip(-w, 0, None))):
+                src = q * part
+                for dy in range(3):
+                    ty = np.clip(np.arange(rows) + dy - 1, 0, rows - 1)
+                    for dx in range(3):
+                        tx = np.clip(np.arange(cols) + dx - 1, 0, cols - 1)
+                        np.add.at(out, (ty[:, None], tx[None, :]), src * k[dy, dx])
+        return out
+    announce("the leaning crosstalk", _leaning)
+    _leaning(q, a, b, ks[0], ks[1], ks[2], ks[3], out)
+    return out
 
 
 def framed_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:

@@ -132,7 +132,9 @@ def lean(mean_e: np.ndarray, leans: tuple, toward_col: np.ndarray, toward_row: n
     the reference angle's change along the columns and the rows (``(angle / reference) * cos(phi)`` and
     ``* sin(phi)``, phi the pixel's direction from the optical centre) and ``D`` the kernels of
     :func:`lean_kernels` for the sign's direction. Spread is linear in the charge and the kernel, so this is
-    four spreads of weighted charge; each ``D`` sums to 0, so the array's total charge is unchanged (to rounding).
+    a scatter of each pixel's charge with its own kernel change, in one compiled pass
+    (:func:`cmosnoise.engine.stencil.leaning_spread`; charge off the array goes back into the edge pixel it left, as
+    :func:`spread` sends it); each ``D`` sums to 0, so the array's total charge is unchanged (to rounding).
 
     Parameters
     ----------
@@ -148,13 +150,7 @@ def lean(mean_e: np.ndarray, leans: tuple, toward_col: np.ndarray, toward_row: n
     (rows, cols) float64 array, e-
         To add to :func:`apply`'s result.
     """
-    right, left, down, up = leans
-    q = np.asarray(mean_e, np.float64)
-    out = spread(q * np.clip(toward_col, 0, None), right)
-    out += spread(q * np.clip(-toward_col, 0, None), left)
-    out += spread(q * np.clip(toward_row, 0, None), down)
-    out += spread(q * np.clip(-toward_row, 0, None), up)
-    return out
+    return stencil.leaning_spread(mean_e, toward_col, toward_row, leans)
 
 
 def channel_mixing_matrix(kernel, pattern: str) -> np.ndarray:
