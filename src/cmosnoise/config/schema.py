@@ -194,8 +194,17 @@ class ExposureSection(Section):
 
 
 # ------------------------------------------------------------------------- light
-#: a spectral table given inline: rows of (wavelength nm, value) or (wavelength nm, R, G, B)
+#: a table given inline: rows of (wavelength nm, value) or (wavelength nm, R, G, B), (mm, degrees), ...
 SpectrumRows = list[list[float]]
+
+
+def _check_rows(v, widths: tuple[int, ...], what: str):
+    """Inline table rows: at least two, all of one of ``widths``; a file's name or None passes (read later)."""
+    if isinstance(v, list):
+        found = {len(r) for r in v}
+        if len(v) < 2 or len(found) != 1 or found.pop() not in widths:
+            raise ValueError(f"give at least two rows, each {what}")
+    return v
 
 
 class LightSection(Section):
@@ -235,11 +244,7 @@ class LightSection(Section):
     @field_validator("spectral_qe")
     @classmethod
     def _rows(cls, v):
-        if isinstance(v, list):
-            widths = {len(r) for r in v}
-            if len(v) < 2 or len(widths) != 1 or widths.pop() not in (2, 4):
-                raise ValueError("give at least two rows, each (nm, QE) or (nm, QE_R, QE_G, QE_B)")
-        return v
+        return _check_rows(v, (2, 4), "(nm, QE) or (nm, QE_R, QE_G, QE_B)")
 
     @model_validator(mode="after")
     def _light_once(self):
@@ -291,13 +296,9 @@ class OpticsSection(Section):
     @field_validator("chief_ray_angle", "angle_relative_qe")
     @classmethod
     def _table_rows(cls, v, info):
-        if isinstance(v, list):
-            widths = {len(r) for r in v}
-            allowed = (2,) if info.field_name == "chief_ray_angle" else (2, 4)
-            if len(v) < 2 or len(widths) != 1 or widths.pop() not in allowed:
-                what = "(mm, degrees)" if info.field_name == "chief_ray_angle" else "(degrees, QE) or (degrees, R, G, B)"
-                raise ValueError(f"give at least two rows, each {what}")
-        return v
+        if info.field_name == "chief_ray_angle":
+            return _check_rows(v, (2,), "(mm, degrees)")
+        return _check_rows(v, (2, 4), "(degrees, QE) or (degrees, R, G, B)")
 
 
 # ------------------------------------------------------------------------ stages

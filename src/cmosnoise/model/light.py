@@ -55,7 +55,7 @@ COLORCHECKER_SPECTRA = "ColorChecker N Ohta"
 #: the largest CSV table read (rows of a spectrum)
 MAX_TABLE_BYTES = 4_000_000
 
-__all__ = ["ChannelLight", "channel_light", "camera_factor", "illuminant_spectrum", "qe_spectrum",
+__all__ = ["ChannelLight", "channel_light", "read_table", "camera_factor", "illuminant_spectrum", "qe_spectrum",
            "photopic_efficiency", "focal_plane_illuminance_lux", "reflectance_channels", "colorchecker_reflectances"]
 
 
@@ -66,8 +66,22 @@ def _colour():
     return colour_lib.colour()
 
 
-def _table(path: str, what: str) -> np.ndarray:
-    """A CSV (or whitespace) table of numbers, rows x columns, through the input gate; a one-line error otherwise."""
+def read_table(path: str, what: str) -> np.ndarray:
+    """A table of numbers from a CSV (commas, semicolons or whitespace; ``#`` comments; a header line allowed),
+    through the input gate: the spectra here, and the lens's tables of :mod:`.optics`.
+
+    Parameters
+    ----------
+    path : str
+        The file.
+    what : str
+        The key it was given for, named in errors.
+
+    Returns
+    -------
+    (rows, columns) float64 array
+        At least two rows, all of the same length.
+    """
     text = inputs.read_text(path, what, MAX_TABLE_BYTES)
     rows = []
     for line in text.splitlines():
@@ -126,7 +140,7 @@ def illuminant_spectrum(name: str) -> tuple[np.ndarray, np.ndarray]:
         sd = colour.SDS_ILLUMINANTS[names[low]]
         return np.asarray(sd.wavelengths, float), np.asarray(sd.values, float)
     if Path(name).suffix.lower() in (".csv", ".txt", ".tsv") or Path(name).exists():
-        t = _table(name, key)
+        t = read_table(name, key)
         if t.shape[1] != 2:
             raise CmosnoiseError(f"{key} {name}: give two columns, wavelength (nm) and relative power")
         _check_wavelengths(t[:, 0], key)
@@ -174,7 +188,7 @@ def qe_spectrum(spectral_qe, qe_peak: float | None, quantum_efficiency) -> tuple
                 msds = colour.MSDS_CAMERA_SENSITIVITIES[names[spectral_qe.lower()]]
                 t = np.column_stack([msds.wavelengths, msds.values])
             else:
-                t = _table(spectral_qe, key)
+                t = read_table(spectral_qe, key)
         else:
             t = np.asarray(spectral_qe, dtype=np.float64)
         if t.ndim != 2 or t.shape[1] not in (2, 4):
@@ -312,8 +326,9 @@ def channel_light(config) -> ChannelLight:
         An unknown illuminant, a QE table outside [0, 1] or with non-increasing wavelengths, spectra that do not
         overlap.
     """
-    parts = {k: config.model_dump(mode="json")[k] for k in ("light", "optics")}
-    parts["sensor"] = {k: getattr(config.sensor, k) for k in ("pixel_pitch_um", "quantum_efficiency")}
+    # the sections it reads, as its cache's key (not the whole configuration: a spec asks for it several times)
+    parts = {"light": config.light.model_dump(mode="json"), "optics": config.optics.model_dump(mode="json"),
+             "sensor": {k: getattr(config.sensor, k) for k in ("pixel_pitch_um", "quantum_efficiency")}}
     return _channel_light(json.dumps(parts, sort_keys=True))
 
 

@@ -52,8 +52,8 @@ MAX_KERNEL = 257
 #: the largest PSF file (a float64 array of MAX_KERNEL^2 with room for its header) and relative-illumination table
 MAX_FILE_BYTES = 64 * 2**20
 
-__all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "field_angle",
-           "incidence", "angle_qe", "lean_weights", "cfa_signal", "blur", "active", "BLOCK"]
+__all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "incidence",
+           "angle_qe", "lean_weights", "cfa_signal", "blur", "active", "BLOCK"]
 
 
 # ------------------------------------------------------------------ point spread functions
@@ -239,56 +239,29 @@ def _psf_kernels(parts: str, spectra: tuple | None) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ relative illumination
-def field_angle(shape: tuple[int, int], region, pitch_um: float, focal_length_mm: float) -> np.ndarray:
-    """Each pixel's field angle: ``atan(h / f)``, h its centre's distance from the sensor's centre (rad).
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-        The whole sensor.
-    region : (row0, row1, col0, col1) or None
-        The pixels to give (None: all).
-    pitch_um, focal_length_mm : float
-
-    Returns
-    -------
-    (rows, cols) float64 array, rad
-    """
-    return np.arctan(_image_height_mm(shape, region, pitch_um) / focal_length_mm)
+def _offsets_mm(shape, region, pitch_um: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pixel centres' offsets from the sensor's centre, mm: (rows,) down and (cols,) across ``region``."""
+    rows, cols = shape
+    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
+    return ((np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch_um * 1e-3,
+            (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch_um * 1e-3)
 
 
 def _image_height_squared_mm2(shape, region, pitch_um: float) -> np.ndarray:
-    rows, cols = shape
-    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
-    y = (np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch_um * 1e-3
-    x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch_um * 1e-3
+    """Each pixel's squared image height (its centre's squared distance from the sensor's centre), mm^2."""
+    y, x = _offsets_mm(shape, region, pitch_um)
     return np.add.outer(y * y, x * x)
-
-
-def _image_height_mm(shape, region, pitch_um: float) -> np.ndarray:
-    rows, cols = shape
-    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
-    y = (np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch_um * 1e-3
-    x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch_um * 1e-3
-    return np.hypot(y[:, None], x[None, :])
 
 
 @functools.lru_cache(maxsize=8)
 def _ri_table(path: str) -> tuple[np.ndarray, np.ndarray]:
-    from .light import _table
-
-    t = _table(path, "optics.relative_illumination")
-    if t.shape[1] != 2:
-        raise CmosnoiseError(f"optics.relative_illumination {path}: give two columns, image height (mm) and "
-                             "relative illumination")
-    h, ri = t[:, 0], t[:, 1]
-    if not np.isfinite(t).all() or (np.diff(h) <= 0).any() or h[0] < 0:
-        raise CmosnoiseError(f"optics.relative_illumination {path}: the image heights must be finite, >= 0 and "
-                             "increasing")
-    if (ri <= 0).any() or (ri > 1).any():
-        raise CmosnoiseError(f"optics.relative_illumination {path}: each relative illumination must be in (0, 1]; "
-                             f"this table spans {ri.min():g} to {ri.max():g}")
-    return h, ri
+    """A relative-illumination table: image heights (mm) and relative illumination in (0, 1]."""
+    key = f"optics.relative_illumination {path}"
+    t = _rows(path, key, (2,))
+    if (t[:, 1] <= 0).any() or (t[:, 1] > 1).any():
+        raise CmosnoiseError(f"{key}: each relative illumination must be in (0, 1]; this table spans "
+                             f"{t[:, 1].min():g} to {t[:, 1].max():g}")
+    return t[:, 0], t[:, 1]
 
 
 def relative_illumination(config, shape: tuple[int, int], region=None) -> np.ndarray | None:
@@ -318,16 +291,16 @@ def relative_illumination(config, shape: tuple[int, int], region=None) -> np.nda
         np.multiply(h2, h2, out=h2)
         return np.divide(1.0, h2, out=h2)
     h, ri = _ri_table(kind)
-    return np.interp(_image_height_mm(shape, region, pitch), h, ri)
+    return np.interp(np.sqrt(_image_height_squared_mm2(shape, region, pitch)), h, ri)
 
 
 # ------------------------------------------------------------------ chief-ray angle
 def _rows(value, key: str, widths: tuple[int, ...]) -> np.ndarray:
     """A table given inline (rows) or as a CSV file, checked: finite, first column increasing and >= 0."""
     if isinstance(value, str):
-        from .light import _table
+        from .light import read_table
 
-        t = _table(value, key)
+        t = read_table(value, key)
     else:
         t = np.asarray(value, np.float64)
     if t.ndim != 2 or t.shape[1] not in widths or t.shape[0] < 2:
@@ -363,10 +336,7 @@ def incidence(config, shape: tuple[int, int], region=None) -> tuple[np.ndarray, 
     t = _rows(op.chief_ray_angle, "optics.chief_ray_angle", (2,))
     if (np.abs(t[:, 1]) > 60).any():
         raise CmosnoiseError("optics.chief_ray_angle: angles must be from -60 to 60 degrees")
-    rows, cols = shape
-    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else region
-    y = (np.arange(r0, r1) + 0.5 - rows / 2.0) * pitch * 1e-3
-    x = (np.arange(c0, c1) + 0.5 - cols / 2.0) * pitch * 1e-3
+    y, x = _offsets_mm(shape, region, pitch)
     h = np.sqrt(np.add.outer(y * y, x * x))
     angle = np.interp(h, t[:, 0], t[:, 1])
     angle *= 1.0 - op.microlens_compensation
@@ -532,8 +502,10 @@ def cfa_signal(draw, config, pattern: str, responsivity, shape: tuple[int, int],
     Returns
     -------
     (rows, cols) float64 array
-        :func:`.scene.cfa_signal` where the lens changes nothing.
+        :func:`.scene.cfa_signal` where the lens changes nothing (:func:`active` false), bit for bit.
     """
+    if not active(config):  # no lens: the scene's own CFA signal, bit for bit
+        return scene_mod.cfa_signal(draw, pattern, responsivity, region)
     if isinstance(draw, scene_mod.RawDraw):
         raise CmosnoiseError("scene: a raw photograph already went through its own lens; set optics.psf, "
                              "optics.relative_illumination and optics.angle_relative_qe to none for it")
