@@ -701,6 +701,30 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     return draw
 
 
+def prepare_configured(source: str, shape: tuple[int, int], section, light=None):
+    """:func:`prepare` with a configuration's ``scene`` section's settings (its scale, fit, window, source size and
+    a ``.npy`` mosaic's raw keys): what a sensor and a tiling draw from.
+
+    Parameters
+    ----------
+    source : str
+        The scene.
+    shape : (rows, cols)
+        The whole sensor.
+    section : SceneSection
+        ``config.scene``.
+    light : cmosnoise.model.light.ChannelLight, optional
+        Light in lux.
+
+    Returns
+    -------
+    callable
+        As :func:`prepare`.
+    """
+    return prepare(source, shape, section.scale, section.fit, section.window, section.source_size, light,
+                   (section.raw_cfa, section.raw_black_dn, section.raw_white_dn))
+
+
 def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop",
                  light=None) -> np.ndarray:
     """The whole source, linear RGB (rows, cols, 3) float64: an image file's own pixels, or a built-in (the

@@ -406,11 +406,8 @@ class Sensor:
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            draw = scene_mod.prepare(scene, self.shape, c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size,
-                                     self.spec.light, (c.scene.raw_cfa, c.scene.raw_black_dn, c.scene.raw_white_dn))
-            if optics_mod.active(c):
-                return optics_mod.cfa_signal(draw, c, self.cfa, self.spec.channel_responsivity, self.shape, self.window)
-            return scene_mod.cfa_signal(draw, self.cfa, self.spec.channel_responsivity, region=self.window)
+            draw = scene_mod.prepare_configured(scene, self.shape, c.scene, self.spec.light)
+            return optics_mod.cfa_signal(draw, c, self.cfa, self.spec.channel_responsivity, self.shape, self.window)
         try:
             given = np.asarray(scene)
             if given.dtype.kind not in "uifb":  # complex, object, text: not light levels (a cast would drop parts)

@@ -187,9 +187,7 @@ class Tiling:
         self._source = source
         self._picture = None
         if scene_mod.builtin_name(source) in (None, "photo") or c.scene.window is not None:
-            self._picture = scene_mod.prepare(source, self.spec.shape, c.scene.scale, c.scene.fit, c.scene.window,
-                                              c.scene.source_size, self.spec.light,
-                                              (c.scene.raw_cfa, c.scene.raw_black_dn, c.scene.raw_white_dn))
+            self._picture = scene_mod.prepare_configured(source, self.spec.shape, c.scene, self.spec.light)
 
     @property
     def populations(self) -> FixedPattern | None:
@@ -245,12 +243,9 @@ class Tiling:
             self._populations = sensor.fixed_pattern
         if self._picture is None:
             return sensor.expose(self._source, sequence=self.sequence)
-        c = self.spec.config
-        if optics_mod.active(c):  # the lens's blocks are fixed to the whole sensor: the tile's crop of the whole
-            signal = optics_mod.cfa_signal(self._picture, c, sensor.cfa, self.spec.channel_responsivity,
-                                           self.spec.shape, window)
-        else:
-            signal = scene_mod.cfa_signal(self._picture, sensor.cfa, self.spec.channel_responsivity, region=window)
+        # the lens's blocks are fixed to the whole sensor: the tile's signal is that crop of the whole
+        signal = optics_mod.cfa_signal(self._picture, self.spec.config, sensor.cfa, self.spec.channel_responsivity,
+                                       self.spec.shape, window)
         return sensor.expose(signal, sequence=self.sequence)
 
     def frames(self, region: tuple[int, int, int, int], n: int, first: int = 0,
