@@ -25,6 +25,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -187,18 +188,28 @@ def read(path: str | Path, raw_cfa: str | None = None, raw_black_dn: float = 0.0
         Not readable, no Bayer colour filter array (a Foveon, an X-Trans or a linear DNG), too large.
     """
     p = inputs.check_regular(path, "scene")
+    st = p.stat()
+    # a command checks its scene before any work and reads it again to draw it: one decode, kept while the file is
+    # the same (its size and modification time)
+    return _read(str(p.resolve()), st.st_size, st.st_mtime_ns, raw_cfa, raw_black_dn, raw_white_dn)
+
+
+@functools.lru_cache(maxsize=2)
+def _read(path: str, size: int, mtime_ns: int, raw_cfa, raw_black_dn, raw_white_dn) -> RawPhoto:
+    """:func:`read` of a checked file (its size and time are the cache's key, not read here)."""
+    p = Path(path)
     if p.suffix.lower() == ".npy":
         if raw_cfa is None:
             raise CmosnoiseError(f"scene {str(path)!r}: a .npy mosaic needs scene.raw_cfa (its pattern at (0, 0))")
-        inputs.check_decoded(p.stat().st_size, p, "scene", MAX_RAW_BYTES)
+        inputs.check_decoded(size, p, "scene", MAX_RAW_BYTES)
         with inputs.open_regular(p, "scene") as fh:
             try:
                 codes = np.load(fh, allow_pickle=False)
             except ValueError as exc:
                 raise CmosnoiseError(f"scene {str(path)!r}: not a NumPy array ({exc})") from None
         return from_array(codes, raw_cfa, raw_black_dn, raw_white_dn)
-    if p.stat().st_size > MAX_RAW_BYTES:
-        raise CmosnoiseError(f"scene {str(path)!r}: {p.stat().st_size} bytes; a raw photograph is read up to "
+    if size > MAX_RAW_BYTES:
+        raise CmosnoiseError(f"scene {str(path)!r}: {size} bytes; a raw photograph is read up to "
                              f"{MAX_RAW_BYTES} bytes")
     import rawpy
 
