@@ -55,6 +55,9 @@ GRACE_S = 4.0
 _cleanups: dict[int, object] = {}
 #: set when the current command is over (the watchdog of its signal then does nothing)
 _over = [None]
+#: what a job keeps on disk as it goes (a data set's shards, a sweep's rows): each says it in words, for the
+#: watchdog's line when the job's own handler never ran
+_keeping: dict[int, object] = {}
 
 
 def signal_received(signum: int, _frame=None):
@@ -91,7 +94,7 @@ def _watchdog(signum: int, over) -> None:
         except Exception:  # noqa: BLE001 - the process ends either way
             pass
     name = "Ctrl-C" if signum == signals.SIGINT else signals.Signals(signum).name
-    done = f"; {written_note() or 'nothing was written'}"
+    done = f"; {_kept_now() or written_note() or 'nothing was written'}"
     try:
         sys.stderr.write(f"cmosnoise: interrupted ({name}): stopped after {GRACE_S:g} s{done}\n")
         sys.stderr.flush()
@@ -158,6 +161,30 @@ def check_terminated() -> None:
 def clear_terminated() -> None:
     _received.clear()
     _written.clear()
+
+
+@contextlib.contextmanager
+def keeping(what):
+    """A block in which a job writes resumable output as it goes: ``what()`` says in words what it has kept so
+    far ("" for nothing). The watchdog's line uses it when the job was ended before its own handler could say so
+    (a signal swallowed inside a compile), instead of "nothing was written"."""
+    key = id(what)
+    _keeping[key] = what
+    try:
+        yield
+    finally:
+        _keeping.pop(key, None)
+
+
+def _kept_now() -> str:
+    for what in list(_keeping.values()):
+        try:
+            said = what()
+        except Exception:  # noqa: BLE001 - the process ends either way; the plain line stands
+            said = ""
+        if said:
+            return said
+    return ""
 
 
 def note_kept(exc: BaseException, what: str) -> None:

@@ -58,7 +58,7 @@ from ..analysis import ground_truth
 from ..config import load_config, virtual_cameras
 from ..config.loading import deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
-from ..errors import CmosnoiseError, note_kept
+from ..errors import CmosnoiseError, keeping, note_kept
 from ..io.output import atomic_file, resumable_mode
 from ..model import raw_scene
 from ..model import scene as scene_mod
@@ -837,19 +837,24 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
                 made = _shards_on(client, recipe, todo, device)
             else:
                 made = _shards_here(recipe, todo, device)
+            counted = [done]
+
+            def kept() -> str:
+                if mode == "replace":
+                    return f"nothing was written: {out} keeps the data set it held"
+                shards = recipe.shards() - len(missing(recipe, work))
+                return (f"{shards} of {recipe.shards()} shards ({counted[0]} of {total} samples) kept in {out}; "
+                        "--resume completes it")
+
             try:
-                for s, data in made:
-                    _write(work, recipe.shard_name(s), data)
-                    done += len(recipe.shard_range(s))
-                    if progress:
-                        progress(done, total)
-            except BaseException as exc:  # the shards made so far stay where they are resumable
-                if mode != "replace":
-                    shards = recipe.shards() - len(missing(recipe, work))
-                    note_kept(exc, f"{shards} of {recipe.shards()} shards ({done} of {total} samples) kept in "
-                                   f"{out}; --resume completes it")
-                else:
-                    note_kept(exc, f"nothing was written: {out} keeps the data set it held")
+                with keeping(kept):  # the shards made so far stay where they are resumable
+                    for s, data in made:
+                        _write(work, recipe.shard_name(s), data)
+                        counted[0] += len(recipe.shard_range(s))
+                        if progress:
+                            progress(counted[0], total)
+            except BaseException as exc:
+                note_kept(exc, kept())
                 raise
     except OSError as exc:
         raise CmosnoiseError(f"--out {str(out)!r} cannot be written: {exc.strerror or exc}") from None

@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 
 from ..config.loading import load_yaml_text
-from ..errors import CmosnoiseError, note_kept
+from ..errors import CmosnoiseError, keeping, note_kept
 from ..io.output import OutputFolder, resumable_mode
 
 #: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
@@ -900,21 +900,28 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
                 work = out
             client, cluster = connect(scheduler, workers, say)
             stack.callback(disconnect, client, cluster)
+
+            def kept() -> str:
+                if mode == "replace":
+                    return f"nothing was written: {out} keeps the sweep it held"
+                if not out.exists():
+                    return ""
+                rows = _rows_kept(out / "results.csv")  # the rows went straight into out: they stay, for --resume
+                total = len(p.points) * p.instances
+                return (f"{rows} of {total} rows kept in {out / 'results.csv'}; --resume completes them" if rows
+                        else f"the sweep's plan kept in {out}; --resume starts it")
+
             try:
-                if mode != "resume":
-                    work.mkdir(parents=True, exist_ok=True)
-                    _write_plan(work, p)
-                execute(p, work, client, mode == "resume", progress, device)
+                with keeping(kept):
+                    if mode != "resume":
+                        work.mkdir(parents=True, exist_ok=True)
+                        _write_plan(work, p)
+                    execute(p, work, client, mode == "resume", progress, device)
             except BaseException as exc:
                 if mode == "new" and not (out / "results.csv").exists():
                     shutil.rmtree(out, ignore_errors=True)
-                elif mode != "replace":  # the rows went straight into out: they stay, for --resume
-                    rows = _rows_kept(out / "results.csv")
-                    total = len(p.points) * p.instances
-                    note_kept(exc, f"{rows} of {total} rows kept in {out / 'results.csv'}; --resume completes "
-                                   "them" if rows else f"the sweep's plan kept in {out}; --resume starts it")
                 else:
-                    note_kept(exc, f"nothing was written: {out} keeps the sweep it held")
+                    note_kept(exc, kept())
                 raise
             summarize(p, work)
     except OSError as exc:
