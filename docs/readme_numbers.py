@@ -195,7 +195,8 @@ def compute_characterize_presets() -> dict:
         res, model = ev.evaluate(m), ch.model_values(sensor, m.stack_texp_s)
         out[name] = {"measured": {k: res[k] for k in README_PRESET_ROWS}, "model": {k: model[k] for k in README_PRESET_ROWS},
                      "excluded": res["prnu_excluded_pixels"], "dark_fit_points": res["dark_fit_points"],
-                     "unavailable": sorted(k for k in res["unavailable"] if k in README_PRESET_ROWS)}
+                     "unavailable": sorted(k for k in res["unavailable"] if k in README_PRESET_ROWS),
+                     "unresolved": {k: v for k, v in res["unresolved"].items() if k in README_PRESET_ROWS}}
     return out
 
 
@@ -206,13 +207,47 @@ def render_characterize_presets(d: dict) -> str:
     head = "| preset | " + " | ".join(labels[k] for k in README_PRESET_ROWS) + " | PRNU: defects left out | dark fit: exposure times |"
     out = [head, "|---" * (len(README_PRESET_ROWS) + 3) + "|"]
     for name, e in d.items():
-        rows = {label.strip(): (mv, xv, dev) for label, _, mv, xv, dev in table(e["measured"], e["model"])}
+        measured = {**e["measured"], "unresolved": e.get("unresolved", {})}
+        rows = {label.strip(): (mv, xv, dev) for label, _, mv, xv, dev in table(measured, e["model"])}
         cells = []
         for k in README_PRESET_ROWS:
             mv, xv, dev = rows[labels[k]]
             cells.append(f"n/a (no K) / {xv}" if k in e["unavailable"] else f"{mv} / {xv} ({dev or '-'} %)")
         fit = "n/a" if "dark_current_mean_e_per_s" in e["unavailable"] else f"{e['dark_fit_points']} of 40"
         out.append(f"| `{name}` | " + " | ".join(cells) + f" | {_int(e['excluded'])} | {fit} |")
+    return "\n".join(out)
+
+
+def compute_cooled_dark() -> dict:
+    """`characterize` on the IMX571 preset at -9.6 C (256 x 192 pixels, seed 0, 40 steps, 16-frame stacks): the
+    dark current with the automatic dark series and without it (--dark-exposures none)."""
+    import tempfile
+
+    from cmosnoise.app import cli
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in ("auto", "none"):
+            assert cli.run(["-q", "characterize", "--preset", "sony-imx571", "--set", "sensor.width=256", "--set",
+                            "sensor.height=192", "--seed", "0", "--dark-exposures", name, "--out", f"{tmp}/{name}"]) == 0
+            d = json.loads(Path(f"{tmp}/{name}/characterization.json").read_text())
+            res = d["measured"]
+            out[name] = {"measured": res["dark_current_mean_e_per_s"], "se": res["dark_current_mean_se_e_per_s"],
+                         "bound": res["unresolved"].get("dark_current_mean_e_per_s"),
+                         "model": d["model"]["dark_current_mean_e_per_s"],
+                         "longest_s": res["dark_series_longest_s"] or float(max(d["series"]["texp_s"])),
+                         "points": res["dark_series_points"] or len(d["series"]["texp_s"])}
+    return out
+
+
+def render_cooled_dark(d: dict) -> str:
+    out = ["| series | dark pairs | longest exposure | dark current (from mean), e-/s | model, e-/s |", "|---|---|---|---|---|"]
+    for name, label in (("none", "photon-transfer darks only (`--dark-exposures none`)"),
+                        ("auto", "with the automatic dark series (`auto`)")):
+        e = d[name]
+        value = (f"< {e['bound']:.2g} (below what this series resolves)" if e["bound"] is not None else
+                 f"{e['measured']:.3g} +- {e['se']:.1g} ({100 * (e['measured'] / e['model'] - 1):+.1f} %)")
+        out.append(f"| {label} | {e['points']} | {e['longest_s']:.4g} s | {value} | {e['model']:.3g} |")
     return "\n".join(out)
 
 
@@ -708,6 +743,7 @@ def render_run_speed(d: dict) -> str:
 SECTIONS = {
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
+    "cooled_dark": (compute_cooled_dark, render_cooled_dark),
     "fig9_processing": (compute_fig9_processing, render_fig9_processing),
     "colour": (compute_colour, render_colour),
     "light": (compute_light, render_light),

@@ -267,3 +267,72 @@ def test_characterize_agrees_with_the_model_on_every_preset(preset):
         assert key in ev.DEFINITION_NOTES
     assert 0.8 * model["saturation_capacity_e"] < res["saturation_capacity_e"] <= model["saturation_capacity_e"] * (1 + 5 * rel_k)
     assert not failures, failures
+
+
+# ------------------------------------------------------------------ a cooled sensor's dark current
+def _imx571(width=256, height=192):
+    from cmosnoise.config.loading import deep_merge, preset_data
+
+    data = deep_merge(preset_data("sony-imx571"), {"sensor": {"width": width, "height": height}})
+    data.pop("description", None)
+    return Sensor(data, seed=0)
+
+
+def test_a_cooled_sensors_dark_current_is_resolved_by_a_dark_series_within_20_percent():
+    """IMX571 at -9.6 C, 0.00054 e-/s (the lab report's median, the preset's mean). The photon-transfer series
+    (to 1.3 s) cannot resolve it; the automatic dark series is chosen so that the slope's standard error is
+    DARK_SERIES_REL_SE (4 %) of the model's dark current: 5 of them is the 20 % the issue asks, and the test
+    holds the measured value to 5 standard errors of the model-derived SE, sqrt(var_pair / Sxx), around the
+    instance's own mean rate (and to 20 % of the report's figure)."""
+    sensor = _imx571()
+    times = ch.dark_series_times(sensor)
+    assert times is not None and times[-1] > 10 * ch.SERIES_END_S and len(times) == ch.DARK_SERIES_STEPS
+    rate = ch.mean_dark_rate(sensor)
+    sxx = float(np.sum((times - times.mean()) ** 2))
+    se = math.sqrt(ch.frame_mean_variance_e2(sensor) / 2 / sxx)
+    assert se == pytest.approx(ch.DARK_SERIES_REL_SE * rate, rel=1e-9)  # what the times were chosen for
+    m = ch.measure(sensor, steps=16, stack_frames=2)
+    res = ev.evaluate(m)
+    assert res["dark_series_points"] == len(times) and res["unresolved"] == {}
+    assert abs(res["dark_current_mean_e_per_s"] - rate) <= 5 * se, (res["dark_current_mean_e_per_s"], rate, se)
+    assert abs(res["dark_current_mean_e_per_s"] / 0.00054 - 1) <= 0.20
+    notes = ev.footnotes(res)
+    assert any(n.startswith(f"dark current: from a dark series of {len(times)} pairs") for n in notes), notes
+    cells = {label.strip(): mv for label, _, mv, _, _ in ev.table(res, ch.model_values(sensor, m.stack_texp_s))}
+    assert cells["Dark current (from mean)"] not in ("0.00", "0") and float(cells["Dark current (from mean)"]) > 0
+
+
+def test_a_dark_current_below_what_the_series_resolves_is_a_bound_that_contains_it():
+    """Without the dark series the photon-transfer darks cannot resolve 0.00054 e-/s: the table prints "< bound"
+    (the slope, or 0, plus DARK_RESOLVE_Z standard errors), the bound contains the truth, and the note says so;
+    never "0.00"."""
+    sensor = _imx571()
+    m = ch.measure(sensor, steps=16, stack_frames=2, dark_exposures=None)
+    res = ev.evaluate(m)
+    assert set(res["unresolved"]) == {"dark_current_mean_e_per_s", "dark_current_var_e_per_s"}
+    assert res["unresolved"]["dark_current_mean_e_per_s"] > ch.mean_dark_rate(sensor)
+    cells = {label.strip(): mv for label, _, mv, _, _ in ev.table(res, None)}
+    assert cells["Dark current (from mean)"].startswith("< "), cells
+    assert any("below what this series resolves" in n and "--dark-exposures" in n for n in ev.footnotes(res))
+
+
+def test_a_sensor_whose_dark_current_the_series_resolves_gets_no_dark_series_and_bad_times_are_refused():
+    assert ch.dark_series_times(Sensor(load_config(), seed=0)) is None  # 8 e-/s: the photon-transfer darks do
+    assert ch.dark_series_times(Sensor({"sensor": {"width": 64, "height": 48}, "dark_current": {"enabled": False}})) \
+        is None
+    for bad in ([1, 2], [1, 1, 2], [0, 1, 2], [1, float("nan"), 3]):
+        with pytest.raises(ch.CmosnoiseError, match="dark_exposures"):
+            ch.measure(Sensor({"sensor": {"width": 32, "height": 24}}), steps=8, stack_frames=2, dark_exposures=bad)
+    r = cli("characterize", "--dark-exposures", "1,2", "--out", "unused")
+    assert r.returncode == 2 and "--dark-exposures '1,2'" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_characterize_takes_dark_exposures_and_writes_the_dark_series(tmp_path):
+    r = cli("characterize", "--preset", "sony-imx571", "--set", "sensor.width=128", "--set", "sensor.height=96",
+            "--steps", "8", "--stack-frames", "2", "--dark-exposures", "100,200,400,800", "--out", tmp_path / "c")
+    assert r.returncode == 0, r.stderr
+    import json
+
+    d = json.loads((tmp_path / "c" / "characterization.json").read_text())
+    assert d["series"]["dark_series"]["texp_s"] == [100, 200, 400, 800]
+    assert d["measured"]["dark_series_longest_s"] == 800 and "from a dark series of 4 pairs" in r.stdout

@@ -6,7 +6,12 @@ a constant, uniform irradiation:
 - a photon-transfer series: at each of ``steps`` exposure times up to beyond
   saturation, two bright and two dark frames;
 - stacks of ``stack_frames`` bright frames (at ~50 % of saturation) and dark
-  frames at the same exposure time, for the spatial statistics.
+  frames at the same exposure time, for the spatial statistics;
+- where the photon-transfer series' exposure times (to 1.3 s) are too short to
+  resolve the dark current (a cooled sensor: 0.0005 e-/s), a dark-current
+  series of dark pairs at longer exposure times, as EMVA 1288 (release 4.0,
+  section 7.1) allows: chosen from the model by :func:`dark_series_times`, or
+  given.
 
 The evaluation (:func:`cmosnoise.analysis.emva_evaluation.evaluate`) uses
 nothing but those frames and the photon counts, as a lab would: the system gain K from the photon-transfer
@@ -40,7 +45,13 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from ..errors import CmosnoiseError
-from ..model.seeds import SEQ_EMVA_BRIGHT, SEQ_EMVA_DARK, SEQ_EMVA_STACK_BRIGHT, SEQ_EMVA_STACK_DARK
+from ..model.seeds import (
+    SEQ_EMVA_BRIGHT,
+    SEQ_EMVA_DARK,
+    SEQ_EMVA_DARK_SERIES,
+    SEQ_EMVA_STACK_BRIGHT,
+    SEQ_EMVA_STACK_DARK,
+)
 from ..model.stages import adc, nonlinearity
 from . import emva, noise_budget
 
@@ -50,6 +61,14 @@ if TYPE_CHECKING:
 
 #: fewest exposure times of a photon-transfer series: 3 of them below 70 % of saturation
 MIN_STEPS = 8
+#: exposure times of an automatic dark-current series
+DARK_SERIES_STEPS = 8
+#: the relative standard error of the dark current an automatic dark series aims at (4 %: 20 % is 5 of them)
+DARK_SERIES_REL_SE = 0.04
+#: the longest exposure an automatic dark series makes, s (an hour: longer than an astronomer's darks)
+DARK_SERIES_MAX_S = 3600.0
+#: the photon-transfer series' longest exposure time, s
+SERIES_END_S = 1.3
 
 
 @dataclass
@@ -80,6 +99,11 @@ class Measurement:
     dsnu_shortest_dn2 : float, optional
         The fixed pattern of the dark pair at the shortest exposure time (DN^2, :func:`dsnu_of_pair`): the pixel
         offsets' DSNU, with the least dark current in it.
+    dark_texp_s, dark_mu_dn, dark_s2_dn2 : (n,) arrays, optional
+        A dark-current series: exposure times (s), the mean (DN) and the temporal variance (DN^2) of a dark pair
+        at each, over the pixels that stay below half the range at its longest exposure (None: no such series).
+    dark_excluded : int
+        The pixels the dark-current series leaves out (white pixels near saturation at its longest exposure).
     """
 
     bits: int
@@ -97,6 +121,10 @@ class Measurement:
     max_ydark: np.ndarray
     frames: dict = field(default_factory=dict)
     dsnu_shortest_dn2: float | None = None
+    dark_texp_s: np.ndarray | None = None
+    dark_mu_dn: np.ndarray | None = None
+    dark_s2_dn2: np.ndarray | None = None
+    dark_excluded: int = 0
 
 
 def dsnu_of_pair(a: np.ndarray, b: np.ndarray) -> float:
@@ -132,8 +160,89 @@ def pair_stats(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return (float(a.mean()) + float(b.mean())) / 2, emva.temporal_variance(a, b)
 
 
+def mean_dark_rate(sensor: Sensor) -> float:
+    """The sensor instance's mean dark current, e-/s per pixel: its dark-rate map's mean plus the blinking pixels'
+    mean rate (their step times their time high).
+
+    Parameters
+    ----------
+    sensor : Sensor
+
+    Returns
+    -------
+    float
+        e-/s.
+    """
+    c, fp = sensor.config, sensor.fixed_pattern
+    rate = 0.0 if fp.dark_rate is None else float(fp.dark_rate.astype(np.float64).mean())
+    blinking = noise_budget.telegraph_moments(sensor).get("blinking")
+    if blinking is not None:
+        rate += float(blinking[1].sum()) / (sensor.shape[0] * sensor.shape[1] * c.exposure.integration_time_s)
+    return rate
+
+
+def frame_mean_variance_e2(sensor: Sensor) -> float:
+    """The temporal variance of one dark frame's mean over its pixels, e-^2, as the model implies it.
+
+    A pixel's own noise averages down with the pixel count, a row's or a column's with the rows or columns, the
+    black level's error of the frame not at all.
+
+    Parameters
+    ----------
+    sensor : Sensor
+
+    Returns
+    -------
+    float
+        e-^2.
+    """
+    rows, cols = sensor.shape
+    per = {"row": rows, "column": cols, "black_level_frame": 1}
+    return sum(v / per.get(name, rows * cols) for name, v in noise_budget.temporal_variances(sensor, 0.0).items())
+
+
+def dark_series_times(sensor: Sensor, steps: int = DARK_SERIES_STEPS) -> np.ndarray | None:
+    """Exposure times of a dark-current series that resolves the sensor's dark current, or None where the
+    photon-transfer series' own dark pairs (to :data:`SERIES_END_S`) already do (or there is no dark current).
+
+    The dark current is the slope of the dark pairs' mean against the exposure time. With ``steps`` equal steps
+    to ``T`` its standard error is ``sqrt(var_pair / Sxx)``, ``var_pair`` the variance of a pair's mean
+    (:func:`frame_mean_variance_e2` / 2) and ``Sxx = T^2 (steps^2 - 1) / (12 steps)``; ``T`` is chosen so that
+    it is :data:`DARK_SERIES_REL_SE` of the model's dark current, at most :data:`DARK_SERIES_MAX_S`.
+
+    Parameters
+    ----------
+    sensor : Sensor
+    steps : int
+        Exposure times in the series.
+
+    Returns
+    -------
+    (steps,) array of s, or None
+    """
+    rate = mean_dark_rate(sensor)
+    if not rate > 0:
+        return None
+    var_pair = frame_mean_variance_e2(sensor) / 2
+    end = math.sqrt(var_pair * 12 * steps / (steps**2 - 1)) / (DARK_SERIES_REL_SE * rate)
+    if end <= SERIES_END_S:
+        return None
+    end = min(end, DARK_SERIES_MAX_S)
+    return np.linspace(end / steps, end, steps)
+
+
+def _dark_times(dark_exposures) -> np.ndarray | None:
+    if dark_exposures is None:
+        return None
+    t = np.asarray(dark_exposures, np.float64).ravel()
+    if t.size < 3 or not np.all(np.isfinite(t)) or np.any(t <= 0) or t.size != np.unique(t).size:
+        raise CmosnoiseError(f"dark_exposures = {list(map(float, t))}: expected 3 or more different exposure times "
+                             "in seconds, each > 0")
+    return np.sort(t)
+
+
 def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames: bool = False,
-            progress: Callable[[], None] | None = None) -> Measurement:
+            progress: Callable[[], None] | None = None, dark_exposures="auto") -> Measurement:
     """Run the EMVA 1288 measurement series on ``sensor`` (a :class:`cmosnoise.Sensor`).
 
     The irradiation is set so that saturation is reached at 1 s; exposure
@@ -152,23 +261,31 @@ def measure(sensor: Sensor, steps: int = 40, stack_frames: int = 16, keep_frames
         Keep the frames in the result (to write them as an EMVA 1288 data set).
     progress : callable, optional
         Called once per step.
+    dark_exposures : "auto", None or sequence of float
+        The dark-current series' exposure times, s: "auto" chooses them from the model
+        (:func:`dark_series_times`; none where the photon-transfer series resolves the dark current), None makes
+        no such series.
 
     Returns
     -------
     Measurement
     """
+    if isinstance(dark_exposures, str) and dark_exposures == "auto":
+        dark = dark_series_times(sensor)
+    else:
+        dark = _dark_times(dark_exposures)
     if not isinstance(steps, (int, np.integer)) or steps < MIN_STEPS:
         raise CmosnoiseError(f"steps = {steps!r}: the photon-transfer series needs at least {MIN_STEPS} exposure times")
     if not isinstance(stack_frames, (int, np.integer)) or stack_frames < 2:
         raise CmosnoiseError(f"stack_frames = {stack_frames!r}: a stack needs at least 2 frames")
     rate = sensor.saturation_e / 1.0  # photo-electrons per second per pixel at scene value 1
-    texp = np.linspace(1.3 / steps, 1.3, steps)
+    texp = np.linspace(SERIES_END_S / steps, SERIES_END_S, steps)
     t50 = 0.5  # half of saturation
-    return _series(sensor, texp, np.full(steps, rate), t50, rate, stack_frames, keep_frames, progress)
+    return _series(sensor, texp, np.full(steps, rate), t50, rate, stack_frames, keep_frames, progress, dark)
 
 
 def measure_like(sensor: Sensor, like: Measurement, keep_frames: bool = False,
-                 progress: Callable[[], None] | None = None) -> Measurement:
+                 progress: Callable[[], None] | None = None, dark_exposures=None) -> Measurement:
     """The measurement series of ``like`` (a lab's: its exposure times, photons per pixel and stack sizes) made on
     ``sensor``: each step's photons times the sensor's quantum efficiency (1 without one) are its photo-electrons.
 
@@ -185,20 +302,26 @@ def measure_like(sensor: Sensor, like: Measurement, keep_frames: bool = False,
         Keep the frames in the result.
     progress : callable, optional
         Called once per step.
+    dark_exposures : None, "auto" or sequence of float
+        A dark-current series besides ``like``'s (:func:`measure`); ``like``'s own when it has one.
 
     Returns
     -------
     Measurement
     """
+    if isinstance(dark_exposures, str) and dark_exposures == "auto":
+        dark = dark_series_times(sensor)
+    else:
+        dark = _dark_times(dark_exposures if dark_exposures is not None else like.dark_texp_s)
     qe = sensor.config.sensor.qe_mean() or 1.0
     texp = np.maximum(np.asarray(like.texp_s, np.float64), 1e-9)
     stack_t = max(float(like.stack_texp_s), 1e-9)
     return _series(sensor, texp, np.asarray(like.mu_p, np.float64) * qe / texp, stack_t,
-                   float(like.stack_mu_p) * qe / stack_t, max(len(like.stack_dark), 2), keep_frames, progress)
+                   float(like.stack_mu_p) * qe / stack_t, max(len(like.stack_dark), 2), keep_frames, progress, dark)
 
 
 def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: float, stack_rate: float,
-            stack_frames: int, keep_frames: bool, progress) -> Measurement:
+            stack_frames: int, keep_frames: bool, progress, dark_texp: np.ndarray | None = None) -> Measurement:
     """Bright and dark pairs at each exposure time ``texp`` under ``rates`` photo-electrons per second generated per
     pixel, and the two stacks; photons are the photo-electrons over the sensor's quantum efficiency."""
     t = sensor.transfer
@@ -230,11 +353,31 @@ def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: flo
     stack_dark = np.stack(list(sd.frames(stack_frames)))
     if progress:
         progress()
+    dark = (None, None, None, 0)
+    if dark_texp is not None:
+        dark = _dark_series(sensor, dark_texp, mu_yd[shortest] + 0.5 * (float(np.max(mu_y)) - mu_yd[shortest]))
     qe = sensor.config.sensor.qe_mean() or 1.0  # photo-electrons per photon
     return Measurement(
         t.bits, sensor.shape, texp, rates * texp / qe, mu_y, mu_yd, s2_y, s2_yd, stack_texp, stack_rate * stack_texp / qe,
-        stack_bright, stack_dark, max_yd, frames, dsnu_short,
+        stack_bright, stack_dark, max_yd, frames, dsnu_short, *dark,
     )
+
+
+def _dark_series(sensor: Sensor, texp: np.ndarray, limit_dn: float):
+    """Dark pairs at each of ``texp`` (their own frames, sequence :data:`SEQ_EMVA_DARK_SERIES`): the mean and
+    temporal variance over the pixels below ``limit_dn`` in both frames of the longest exposure's pair."""
+    def pair(i):
+        shot = sensor.with_exposure(float(texp[i])).expose("flat:0", sequence=SEQ_EMVA_DARK_SERIES)
+        return shot.frame(2 * i), shot.frame(2 * i + 1)
+
+    last = pair(len(texp) - 1)
+    keep = (last[0] < limit_dn) & (last[1] < limit_dn)
+    mu, s2 = np.zeros(len(texp)), np.zeros(len(texp))
+    for i in range(len(texp)):
+        a, b = last if i == len(texp) - 1 else pair(i)
+        a, b = a[keep], b[keep]
+        mu[i], s2[i] = pair_stats(a, b)
+    return texp, mu, s2, int(keep.size - keep.sum())
 
 
 def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray | None = None,
@@ -282,10 +425,7 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
     if fp.column_gain is not None:
         signal = signal * fp.column_gain
     qe = float(signal.mean()) * (c.sensor.qe_mean() or 1.0)  # photo-electrons collected per photon
-    dark_mean = 0.0 if fp.dark_rate is None else float(fp.dark_rate.astype(np.float64).mean())
-    blinking = noise_budget.telegraph_moments(sensor).get("blinking")
-    if blinking is not None:  # a blinking pixel's mean rate: its step times its time high
-        dark_mean += float(blinking[1].sum()) / (sensor.shape[0] * sensor.shape[1] * c.exposure.integration_time_s)
+    dark_mean = mean_dark_rate(sensor)
     def expected_dark_at(texp_s):
         """The expected dark image (e-) at ``texp_s``, with the clips and the quantizer's pattern."""
         mo = noise_budget.clipped_moments(sensor.with_exposure(texp_s), 0.0)

@@ -40,6 +40,25 @@ MIN_FIT_POINTS = 3
 #: the dark series is fitted where no dark pixel is above this fraction of the way to saturation
 DARK_FIT_LIMIT = 0.9
 
+#: a dark current below this many standard errors of its slope is "below what this series resolves", and its
+#: upper bound is the slope (or 0) plus as many: a one-sided 99.87 % bound
+DARK_RESOLVE_Z = 3.0
+
+
+def _slope(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """Least squares line: (slope, its standard error, intercept); the standard error from the residuals, n - 2
+    degrees of freedom."""
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
+    xm, ym = x.mean(), y.mean()
+    sxx = float(np.sum((x - xm) ** 2))
+    b = float(np.sum((x - xm) * (y - ym))) / sxx
+    a = float(ym) - b * float(xm)
+    r = y - (a + b * x)
+    se = math.sqrt(float(np.sum(r * r)) / (len(x) - 2) / sxx) if len(x) > 2 else math.nan
+    return b, se, a
+
+
 #: what needs the system gain K (e- values), for when the series cannot give it
 _NEEDS_K = ("system_gain_K_dn_per_e", "inverse_gain_e_per_dn", "quantum_efficiency", "temporal_dark_noise_e",
             "saturation_capacity_e", "snr_max", "snr_max_db", "absolute_sensitivity_threshold_photons",
@@ -100,9 +119,10 @@ def evaluate(m: Measurement) -> dict:
     # intercept = sigma_y.dark^2, slopes = dark current
     limit = m.mu_ydark[0] + DARK_FIT_LIMIT * (float(np.max(m.mu_y)) - m.mu_ydark[0])
     dark_ok = np.nonzero(m.max_ydark < limit)[0]
+    se_m = se_v = math.nan
     if len(dark_ok) >= MIN_FIT_POINTS:
-        slope_v, s2_ydark0 = np.polyfit(m.texp_s[dark_ok], m.s2_ydark[dark_ok], 1)
-        slope_m, _ = np.polyfit(m.texp_s[dark_ok], m.mu_ydark[dark_ok], 1)
+        slope_v, se_v, s2_ydark0 = _slope(m.texp_s[dark_ok], m.s2_ydark[dark_ok])
+        slope_m, se_m, _ = _slope(m.texp_s[dark_ok], m.mu_ydark[dark_ok])
     else:
         slope_v = slope_m = s2_ydark0 = math.nan
         why = (f"white pixels come within {100 * (1 - DARK_FIT_LIMIT):.0f} % of saturation in the dark in all but "
@@ -112,6 +132,17 @@ def evaluate(m: Measurement) -> dict:
                     "dark_current_var_e_per_s", "absolute_sensitivity_threshold_photons", "dynamic_range",
                     "dynamic_range_db"):
             unavailable.setdefault(key, why)
+    if m.dark_texp_s is not None:  # a dark-current series: the dark current from it
+        slope_m, se_m, _ = _slope(m.dark_texp_s, m.dark_mu_dn)
+        slope_v, se_v, _ = _slope(m.dark_texp_s, m.dark_s2_dn2)
+        for key in ("dark_current_mean_e_per_s", "dark_current_var_e_per_s"):
+            unavailable.pop(key, None)
+    bounds = {}
+    for key, slope, se, kk in (("dark_current_mean_e_per_s", slope_m, se_m, k), ("dark_current_var_e_per_s", slope_v,
+                                                                                  se_v, k * k)):
+        # (a series without temporal noise has se = 0: its slope is exact, resolved)
+        if math.isfinite(slope) and math.isfinite(kk) and se > 0 and not slope > DARK_RESOLVE_Z * se:
+            bounds[key] = (max(slope, 0.0) + DARK_RESOLVE_Z * se) / kk
     s2_ydark0 = max(s2_ydark0, 1 / 12 + 1e-12) if math.isfinite(s2_ydark0) else math.nan
     sigma_y_dark = math.sqrt(s2_ydark0)
     sigma_d = math.sqrt(s2_ydark0 - 1 / 12) / k
@@ -147,6 +178,8 @@ def evaluate(m: Measurement) -> dict:
         "dynamic_range_db": 20 * math.log10(u_p_sat / u_p_min) if u_p_sat / u_p_min > 0 else math.nan,
         "dark_current_mean_e_per_s": slope_m / k,
         "dark_current_var_e_per_s": slope_v / k**2,
+        "dark_current_mean_se_e_per_s": se_m / k,
+        "dark_current_var_se_e_per_s": se_v / k**2,
         "dsnu_e": dsnu["total"] / k,
         "dsnu_shortest_e": (math.sqrt(max(m.dsnu_shortest_dn2, 0.0)) / k if m.dsnu_shortest_dn2 is not None
                             else math.nan),
@@ -163,9 +196,13 @@ def evaluate(m: Measurement) -> dict:
         "linear_fit_points": int(len(lin)),
         "dark_fit_points": int(len(dark_ok)),
         "series_points": int(len(m.texp_s)),
+        "dark_series_points": 0 if m.dark_texp_s is None else int(len(m.dark_texp_s)),
+        "dark_series_longest_s": math.nan if m.dark_texp_s is None else float(np.max(m.dark_texp_s)),
+        "dark_series_excluded_pixels": int(m.dark_excluded),
     }
     out = {key: (None if isinstance(val, float) and not math.isfinite(val) else val) for key, val in out.items()}
     out["unavailable"] = unavailable
+    out["unresolved"] = bounds
     return out
 
 
@@ -213,8 +250,8 @@ TABLE_ROWS = [
     ("saturation_capacity_e", "Saturation capacity mu_e.sat", "e-", "{:.0f}"),
     ("snr_max", "SNR max", "", "{:.1f}"),
     ("dynamic_range_db", "Dynamic range", "dB", "{:.1f}"),
-    ("dark_current_mean_e_per_s", "Dark current (from mean)", "e-/s", "{:.2f}"),
-    ("dark_current_var_e_per_s", "Dark current (from variance)", "e-/s", "{:.2f}"),
+    ("dark_current_mean_e_per_s", "Dark current (from mean)", "e-/s", "{:.3g}"),
+    ("dark_current_var_e_per_s", "Dark current (from variance)", "e-/s", "{:.3g}"),
     ("linearity_error_min_pct", "Linearity error min", "%", "{:.3f}"),
     ("linearity_error_max_pct", "Linearity error max", "%", "{:.3f}"),
     ("dsnu_e", "DSNU1288", "e-", "{:.3f}"),
@@ -239,14 +276,24 @@ def table(measured: dict, model: dict | None) -> list[tuple[str, str, str, str, 
     list of (str, str, str, str, str)
     """
     rows = []
+    bounds = measured.get("unresolved", {})
     for key, label, unit, fmt in TABLE_ROWS:
         mv = measured.get(key)
         xv = (model or {}).get(key)
         dev = ""
+        if key in bounds:  # below what the series resolves: its upper bound, no deviation
+            rows.append((label, unit, f"< {fmt.format(bounds[key])}", _cell(fmt, xv) if xv is not None else "", ""))
+            continue
         if xv is not None and float(fmt.format(xv)) != 0 and mv is not None and np.isfinite(mv):  # no % of a 0
             dev = f"{100 * (mv - xv) / xv:+.2f}"
-        rows.append((label, unit, fmt.format(mv) if mv is not None else "n/a", fmt.format(xv) if xv is not None else "", dev))
+        rows.append((label, unit, _cell(fmt, mv) if mv is not None else "n/a", _cell(fmt, xv) if xv is not None else "",
+                     dev))
     return rows
+
+
+def _cell(fmt: str, value: float) -> str:
+    """``value`` in ``fmt``; a rounding error's residue (below 1e-12, e.g. a dark current of -5e-15 e-/s) as 0."""
+    return fmt.format(0.0 if abs(value) < 1e-12 else value)
 
 
 def footnotes(measured: dict) -> list[str]:
@@ -269,6 +316,15 @@ def footnotes(measured: dict) -> list[str]:
             reasons.setdefault(why, []).append(labels[key])
     for why, names in reasons.items():
         out.append(f"n/a: {', '.join(names)}: {why}")
+    longest = measured.get("dark_series_longest_s")
+    for key, bound in measured.get("unresolved", {}).items():
+        where = (f"its longest dark exposure {longest:.4g} s" if longest else "the photon-transfer series' dark pairs")
+        out.append(f"{labels[key]}: below what this series resolves (< {bound:.3g} e-/s, a {DARK_RESOLVE_Z:g}-sigma "
+                   f"upper bound; {where}): longer --dark-exposures resolve it")
+    if measured.get("dark_series_points"):
+        excluded = measured.get("dark_series_excluded_pixels") or 0
+        out.append(f"dark current: from a dark series of {measured['dark_series_points']} pairs to {longest:.4g} s"
+                   + (f", {excluded} white pixel(s) near saturation left out" if excluded else ""))
     fit, steps = measured.get("dark_fit_points"), measured.get("series_points")
     if fit is not None and steps is not None and MIN_FIT_POINTS <= fit < steps:
         out.append(f"dark current and sigma_d: fitted over the {fit} shortest of {steps} exposure times (in the longer "

@@ -29,11 +29,13 @@ from ..model.spec import SensorSpec
 
 def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from: Path | None = None,
         steps: int = 40, stack_frames: int = 16, emva_export: Path | None = None,
-        progress: Callable[[int], Callable[[], None]] | None = None, like: Path | None = None) -> dict:
+        progress: Callable[[int], Callable[[], None]] | None = None, like: Path | None = None,
+        dark_exposures="auto") -> dict:
     """Characterize ``spec``'s sensor (or the frames of the descriptor ``frames_from``, compared with ``spec``
     when given) into ``out``; returns ``{"measured", "model", "notes", "reference"}``.
 
-    ``progress(total)`` returns what is called once per step of the series.
+    ``progress(total)`` returns what is called once per step of the series. ``dark_exposures``: the dark-current
+    series (:func:`cmosnoise.analysis.characterize.measure`); with ``like``, only one given explicitly is made.
     """
     folder = OutputFolder(out, overwrite)
     if emva_export is not None:
@@ -56,15 +58,19 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
         plan = emva_files.load(like) if like is not None else None
         advance = progress((len(plan.texp_s) if plan is not None else steps) + 1) if progress else None
         if plan is not None:  # another data set's exposure times, photons and stack sizes
-            m = ch.measure_like(sensor, plan, keep_frames=emva_export is not None, progress=advance)
+            m = ch.measure_like(sensor, plan, keep_frames=emva_export is not None, progress=advance,
+                                dark_exposures=None if isinstance(dark_exposures, str) else dark_exposures)
         else:
-            m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance)
+            m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance,
+                           dark_exposures=dark_exposures)
         model = ch.model_values(sensor, m.stack_texp_s, series_e=m.mu_p * (sensor.config.sensor.qe_mean() or 1.0),
                                 shortest_texp_s=float(np.min(m.texp_s)))
     results = ev.evaluate(m)
     notes = ev.footnotes(results)
     series = {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
               "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark}
+    if m.dark_texp_s is not None:
+        series["dark_series"] = {"texp_s": m.dark_texp_s, "mu_dn": m.dark_mu_dn, "s2_dn2": m.dark_s2_dn2}
     light = _light_axis(spec, m) if spec is not None else None
     if light is not None:
         series["focal_plane_lux_s"] = light.pop("focal_plane_lux_s")

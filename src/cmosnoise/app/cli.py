@@ -358,6 +358,10 @@ def characterize(
     like: Optional[Path] = typer.Option(None, "--like", help="measure the configuration with the exposure times, photons "
                                         "and stack sizes of this EMVA 1288 data set (folder or descriptor), for a "
                                         "side-by-side comparison with it"),
+    dark_exposures: str = typer.Option("auto", "--dark-exposures", help="a dark-current series' exposure times, s, "
+                                       "comma-separated (e.g. 60,120,300,600); 'auto': long enough to resolve the "
+                                       "configured dark current (none where the photon-transfer series does); "
+                                       "'none': no series"),
     out: Path = typer.Option(Path("cmosnoise-characterization"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
@@ -370,6 +374,10 @@ def characterize(
     if like is not None and frames_from is not None:
         raise CmosnoiseError("--like measures a configuration on another data set's plan; --frames-from reads frames "
                              "instead: give one of the two")
+    dark = _dark_exposures(dark_exposures)
+    if frames_from is not None and dark_exposures != "auto":
+        raise CmosnoiseError("--dark-exposures measures a dark series on the configuration; --frames-from reads "
+                             "frames instead: give one of the two")
     spec = None
     if frames_from is None or config or preset or set_:
         spec = _sensor(config, preset, set_, {"seed": seed} if seed is not None else None)
@@ -379,7 +387,8 @@ def characterize(
             task = p.add_task("series", total=total)
             return lambda: p.advance(task)
 
-        done = characterize_job(spec, out, overwrite, frames_from, steps, stack_frames, emva_export, progress, like)
+        done = characterize_job(spec, out, overwrite, frames_from, steps, stack_frames, emva_export, progress, like,
+                                dark)
     results, model, reference = done["measured"], done["model"], done["reference"]
     tab = Table(title="EMVA 1288 characterization" + (" (measured vs. the configuration)" if model else ""))
     cols = ["quantity", "unit", "measured", "model", "deviation %"] + (["emva1288"] if reference else [])
@@ -399,6 +408,21 @@ def characterize(
                 typer.echo(f"  emva1288 gave no value (nan) for: {', '.join(missing)}")
     _say(ctx, f"wrote characterization.json, photon_transfer.png, snr.png to {out}/"
                + (f"; EMVA 1288 data set to {emva_export}/" if emva_export else ""))
+
+
+def _dark_exposures(text: str):
+    """--dark-exposures: "auto", "none" (None) or the exposure times, s."""
+    word = text.strip().lower()
+    if word in ("auto", "none"):
+        return None if word == "none" else "auto"
+    try:
+        times = [float(part) for part in word.split(",") if part.strip()]
+    except ValueError:
+        times = []
+    if len(times) < 3 or any(not (math.isfinite(t) and t > 0) for t in times) or len(set(times)) < len(times):
+        raise CmosnoiseError(f"--dark-exposures {text!r}: expected 'auto', 'none' or 3 or more different exposure "
+                             "times in seconds, each > 0, comma-separated (e.g. 60,120,300,600)")
+    return times
 
 
 @app.command()

@@ -33,6 +33,7 @@ SEQ_EMVA_BRIGHT = 100  #: EMVA 1288 photon-transfer series, bright pairs
 SEQ_EMVA_DARK = 101  #: EMVA 1288 photon-transfer series, dark pairs
 SEQ_EMVA_STACK_BRIGHT = 102  #: EMVA 1288 bright stack (spatial statistics)
 SEQ_EMVA_STACK_DARK = 103  #: EMVA 1288 dark stack
+SEQ_EMVA_DARK_SERIES = 104  #: EMVA 1288 dark-current series (long dark pairs, for a cooled sensor)
 
 #: stage numbers of docs/model.md section 2; they key the random streams.
 STAGE_IDS = {
