@@ -380,6 +380,38 @@ def _dark_series(sensor: Sensor, texp: np.ndarray, limit_dn: float):
     return texp, mu, s2, int(keep.size - keep.sum())
 
 
+def photon_transfer_gain(sensor: Sensor, series_e: np.ndarray | None = None) -> float:
+    """The system gain K that EMVA 1288's photon-transfer fit gives on the model (DN/e-): the configured
+    (small-signal) K on a linear sensor; under a nonlinearity ``f`` the through-the-origin slope of
+    ``v = K^2 f'(x)^2 x`` against ``y = K f(x)`` over the series' photo-charges ``x`` below 70 % of saturation
+    (the shot noise through the transfer, to first order; :func:`.emva_evaluation.small_signal_gain`).
+
+    Parameters
+    ----------
+    sensor : Sensor
+    series_e : array, e-, optional
+        The series' photo-charge per pixel at each step (default: 101 equal steps to the full well).
+
+    Returns
+    -------
+    float
+        DN/e-.
+    """
+    k = sensor.transfer.gain_dn_per_e
+    curve = sensor.spec.active_nonlinearity
+    if curve is None:
+        return k
+    x = (np.asarray(series_e, np.float64) if series_e is not None
+         else np.linspace(0.0, sensor.config.sensor.full_well_e, nonlinearity.SERIES))
+    fx = curve.apply(x)
+    x = x[(x > 0) & (fx <= 0.7 * float(curve.apply(sensor.saturation_e)))]
+    if x.size == 0:
+        return k
+    y = k * curve.apply(x)
+    v = k**2 * np.array([curve.slope(float(q)) for q in x]) ** 2 * x
+    return float(np.sum(y * v) / np.sum(y * y))
+
+
 def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray | None = None,
                  shortest_texp_s: float | None = None) -> dict:
     """The same quantities as the simulated sensor instance implies them (its configuration and maps).
@@ -450,7 +482,8 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
     sigma_y_dark = math.sqrt(read_var * k**2 + 1 / 12)
     u_p_min = (sigma_y_dark / k + 0.5) / qe
     return {
-        "system_gain_K_dn_per_e": k,
+        "system_gain_K_dn_per_e": photon_transfer_gain(sensor, series_e),
+        "small_signal_gain_K_dn_per_e": k * (curve.slope(0.0) if curve is not None else 1.0),
         "inverse_gain_e_per_dn": 1 / k,
         "quantum_efficiency": qe,
         "temporal_dark_noise_e": math.sqrt(read_var),

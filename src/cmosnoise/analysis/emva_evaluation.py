@@ -59,8 +59,59 @@ def _slope(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     return b, se, a
 
 
+def small_signal_gain(mu_p: np.ndarray, y: np.ndarray, v: np.ndarray, s2_y: np.ndarray,
+                      s2_ydark: np.ndarray) -> tuple[float, float]:
+    """The small-signal conversion gain K0 (DN/e-): the gain at no signal, where a nonlinearity has not yet bent
+    the response.
+
+    Under a nonlinearity ``f`` (output e- per collected e-, ``f'(0) = 1``) the mean is ``y = K0 f(eta mu_p)`` and
+    the shot noise's variance ``v = K0^2 f'(x)^2 x``; EMVA 1288's through-the-origin slope of ``v`` against ``y``
+    (the photon-transfer K) is then ``K0`` times a mean of ``f'(x)^2 x / f(x)``: 2.2 % high for a 0.5 %
+    linearity error. The mean response is measured far more precisely than the variance, so it gives ``f``: a
+    polynomial ``P(mu_p) = c1 mu_p + ... + c4 mu_p^4`` fitted to ``y`` (relative least squares) is
+    ``K0 f(eta mu_p)``, with ``c1 = K0 eta``, and the variance becomes ``v = K0 z``, ``z = P'(mu_p)^2 mu_p / c1``.
+    ``K0`` is the weighted through-the-origin slope of ``v`` on ``z`` (weights ``1 / (s2_y^2 + s2_ydark^2)``, the
+    inverse variance of the pair estimators' difference up to a constant). On a linear sensor ``z = y`` and ``K0``
+    is the photon-transfer K.
+
+    Parameters
+    ----------
+    mu_p : (n,) array
+        Photons per pixel of the points below 70 % of saturation (any quantity proportional to the exposure).
+    y, v : (n,) arrays
+        Mean signal above dark (DN) and temporal variance above dark (DN^2) there.
+    s2_y, s2_ydark : (n,) arrays
+        The bright and dark temporal variances, DN^2.
+
+    Returns
+    -------
+    (float, float)
+        K0 and its standard error (from the weighted residuals), DN/e-; NaN with fewer than 3 points.
+    """
+    mu_p, y, v = (np.asarray(a, np.float64) for a in (mu_p, y, v))
+    ok = (y > 0) & (mu_p > 0)
+    mu_p, y, v = mu_p[ok], y[ok], v[ok]
+    s2_y, s2_ydark = np.asarray(s2_y, np.float64)[ok], np.asarray(s2_ydark, np.float64)[ok]
+    n = len(y)
+    if n < 3:
+        return math.nan, math.nan
+    scale = float(mu_p.max())
+    t = mu_p / scale
+    powers = np.arange(1, min(4, n - 2) + 1)
+    basis = t[:, None] ** powers
+    c = np.linalg.lstsq(basis / y[:, None], np.ones(n), rcond=None)[0]  # relative residuals (y - P) / y
+    slope = (basis / t[:, None]) @ (c * powers)  # dP/dt
+    z = slope**2 * t / c[0]
+    w = 1.0 / np.maximum(s2_y**2 + s2_ydark**2, 1e-300)
+    szz = float(np.sum(w * z * z))
+    k0 = float(np.sum(w * z * v)) / szz
+    res = v - k0 * z
+    return k0, math.sqrt(float(np.sum(w * res**2)) / (n - 1) / szz)
+
+
 #: what needs the system gain K (e- values), for when the series cannot give it
-_NEEDS_K = ("system_gain_K_dn_per_e", "inverse_gain_e_per_dn", "quantum_efficiency", "temporal_dark_noise_e",
+_NEEDS_K = ("system_gain_K_dn_per_e", "small_signal_gain_K_dn_per_e", "inverse_gain_e_per_dn", "quantum_efficiency",
+            "temporal_dark_noise_e",
             "saturation_capacity_e", "snr_max", "snr_max_db", "absolute_sensitivity_threshold_photons",
             "dynamic_range", "dynamic_range_db", "dark_current_mean_e_per_s", "dark_current_var_e_per_s",
             "dsnu_e", "dsnu_column_e", "dsnu_row_e", "dsnu_pixel_e", "dsnu_shortest_e")
@@ -113,6 +164,7 @@ def evaluate(m: Measurement) -> dict:
                f"not grow with the signal (slope {_fit_through_origin(y[lin], v[lin]):.3g} +- {se_k:.2g} DN/e-; "
                "is shot noise off?)")
         unavailable.update({key: why for key in _NEEDS_K})
+    k0, se_k0 = small_signal_gain(m.mu_p[lin], y[lin], v[lin], m.s2_y[lin], m.s2_ydark[lin])
     r = _fit_through_origin(m.mu_p[lin], y[lin])  # DN/photon
     qe = r / k
     # dark variance and mean against exposure time, where no dark pixel nears saturation:
@@ -162,6 +214,9 @@ def evaluate(m: Measurement) -> dict:
             "fewer than 3 exposure times between 5 and 95 % of saturation")
     out = {
         "system_gain_K_dn_per_e": k,
+        "system_gain_se_dn_per_e": se_k,
+        "small_signal_gain_K_dn_per_e": k0 if math.isfinite(k) else math.nan,
+        "small_signal_gain_se_dn_per_e": se_k0 if math.isfinite(k) else math.nan,
         "linearity_error_min_pct": le_min,
         "linearity_error_max_pct": le_max,
         "inverse_gain_e_per_dn": 1 / k,
@@ -245,6 +300,7 @@ def agrees(key: str, measured: float, simulated: float) -> bool | None:
 
 TABLE_ROWS = [
     ("system_gain_K_dn_per_e", "System gain K", "DN/e-", "{:.4f}"),
+    ("small_signal_gain_K_dn_per_e", "  small-signal K0 (at no signal)", "DN/e-", "{:.4f}"),
     ("quantum_efficiency", "Quantum efficiency eta", "", "{:.3f}"),
     ("temporal_dark_noise_e", "Temporal dark noise sigma_d", "e-", "{:.3f}"),
     ("saturation_capacity_e", "Saturation capacity mu_e.sat", "e-", "{:.0f}"),
@@ -316,6 +372,12 @@ def footnotes(measured: dict) -> list[str]:
             reasons.setdefault(why, []).append(labels[key])
     for why, names in reasons.items():
         out.append(f"n/a: {', '.join(names)}: {why}")
+    k, k0, se0 = (measured.get(key) for key in ("system_gain_K_dn_per_e", "small_signal_gain_K_dn_per_e",
+                                                  "small_signal_gain_se_dn_per_e"))
+    if k is not None and k0 is not None and se0 is not None and abs(k - k0) > DARK_RESOLVE_Z * se0:
+        out.append(f"System gain K: the photon-transfer K ({k:.4g}) is {100 * (k / k0 - 1):+.1f} % off the "
+                   f"small-signal K0 ({k0:.4g} +- {se0:.1g} DN/e-), a nonlinearity's doing; EMVA 1288's e- "
+                   "figures (QE, sigma_d, DSNU, saturation) use K: times K/K0 they are small-signal ones")
     longest = measured.get("dark_series_longest_s")
     for key, bound in measured.get("unresolved", {}).items():
         where = (f"its longest dark exposure {longest:.4g} s" if longest else "the photon-transfer series' dark pairs")

@@ -66,7 +66,7 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
         model = ch.model_values(sensor, m.stack_texp_s, series_e=m.mu_p * (sensor.config.sensor.qe_mean() or 1.0),
                                 shortest_texp_s=float(np.min(m.texp_s)))
     results = ev.evaluate(m)
-    notes = ev.footnotes(results)
+    notes = ev.footnotes(results) + (spec.notes if spec is not None else [])
     series = {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
               "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark}
     if m.dark_texp_s is not None:

@@ -726,7 +726,10 @@ def config_cmd(
 
         typer.echo(text(), nl=False)
         return
-    typer.echo(_sensor(config, preset, set_).config.to_yaml(), nl=False)
+    spec = _sensor(config, preset, set_)
+    for note in spec.notes:  # as YAML comments: the output stays a configuration --config reads
+        typer.echo(f"# note: {note}")
+    typer.echo(spec.config.to_yaml(), nl=False)
 
 
 def run(argv: list[str] | None = None) -> int:

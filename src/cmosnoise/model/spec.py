@@ -87,6 +87,26 @@ class SensorSpec:
         return float(min(self.config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
 
     @property
+    def notes(self) -> list[str]:
+        """How parts of the configuration read that a user could take otherwise, one sentence each: a linearity
+        error (defined on a series to the full well) when the ADC clips first, where an EMVA 1288 series ends
+        at the ADC's full scale and reads a different one."""
+        from .stages.nonlinearity import SERIES, linearity_error
+
+        out = []
+        nl = self.config.nonlinearity
+        curve = self.active_nonlinearity
+        fw, sat = float(self.config.sensor.full_well_e), self.saturation_e
+        if curve is not None and nl.linearity_error_pct is not None and sat < fw:
+            x = np.linspace(0.0, sat, SERIES)
+            y = curve.apply(x)
+            lo, hi = linearity_error(x, y, float(y[-1]))
+            out.append(f"nonlinearity.linearity_error_pct = {list(nl.linearity_error_pct)} is defined on a series to "
+                       f"the full well ({fw:g} e-); the ADC clips first, at {sat:.0f} e-, and an EMVA 1288 series to "
+                       f"there reads [{lo:+.2f}, {hi:+.2f}] %")
+        return out
+
+    @property
     def active_nonlinearity(self) -> Curve | None:
         """The nonlinearity's curve when the stage is on (wherever it acts), else None."""
         return self.nonlinearity if self.config.nonlinearity.enabled else None
