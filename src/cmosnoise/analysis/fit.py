@@ -21,9 +21,14 @@ random telegraph pixels (ppm, amplitude,   the long dark stack with >= 50 frames
 dwell times)                               its frame period (the manifest's ``frame_period_s``)
 =========================================  ===================================================================
 
-Every parameter is reported as ``{value, ci95, method}``; one that the data
-cannot give is listed in ``not_fitted`` with what it needs and keeps the
-base configuration's value.
+Every parameter is reported as ``{value, ci95, method, basis}``; one that the
+data cannot give is listed in ``not_fitted`` with what it needs and keeps the
+base configuration's value. ``basis`` says how the value was obtained
+(:data:`BASES`): measured (with its interval), derived (from measured values,
+without an interval of its own), assumed (a value the data cannot see past,
+named in the method), or not identifiable (the data give only a combination:
+``identifiable`` names the parameter that carries it). The temperature is
+``meta["temperature_basis"]``: given, from the data, or assumed.
 """
 
 from __future__ import annotations
@@ -48,6 +53,24 @@ MIN_READOUT_FRAMES = 4
 MIN_TELEGRAPH_FRAMES = 50
 #: the most memory the random telegraph fit's frames may take (the middle rows that fit are read where more)
 TELEGRAPH_BYTES = 1 << 30
+
+
+#: how a fitted value was obtained: fit.json's ``basis``, the console's and the report's, config.yaml's comments
+BASES = ("measured", "derived", "assumed", "not identifiable")
+
+
+def _with_basis(P: dict) -> None:
+    """Give every parameter without one its basis: measured where it has an interval, else derived."""
+    for p in P.values():
+        p.setdefault("basis", "measured" if p.get("ci95") is not None else "derived")
+
+
+def _temperature_basis(ds, temperature_c, base) -> str:
+    """How the fit's reference temperature was obtained, before stacks without one take it."""
+    if all(st.temperature_c is not None for st in ds.stacks):
+        return "given (--temperature)" if temperature_c is not None and not ds.temperatures_stated else "from the data"
+    return (f"assumed: the data carry none, so the base configuration's sensor.temperature_c "
+            f"({base.sensor.temperature_c:g} C); give --temperature or the manifest's temperature_c")
 
 
 def _p(value, ci95=None, method: str = "", **extra) -> dict:
@@ -117,6 +140,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         bits = next(b for b in range(8, 17) if top < 2**b)
     sat_dn = 2**bits - 1
     temps = ds.temperatures
+    t_basis = _temperature_basis(ds, temperature_c, base)
     t_ref = temperature_c if temperature_c is not None else (temps[-1] if temps else base.sensor.temperature_c)
     for st in ds.stacks:  # stacks measured at no stated temperature: at the reference one
         if st.temperature_c is None:
@@ -202,7 +226,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             # pixels sit at the top code: the ADC clips before the well fills, which the data cannot see
             # past; a full well just beyond the ADC's range lets the ADC clip, as measured
             P["full_well_e"] = _p(1.005 * adc_e, None, f"the ADC's range ({adc_e:.0f} e-) clips first: pixels of "
-                                  "the brightest flat sit at the top code; the well is put just beyond it")
+                                  "the brightest flat sit at the top code; the well is put just beyond it",
+                                  basis="assumed")
         else:
             P["full_well_e"] = _p(full, None, "the brightest flat's mean above black / K (beyond the saturation point)")
     else:
@@ -320,7 +345,12 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     phase("crosstalk")
     spots = [(sp, _dark_at(ds, sp)) for sp in ds.of_kind("spot")]
     spots = [(sp, d) for sp, d in spots if d is not None]
-    if not spots:
+    crosstalk_off = not spots and pattern == "none"
+    if crosstalk_off:  # nothing in a monochrome flat or dark tells crosstalk from PRNU: not measured, not assumed
+        not_fitted["crosstalk"] = ("not measured: monochrome data without a spot stack (single lit pixels, with a "
+                                   "dark stack at its exposure time); left off, so the PRNU is the pixel-level "
+                                   "figure the flats show")
+    elif not spots:
         not_fitted["crosstalk"] = ("needs a spot stack (single lit pixels, with a dark stack at its exposure time); "
                                    "kept at the base configuration's kernel")
     else:
@@ -346,25 +376,62 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         target = black + 0.5 * (sat_dn - black)
         f, d = max(cands, key=lambda fd: (min(fd[0].n, fd[1].n), -abs(fd[0].mean.mean() - target)))
         pg = fit_photo.prnu_and_column_gain(f, d, pattern, sat_dn)
-        seen = physics.prnu_seen_per_sigma(_with_crosstalk(base, P))
+        seen = physics.prnu_seen_per_sigma(_with_crosstalk(base, P, crosstalk_off))
         m = pg["prnu_pct"]
         P["prnu.measured_pct"] = _p(m["value"], m["ci95"], f"pixel residual of a {f.n}-frame flat at "
                                     f"{pg['signal_dn']:.0f} DN less its dark, rows and columns removed, "
                                     f"{pg['excluded_pixels']} defect pixels out")
         P["prnu.sigma_pct"] = _p(m["value"] / seen, [c / seen for c in m["ci95"]],
-                                 f"the gain map's sigma: measured / {seen:.4f} (crosstalk averages neighbours: the "
-                                 f"{'fitted' if any(k.startswith('crosstalk.') for k in P) else 'base'} kernel)")
+                                 f"the gain map's sigma: measured / {seen:.4f} " + (
+                                     "(no crosstalk: not measured)" if crosstalk_off else
+                                     "(crosstalk averages neighbours: the "
+                                     f"{'fitted' if any(k.startswith('crosstalk.') for k in P) else 'base'} kernel)"))
         g = pg["column_gain_pct"]
         P["column_noise.gain_sigma_pct"] = _p(g["value"], g["ci95"], "the flat's column means, less the pixel and "
                                               "temporal shares")
         plots["prnu"] = {"residual": pg["relative_residual"]}
     _include_gain_uncertainty(P, ptc["rel_se"])
+    qe = P.get("quantum_efficiency")
+    if qe is not None and qe["value"] > 1:  # reported as measured; what the configuration can hold is written
+        qe["written"] = 1.0
+        qe["method"] += (f"; above 1, which no QE can be (95 % CI {qe['ci95'][0]:.4g} to {qe['ci95'][1]:.4g}): "
+                         "config.yaml has 1.0" if qe.get("ci95") else "; above 1: config.yaml has 1.0")
+    _with_basis(P)
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
+            "_crosstalk_off": crosstalk_off,
             "_nonlinearity": nonlin if nonlin is not None and nonlin["bent"] else None,
             "_telegraph": telegraph,
             "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
+                     "temperature_basis": t_basis,
                      "temperatures": temps, "source": ds.source, "input": ds.kind},
             "_maps": dark_maps}
+
+
+#: a part of the read noise whose interval reaches this many times the total's upper end is not identifiable
+SPLIT_LIMIT = 1.5
+
+
+def _split_identifiable(P: dict, s2: np.ndarray, known: np.ndarray, frames: int, where: str) -> None:
+    """The source follower's total temporal noise, which the per-pixel variances always give, and the split into
+    thermal (white) and flicker (a spread of sigmas) marked "not identifiable" where an interval of a part reaches
+    past what the total allows (:data:`SPLIT_LIMIT` times its upper end): only the sum was measured."""
+    excess = np.asarray(s2, np.float64) - np.asarray(known, np.float64)
+    # each pixel's variance over `frames` frames: chi-square, sampling variance 2 s^4 / (frames - 1)
+    se = math.sqrt(float(np.mean(2 * np.asarray(s2, np.float64) ** 2 / (frames - 1))) / excess.size)
+    total = sigma_from_variance(float(excess.mean()), se)
+    P["source_follower.read_noise_total_e"] = _p(total["value"], total["ci95"], "the mean of the pixels' temporal "
+                                                 "variance less the dark charge's and the quantizer's (thermal and "
+                                                 f"flicker together); {where}", basis="measured")
+    top = total["ci95"][1]
+    parts = ("source_follower.thermal_sigma_e", "source_follower.flicker.gumbel_loc_e",
+             "source_follower.flicker.gumbel_scale_e")
+    if any(P.get(k, {}).get("ci95") and P[k]["ci95"][1] > SPLIT_LIMIT * top for k in parts):
+        for k in parts:
+            if k in P and P[k]["value"] is not None:
+                P[k]["basis"] = "not identifiable"
+                P[k]["identifiable"] = "source_follower.read_noise_total_e"
+                P[k]["method"] += (f"; the split into thermal and flicker is not identifiable from these data (an "
+                                   f"interval reaches past the total's {top:.3g} e-): only the total is measured")
 
 
 def _crosstalk_update(P: dict) -> dict | None:
@@ -386,10 +453,10 @@ def _crosstalk_update(P: dict) -> dict | None:
     return None
 
 
-def _with_crosstalk(base, P: dict):
+def _with_crosstalk(base, P: dict, off: bool = False):
     from ..config.loading import merge_updates
 
-    xt = _crosstalk_update(P)
+    xt = {"enabled": False} if off else _crosstalk_update(P)
     return base if xt is None else merge_updates(base, {"crosstalk": xt})
 
 
@@ -500,6 +567,7 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
             P[key] = _p(None, None, "no flicker tail seen (not one tail pixel): not fitted, none in the configuration")
         else:
             P[key] = _p(float(v), ci, where)
+    _split_identifiable(P, s2_fit, known_fit, n, where)
     P["source_follower.flicker.tail.ppm_above"]["threshold_e"] = thr
     if r.get("no_tail"):
         P["source_follower.flicker.tail.ppm_above"]["method"] = ("the body's own share above the threshold; no tail "
@@ -669,9 +737,10 @@ def fitted_config(base, result: dict):
         black_level["frame_sigma_dn"] = v("black_level.frame_sigma_dn")
     if black_level:
         u["black_level"] = black_level
-    if "quantum_efficiency" in P and 0 < v("quantum_efficiency") <= 1:
-        # photons per pixel over the fitted configuration's e-: what a crosstalk loss and the PRNU map leave aside
-        u["sensor"]["quantum_efficiency"] = v("quantum_efficiency")
+    if "quantum_efficiency" in P and v("quantum_efficiency") > 0:
+        # photons per pixel over the fitted configuration's e-: what a crosstalk loss and the PRNU map leave aside;
+        # one above 1 is written as 1 (the parameter says so)
+        u["sensor"]["quantum_efficiency"] = min(v("quantum_efficiency"), 1.0)
     if "pixel_offset.sigma_e" in P:
         lo = P["pixel_offset.sigma_e"]["ci95"][0]
         sig = v("pixel_offset.sigma_e")
@@ -682,7 +751,7 @@ def fitted_config(base, result: dict):
                         "max_e": max(v("pixel_offset.tail.max_e"), P["pixel_offset.tail.ppm_above"]["threshold_e"])}
         # on only where the data show offsets (the interval excludes 0, or a tail): else the section is left off
         u["pixel_offset"] = {"enabled": bool(lo > 0 or off_tail is not None), "sigma_e": sig, "tail": off_tail}
-    xt = _crosstalk_update(P)
+    xt = {"enabled": False} if result.get("_crosstalk_off") else _crosstalk_update(P)
     if xt is not None:
         u["crosstalk"] = xt
     if "prnu.sigma_pct" in P:

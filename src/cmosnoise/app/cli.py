@@ -571,6 +571,8 @@ def fit(
             _say(ctx, f"setting {setting}{' (' + r['mode'] + ')' if r['mode'] else ''}: system gain K = "
                       f"{fitting.describe(k)}")
         _say(ctx, "the lowest setting's parameters in full (fit.json has every setting's):")
+    meta = doc.get("meta", {})
+    _say(ctx, f"temperature {meta.get('temperature_c')} C: {meta.get('temperature_basis', 'from the data')}")
     for name, p in doc["parameters"].items():
         _say(ctx, f"{name} = {fitting.describe(p)}")
     for name, why in doc["not_fitted"].items():

@@ -143,8 +143,12 @@ def build(doc: dict, result: dict, cfg) -> str:
              f"{html.escape(doc['source'])} ({html.escape(doc['input'])}), {meta['shape'][1]} x {meta['shape'][0]} "
              f"{html.escape(meta['cfa'])}, {meta['bits']} bits. <code>config.yaml</code> beside this report is the "
              "fitted sensor: <code>cmosnoise simulate --config config.yaml</code> runs it.</p>"]
-    rows = [(name, p["value"], _fmt_ci(p), p["method"]) for name, p in P.items()]
-    parts.append("<h2>Fitted parameters</h2>" + _table(rows, ["parameter", "value", "95 % interval", "method"]))
+    rows = [(name, p["value"], _fmt_ci(p), p.get("basis", "measured")
+             + (f" (only {p['identifiable']} is)" if p.get("identifiable") else ""), p["method"]) for name, p in P.items()]
+    meta = doc.get("meta", {})
+    parts.append(f"<p>Temperature {html.escape(str(meta.get('temperature_c')))} C: "
+                 f"{html.escape(meta.get('temperature_basis', 'from the data'))}</p>")
+    parts.append("<h2>Fitted parameters</h2>" + _table(rows, ["parameter", "value", "95 % interval", "basis", "method"]))
     if doc["not_fitted"]:
         parts.append("<h2>Not fitted (kept from the base configuration)</h2>"
                      + _table(list(doc["not_fitted"].items()), ["parameter", "why, and what it needs"]))

@@ -215,18 +215,39 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
     phase("writing fit_report.html")
     html_text = fit_report.build(doc, result, cfg)
     with folder as tmp:
-        (tmp / "config.yaml").write_text(cfg.to_yaml())
+        comments = "".join(f"# {line}\n" for line in provenance_lines(doc))
+        (tmp / "config.yaml").write_text(comments + cfg.to_yaml())
         write_json(tmp / "fit.json", doc)
         (tmp / "fit_report.html").write_text(html_text)
     return doc
 
 
 def describe(p: dict) -> str:
-    """One parameter as a line: value, interval, method."""
+    """One parameter as a line: value, interval (not where it is not identifiable), basis, method."""
     v = p["value"]
     value = f"{v:.5g}" if isinstance(v, float) and math.isfinite(v) else str(v)
+    basis = p.get("basis", "measured")
+    if basis == "not identifiable":
+        return f"{value} [not identifiable: only {p.get('identifiable', 'a combination')} is]: {p['method']}"
     ci = f" (95 % CI {p['ci95'][0]:.4g} to {p['ci95'][1]:.4g})" if p.get("ci95") else ""
-    return f"{value}{ci}: {p['method']}"
+    return f"{value}{ci} [{basis}]: {p['method']}"
+
+
+def provenance_lines(doc: dict) -> list[str]:
+    """What a fitted configuration rests on, as lines (config.yaml's comments): the temperature's basis, then the
+    parameters by basis, and what was kept from the base configuration."""
+    meta = doc.get("meta", {})
+    lines = [f"fitted by cmosnoise fit from {doc.get('source')}",
+             f"temperature {meta.get('temperature_c')} C: {meta.get('temperature_basis', 'from the data')}"]
+    by: dict[str, list[str]] = {}
+    for name, p in doc.get("parameters", {}).items():
+        by.setdefault(p.get("basis", "measured"), []).append(name)
+    for basis in ("measured", "derived", "assumed", "not identifiable"):
+        if by.get(basis):
+            lines.append(f"{basis}: {', '.join(by[basis])}")
+    if doc.get("not_fitted"):
+        lines.append(f"kept from the base configuration (not in these data): {', '.join(doc['not_fitted'])}")
+    return lines
 
 
 def dark_exposures(sensor: Sensor, base_s: tuple[float, ...] = (0.25, 0.5, 1.0), signal_e: float = 200.0) -> list[float]:

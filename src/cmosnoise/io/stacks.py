@@ -180,6 +180,8 @@ class Dataset:
     source: str
     kind: str  #: "emva" or "manifest"
     descriptor: Optional[Path] = None  #: the EMVA descriptor, when that was the input
+    #: whether every stack's temperature came from the data (the manifest), not from ``load``'s ``temperature_c``
+    temperatures_stated: bool = False
 
     def of_kind(self, kind: str, temperature_c: float | None = None) -> list[StackStats]:
         return [s for s in self.stacks if s.kind == kind and (temperature_c is None or s.temperature_c == temperature_c)]
@@ -200,7 +202,8 @@ class Dataset:
     def at_setting(self, index: str, value: float) -> "Dataset":
         """The stacks taken at one gain setting, as a data set of their own."""
         return Dataset([s for s in self.stacks if getattr(s, index) == value], self.shape, self.bits, self.cfa,
-                       self.black_level_dn, f"{self.source} at {index} {value:g}", self.kind, self.descriptor)
+                       self.black_level_dn, f"{self.source} at {index} {value:g}", self.kind, self.descriptor,
+                       self.temperatures_stated)
 
 
 # ------------------------------------------------------------------ files
@@ -396,6 +399,7 @@ def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
         raise CmosnoiseError(f"manifest {str(path)!r} is not valid YAML: {' '.join(str(exc).split())[:160]}") from None
     base = path.parent
     stacks, meta = [], _Meta()
+    stated = True
     for i, e in enumerate(m.stacks):
         paths: list[Path] = []
         for pattern in e.files:
@@ -409,6 +413,7 @@ def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
                 paths.append(p)
         temp = e.temperature_c if e.temperature_c is not None else m.temperature_c
         if temp is None:
+            stated = False
             temp = temperature_c
         name = f"stacks.{i} ({e.kind}, {e.exposure_s:g} s)"
         stacks.append(_stack(paths, meta, name=name, kind=e.kind, exposure_s=e.exposure_s, temperature_c=temp,
@@ -423,7 +428,7 @@ def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
         bits = max(8, min(16, int(math.ceil(math.log2(meta.white + 1)))))
     cfa = meta.cfa or m.cfa
     black = meta.black if meta.black is not None else m.black_level_dn
-    return Dataset(stacks, shapes[0], bits, cfa, black, str(path), "manifest")
+    return Dataset(stacks, shapes[0], bits, cfa, black, str(path), "manifest", temperatures_stated=stated)
 
 
 def load(path: str | Path, temperature_c: float | None = None) -> Dataset:
