@@ -537,6 +537,19 @@ def render_fit_coverage(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_fit_selection(d: dict) -> str:
+    lines = [f"Measured with `{d['command']}`: {d['seeds']} data sets from emva1288's camera simulator per column, "
+             f"each its own camera and noise; each test at p < {d['alpha']:g} / {len(d['tests'])}.", "",
+             f"| stage | switched on, data without it | switched on, data with it ({d['offset_e']:g} e- offsets, "
+             f"{100 * d['nonlinearity']:g} % compression at saturation) |", "|---|---|---|"]
+    for name in d["tests"]:
+        lines.append(f"| `{name}` | {d['counts']['absent'][name]} of {d['seeds']} | "
+                     f"{d['counts']['present'][name]} of {d['seeds']} |")
+    lines += ["", f"Of the {d['seeds']} data sets without any of the six stages, {d['any_absent']} had one switched "
+                  "on. The data sets with stages have only the offsets and the nonlinearity."]
+    return "\n".join(lines)
+
+
 def _stage_cost_table(d: dict, script: str) -> list[str]:
     """A stage-cost benchmark's table (bench_measured_stages.py, bench_telegraph.py): its rows against the reference."""
     repeats = f" --repeats {d['repeats']}" if "repeats" in d else ""
@@ -759,6 +772,7 @@ SECTIONS = {
     "sweep_speed": (None, render_sweep_speed),
     "fit_speed": (None, render_fit_speed),
     "fit_coverage": (None, render_fit_coverage),
+    "fit_selection": (None, render_fit_selection),
     "measured_stages": (None, render_measured_stages),
     "telegraph_cost": (None, render_telegraph_cost),
     "telegraph_fit": (None, render_telegraph_fit),
@@ -781,6 +795,7 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "sweep_speed": ["bench_sweep.py", "--json", "sweep_speed.json"],
               "fit_speed": ["bench_fit.py", "--json", "fit_speed.json", "--figures", "../img"],
               "fit_coverage": ["fit_coverage.py", "--json", "fit_coverage.json"],
+              "fit_selection": ["fit_selection.py", "--json", "fit_selection.json"],
               "measured_stages": ["bench_measured_stages.py", "--repeats", "15", "--json", "measured_stages.json"],
               "telegraph_cost": ["bench_telegraph.py", "--json", "telegraph_cost.json"],
               "telegraph_fit": ["fit_telegraph_coverage.py", "--json", "telegraph_fit.json"],

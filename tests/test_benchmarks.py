@@ -26,6 +26,7 @@ SMALLEST = {
     "bench_sweep.py": ["--instances", "2"],
     "bias_source_follower.py": ["--fits", "2", "--frames", "8"],
     "fit_telegraph_coverage.py": ["--sensors", "1"],
+    "fit_selection.py": ["--seeds", "1"],
     "kernel_parts.py": ["--repeats", "1"],
 }
 #: minutes at their smallest (or a device they need): imported and --help only

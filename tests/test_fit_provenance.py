@@ -92,3 +92,25 @@ def test_a_fitted_qe_above_one_is_reported_with_its_interval_and_what_was_writte
     assert qe["value"] > 1.05 and qe["written"] == 1.0 and qe["ci95"][0] > 1, qe
     assert "config.yaml has 1.0" in qe["method"] and "config.yaml has 1.0" in r.stdout
     assert yaml.safe_load((tmp_path / "f" / "config.yaml").read_text())["sensor"]["quantum_efficiency"] == 1.0
+
+
+def test_no_stage_the_data_lack_is_switched_on_and_small_ones_they_have_are(plain, tmp_path):
+    """Each test of fit.SELECTION_TESTS passes at p < SELECTION_ALPHA / 6; on data without any of the stages all
+    six stay off (a false alarm here has probability below 1 %), and 1 e- of pixel offsets and 2 % of
+    compression, which the data resolve (benchmarks/fit_selection.py: 20 of 20), are switched on."""
+    from cmosnoise.analysis.fit import SELECTION_P, SELECTION_TESTS
+
+    r, doc = _fit(plain, tmp_path / "a")
+    sel = doc["selection"]
+    assert set(sel) == set(SELECTION_TESTS) and not any(t["on"] for t in sel.values()), sel
+    assert all(t["threshold"] == SELECTION_P for t in sel.values())
+    assert "stages switched on by the data (each test at p < 0.0017: 1% family-wise over 6 tests): none" in r.stdout
+    data = tmp_path / "with"
+    proc = subprocess.run([sys.executable, str(HERE / "emva_dataset.py"), str(data), "0.4", "10000", "1.0", "0.02",
+                           "0", "1"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r, doc = _fit(data, tmp_path / "b")
+    on = {name for name, t in doc["selection"].items() if t["on"]}
+    assert on == {"nonlinearity", "pixel_offset"}, doc["selection"]
+    cfg = yaml.safe_load((tmp_path / "b" / "config.yaml").read_text())
+    assert cfg["pixel_offset"]["enabled"] and cfg["nonlinearity"]["enabled"]

@@ -55,6 +55,24 @@ MIN_TELEGRAPH_FRAMES = 50
 TELEGRAPH_BYTES = 1 << 30
 
 
+#: the family-wise false-positive rate of switching on stages the data do not have: each test of
+#: :data:`SELECTION_TESTS` switches its stage on only at p < SELECTION_ALPHA / len(SELECTION_TESTS) (Bonferroni),
+#: so data without any of them switch one on in at most 1 % of data sets (benchmarks/fit_selection.py measures it)
+SELECTION_ALPHA = 0.01
+#: the stages a fit switches on from a test (each test's null hypothesis: the stage is absent)
+SELECTION_TESTS = ("nonlinearity", "pixel_offset", "pixel_offset.tail", "black_level.frame_sigma_dn",
+                   "black_level.channel_offsets_dn", "read_noise.shape")
+#: the p-value below which one test switches its stage on
+SELECTION_P = SELECTION_ALPHA / len(SELECTION_TESTS)
+
+
+def _select(selection: dict, name: str, p_value: float, what: str) -> bool:
+    """Record test ``name``'s p-value (``what`` it tested) in ``selection``; whether its stage is switched on."""
+    on = bool(p_value < SELECTION_P)
+    selection[name] = {"p_value": float(p_value), "threshold": SELECTION_P, "on": on, "test": what}
+    return on
+
+
 #: how a fitted value was obtained: fit.json's ``basis``, the console's and the report's, config.yaml's comments
 BASES = ("measured", "derived", "assumed", "not identifiable")
 
@@ -130,6 +148,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     P: dict = {}
     not_fitted: dict = {}
     plots: dict = {}
+    selection: dict = {}
     rows, cols = ds.shape
     # an EMVA 1288 data set is one channel (the standard measures a colour sensor channel by channel): monochrome
     # unless told otherwise; a manifest without a CFA takes the base configuration's
@@ -171,7 +190,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         npix = rows * cols
         mean_var = [p[2].temporal_var / (npix * p[2].n) + p[3].temporal_var / (npix * p[3].n) for p in pts]
         nonlin = fit_photo.nonlinearity([p[0] for p in pts], [p[1] for p in pts], photons, k,
-                                        ptc["saturation_index"], mean_var)
+                                        ptc["saturation_index"], mean_var, alpha=SELECTION_P)
+        _select(selection, "nonlinearity", nonlin["p_value"], "F test of a quartic mean response against a line")
         if nonlin["bent"]:  # the QE is the bent response's small-signal slope
             P["quantum_efficiency"] = _p(nonlin["qe"], [nonlin["qe"] - Z95 * nonlin["qe_se"],
                                                         nonlin["qe"] + Z95 * nonlin["qe_se"]],
@@ -284,7 +304,10 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         res["exposures_s"] = sorted(set(float(x) for x in t))
         if T == t_ref:  # the pixel offsets: each pixel's intercept, at the reference temperature
             off = fit_dark.pixel_offsets([d.mean for d in ok], list(t), [d.pixel_var for d in ok], [d.n for d in ok],
-                                         k, limit, exclude=rts_pixels)
+                                         k, limit, exclude=rts_pixels, tail_alpha=SELECTION_P)
+            _select(selection, "pixel_offset", off["p_value"], "the offsets' variance against 0 (one-sided z)")
+            _select(selection, "pixel_offset.tail", off["tail_p_value"], "the count above 5 body sigmas against the "
+                    "body's share (Poisson)")
             where = (f"each pixel's dark intercept over {len(ok)} exposure times, rows and columns taken out "
                      f"(temporal noise {off['noise_e']:.3g} e- rms): {off['method']}, {off['pixels']} pixels")
             P["pixel_offset.sigma_e"] = _p(off["sigma_e"]["value"], off["sigma_e"]["ci95"], where)
@@ -298,7 +321,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             cells, cse = off["cells_dn"].ravel(), off["cells_se_dn"].ravel()
             # the four positions less their mean, sum((c_i - mean)^2 / se^2) ~ chi-square with three degrees of
             # freedom: kept where they differ beyond what their errors allow (95 % level), else one black level
-            if float(np.sum((cells / cse) ** 2)) > float(stats.chi2.isf(0.05, 3)):
+            if _select(selection, "black_level.channel_offsets_dn", float(stats.chi2.sf(np.sum((cells / cse) ** 2), 3)),
+                       "the four 2 x 2 positions' intercepts against one (chi-square, 3 dof)"):
                 P["black_level.channel_offsets_dn"] = _p(
                     [float(x) for x in cells], None, "each 2 x 2 cell position's mean dark intercept less the four's "
                     "mean (in sensor.cfa's order)", ci95_each=[[float(x - Z95 * e), float(x + Z95 * e)]
@@ -339,7 +363,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
     else:
         _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed,
-                 not_fitted, exclude=rts_pixels)
+                 not_fitted, exclude=rts_pixels, selection=selection)
 
     # ---------------------------------------------------------------- crosstalk from spots
     phase("crosstalk")
@@ -398,7 +422,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                          "config.yaml has 1.0" if qe.get("ci95") else "; above 1: config.yaml has 1.0")
     _with_basis(P)
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
-            "_crosstalk_off": crosstalk_off,
+            "_crosstalk_off": crosstalk_off, "selection": selection,
             "_nonlinearity": nonlin if nonlin is not None and nonlin["bent"] else None,
             "_telegraph": telegraph,
             "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
@@ -520,7 +544,7 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
 
 
 def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int,
-             not_fitted: dict, exclude: np.ndarray | None = None) -> None:
+             not_fitted: dict, exclude: np.ndarray | None = None, selection: dict | None = None) -> None:
     """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``; the
     read noise's shape (Tukey-lambda) where the pixels' noise is not normal, and the black level's error per
     frame. What cannot be fitted goes to ``not_fitted``."""
@@ -584,21 +608,32 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
         shp = fit_readout.pixel_noise_shape(st.pixel_var, st.pixel_m4, n, known_var, known_k4,
                                             fit_readout.own_share(rows, cols))
         if shp is not None:
+            from scipy import stats
+
             (kurt, kci), (lam, lci) = shp["kurtosis"], shp["lam"]
-            if (kci[0] > 0 or kci[1] < 0) and shp["spread"] < 0.1:
+            se_kurt = (kci[1] - kci[0]) / (2 * Z95)
+            not_normal = _select(selection if selection is not None else {}, "read_noise.shape",
+                                 float(2 * stats.norm.sf(abs(kurt) / se_kurt)) if se_kurt > 0 else 1.0,
+                                 "the pixels' excess kurtosis against 0 (two-sided z)")
+            if not_normal and shp["spread"] < 0.1:
                 P["read_noise.shape"] = _p(lam, lci, f"the Tukey-lambda shape whose excess kurtosis is the pixels' noise's, "
                                            f"{kurt:.3g} (95 % CI {kci[0]:.3g} to {kci[1]:.3g}), from their fourth moments "
                                            f"over {n} frames less the dark charge's and the quantizer's")
                 P["read_noise.scale_dn"] = _p(*shp["scale_dn"], "the scale that gives the pixels' mean variance (less "
                                               "the dark charge's and the quantizer's); interval from the shape's and "
                                               "that variance's")
-            elif kci[0] > 0 or kci[1] < 0:
+            elif not_normal:
                 not_fitted["read_noise"] = (
                     f"the pixels' noise is not normal (excess kurtosis {kurt:.3g}, 95 % CI {kci[0]:.3g} to {kci[1]:.3g}) "
                     f"but their sigmas spread by {shp['spread']:.0%}: the flicker model holds it; no Tukey-lambda read "
                     "noise")
     e2, e2_se = fit_readout.frame_error_variance(st.row_means, st.col_means,
                                                  float(np.mean(st.pixel_var)) / fit_readout.own_share(rows, cols))
+    if selection is not None:
+        from scipy import stats
+
+        _select(selection, "black_level.frame_sigma_dn", float(stats.norm.sf(e2 / e2_se)) if e2_se > 0 else 1.0,
+                "the frames' means' spread beyond the rows', columns' and pixels' share, against 0 (one-sided z)")
     P["black_level.frame_sigma_dn"] = _p(**sigma_from_variance(e2, e2_se),
                                          method=f"the spread of the {n} frames' means less what the rows', columns' "
                                                 "and pixels' temporal noise put there")
@@ -733,7 +768,8 @@ def fitted_config(base, result: dict):
     black_level: dict = {}
     if "black_level.channel_offsets_dn" in P:
         black_level["channel_offsets_dn"] = v("black_level.channel_offsets_dn")
-    if "black_level.frame_sigma_dn" in P and P["black_level.frame_sigma_dn"]["ci95"][0] > 0:
+    sel = result.get("selection", {})
+    if "black_level.frame_sigma_dn" in P and sel.get("black_level.frame_sigma_dn", {}).get("on"):
         black_level["frame_sigma_dn"] = v("black_level.frame_sigma_dn")
     if black_level:
         u["black_level"] = black_level
@@ -742,15 +778,15 @@ def fitted_config(base, result: dict):
         # one above 1 is written as 1 (the parameter says so)
         u["sensor"]["quantum_efficiency"] = min(v("quantum_efficiency"), 1.0)
     if "pixel_offset.sigma_e" in P:
-        lo = P["pixel_offset.sigma_e"]["ci95"][0]
         sig = v("pixel_offset.sigma_e")
         off_tail = None
         if "pixel_offset.tail.ppm_above" in P:
             off_tail = {"ppm_above": v("pixel_offset.tail.ppm_above"),
                         "threshold_e": P["pixel_offset.tail.ppm_above"]["threshold_e"],
                         "max_e": max(v("pixel_offset.tail.max_e"), P["pixel_offset.tail.ppm_above"]["threshold_e"])}
-        # on only where the data show offsets (the interval excludes 0, or a tail): else the section is left off
-        u["pixel_offset"] = {"enabled": bool(lo > 0 or off_tail is not None), "sigma_e": sig, "tail": off_tail}
+        # on only where the data show offsets (the body's test or a tail, SELECTION_TESTS): else the section is off
+        u["pixel_offset"] = {"enabled": bool(sel.get("pixel_offset", {}).get("on") or off_tail is not None),
+                             "sigma_e": sig, "tail": off_tail}
     xt = {"enabled": False} if result.get("_crosstalk_off") else _crosstalk_update(P)
     if xt is not None:
         u["crosstalk"] = xt

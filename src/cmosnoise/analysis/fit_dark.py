@@ -207,7 +207,8 @@ def rate_map_from_stacks(means_dn: list[np.ndarray], exposures_s: list[float], g
 
 
 def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_vars_dn2: list[np.ndarray],
-                  frames: list[int], gain_dn_per_e: float, limit_dn: float, exclude: np.ndarray | None = None) -> dict:
+                  frames: list[int], gain_dn_per_e: float, limit_dn: float, exclude: np.ndarray | None = None,
+                  tail_alpha: float = 1e-3) -> dict:
     """The pixel offsets (docs/model.md stage 5c) from each pixel's dark intercept over exposure time.
 
     Each pixel's dark mean is a line in exposure time: its intercept is the
@@ -226,7 +227,10 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     ``j`` over its ``n_j`` frames). The body's sigma is taken robustly
     (median absolute deviation: a tail of large offsets does not inflate it);
     pixels more than 5 body sigmas (with the noise) above it are the tail,
-    counted with an exact binomial interval against what the body puts there.
+    counted with an exact binomial interval against what the body puts there,
+    and reported where their count's Poisson p-value under the body is below
+    ``tail_alpha``. ``p_value`` is the body's: that its variance is 0
+    (one-sided, from its standard error).
     Pixels that reach ``limit_dn`` in any stack are left out (a white pixel
     bends its own line), and the pixels ``exclude`` (flat indices: random
     telegraph pixels, whose level in a stack is where their traps happened to be).
@@ -237,8 +241,8 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
 
     Returns
     -------
-    dict with ``sigma_e`` (value, ci95), ``tail`` (ppm_above, threshold_e,
-    max_e, ci95, pixels) or None, ``residual_e`` (rows, cols), ``pixels``,
+    dict with ``sigma_e`` (value, ci95), ``p_value``, ``tail`` (ppm_above, threshold_e,
+    max_e, ci95, pixels) or None, ``tail_p_value``, ``residual_e`` (rows, cols), ``pixels``,
     ``cells_dn`` and ``cells_se_dn`` (2, 2).
     """
     from scipy import stats
@@ -314,11 +318,13 @@ def pixel_offsets(means_dn: list[np.ndarray], exposures_s: list[float], pixel_va
     above = int(np.sum(values > threshold))
     expected = n * float(stats.norm.sf(threshold / math.sqrt(total_var)))
     tail = None
-    if above >= 3 and stats.poisson.sf(above - 1, expected) < 1e-3:
+    tail_p = float(stats.poisson.sf(above - 1, expected)) if above >= 1 else 1.0
+    if above >= 3 and tail_p < tail_alpha:
         ci = stats.binomtest(above, n).proportion_ci(0.95, method="exact")
         tail = {"ppm_above": above / n * 1e6, "threshold_e": threshold, "max_e": float(values.max()),
                 "ci95": [ci.low * 1e6, ci.high * 1e6], "pixels": above}
     return {"sigma_e": {"value": sigma, "ci95": [math.sqrt(max(var - Z95 * se, 0.0)), math.sqrt(max(var + Z95 * se, 0.0))]},
+            "p_value": float(stats.norm.sf(var / se)) if se > 0 else (0.0 if var > 0 else 1.0), "tail_p_value": tail_p,
             "noise_e": math.sqrt(noise), "tail": tail, "residual_e": resid_e, "pixels": n, "method": how,
             "cells_dn": cells, "cells_se_dn": cells_se}
 

@@ -98,7 +98,7 @@ def quantum_efficiency(mu_dn, photons, k: float, saturation_index: int, k_rel_se
     return {"value": q, "ci95": [q - half, q + half], "points": int(lin.size)}
 
 
-def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_var_dn2) -> dict:
+def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_var_dn2, alpha: float = 1e-3) -> dict:
     """The photo-response nonlinearity (docs/model.md stage 5b) from the photon-transfer means.
 
     The mean signal in e- (``mu_dn / k``) below saturation is fitted as a
@@ -106,7 +106,7 @@ def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_va
     + p4 x**4`` (weighted least squares, each mean's sampling variance
     ``mean_var_dn2``, DN^2),
     and against a line through the origin: an F test says whether the bend is
-    there (p < 1e-3). ``p1`` is then the quantum efficiency (the small-signal
+    there (p < ``alpha``; the fit passes its share of a family-wise rate). ``p1`` is then the quantum efficiency (the small-signal
     slope), and the transfer, as a function of the collected charge
     ``c = p1 x``, is ``f(c) = c + p2 c**2 / p1**2 + p3 c**3 / p1**3 + p4 c**4 / p1**4``.
 
@@ -159,7 +159,7 @@ def nonlinearity(mu_dn, v_dn2, photons, k: float, saturation_index: int, mean_va
     w_v = 1.0 / np.maximum(v[use], 1e-12) ** 2
     chi_charge = float(np.sum(w_v * (v[use] - slope(c) ** 2 * c) ** 2))
     chi_mean = float(np.sum(w_v * (v[use] - transfer(c)) ** 2))
-    return {"bent": p_value < 1e-3, "p_value": p_value, "coefficients": [float(a) for a in p], "qe": qe,
+    return {"bent": p_value < alpha, "p_value": p_value, "coefficients": [float(a) for a in p], "qe": qe,
             "qe_se": qe_se, "acts_on": "charge" if chi_charge < chi_mean else "mean", "transfer": transfer,
             "slope": slope, "levels": int(use.size)}
 

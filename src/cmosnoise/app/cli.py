@@ -577,6 +577,8 @@ def fit(
         _say(ctx, f"{name} = {fitting.describe(p)}")
     for name, why in doc["not_fitted"].items():
         _say(ctx, f"not fitted, kept from the base configuration: {name}: {why}")
+    if doc.get("selection"):
+        _say(ctx, fitting.selection_line(doc["selection"]))
     for what, rows, key in (("round trip", doc.get("round_trip"), "parameter"),
                              ("EMVA 1288 of the fitted sensor on the measured plan", doc.get("emva_round_trip"), "quantity")):
         if rows:

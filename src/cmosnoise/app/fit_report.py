@@ -149,6 +149,16 @@ def build(doc: dict, result: dict, cfg) -> str:
     parts.append(f"<p>Temperature {html.escape(str(meta.get('temperature_c')))} C: "
                  f"{html.escape(meta.get('temperature_basis', 'from the data'))}</p>")
     parts.append("<h2>Fitted parameters</h2>" + _table(rows, ["parameter", "value", "95 % interval", "basis", "method"]))
+    sel = doc.get("selection") or {}
+    if sel:
+        from ..analysis.fit import SELECTION_ALPHA, SELECTION_TESTS
+
+        parts.append(f"<h2>Stages the data switch on</h2><p>Each stage's absence is tested; it is switched on only "
+                     f"where p is below {SELECTION_ALPHA:.0%} / {len(SELECTION_TESTS)} (Bonferroni: data without any "
+                     f"of them switch one on in at most {SELECTION_ALPHA:.0%} of data sets).</p>"
+                     + _table([(name, f"{t['p_value']:.3g}", f"{t['threshold']:.3g}", "on" if t["on"] else "off",
+                                t["test"]) for name, t in sel.items()], ["stage", "p-value", "threshold", "switched",
+                                                                         "test"]))
     if doc["not_fitted"]:
         parts.append("<h2>Not fitted (kept from the base configuration)</h2>"
                      + _table(list(doc["not_fitted"].items()), ["parameter", "why, and what it needs"]))

@@ -211,6 +211,7 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
                                     "white_pixels": r["white_pixels"], "exposures_s": r["exposures_s"]}
                          for T, r in result["dark"].items()},
         "round_trip": trip, "emva_round_trip": emva, "settings": per_setting,
+        "selection": result.get("selection", {}),
     }
     phase("writing fit_report.html")
     html_text = fit_report.build(doc, result, cfg)
@@ -247,7 +248,19 @@ def provenance_lines(doc: dict) -> list[str]:
             lines.append(f"{basis}: {', '.join(by[basis])}")
     if doc.get("not_fitted"):
         lines.append(f"kept from the base configuration (not in these data): {', '.join(doc['not_fitted'])}")
+    lines.append(selection_line(doc.get("selection", {})))
     return lines
+
+
+def selection_line(selection: dict) -> str:
+    """Which stages the data's tests switched on, at what threshold (the console's and config.yaml's line)."""
+    from ..analysis.fit import SELECTION_ALPHA, SELECTION_P, SELECTION_TESTS
+
+    on = [f"{name} (p = {t['p_value']:.2g})" for name, t in selection.items() if t["on"]]
+    off = [name for name, t in selection.items() if not t["on"]]
+    return (f"stages switched on by the data (each test at p < {SELECTION_P:.2g}: {SELECTION_ALPHA:.0%} "
+            f"family-wise over {len(SELECTION_TESTS)} tests): {', '.join(on) or 'none'}"
+            + (f"; absence not rejected: {', '.join(off)}" if off else ""))
 
 
 def dark_exposures(sensor: Sensor, base_s: tuple[float, ...] = (0.25, 0.5, 1.0), signal_e: float = 200.0) -> list[float]:
