@@ -377,7 +377,7 @@ def test_a_half_percent_nonlinearity_leaves_the_small_signal_k_within_half_a_per
 
 
 def test_a_linearity_error_read_where_the_adc_clips_first_is_said_by_the_configuration():
-    r = cli("config", "--preset", "sony-imx571", "--set", "nonlinearity.enabled=true", "--set",
+    r = cli("config", "--preset", "sony-imx571", "--set", "nonlinearity.coefficients=null", "--set",
             "nonlinearity.linearity_error_pct=[-0.5,0.5]")
     assert r.returncode == 0, r.stderr
     first = r.stdout.splitlines()[0]

@@ -75,7 +75,7 @@ BUILTIN_SIZE = 1024
 ARRAYS = ("raw", "expected_raw", "perfect_dn", "mask")
 #: each sample's settings, as columns: name -> numpy dtype ("str": text)
 COLUMNS = {
-    "sample": "int64", "camera": "str", "mode": "str", "iso": "float64", "gain_db": "float64",
+    "sample": "int64", "camera": "str", "mode": "str", "binning": "str", "iso": "float64", "gain_db": "float64",
     "k_dn_per_e": "float64", "black_level_dn": "float64", "white_level_dn": "float64", "cfa": "str",
     "light_e": "float64", "integration_time_s": "float64", "temperature_c": "float64", "seed": "int64",
     "source": "str", "window_row": "int64", "window_col": "int64", "config": "str",
@@ -381,10 +381,11 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
         raise CmosnoiseError(f"sample {index} ({camera}): light.enabled is on, but a data set sets each sample's "
                              "light itself (--light, electrons at the scene's white); leave light in lux off")
     sensor = config.sensor
-    gain_row = next((r for r in config.gain_table
-                     if (sensor.iso is not None and r.iso == sensor.iso)
-                     or (sensor.gain_db is not None and r.gain_db == sensor.gain_db)), None)
+    from ..model.physics import gain_row as selected_row
+
+    gain_row = selected_row(config)
     columns = {"sample": index, "camera": camera, "mode": (gain_row.mode or "") if gain_row else "",
+               "binning": sensor.binning,
                "iso": sensor.iso if sensor.iso is not None else math.nan,
                "gain_db": sensor.gain_db if sensor.gain_db is not None else math.nan,
                "cfa": sensor.cfa, "light_e": light, "integration_time_s": t, "temperature_c": temp, "seed": seed,

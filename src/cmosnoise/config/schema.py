@@ -147,6 +147,10 @@ class SensorSection(Section):
                                                                  "with this iso")
     gain_db: Optional[float] = Field(None, ge=-60, le=120, description="gain setting in dB: selects the row of "
                                                                        "gain_table with this gain_db")
+    binning: Literal["1x1", "2x2", "1x2", "2x1"] = Field(
+        "1x1", description="the camera's binning mode (rows x columns of native pixels read as one): selects the "
+                           "gain_table rows of this binning, with their own K, noise, bias, dark signal and pitch; "
+                           "sensor.width and height are the frame's, in binned pixels")
     frame_rate_hz: Optional[float] = Field(None, gt=0, le=1e6, description="frames per second: frame k starts k / "
                                            "frame_rate_hz seconds after frame 0 (random telegraph noise reads it); null: "
                                            "frames back to back, 1 / exposure.integration_time_s")
@@ -824,6 +828,8 @@ class GainRow(Section):
     iso: Optional[float] = Field(None, gt=0, le=1e7, description="the setting as ISO")
     gain_db: Optional[float] = Field(None, ge=-60, le=120, description="the setting in dB")
     mode: Optional[str] = Field(None, max_length=40, description="a name for the row's mode, e.g. LCG or HCG")
+    binning: Optional[Literal["1x1", "2x2", "1x2", "2x1"]] = Field(
+        None, description="the binning mode this row is for (sensor.binning picks it); null: every binning")
     k_dn_per_e: float = Field(gt=0, le=1000, description="system gain K at this setting, DN per e-")
     set: dict[str, Union[float, bool, str, list, None]] = Field(
         default_factory=dict, description="configuration keys this setting changes, dotted, e.g. read_noise.scale_dn")
@@ -832,7 +838,8 @@ class GainRow(Section):
     def _one_index(self):
         if (self.iso is None) == (self.gain_db is None):
             raise ValueError("a row is indexed by iso or by gain_db (one of the two)")
-        bad = [k for k in self.set if k.split(".")[0] in ("gain_table", "seed", "run", "scene") or k in ("sensor.iso", "sensor.gain_db")]
+        bad = [k for k in self.set if k.split(".")[0] in ("gain_table", "seed", "run", "scene")
+               or k in ("sensor.iso", "sensor.gain_db", "sensor.binning")]
         if bad:
             raise ValueError(f"{bad} cannot be set per gain (set sensor, stage and adc keys)")
         return self
@@ -910,13 +917,21 @@ class Config(Section):
         index = "iso" if self.sensor.iso is not None else "gain_db" if self.sensor.gain_db is not None else None
         if index is not None:
             value = getattr(self.sensor, index)
+            binning = self.sensor.binning
             have = [getattr(r, index) for r in self.gain_table if getattr(r, index) is not None]
             if not have:
                 raise ValueError(f"sensor.{index} = {value:g} needs a gain_table with {index} rows (this configuration "
                                  "has none)")
             if value not in have:
                 raise ValueError(f"sensor.{index} = {value:g} is not in the gain table; it has "
-                                 f"{', '.join(f'{h:g}' for h in sorted(have))}")
+                                 f"{', '.join(f'{h:g}' for h in sorted(set(have)))}")
+            if not any(getattr(r, index) == value and r.binning in (None, binning) for r in self.gain_table):
+                modes = sorted({r.binning for r in self.gain_table if getattr(r, index) == value})
+                raise ValueError(f"sensor.binning = {binning!r}: the gain table has no row for it at sensor.{index} = "
+                                 f"{value:g}; it has binning {', '.join(modes)} there")
+        elif self.sensor.binning != "1x1" and any(r.binning is not None for r in self.gain_table):
+            raise ValueError(f"sensor.binning = {self.sensor.binning!r} picks gain_table rows by binning: give the "
+                             "gain setting too (sensor.iso or sensor.gain_db)")
         ex = self.exposure
         if ex.peak_rate_photons_per_s is not None:
             if self.sensor.quantum_efficiency is None:

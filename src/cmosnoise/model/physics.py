@@ -53,12 +53,14 @@ def flicker_model(config: Config) -> HeavyTail:
 
 
 def gain_row(config: Config):
-    """The gain_table row ``sensor.iso`` or ``sensor.gain_db`` selects, or None."""
+    """The gain_table row ``sensor.iso`` or ``sensor.gain_db`` selects, of ``sensor.binning``'s rows (a row
+    without a binning serves every one), or None."""
     sen = config.sensor
     index = "iso" if sen.iso is not None else "gain_db" if sen.gain_db is not None else None
     if index is None:
         return None
-    return next(r for r in config.gain_table if getattr(r, index) == getattr(sen, index))
+    rows = [r for r in config.gain_table if getattr(r, index) == getattr(sen, index) and r.binning in (None, sen.binning)]
+    return next((r for r in rows if r.binning == sen.binning), rows[0])
 
 
 def apply_gain(config: Config) -> Config:
@@ -76,7 +78,8 @@ def apply_gain(config: Config) -> Config:
         for part in parents:
             node = node.setdefault(part, {})
         node[leaf] = value
-    where = f"iso {row.iso:g}" if row.iso is not None else f"gain_db {row.gain_db:g}"
+    where = (f"iso {row.iso:g}" if row.iso is not None else f"gain_db {row.gain_db:g}") + (
+        f", binning {row.binning}" if row.binning is not None else "")
     try:
         return merge_updates(config, updates)
     except CmosnoiseError as exc:

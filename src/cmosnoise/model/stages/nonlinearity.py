@@ -62,6 +62,33 @@ def linearity_error(x: np.ndarray, y: np.ndarray, y_sat: float) -> tuple[float, 
     return float(dev.min()), float(dev.max())
 
 
+def residual_pct(x: np.ndarray, y: np.ndarray, lo: float, hi: float) -> float:
+    """A laboratory's linearity residual (the ITL reports' "maximum residual"), %: the largest deviation of the
+    mean signal ``y`` from a straight line in ``x`` fitted (least squares, unweighted, with an intercept) over the
+    points with ``lo <= y <= hi``, relative to the line at each point. Not EMVA 1288's linearity error
+    (:func:`linearity_error`: weights ``1/y``, 5 to 95 % of saturation).
+
+    Parameters
+    ----------
+    x, y : ndarray (n,)
+        Exposure (any quantity proportional to it) and mean signal (DN, black included, as a report's range is).
+    lo, hi : float
+        The fit's range of ``y``.
+
+    Returns
+    -------
+    float
+        %, >= 0.
+    """
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    use = (y >= lo) & (y <= hi)
+    if use.sum() < 3:
+        raise ValueError(f"a linearity residual needs 3 points from {lo:g} to {hi:g}, got {int(use.sum())}")
+    slope, intercept = np.polyfit(x[use], y[use], 1)
+    line = intercept + slope * x[use]
+    return float(100.0 * np.max(np.abs((y[use] - line) / line)))
+
+
 def polynomial(coefficients: tuple[float, ...], full_well_e: float):
     """``f(x) = x (1 + s (a + s (b + s c)))``, ``s = x / full_well_e`` (as ``x * (1 / full_well_e)``, the
     kernel's arithmetic), for ``coefficients = (a, b, c)``."""
