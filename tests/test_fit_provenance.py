@@ -114,3 +114,29 @@ def test_no_stage_the_data_lack_is_switched_on_and_small_ones_they_have_are(plai
     assert on == {"nonlinearity", "pixel_offset"}, doc["selection"]
     cfg = yaml.safe_load((tmp_path / "b" / "config.yaml").read_text())
     assert cfg["pixel_offset"]["enabled"] and cfg["nonlinearity"]["enabled"]
+
+
+def test_measure_then_fit_compares_the_fit_with_the_configuration_that_made_the_data(tmp_path):
+    """`measure` writes truth.yaml beside its manifest and `fit` compares with it, parameter by parameter: each
+    fitted value, its 95 % interval and the configured value. About 1 in 20 intervals misses by chance; with 18
+    judged, 4 or more misses has binomial probability 1.1 % (fixed seed: the count is deterministic)."""
+    r = cli("-q", "measure", "--set", "sensor.width=192", "--set", "sensor.height=144", "--long-frames", "50",
+            "--levels", "16", "--out", tmp_path / "lab")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "lab" / "truth.yaml").is_file()
+    r, doc = _fit(tmp_path / "lab" / "manifest.yaml", tmp_path / "f")
+    rows = {row["parameter"]: row for row in doc["truth"]["rows"]}
+    assert doc["truth"]["source"].endswith("truth.yaml")
+    assert rows["system_gain_K_dn_per_e"]["truth"] == pytest.approx(0.4031, rel=1e-3)
+    assert rows["dark_current[25 C].mean_e_per_s"]["truth"] == pytest.approx(8.0)
+    assert "source_follower.rts.ppm" not in rows  # off in the configuration: its number made nothing
+    judged = [row for row in rows.values() if row["inside"] is not None]
+    misses = [row["parameter"] for row in judged if not row["inside"]]
+    assert len(judged) >= 15 and len(misses) <= 3, misses
+    assert "against the configuration that made the data" in r.stdout
+    assert "Against the configuration that made the data" in (tmp_path / "f" / "fit_report.html").read_text()
+    manifest = tmp_path / "lab" / "manifest.yaml"
+    r = cli("fit", "--frames-from", manifest, "--no-round-trip",
+            "--truth", tmp_path / "missing.yaml", "--out", tmp_path / "g")
+    assert r.returncode == 2 and "missing.yaml" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "g").exists()

@@ -414,6 +414,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         P["column_noise.gain_sigma_pct"] = _p(g["value"], g["ci95"], "the flat's column means, less the pixel and "
                                               "temporal shares")
         plots["prnu"] = {"residual": pg["relative_residual"]}
+    _instance_offsets_in_black(P, k, rows, cols)
     _include_gain_uncertainty(P, ptc["rel_se"])
     qe = P.get("quantum_efficiency")
     if qe is not None and qe["value"] > 1:  # reported as measured; what the configuration can hold is written
@@ -456,6 +457,20 @@ def _split_identifiable(P: dict, s2: np.ndarray, known: np.ndarray, frames: int,
                 P[k]["identifiable"] = "source_follower.read_noise_total_e"
                 P[k]["method"] += (f"; the split into thermal and flicker is not identifiable from these data (an "
                                    f"interval reaches past the total's {top:.3g} e-): only the total is measured")
+
+
+def _instance_offsets_in_black(P: dict, k: float, rows: int, cols: int) -> None:
+    """The black level's interval widened by what an instance's mean column and row offsets put in it: the
+    intercept holds this sensor's mean VFPN and fixed row offset, another instance of the fitted sensor draws its
+    own (sigma / sqrt(columns), sigma / sqrt(rows)), as the pixel offsets' share already is."""
+    b = P.get("black_level_dn")
+    parts = [(P.get("column_noise.vfpn_sigma_e"), cols), (P.get("row_noise.fixed_sigma_e"), rows)]
+    spread2 = sum((p["value"] * k) ** 2 / n for p, n in parts if p is not None and p.get("value"))
+    if b is None or b.get("ci95") is None or spread2 <= 0:
+        return
+    half = math.sqrt(((b["ci95"][1] - b["ci95"][0]) / 2) ** 2 + Z95**2 * spread2)
+    b["ci95"] = [b["value"] - half, b["value"] + half]
+    b["method"] += "; and an instance's mean column (VFPN) and row offsets"
 
 
 def _crosstalk_update(P: dict) -> dict | None:

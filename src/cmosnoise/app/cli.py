@@ -551,6 +551,9 @@ def fit(
     config: Optional[Path] = ConfigOpt,
     preset: Optional[str] = PresetOpt,
     round_trip: bool = typer.Option(True, "--round-trip/--no-round-trip", help="simulate the measurement again from the fit and compare"),
+    truth: Optional[Path] = typer.Option(None, "--truth", help="the configuration that made the data (a simulated "
+                                         "lab): compared parameter by parameter (default: truth.yaml beside the "
+                                         "manifest, which cmosnoise measure writes)"),
     out: Path = typer.Option(Path("cmosnoise-fit"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
@@ -564,7 +567,7 @@ def fit(
     base = _sensor(config, preset, None, {"sensor": {"cfa": cfa}} if cfa else None).config
     with _status(ctx) as (phase, say):
         doc = fitting.run(frames_from, base, out, overwrite, temperature, threshold, cfa, black_level, bits,
-                          with_round_trip=round_trip, say=say, phase=phase)
+                          with_round_trip=round_trip, say=say, phase=phase, truth=truth)
     if doc.get("settings"):  # one fit per gain setting: a gain table
         for setting, r in doc["settings"].items():
             k = r["parameters"]["system_gain_K_dn_per_e"]
@@ -579,6 +582,8 @@ def fit(
         _say(ctx, f"not fitted, kept from the base configuration: {name}: {why}")
     if doc.get("selection"):
         _say(ctx, fitting.selection_line(doc["selection"]))
+    if doc.get("truth"):
+        _say(ctx, fitting.truth_line(doc["truth"]["rows"], doc["truth"]["source"]))
     for what, rows, key in (("round trip", doc.get("round_trip"), "parameter"),
                              ("EMVA 1288 of the fitted sensor on the measured plan", doc.get("emva_round_trip"), "quantity")):
         if rows:

@@ -36,7 +36,7 @@ Examples
 >>> recipe = dataset.Recipe(samples=4, crop=(64, 64), seed=0)
 >>> sample, truth = dataset.make_sample(recipe, 0)
 >>> sorted(sample)[:4], sorted(truth)[:3]
-(['expected_raw', 'mask', 'perfect_dn', 'raw'], ['black_level_dn', 'camera', 'cfa'])
+(['expected_raw', 'mask', 'perfect_dn', 'raw'], ['binning', 'black_level_dn', 'camera'])
 """
 
 from __future__ import annotations

@@ -149,6 +149,15 @@ def build(doc: dict, result: dict, cfg) -> str:
     parts.append(f"<p>Temperature {html.escape(str(meta.get('temperature_c')))} C: "
                  f"{html.escape(meta.get('temperature_basis', 'from the data'))}</p>")
     parts.append("<h2>Fitted parameters</h2>" + _table(rows, ["parameter", "value", "95 % interval", "basis", "method"]))
+    truth = doc.get("truth")
+    if truth:
+        parts.append(f"<h2>Against the configuration that made the data</h2><p>{html.escape(truth['source'])}: each "
+                     "fitted value, its 95 % interval and the configured value. About one interval in twenty misses "
+                     "by chance.</p>" + _table([(r["parameter"], f"{r['fitted']:.5g}",
+                                                 "" if not r["ci95"] else f"{r['ci95'][0]:.4g} to {r['ci95'][1]:.4g}",
+                                                 f"{r['truth']:.5g}", {True: "yes", False: "NO", None: "-"}[r["inside"]])
+                                                for r in truth["rows"]],
+                                               ["parameter", "fitted", "95 % interval", "configured", "inside"]))
     sel = doc.get("selection") or {}
     if sel:
         from ..analysis.fit import SELECTION_ALPHA, SELECTION_TESTS

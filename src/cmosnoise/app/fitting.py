@@ -156,13 +156,23 @@ def emva_round_trip(descriptor: Path, cfg) -> list[dict]:
 def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: float | None = None,
         threshold_e_per_s: float | None = None, cfa: str | None = None, black_level_dn: float | None = None,
         bits: int | None = None, with_round_trip: bool = True, seed: int = 0,
-        say: Callable[[str], None] = lambda m: None, phase: Callable[[str], None] = lambda m: None) -> dict:
+        say: Callable[[str], None] = lambda m: None, phase: Callable[[str], None] = lambda m: None,
+        truth: Path | None = None) -> dict:
     """Fit ``frames_from`` and write the outputs to ``out`` (whole or not at all).
 
     ``say`` is told what was done (lines a user keeps); ``phase`` what is being done now (a progress display's
-    text: reading, each part of the fit, the round trip, the report).
+    text: reading, each part of the fit, the round trip, the report). ``truth``: the configuration that made
+    the data, compared parameter by parameter (default: :data:`TRUTH_NAME` beside a manifest, where ``cmosnoise
+    measure`` put it).
     """
     folder = OutputFolder(out, overwrite)  # refuses a bad output folder before any work
+    truth_cfg = None
+    if truth is None and Path(frames_from).is_file() and (Path(frames_from).parent / TRUTH_NAME).is_file():
+        truth = Path(frames_from).parent / TRUTH_NAME
+    if truth is not None:
+        from ..config import load_config
+
+        truth_cfg = load_config(truth)
     phase("reading the stacks")
     ds = stacks.load(frames_from, temperature_c)
     if cfa:
@@ -213,6 +223,9 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
         "round_trip": trip, "emva_round_trip": emva, "settings": per_setting,
         "selection": result.get("selection", {}),
     }
+    if truth_cfg is not None:
+        doc["truth"] = {"source": str(truth), "rows": compare_with_truth(result["parameters"], truth_cfg,
+                                                                          result["meta"].get("temperatures"))}
     phase("writing fit_report.html")
     html_text = fit_report.build(doc, result, cfg)
     with folder as tmp:
@@ -232,6 +245,101 @@ def describe(p: dict) -> str:
         return f"{value} [not identifiable: only {p.get('identifiable', 'a combination')} is]: {p['method']}"
     ci = f" (95 % CI {p['ci95'][0]:.4g} to {p['ci95'][1]:.4g})" if p.get("ci95") else ""
     return f"{value}{ci} [{basis}]: {p['method']}"
+
+
+#: the name of the configuration that made a simulated lab's data (``cmosnoise measure`` writes it beside the
+#: manifest; ``fit`` compares with it)
+TRUTH_NAME = "truth.yaml"
+
+
+def truth_values(truth) -> dict[str, float]:
+    """What each fitted parameter's name means in the configuration ``truth`` (a resolved Config): its number.
+
+    The keys a fit writes as configuration keys (``source_follower.thermal_sigma_e``, ``prnu.sigma_pct``, ...)
+    are read from the configuration as they are; K, the black level, the full well and the QE from their
+    sections; each fitted temperature's dark-current body (mean, std) from the configuration's characterization
+    points at that temperature; the source follower's total from its thermal and mean-square flicker sigma. A
+    section switched off gives nothing: its numbers did not make the data.
+    """
+    from ..model import physics
+    from ..model.spec import resolve
+    from ..model.stages import dark_current
+
+    spec = resolve(truth)
+    c = spec.config
+    out: dict[str, float] = {"system_gain_K_dn_per_e": spec.transfer.gain_dn_per_e,
+                             "black_level_dn": c.adc.black_level_dn, "full_well_e": c.sensor.full_well_e}
+    if c.sensor.qe_mean() is not None:
+        out["quantum_efficiency"] = c.sensor.qe_mean()
+    dump = c.model_dump(mode="json")
+
+    def walk(node, prefix):
+        if node.get("enabled") is False:  # a stage that is off: its numbers are not what made the data
+            return
+        for key, value in node.items():
+            name = f"{prefix}{key}"
+            if isinstance(value, dict):
+                walk(value, name + ".")
+            elif isinstance(value, (int, float)) and not isinstance(value, bool):
+                out.setdefault(name, float(value))
+
+    for section in ("source_follower", "row_noise", "column_noise", "prnu", "pixel_offset", "black_level"):
+        walk(dump[section], section + ".")
+    if c.source_follower.enabled:
+        ms = 0.0
+        if c.source_follower.flicker.enabled:  # E[X^2] of max(B, 0) + Bernoulli(f) Uniform(0, M)
+            law = physics.flicker_model(c)
+            b1 = float(law.body.expect(lambda x: x, lb=0))
+            b2 = float(law.body.expect(lambda x: x * x, lb=0))
+            m, f = law.tail_max, law.tail_fraction
+            ms = b2 + f * (b1 * m + m * m / 3)
+        out["source_follower.read_noise_total_e"] = math.sqrt(c.source_follower.thermal_sigma_e**2 + ms)
+    if c.dark_current.enabled:
+        d = c.dark_current
+        for T in sorted({p.temperature_c for p in spec.dark_points} | {c.sensor.temperature_c}):
+            state = dark_current.at_temperature(list(spec.dark_points), T, d.doubling_c, d.tail_doubling_c)
+            out[f"dark_current[{T:g} C].mean_e_per_s"] = state.mean
+            out[f"dark_current[{T:g} C].std_e_per_s"] = state.std
+        out["dark_current.doubling_c"] = d.doubling_c
+    return out
+
+
+def compare_with_truth(parameters: dict, truth, temperatures: list[float] | None = None) -> list[dict]:
+    """Parameter by parameter: the fitted value and its 95 % interval beside the value of the configuration that
+    made the data, and whether the interval holds it (None where the fit gives no interval or the truth has no
+    such number). Dark-current rows are made at the fitted temperatures."""
+    from ..model.spec import resolve
+
+    values = truth_values(truth)
+    if temperatures:  # the configuration's dark body at each temperature the fit measured
+        from ..model.stages import dark_current
+
+        spec = resolve(truth)
+        d = spec.config.dark_current
+        if d.enabled:
+            for T in temperatures:
+                state = dark_current.at_temperature(list(spec.dark_points), T, d.doubling_c, d.tail_doubling_c)
+                values[f"dark_current[{T:g} C].mean_e_per_s"] = state.mean
+                values[f"dark_current[{T:g} C].std_e_per_s"] = state.std
+    rows = []
+    for name, p in parameters.items():
+        if name not in values or not isinstance(p.get("value"), (int, float)) or isinstance(p.get("value"), bool):
+            continue
+        ci = p.get("ci95")
+        inside = None if ci is None or p.get("basis") == "not identifiable" else bool(ci[0] <= values[name] <= ci[1])
+        rows.append({"parameter": name, "fitted": float(p["value"]), "ci95": ci, "truth": values[name],
+                     "inside": inside, "basis": p.get("basis", "measured")})
+    return rows
+
+
+def truth_line(rows: list[dict], source: str) -> str:
+    """The comparison with the truth as one line: how many 95 % intervals hold it, and which do not."""
+    judged = [r for r in rows if r["inside"] is not None]
+    out = [r["parameter"] for r in judged if not r["inside"]]
+    expected = 0.05 * len(judged)
+    return (f"against the configuration that made the data ({source}): {len(judged) - len(out)} of {len(judged)} "
+            f"95 % intervals hold it (about {expected:.1f} miss by chance)" + (f"; outside: {', '.join(out)}" if out else "")
+            + (f"; {len(rows) - len(judged)} without an interval" if len(judged) < len(rows) else ""))
 
 
 def provenance_lines(doc: dict) -> list[str]:
@@ -341,5 +449,8 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
         say(f"wrote the stacks at {T:g} C")
     manifest = folder / "manifest.yaml"
     doc = {"cfa": cfg.sensor.cfa, "bits": cfg.adc.bits, "black_level_dn": cfg.adc.black_level_dn, "stacks": stacks_}
-    manifest.write_text("# a simulated lab measurement (cmosnoise measure)\n" + yaml.safe_dump(doc, sort_keys=False))
+    manifest.write_text(f"# a simulated lab measurement (cmosnoise measure); the configuration that made it: "
+                        f"{TRUTH_NAME}\n" + yaml.safe_dump(doc, sort_keys=False))
+    (folder / TRUTH_NAME).write_text("# the configuration that made these stacks: cmosnoise fit compares with it\n"
+                                     + cfg.to_yaml())
     return manifest
