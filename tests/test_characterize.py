@@ -356,6 +356,7 @@ def test_the_small_signal_k_estimator_is_exact_on_the_models_own_curves():
 
 
 @pytest.mark.parametrize("nonlinear", [True, False])
+@pytest.mark.slow
 def test_a_half_percent_nonlinearity_leaves_the_small_signal_k_within_half_a_percent(nonlinear):
     """512 x 384 pixels, 40 steps (20 below 70 % of saturation): K0's standard error is about 0.08 % of K (from
     the weighted residuals), so 0.5 % is over 5 of them; the test holds K0 to both. The photon-transfer K is held

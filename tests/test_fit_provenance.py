@@ -14,6 +14,8 @@ from conftest import cli
 from cmosnoise.analysis.fit import BASES
 
 HERE = Path(__file__).parent
+#: each test makes a foreign data set (emva1288's simulator, about 3 s) and fits it: the slow tier
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")

@@ -204,6 +204,11 @@ def evaluate(m: Measurement) -> dict:
     sp_b = emva.spatial_variances(m.stack_bright)
     sp_d = emva.spatial_variances(m.stack_dark)
     dsnu = emva.dsnu(m.stack_dark)
+    # the DSNU's spatial variance at the noise floor: the stack mean's temporal share (sigma^2 / L) estimated over
+    # N pixels has standard error sqrt(2 / N) sigma^2 / L (what :func:`agrees` allows near 0), e-^2
+    n_pix = m.stack_dark[0].size
+    dsnu_var_se = (math.sqrt(2 / n_pix) * emva.temporal_variance_stack(m.stack_dark) / len(m.stack_dark) / k**2
+                   if math.isfinite(k) else math.nan)
     defects = emva.defect_pixels(m.stack_bright, m.stack_dark, float(np.max(m.mu_y)))
     prnu = emva.prnu(m.stack_bright, m.stack_dark, exclude=defects)
     try:  # EMVA 1288's linearity error: the mean signal against the photons, 5 to 95 % of saturation
@@ -236,6 +241,7 @@ def evaluate(m: Measurement) -> dict:
         "dark_current_mean_se_e_per_s": se_m / k,
         "dark_current_var_se_e_per_s": se_v / k**2,
         "dsnu_e": dsnu["total"] / k,
+        "dsnu_var_se_e2": dsnu_var_se,
         "dsnu_shortest_e": (math.sqrt(max(m.dsnu_shortest_dn2, 0.0)) / k if m.dsnu_shortest_dn2 is not None
                             else math.nan),
         "dsnu_column_e": dsnu["column"] / k,
@@ -277,8 +283,17 @@ AGREEMENT_LIMITS = {"system_gain_K_dn_per_e": 0.03, "temporal_dark_noise_e": 0.0
 LINEARITY_POINTS = 0.25
 
 
-def agrees(key: str, measured: float, simulated: float) -> bool | None:
+#: standard errors of the difference of two DSNU variances within which two DSNUs at the noise floor agree
+FLOOR_Z = 5.0
+
+
+def agrees(key: str, measured: float, simulated: float, dsnu_var_se_e2: float | None = None) -> bool | None:
     """Whether ``simulated`` reproduces ``measured`` within :data:`AGREEMENT_LIMITS` (None: no limit for it).
+
+    A DSNU is the square root of a spatial variance less the temporal share; on a sensor without a fixed dark
+    pattern both are at the noise floor, where a relative limit means nothing: they also agree where their
+    variances differ by at most :data:`FLOOR_Z` times ``dsnu_var_se_e2``, the standard error of that difference
+    (each side's ``evaluate()["dsnu_var_se_e2"]``, in quadrature).
 
     Parameters
     ----------
@@ -286,6 +301,8 @@ def agrees(key: str, measured: float, simulated: float) -> bool | None:
         The quantity.
     measured, simulated : float
         Its two values.
+    dsnu_var_se_e2 : float, optional
+        For ``dsnu_e``: the standard error of the two variances' difference, e-^2.
 
     Returns
     -------
@@ -293,6 +310,9 @@ def agrees(key: str, measured: float, simulated: float) -> bool | None:
     """
     if key in ("linearity_error_min_pct", "linearity_error_max_pct"):
         return bool(abs(simulated - measured) <= LINEARITY_POINTS)
+    if key == "dsnu_e" and dsnu_var_se_e2 is not None and math.isfinite(dsnu_var_se_e2):
+        if abs(simulated**2 - measured**2) <= FLOOR_Z * dsnu_var_se_e2:
+            return True
     if key not in AGREEMENT_LIMITS or not measured:
         return None
     return bool(abs(simulated / measured - 1) <= AGREEMENT_LIMITS[key])

@@ -439,7 +439,8 @@ SPLIT_LIMIT = 1.5
 def _split_identifiable(P: dict, s2: np.ndarray, known: np.ndarray, frames: int, where: str) -> None:
     """The source follower's total temporal noise, which the per-pixel variances always give, and the split into
     thermal (white) and flicker (a spread of sigmas) marked "not identifiable" where an interval of a part reaches
-    past what the total allows (:data:`SPLIT_LIMIT` times its upper end): only the sum was measured."""
+    past what the total allows (:data:`SPLIT_LIMIT` times its upper end) or cannot be had: only the sum was
+    measured."""
     excess = np.asarray(s2, np.float64) - np.asarray(known, np.float64)
     # each pixel's variance over `frames` frames: chi-square, sampling variance 2 s^4 / (frames - 1)
     se = math.sqrt(float(np.mean(2 * np.asarray(s2, np.float64) ** 2 / (frames - 1))) / excess.size)
@@ -450,7 +451,11 @@ def _split_identifiable(P: dict, s2: np.ndarray, known: np.ndarray, frames: int,
     top = total["ci95"][1]
     parts = ("source_follower.thermal_sigma_e", "source_follower.flicker.gumbel_loc_e",
              "source_follower.flicker.gumbel_scale_e")
-    if any(P.get(k, {}).get("ci95") and P[k]["ci95"][1] > SPLIT_LIMIT * top for k in parts):
+    def beyond(k):  # an interval past what the total allows, or none at all (the likelihood's scores singular)
+        p = P.get(k)
+        return p is not None and p["value"] is not None and (p["ci95"] is None or p["ci95"][1] > SPLIT_LIMIT * top)
+
+    if any(beyond(k) for k in parts):
         for k in parts:
             if k in P and P[k]["value"] is not None:
                 P[k]["basis"] = "not identifiable"

@@ -145,11 +145,13 @@ def emva_round_trip(descriptor: Path, cfg) -> list[dict]:
     sim = ch.measure_like(Sensor(cfg), m)
     simulated = ev.evaluate(sim)
     rows = []
+    ses = [r.get("dsnu_var_se_e2") for r in (measured, simulated)]
+    floor = math.hypot(*ses) if all(isinstance(x, float) for x in ses) else None
     for key, label, unit, _fmt in ev.TABLE_ROWS:
         a, b = measured.get(key), simulated.get(key)
         if isinstance(a, (int, float)) and isinstance(b, (int, float)):
             rows.append({"quantity": label.strip(), "unit": unit, "measured": float(a), "simulated": float(b),
-                         "agree": ev.agrees(key, float(a), float(b))})
+                         "agree": ev.agrees(key, float(a), float(b), floor)})
     return rows
 
 
