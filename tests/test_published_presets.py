@@ -27,7 +27,8 @@ REPORTS = [
                                              "residual": (0.7, 1000, 50000), "qe": 0.818, "bias": 101.4}),
     ("sony-imx571", {"sensor.gain_db": 12}, {"k": 1 / 0.20, "rn": 1.4}),
     ("zwo-asi294mm", {"sensor.binning": "2x2"}, {"k": 1 / 0.22, "rn": 1.9, "dark": 0.033,
-                                                 "residual": (0.5, 5500, 49500), "qe": 0.78, "bias": 642.7}),
+                                                 "residual": (0.5, 5500, 49500), "qe": 0.78, "bias": 642.7,
+                                                 "bias_noise": 9.3}),
     ("zwo-asi294mm", {"sensor.binning": "1x1", "sensor.temperature_c": -15.0}, {"k": 1 / 0.05, "rn": 2.5,
                                                                                "dark": 0.001, "bias": 572.9}),
 ]
@@ -65,6 +66,9 @@ def test_a_named_camera_gives_back_its_reports_figures(preset, sets, report):
         assert abs(residual_pct(m.mu_p, m.mu_y, lo, hi) - want) <= 0.25
     if "qe" in report:
         assert abs(res["quantum_efficiency"] / report["qe"] - 1) <= 0.03, res["quantum_efficiency"]
+    if "bias_noise" in report:  # one bias frame's standard deviation over its pixels (temporal and fixed)
+        bias = sensor.with_exposure(1e-6).expose("flat:0").frame(0).astype(float)
+        assert abs(bias.std(ddof=1) / report["bias_noise"] - 1) <= 0.05, bias.std(ddof=1)
     if "bias" in report:  # the dark stack's mean at 0.5 s: the black level plus half a second of dark signal
         dark_dn = (report.get("dark") or 0.0) * m.stack_texp_s * got["k"]
         assert abs(res["stack_mean_dark_dn"] - dark_dn - report["bias"]) <= 1.0, res["stack_mean_dark_dn"]
