@@ -355,7 +355,8 @@ def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: flo
         progress()
     dark = (None, None, None, 0)
     if dark_texp is not None:
-        dark = _dark_series(sensor, dark_texp, mu_yd[shortest] + 0.5 * (float(np.max(mu_y)) - mu_yd[shortest]))
+        dark = _dark_series(sensor, dark_texp, mu_yd[shortest] + 0.5 * (float(np.max(mu_y)) - mu_yd[shortest]),
+                            progress)
     qe = sensor.config.sensor.qe_mean() or 1.0  # photo-electrons per photon
     return Measurement(
         t.bits, sensor.shape, texp, rates * texp / qe, mu_y, mu_yd, s2_y, s2_yd, stack_texp, stack_rate * stack_texp / qe,
@@ -363,7 +364,7 @@ def _series(sensor: Sensor, texp: np.ndarray, rates: np.ndarray, stack_texp: flo
     )
 
 
-def _dark_series(sensor: Sensor, texp: np.ndarray, limit_dn: float):
+def _dark_series(sensor: Sensor, texp: np.ndarray, limit_dn: float, progress=None):
     """Dark pairs at each of ``texp`` (their own frames, sequence :data:`SEQ_EMVA_DARK_SERIES`): the mean and
     temporal variance over the pixels below ``limit_dn`` in both frames of the longest exposure's pair."""
     def pair(i):
@@ -377,6 +378,8 @@ def _dark_series(sensor: Sensor, texp: np.ndarray, limit_dn: float):
         a, b = last if i == len(texp) - 1 else pair(i)
         a, b = a[keep], b[keep]
         mu[i], s2[i] = pair_stats(a, b)
+        if progress:
+            progress()
     return texp, mu, s2, int(keep.size - keep.sum())
 
 
