@@ -415,51 +415,19 @@ def test_a_full_disk_after_one_folder_was_committed_says_so(tmp_path, monkeypatc
     assert (tmp_path / "out" / "characterization.json").exists() and not (tmp_path / "emva").exists()
 
 
-def test_a_command_that_swallows_its_signal_is_ended_within_seconds_with_its_folder_absent(tmp_path, request):
-    """The watchdog: a job stuck where the signal's exception is swallowed (as inside a compiler's callback) is
-    ended GRACE_S after the signal, its temporary output removed, with one line and status 128 + the signal."""
+def _stuck_simulate(request, around: str, setup: str = "", **popen):
+    """A ``simulate`` whose job is stuck where every exception is swallowed, the first signal's too, wherever it
+    lands (as inside a compiler's callback), inside the context manager ``around`` (after ``setup``); started,
+    and its "ready" read."""
     code = textwrap.dedent(f"""
         import sys, time
         from cmosnoise.app import run as jobs
-        from cmosnoise.io.output import OutputFolder
+        {setup}
 
         def stuck(*a, **k):
-            with OutputFolder({str(tmp_path / 'out')!r}) as tmp:
-                (tmp / 'half').write_text('x')
-                said = False
-                while True:  # every exception swallowed, the first signal's too, wherever it lands
-                    try:
-                        if not said:
-                            said = True
-                            print('ready', flush=True)
-                        time.sleep(0.05)
-                    except BaseException:
-                        pass
-
-        jobs.simulate = stuck
-        from cmosnoise.app.cli import run
-        sys.exit(run(['simulate', '--set', 'sensor.width=64', '--set', 'sensor.height=48']))
-        """)
-    proc = _popen(request, [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    assert proc.stdout.readline().strip() == "ready", proc.stderr.read()
-    proc.send_signal(signal.SIGTERM)
-    t0 = time.monotonic()
-    err = proc.communicate(timeout=30)[1]
-    assert time.monotonic() - t0 < 6, err
-    assert proc.returncode == 143 and "stopped after" in err and "nothing was written" in err, err
-    assert os.listdir(tmp_path) == [], os.listdir(tmp_path)  # neither the folder nor its temporary
-
-
-def test_a_job_ended_by_the_watchdog_still_says_what_it_kept(tmp_path, request):
-    """A data set stopped inside a compile (its signal swallowed): the watchdog's line names the shards kept, not
-    "nothing was written" (CI met this: a resume stopped while numba compiled said it had written nothing)."""
-    code = textwrap.dedent("""
-        import sys, time
-        from cmosnoise.app import run as jobs
-        from cmosnoise.errors import keeping
-
-        def stuck(*a, **k):
-            with keeping(lambda: "3 of 9 shards kept in ds; --resume completes it"):
+            with {around} as tmp:
+                if tmp is not None:
+                    (tmp / 'half').write_text('x')
                 said = False
                 while True:
                     try:
@@ -475,8 +443,29 @@ def test_a_job_ended_by_the_watchdog_still_says_what_it_kept(tmp_path, request):
         sys.exit(run(['simulate', '--set', 'sensor.width=64', '--set', 'sensor.height=48']))
         """)
     proc = _popen(request, [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                  cwd=tmp_path)
+                  **popen)
     assert proc.stdout.readline().strip() == "ready", proc.stderr.read()
+    return proc
+
+
+def test_a_command_that_swallows_its_signal_is_ended_within_seconds_with_its_folder_absent(tmp_path, request):
+    """The watchdog: a job stuck where the signal's exception is swallowed (as inside a compiler's callback) is
+    ended GRACE_S after the signal, its temporary output removed, with one line and status 128 + the signal."""
+    proc = _stuck_simulate(request, f"OutputFolder({str(tmp_path / 'out')!r})",
+                           "from cmosnoise.io.output import OutputFolder")
+    proc.send_signal(signal.SIGTERM)
+    t0 = time.monotonic()
+    err = proc.communicate(timeout=30)[1]
+    assert time.monotonic() - t0 < 6, err
+    assert proc.returncode == 143 and "stopped after" in err and "nothing was written" in err, err
+    assert os.listdir(tmp_path) == [], os.listdir(tmp_path)  # neither the folder nor its temporary
+
+
+def test_a_job_ended_by_the_watchdog_still_says_what_it_kept(tmp_path, request):
+    """A data set stopped inside a compile (its signal swallowed): the watchdog's line names the shards kept, not
+    "nothing was written" (CI met this: a resume stopped while numba compiled said it had written nothing)."""
+    proc = _stuck_simulate(request, 'keeping(lambda: "3 of 9 shards kept in ds; --resume completes it")',
+                           "from cmosnoise.errors import keeping", cwd=tmp_path)
     proc.send_signal(signal.SIGINT)
     err = proc.communicate(timeout=30)[1]
     assert proc.returncode == 130 and "stopped after" in err, err
