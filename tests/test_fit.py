@@ -366,3 +366,16 @@ def test_k_uncertainty_widens_the_parameters_in_electrons_only():
     assert P["dark_current[45 C].mean_e_per_s"]["ci95"] == pytest.approx([50 - math.hypot(1, Z95 / 2), 50 + math.hypot(1, Z95 / 2)])
     for name in ("system_gain_K_dn_per_e", "dark_current[45 C].tail.ppm_above", "prnu.sigma_pct", "full_well_e"):
         assert P[name] == before[name], name
+
+
+def test_a_fitted_value_outside_the_schema_is_written_clipped_and_says_so():
+    """No silent clipping: what the configuration cannot hold is written at its limit, and the parameter says
+    what was written and why; a value inside is written as it is, with nothing added."""
+    from cmosnoise.analysis.fit import _written
+
+    P = {"prnu.sigma_pct": {"value": 130.0, "method": "m"}, "column_noise.gain_sigma_pct": {"value": 2.0, "method": "m"}}
+    assert _written(P, "prnu.sigma_pct", 0.0, 100.0) == 100.0 and P["prnu.sigma_pct"]["written"] == 100.0
+    assert "config.yaml has 100" in P["prnu.sigma_pct"]["method"]
+    assert _written(P, "prnu.sigma_pct", 0.0, 100.0) == 100.0 and P["prnu.sigma_pct"]["method"].count("config.yaml") == 1
+    assert _written(P, "column_noise.gain_sigma_pct", 0.0, 50.0) == 2.0
+    assert P["column_noise.gain_sigma_pct"] == {"value": 2.0, "method": "m"}

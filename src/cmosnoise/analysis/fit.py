@@ -464,6 +464,17 @@ def _split_identifiable(P: dict, s2: np.ndarray, known: np.ndarray, frames: int,
                                    f"interval reaches past the total's {top:.3g} e-): only the total is measured")
 
 
+def _written(P: dict, name: str, lo: float, hi: float, value: float | None = None) -> float:
+    """The value the configuration gets for fitted parameter ``name``: clipped to the schema's ``[lo, hi]``, and
+    where that changes it, the parameter says so (``written``, and its method): no silent clipping."""
+    v = float(P[name]["value"] if value is None else value)
+    out = min(max(v, lo), hi)
+    if out != v and P[name].get("written") != out:
+        P[name]["written"] = out
+        P[name]["method"] += f"; outside what the configuration holds ({lo:g} to {hi:g}): config.yaml has {out:g}"
+    return out
+
+
 def _instance_offsets_in_black(P: dict, k: float, rows: int, cols: int) -> None:
     """The black level's interval widened by what an instance's mean column and row offsets put in it: the
     intercept holds this sensor's mean VFPN and fixed row offset, another instance of the fitted sensor draws its
@@ -695,7 +706,7 @@ def fitted_config(base, result: dict):
         return P[name]["value"] if name in P else default
 
     k, black, bits = v("system_gain_K_dn_per_e"), v("black_level_dn"), meta["bits"]
-    black = min(max(round(black, 3), 0.0), 2**bits - 2)
+    black = _written(P, "black_level_dn", 0.0, 2**bits - 2, round(black, 3))
     full = v("full_well_e", base.sensor.full_well_e)
     nonlin = result.get("_nonlinearity")
     nl_update = None
@@ -796,7 +807,7 @@ def fitted_config(base, result: dict):
     if "quantum_efficiency" in P and v("quantum_efficiency") > 0:
         # photons per pixel over the fitted configuration's e-: what a crosstalk loss and the PRNU map leave aside;
         # one above 1 is written as 1 (the parameter says so)
-        u["sensor"]["quantum_efficiency"] = min(v("quantum_efficiency"), 1.0)
+        u["sensor"]["quantum_efficiency"] = _written(P, "quantum_efficiency", 0.0, 1.0)
     if "pixel_offset.sigma_e" in P:
         sig = v("pixel_offset.sigma_e")
         off_tail = None
@@ -811,8 +822,8 @@ def fitted_config(base, result: dict):
     if xt is not None:
         u["crosstalk"] = xt
     if "prnu.sigma_pct" in P:
-        u["prnu"] = {"enabled": True, "sigma_pct": min(v("prnu.sigma_pct"), 100.0), "measured_pct": None}
-        u.setdefault("column_noise", {})["gain_sigma_pct"] = min(v("column_noise.gain_sigma_pct"), 50.0)
+        u["prnu"] = {"enabled": True, "sigma_pct": _written(P, "prnu.sigma_pct", 0.0, 100.0), "measured_pct": None}
+        u.setdefault("column_noise", {})["gain_sigma_pct"] = _written(P, "column_noise.gain_sigma_pct", 0.0, 50.0)
     try:
         return resolve(merge_updates(base, u)).config
     except CmosnoiseError as exc:
