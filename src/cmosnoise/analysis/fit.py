@@ -78,9 +78,11 @@ BASES = ("measured", "derived", "assumed", "not identifiable")
 
 
 def _with_basis(P: dict) -> None:
-    """Give every parameter without one its basis: measured where it has an interval, else derived."""
+    """Give every parameter without one its basis: measured where it has an interval (its own, or one per element
+    of a kernel or a cell map), else derived."""
     for p in P.values():
-        p.setdefault("basis", "measured" if p.get("ci95") is not None else "derived")
+        interval = any(p.get(key) is not None for key in ("ci95", "ci95_pct", "ci95_each"))
+        p.setdefault("basis", "measured" if interval else "derived")
 
 
 def _temperature_basis(ds, temperature_c, base) -> str:
