@@ -9,6 +9,7 @@ The limits are the issue's, not sampling errors; the estimators' own spread is f
 
 import math
 
+import numpy as np
 import pytest
 
 from cmosnoise import CmosnoiseError, Sensor
@@ -52,7 +53,7 @@ def _sensor(preset: str, sets: dict) -> Sensor:
 @pytest.mark.slow
 def test_a_named_camera_gives_back_its_reports_figures(preset, sets, report):
     sensor = _sensor(preset, sets)
-    m = ch.measure(sensor, steps=60, stack_frames=4)
+    m = ch.measure(sensor, steps=40, stack_frames=2)
     res = ev.evaluate(m)
     got = {"k": res["system_gain_K_dn_per_e"], "rn": res["temporal_dark_noise_e"]}
     assert abs(got["k"] / report["k"] - 1) <= 0.02, (got["k"], report["k"])
@@ -61,9 +62,12 @@ def test_a_named_camera_gives_back_its_reports_figures(preset, sets, report):
         assert not res["unresolved"], res["unresolved"]
         assert abs(res["dark_current_mean_e_per_s"] / report["dark"] - 1) <= 0.20, (res["dark_current_mean_e_per_s"],
                                                                                       report["dark"])
-    if "residual" in report:
+    if "residual" in report:  # the lab's series: 25 flats from the range's bottom to its top, one frame's mean each
         want, lo, hi = report["residual"]
-        assert abs(residual_pct(m.mu_p, m.mu_y, lo, hi) - want) <= 0.25
+        t = sensor.transfer
+        charge = (np.linspace(lo, hi, 25) - t.black_level_dn) / t.gain_dn_per_e  # e-, in proportion to exposure
+        means = [float(sensor.with_exposure(1.0, q).expose("flat:1.0").frame(0).mean()) for q in charge]
+        assert abs(residual_pct(charge, np.array(means), lo * 0.98, hi) - want) <= 0.25
     if "qe" in report:
         assert abs(res["quantum_efficiency"] / report["qe"] - 1) <= 0.03, res["quantum_efficiency"]
     if "bias_noise" in report:  # one bias frame's standard deviation over its pixels (temporal and fixed)
