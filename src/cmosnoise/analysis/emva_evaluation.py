@@ -46,17 +46,11 @@ DARK_RESOLVE_Z = 3.0
 
 
 def _slope(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
-    """Least squares line: (slope, its standard error, intercept); the standard error from the residuals, n - 2
-    degrees of freedom."""
-    x = np.asarray(x, np.float64)
-    y = np.asarray(y, np.float64)
-    xm, ym = x.mean(), y.mean()
-    sxx = float(np.sum((x - xm) ** 2))
-    b = float(np.sum((x - xm) * (y - ym))) / sxx
-    a = float(ym) - b * float(xm)
-    r = y - (a + b * x)
-    se = math.sqrt(float(np.sum(r * r)) / (len(x) - 2) / sxx) if len(x) > 2 else math.nan
-    return b, se, a
+    """Least squares line: (slope, its standard error from the residuals, intercept): ``scipy.stats.linregress``."""
+    from scipy import stats
+
+    fit = stats.linregress(np.asarray(x, np.float64), np.asarray(y, np.float64))
+    return float(fit.slope), float(fit.stderr), float(fit.intercept)
 
 
 def small_signal_gain(mu_p: np.ndarray, y: np.ndarray, v: np.ndarray, s2_y: np.ndarray,
