@@ -254,14 +254,15 @@ def describe(p: dict) -> str:
 TRUTH_NAME = "truth.yaml"
 
 
-def truth_values(truth) -> dict[str, float]:
+def truth_values(truth, temperatures: list[float] | None = None) -> dict[str, float]:
     """What each fitted parameter's name means in the configuration ``truth`` (a resolved Config): its number.
 
     The keys a fit writes as configuration keys (``source_follower.thermal_sigma_e``, ``prnu.sigma_pct``, ...)
     are read from the configuration as they are; K, the black level, the full well and the QE from their
     sections; each fitted temperature's dark-current body (mean, std) from the configuration's characterization
-    points at that temperature; the source follower's total from its thermal and mean-square flicker sigma. A
-    section switched off gives nothing: its numbers did not make the data.
+    points at that temperature (``temperatures``: the fit's; default: the points' and the sensor's); the source
+    follower's total from its thermal and mean-square flicker sigma. A section switched off gives nothing: its
+    numbers did not make the data.
     """
     from ..model import physics
     from ..model.spec import resolve
@@ -298,7 +299,7 @@ def truth_values(truth) -> dict[str, float]:
         out["source_follower.read_noise_total_e"] = math.sqrt(c.source_follower.thermal_sigma_e**2 + ms)
     if c.dark_current.enabled:
         d = c.dark_current
-        for T in sorted({p.temperature_c for p in spec.dark_points} | {c.sensor.temperature_c}):
+        for T in temperatures or sorted({p.temperature_c for p in spec.dark_points} | {c.sensor.temperature_c}):
             state = dark_current.at_temperature(list(spec.dark_points), T, d.doubling_c, d.tail_doubling_c)
             out[f"dark_current[{T:g} C].mean_e_per_s"] = state.mean
             out[f"dark_current[{T:g} C].std_e_per_s"] = state.std
@@ -310,19 +311,7 @@ def compare_with_truth(parameters: dict, truth, temperatures: list[float] | None
     """Parameter by parameter: the fitted value and its 95 % interval beside the value of the configuration that
     made the data, and whether the interval holds it (None where the fit gives no interval or the truth has no
     such number). Dark-current rows are made at the fitted temperatures."""
-    from ..model.spec import resolve
-
-    values = truth_values(truth)
-    if temperatures:  # the configuration's dark body at each temperature the fit measured
-        from ..model.stages import dark_current
-
-        spec = resolve(truth)
-        d = spec.config.dark_current
-        if d.enabled:
-            for T in temperatures:
-                state = dark_current.at_temperature(list(spec.dark_points), T, d.doubling_c, d.tail_doubling_c)
-                values[f"dark_current[{T:g} C].mean_e_per_s"] = state.mean
-                values[f"dark_current[{T:g} C].std_e_per_s"] = state.std
+    values = truth_values(truth, temperatures)
     rows = []
     for name, p in parameters.items():
         if name not in values or not isinstance(p.get("value"), (int, float)) or isinstance(p.get("value"), bool):
