@@ -56,14 +56,13 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
     else:
         sensor = Sensor(spec)
         plan = emva_files.load(like) if like is not None else None
-        dark_steps = 0 if isinstance(dark_exposures, str) or dark_exposures is None else len(dark_exposures)
-        if isinstance(dark_exposures, str) and plan is None:  # "auto": the series the model asks for
-            auto = ch.dark_series_times(sensor)
-            dark_steps = 0 if auto is None else len(auto)
+        if isinstance(dark_exposures, str):  # "auto": the series the model asks for (none on another's plan)
+            dark_exposures = ch.dark_series_times(sensor) if plan is None else None
+        dark_steps = 0 if dark_exposures is None else len(dark_exposures)
         advance = progress((len(plan.texp_s) if plan is not None else steps) + 1 + dark_steps) if progress else None
         if plan is not None:  # another data set's exposure times, photons and stack sizes
             m = ch.measure_like(sensor, plan, keep_frames=emva_export is not None, progress=advance,
-                                dark_exposures=None if isinstance(dark_exposures, str) else dark_exposures)
+                                dark_exposures=dark_exposures)
         else:
             m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance,
                            dark_exposures=dark_exposures)
