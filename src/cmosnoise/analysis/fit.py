@@ -365,7 +365,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
     else:
         _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed,
-                 not_fitted, exclude=rts_pixels, selection=selection)
+                 not_fitted, selection, exclude=rts_pixels)
 
     # ---------------------------------------------------------------- crosstalk from spots
     phase("crosstalk")
@@ -577,10 +577,12 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
 
 
 def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int,
-             not_fitted: dict, exclude: np.ndarray | None = None, selection: dict | None = None) -> None:
+             not_fitted: dict, selection: dict, exclude: np.ndarray | None = None) -> None:
     """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``; the
     read noise's shape (Tukey-lambda) where the pixels' noise is not normal, and the black level's error per
-    frame. What cannot be fitted goes to ``not_fitted``."""
+    frame. What cannot be fitted goes to ``not_fitted``; each stage test's p-value to ``selection``."""
+    from scipy import stats
+
     rows, cols = st.shape
     n = st.n
     corr = 1 - 2 / cols - 2 / rows
@@ -641,11 +643,9 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
         shp = fit_readout.pixel_noise_shape(st.pixel_var, st.pixel_m4, n, known_var, known_k4,
                                             fit_readout.own_share(rows, cols))
         if shp is not None:
-            from scipy import stats
-
             (kurt, kci), (lam, lci) = shp["kurtosis"], shp["lam"]
             se_kurt = (kci[1] - kci[0]) / (2 * Z95)
-            not_normal = _select(selection if selection is not None else {}, "read_noise.shape",
+            not_normal = _select(selection, "read_noise.shape",
                                  float(2 * stats.norm.sf(abs(kurt) / se_kurt)) if se_kurt > 0 else 1.0,
                                  "the pixels' excess kurtosis against 0 (two-sided z)")
             if not_normal and shp["spread"] < 0.1:
@@ -662,11 +662,8 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
                     "noise")
     e2, e2_se = fit_readout.frame_error_variance(st.row_means, st.col_means,
                                                  float(np.mean(st.pixel_var)) / fit_readout.own_share(rows, cols))
-    if selection is not None:
-        from scipy import stats
-
-        _select(selection, "black_level.frame_sigma_dn", float(stats.norm.sf(e2 / e2_se)) if e2_se > 0 else 1.0,
-                "the frames' means' spread beyond the rows', columns' and pixels' share, against 0 (one-sided z)")
+    _select(selection, "black_level.frame_sigma_dn", float(stats.norm.sf(e2 / e2_se)) if e2_se > 0 else 1.0,
+            "the frames' means' spread beyond the rows', columns' and pixels' share, against 0 (one-sided z)")
     P["black_level.frame_sigma_dn"] = _p(**sigma_from_variance(e2, e2_se),
                                          method=f"the spread of the {n} frames' means less what the rows', columns' "
                                                 "and pixels' temporal noise put there")

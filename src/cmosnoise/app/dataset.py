@@ -60,7 +60,7 @@ from ..config.loading import deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError, keeping, note_kept
 from ..io.output import atomic_file, resumable_mode
-from ..model import raw_scene
+from ..model import physics, raw_scene
 from ..model import scene as scene_mod
 from ..model.cfa import BAYER_PATTERNS
 from ..model.sensor import Sensor, check_device, frames_together
@@ -381,9 +381,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
         raise CmosnoiseError(f"sample {index} ({camera}): light.enabled is on, but a data set sets each sample's "
                              "light itself (--light, electrons at the scene's white); leave light in lux off")
     sensor = config.sensor
-    from ..model.physics import gain_row as selected_row
-
-    gain_row = selected_row(config)
+    gain_row = physics.gain_row(config)
     columns = {"sample": index, "camera": camera, "mode": (gain_row.mode or "") if gain_row else "",
                "binning": sensor.binning,
                "iso": sensor.iso if sensor.iso is not None else math.nan,
