@@ -9,9 +9,10 @@ a constant, uniform irradiation:
   frames at the same exposure time, for the spatial statistics;
 - where the photon-transfer series' exposure times (to 1.3 s) are too short to
   resolve the dark current (a cooled sensor: 0.0005 e-/s), a dark-current
-  series of dark pairs at longer exposure times, as EMVA 1288 (release 4.0,
-  section 7.1) allows: chosen from the model by :func:`dark_series_times`, or
-  given.
+  series of dark pairs at longer exposure times (EMVA 1288 takes the dark
+  current from the dark mean's growth with exposure time; these are longer
+  times for that fit, our choice, not the standard's): chosen from the model
+  by :func:`dark_series_times`, or given.
 
 The evaluation (:func:`cmosnoise.analysis.emva_evaluation.evaluate`) uses
 nothing but those frames and the photon counts, as a lab would: the system gain K from the photon-transfer
