@@ -7,7 +7,6 @@ The limits are the issue's, not sampling errors; the estimators' own spread is f
 (K: 0.2 %, sigma_d: 0.3 %, the dark series' 4 % by construction, the residual's 0.03 points at the low end).
 """
 
-import math
 
 import numpy as np
 import pytest
@@ -97,13 +96,14 @@ def test_a_binning_mode_is_selected_like_a_gain_setting():
 
 
 def test_the_linearity_residual_is_a_straight_lines_largest_relative_deviation():
-    """residual_pct is 0 on a straight line (any intercept) and, on y = x (1 - 0.01 x), the largest of
-    |y / line - 1| for numpy's least-squares line over the range."""
+    """Analytic: y = x^2 at x = 1, 2, 3 has the least-squares line 4x - 10/3 (slope Sxy / Sxx = 8 / 2, intercept
+    14/3 - 8), which misses y by (1 - 2/3) / (2/3) = 50 % at x = 1, 1/7 at 2 and 1/26 at 3: the residual is
+    50 %, whatever lies outside the fit's range. A straight line with an offset gives 0."""
     import numpy as np
 
-    x = np.linspace(0.01, 1.0, 200)
-    assert residual_pct(x, 3 * x + 2, 0, 10) == pytest.approx(0.0, abs=1e-10)
-    y = x * (1 - 0.01 * x)
-    b, a = np.polyfit(x, y, 1)
-    assert residual_pct(x, y, 0, 1) == pytest.approx(100 * np.max(np.abs(y / (a + b * x) - 1)), rel=1e-12)
-    assert math.isfinite(residual_pct(x, y, 0.2, 0.8))
+    x = np.array([1.0, 2.0, 3.0])
+    assert residual_pct(x, x**2, 0, 10) == pytest.approx(50.0, rel=1e-12)
+    assert residual_pct(np.array([*x, 10.0]), np.array([*x**2, 100.0]), 0, 10) == pytest.approx(50.0, rel=1e-12)
+    assert residual_pct(x, 3 * x + 2, 0, 100) == pytest.approx(0.0, abs=1e-10)
+    with pytest.raises(ValueError, match="3 points"):
+        residual_pct(x, x**2, 3, 10)
