@@ -21,6 +21,7 @@ from ..analysis import characterize as ch
 from ..analysis import emva_evaluation as ev
 from ..analysis import emva_files
 from ..analysis import fit as fitting
+from ..config import schema
 from ..io import stacks
 from ..io.output import OutputFolder, write_json
 from ..model.sensor import Sensor
@@ -365,13 +366,16 @@ def selection_line(selection: dict) -> str:
 def dark_exposures(sensor: Sensor, base_s: tuple[float, ...] = (0.25, 0.5, 1.0), signal_e: float = 200.0) -> list[float]:
     """Dark-current exposure times (s) for ``sensor``: ``base_s``, and where the body's mean dark signal is below
     ``signal_e`` at the longest of them, ``base_s`` scaled up until it is (never past a third of saturation;
-    rounded to 3 significant digits). The short ones measure the white pixels, which clip in the long ones
-    (each pixel's slope is taken where it does not clip); the long ones the body, above the read noise."""
+    rounded to 3 significant digits; never past the longest exposure a configuration takes, an hour). The short
+    ones measure the white pixels, which clip in the long ones (each pixel's slope is taken where it does not
+    clip); the long ones the body, above the read noise."""
     state = sensor.dark_state
     if state is None or state.mean <= 0:
         return list(base_s)
     longest = max(base_s)
-    scale = max(1.0, min(signal_e / (state.mean * longest), sensor.saturation_e / 3 / (state.mean * longest)))
+    limit = schema.MAX_EXPOSURE_S
+    scale = max(1.0, min(signal_e / (state.mean * longest), sensor.saturation_e / 3 / (state.mean * longest),
+                         limit / longest))
     if scale <= 1.0:
         return list(base_s)
     return list(base_s) + [float(f"{t * scale:.3g}") for t in base_s]

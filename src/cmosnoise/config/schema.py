@@ -17,6 +17,9 @@ from typing import Literal, Optional, Union
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+#: the longest exposure a configuration takes, s (an hour)
+MAX_EXPOSURE_S = 3600.0
+
 
 class Section(BaseModel):
     """Base of every section: unknown keys are errors, values are re-validated on assignment, inf and NaN refused."""
@@ -188,7 +191,7 @@ class SensorSection(Section):
 
 
 class ExposureSection(Section):
-    integration_time_s: float = Field(0.03, gt=0, le=3600, description="integration (exposure) time, s")
+    integration_time_s: float = Field(0.03, gt=0, le=MAX_EXPOSURE_S, description="integration (exposure) time, s")
     peak_rate_e_per_s: float = Field(
         100000.0, ge=0, le=1e10, description="photo-electron rate of a scene value of 1.0, e-/s per pixel"
     )
