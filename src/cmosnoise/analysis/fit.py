@@ -727,8 +727,13 @@ def fitted_config(base, result: dict):
     u: dict = {
         "sensor": {"width": meta["shape"][1], "height": meta["shape"][0], "cfa": meta["cfa"],
                    "full_well_e": round(float(full), 1), "temperature_c": meta["temperature_c"]},
-        "adc": {"enabled": True, "bits": bits, "black_level_dn": black, "full_scale_e": (2**bits - 1 - black) / k},
+        "adc": {"enabled": True, "bits": bits, "black_level_dn": black, "full_scale_e": (2**bits - 1 - black) / k,
+                "gain_dn_per_e": None},
     }
+    if base.gain_table:  # the data measure one setting: the base's table (whose rows would set K and the read
+        # noise again) gives way to the fitted values; fitted_gain_config writes a table from several settings
+        u["gain_table"] = []
+        u["sensor"].update({"iso": None, "gain_db": None})
     points = []
     for T, res in sorted(result["dark"].items()):
         p = res["parameters"]
