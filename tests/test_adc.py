@@ -80,3 +80,68 @@ def test_expected_code_is_the_mean_of_the_rounded_noisy_value(sigma):
         assert np.all(np.abs(got - mc) <= 5 * se + 1e-12)
     if sigma >= 1.0:  # dithered: the quantizer adds no bias
         assert np.allclose(got, mu, atol=1e-8)
+
+
+# ------------------------------------------------------------------ an ADC's codes scaled to a wider range
+def test_an_adc_in_a_wider_range_writes_its_codes_times_the_step():
+    """docs/model.md stage 9: DN = step * clip(round((e K + black) / step), 0, 2^bits - 1), step = 2^(out - bits)."""
+    rng = np.random.default_rng(14)
+    n = rng.uniform(-500, 16000, 200_000).astype(np.float32)
+    t = Transfer.from_gain(14, 642.7, 4.545, output_bits=16)
+    assert (t.step, t.max_code, t.output_bits) == (4, 65532, 16)
+    out = convert(n, t)
+    assert (out % 4 == 0).all() and out.max() == 65532 and out.min() == 0
+    # the same codes as the ADC counted in its own codes (K and black divided by 4), times 4
+    np.testing.assert_array_equal(out, 4 * convert(n, t.adc_codes()).astype(np.uint32))
+    # without output_bits the step is 1: the transfer of before, bit for bit
+    assert Transfer.from_gain(14, 642.7, 4.545) == Transfer(4.545, 642.7, 14, 1)
+
+
+def test_the_quantizer_adds_a_step_squared_over_12():
+    """The rounding error of a charge spread over many codes is uniform over one step: variance step^2 / 12.
+    Its sample variance over n values has standard error sqrt((mu4 - sigma^4) / n), mu4 = step^4 / 80 for a
+    uniform; the test allows 5 of them."""
+    rng = np.random.default_rng(3)
+    n = rng.uniform(100, 2_000, 400_000)  # below the top code of each (12 bits: 4095 DN at 2371 e-)
+    for bits, out_bits in ((12, 12), (12, 16), (10, 16)):
+        t = Transfer.from_gain(bits, 64.0, 1.7, output_bits=out_bits)
+        err = convert(n, t).astype(np.float64) - (n * t.gain_dn_per_e + t.black_level_dn)
+        s = t.step
+        se = np.sqrt((s**4 / 80 - (s**2 / 12) ** 2) / n.size)
+        assert abs(err.var() - t.quantization_var_dn2) < 5 * se, (s, err.var())
+        assert abs(err.mean()) < 5 * s / np.sqrt(12 * n.size)
+
+
+def test_an_output_range_narrower_than_the_adc_is_refused_with_its_keys():
+    from cmosnoise import load_config
+    from cmosnoise.errors import CmosnoiseError
+
+    with pytest.raises(CmosnoiseError, match=r"adc.output_bits = 12 is below adc.bits = 14"):
+        load_config(extra={"adc": {"bits": 14, "output_bits": 12}})
+    with pytest.raises(CmosnoiseError, match=r"adc.black_level_dn = 65533 .*top code 65532"):
+        load_config(extra={"adc": {"bits": 14, "output_bits": 16, "black_level_dn": 65533}})
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.3, 1.2, 6.0])
+def test_the_expected_output_code_rounds_in_the_adcs_codes(sigma):
+    """E[step round((mu + sigma Z) / step)] against a Monte Carlo mean, within 5 standard errors."""
+    from cmosnoise.model.stages.adc import expected_output
+
+    t = Transfer.from_gain(14, 0.0, 1.0, output_bits=16)
+    rng = np.random.default_rng(11)
+    mu = np.linspace(40.0, 44.0, 33)  # one ADC code's span, at every eighth of an output DN
+    x = 4 * np.round((mu[:, None] + sigma * rng.standard_normal((mu.size, 100_000))) / 4)
+    se = np.sqrt(np.maximum(x.var(axis=1), 16.0 / 100_000) / 100_000)
+    got = expected_output(mu, np.full(mu.size, sigma), t)
+    assert np.all(np.abs(got - x.mean(axis=1)) <= 5 * se + 1e-12)
+
+
+def test_the_step_is_read_from_the_codes():
+    from cmosnoise.model.stages.adc import code_grid, code_step
+
+    rng = np.random.default_rng(2)
+    codes = 4 * rng.integers(100, 16000, 5000)
+    assert code_step(code_grid(codes)) == 4
+    assert code_step(code_grid(codes) | code_grid(codes + 2)) == 2  # ORed over frames: the finest spacing
+    assert code_step(code_grid(np.full(100, 64))) == 1  # all one code: it cannot tell
+    assert code_step(code_grid(codes + 0.5)) == 1  # not codes

@@ -84,7 +84,7 @@ def test_every_stage_on_equals_the_cpu_kernel_bit_for_bit_with_electrons_and_far
         np.testing.assert_array_equal(electrons[b], expected_e, err_msg=f"frame {k}")
 
 
-@pytest.mark.parametrize("preset", ["sony-a7s2", "sony-imx900", "sony-imx571", "paper-fig11-full", None])
+@pytest.mark.parametrize("preset", ["sony-a7s2", "sony-imx900", "sony-imx571", "paper-fig11-full", "zwo-asi294mm", None])
 @pytest.mark.gpu
 def test_each_preset_equals_the_cpu_kernel(preset):
     cpu, gpu = _pair(preset=preset, seed=9)

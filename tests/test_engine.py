@@ -157,8 +157,15 @@ needs_numba = pytest.mark.skipif(not kernel.AVAILABLE, reason="numba not install
 
 
 @needs_numba
-@pytest.mark.parametrize("extra", [{}, {"shot_noise": {"gaussian_above_e": 100.0}}, {"adc": {"enabled": False}}],
-                         ids=["default", "normal-approx", "adc-off"])
+@pytest.mark.parametrize("extra", [
+    {}, {"shot_noise": {"gaussian_above_e": 100.0}}, {"adc": {"enabled": False}},
+    # an ADC whose codes are scaled to a wider range: one black level (the kernel's short path), and with the DN
+    # terms (cell offsets, the frame's error, read noise after the gain) that the quantizer divides by its step
+    {"adc": {"bits": 10, "output_bits": 16, "black_level_dn": 1000}},
+    {"adc": {"bits": 14, "output_bits": 16, "black_level_dn": 512},
+     "black_level": {"channel_offsets_dn": [3.0, -2.0, 1.0, 6.0], "frame_sigma_dn": 2.5},
+     "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 5.0, "shape": -0.05}}],
+    ids=["default", "normal-approx", "adc-off", "10-bit-in-16", "14-bit-in-16-dn-terms"])
 def test_kernel_equals_the_numpy_implementation_on_any_threads_and_tiling(extra):
     shot = _full_chain(**extra).expose("photo")
     reference = shot.frame(3, detail=True)  # the NumPy implementation, stage by stage

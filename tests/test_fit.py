@@ -379,3 +379,34 @@ def test_a_fitted_value_outside_the_schema_is_written_clipped_and_says_so():
     assert _written(P, "prnu.sigma_pct", 0.0, 100.0) == 100.0 and P["prnu.sigma_pct"]["method"].count("config.yaml") == 1
     assert _written(P, "column_noise.gain_sigma_pct", 0.0, 50.0) == 2.0
     assert P["column_noise.gain_sigma_pct"] == {"value": 2.0, "method": "m"}
+
+
+def test_a_14_bit_adc_in_a_16_bit_range_is_fitted_as_one(tmp_path):
+    """The ZWO ASI294MM writes its 14-bit ADC's codes times 4 in 16 bits. `measure` of its preset (linear here:
+    the photon-transfer K of a nonlinearity is another matter) and `fit` from it: the codes' spacing says 14 bits
+    in 16, the quantizer's 4^2/12 DN^2 (not 1/12) comes out of the read noise, so its total holds the configured
+    1.9 e- within its interval (with 1/12 it would sit at sqrt(1.9^2 + 16/12/4.545^2 - 1/12/4.545^2) = 1.916 e-,
+    four half-widths out); and the preset's gain table, whose row would set K and the noise again, gives way to
+    the fitted values."""
+    import json
+
+    import yaml
+    from conftest import cli
+
+    r = cli("-q", "measure", "--preset", "zwo-asi294mm", "--set", "sensor.width=160", "--set", "sensor.height=120",
+            "--set", "nonlinearity.enabled=false", "--levels", "16", "--out", tmp_path / "lab")
+    assert r.returncode == 0, r.stderr
+    r = cli("fit", "--frames-from", tmp_path / "lab" / "manifest.yaml", "--preset", "zwo-asi294mm", "--no-round-trip",
+            "--out", tmp_path / "fit")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    assert (doc["meta"]["bits"], doc["meta"]["output_bits"], doc["meta"]["step_dn"]) == (14, 16, 4)
+    fitted = yaml.safe_load((tmp_path / "fit" / "config.yaml").read_text())
+    assert (fitted["adc"]["bits"], fitted["adc"]["output_bits"]) == (14, 16)
+    assert not fitted.get("gain_table") and fitted["sensor"].get("gain_db") is None
+    total = doc["parameters"]["source_follower.read_noise_total_e"]
+    lo, hi = total["ci95"]
+    assert lo <= 1.9 <= hi, total
+    assert hi - lo < 0.02  # narrow enough that a 1/12 DN^2 quantizer (1.916 e-) would fall outside
+    k = doc["parameters"]["system_gain_K_dn_per_e"]
+    assert k["ci95"][0] <= 4.545 <= k["ci95"][1], k

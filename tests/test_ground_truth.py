@@ -184,3 +184,23 @@ def test_the_perfect_image_is_the_scene_on_an_ideal_pixel():
     expect = np.clip(t.black_level_dn + t.gain_dn_per_e * np.minimum(shot.perfect_e, sensor.config.sensor.full_well_e),
                      0, t.max_code)
     np.testing.assert_allclose(truth.perfect_dn, expect, rtol=1e-6)
+
+
+def test_an_adc_in_a_wider_range_has_its_expected_codes_a_step_apart():
+    """With a 10-bit ADC written in 16 bits (codes 64 DN apart) and less noise than a step, the quantizer's
+    pattern is most of what a pixel's mean shows: 400 frames average to the expected raw within the same bound
+    as above (each pixel's mean within Z standard errors plus the union bound over the pixels)."""
+    sensor = Sensor({"sensor": {"width": 48, "height": 40}, "adc": {"bits": 10, "output_bits": 16},
+                     "exposure": {"integration_time_s": 0.03, "peak_rate_e_per_s": 6e5}})
+    shot = sensor.expose("ramp")
+    expected = gt.expected_raw(shot)
+    assert sensor.transfer.step == 64 and expected.max() > sensor.transfer.max_code - 64
+    n = 400
+    frames = np.stack([shot.frame(k) for k in range(n)]).astype(np.float64)
+    slow = (gt.mask(sensor) & (gt.MASK_BITS["telegraph"] | gt.MASK_BITS["blinking"])) > 0
+    se = np.maximum(frames.std(axis=0, ddof=1), 0.3 * 64) / np.sqrt(n)
+    z = (frames.mean(axis=0) - expected) / se
+    assert np.abs(z[~slow]).max() < Z + np.sqrt(2 * np.log(expected.size))
+    # the pattern is there: the expectation is not the mean code (it departs by up to half a step)
+    e = shot.perfect_e.astype(np.float64)
+    assert np.abs(expected - (sensor.transfer.black_level_dn + sensor.transfer.gain_dn_per_e * e)).max() > 8

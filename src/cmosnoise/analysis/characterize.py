@@ -468,7 +468,7 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
         if not c.adc.enabled:
             return mo["mean"]
         # the quantizer: undithered where the temporal noise is well below a DN (adds its pattern)
-        dn = adc.expected_code(mo["mean"] * k + t.black_level_dn, np.sqrt(mo["var"]) * k)
+        dn = adc.expected_output(mo["mean"] * k + t.black_level_dn, np.sqrt(mo["var"]) * k, t)
         return (dn - t.black_level_dn) / k
 
     sp = emva.spatial_variances(expected_dark_at(stack_texp_s)[None])
@@ -483,7 +483,7 @@ def model_values(sensor: Sensor, stack_texp_s: float = 0.5, series_e: np.ndarray
         x = x[x <= fw]
         y = curve.apply(x)
         le = nonlinearity.linearity_error(x, y, float(y[-1]))
-    sigma_y_dark = math.sqrt(read_var * k**2 + 1 / 12)
+    sigma_y_dark = math.sqrt(read_var * k**2 + t.quantization_var_dn2)
     u_p_min = (sigma_y_dark / k + 0.5) / qe
     return {
         "system_gain_K_dn_per_e": photon_transfer_gain(sensor, series_e),

@@ -9,7 +9,8 @@ gain K, DN/e-, for electrons). Conventions follow EMVA 1288 release 4.0:
 - split of a spatial variance into column, row and pixel parts from the
   variances of column and row means (EMVA 1288 4.0, Sec. 8.3);
 - PRNU = ``sqrt(s^2_bright - s^2_dark) / (mu_bright - mu_dark)``;
-- quantization: 1/12 DN^2 is part of the temporal variance.
+- quantization: 1/12 DN^2 is part of the temporal variance (``step^2 / 12`` where the output's codes are
+  ``step`` DN apart: an ADC's codes scaled to a wider range).
 
 Examples
 --------

@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from ..errors import CmosnoiseError
+from ..model.stages import adc
 from ..model.stages.nonlinearity import linearity_error
 from . import emva
 from .characterize import Measurement
@@ -189,9 +190,13 @@ def evaluate(m: Measurement) -> dict:
         # (a series without temporal noise has se = 0: its slope is exact, resolved)
         if math.isfinite(slope) and math.isfinite(kk) and se > 0 and not slope > DARK_RESOLVE_Z * se:
             bounds[key] = (max(slope, 0.0) + DARK_RESOLVE_Z * se) / kk
-    s2_ydark0 = max(s2_ydark0, 1 / 12 + 1e-12) if math.isfinite(s2_ydark0) else math.nan
+    # the quantizer's variance, step^2 / 12 DN^2 (EMVA 1288's 1/12 where the output is the ADC's codes): a camera
+    # that writes a 14-bit ADC in a 16-bit range has codes 4 DN apart, which its frames show
+    step = adc.code_step(adc.code_grid(m.stack_bright) | adc.code_grid(m.stack_dark))
+    q_var = step**2 / 12
+    s2_ydark0 = max(s2_ydark0, q_var + 1e-12) if math.isfinite(s2_ydark0) else math.nan
     sigma_y_dark = math.sqrt(s2_ydark0)
-    sigma_d = math.sqrt(s2_ydark0 - 1 / 12) / k
+    sigma_d = math.sqrt(s2_ydark0 - q_var) / k
     u_e_sat = y[i_sat] / k
     u_p_sat = m.mu_p[i_sat]
     u_p_min = (sigma_y_dark / k + 0.5) / qe
@@ -254,6 +259,7 @@ def evaluate(m: Measurement) -> dict:
         "dark_series_points": 0 if m.dark_texp_s is None else int(len(m.dark_texp_s)),
         "dark_series_longest_s": math.nan if m.dark_texp_s is None else float(np.max(m.dark_texp_s)),
         "dark_series_excluded_pixels": int(m.dark_excluded),
+        "output_step_dn": step,
     }
     out = {key: (None if isinstance(val, float) and not math.isfinite(val) else val) for key, val in out.items()}
     out["unavailable"] = unavailable
@@ -392,6 +398,11 @@ def footnotes(measured: dict) -> list[str]:
         out.append(f"System gain K: the photon-transfer K ({k:.4g}) is {100 * (k / k0 - 1):+.1f} % off the "
                    f"small-signal K0 ({k0:.4g} +- {se0:.1g} DN/e-), a nonlinearity's doing; EMVA 1288's e- "
                    "figures (QE, sigma_d, DSNU, saturation) use K: times K/K0 they are small-signal ones")
+    step = measured.get("output_step_dn") or 1
+    if step > 1:
+        out.append(f"the codes are {step} DN apart (an ADC of {step.bit_length() - 1} bit(s) fewer than the output's "
+                   f"range): the quantization noise taken out of sigma_d is {step}^2/12 = {step**2 / 12:.3g} DN^2, "
+                   "not 1/12")
     longest = measured.get("dark_series_longest_s")
     for key, bound in measured.get("unresolved", {}).items():
         where = (f"its longest dark exposure {longest:.4g} s" if longest else "the photon-transfer series' dark pairs")

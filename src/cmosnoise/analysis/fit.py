@@ -155,11 +155,14 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     # an EMVA 1288 data set is one channel (the standard measures a colour sensor channel by channel): monochrome
     # unless told otherwise; a manifest without a CFA takes the base configuration's
     pattern = ds.cfa or ("none" if ds.kind == "emva" else base.sensor.cfa)
-    bits = ds.bits
+    bits = ds.bits  # the output's range
     if bits is None:
         top = max(s.max_dn for s in ds.stacks)
         bits = next(b for b in range(8, 17) if top < 2**b)
-    sat_dn = 2**bits - 1
+    # codes a step apart: an ADC of fewer bits, its codes scaled to the output's range (a 14-bit ADC in 16 bits);
+    # the quantizer's variance is step^2 / 12 DN^2
+    step = min(ds.code_step, 2 ** (bits - 8))
+    sat_dn = 2**bits - step
     temps = ds.temperatures
     t_basis = _temperature_basis(ds, temperature_c, base)
     t_ref = temperature_c if temperature_c is not None else (temps[-1] if temps else base.sensor.temperature_c)
@@ -365,7 +368,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
     else:
         _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed,
-                 not_fitted, selection, exclude=rts_pixels)
+                 not_fitted, selection, exclude=rts_pixels, step=step)
 
     # ---------------------------------------------------------------- crosstalk from spots
     phase("crosstalk")
@@ -428,7 +431,8 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             "_crosstalk_off": crosstalk_off, "selection": selection,
             "_nonlinearity": nonlin if nonlin is not None and nonlin["bent"] else None,
             "_telegraph": telegraph,
-            "meta": {"bits": bits, "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
+            "meta": {"bits": bits - (step.bit_length() - 1), "output_bits": bits, "step_dn": step,
+                     "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
                      "temperature_basis": t_basis,
                      "temperatures": temps, "source": ds.source, "input": ds.kind},
             "_maps": dark_maps}
@@ -577,10 +581,11 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
 
 
 def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int,
-             not_fitted: dict, selection: dict, exclude: np.ndarray | None = None) -> None:
+             not_fitted: dict, selection: dict, exclude: np.ndarray | None = None, step: int = 1) -> None:
     """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``; the
     read noise's shape (Tukey-lambda) where the pixels' noise is not normal, and the black level's error per
-    frame. What cannot be fitted goes to ``not_fitted``; each stage test's p-value to ``selection``."""
+    frame. What cannot be fitted goes to ``not_fitted``; each stage test's p-value to ``selection``. ``step``:
+    the output DN per ADC code (the quantizer's variance is ``step^2 / 12`` DN^2)."""
     from scipy import stats
 
     rows, cols = st.shape
@@ -596,10 +601,10 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
         dark_var = np.maximum((st.mean - black) / k, 0)
         known_var = None
         how = "dark shot noise from the stack's mean above black (no rate map at this temperature)"
-    known = dark_var + 1 / (12 * k * k) + vbar * (1 / cols + 1 / rows) / corr
+    known = dark_var + step**2 / (12 * k * k) + vbar * (1 / cols + 1 / rows) / corr
     tail = base.source_follower.flicker.tail
     thr = tail.threshold_e if tail is not None else 4 * base.source_follower.flicker.gumbel_loc_e
-    q = 1 / (12 * k * k)  # the quantizer's variance, e-^2; its fourth cumulant -1.2 q^2, the dark charge's its mean
+    q = step**2 / (12 * k * k)  # the quantizer's variance, e-^2; its fourth cumulant -1.2 q^2, the dark charge's its mean
     kappa4 = dark_var - 1.2 * q * q
     if exclude is not None and exclude.size:
         keep = np.ones(rows * cols, bool)
@@ -638,8 +643,8 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     # share one noise (their variances spread by less than 10 % of the mean, as on ELD's cameras)
     if st.pixel_m4 is not None:
         # what is not the read noise: the dark charge's shot noise and the quantizer's, their variances (DN^2) and
-        # fourth cumulants (the Poisson's is its mean; a uniform code's -1/120 DN^4)
-        known_var, known_k4 = dark_var * k**2 + 1 / 12, dark_var * k**4 - 1 / 120
+        # fourth cumulants (the Poisson's is its mean; a uniform code's -step^4/120 DN^4)
+        known_var, known_k4 = dark_var * k**2 + step**2 / 12, dark_var * k**4 - step**4 / 120
         shp = fit_readout.pixel_noise_shape(st.pixel_var, st.pixel_m4, n, known_var, known_k4,
                                             fit_readout.own_share(rows, cols))
         if shp is not None:
@@ -705,7 +710,9 @@ def fitted_config(base, result: dict):
         return P[name]["value"] if name in P else default
 
     k, black, bits = v("system_gain_K_dn_per_e"), v("black_level_dn"), meta["bits"]
-    black = _written(P, "black_level_dn", 0.0, 2**bits - 2, round(black, 3))
+    out_bits = meta.get("output_bits", bits)
+    top = 2 ** (out_bits - bits) * (2**bits - 1)  # the top output code
+    black = _written(P, "black_level_dn", 0.0, top - 1, round(black, 3))
     full = v("full_well_e", base.sensor.full_well_e)
     nonlin = result.get("_nonlinearity")
     nl_update = None
@@ -727,8 +734,8 @@ def fitted_config(base, result: dict):
     u: dict = {
         "sensor": {"width": meta["shape"][1], "height": meta["shape"][0], "cfa": meta["cfa"],
                    "full_well_e": round(float(full), 1), "temperature_c": meta["temperature_c"]},
-        "adc": {"enabled": True, "bits": bits, "black_level_dn": black, "full_scale_e": (2**bits - 1 - black) / k,
-                "gain_dn_per_e": None},
+        "adc": {"enabled": True, "bits": bits, "output_bits": out_bits if out_bits != bits else None,
+                "black_level_dn": black, "full_scale_e": (top - black) / k, "gain_dn_per_e": None},
     }
     if base.gain_table:  # the data measure one setting: the base's table (whose rows would set K and the read
         # noise again) gives way to the fitted values; fitted_gain_config writes a table from several settings

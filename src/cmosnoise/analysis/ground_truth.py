@@ -195,7 +195,8 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
     """
     sensor = exposure.sensor
     c = sensor.config
-    t = sensor.transfer
+    t = sensor.transfer.adc_codes()  # the quantizer's own codes; times the output's step at the end
+    step = sensor.transfer.step
     if c.adc.enabled and _far_pixels is not None:
         terms = noise_budget.readout_terms(sensor, exposure=exposure)
         shape = sensor.shape
@@ -220,8 +221,12 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
         out = _codes(noise_budget.clipped_moments(sensor, exposure=exposure, codes=True), t)
         top = t.max_code
     else:
+        step = 1
         out = noise_budget.clipped_moments(sensor, exposure=exposure)["mean"].astype(np.float32)
         top = c.sensor.full_well_e
+    if step != 1:
+        out *= np.float32(step)  # exact: a power of two
+        top *= step
     if sensor.fixed_pattern.defects is not None and sensor.fixed_pattern.defects.has_stuck:
         defects_mod.stick(out, sensor.fixed_pattern.defects, (0, sensor.shape[0], 0, sensor.shape[1]), top,
                           rounded=c.adc.enabled)
@@ -230,7 +235,8 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
 
 def _codes(moments: dict, t) -> np.ndarray:
     """The expected codes (float32) of the charge's clipped ``moments`` (mean, var e-; ``quantized``: where the
-    mean is already the quantizer's expectation near the top code, referred to e-)."""
+    mean is already the quantizer's expectation near the top code, referred to e-), in the codes of ``t`` (the
+    ADC's own: :meth:`~cmosnoise.model.stages.adc.Transfer.adc_codes`)."""
     mean_dn = t.black_level_dn + t.gain_dn_per_e * moments["mean"]
     code = expected_code(mean_dn, t.gain_dn_per_e * np.sqrt(moments["var"]))
     if moments["quantized"] is not None:

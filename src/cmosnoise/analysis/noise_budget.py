@@ -5,12 +5,13 @@ averaged over the array (the sensor's own fixed maps: flicker sigmas,
 column sigmas, column gains, dark-current map)::
 
     var = ((mu + d) f'^2 + thermal^2 + <flicker_i^2> + row^2) * <g_c^2> + <sigma_c^2>
-          + (read_dn^2 + black_frame_dn^2 + 1/12) / K^2
+          + (read_dn^2 + black_frame_dn^2 + step^2/12) / K^2
 
 with ``d`` the mean dark charge (its shot noise), ``f'`` the
 nonlinearity's slope at ``mu + d`` (1 without one), ``g_c`` the column
 gains, the read noise after the gain and the frame's black-level error in DN,
-and quantization (1/12 DN^2), referred to e-. The random telegraph pixels
+and quantization (``step^2 / 12`` DN^2, ``step`` the output DN per ADC code: 1 unless
+``adc.output_bits`` scales the codes), referred to e-. The random telegraph pixels
 (stages 6b and 4b, where on) add their stationary variances, averaged over
 the array (:func:`telegraph_moments`): a trap's ``2 A^2 pi0 pi1 (1 -
 e^-s tau)`` through CDS (``A^2 pi0 pi1`` without), a blinking pixel's rate
@@ -183,7 +184,7 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
         out["column"] = map_moment(sensor, "column_sigma", "mean_square")
     if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
         out.update(after_gain_variances(sensor))
-        out["quantization"] = 1.0 / (12.0 * t.gain_dn_per_e**2)
+        out["quantization"] = t.quantization_var_dn2 / t.gain_dn_per_e**2
     return out
 
 
@@ -421,7 +422,7 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
     mean_n = np.broadcast_to(photo + dark, shape)
     shot = (photo if c.shot_noise.enabled else 0.0) + (dark if c.dark_current.shot_noise else 0.0) + blink_var
     # the top code's charge (values within half a code of it round to it)
-    top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
+    top = (t.max_code - 0.5 * t.step - t.black_level_dn) / t.gain_dn_per_e if c.adc.enabled else math.inf
     read = sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0  # before the column gain, e-^2
     if c.source_follower.enabled:
         read = read + sensor.source_follower_sigma.astype(np.float64) ** 2
@@ -470,7 +471,7 @@ def near_moments(sensor: Sensor, terms: dict, idx: tuple, codes: bool = False) -
         ``idx``.
     """
     c = sensor.config
-    t = sensor.transfer
+    t = sensor.transfer.adc_codes()  # the quantizer's own codes (the means in e- are the same)
     shape = sensor.shape
     fw, top = terms["fw"], terms["top"]
 
@@ -555,7 +556,7 @@ def _may_clip(sensor: Sensor, signal_e: float, photo_e: np.ndarray | None) -> bo
         return True
     if not c.adc.enabled:
         return False
-    top = (t.max_code - 0.5 - t.black_level_dn) / t.gain_dn_per_e
+    top = (t.max_code - 0.5 * t.step - t.black_level_dn) / t.gain_dn_per_e
     # the largest source-follower sigma, sqrt(thermal^2 + flicker^2), is the largest flicker sigma's
     sf = c.source_follower.thermal_sigma_e**2 + top_of("flicker_sigma") ** 2
     read = (sensor.spec.row_sigma_e**2 if c.row_noise.enabled else 0.0) + (sf if c.source_follower.enabled else 0.0)

@@ -443,7 +443,9 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
             save("spots.npy", ex, 8, kind="spot", exposure_s=t_flat, temperature_c=T)
         say(f"wrote the stacks at {T:g} C")
     manifest = folder / "manifest.yaml"
-    doc = {"cfa": cfg.sensor.cfa, "bits": cfg.adc.bits, "black_level_dn": cfg.adc.black_level_dn, "stacks": stacks_}
+    # the files' range (a 14-bit ADC written in 16 bits: 16; the fit finds the ADC's bits from the codes' spacing)
+    doc = {"cfa": cfg.sensor.cfa, "bits": cfg.adc.output_bits or cfg.adc.bits, "black_level_dn": cfg.adc.black_level_dn,
+           "stacks": stacks_}
     manifest.write_text(f"# a simulated lab measurement (cmosnoise measure); the configuration that made it: "
                         f"{TRUTH_NAME}\n" + yaml.safe_dump(doc, sort_keys=False))
     (folder / TRUTH_NAME).write_text("# the configuration that made these stacks: cmosnoise fit compares with it\n"

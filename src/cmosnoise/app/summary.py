@@ -50,8 +50,8 @@ def run_metadata(sensor: Sensor, **extra) -> dict:
     """
     config, t, info = sensor.config, sensor.transfer, sensor.raw_info()
     return raw_metadata(
-        sensor.cfa, t.black_level_dn, t.bits, t.gain_dn_per_e,
-        first_frame=config.run.first_frame, seed=config.seed, cmosnoise_version=__version__,
+        sensor.cfa, t.black_level_dn, t.output_bits, t.gain_dn_per_e,
+        adc_bits=t.bits, first_frame=config.run.first_frame, seed=config.seed, cmosnoise_version=__version__,
         scene_white_dn=info.white_dn, channel_responsivity=list(info.responsivity),
         crosstalk_kernel_pct=info.crosstalk_kernel_pct, generator=generator_info(sensor.device),
         units="DN" if config.adc.enabled else "e- (ideal readout: ADC off)", **extra,
@@ -90,6 +90,8 @@ def summary_head(sensor: Sensor, n: int) -> dict:
             "gain_e_per_dn": 1 / t.gain_dn_per_e,
             "black_level_dn": t.black_level_dn,
             "bits": t.bits,
+            "output_bits": t.output_bits,
+            "step_dn": t.step,
         },
         **({"light": light_figures(sensor)} if sensor.spec.light is not None else {}),
     }

@@ -615,6 +615,9 @@ class ColumnNoiseSection(Section):
 class AdcSection(Section):
     enabled: bool = Field(True, description="off: ideal readout, 1 DN per e-, no black level, 16-bit range")
     bits: int = Field(12, ge=8, le=16, description="ADC resolution, bits")
+    output_bits: Optional[int] = Field(None, ge=8, le=16, description="the output's range, bits: the ADC's codes "
+                                       "times 2^(output_bits - bits), as a camera writes a 12- or 14-bit ADC in a "
+                                       "16-bit range; K, the black level and DN noise are in output DN; null: bits")
     black_level_dn: float = Field(64.0, ge=0, le=65535, description="offset added before quantization, DN")
     full_scale_e: Optional[float] = Field(None, ge=1, le=1e9, description="charge mapped to the top code, e-; null: the full well")
     gain_dn_per_e: Optional[float] = Field(None, gt=0, le=1000, description="system gain K, DN per e- (instead of "
@@ -624,7 +627,16 @@ class AdcSection(Section):
     def _one_scale(self):
         if self.full_scale_e is not None and self.gain_dn_per_e is not None:
             raise ValueError("give the ADC's scale once: adc.full_scale_e or adc.gain_dn_per_e")
+        if self.output_bits is not None and self.output_bits < self.bits:
+            raise ValueError(f"adc.output_bits = {self.output_bits} is below adc.bits = {self.bits}: the output "
+                             "holds the ADC's codes, so it needs at least as many bits (null: the same)")
         return self
+
+    @property
+    def top_code(self) -> int:
+        """The top output code, DN: ``2^(output_bits - bits) (2^bits - 1)``."""
+        out = self.bits if self.output_bits is None else self.output_bits
+        return 2 ** (out - self.bits) * (2**self.bits - 1)
 
 
 # ------------------------------------------------ what measured sensors show
@@ -910,10 +922,11 @@ class Config(Section):
 
     @model_validator(mode="after")
     def _cross_checks(self):
-        top = 2**self.adc.bits - 1
+        top = self.adc.top_code
         if self.adc.black_level_dn >= top:
             raise ValueError(
-                f"adc.black_level_dn = {self.adc.black_level_dn:g} leaves no range: it must be below 2^bits - 1 = {top}"
+                f"adc.black_level_dn = {self.adc.black_level_dn:g} leaves no range: it must be below the top code "
+                f"{top} (2^bits - 1{' times the output step' if top >= 2**self.adc.bits else ''})"
             )
         if self.sensor.iso is not None and self.sensor.gain_db is not None:
             raise ValueError("give the gain once: sensor.iso or sensor.gain_db")

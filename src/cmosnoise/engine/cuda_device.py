@@ -31,6 +31,7 @@ from .cuda_table import (
     READ_KIND,
     READ_SCALE,
     ROW_SIGMA,
+    STEP,
     TOP,
     scalar_numpy,
 )
@@ -280,8 +281,9 @@ def pixels(noisy, exact, flags, ints, numbers, sf, rowval, colterm, gain, keys, 
                 kf, wt = tukey_lambda_cell(partner)
                 noise = scale * tukey_lambda_at(read_table[p], kf, wt, partner)
             v = v + noise
-        v = rint(v)
-        out_dn[b, i, j] = np.uint16(min(max(v, 0.0), numbers[p, TOP]))
+        step = numbers[p, STEP]  # the ADC rounds its own codes (kernel._render_rows)
+        v = rint(v * (1.0 / step))
+        out_dn[b, i, j] = np.uint16(min(max(v, 0.0), numbers[p, TOP]) * step)
 
 
 @cuda.jit(fastmath=False)

@@ -340,9 +340,10 @@ class DevicePlan:
         for q, p in enumerate(plans):
             table, nl_scale, (a, b, c) = kernel.curve_constants(p)
             read_kind, read_scale, read_table = kernel.read_constants(p)
-            k_adc, black, top = p.adc if p.adc is not None else (1.0, 0.0, 0)
+            k_adc, black, top, step = p.adc if p.adc is not None else (1.0, 0.0, 0, 1)
             for column, value in ((cuda_table.NORMAL_ABOVE, p.normal_above_e), (cuda_table.FULL_WELL, p.full_well_e), (cuda_table.K_ADC, k_adc),
-                                  (cuda_table.BLACK, black), (cuda_table.TOP, top), (cuda_table.NL_SCALE, nl_scale), (cuda_table.NL_A, a), (cuda_table.NL_B, b), (cuda_table.NL_C, c),
+                                  (cuda_table.BLACK, black), (cuda_table.TOP, top), (cuda_table.STEP, step),
+                                  (cuda_table.NL_SCALE, nl_scale), (cuda_table.NL_A, a), (cuda_table.NL_B, b), (cuda_table.NL_C, c),
                                   (cuda_table.READ_SCALE, read_scale), (cuda_table.ROW_SIGMA, p.row_sigma_e or 0.0),
                                   (cuda_table.FRAME_BLACK_SIGMA, p.frame_black_sigma_dn), (cuda_table.FRAME_PERIOD, p.frame_period_s),
                                   (cuda_table.CDS_INTERVAL, p.cds_interval_s or 0.0), (cuda_table.EXPOSURE, p.exposure_s)):

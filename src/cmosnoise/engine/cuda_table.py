@@ -14,11 +14,11 @@ import numpy as np
 from .jit import numba
 
 #: the columns of :attr:`DevicePlan.numbers`, each plan's scalars (float64): the Poisson draw's normal
-#: approximation from, the full well (e-); K (DN/e-), black level and top code (DN); the curve's charge scale and
-#: cubic; the read noise's scale (DN); the row noise's sigma (e-), the black level's error per frame (DN); the
-#: frame period, CDS interval and exposure (s; telegraph noise and blinking pixels)
-(NORMAL_ABOVE, FULL_WELL, K_ADC, BLACK, TOP, NL_SCALE, NL_A, NL_B, NL_C, READ_SCALE, ROW_SIGMA, FRAME_BLACK_SIGMA,
- FRAME_PERIOD, CDS_INTERVAL, EXPOSURE) = range(15)
+#: approximation from, the full well (e-); K (DN/e-), black level (DN), the ADC's top code and the output DN per ADC
+#: code; the curve's charge scale and cubic; the read noise's scale (DN); the row noise's sigma (e-), the black
+#: level's error per frame (DN); the frame period, CDS interval and exposure (s; telegraph noise and blinking pixels)
+(NORMAL_ABOVE, FULL_WELL, K_ADC, BLACK, TOP, STEP, NL_SCALE, NL_A, NL_B, NL_C, READ_SCALE, ROW_SIGMA,
+ FRAME_BLACK_SIGMA, FRAME_PERIOD, CDS_INTERVAL, EXPOSURE) = range(16)
 #: the columns of :attr:`DevicePlan.ints` (int64): the read noise's law (0 normal, 1 Tukey-lambda), the curve
 #: table's length (2: the cubic), whether the traps are read by CDS
 READ_KIND, NL_SIZE, CDS = range(3)

@@ -62,7 +62,8 @@ class FramePlan:
     col_sigma_e: np.ndarray | None = None
     col_offset_e: np.ndarray | None = None
     col_gain: np.ndarray | None = None
-    adc: tuple[float, float, int] | None = None  #: (K DN/e-, black level DN, top code); None: float32 e-
+    #: (K output DN/e-, black level output DN, the ADC's top code, output DN per ADC code); None: float32 e-
+    adc: tuple[float, float, int, int] | None = None
     #: the charge-to-voltage transfer (stage 5b): a nonlinearity.Curve (a cubic, or a table)
     nonlinearity: object | None = None
     offset_e: np.ndarray | None = None  #: per-pixel offsets (rows, cols) float32, e- (stage 5c)
@@ -407,7 +408,7 @@ if numba is not None:
 
     @numba.njit(**_JIT)
     def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
-                     gain, keys, fr, sq, r0, c0, c1, cols, ar0, ac0, k_adc, cell_black, top, loggam_table, nl_table,
+                     gain, keys, fr, sq, r0, c0, c1, cols, ar0, ac0, k_adc, cell_black, top, step, loggam_table, nl_table,
                      nl_scale, nl_a, nl_b, nl_c, offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val,
                      blink_ptr, blink_col, blink_mean, out_dn, out_e):
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
@@ -422,6 +423,7 @@ if numba is not None:
         has_nl, has_offset, has_read = flags[7], flags[8], flags[9]
         has_rts, has_blink, blink_exact = flags[10], flags[11], flags[12]
         nl_last = np.float64(nl_table.size - 2)
+        inv_step = 1.0 / step  # exact: the step is a power of two
         zero = np.uint64(0)
         w = c1 - c0
         s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
@@ -546,25 +548,27 @@ if numba is not None:
                         lo = read_table[k]
                         noise[j] = scale[j] * (lo + weight[j] * (read_table[k + np.uint64(1)] - lo))
                 read = noise if tukey else partner  # stage 9a's noise, DN
+                # the ADC rounds its own codes: output DN times 1 / step (exact, a power of two; 1.0 without an
+                # output scaling), clipped to its top code, then times the step (adc.convert)
                 if one_black and not has_read:  # the paper's ADC: one black level, nothing after the gain
                     b0 = cell_black[0]
                     for j in range(w):
-                        v = np.rint(n[j] * k_adc + b0)
-                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+                        v = np.rint((n[j] * k_adc + b0) * inv_step)
+                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top) * step)
                 else:
                     row_black = black_even if (r & 1) == 0 else black_odd  # this row's cell black levels, laid out
                     for j in range(w):
                         v = n[j] * k_adc + row_black[j]
                         if has_read:
                             v = v + read[j]
-                        v = np.rint(v)
-                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top))
+                        v = np.rint(v * inv_step)
+                        out_dn[i, j] = np.uint16(min(max(v, 0.0), top) * step)
             if not has_noisy:
                 n[:] = 0.0
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
     def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
-                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, ar0, ac0, k_adc, black, top, loggam_table, nl_table,
+                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, ar0, ac0, k_adc, black, top, step, loggam_table, nl_table,
                 nl_scale, nl_a, nl_b, nl_c, offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_table, rts_ptr,
                 rts_col, rts_val, blink_ptr, blink_col, blink_mean, out_dn, out_e):
         fr = np.uint64(frame)
@@ -588,7 +592,8 @@ if numba is not None:
         for blk in numba.prange(nblocks):
             _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
                          normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
-                         c1, cols, ar0, ac0, k_adc, cell_black, top, loggam_table, nl_table, nl_scale, nl_a, nl_b, nl_c,
+                         c1, cols, ar0, ac0, k_adc, cell_black, top, step, loggam_table, nl_table, nl_scale, nl_a,
+                         nl_b, nl_c,
                          offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col,
                          blink_mean, out_dn, out_e)
 
@@ -782,7 +787,7 @@ def preload() -> bool:
         return False
     flags = np.zeros(_FLAGS, np.bool_)
     args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
-            np.zeros((5, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 0, 0, 1.0, 0.0, 0.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
+            np.zeros((5, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 0, 0, 1.0, 0.0, 0.0, 1.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
             0.0, 0.0, 0.0, _DUMMY2, _DUMMY1, 0.0, 0, 0.0, _DUMMY_NL, _DUMMY_PTR, _DUMMY_COL, _DUMMY1, _DUMMY_PTR,
             _DUMMY_COL, _DUMMY_F32, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
@@ -862,7 +867,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
         blink_ptr, blink_col, blink_mean = sparse_rows(pixels, means, (r0, r1, c0, c1), cols)
     flags = switches(plan, electrons, rts_val.size > 0 and plan.traps is not None,
                      blink_mean.size > 0 and plan.blinkers is not None)
-    k_adc, black, top = plan.adc if adc_on else (1.0, 0.0, 0)
+    k_adc, black, top, step = plan.adc if adc_on else (1.0, 0.0, 0, 1)
     nl, nl_scale, (nl_a, nl_b, nl_c) = curve_constants(plan)
     read_kind, read_scale, read_table = read_constants(plan)
     held = _needs_compile()
@@ -876,7 +881,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
                 plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
                 plan.col_gain if plan.col_gain is not None else _DUMMY1,
                 plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, ar0, ac0, float(k_adc), float(black),
-                float(top),
+                float(top), float(step),
                 plan.loggam_table, nl, float(nl_scale), nl_a, nl_b, nl_c,
                 plan.offset_e if plan.offset_e is not None else _DUMMY2,
                 np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),

@@ -49,6 +49,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from .. import inputs
 from ..errors import CmosnoiseError
+from ..model.stages import adc
 
 #: an EMVA 1288 descriptor's default file name inside a folder
 DESCRIPTOR = "EMVA1288_descriptor.txt"
@@ -104,6 +105,9 @@ class StackStats:
     iso: Optional[float] = None  #: the gain setting the stack was taken at (ISO), when the manifest says
     gain_db: Optional[float] = None  #: or in dB
     frame_period_s: Optional[float] = None  #: seconds from one frame's start to the next, when the manifest says
+    #: the OR of the stack's codes (:func:`cmosnoise.model.stages.adc.code_grid`): its lowest bit, the output DN per
+    #: ADC code where a camera scales its ADC's codes to a wider range
+    code_grid: int = 0
     #: the stack's frames again, one at a time (a fit that needs the whole series: random telegraph pixels)
     reread: Optional[Callable[[], Iterator[np.ndarray]]] = field(default=None, repr=False)
 
@@ -140,8 +144,10 @@ def reduce_stack(frames: Iterator[np.ndarray], **info) -> StackStats:
     """Reduce frames (each (rows, cols)) to a :class:`StackStats`, one frame at a time."""
     s1 = s2 = c1 = c2 = c3 = c4 = None
     rows_, cols_, top = [], [], -math.inf
+    grid = 0
     n = 0
     for f in frames:
+        grid |= adc.code_grid(f)
         x = np.asarray(f, np.float64)
         if s1 is None:
             s1, s2, c1, c2, c3, c4 = (np.zeros(x.shape) for _ in range(6))
@@ -165,7 +171,7 @@ def reduce_stack(frames: Iterator[np.ndarray], **info) -> StackStats:
     mu = c1 / n  # the fourth central moment from the raw sums: E y^4 - 4 mu E y^3 + 6 mu^2 E y^2 - 3 mu^4
     m4 = np.maximum(c4 / n - 4 * mu * c3 / n + 6 * mu * mu * c2 / n - 3 * mu**4, 0)
     return StackStats(mean=mean, pixel_var=cvar, pixel_m4=m4, temporal_var=float(var.mean()), row_means=np.array(rows_),
-                      col_means=np.array(cols_), max_dn=top, n=n, **info)
+                      col_means=np.array(cols_), max_dn=top, n=n, code_grid=grid, **info)
 
 
 @dataclass
@@ -182,6 +188,15 @@ class Dataset:
     descriptor: Optional[Path] = None  #: the EMVA descriptor, when that was the input
     #: whether every stack's temperature came from the data (the manifest), not from ``load``'s ``temperature_c``
     temperatures_stated: bool = False
+
+    @property
+    def code_step(self) -> int:
+        """The output DN per ADC code the stacks' codes show (:func:`cmosnoise.model.stages.adc.code_step`): 1 for
+        a camera that writes its ADC's codes, 4 for a 14-bit ADC in a 16-bit range."""
+        grid = 0
+        for s in self.stacks:
+            grid |= s.code_grid
+        return adc.code_step(grid)
 
     def of_kind(self, kind: str, temperature_c: float | None = None) -> list[StackStats]:
         return [s for s in self.stacks if s.kind == kind and (temperature_c is None or s.temperature_c == temperature_c)]

@@ -366,7 +366,7 @@ class Sensor:
         c = self.config
         t = self.transfer
         return RawInfo(
-            cfa=self.cfa, black_level_dn=t.black_level_dn, bits=t.bits, white_dn=self.white_dn,
+            cfa=self.cfa, black_level_dn=t.black_level_dn, bits=t.output_bits, white_dn=self.white_dn,
             crosstalk_kernel_pct=c.crosstalk.kernel_pct if c.crosstalk.enabled else None,
             responsivity=self.spec.channel_responsivity,
         )
@@ -611,7 +611,7 @@ class Exposure:
                 col_sigma_e=col(fp.column_sigma, 0.0) if columns_on else None,
                 col_offset_e=col_offset if columns_on else None,
                 col_gain=col(fp.column_gain, 1.0) if columns_on else None,
-                adc=(t.gain_dn_per_e, t.black_level_dn, t.max_code) if c.adc.enabled else None,
+                adc=(t.gain_dn_per_e, t.black_level_dn, 2**t.bits - 1, t.step) if c.adc.enabled else None,
                 nonlinearity=s.spec.nonlinearity_on("charge"),
                 offset_e=fp.pixel_offset,
                 cell_offsets_dn=tuple(float(v) for v in c.black_level.channel_offsets_dn),

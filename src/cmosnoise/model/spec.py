@@ -192,15 +192,16 @@ def transfer(config: Config) -> adc.Transfer:
     Returns
     -------
     cmosnoise.model.stages.adc.Transfer
-        K (DN/e-, from ``adc.gain_dn_per_e`` or the full scale over the codes), black level (DN) and bits.
+        K (DN/e-, from ``adc.gain_dn_per_e`` or the full scale over the codes), black level (DN), bits and the
+        output's step (``adc.output_bits``).
     """
     a = config.adc
     if not a.enabled:
         return adc.Transfer.ideal()
     if a.gain_dn_per_e is not None:
-        return adc.Transfer.from_gain(a.bits, a.black_level_dn, a.gain_dn_per_e)
+        return adc.Transfer.from_gain(a.bits, a.black_level_dn, a.gain_dn_per_e, a.output_bits)
     full_scale = a.full_scale_e if a.full_scale_e is not None else config.sensor.full_well_e
-    return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale)
+    return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale, a.output_bits)
 
 
 def resolve(config: Config | SensorSpec) -> SensorSpec:

@@ -2,11 +2,17 @@
 
 A linear ramp ADC (docs/model.md stage 9)::
 
-    K  = (2**bits - 1 - black_level_dn) / full_scale_e          # DN per e-
-    DN = clip(round(N_total * K + black_level_dn), 0, 2**bits - 1)
+    step = 2**(output_bits - bits)                              # output DN per ADC code
+    K  = (step * (2**bits - 1) - black_level_dn) / full_scale_e  # output DN per e-
+    DN = step * clip(round((N_total * K + black_level_dn) / step), 0, 2**bits - 1)
 
 ``round`` is round-half-to-even (``numpy.rint``). The black level keeps
-negative noise excursions visible, as real sensors do.
+negative noise excursions visible, as real sensors do. K, the black level and
+every noise after the gain are in the output's DN, as a camera's files give
+them; the ADC resolves ``bits`` of them: a 14-bit ADC written in a 16-bit
+range (``output_bits`` 16) has codes 0, 4, 8, ... 65532, and its quantization
+adds ``step**2 / 12`` DN^2 to the variance. Without ``output_bits`` the step is
+1 DN (the codes are the ADC's).
 
 Examples
 --------
@@ -14,6 +20,9 @@ Examples
 >>> t = Sensor({"sensor": {"width": 64, "height": 48}}).transfer
 >>> t.bits, t.black_level_dn, t.max_code
 (12, 64.0, 4095)
+>>> t14 = Sensor({"sensor": {"width": 64, "height": 48}, "adc": {"bits": 14, "output_bits": 16}}).transfer
+>>> t14.step, t14.max_code, t14.quantization_var_dn2
+(4, 65532, 1.3333333333333333)
 """
 
 from __future__ import annotations
@@ -26,44 +35,77 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Transfer:
-    """The ADC's transfer function: ``DN = round(e- * gain_dn_per_e + black_level_dn)``, clipped to the codes.
+    """The ADC's transfer function: ``DN = step * round((e- * gain_dn_per_e + black_level_dn) / step)``, clipped
+    to the codes.
 
     Parameters
     ----------
     gain_dn_per_e : float
-        K, the conversion gain, DN per electron.
+        K, the conversion gain, output DN per electron.
     black_level_dn : float
-        The code of no charge, DN.
+        The code of no charge, output DN.
     bits : int
-        The ADC's resolution: codes 0 to ``2**bits - 1``.
+        The ADC's resolution: ``2**bits`` codes.
+    step : int
+        Output DN per ADC code, ``2**(output_bits - bits)``: 1 where the output is the ADC's codes.
     """
 
-    gain_dn_per_e: float  #: K, DN per electron
+    gain_dn_per_e: float  #: K, output DN per electron
     black_level_dn: float
     bits: int
+    step: int = 1  #: output DN per ADC code
 
     @property
     def max_code(self) -> int:
-        return 2**self.bits - 1
+        """The top output code, DN: ``step * (2**bits - 1)``."""
+        return self.step * (2**self.bits - 1)
 
-    @classmethod
-    def from_settings(cls, bits: int, black_level_dn: float, full_scale_e: float) -> "Transfer":
+    @property
+    def output_bits(self) -> int:
+        """The bits of the output's range (``bits`` where the step is 1)."""
+        return self.bits + self.step.bit_length() - 1
+
+    @property
+    def quantization_var_dn2(self) -> float:
+        """The quantizer's variance, DN^2: ``step**2 / 12`` (a uniform error over one step)."""
+        return self.step**2 / 12.0
+
+    def adc_codes(self) -> "Transfer":
+        """This transfer counted in the ADC's own codes (K, black level and top divided by the step): what the
+        quantizer rounds. Exact: the step is a power of two."""
+        return Transfer(self.gain_dn_per_e / self.step, self.black_level_dn / self.step, self.bits, 1)
+
+    @staticmethod
+    def _step(bits: int, output_bits: int | None) -> int:
         if not 8 <= bits <= 16:
             raise ValueError(f"bits must be in 8..16, got {bits}")
-        top = 2**bits - 1
+        out = bits if output_bits is None else output_bits
+        if not bits <= out <= 16:
+            raise ValueError(f"output_bits must be in {bits}..16 (at least the ADC's bits), got {out}")
+        return 2 ** (out - bits)
+
+    @classmethod
+    def from_settings(cls, bits: int, black_level_dn: float, full_scale_e: float,
+                      output_bits: int | None = None) -> "Transfer":
+        """The transfer whose top code is at ``full_scale_e`` e- (``output_bits``: the output's range, default
+        ``bits``)."""
+        step = cls._step(bits, output_bits)
+        top = step * (2**bits - 1)
         if not 0 <= black_level_dn < top:
             raise ValueError(f"black_level_dn must be in [0, {top}), got {black_level_dn}")
         if full_scale_e <= 0:
             raise ValueError(f"full_scale_e must be > 0, got {full_scale_e}")
-        return cls((top - black_level_dn) / full_scale_e, float(black_level_dn), bits)
+        return cls((top - black_level_dn) / full_scale_e, float(black_level_dn), bits, step)
 
     @classmethod
-    def from_gain(cls, bits: int, black_level_dn: float, gain_dn_per_e: float) -> "Transfer":
-        """The transfer of a given system gain K (DN per e-): its top code at ``(2**bits - 1 - black) / K`` e-."""
-        cls.from_settings(bits, black_level_dn, 1.0)  # the same checks
+    def from_gain(cls, bits: int, black_level_dn: float, gain_dn_per_e: float,
+                  output_bits: int | None = None) -> "Transfer":
+        """The transfer of a given system gain K (output DN per e-): its top code at ``(max_code - black) / K``
+        e-."""
+        cls.from_settings(bits, black_level_dn, 1.0, output_bits)  # the same checks
         if not gain_dn_per_e > 0:
             raise ValueError(f"gain_dn_per_e must be > 0, got {gain_dn_per_e}")
-        return cls(float(gain_dn_per_e), float(black_level_dn), bits)
+        return cls(float(gain_dn_per_e), float(black_level_dn), bits, cls._step(bits, output_bits))
 
     @classmethod
     def ideal(cls) -> "Transfer":
@@ -94,16 +136,29 @@ def convert(electrons: np.ndarray, transfer: Transfer, black_dn: np.ndarray | No
     Returns
     -------
     (rows, cols) uint16 array, DN
-        The raw codes, clipped to ``0 .. 2**bits - 1``.
+        The raw codes: the ADC's (``0 .. 2**bits - 1``) times the step.
     """
     # float64 so that rounding at .5 boundaries is the formula's, not float32's
     v = electrons.astype(np.float64) * transfer.gain_dn_per_e
     v += transfer.black_level_dn if black_dn is None else black_dn
     if read_dn is not None:
         v += read_dn
+    if transfer.step != 1:  # the ADC rounds its own codes (exact: a power of two)
+        v *= 1.0 / transfer.step
     np.rint(v, out=v)
-    np.clip(v, 0, transfer.max_code, out=v)
+    np.clip(v, 0, 2**transfer.bits - 1, out=v)
+    if transfer.step != 1:
+        v *= transfer.step
     return v.astype(np.uint16)
+
+
+def expected_output(mean_dn: np.ndarray, sigma_dn: np.ndarray, transfer: Transfer) -> np.ndarray:
+    """:func:`expected_code` for ``transfer``'s quantizer, in output DN: the ADC rounds ``mean / step`` (with
+    noise ``sigma / step``), and its codes are multiplied by the step. Clipping is not included."""
+    if transfer.step == 1:
+        return expected_code(mean_dn, sigma_dn)
+    s = float(transfer.step)
+    return s * expected_code(np.asarray(mean_dn, np.float64) / s, np.asarray(sigma_dn, np.float64) / s)
 
 
 #: below this noise (DN) the expected code is a sum over codes' edges; from it to 1 DN a Fourier series
@@ -198,3 +253,48 @@ def series_terms(sigma_dn: float) -> int:
     if sigma_dn >= DITHER_SERIES_FROM:
         return max(int(SERIES_TERMS_DN / sigma_dn), 1)
     return int(TAIL_Z * sigma_dn) + 1
+
+
+#: the largest output step :func:`code_step` reports (2^8: an 8-bit ADC in a 16-bit range)
+MAX_STEP = 256
+
+
+def code_grid(codes: np.ndarray) -> int:
+    """The bitwise OR of integer codes: :func:`code_step`'s input, which accumulates over frames with ``|``.
+
+    0 where every code is the same (they say nothing of the step), -1 where some code is not an integer (or
+    negative): the step is then unknown, and stays so when ORed with others.
+
+    Parameters
+    ----------
+    codes : array
+        Raw codes, DN.
+    """
+    x = np.asarray(codes).ravel()
+    if x.size == 0:
+        return 0
+    if x.dtype.kind == "f" and not np.all(x == np.rint(x)):
+        return -1
+    x = x.astype(np.int64)
+    if x.min() < 0:
+        return -1
+    if x.min() == x.max():
+        return 0
+    return int(np.bitwise_or.reduce(x))
+
+
+def code_step(grid: int) -> int:
+    """The output DN per ADC code that data show: the lowest bit set in :func:`code_grid`'s OR of the codes (every
+    code is a multiple of it), at most :data:`MAX_STEP`; 1 where the data cannot tell (all codes equal, or codes
+    that are not integers).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cmosnoise.model.stages.adc import code_grid, code_step
+    >>> code_step(code_grid(np.array([512, 516, 540, 1024]))), code_step(code_grid(np.array([3, 4])))
+    (4, 1)
+    """
+    if grid <= 0:
+        return 1
+    return min(grid & -grid, MAX_STEP)
