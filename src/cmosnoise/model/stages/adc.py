@@ -154,7 +154,21 @@ def convert(electrons: np.ndarray, transfer: Transfer, black_dn: np.ndarray | No
 
 def expected_output(mean_dn: np.ndarray, sigma_dn: np.ndarray, transfer: Transfer) -> np.ndarray:
     """:func:`expected_code` for ``transfer``'s quantizer, in output DN: the ADC rounds ``mean / step`` (with
-    noise ``sigma / step``), and its codes are multiplied by the step. Clipping is not included."""
+    noise ``sigma / step``), and its codes are multiplied by the step. Clipping is not included.
+
+    Parameters
+    ----------
+    mean_dn : array, output DN
+        The code's mean before rounding.
+    sigma_dn : array or float, output DN
+        Its temporal noise.
+    transfer : Transfer
+        The quantizer: its step.
+
+    Returns
+    -------
+    float64 array, output DN, ``mean_dn``'s shape
+    """
     if transfer.step == 1:
         return expected_code(mean_dn, sigma_dn)
     s = float(transfer.step)
@@ -269,6 +283,10 @@ def code_grid(codes: np.ndarray) -> int:
     ----------
     codes : array
         Raw codes, DN.
+
+    Returns
+    -------
+    int
     """
     x = np.asarray(codes).ravel()
     if x.size == 0:
@@ -287,6 +305,16 @@ def code_step(grid: int) -> int:
     """The output DN per ADC code that data show: the lowest bit set in :func:`code_grid`'s OR of the codes (every
     code is a multiple of it), at most :data:`MAX_STEP`; 1 where the data cannot tell (all codes equal, or codes
     that are not integers).
+
+    Parameters
+    ----------
+    grid : int
+        :func:`code_grid`'s OR of the codes (of one frame, or ORed over many).
+
+    Returns
+    -------
+    int
+        Output DN per ADC code, a power of two.
 
     Examples
     --------
