@@ -753,7 +753,46 @@ def render_run_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+def compute_quality_hot() -> dict:
+    """`cmosnoise quality`'s comparison of the default sensor (QE 0.6) at 25 C and at 65 C: 1, 10 and 100 lux,
+    8 frames, the default charts, 3 paired sensor instances."""
+    from cmosnoise import load_config
+    from cmosnoise.analysis import quality
+    from cmosnoise.app.quality import difference
+
+    base = ["sensor.quantum_efficiency=0.6"]
+    a_cfg = load_config(overrides=base)
+    b_cfg = load_config(overrides=[*base, "sensor.temperature_c=65"])
+    lux = [1.0, 10.0, 100.0]
+    a = [quality.measure(a_cfg, lux, frames=8, seed=s) for s in range(3)]
+    b = [quality.measure(b_cfg, lux, frames=8, seed=s) for s in range(3)]
+    d = difference(a, b)
+    keys = ["snr_green", "visual_noise_l", "banding_columns", "banding_rows", "mtf50"]
+    return {"lux": lux, "a": {k: a[0]["metrics"][k] for k in keys}, "b": {k: b[0]["metrics"][k] for k in keys},
+            "diff": {k: d[k] for k in keys}, "snr10": [a[0]["snr10_lux"], b[0]["snr10_lux"]],
+            "threshold_l": a[0]["visual_threshold_l"]}
+
+
+def render_quality_hot(d: dict) -> str:
+    from cmosnoise.analysis import quality
+
+    lines = ["| metric | unit | " + " | ".join(f"{v:g} lux: 25 C / 65 C (65 - 25)" for v in d["lux"]) + " |",
+             "|---|---|" + "---|" * len(d["lux"])]
+    for k in d["a"]:
+        m = quality.BY_NAME[k]
+        cells = []
+        for i in range(len(d["lux"])):
+            diff = d["diff"][k][i]
+            star = " **clear**" if diff["clear"] else ""
+            cells.append(f"{d['a'][k][i]:.3g} / {d['b'][k][i]:.3g} ({diff['mean']:+.2g} ± {diff['se']:.1g}){star}")
+        lines.append(f"| {m.label} | {m.unit} | " + " | ".join(cells) + " |")
+    lines += ["", f"SNR10: {d['snr10'][0]:.3g} lux at 25 C, {d['snr10'][1]:.3g} lux at 65 C (f/2.8, 0.03 s, D65). "
+                  f"The just-detectable visual noise at these viewing conditions is {d['threshold_l']:.3g} L*."]
+    return "\n".join(lines)
+
+
 SECTIONS = {
+    "quality_hot": (compute_quality_hot, render_quality_hot),
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
     "cooled_dark": (compute_cooled_dark, render_cooled_dark),

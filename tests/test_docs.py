@@ -175,8 +175,8 @@ def test_the_sensor_guide_runs_as_written(tmp_path):
 
 
 #: every command's page (each example runs in a folder of its own, as a reader would run one page)
-COMMAND_PAGES = ["presets", "config", "simulate", "process", "figures", "characterize", "compare", "sweep", "measure",
-                 "fit", "dataset", "evaluate", "explore"]
+COMMAND_PAGES = ["presets", "config", "simulate", "process", "figures", "characterize", "quality", "compare", "sweep",
+                 "measure", "fit", "dataset", "evaluate", "explore"]
 
 
 @pytest.mark.slow
@@ -219,6 +219,7 @@ def test_every_commands_page_example_runs_as_written(tmp_path):
             r = cli(*args, cwd=here)
             assert r.returncode == 0, f"docs/commands/{name}.md: {line}: {r.stderr[-2000:]}"
     for made in ("simulate/run1/raw.tiff", "simulate/tiled/raw.tiff", "process/pictures", "characterize/emva/characterization.json",
+                 "quality/q/report.html",
                  "compare/cmp/compare.html", "sweep/yield/summary.csv", "measure/lab/manifest.yaml",
                  "fit/fitted/config.yaml", "dataset/data/dataset.json", "evaluate/scores", "figures/paper/index.html"):
         assert (tmp_path / made).exists(), made

@@ -540,6 +540,72 @@ def compare(
 
 
 @app.command()
+def quality(
+    ctx: typer.Context,
+    config: Optional[Path] = ConfigOpt,
+    preset: Optional[str] = PresetOpt,
+    set_: Optional[List[str]] = SetOpt,
+    lux: str = typer.Option("1,3,10,30,100,300,1000", "--lux", help="illuminances on the scene, lux, "
+                            "comma-separated, increasing"),
+    frames: int = typer.Option(8, "--frames", min=2, max=1000, help="frames of each chart at each illuminance"),
+    seed: Optional[int] = typer.Option(None, "--seed", help="sensor instance seed (without --compare)"),
+    compare_config: Optional[Path] = typer.Option(None, "--compare", help="a second configuration (YAML) to set "
+                                                  "beside the first: each difference with its spread over "
+                                                  "--instances sensor instances"),
+    compare_preset: Optional[str] = typer.Option(None, "--compare-preset", help="the second configuration from a "
+                                                 "preset (with --compare-set)"),
+    compare_set: Optional[List[str]] = typer.Option(None, "--compare-set", help="the second configuration: the "
+                                                    "first with this key changed, e.g. --compare-set "
+                                                    "sensor.temperature_c=65 (repeatable)"),
+    instances: int = typer.Option(3, "--instances", max=100, help="with a comparison: sensor instances "
+                                  "(seeds 0, 1, ...) each difference's standard error comes from"),
+    picture_height_cm: float = typer.Option(20.0, "--picture-height-cm", help="viewing: the picture's height, cm"),
+    viewing_distance_cm: float = typer.Option(50.0, "--viewing-distance-cm", help="viewing: the distance, cm"),
+    out: Path = typer.Option(Path("cmosnoise-quality"), "--out", "-o", help="output folder"),
+    overwrite: bool = OverwriteOpt,
+):
+    """Image quality through the test charts at each illuminance: SNR and SNR10, visual noise, banding, MTF, colour
+    error; with --compare, a second configuration beside the first."""
+    from rich.table import Table
+
+    from . import quality as job
+
+    try:
+        levels = [float(v) for v in lux.split(",") if v.strip()]
+    except ValueError:
+        raise CmosnoiseError(f"--lux {lux!r}: give illuminances in lux, comma-separated (e.g. 1,10,100)") from None
+    spec = _sensor(config, preset, set_, {"seed": seed} if seed is not None else None)
+    other, origin = None, ""
+    if compare_config is not None or compare_preset is not None or compare_set:
+        if compare_config is None and compare_preset is None:  # the first configuration with keys changed
+            other = _sensor(config, preset, [*(set_ or []), *compare_set]).config
+            origin = f"A with {', '.join(compare_set)}"
+        else:
+            other = _sensor(compare_config, compare_preset, compare_set).config
+            origin = " ".join(x for x in (str(compare_config or ""), f"preset {compare_preset}" if compare_preset
+                                          else "", ", ".join(compare_set or [])) if x)
+    with _counting(ctx, "measuring", "sensors") as progress:
+        doc = job.run(spec.config, out, overwrite, levels, frames, spec.config.seed if seed is None else seed, other,
+                      instances, compare_from=origin, picture_height_cm=picture_height_cm,
+                      viewing_distance_cm=viewing_distance_cm, progress=progress)
+    if _level(ctx) >= 0:
+        head, rows = job.console_rows(doc)
+        tab = Table(title="Image quality at each illuminance, lux (an 18 % grey, the edge, the ColorChecker)")
+        for col in head:
+            if col in ("metric", "unit"):
+                tab.add_column(col, justify="left", no_wrap=True)
+            else:
+                tab.add_column(col, justify="right")
+        for row in rows:
+            tab.add_row(*row)
+        Console().print(tab)
+        for line in job.summary_lines(doc):
+            typer.echo(f"  {line}")
+    files = ["quality.json", "quality.csv", "report.html"]
+    _say(ctx, f"wrote {', '.join(files)} and the plots to {out}/")
+
+
+@app.command()
 def fit(
     ctx: typer.Context,
     frames_from: Path = typer.Option(..., "--frames-from", help="a manifest .yaml of stacks, or an EMVA 1288 descriptor (file or folder)"),

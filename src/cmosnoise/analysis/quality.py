@@ -1,0 +1,409 @@
+"""Image quality of a configured sensor and its processing, through the test charts, at a list of illuminances.
+
+At each illuminance three charts are exposed under the configuration's light (lux on a reflective scene, its
+illuminant and lens; :mod:`cmosnoise.model.light`), each on a sensor of its own size (a chart needs a few
+hundred pixels, not the whole frame), and ``frames`` frames are drawn:
+
+- a flat 18 % grey (``flat:0.18``): the raw green SNR (e-, against the noise model's prediction,
+  :mod:`.snr_light`), the output luminance's SNR, the visual luminance noise and the row and column banding's
+  visibility (:mod:`.visual_noise`);
+- the slanted edge (``edge``): the e-SFR of the output luminance averaged over the frames (:mod:`.sfr`);
+- the ColorChecker (``colorchecker``): CIEDE2000 per patch after a least-squares colour matrix, on the raw
+  mosaic's patch means (:mod:`.colour_error`; colour sensors only).
+
+The output luminance is the processing's linear RGB (``config.processing``: black level and the mean dark signal,
+as a camera's optically black pixels clamp it, demosaicing, crosstalk compensation, white balance; no dark
+calibration) turned into Y with sRGB's primaries
+(``0.2126 R + 0.7152 G + 0.0722 B``), scaled so that the grey's mean is 0.18 of white: what an auto-exposure
+brings a grey to, so that the visual noise is judged at the output's level and not darkened away at low light.
+The viewing conditions (the whole picture, ``sensor.height`` rows, ``picture_height_cm`` high, seen from
+``viewing_distance_cm``) are in every result.
+
+The metrics are one table, :data:`METRICS`: each a name, a label and unit, which way is better, the chart it
+reads and a function of a :class:`Captures`. A new metric is one function and one row; ``cmosnoise quality``,
+its report and ``--compare`` iterate the table.
+
+Examples
+--------
+>>> from cmosnoise import load_config
+>>> from cmosnoise.analysis import quality
+>>> c = load_config(overrides=["light.enabled=true", "sensor.width=640", "sensor.height=480"])
+>>> r = quality.measure(c, [10.0, 100.0], frames=2, sizes={"flat": (64, 64), "edge": (64, 64),
+...                                                         "colorchecker": (96, 144)})
+>>> [round(v, 1) for v in r["metrics"]["snr_green"]]
+[6.6, 22.3]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..config.loading import merge_updates
+from ..errors import CmosnoiseError
+from ..model import charts
+from ..model.sensor import Sensor
+from . import colour_error, sfr, snr_light, visual_noise
+
+#: the charts' default sizes (rows, cols): enough pixels for each metric's estimate, few enough for speed
+SIZES = {"flat": (256, 256), "edge": (192, 192), "colorchecker": (240, 360)}
+#: the grey the flat field, the SNR and the visual noise are measured on (ISO 15739 and SNR10's reference grey)
+GREY = 0.18
+#: sRGB's (Rec. 709) luminance weights of linear R, G, B (IEC 61966-2-1)
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass
+class Captures:
+    """One illuminance's charts: frames and what the metrics need to read them.
+
+    Parameters
+    ----------
+    lux : float
+        The illuminance, lux.
+    raw : dict
+        Chart name -> (frames, rows, cols) raw frames (DN).
+    luminance : dict
+        Chart name -> (frames, rows, cols) output luminance, float64 (linear; the grey scaled to 0.18).
+    sensors : dict
+        Chart name -> its :class:`Sensor`.
+    shots : dict
+        Chart name -> its exposure.
+    rows : int
+        The whole picture's height, pixels (the viewing conditions' scale).
+    picture_height_cm, viewing_distance_cm : float
+        The viewing conditions.
+    """
+
+    lux: float
+    raw: dict
+    luminance: dict
+    sensors: dict
+    shots: dict
+    rows: int
+    picture_height_cm: float
+    viewing_distance_cm: float
+    cache: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)  #: why a metric is not measured here, one line each
+
+    def clipped(self, chart: str, boxes) -> bool:
+        """Whether a part of ``chart`` (boxes (row0, row1, col0, col1)) reaches saturation in the frames' mean:
+        within 2 % of the saturation code, where the charge (or the ADC) clips and the metric would read the clip."""
+        s = self.sensors[chart]
+        t = s.transfer
+        top = t.black_level_dn + 0.98 * s.saturation_e * t.gain_dn_per_e
+        mean = self.raw[chart].astype(np.float64).mean(axis=0)
+        return any(float(mean[r0:r1, c0:c1].max()) >= top for r0, r1, c0, c1 in boxes)
+
+    def patch(self, chart: str = "flat") -> tuple[slice, slice]:
+        r0, r1, c0, c1 = charts.truth(_SOURCES[chart], self.raw[chart].shape[1:])["patches"][0]
+        return slice(r0, r1), slice(c0, c1)
+
+    def viewing(self) -> dict:
+        return {"rows": self.rows, "picture_height_cm": self.picture_height_cm,
+                "viewing_distance_cm": self.viewing_distance_cm}
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One row of :data:`METRICS`.
+
+    Parameters
+    ----------
+    name : str
+        Its key in results.
+    label, unit : str
+        How tables and plots name it.
+    better : {"higher", "lower"}
+        Which way is better.
+    chart : str
+        The chart it reads: ``flat``, ``edge`` or ``colorchecker``.
+    compute : callable
+        ``compute(captures) -> float or None`` (None: these data cannot give it, e.g. colour on a monochrome
+        sensor).
+    source : str
+        Where its definition was read.
+    """
+
+    name: str
+    label: str
+    unit: str
+    better: str
+    chart: str
+    compute: Callable[[Captures], float | None]
+    source: str
+
+
+_SOURCES = {"flat": f"flat:{GREY!r}", "edge": "edge", "colorchecker": "colorchecker"}
+
+
+def _green_snr(c: Captures) -> float:
+    s, shot = c.sensors["flat"], c.shots["flat"]
+    t = s.transfer
+    green = (snr_light._green(c.raw["flat"].astype(np.float64), s.cfa) - t.black_level_dn) / t.gain_dn_per_e
+    signal = float(green.mean()) - snr_light._dark_mean(s, shot)
+    return signal / math.sqrt(float(green.var(axis=0, ddof=1).mean()))
+
+
+def _green_snr_predicted(c: Captures) -> float:
+    signal, noise = snr_light._predicted(c.sensors["flat"], c.shots["flat"])
+    return signal / noise
+
+
+def _luminance_snr(c: Captures) -> float:
+    y = c.luminance["flat"][(slice(None), *c.patch())]
+    return float(y.mean()) / math.sqrt(float(y.var(axis=0, ddof=1).mean()))
+
+
+def _visual(c: Captures) -> dict:
+    if "visual" not in c.cache:
+        y = c.luminance["flat"][(slice(None), *c.patch())]
+        per = [visual_noise.visual_luminance_noise(np.clip(f, 0, None), c.rows, c.picture_height_cm,
+                                                   c.viewing_distance_cm)["sigma_l"] for f in y]
+        c.cache["visual"] = float(np.mean(per))
+    return c.cache["visual"]
+
+
+def _banding(axis: str) -> Callable[[Captures], float]:
+    def compute(c: Captures) -> float:
+        # the frames' mean: banding is the fixed pattern a still picture shows (the temporal part averages out
+        # over the frames as a viewer's eye does over a video; one frame's adds the row noise of that frame)
+        y = c.luminance["flat"][(slice(None), *c.patch())].mean(axis=0)
+        return visual_noise.banding(np.clip(y, 0, None), axis, c.rows, c.picture_height_cm,
+                                    c.viewing_distance_cm)["visibility"]
+    return compute
+
+
+def _esfr(c: Captures) -> sfr.SfrResult | None:
+    if "sfr" not in c.cache:
+        y = c.luminance["edge"].mean(axis=0)
+        region = charts.truth("edge", y.shape)["region"]
+        if c.clipped("edge", [region]):
+            c.notes.append(f"MTF at {c.lux:g} lux: the edge's bright side reaches saturation; not measured")
+            c.cache["sfr"] = None
+        else:
+            c.cache["sfr"] = sfr.esfr(y, region)
+    return c.cache["sfr"]
+
+
+def _sfr_value(name: str) -> Callable[[Captures], float | None]:
+    def compute(c: Captures) -> float | None:
+        r = _esfr(c)
+        return None if r is None else getattr(r, name)
+    return compute
+
+
+def _colour(c: Captures) -> dict | None:
+    s = c.sensors["colorchecker"]
+    if s.cfa == "none":
+        return None
+    if "colour" not in c.cache:
+        raw = c.raw["colorchecker"].astype(np.float64).mean(axis=0)
+        patches = charts.truth("colorchecker", raw.shape)["patches"]
+        if c.clipped("colorchecker", patches):
+            c.notes.append(f"colour error at {c.lux:g} lux: a ColorChecker patch reaches saturation; not measured")
+            c.cache["colour"] = None
+        else:
+            cam = colour_error.mosaic_patch_means(raw, s.cfa, patches, s.transfer.black_level_dn)
+            c.cache["colour"] = colour_error.colour_error(cam)
+    return c.cache["colour"]
+
+
+def _colour_mean(c: Captures) -> float | None:
+    r = _colour(c)
+    return None if r is None else r["mean_de2000"]
+
+
+def _colour_max(c: Captures) -> float | None:
+    r = _colour(c)
+    return None if r is None else r["max_de2000"]
+
+
+#: the metrics, in the order tables show them
+METRICS: list[Metric] = [
+    Metric("snr_green", "SNR, raw green", "", "higher", "flat", _green_snr,
+           "mean photo-charge over the temporal noise of the green pixels (snr_light)"),
+    Metric("snr_green_predicted", "SNR, raw green (model)", "", "higher", "flat", _green_snr_predicted,
+           "noise_budget's temporal and after-gain variances at the patch's charge"),
+    Metric("snr_luminance", "SNR, output luminance", "", "higher", "flat", _luminance_snr,
+           "mean Y over its temporal noise after the processing and sRGB's luminance weights"),
+    Metric("visual_noise_l", "visual luminance noise", "L*", "lower", "flat", _visual,
+           "CSF-weighted sigma of L* (ISO 15739 Annex B's luminance channel, CPIQ CSF; visual_noise)"),
+    Metric("banding_columns", "column banding", "JND", "lower", "flat", _banding("columns"),
+           "column means' CSF-weighted sigma of L* over the just-detectable 3 % noise (visual_noise.banding)"),
+    Metric("banding_rows", "row banding", "JND", "lower", "flat", _banding("rows"),
+           "row means' CSF-weighted sigma of L* over the just-detectable 3 % noise (visual_noise.banding)"),
+    Metric("mtf50", "MTF50", "cy/px", "higher", "edge", _sfr_value("mtf50"),
+           "ISO 12233 e-SFR of the output luminance (sfr)"),
+    Metric("mtf_nyquist", "MTF at Nyquist", "", "higher", "edge", _sfr_value("mtf_nyquist"),
+           "ISO 12233 e-SFR at 0.5 cy/px (sfr)"),
+    Metric("colour_de2000_mean", "colour error, mean", "dE00", "lower", "colorchecker", _colour_mean,
+           "CIEDE2000 after a least-squares 3 x 3 matrix, 24 patches (colour_error)"),
+    Metric("colour_de2000_max", "colour error, worst patch", "dE00", "lower", "colorchecker", _colour_max,
+           "the largest patch's CIEDE2000 (colour_error)"),
+]
+BY_NAME = {m.name: m for m in METRICS}
+
+
+def with_light(config):
+    """``config`` with its light on (the light section's own defaults, the illuminance replaced at each step, where
+    it was off), and whether it was off.
+
+    Returns
+    -------
+    (Config, bool)
+    """
+    if config.light.enabled:
+        return config, False
+    return merge_updates(config, {"light": {"enabled": True, "illuminance_lux": 100.0}}), True
+
+
+def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: int = 0,
+            picture_height_cm: float = visual_noise.PICTURE_HEIGHT_CM,
+            viewing_distance_cm: float = visual_noise.VIEWING_DISTANCE_CM) -> Captures:
+    """The charts at one illuminance: ``frames`` frames of each, and their output luminance.
+
+    Parameters
+    ----------
+    config : Config
+        With ``light.enabled``.
+    lux : float
+        Illuminance on the scene, lux.
+    frames : int
+        Frames of each chart, at least 2.
+    sizes : dict, optional
+        Chart name -> (rows, cols); default :data:`SIZES`.
+    seed : int
+        The sensor instance.
+    picture_height_cm, viewing_distance_cm : float
+        The viewing conditions.
+
+    Returns
+    -------
+    Captures
+    """
+    from ..isp.process import Processor
+
+    sizes = {**SIZES, **(sizes or {})}
+    raw, lum, sensors, shots = {}, {}, {}, {}
+    grey_scale = None
+    for chart in ("flat", "edge", "colorchecker"):
+        rows, cols = sizes[chart]
+        c = merge_updates(config, {"light": {"illuminance_lux": float(lux)},
+                                   "sensor": {"height": int(rows), "width": int(cols)}})
+        s = Sensor(c, seed=seed)
+        shot = s.expose(_SOURCES[chart])
+        stack = np.stack(list(shot.frames(int(frames))))
+        proc = Processor(c.processing, s.raw_info())
+        # the optical-black clamp: the mean dark signal goes with the black level, as a camera's optically black
+        # pixels (dark current and all) take it out; the dark signal's pattern and noise stay
+        clamp = 0.0 if shot.dark_mean_e is None else float(np.mean(shot.dark_mean_e)) * s.transfer.gain_dn_per_e
+        y = []
+        for f in stack:
+            rgb = proc.linear_rgb(proc.cfa_image(f) - np.float32(clamp)).astype(np.float64)
+            y.append(rgb if rgb.ndim == 2 else rgb @ LUMA)
+        y = np.stack(y)
+        if grey_scale is None:  # the flat grey's mean to 0.18: an auto-exposure's level, the same for each chart
+            r0, r1, c0, c1 = charts.truth(_SOURCES["flat"], (rows, cols))["patches"][0]
+            mean = float(y[:, r0:r1, c0:c1].mean())
+            grey_scale = GREY / mean if mean > 0 else 1.0
+        raw[chart], lum[chart], sensors[chart], shots[chart] = stack, y * grey_scale, s, shot
+    return Captures(float(lux), raw, lum, sensors, shots, int(config.sensor.height), picture_height_cm,
+                    viewing_distance_cm)
+
+
+def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int = 0, metrics=None,
+            picture_height_cm: float = visual_noise.PICTURE_HEIGHT_CM,
+            viewing_distance_cm: float = visual_noise.VIEWING_DISTANCE_CM) -> dict:
+    """Every metric at each illuminance, SNR10 and SNR1, and the curves the plots draw.
+
+    Parameters
+    ----------
+    config : Config
+        The sensor and its processing; its light is switched on where it is off (``light_switched_on`` says so).
+    lux : sequence of float
+        Illuminances, lux, increasing.
+    frames : int
+        Frames of each chart at each illuminance, at least 2.
+    sizes : dict, optional
+        Chart name -> (rows, cols).
+    seed : int
+        The sensor instance.
+    metrics : sequence of str, optional
+        Names in :data:`METRICS` (default: all).
+    picture_height_cm, viewing_distance_cm : float
+        The viewing conditions (positive).
+
+    Returns
+    -------
+    dict
+        ``lux``; ``metrics``: name -> list of values (None where the data cannot give one); ``snr10_lux``,
+        ``snr1_lux`` (measured, interpolated; None outside the curve) and their ``_predicted``; the conditions
+        (``f_number``, ``integration_time_s``, ``illuminant``, ``frames``, ``seed``, viewing); ``sfr`` (the curve at
+        the brightest illuminance whose edge does not clip) and ``colour`` (the per-patch errors likewise), where
+        measured; ``notes`` (why a metric is missing, what it assumes); ``light_switched_on``.
+    """
+    lux = [float(v) for v in lux]
+    if not lux or any(not v > 0 for v in lux) or any(b <= a for a, b in zip(lux, lux[1:])):
+        raise CmosnoiseError(f"lux = {lux}: give increasing illuminances above 0")
+    if int(frames) < 2:
+        raise CmosnoiseError(f"frames = {frames}: the temporal noise needs at least 2")
+    if not (picture_height_cm > 0 and viewing_distance_cm > 0):
+        raise CmosnoiseError(f"viewing conditions: picture height {picture_height_cm:g} cm and distance "
+                             f"{viewing_distance_cm:g} cm must both be above 0")
+    names = [m.name for m in METRICS] if metrics is None else list(metrics)
+    unknown = [n for n in names if n not in BY_NAME]
+    if unknown:
+        raise CmosnoiseError(f"metrics {unknown}: not known; choose from {', '.join(BY_NAME)}")
+    for chart, size in (sizes or {}).items():
+        if chart not in SIZES or len(size) != 2 or min(size) < 32:
+            raise CmosnoiseError(f"sizes[{chart!r}] = {size}: give a chart of {', '.join(SIZES)} at least 32 x 32")
+    config, switched = with_light(config)
+    flat = {**SIZES, **(sizes or {})}["flat"]
+    out = {"lux": lux, "metrics": {n: [] for n in names}, "frames": int(frames), "seed": int(seed),
+           "f_number": config.optics.f_number, "integration_time_s": config.exposure.integration_time_s,
+           "illuminant": config.light.illuminant, "light_switched_on": switched,
+           "picture_height_cm": picture_height_cm, "viewing_distance_cm": viewing_distance_cm,
+           "picture_rows": int(config.sensor.height),
+           "visual_threshold_l": visual_noise.threshold_sigma_l(int(config.sensor.height),
+                                                                (flat[0] - 2 * (flat[0] // 4), flat[1] - 2 * (flat[1] // 4)),
+                                                                picture_height_cm, viewing_distance_cm)}
+    out["notes"] = []
+    if config.light.spectral_qe is None or _one_column(config.light.spectral_qe):
+        out["notes"].append("one QE spectrum for every colour channel (light.spectral_qe gives no R, G, B "
+                            "columns): the channels see the same light, so the colour error measures only that")
+    edge_cap = colour_cap = None
+    for v in lux:
+        cap = capture(config, v, frames, sizes, seed, picture_height_cm, viewing_distance_cm)
+        for n in names:
+            val = BY_NAME[n].compute(cap)
+            out["metrics"][n].append(None if val is None or not math.isfinite(val) else float(val))
+        out["notes"] += cap.notes
+        if cap.cache.get("sfr") is not None:
+            edge_cap = cap  # the brightest illuminance the edge does not clip at
+        if cap.cache.get("colour") is not None:
+            colour_cap = cap
+    if "snr_green" in out["metrics"]:
+        for target in (10.0, 1.0):
+            key = f"snr{target:g}_lux"
+            out[key] = snr_light.crossing_lux(lux, [s or 0.0 for s in out["metrics"]["snr_green"]], target)
+            out[key + "_predicted"] = snr_light.predicted_crossing_lux(config, target, flat, GREY, seed)
+    if edge_cap is not None:
+        r = edge_cap.cache["sfr"]
+        keep = r.frequency <= 1.0
+        out["sfr"] = {"lux": edge_cap.lux, "frequency": r.frequency[keep].tolist(), "sfr": r.sfr[keep].tolist(),
+                      "angle_deg": r.angle_deg}
+    if colour_cap is not None:
+        col = colour_cap.cache["colour"]
+        out["colour"] = {"lux": colour_cap.lux, "de2000": col["de2000"].tolist(),
+                         "names": charts.truth("colorchecker", (240, 360))["names"],
+                         "corrected": col["corrected"].tolist()}
+    return out
+
+
+def _one_column(spectral_qe) -> bool:
+    """Whether inline spectral QE rows give one column (the same spectrum for R, G and B)."""
+    return not isinstance(spectral_qe, str) and all(len(row) == 2 for row in spectral_qe)

@@ -1,0 +1,123 @@
+"""`cmosnoise quality`: the metric registry through the charts at each illuminance, its outputs and --compare."""
+
+import csv
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+from conftest import cli
+
+from cmosnoise import load_config
+from cmosnoise.analysis import quality
+
+#: small charts: the tests' speed (the metrics' estimates are then noisier than a run's defaults)
+SMALL = {"flat": (96, 96), "edge": (96, 96), "colorchecker": (120, 180)}
+BASE = ["sensor.quantum_efficiency=0.6", "sensor.width=640", "sensor.height=480"]
+
+
+def _measure(overrides=(), lux=(1.0, 10.0, 100.0), seed=0, **kw):
+    return quality.measure(load_config(overrides=[*BASE, *overrides]), lux, frames=4, sizes=SMALL, seed=seed, **kw)
+
+
+def test_every_metric_of_the_table_is_measured_at_each_illuminance_and_more_light_is_better():
+    r = _measure()
+    assert list(r["metrics"]) == [m.name for m in quality.METRICS]
+    assert all(len(v) == 3 for v in r["metrics"].values())
+    snr, vn = r["metrics"]["snr_green"], r["metrics"]["visual_noise_l"]
+    assert snr[0] < snr[1] < snr[2] and vn[0] > vn[1] > vn[2]
+    # the photo-charge grows tenfold from 10 to 100 lux: the SNR by sqrt(10) where shot noise rules, by up to 10
+    # where the read noise does
+    assert math.sqrt(10) * 0.95 < snr[2] / snr[1] < 10
+    # SNR10 where the measured curve crosses 10, and the model's within 10 % of it (the measured curve is
+    # interpolated in log-log between 10 and 100 lux)
+    assert 10 < r["snr10_lux"] < 100 and abs(r["snr10_lux"] / r["snr10_lux_predicted"] - 1) < 0.1
+    assert r["light_switched_on"] and (r["f_number"], r["illuminant"]) == (2.8, "D65")
+    assert r["picture_rows"] == 480 and r["visual_threshold_l"] > 0
+
+
+def test_two_runs_that_differ_in_nothing_the_charts_see_differ_by_exactly_nothing():
+    """The same seed gives the same random numbers wherever the parameters agree: a change the charts do not see
+    (the video's frame rate) leaves every metric's bits."""
+    a = _measure(lux=(10.0,))
+    b = _measure(["processing.video_fps=24"], lux=(10.0,))
+    assert a["metrics"] == b["metrics"]
+
+
+def test_a_hot_sensor_is_clearly_noisier_in_low_light_through_the_command(tmp_path):
+    r = cli("-q", "quality", *sum((["--set", s] for s in BASE), []), "--compare-set", "sensor.temperature_c=65",
+            "--lux", "1,100", "--frames", "3", "--instances", "3", "--out", tmp_path / "q")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "q" / "quality.json").read_text())
+    d = doc["difference"]["visual_noise_l"]
+    # at 1 lux the dark current of 65 C (16 x 25 C's) adds visible noise, far beyond the instances' spread
+    assert d[0]["clear"] and d[0]["mean"] > 1.0
+    assert d[1]["mean"] < d[0]["mean"] / 10
+    assert doc["b"]["metrics"]["snr_green"][0] < doc["a"]["metrics"]["snr_green"][0]
+
+
+def test_the_outputs_iterate_the_table_so_a_new_metric_is_one_row(tmp_path, monkeypatch):
+    """A metric added to METRICS (one function, one row) reaches quality.json, quality.csv, the console and the
+    report without any other change."""
+    extra = quality.Metric("grey_mean", "grey's mean luminance", "", "higher", "flat",
+                           lambda c: float(c.luminance["flat"].mean()), "a test's row")
+    monkeypatch.setattr(quality, "METRICS", [*quality.METRICS, extra])
+    monkeypatch.setattr(quality, "BY_NAME", {m.name: m for m in quality.METRICS})
+    r = cli("quality", *sum((["--set", s] for s in BASE), []), "--lux", "10,30", "--frames", "2",
+            "--out", tmp_path / "q")
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "q"
+    doc = json.loads((out / "quality.json").read_text())
+    assert doc["a"]["metrics"]["grey_mean"] == pytest.approx([0.18, 0.18], rel=0.05)
+    header = next(csv.reader(io.StringIO((out / "quality.csv").read_text())))
+    assert header == ["lux"] + [f"A:{m.name}" for m in quality.METRICS]
+    page = (out / "report.html").read_text()
+    assert "grey&#x27;s mean luminance" in page or "grey's mean luminance" in page
+    assert "grey's mean luminance" in r.stdout
+    for name in ("snr.png", "visual_noise.png", "mtf.png", "colorchecker.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_an_edge_or_a_patch_that_reaches_saturation_is_not_measured_and_says_so():
+    r = _measure(lux=(10.0, 3000.0))
+    assert r["metrics"]["mtf50"][0] is not None and r["metrics"]["mtf50"][1] is None
+    assert r["metrics"]["colour_de2000_mean"][1] is None
+    assert any("3000 lux: the edge's bright side reaches saturation" in n for n in r["notes"])
+    assert r["sfr"]["lux"] == 10.0  # the curve of the brightest illuminance it holds at
+
+
+def test_one_qe_for_all_channels_is_named_beside_the_colour_error():
+    r = _measure(lux=(30.0,))
+    assert any("one QE spectrum for every colour channel" in n for n in r["notes"])
+    nikon = _measure(["light.enabled=true", "light.illuminance_lux=1", "light.spectral_qe=Nikon 5100 (NPL)",
+                      "light.qe_peak=0.6", "light.ir_cut_nm=680"], lux=(300.0,))
+    assert not any("one QE spectrum" in n for n in nikon["notes"]) and not nikon["light_switched_on"]
+    # a camera's own spectra tell the patches apart: the error is a few units, not the tens of one spectrum's
+    assert nikon["metrics"]["colour_de2000_mean"][0] < 5 < r["metrics"]["colour_de2000_mean"][0]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--lux", "10,1"], "give increasing illuminances above 0"),
+    (["--lux", "ten"], "--lux 'ten': give illuminances in lux"),
+    (["--picture-height-cm", "-1"], "viewing conditions"),
+    (["--compare-set", "sensor.temperature_c=65", "--instances", "1"], "--instances"),
+])
+def test_bad_input_is_one_line_and_no_folder(tmp_path, args, needle):
+    r = cli("quality", *sum((["--set", s] for s in BASE), []), *args, "--out", tmp_path / "q")
+    assert r.returncode == 2 and needle in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not (tmp_path / "q").exists()
+
+
+def test_the_greys_luminance_is_brought_to_18_percent_after_the_dark_clamp():
+    """At 65 C and 1 lux the dark signal is above the photo-signal; the optical-black clamp takes its mean
+    out, so the grey's output luminance is the photo-signal's, scaled to 0.18 (an auto-exposure's level)."""
+    cfg = load_config(overrides=[*BASE, "sensor.temperature_c=65"])
+    cfg, _ = quality.with_light(cfg)
+    cap = quality.capture(cfg, 1.0, 4, SMALL)
+    y = cap.luminance["flat"][(slice(None), *cap.patch())]
+    assert abs(float(y.mean()) - 0.18) < 1e-9
+    dark = float(np.mean(cap.shots["flat"].dark_mean_e))
+    photo = float(np.mean(cap.shots["flat"].photo_mean_e))
+    assert dark > photo
