@@ -121,3 +121,23 @@ def test_the_greys_luminance_is_brought_to_18_percent_after_the_dark_clamp():
     dark = float(np.mean(cap.shots["flat"].dark_mean_e))
     photo = float(np.mean(cap.shots["flat"].photo_mean_e))
     assert dark > photo
+
+
+def test_the_iso_15739_dynamic_range_is_saturation_over_the_snr1_signal():
+    """With shot noise and one read noise sigma alone, SNR = s / sqrt(s + sigma^2 + q) reaches 1 at
+    s1 = (1 + sqrt(1 + 4 (sigma^2 + q))) / 2 e- (q: the quantizer's 1/12 DN^2 in e-^2); the grey saturates at the
+    full well (the ADC's range is wider): the ratio of their illuminances is FW / s1 exactly."""
+    from conftest import quiet_config
+
+    from cmosnoise.analysis import snr_light
+
+    cfg = quiet_config(shot_noise={"enabled": True}, source_follower={"enabled": True, "thermal_sigma_e": 3.0,
+                                                                      "flicker": {"enabled": False}},
+                       sensor={"full_well_e": 8000, "quantum_efficiency": 0.5},
+                       adc={"bits": 14, "full_scale_e": 9000},
+                       light={"enabled": True, "illuminance_lux": 10})
+    dr = snr_light.dynamic_range(cfg)
+    k = (2**14 - 1 - 64) / 9000
+    s1 = (1 + math.sqrt(1 + 4 * (9.0 + 1 / 12 / k**2))) / 2
+    assert dr["ratio"] == pytest.approx(8000 / s1, rel=1e-6)
+    assert dr["db"] == pytest.approx(20 * math.log10(8000 / s1), rel=1e-6)

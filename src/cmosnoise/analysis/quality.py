@@ -341,7 +341,8 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
     -------
     dict
         ``lux``; ``metrics``: name -> list of values (None where the data cannot give one); ``snr10_lux``,
-        ``snr1_lux`` (measured, interpolated; None outside the curve) and their ``_predicted``; the conditions
+        ``snr1_lux`` (measured, interpolated; None outside the curve) and their ``_predicted``;
+        ``dynamic_range`` (ISO 15739's form, :func:`.snr_light.dynamic_range`); the conditions
         (``f_number``, ``integration_time_s``, ``illuminant``, ``frames``, ``seed``, viewing); ``sfr`` (the curve at
         the brightest illuminance whose edge does not clip) and ``colour`` (the per-patch errors likewise), where
         measured; ``notes`` (why a metric is missing, what it assumes); ``light_switched_on``.
@@ -391,6 +392,7 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
             key = f"snr{target:g}_lux"
             out[key] = snr_light.crossing_lux(lux, [s or 0.0 for s in out["metrics"]["snr_green"]], target)
             out[key + "_predicted"] = snr_light.predicted_crossing_lux(config, target, flat, GREY, seed)
+        out["dynamic_range"] = snr_light.dynamic_range(config, flat, GREY, seed)
     if edge_cap is not None:
         r = edge_cap.cache["sfr"]
         keep = r.frequency <= 1.0

@@ -185,3 +185,60 @@ def predicted_crossing_lux(config, target: float = 10.0, shape=(96, 128), reflec
         return s / math.sqrt(var) - target
 
     return float(math.exp(brentq(snr, math.log(1e-6), math.log(1e7))))
+
+
+def saturation_lux(config, shape=(96, 128), reflectance: float = 0.18, seed: int = 0) -> float:
+    """The illuminance at which the patch's green pixels reach saturation on average: their mean photo-charge and
+    dark charge at the sensor's saturation (the full well, or the ADC's top if it clips first), lux.
+
+    Parameters
+    ----------
+    config : Config
+        With ``light.enabled``.
+    shape : (rows, cols)
+        The sensor simulated.
+    reflectance : float
+        The patch's reflectance.
+    seed : int
+        The sensor instance.
+
+    Returns
+    -------
+    float
+        lux.
+    """
+    sensor = _sensor(config, 1.0, shape, seed)
+    shot = sensor.expose(f"flat:{reflectance!r}")
+    per_lux = _predicted(sensor, shot)[0]
+    return float(max(sensor.saturation_e - _dark_mean(sensor, shot), 0.0) / per_lux)
+
+
+def dynamic_range(config, shape=(96, 128), reflectance: float = 0.18, seed: int = 0) -> dict:
+    """ISO 15739's dynamic range as the references state it: the largest unclipped scene luminance over the
+    luminance at which the SNR is 1, scene-referred. Both are illuminances of the same patch here (the ratio of
+    illuminances is the ratio of its luminances): :func:`saturation_lux` over the model's SNR1 (the raw green
+    SNR, :func:`predicted_crossing_lux`). The wording of ISO 15739 itself was not read: this is the form
+    ``shared/imaging-chain-references.md`` gives, beside EMVA 1288's (saturation over the smallest detectable
+    signal, photons at the sensor) that ``characterize`` reports.
+
+    Parameters
+    ----------
+    config : Config
+        With ``light.enabled``.
+    shape : (rows, cols)
+        The sensor simulated.
+    reflectance : float
+        The patch's reflectance.
+    seed : int
+        The sensor instance.
+
+    Returns
+    -------
+    dict
+        ``saturation_lux``, ``snr1_lux``, ``ratio`` and ``db`` (20 log10 of the ratio).
+    """
+    sat = saturation_lux(config, shape, reflectance, seed)
+    low = predicted_crossing_lux(config, 1.0, shape, reflectance, seed)
+    ratio = sat / low if low > 0 else math.inf
+    return {"saturation_lux": sat, "snr1_lux": low, "ratio": ratio,
+            "db": 20 * math.log10(ratio) if 0 < ratio < math.inf else None}

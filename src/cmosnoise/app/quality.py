@@ -169,6 +169,10 @@ def summary_lines(doc: dict) -> list[str]:
                    f"{_lux(r.get('snr1_lux'))} (model {_lux(r.get('snr1_lux_predicted'))}), an 18 % grey at "
                    f"f/{r['f_number']:g}, {r['integration_time_s']:g} s, {r['illuminant']}")
         out += [f"{who}{line}" for line in r.get("notes", [])]
+        dr = r.get("dynamic_range")
+        if dr and dr.get("db") is not None:
+            out.append(f"{who}dynamic range (ISO 15739's form: the grey's saturation at {dr['saturation_lux']:.4g} "
+                       f"lux over its SNR 1 at {dr['snr1_lux']:.3g} lux, scene-referred) {dr['db']:.1f} dB")
         if r.get("light_switched_on"):
             out.append(f"{who}light was off in the configuration: switched on with its light section's defaults "
                        f"({r['illuminant']}, f/{r['f_number']:g}), each illuminance set in turn")
