@@ -141,3 +141,44 @@ def test_the_iso_15739_dynamic_range_is_saturation_over_the_snr1_signal():
     s1 = (1 + math.sqrt(1 + 4 * (9.0 + 1 / 12 / k**2))) / 2
     assert dr["ratio"] == pytest.approx(8000 / s1, rel=1e-6)
     assert dr["db"] == pytest.approx(20 * math.log10(8000 / s1), rel=1e-6)
+
+
+def test_the_threshold_search_finds_each_instances_crossing():
+    """The largest column FPN at which column banding stays below 1 JND at 10 lux: each sensor instance keeps its
+    random numbers as the FPN moves, so its banding is one smooth curve and the bisection's crossing puts it at the
+    limit (12 steps over 0 to 20 e-: within 0.005 e-, a banding within 1 % of the limit)."""
+    cfg = load_config(overrides=BASE)
+    r = quality.threshold(cfg, "column_noise.vfpn_sigma_e", 0.0, 20.0, "banding_columns", 1.0, 10.0, instances=3,
+                          frames=3, sizes=SMALL)
+    assert r["below_at"] == "low" and all(x is not None for x in r["crossings"])
+    for s, x in enumerate(r["crossings"]):
+        c = quality.merge_updates(quality.with_light(cfg)[0], {"column_noise": {"vfpn_sigma_e": x}})
+        again = quality.BY_NAME["banding_columns"].compute(quality.capture(c, 10.0, 3, SMALL, s, charts_=("flat",)))
+        assert again == pytest.approx(1.0, rel=0.01)
+    assert r["min"] <= r["mean"] <= r["max"] and r["se"] > 0
+    # the banding of a column FPN grows with it, so more light (a larger signal) allows more FPN
+    brighter = quality.threshold(cfg, "column_noise.vfpn_sigma_e", 0.0, 40.0, "banding_columns", 1.0, 100.0,
+                                 instances=2, frames=3, sizes=SMALL)
+    assert brighter["mean"] > 2 * r["mean"]
+
+
+def test_the_threshold_command_says_its_sentence_and_refuses_what_it_cannot_search(tmp_path):
+    sets = sum((["--set", s] for s in BASE), [])
+    r = cli("quality", *sets, "--find", "column_noise.vfpn_sigma_e=0:20", "--until", "banding_columns=1",
+            "--lux", "10", "--instances", "2", "--frames", "2", "--out", tmp_path / "t")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("the largest column_noise.vfpn_sigma_e at which column banding stays below 1 JND")
+    doc = json.loads((tmp_path / "t" / "threshold.json").read_text())
+    assert doc["mean"] > 0 and (tmp_path / "t" / "threshold.png").exists()
+    # nothing to cross: said, not invented
+    r = cli("quality", *sets, "--find", "column_noise.vfpn_sigma_e=0:0.1", "--until", "banding_columns=1",
+            "--lux", "10", "--instances", "2", "--frames", "2", "--out", tmp_path / "none")
+    assert r.returncode == 0 and "does not cross 1 JND" in r.stdout, r.stdout
+    for args, needle in ((["--find", "column_noise.vfpn_sigma_e=0:20"], "--find and --until go together"),
+                         (["--find", "x", "--until", "banding_columns=1"], "give KEY=LOW:HIGH"),
+                         (["--find", "a.b=0:1", "--until", "sharpness=1"], "'sharpness' is not a metric"),
+                         (["--find", "column_noise.vfpn_sigma_e=0:20", "--until", "banding_columns=1", "--lux",
+                           "1,10"], "at one illuminance")):
+        r = cli("quality", *sets, *args, "--out", tmp_path / "bad")
+        assert r.returncode == 2 and needle in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert not (tmp_path / "bad").exists()

@@ -557,8 +557,12 @@ def quality(
     compare_set: Optional[List[str]] = typer.Option(None, "--compare-set", help="the second configuration: the "
                                                     "first with this key changed, e.g. --compare-set "
                                                     "sensor.temperature_c=65 (repeatable)"),
-    instances: int = typer.Option(3, "--instances", max=100, help="with a comparison: sensor instances "
-                                  "(seeds 0, 1, ...) each difference's standard error comes from"),
+    instances: int = typer.Option(3, "--instances", max=100, help="with a comparison or a search: sensor "
+                                  "instances (seeds 0, 1, ...) each spread comes from"),
+    find: Optional[str] = typer.Option(None, "--find", help="search instead: the value of one parameter, KEY=LOW:HIGH, "
+                                       "at which the --until metric crosses its limit (bisection on each of "
+                                       "--instances sensor instances, at the one --lux)"),
+    until: Optional[str] = typer.Option(None, "--until", help="with --find: METRIC=LIMIT, e.g. banding_columns=1"),
     picture_height_cm: float = typer.Option(20.0, "--picture-height-cm", help="viewing: the picture's height, cm"),
     viewing_distance_cm: float = typer.Option(50.0, "--viewing-distance-cm", help="viewing: the distance, cm"),
     out: Path = typer.Option(Path("cmosnoise-quality"), "--out", "-o", help="output folder"),
@@ -575,6 +579,17 @@ def quality(
     except ValueError:
         raise CmosnoiseError(f"--lux {lux!r}: give illuminances in lux, comma-separated (e.g. 1,10,100)") from None
     spec = _sensor(config, preset, set_, {"seed": seed} if seed is not None else None)
+    if find is not None or until is not None:
+        if find is None or until is None:
+            raise CmosnoiseError("--find and --until go together: the parameter's interval and the metric's limit")
+        job.parse_find(find), job.parse_until(until)  # their syntax first: one line each
+        if len(levels) != 1:
+            raise CmosnoiseError(f"--lux {lux!r}: a threshold search holds at one illuminance; give one value")
+        r = job.run_threshold(spec.config, out, overwrite, find, until, levels[0], instances, frames)
+        if _level(ctx) >= 0:
+            typer.echo(r["sentence"])
+        _say(ctx, f"wrote threshold.json and threshold.png to {out}/")
+        return
     other, origin = None, ""
     if compare_config is not None or compare_preset is not None or compare_set:
         if compare_config is None and compare_preset is None:  # the first configuration with keys changed

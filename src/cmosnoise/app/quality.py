@@ -308,3 +308,81 @@ def build_report(doc: dict, pngs: dict) -> str:
                         ["metric", "unit", "better", "definition and source"]))
     parts.append("</body></html>")
     return "".join(parts)
+
+
+# ------------------------------------------------------------------ threshold search
+def parse_find(text: str) -> tuple[str, float, float]:
+    """``--find KEY=LOW:HIGH`` read, or a one-line error."""
+    key, sep, rng = text.partition("=")
+    low, colon, high = rng.partition(":")
+    try:
+        if not (sep and colon and key.strip()):
+            raise ValueError
+        return key.strip(), float(low), float(high)
+    except ValueError:
+        raise CmosnoiseError(f"--find {text!r}: give KEY=LOW:HIGH, e.g. column_noise.vfpn_sigma_e=0:20") from None
+
+
+def parse_until(text: str) -> tuple[str, float]:
+    """``--until METRIC=LIMIT`` read, or a one-line error."""
+    name, sep, value = text.partition("=")
+    try:
+        if not sep:
+            raise ValueError
+        limit = float(value)
+    except ValueError:
+        raise CmosnoiseError(f"--until {text!r}: give METRIC=LIMIT, e.g. banding_columns=1 (metrics: "
+                             f"{', '.join(quality.BY_NAME)})") from None
+    if name.strip() not in quality.BY_NAME:
+        raise CmosnoiseError(f"--until {text!r}: {name.strip()!r} is not a metric; choose from "
+                             f"{', '.join(quality.BY_NAME)}")
+    return name.strip(), limit
+
+
+def run_threshold(config, out: Path, overwrite: bool, find: str, until: str, lux: float, instances: int = 5,
+                  frames: int = 4) -> dict:
+    """``cmosnoise quality --find``: :func:`cmosnoise.analysis.quality.threshold` into ``out`` (threshold.json,
+    threshold.png)."""
+    key, low, high = parse_find(find)
+    metric, limit = parse_until(until)
+    folder = OutputFolder(out, overwrite)
+    r = quality.threshold(config, key, low, high, metric, limit, lux, instances, frames)
+    r["cmosnoise_version"] = __version__
+    r["sentence"] = threshold_sentence(r)
+    with folder as tmp:
+        write_json(tmp / "threshold.json", r)
+        (tmp / "threshold.png").write_bytes(threshold_plot(r))
+    return r
+
+
+def threshold_sentence(r: dict) -> str:
+    m = quality.BY_NAME[r["metric"]]
+    unit = f" {m.unit}" if m.unit else ""
+    if r["mean"] is None:
+        return (f"{m.label} does not cross {r['limit']:g}{unit} between {r['key']} = {r['low']:g} and {r['high']:g} "
+                f"at {r['lux']:g} lux on any of {r['instances']} sensor instances")
+    side = "largest" if r["below_at"] == "low" else "smallest" if r["below_at"] == "high" else "value of"
+    good = "below" if m.better == "lower" else "above"
+    spread = (f" ± {r['se']:.2g} (standard error; {r['min']:.4g} to {r['max']:.4g} over "
+              f"{sum(x is not None for x in r['crossings'])} sensor instances)" if r["se"] is not None else "")
+    missed = sum(x is None for x in r["crossings"])
+    return (f"the {side} {r['key']} at which {m.label} stays {good if side != 'value of' else 'at'} "
+            f"{r['limit']:g}{unit} at {r['lux']:g} lux: {r['mean']:.4g}{spread}"
+            + (f"; {missed} instance(s) do not cross it in the interval" if missed else ""))
+
+
+def threshold_plot(r: dict) -> bytes:
+    m = quality.BY_NAME[r["metric"]]
+    fig, ax = plots.figure(figsize=(6.0, 4.0))
+    for s, pts in enumerate(r["points"]):
+        x, y = zip(*pts)
+        ax.plot(x, y, ".-", ms=3, lw=0.8, label=f"sensor instance {s}")
+    ax.axhline(r["limit"], color="0.3", ls=":", label=f"limit {r['limit']:g}")
+    if r["mean"] is not None:
+        ax.axvline(r["mean"], color="k", lw=1, label=f"crossing {r['mean']:.4g}")
+    ax.set_xlabel(r["key"])
+    ax.set_ylabel(f"{m.label} [{m.unit}]" if m.unit else m.label)
+    ax.set_title(f"Where {m.label} crosses {r['limit']:g} at {r['lux']:g} lux")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    return plots.to_png_bytes(fig)
