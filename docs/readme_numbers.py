@@ -791,8 +791,16 @@ def render_quality_hot(d: dict) -> str:
     return "\n".join(lines)
 
 
+def render_quality_speed(d: dict) -> str:
+    lines = [f"| {d['megapixels']:.1f} MP ({d['width']} x {d['height']}), {d['cores']} cores, {d['vectors']} | s | "
+             "frames' worth |", "|---|---|---|"]
+    lines += [f"| {r['label']} | {r['s']:.3f} | {r['frames_worth']:.2f} |" for r in d["rows"]]
+    return "\n".join(lines)
+
+
 SECTIONS = {
     "quality_hot": (compute_quality_hot, render_quality_hot),
+    "quality_speed": (None, render_quality_speed),
     "characterize": (compute_characterize, render_characterize),
     "characterize_presets": (compute_characterize_presets, render_characterize_presets),
     "cooled_dark": (compute_cooled_dark, render_cooled_dark),
@@ -846,7 +854,8 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
                              "tile_speed.json"],
               "run_speed": ["bench_run.py", "--megapixels", "50", "--json", "run_speed.json"],
               "optics_speed": ["bench_optics.py", "--megapixels", "12", "--repeats", "3", "--json",
-                               "optics_speed.json"]}
+                               "optics_speed.json"],
+              "quality_speed": ["bench_quality.py", "--megapixels", "12", "--json", "quality_speed.json"]}
 SLOW = {"sweep_fig9"}
 
 
