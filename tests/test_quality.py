@@ -182,3 +182,13 @@ def test_the_threshold_command_says_its_sentence_and_refuses_what_it_cannot_sear
         r = cli("quality", *sets, *args, "--out", tmp_path / "bad")
         assert r.returncode == 2 and needle in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert not (tmp_path / "bad").exists()
+
+
+def test_a_corrector_leaves_fewer_defects_than_none():
+    """The defects metric counts what the processing's correction leaves of the truth's defects: without a
+    correction every visible defect is left; the median corrector takes nearly all the isolated ones."""
+    base = [*BASE, "defects.enabled=true", "defects.dead_ppm=2000", "defects.stuck_ppm=2000"]
+    off = _measure([*base, 'processing.defects.method="off"'], lux=(100.0,))["metrics"]["defects_left_per_mp"][0]
+    med = _measure([*base, "processing.defects.method=median"], lux=(100.0,))["metrics"]["defects_left_per_mp"][0]
+    # 4000 ppm of dead and stuck pixels on 96 x 96: about 37 pixels, most visible at 100 lux
+    assert off > 1500 and med < off / 5

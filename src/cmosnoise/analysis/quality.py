@@ -66,6 +66,8 @@ class Captures:
         The illuminance, lux.
     raw : dict
         Chart name -> (frames, rows, cols) raw frames (DN).
+    processors : dict
+        Chart name -> its :class:`~cmosnoise.isp.process.Processor` (the configuration's processing).
     luminance : dict
         Chart name -> (frames, rows, cols) output luminance, float64 (linear; the grey scaled to 0.18).
     sensors : dict
@@ -80,6 +82,7 @@ class Captures:
 
     lux: float
     raw: dict
+    processors: dict
     luminance: dict
     sensors: dict
     shots: dict
@@ -212,6 +215,19 @@ def _colour(c: Captures) -> dict | None:
     return c.cache["colour"]
 
 
+def _defects_left(c: Captures) -> float:
+    """The defect pixels (white pixels, couplets, clusters, dead, stuck, gain) visible in the grey's first frame
+    that the processing's correction (``processing.defects``) leaves, per megapixel (scoring.defects_left)."""
+    from . import ground_truth, scoring
+
+    s, shot, proc = c.sensors["flat"], c.shots["flat"], c.processors["flat"]
+    frame = c.raw["flat"][0]
+    out = proc.cfa_image(frame).astype(np.float64) + s.transfer.black_level_dn
+    left = scoring.defects_left(frame.astype(np.float64), out, ground_truth.expected_raw(shot),
+                                ground_truth.mask(s), s.cfa)
+    return sum(v["left"] for v in left.values()) / (frame.size / 1e6)
+
+
 def _colour_mean(c: Captures) -> float | None:
     r = _colour(c)
     return None if r is None else r["mean_de2000"]
@@ -240,6 +256,9 @@ METRICS: list[Metric] = [
            "ISO 12233 e-SFR of the output luminance (sfr)"),
     Metric("mtf_nyquist", "MTF at Nyquist", "", "higher", "edge", _sfr_value("mtf_nyquist"),
            "ISO 12233 e-SFR at 0.5 cy/px (sfr)"),
+    Metric("defects_left_per_mp", "defects left after correction", "per MP", "lower", "flat", _defects_left,
+           "defect pixels of the truth's mask visible in a frame (6 robust sigma) that processing.defects leaves, "
+           "singles, couplets and clusters (scoring.defects_left)"),
     Metric("colour_de2000_mean", "colour error, mean", "dE00", "lower", "colorchecker", _colour_mean,
            "CIEDE2000 after a least-squares 3 x 3 matrix, 24 patches (colour_error)"),
     Metric("colour_de2000_max", "colour error, worst patch", "dE00", "lower", "colorchecker", _colour_max,
@@ -291,7 +310,7 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
     from ..isp.process import Processor
 
     sizes = {**SIZES, **(sizes or {})}
-    raw, lum, sensors, shots = {}, {}, {}, {}
+    raw, lum, sensors, shots, procs = {}, {}, {}, {}, {}
     grey_scale = None
     for chart in [c for c in ("flat", "edge", "colorchecker") if c in charts_]:
         rows, cols = sizes[chart]
@@ -300,7 +319,13 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
         s = Sensor(c, seed=seed)
         shot = s.expose(_SOURCES[chart])
         stack = np.stack(list(shot.frames(int(frames))))
-        proc = Processor(c.processing, s.raw_info())
+        dark = None
+        if c.processing.dark_frames > 0 or c.processing.defects.method == "map":
+            # a master dark of the same sensor from its own frames, as the processing's dark calibration or its
+            # defect map asks (at least 8 frames for a map)
+            n = max(int(c.processing.dark_frames), 8)
+            dark = np.mean(np.stack(list(s.dark_frames(n))).astype(np.float64), axis=0).astype(np.float32)
+        proc = Processor(c.processing, s.raw_info(), dark)
         # the optical-black clamp: the mean dark signal goes with the black level, as a camera's optically black
         # pixels (dark current and all) take it out; the dark signal's pattern and noise stay
         clamp = 0.0 if shot.dark_mean_e is None else float(np.mean(shot.dark_mean_e)) * s.transfer.gain_dn_per_e
@@ -314,7 +339,8 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
             mean = float(y[:, r0:r1, c0:c1].mean())
             grey_scale = GREY / mean if mean > 0 else 1.0
         raw[chart], lum[chart], sensors[chart], shots[chart] = stack, y * (grey_scale or 1.0), s, shot
-    return Captures(float(lux), raw, lum, sensors, shots, int(config.sensor.height), picture_height_cm,
+        procs[chart] = proc
+    return Captures(float(lux), raw, procs, lum, sensors, shots, int(config.sensor.height), picture_height_cm,
                     viewing_distance_cm)
 
 
