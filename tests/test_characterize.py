@@ -233,9 +233,10 @@ def test_characterize_agrees_with_the_model_on_every_preset(preset):
     var_s2 = np.array([temporal_variance_se(sensor.with_exposure(ti), 1) ** 2 for ti in t])
     se_slope_v, se_icpt = _line_fit_se(t, var_s2)
     tv0 = noise_budget.temporal_variances(sensor, 0.0)
-    s0_model = sum(v for name, v in tv0.items() if name not in ("dark_shot", "photon_shot", "quantization")) * k**2 + 1 / 12
-    undithered = s0_model < 0.25  # no temporal noise to dither the quantization: a dark frame's variance is 0, not 1/12
-    check("sigma_d^2 (DN^2)", res["temporal_dark_noise_dn"] ** 2, s0_model, se_icpt + (1 / 12 if undithered else 0))
+    q = sensor.transfer.quantization_var_dn2  # step^2 / 12: 1/12, or 16/12 for a 14-bit ADC written in 16 bits
+    s0_model = sum(v for name, v in tv0.items() if name not in ("dark_shot", "photon_shot", "quantization")) * k**2 + q
+    undithered = s0_model < 3 * q  # no temporal noise to dither the quantization: a dark frame's variance is 0, not q
+    check("sigma_d^2 (DN^2)", res["temporal_dark_noise_dn"] ** 2, s0_model, se_icpt + (q if undithered else 0))
     rows, cols = sensor.shape
 
     def var_of_dark_mean(ti):
