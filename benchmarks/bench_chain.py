@@ -211,7 +211,8 @@ def main() -> None:
             _run(cmd + ["--out", f"{tmp}/o{i}"])
             w = time.perf_counter() - t0
             if w < wall:
-                wall, loop = w, json.load(open(f"{tmp}/o{i}/summary.json"))["timings_s"]["per_frame"]
+                with open(f"{tmp}/o{i}/summary.json") as fh:
+                    wall, loop = w, json.load(fh)["timings_s"]["per_frame"]
             t0 = time.perf_counter()
             _run(double + ["--out", f"{tmp}/d{i}"])
             wall2 = min(wall2, time.perf_counter() - t0)

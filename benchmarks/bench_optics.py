@@ -83,7 +83,7 @@ def main(argv=None) -> int:
     for name, sets in PARTS.items():
         part = Sensor(load_config(overrides=size + sets), seed=1)
         part.expose("photo")
-        res["parts_frames_worth"][name] = (fastest(lambda: part.expose("photo"), args.repeats)
+        res["parts_frames_worth"][name] = (fastest(lambda part=part: part.expose("photo"), args.repeats)
                                            - res["exposure_s"]) / res["frame_s"]
     print(f"{res['megapixels']:.1f} MP: frame {res['frame_s'] * 1e3:.0f} ms; exposure {res['exposure_s'] * 1e3:.0f} ms, "
           f"with light and lens {res['exposure_lens_s'] * 1e3:.0f} ms ({res['optics_frames_worth']:.2f} frames' "

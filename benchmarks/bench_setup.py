@@ -21,7 +21,7 @@ import os
 import subprocess
 import sys
 import time
-from typing import Callable
+from collections.abc import Callable
 
 #: (width, height) of each size in megapixels (4:3)
 SIZES = {1: (1152, 864), 12: (4000, 3000), 50: (8192, 6144)}

@@ -103,7 +103,8 @@ def test_presets_and_config_commands(tmp_path):
 @pytest.fixture
 def bad_inputs(tmp_path):
     (tmp_path / "junk.png").write_text("not an image")
-    a = np.ones((8, 8)); a[2, 2] = np.nan
+    a = np.ones((8, 8))
+    a[2, 2] = np.nan
     np.save(tmp_path / "nan.npy", a)
     (tmp_path / "afile").write_text("x")
     return tmp_path

@@ -33,9 +33,9 @@ def test_raw_frame_of_fig4_preset_reads_the_kernel():
 
 
 def test_per_colour_kernel_follows_the_colour_where_charge_was_generated():
-    kr = np.zeros((3, 3)); kr[1, 1] = 0.5; kr[0, 1] = 0.5  # red charge: half goes up
-    kg = np.zeros((3, 3)); kg[1, 1] = 1.0
-    kb = np.zeros((3, 3)); kb[1, 1] = 0.9  # blue: 10 % lost
+    kr = np.array([[0, 0.5, 0], [0, 0.5, 0], [0, 0, 0]])  # red charge: half goes up
+    kg = np.array([[0, 0, 0], [0, 1.0, 0], [0, 0, 0]])
+    kb = np.array([[0, 0, 0], [0, 0.9, 0], [0, 0, 0]])  # blue: 10 % lost
     mu = np.zeros((8, 8), np.float32)
     mu[4, 4] = 100  # RGGB: (even, even) is red
     mu[5, 5] = 100  # blue
@@ -65,7 +65,7 @@ def test_edges_reflect_the_charge_that_would_leave(lit):
     """
     mu = np.zeros((5, 5), np.float32)
     mu[lit] = 100.0
-    k = np.zeros((3, 3)); k[0, 1] = 0.2; k[1, 2] = 0.1; k[1, 1] = 0.7  # 20 % one row up, 10 % one column right
+    k = np.array([[0, 0.2, 0], [0, 0.7, 0.1], [0, 0, 0]])  # 20 % one row up, 10 % one column right
     out = crosstalk.apply(mu, k)
     r, c = lit
     up_stays = r == 0

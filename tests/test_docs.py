@@ -233,7 +233,7 @@ def _numpydoc_gaps() -> dict[str, list[str]]:
     from numpydoc.validate import validate
 
     names = []
-    for name, obj in _public_objects():
+    for _name, obj in _public_objects():
         if inspect.ismodule(obj):
             names += [f"{obj.__name__}.{k}" for k, v in vars(obj).items() if not k.startswith("_")
                       and (inspect.isfunction(v) or inspect.isclass(v)) and getattr(v, "__module__", "") == obj.__name__]

@@ -37,4 +37,4 @@ def test_robust_sigma_estimates_a_normal_laws_sigma_and_resists_outliers():
     assert abs(robust_sigma(x) - limit) <= 5 * se
     clean = x[int(eps * n):]
     assert abs(robust_sigma(clean) - sigma) <= 5 * se
-    assert NORMAL_MAD == pytest.approx(z, rel=1e-15) and Z95 == pytest.approx(stats.norm.ppf(0.975), rel=1e-15)
+    assert pytest.approx(z, rel=1e-15) == NORMAL_MAD and pytest.approx(stats.norm.ppf(0.975), rel=1e-15) == Z95

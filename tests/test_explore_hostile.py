@@ -166,7 +166,7 @@ def test_slow_connections_do_not_stop_a_normal_request_and_are_closed(server):
                 closed += s.recv(1) == b""
             except ConnectionResetError:
                 closed += 1
-            except socket.timeout:
+            except TimeoutError:
                 pass
         assert closed == 100
     finally:

@@ -100,7 +100,7 @@ def test_a_looping_or_many_page_tiff_is_refused_from_its_structure_by_simulate_a
     assert size < 40e6
     for args in (["simulate", "--scene", bad, "--set", "sensor.width=64", "--set", "sensor.height=48"],
                  ["process", bad]):
-        r, took, peak = _timed_memory(lambda: cli(*args, "--out", tmp_path / "out"))
+        r, took, peak = _timed_memory(lambda args=args: cli(*args, "--out", tmp_path / "out"))
         assert r.returncode == 2 and needle in r.stderr and _one_line(r.stderr), r.stderr
         assert took < FAST_S and peak < SMALL_MEMORY, (args[0], took, peak)
         assert not (tmp_path / "out").exists()

@@ -160,7 +160,7 @@ def test_light_off_keeps_the_peak_rate_and_the_bits():
 ])
 def test_bad_light_is_one_line_naming_the_key(sets, needle):
     with pytest.raises(CmosnoiseError, match=needle.replace("[", r"\[").replace("(", r"\(")) as info:
-        resolve(load_config(overrides=["light.enabled=true"] + sets)).light
+        _ = resolve(load_config(overrides=["light.enabled=true"] + sets)).light
     assert "\n" not in str(info.value)
 
 

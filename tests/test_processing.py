@@ -122,7 +122,9 @@ def test_crosstalk_compensation_restores_colorchecker_colours():
     assert de_on.max() < 1.0  # below a just-noticeable difference
     assert de_off.mean() > 3.0  # visibly desaturated
     # desaturated: the chroma of the coloured patches drops without compensation
-    chroma = lambda x: x.max(axis=1) - x.min(axis=1)
+    def chroma(x):
+        return x.max(axis=1) - x.min(axis=1)
+
     assert np.all(chroma(off[:18]) <= chroma(truth[:18]) + 1.5)
 
 

@@ -74,14 +74,14 @@ def test_the_writers_errors_reach_the_caller_and_nothing_hangs(tmp_path, monkeyp
             out.write(frame)
         out.close()
     out.close()  # closing again is harmless
-    with raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out:
-        with pytest.raises(ValueError, match=r"\(64, 64\) uint16"):  # a frame of another shape or type: named
-            out.write(frames[0, :10])
+    # a frame of another shape or type: named
+    with raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out, pytest.raises(ValueError,
+                                                                                       match=r"\(64, 64\) uint16"):
+        out.write(frames[0, :10])
     # the caller's own error wins over the writer's
-    with pytest.raises(KeyError):
-        with raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out:
-            out.write(frames[0])
-            raise KeyError("the caller's")
+    with pytest.raises(KeyError), raw_tiff.SeriesWriter(path, offset, (64, 64), "uint16") as out:
+        out.write(frames[0])
+        raise KeyError("the caller's")
 
 
 def test_a_system_without_pwrite_writes_the_same_file(tmp_path, monkeypatch):

@@ -54,7 +54,8 @@ def test_bad_scene_files_are_clear_errors(tmp_path):
     (tmp_path / "junk.png").write_text("not an image")
     with pytest.raises(CmosnoiseError, match="cannot be read"):
         scene.load_file(tmp_path / "junk.png")
-    a = np.ones((4, 4)); a[1, 1] = np.nan
+    a = np.ones((4, 4))
+    a[1, 1] = np.nan
     np.save(tmp_path / "nan.npy", a)
     with pytest.raises(CmosnoiseError, match="NaN"):
         scene.load_file(tmp_path / "nan.npy")
@@ -66,7 +67,8 @@ def test_bad_scene_files_are_clear_errors(tmp_path):
 
 
 def test_cfa_sampling_keeps_each_pixels_channel_and_responsivity():
-    rgb = np.zeros((4, 4, 3)); rgb[..., 0] = 0.1; rgb[..., 1] = 0.2; rgb[..., 2] = 0.3
+    rgb = np.zeros((4, 4, 3))
+    rgb[..., 0], rgb[..., 1], rgb[..., 2] = 0.1, 0.2, 0.3
     out = scene.to_cfa(rgb, "GRBG", (1.0, 0.5, 2.0))
     assert out[0, 0] == pytest.approx(0.1) and out[0, 1] == pytest.approx(0.1)  # G, R
     assert out[1, 0] == pytest.approx(0.6) and out[1, 1] == pytest.approx(0.1)  # B, G

@@ -89,10 +89,8 @@ def _watchdog(signum: int, over) -> None:
     if over.is_set():
         return
     for fn in list(_cleanups.values()):
-        try:
+        with contextlib.suppress(Exception):  # the process ends either way
             fn()
-        except Exception:  # noqa: BLE001 - the process ends either way
-            pass
     name = "Ctrl-C" if signum == signals.SIGINT else signals.Signals(signum).name
     done = f"; {_kept_now() or written_note() or 'nothing was written'}"
     try:
@@ -192,7 +190,5 @@ def note_kept(exc: BaseException, what: str) -> None:
     it stopped: the command line prints it instead of "nothing was written" (e.g. "10 of 24 rows kept in
     results.csv; --resume completes it"). The first note stands."""
     if not getattr(exc, "kept", None):
-        try:
+        with contextlib.suppress(AttributeError):  # an exception type without a __dict__
             exc.kept = what
-        except AttributeError:  # pragma: no cover - an exception type without a __dict__
-            pass

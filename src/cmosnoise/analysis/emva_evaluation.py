@@ -310,9 +310,9 @@ def agrees(key: str, measured: float, simulated: float, dsnu_var_se_e2: float | 
     """
     if key in ("linearity_error_min_pct", "linearity_error_max_pct"):
         return bool(abs(simulated - measured) <= LINEARITY_POINTS)
-    if key == "dsnu_e" and dsnu_var_se_e2 is not None and math.isfinite(dsnu_var_se_e2):
-        if abs(simulated**2 - measured**2) <= FLOOR_Z * dsnu_var_se_e2:
-            return True
+    if (key == "dsnu_e" and dsnu_var_se_e2 is not None and math.isfinite(dsnu_var_se_e2)
+            and abs(simulated**2 - measured**2) <= FLOOR_Z * dsnu_var_se_e2):
+        return True
     if key not in AGREEMENT_LIMITS or not measured:
         return None
     return bool(abs(simulated / measured - 1) <= AGREEMENT_LIMITS[key])

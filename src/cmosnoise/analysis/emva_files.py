@@ -119,7 +119,8 @@ def load(descriptor: Path) -> Measurement:
         da, db = read(d[3])
         my, sy = pair_stats(a, b)
         md, sd = pair_stats(da, db)
-        texp.append(t); mu_p.append(p); mu_y.append(my); s2_y.append(sy); mu_yd.append(md); s2_yd.append(sd)
+        for column, value in ((texp, t), (mu_p, p), (mu_y, my), (s2_y, sy), (mu_yd, md), (s2_yd, sd)):
+            column.append(value)
         max_yd.append(max(float(da.max()), float(db.max())))
         if len(texp) == 1:  # the pairs come sorted by exposure time: the shortest
             dsnu_short = dsnu_of_pair(da, db)

@@ -34,7 +34,7 @@ named in the method), or not identifiable (the data give only a combination:
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -307,7 +307,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             if wp["couplets"] > 0 else 1.0
         res["white_pixels"] = wp
         res["exposures_s"] = sorted(set(float(x) for x in t))
-        if T == t_ref:  # the pixel offsets: each pixel's intercept, at the reference temperature
+        if t_ref == T:  # the pixel offsets: each pixel's intercept, at the reference temperature
             off = fit_dark.pixel_offsets([d.mean for d in ok], list(t), [d.pixel_var for d in ok], [d.n for d in ok],
                                          k, limit, exclude=rts_pixels, tail_alpha=SELECTION_P)
             _select(selection, "pixel_offset", off["p_value"], "the offsets' variance against 0 (one-sided z)")

@@ -128,7 +128,7 @@ class RunStats:
             self._pair_sums.append(s[3:7].copy())
         self._prev = (raw, electrons)
 
-    def absorb(self, other: "RunStats") -> None:
+    def absorb(self, other: RunStats) -> None:
         """Add the sums of ``other``: the same frames of another part of the frame (a tile), so that the result
         is that of the whole frame's pixels; ``other`` keeps its own."""
         if self.n == 0:

@@ -11,7 +11,7 @@ import sys
 import threading
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, List, Optional
+from typing import TYPE_CHECKING
 
 import typer
 from rich.console import Console
@@ -189,7 +189,7 @@ def _status(ctx: typer.Context):
         yield (lambda text: status.update(f"[bold]{text}")), say
 
 
-def _progress_factory(enabled: Optional[bool], pixels: int, unit: str = "frames"):
+def _progress_factory(enabled: bool | None, pixels: int, unit: str = "frames"):
     def factory(n: int):
         show = enabled if enabled is not None else (err_console.is_terminal and n * pixels >= 5_000_000)
         if not show:
@@ -223,27 +223,27 @@ OverwriteOpt = typer.Option(False, "--overwrite", help="replace an existing non-
 @app.command()
 def simulate(
     ctx: typer.Context,
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
-    scene: Optional[str] = typer.Option(None, "--scene", help="photo, flat:LEVEL, ramp, colorchecker, zoneplate, siemens, or an image path"),
-    frames: Optional[int] = typer.Option(None, "--frames", "-n", help="number of frames"),
-    first_frame: Optional[int] = typer.Option(None, "--first-frame", help="index of the first frame"),
-    seed: Optional[int] = typer.Option(None, "--seed", help="sensor instance seed"),
-    set_: Optional[List[str]] = SetOpt,
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
+    scene: str | None = typer.Option(None, "--scene", help="photo, flat:LEVEL, ramp, colorchecker, zoneplate, siemens, or an image path"),
+    frames: int | None = typer.Option(None, "--frames", "-n", help="number of frames"),
+    first_frame: int | None = typer.Option(None, "--first-frame", help="index of the first frame"),
+    seed: int | None = typer.Option(None, "--seed", help="sensor instance seed"),
+    set_: list[str] | None = SetOpt,
     out: Path = typer.Option(Path("cmosnoise-out"), "--out", "-o", help="output folder"),
     process: bool = typer.Option(False, "--process", help="also write processed.png (and processed.mp4) through the processing chain"),
-    dark_frames: Optional[int] = typer.Option(None, "--dark-frames", help="dark calibration: make a master dark from N dark frames"),
-    format_: Optional[List[str]] = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
+    dark_frames: int | None = typer.Option(None, "--dark-frames", help="dark calibration: make a master dark from N dark frames"),
+    format_: list[str] | None = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
     report: bool = typer.Option(False, "--report", help="also write report.html (self-contained run report)"),
-    progress: Optional[bool] = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
-    white_threshold: Optional[str] = WhiteThresholdOpt,
+    progress: bool | None = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
+    white_threshold: str | None = WhiteThresholdOpt,
     device: str = DeviceOpt,
-    tile: Optional[int] = typer.Option(None, "--tile", help="make the sensor tile by tile, SIZE pixels a side (a "
+    tile: int | None = typer.Option(None, "--tile", help="make the sensor tile by tile, SIZE pixels a side (a "
                                        "multiple of 16, e.g. 2048): memory bounded by a few tiles, raw.tiff tiled, "
                                        "the same bits; for sensors too large to hold whole"),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="with --tile: make the tiles on an existing "
+    scheduler: str | None = typer.Option(None, "--scheduler", help="with --tile: make the tiles on an existing "
                                             "Dask scheduler, e.g. tcp://host:8786"),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="with --tile: make the tiles on "
+    workers: int | None = typer.Option(None, "--workers", min=1, max=1024, help="with --tile: make the tiles on "
                                           "a LocalCluster of this many worker processes"),
     overwrite: bool = OverwriteOpt,
 ):
@@ -323,12 +323,12 @@ def simulate(
 def process(
     ctx: typer.Context,
     raw: Path = typer.Argument(..., help="raw frames: a TIFF (frames, rows, cols) or (rows, cols) of uint16 codes"),
-    dark: Optional[Path] = typer.Option(None, "--dark", help="dark frames (averaged into a master dark) or a master dark"),
-    config: Optional[Path] = ConfigOpt,
-    set_: Optional[List[str]] = SetOpt,
-    cfa: Optional[str] = typer.Option(None, "--cfa", help="RGGB, BGGR, GRBG, GBRG or none (default: from the file's metadata)"),
-    black_level: Optional[float] = typer.Option(None, "--black-level", help="black level, DN (default: from the metadata)"),
-    bits: Optional[int] = typer.Option(None, "--bits", help="bit depth (default: from the metadata)"),
+    dark: Path | None = typer.Option(None, "--dark", help="dark frames (averaged into a master dark) or a master dark"),
+    config: Path | None = ConfigOpt,
+    set_: list[str] | None = SetOpt,
+    cfa: str | None = typer.Option(None, "--cfa", help="RGGB, BGGR, GRBG, GBRG or none (default: from the file's metadata)"),
+    black_level: float | None = typer.Option(None, "--black-level", help="black level, DN (default: from the metadata)"),
+    bits: int | None = typer.Option(None, "--bits", help="bit depth (default: from the metadata)"),
     out: Path = typer.Option(Path("cmosnoise-processed"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
@@ -347,15 +347,15 @@ def process(
 @app.command()
 def characterize(
     ctx: typer.Context,
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
-    set_: Optional[List[str]] = SetOpt,
-    seed: Optional[int] = typer.Option(None, "--seed", help="sensor instance seed"),
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
+    set_: list[str] | None = SetOpt,
+    seed: int | None = typer.Option(None, "--seed", help="sensor instance seed"),
     steps: int = typer.Option(40, "--steps", min=8, max=1000, help="exposure times in the photon-transfer series"),
     stack_frames: int = typer.Option(16, "--stack-frames", min=2, max=10000, help="frames per stack for DSNU and PRNU"),
-    emva_export: Optional[Path] = typer.Option(None, "--emva-export", help="also write the frames and an EMVA 1288 descriptor here"),
-    frames_from: Optional[Path] = typer.Option(None, "--frames-from", help="characterize frames from an EMVA 1288 descriptor (folder or file) instead"),
-    like: Optional[Path] = typer.Option(None, "--like", help="measure the configuration with the exposure times, photons "
+    emva_export: Path | None = typer.Option(None, "--emva-export", help="also write the frames and an EMVA 1288 descriptor here"),
+    frames_from: Path | None = typer.Option(None, "--frames-from", help="characterize frames from an EMVA 1288 descriptor (folder or file) instead"),
+    like: Path | None = typer.Option(None, "--like", help="measure the configuration with the exposure times, photons "
                                         "and stack sizes of this EMVA 1288 data set (folder or descriptor), for a "
                                         "side-by-side comparison with it"),
     dark_exposures: str = typer.Option("auto", "--dark-exposures", help="a dark-current series' exposure times, s, "
@@ -436,9 +436,9 @@ def figures(
     from ..io.output import OutputFolder
     from .figures import write_gallery
 
-    with OutputFolder(out, overwrite) as tmp:
-        with Progress(TextColumn("[bold]figure"), TextColumn("{task.description}"), console=err_console,
-                      disable=not err_console.is_terminal or _level(ctx) < 0) as p:
+    with OutputFolder(out, overwrite) as tmp, Progress(
+            TextColumn("[bold]figure"), TextColumn("{task.description}"), console=err_console,
+            disable=not err_console.is_terminal or _level(ctx) < 0) as p:
             task = p.add_task("", total=None)
             items = write_gallery(tmp, seed, progress=lambda name: p.update(task, description=name))
     _say(ctx, f"wrote {len(items)} figures and index.html to {out}/")
@@ -446,14 +446,14 @@ def figures(
 
 @app.command()
 def explore(
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
-    set_: Optional[List[str]] = SetOpt,
-    scene: Optional[str] = typer.Option(None, "--scene", help="start scene: a built-in name or an image file"),
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
+    set_: list[str] | None = SetOpt,
+    scene: str | None = typer.Option(None, "--scene", help="start scene: a built-in name or an image file"),
     port: int = typer.Option(8765, "--port", min=1, max=65535, help="TCP port"),
     host: str = typer.Option("127.0.0.1", "--host", help="address to listen on (default loopback only; another is reachable by others)"),
     no_browser: bool = typer.Option(False, "--no-browser", help="do not open the page in a browser"),
-    white_threshold: Optional[str] = WhiteThresholdOpt,
+    white_threshold: str | None = WhiteThresholdOpt,
 ):
     """A local web page: two sensors side by side, every parameter, the picture follows at once."""
     import socket
@@ -474,21 +474,21 @@ def explore(
 @app.command()
 def sweep(
     ctx: typer.Context,
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
-    set_: Optional[List[str]] = SetOpt,
-    scene: Optional[str] = typer.Option(None, "--scene", help="scene of every instance (default: the configuration's)"),
-    vary: Optional[List[str]] = typer.Option(None, "--vary", help="KEY=v1,v2 | KEY=start:stop:count | K1,K2=a1xb1,a2xb2 (repeatable: the grid is their product)"),
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
+    set_: list[str] | None = SetOpt,
+    scene: str | None = typer.Option(None, "--scene", help="scene of every instance (default: the configuration's)"),
+    vary: list[str] | None = typer.Option(None, "--vary", help="KEY=v1,v2 | KEY=start:stop:count | K1,K2=a1xb1,a2xb2 (repeatable: the grid is their product)"),
     instances: int = typer.Option(20, "--instances", min=1, max=1_000_000, help="sensor instances (dies) per point"),
     frames: int = typer.Option(2, "--frames", min=1, max=100, help="frames per instance (2: temporal noise from their difference)"),
-    spec: Optional[List[str]] = typer.Option(None, "--spec", help="pass/fail per instance, e.g. couplets_after_correction<=0 (repeatable: all must hold)"),
-    metric: Optional[List[str]] = typer.Option(None, "--metric", help="plot only these metrics (repeatable; every metric is in results.csv)"),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a LocalCluster here)"),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="LocalCluster worker processes (default: the core count)"),
+    spec: list[str] | None = typer.Option(None, "--spec", help="pass/fail per instance, e.g. couplets_after_correction<=0 (repeatable: all must hold)"),
+    metric: list[str] | None = typer.Option(None, "--metric", help="plot only these metrics (repeatable; every metric is in results.csv)"),
+    scheduler: str | None = typer.Option(None, "--scheduler", help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a LocalCluster here)"),
+    workers: int | None = typer.Option(None, "--workers", min=1, max=1024, help="LocalCluster worker processes (default: the core count)"),
     resume: bool = typer.Option(False, "--resume", help="continue the sweep in --out: skip the rows results.csv already holds"),
     overwrite: bool = OverwriteOpt,
-    from_: Optional[Path] = typer.Option(None, "--from", help="rerun a sweep.yaml (its base configuration, grid, instances and spec)"),
-    white_threshold: Optional[str] = WhiteThresholdOpt,
+    from_: Path | None = typer.Option(None, "--from", help="rerun a sweep.yaml (its base configuration, grid, instances and spec)"),
+    white_threshold: str | None = WhiteThresholdOpt,
     device: str = DeviceOpt,
     out: Path = typer.Option(Path("cmosnoise-sweep"), "--out", "-o", help="output folder"),
 ):
@@ -519,11 +519,11 @@ def compare(
     ctx: typer.Context,
     run_a: Path = typer.Argument(..., help="a cmosnoise simulate output folder"),
     run_b: Path = typer.Argument(..., help="another one"),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="also write compare.txt, compare.json and "
+    out: Path | None = typer.Option(None, "--out", "-o", help="also write compare.txt, compare.json and "
                                        "compare.html (the previews side by side and their difference) here"),
     instances: int = typer.Option(8, "--instances", help="further instances of each run that "
                                   "measure each figure's sampling error"),
-    white_threshold: Optional[str] = typer.Option(None, "--white-threshold", help="count both runs' white pixels "
+    white_threshold: str | None = typer.Option(None, "--white-threshold", help="count both runs' white pixels "
                                                   "above this dark current: e-/s, or 1560e-/s, 250aA (default: "
                                                   "run A's threshold)"),
     overwrite: bool = OverwriteOpt,
@@ -542,27 +542,27 @@ def compare(
 @app.command()
 def quality(
     ctx: typer.Context,
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
-    set_: Optional[List[str]] = SetOpt,
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
+    set_: list[str] | None = SetOpt,
     lux: str = typer.Option("1,3,10,30,100,300,1000", "--lux", help="illuminances on the scene, lux, "
                             "comma-separated, increasing"),
     frames: int = typer.Option(8, "--frames", min=2, max=1000, help="frames of each chart at each illuminance"),
-    seed: Optional[int] = typer.Option(None, "--seed", help="sensor instance seed (without --compare)"),
-    compare_config: Optional[Path] = typer.Option(None, "--compare", help="a second configuration (YAML) to set "
+    seed: int | None = typer.Option(None, "--seed", help="sensor instance seed (without --compare)"),
+    compare_config: Path | None = typer.Option(None, "--compare", help="a second configuration (YAML) to set "
                                                   "beside the first: each difference with its spread over "
                                                   "--instances sensor instances"),
-    compare_preset: Optional[str] = typer.Option(None, "--compare-preset", help="the second configuration from a "
+    compare_preset: str | None = typer.Option(None, "--compare-preset", help="the second configuration from a "
                                                  "preset (with --compare-set)"),
-    compare_set: Optional[List[str]] = typer.Option(None, "--compare-set", help="the second configuration: the "
+    compare_set: list[str] | None = typer.Option(None, "--compare-set", help="the second configuration: the "
                                                     "first with this key changed, e.g. --compare-set "
                                                     "sensor.temperature_c=65 (repeatable)"),
     instances: int = typer.Option(3, "--instances", max=100, help="with a comparison or a search: sensor "
                                   "instances (seeds 0, 1, ...) each spread comes from"),
-    find: Optional[str] = typer.Option(None, "--find", help="search instead: the value of one parameter, KEY=LOW:HIGH, "
+    find: str | None = typer.Option(None, "--find", help="search instead: the value of one parameter, KEY=LOW:HIGH, "
                                        "at which the --until metric crosses its limit (bisection on each of "
                                        "--instances sensor instances, at the one --lux)"),
-    until: Optional[str] = typer.Option(None, "--until", help="with --find: METRIC=LIMIT, e.g. banding_columns=1"),
+    until: str | None = typer.Option(None, "--until", help="with --find: METRIC=LIMIT, e.g. banding_columns=1"),
     picture_height_cm: float = typer.Option(20.0, "--picture-height-cm", help="viewing: the picture's height, cm"),
     viewing_distance_cm: float = typer.Option(50.0, "--viewing-distance-cm", help="viewing: the distance, cm"),
     out: Path = typer.Option(Path("cmosnoise-quality"), "--out", "-o", help="output folder"),
@@ -624,15 +624,15 @@ def quality(
 def fit(
     ctx: typer.Context,
     frames_from: Path = typer.Option(..., "--frames-from", help="a manifest .yaml of stacks, or an EMVA 1288 descriptor (file or folder)"),
-    temperature: Optional[float] = typer.Option(None, "--temperature", min=-60, max=150, help="temperature of stacks that give none, and the fitted sensor's, C (default: the hottest measured)"),
-    threshold: Optional[float] = typer.Option(None, "--threshold-e-per-s", min=0, help="white-pixel threshold (default: the base's, else 8 robust sigma above the median rate)"),
-    cfa: Optional[str] = typer.Option(None, "--cfa", help="CFA of the frames where their metadata lack it: RGGB, BGGR, GRBG, GBRG or none"),
-    black_level: Optional[float] = typer.Option(None, "--black-level", min=0, max=65535, help="black level, DN (reported beside the fitted one)"),
-    bits: Optional[int] = typer.Option(None, "--bits", min=8, max=16, help="ADC bits where the metadata lack them (default: from the largest code)"),
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
+    temperature: float | None = typer.Option(None, "--temperature", min=-60, max=150, help="temperature of stacks that give none, and the fitted sensor's, C (default: the hottest measured)"),
+    threshold: float | None = typer.Option(None, "--threshold-e-per-s", min=0, help="white-pixel threshold (default: the base's, else 8 robust sigma above the median rate)"),
+    cfa: str | None = typer.Option(None, "--cfa", help="CFA of the frames where their metadata lack it: RGGB, BGGR, GRBG, GBRG or none"),
+    black_level: float | None = typer.Option(None, "--black-level", min=0, max=65535, help="black level, DN (reported beside the fitted one)"),
+    bits: int | None = typer.Option(None, "--bits", min=8, max=16, help="ADC bits where the metadata lack them (default: from the largest code)"),
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
     round_trip: bool = typer.Option(True, "--round-trip/--no-round-trip", help="simulate the measurement again from the fit and compare"),
-    truth: Optional[Path] = typer.Option(None, "--truth", help="the configuration that made the data (a simulated "
+    truth: Path | None = typer.Option(None, "--truth", help="the configuration that made the data (a simulated "
                                          "lab): compared parameter by parameter (default: truth.yaml beside the "
                                          "manifest, which cmosnoise measure writes)"),
     out: Path = typer.Option(Path("cmosnoise-fit"), "--out", "-o", help="output folder"),
@@ -679,11 +679,11 @@ def fit(
 @app.command()
 def measure(
     ctx: typer.Context,
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
-    set_: Optional[List[str]] = SetOpt,
-    seed: Optional[int] = typer.Option(None, "--seed", min=0, help="sensor instance (default: the configuration's)"),
-    temperatures: Optional[str] = typer.Option(None, "--temperatures", help="comma-separated, C (default: the sensor's)"),
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
+    set_: list[str] | None = SetOpt,
+    seed: int | None = typer.Option(None, "--seed", min=0, help="sensor instance (default: the configuration's)"),
+    temperatures: str | None = typer.Option(None, "--temperatures", help="comma-separated, C (default: the sensor's)"),
     levels: int = typer.Option(40, "--levels", min=8, max=400, help="flat-field pairs from dark to beyond saturation"),
     long_frames: int = typer.Option(100, "--long-frames", min=4, max=10000, help="frames of the long dark stack at each temperature"),
     out: Path = typer.Option(Path("cmosnoise-measurement"), "--out", "-o", help="output folder"),
@@ -726,24 +726,24 @@ def dataset(
     crop: str = typer.Option("512", "--crop", help="sample size: SIZE or HEIGHTxWIDTH, even (the CFA cell kept)"),
     out: Path = typer.Option(Path("cmosnoise-dataset"), "--out", "-o", help="output folder"),
     format_: str = typer.Option("hdf5", "--format", help="hdf5 (chunked, compressed shards), npz or fits"),
-    camera: Optional[List[str]] = typer.Option(None, "--camera", "--preset", "-p", help="a preset (sony-imx900; "
+    camera: list[str] | None = typer.Option(None, "--camera", "--preset", "-p", help="a preset (sony-imx900; "
                                                "sony-a7s2@iso=1600 for one setting) or a virtual camera family (led, "
                                                "eld, eld:nikon-d850); repeatable: each sample picks one (default: led)"),
-    images: Optional[Path] = typer.Option(None, "--images", help="a folder of images to crop (default: the built-in "
+    images: Path | None = typer.Option(None, "--images", help="a folder of images to crop (default: the built-in "
                                           "scenes)"),
     light: str = typer.Option("50:5000", "--light", help="charge at the scene's white, LOW:HIGH e- (log-uniform)"),
-    exposure: Optional[str] = typer.Option(None, "--exposure", help="integration time LOW:HIGH s (log-uniform; "
+    exposure: str | None = typer.Option(None, "--exposure", help="integration time LOW:HIGH s (log-uniform; "
                                            "default: each camera's)"),
-    temperature: Optional[str] = typer.Option(None, "--temperature", help="LOW:HIGH C (uniform; default: each "
+    temperature: str | None = typer.Option(None, "--temperature", help="LOW:HIGH C (uniform; default: each "
                                               "camera's)"),
-    set_: Optional[List[str]] = SetOpt,
-    white_threshold: Optional[str] = typer.Option(None, "--white-threshold", help="dark current above which the "
+    set_: list[str] | None = SetOpt,
+    white_threshold: str | None = typer.Option(None, "--white-threshold", help="dark current above which the "
                                                   "mask calls a pixel white: e-/s, or with its unit, e.g. 1560e-/s or "
                                                   "250aA (default: the model's)"),
     seed: int = typer.Option(0, "--seed", min=0, max=2**62, help="the data set's seed: sample i depends on (seed, i)"),
     shard_size: int = typer.Option(64, "--shard-size", min=1, max=100000, help="samples per shard file"),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="make the shards on an existing Dask scheduler"),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=1024, help="make the shards on a "
+    scheduler: str | None = typer.Option(None, "--scheduler", help="make the shards on an existing Dask scheduler"),
+    workers: int | None = typer.Option(None, "--workers", min=1, max=1024, help="make the shards on a "
                                           "LocalCluster of this many processes (default: here, one process)"),
     resume: bool = typer.Option(False, "--resume", help="complete the data set in --out: make its missing shards"),
     device: str = DeviceOpt,
@@ -783,10 +783,10 @@ def dataset(
 def evaluate(
     ctx: typer.Context,
     data: Path = typer.Option(..., "--data", help="a data set folder (cmosnoise dataset)"),
-    method: Optional[List[str]] = typer.Option(None, "--method", "-m", help="none, median, dark-map, gaussian, bm3d, "
+    method: list[str] | None = typer.Option(None, "--method", "-m", help="none, median, dark-map, gaussian, bm3d, "
                                                "or your module:function (raw in, raw out); repeatable (default: "
                                                "the first four)"),
-    outputs: Optional[Path] = typer.Option(None, "--outputs", help="a folder of your method's outputs, "
+    outputs: Path | None = typer.Option(None, "--outputs", help="a folder of your method's outputs, "
                                            "sample_NNNNNN.npy or .tif, scored beside the methods"),
     target: str = typer.Option("expected", "--target", help="expected (the expected raw: the fixed pattern kept) or "
                                "perfect (the perfect image)"),
@@ -805,9 +805,9 @@ def evaluate(
 
 @app.command("config")
 def config_cmd(
-    config: Optional[Path] = ConfigOpt,
-    preset: Optional[str] = PresetOpt,
-    set_: Optional[List[str]] = SetOpt,
+    config: Path | None = ConfigOpt,
+    preset: str | None = PresetOpt,
+    set_: list[str] | None = SetOpt,
     explain: bool = typer.Option(False, "--explain", help="list every key with its type, default, limits and description instead"),
 ):
     """Print the fully resolved configuration as YAML, every key (edit it, then use --config)."""

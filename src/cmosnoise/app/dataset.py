@@ -46,9 +46,9 @@ import io
 import json
 import math
 import zipfile
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
 
 import numpy as np
 
@@ -152,7 +152,7 @@ class Recipe:
         return json.dumps(asdict(self), sort_keys=True)
 
     @classmethod
-    def from_json(cls, text: str) -> "Recipe":
+    def from_json(cls, text: str) -> Recipe:
         data = json.loads(text)
         for k in ("crop", "cameras", "sources", "light_e", "integration_time_s", "temperature_c", "overrides"):
             if data.get(k) is not None:
@@ -160,7 +160,7 @@ class Recipe:
         return cls(**data)
 
 
-def check(recipe: Recipe, sources: "Sources | None" = None) -> Recipe:
+def check(recipe: Recipe, sources: Sources | None = None) -> Recipe:
     """``recipe`` if every part is usable; raises CmosnoiseError naming the first that is not (before any work).
 
     Parameters

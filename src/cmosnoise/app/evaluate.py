@@ -18,8 +18,8 @@ import importlib
 import inspect
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 

@@ -9,8 +9,9 @@ and the facts the figure shows, measured (so a test can check them).
 from __future__ import annotations
 
 import html
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 

@@ -11,9 +11,9 @@ also set beside that of a series simulated from the fitted configuration.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from statistics import NormalDist
-from typing import Callable
 
 import numpy as np
 

@@ -15,8 +15,8 @@ import datetime
 import html
 import io
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 

@@ -30,9 +30,9 @@ import json
 import math
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import yaml
@@ -656,7 +656,7 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
     if progress:
         progress(len(done), total)
     new = not results.exists() or not resume or results.stat().st_size == 0
-    fh = open(results, "w" if new else "a", newline="")
+    fh = open(results, "w" if new else "a", newline="")  # noqa: SIM115 - closed in the finally below, rows flushed one by one
     writer = csv.writer(fh)
     if new:
         writer.writerow(columns)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import types
 import typing
 from typing import Any
 
@@ -10,6 +11,11 @@ from pydantic import BaseModel
 from .schema import Config
 
 _DEFAULT_TEXT = {"enabled": "switch this stage (or part) on or off"}
+
+
+def _is_union(ann) -> bool:
+    """Whether ``ann`` is a union, ``Optional[X]`` or ``X | None`` alike (two origins since Python 3.10)."""
+    return typing.get_origin(ann) in (typing.Union, types.UnionType)
 
 
 def _limits(info) -> str:
@@ -27,7 +33,7 @@ def _type_name(ann) -> str:
     args = typing.get_args(ann)
     if origin is typing.Literal:
         return " | ".join(map(str, args))
-    if origin is typing.Union:
+    if _is_union(ann):
         names = [_type_name(a) for a in args if a is not type(None)]
         return " | ".join(names) + (" | null" if type(None) in args else "")
     if origin in (list, tuple):
@@ -56,7 +62,7 @@ def rows(model: type[BaseModel] = Config, prefix: str = "") -> list[dict[str, An
         sub = _submodel(info.annotation)
         is_list = typing.get_origin(info.annotation) is list or any(
             typing.get_origin(a) is list for a in typing.get_args(info.annotation))
-        if sub is not None and not is_list and typing.get_origin(info.annotation) is not typing.Union:
+        if sub is not None and not is_list and not _is_union(info.annotation):
             out.extend(rows(sub, key + "."))
             continue
         default = "required" if info.is_required() else info.get_default(call_default_factory=True)
@@ -93,7 +99,7 @@ def fields(model: type[BaseModel] = Config, prefix: str = "") -> list[dict[str, 
         kind, choices, lo, hi = "json", None, None, None
         if info is not None:
             ann = info.annotation
-            args = [a for a in typing.get_args(ann) if a is not type(None)] if typing.get_origin(ann) is typing.Union else [ann]
+            args = [a for a in typing.get_args(ann) if a is not type(None)] if _is_union(ann) else [ann]
             base = args[0] if len(args) == 1 else ann
             if typing.get_origin(base) is typing.Literal:
                 kind, choices = "enum", list(typing.get_args(base))

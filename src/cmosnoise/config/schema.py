@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import json
 import math
-from typing import Literal, Optional, Union
+from typing import Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -33,7 +33,7 @@ class Section(BaseModel):
         if not isinstance(value, bool):  # first: every field of every section passes here (42 a Sensor)
             return value
         field = cls.model_fields.get(info.field_name)
-        numeric = (int, float, Optional[int], Optional[float])
+        numeric = (int, float, int | None, float | None)
         if field is not None and field.annotation in numeric:
             raise ValueError(f"expected a number, got {str(value).lower()}")
         return value
@@ -49,23 +49,23 @@ class SceneSection(Section):
     """
 
     source: str = Field("photo", description="photo, flat:LEVEL (0..1), ramp, colorchecker, zoneplate, siemens, or an image path")
-    scale: Optional[float] = Field(
+    scale: float | None = Field(
         None, ge=1e-9, le=1e12, description="linear files (16-bit, float, .npy): value that maps to 1.0; null: the file's own maximum"
     )
     fit: Literal["crop", "stretch"] = Field(
         "crop", description="aspect mismatch: crop the scene's centre to the sensor's aspect, or stretch it"
     )
-    window: Optional[tuple[int, int]] = Field(
+    window: tuple[int, int] | None = Field(
         None, description="(row, col): take the sensor's size of the source at this corner, at the source's own "
                           "resolution (no resampling); null: the whole source fitted to the sensor")
-    source_size: Optional[tuple[int, int]] = Field(
+    source_size: tuple[int, int] | None = Field(
         None, description="(rows, cols) a built-in scene (the photo included) is drawn at before the window is "
                           "taken; null: the sensor's")
-    raw_cfa: Optional[Literal["RGGB", "BGGR", "GRBG", "GBRG"]] = Field(
+    raw_cfa: Literal["RGGB", "BGGR", "GRBG", "GBRG"] | None = Field(
         None, description="a 2-D .npy scene is a raw photograph's mosaic with this pattern at (0, 0) (a camera raw "
                           "file carries its own); null: a .npy is linear RGB or grey")
     raw_black_dn: float = Field(0.0, ge=0, le=1e6, description="a .npy mosaic's black level, DN")
-    raw_white_dn: Optional[float] = Field(None, gt=0, le=1e9, description="a .npy mosaic's white level, DN; null: "
+    raw_white_dn: float | None = Field(None, gt=0, le=1e9, description="a .npy mosaic's white level, DN; null: "
                                                                           "its largest code")
 
     @field_validator("window", "source_size")
@@ -107,7 +107,7 @@ class WhiteBalanceSection(Section):
     mode: Literal["sensor", "gains", "grey_world", "none"] = Field(
         "sensor", description="sensor: undo the channel responsivities; gains: the given gains; grey_world: make the mean grey"
     )
-    gains: Optional[tuple[float, float, float]] = Field(None, description="R, G, B gains for mode 'gains'")
+    gains: tuple[float, float, float] | None = Field(None, description="R, G, B gains for mode 'gains'")
 
     @model_validator(mode="after")
     def _gains(self):
@@ -127,8 +127,8 @@ class ProcessingSection(Section):
     crosstalk_compensation: bool = Field(True, description="undo crosstalk's colour mixing with the inverse 3 x 3 matrix")
     white_balance: WhiteBalanceSection = Field(default_factory=WhiteBalanceSection)
     demosaic: Literal["bilinear", "malvar2004", "menon2007"] = Field("bilinear", description="demosaicing method")
-    white_dn: Optional[float] = Field(None, gt=0, le=1e6, description="raw code shown as white; null: the scene's white (simulation) or the white level (files)")
-    video_fps: Optional[float] = Field(None, gt=0, le=240, description="frame rate of processed.mp4, frames/s; "
+    white_dn: float | None = Field(None, gt=0, le=1e6, description="raw code shown as white; null: the scene's white (simulation) or the white level (files)")
+    video_fps: float | None = Field(None, gt=0, le=240, description="frame rate of processed.mp4, frames/s; "
                                        "null: the sensor's own (1 / its frame period), within 1 to 240")
     video_stretch: bool = Field(True, description="processed.mp4 brightened for display where the scene is dark "
                                 "(frame 0's 99.5th percentile below mid-grey lifted to 235, at most 16 times; the "
@@ -146,18 +146,18 @@ class SensorSection(Section):
     full_well_e: float = Field(10000.0, ge=1, le=1e7, description="full-well capacity, e-")
     temperature_c: float = Field(25.0, ge=-60, le=150, description="operating temperature, degrees C")
     pixel_pitch_um: float = Field(2.2, gt=0, le=100, description="pixel pitch, um")
-    iso: Optional[float] = Field(None, gt=0, le=1e7, description="gain setting as ISO: selects the row of gain_table "
+    iso: float | None = Field(None, gt=0, le=1e7, description="gain setting as ISO: selects the row of gain_table "
                                                                  "with this iso")
-    gain_db: Optional[float] = Field(None, ge=-60, le=120, description="gain setting in dB: selects the row of "
+    gain_db: float | None = Field(None, ge=-60, le=120, description="gain setting in dB: selects the row of "
                                                                        "gain_table with this gain_db")
     binning: Literal["1x1", "2x2", "1x2", "2x1"] = Field(
         "1x1", description="the camera's binning mode (rows x columns of native pixels read as one): selects the "
                            "gain_table rows of this binning, with their own K, noise, bias, dark signal and pitch; "
                            "sensor.width and height are the frame's, in binned pixels")
-    frame_rate_hz: Optional[float] = Field(None, gt=0, le=1e6, description="frames per second: frame k starts k / "
+    frame_rate_hz: float | None = Field(None, gt=0, le=1e6, description="frames per second: frame k starts k / "
                                            "frame_rate_hz seconds after frame 0 (random telegraph noise reads it); null: "
                                            "frames back to back, 1 / exposure.integration_time_s")
-    quantum_efficiency: Optional[Union[float, tuple[float, float, float]]] = Field(
+    quantum_efficiency: float | tuple[float, float, float] | None = Field(
         None, description="quantum efficiency (0, 1], one number or R, G, B: photo-electrons per photon. Light given "
                           "in photons (exposure.peak_rate_photons_per_s) needs it; with light in e-/s it says how many "
                           "photons that was (characterize's eta). null: light in e-/s, no photons")
@@ -195,7 +195,7 @@ class ExposureSection(Section):
     peak_rate_e_per_s: float = Field(
         100000.0, ge=0, le=1e10, description="photo-electron rate of a scene value of 1.0, e-/s per pixel"
     )
-    peak_rate_photons_per_s: Optional[float] = Field(
+    peak_rate_photons_per_s: float | None = Field(
         None, ge=0, le=1e12, description="light as photons: photons per second per pixel at a scene value of 1.0 "
                                          "(times sensor.quantum_efficiency: e-/s); null: peak_rate_e_per_s")
 
@@ -221,22 +221,22 @@ class LightSection(Section):
 
     enabled: bool = Field(False, description="light in lux through a lens (this section and optics); off: "
                                              "exposure.peak_rate_e_per_s")
-    illuminance_lux: Optional[float] = Field(
+    illuminance_lux: float | None = Field(
         None, ge=0, le=1e6, description="illuminance on the scene, lux; scene values are reflectances (1: a white "
                                         "diffuser, 0.18: the reference grey)")
-    luminance_cd_m2: Optional[float] = Field(
+    luminance_cd_m2: float | None = Field(
         None, ge=0, le=1e9, description="luminance of a scene value of 1, cd/m2 (instead of illuminance_lux; a "
                                         "Lambertian white under E lux has E / pi)")
     illuminant: str = Field("D65", description="CIE D50, D55, D65, D75, A, FL1..FL12, LED-B1..LED-V2 (colour-science's "
                                                "names), blackbody:KELVIN, or a CSV file (wavelength nm, relative power)")
-    spectral_qe: Union[str, SpectrumRows, None] = Field(
+    spectral_qe: str | SpectrumRows | None = Field(
         None, description="the pixels' quantum efficiency against wavelength (colour filter, photodiode, microlens): "
                           "a CSV file or inline rows of (nm, QE) or (nm, QE_R, QE_G, QE_B), or a camera set that "
                           "colour-science ships ('Nikon 5100 (NPL)', 'Sigma SDMerill (NPL)': relative, give qe_peak); "
                           "null: sensor.quantum_efficiency at every wavelength from 380 to 780 nm")
-    qe_peak: Optional[float] = Field(None, gt=0, le=1, description="scale the spectral QE so its highest value is "
+    qe_peak: float | None = Field(None, gt=0, le=1, description="scale the spectral QE so its highest value is "
                                                                   "this (a relative table made absolute); null: as given")
-    ir_cut_nm: Optional[float] = Field(None, ge=300, le=1200, description="an ideal IR-cut filter: no light beyond "
+    ir_cut_nm: float | None = Field(None, ge=300, le=1200, description="an ideal IR-cut filter: no light beyond "
                                                                            "this wavelength, nm; null: none")
     fill_factor: float = Field(1.0, gt=0, le=1, description="the share of the pixel's area that collects light, "
                                                             "where the QE does not include it (a measured QE does)")
@@ -281,18 +281,18 @@ class OpticsSection(Section):
     psf: str = Field("none", description="none; diffraction: the polychromatic Airy pattern of each channel at "
                                          "f_number; gaussian: psf_sigma_px; or a .npy/.fits file of one 2-D PSF at "
                                          "the pixel pitch (or psf_sampling_um)")
-    chief_ray_angle: Union[str, SpectrumRows, None] = Field(
+    chief_ray_angle: str | SpectrumRows | None = Field(
         None, description="the chief ray's angle of incidence against image height: a CSV file or inline rows of "
                           "(image height mm, degrees) from the optical centre outwards; null: 0 everywhere "
                           "(an image-space telecentric lens)")
     microlens_compensation: float = Field(0.0, ge=0, le=1, description="the share of the chief-ray angle the "
                                                                        "microlenses' shift takes back (0: none, 1: all)")
-    angle_relative_qe: Union[str, SpectrumRows, None] = Field(
+    angle_relative_qe: str | SpectrumRows | None = Field(
         None, description="the pixels' QE against the angle of incidence left after the microlenses, relative to "
                           "normal incidence: rows of (degrees, QE) or (degrees, QE_R, QE_G, QE_B), or a CSV; null: "
                           "no loss with angle")
     psf_sigma_px: float = Field(0.5, gt=0, le=100, description="sigma of the gaussian PSF, pixels")
-    psf_sampling_um: Optional[float] = Field(None, gt=0, le=100, description="a PSF file's sample spacing, um; "
+    psf_sampling_um: float | None = Field(None, gt=0, le=100, description="a PSF file's sample spacing, um; "
                                                                               "null: the pixel pitch")
 
     @field_validator("relative_illumination", "psf")
@@ -312,7 +312,7 @@ class OpticsSection(Section):
 class PrnuSection(Section):
     enabled: bool = True
     sigma_pct: float = Field(1.0, ge=0, le=100, description="PRNU, % of the signal: the std of the gain map, before crosstalk")
-    measured_pct: Optional[float] = Field(
+    measured_pct: float | None = Field(
         None, ge=0, le=100,
         description="PRNU as a data sheet or an EMVA 1288 measurement gives it (after crosstalk), %; "
                     "when set, sigma_pct is solved from it (crosstalk averages neighbouring gains: about 0.79 with the default kernel)",
@@ -345,13 +345,13 @@ class CrosstalkSection(Section):
     """
 
     enabled: bool = True
-    kernel_pct: Union[Kernel, dict[Literal["R", "G", "B"], Kernel]] = Field(
+    kernel_pct: Kernel | dict[Literal["R", "G", "B"], Kernel] = Field(
         default_factory=lambda: [[0.9, 4.5, 0.9], [4.5, 78.4, 4.5], [0.9, 4.5, 0.9]],
         description="3 x 3 kernel, % of a pixel's photo-charge landing in itself and each neighbour (sum <= 100), "
                     "or one kernel per colour {R: ..., G: ..., B: ...}",
     )
 
-    kernel_at_angle_pct: Optional[Kernel] = Field(
+    kernel_at_angle_pct: Kernel | None = Field(
         None, description="3 x 3 kernel, %, for light arriving at reference_angle_deg from the left (a pixel right of "
                           "the optical centre): the charge leans outward; between 0 and that angle the kernel is "
                           "interpolated (optics.chief_ray_angle sets each pixel's angle). Same sum as kernel_pct. "
@@ -390,7 +390,7 @@ class CrosstalkSection(Section):
 
 class ShotNoiseSection(Section):
     enabled: bool = Field(True, description="photon shot noise (Poisson); off: the photo-charge enters as its mean")
-    gaussian_above_e: Optional[float] = Field(
+    gaussian_above_e: float | None = Field(
         None, ge=100,
         description="speed option: rounded normal approximation where the mean exceeds this many e- (paper: 1000); "
                     "null: exact Poisson. At least 100 e-: below that the approximation is biased (at 2 e-, var/mean 0.93, "
@@ -417,9 +417,9 @@ class SpreadLaw(Section):
     deviation of its natural log) or exponential (``mean``)."""
 
     distribution: Literal["lognormal", "exponential"] = Field("lognormal", description="family across traps or pixels")
-    median: Optional[float] = Field(None, gt=0, le=1e9, description="lognormal: the median")
-    sigma_log: Optional[float] = Field(None, ge=0, le=5, description="lognormal: standard deviation of the natural log")
-    mean: Optional[float] = Field(None, gt=0, le=1e9, description="exponential: the mean")
+    median: float | None = Field(None, gt=0, le=1e9, description="lognormal: the median")
+    sigma_log: float | None = Field(None, ge=0, le=5, description="lognormal: standard deviation of the natural log")
+    mean: float | None = Field(None, gt=0, le=1e9, description="exponential: the mean")
 
     @model_validator(mode="after")
     def _complete(self):
@@ -485,12 +485,12 @@ class DarkTail(Section):
     """White-pixel tail: ``ppm_above`` ppm of pixels above a threshold, tail values up to a maximum."""
 
     ppm_above: float = Field(ge=0, le=1e6, description="parts per million of pixels above the threshold")
-    threshold_e_per_s: Optional[float] = Field(None, ge=0, le=1e9, description="white-pixel threshold, e-/s per pixel")
-    threshold_aA: Optional[float] = Field(None, ge=0, le=1e8, description="white-pixel threshold, aA per pixel")
-    threshold_nA_per_cm2: Optional[float] = Field(None, ge=0, le=1e9, description="white-pixel threshold, nA/cm^2")
-    max_e_per_s: Optional[float] = Field(None, gt=0, le=1e9, description="largest extra dark current of a tail pixel")
-    max_aA: Optional[float] = Field(None, gt=0, le=1e8, description="largest extra dark current of a tail pixel, aA")
-    max_nA_per_cm2: Optional[float] = Field(None, gt=0, le=1e9, description="largest extra dark current of a tail pixel, nA/cm^2")
+    threshold_e_per_s: float | None = Field(None, ge=0, le=1e9, description="white-pixel threshold, e-/s per pixel")
+    threshold_aA: float | None = Field(None, ge=0, le=1e8, description="white-pixel threshold, aA per pixel")
+    threshold_nA_per_cm2: float | None = Field(None, ge=0, le=1e9, description="white-pixel threshold, nA/cm^2")
+    max_e_per_s: float | None = Field(None, gt=0, le=1e9, description="largest extra dark current of a tail pixel")
+    max_aA: float | None = Field(None, gt=0, le=1e8, description="largest extra dark current of a tail pixel, aA")
+    max_nA_per_cm2: float | None = Field(None, gt=0, le=1e9, description="largest extra dark current of a tail pixel, nA/cm^2")
 
     @model_validator(mode="after")
     def _units(self):
@@ -504,13 +504,13 @@ class DarkPoint(Section):
 
     temperature_c: float = Field(ge=-60, le=150, description="temperature of this characterization, degrees C")
     distribution: Literal["logistic", "inverse_gaussian", "lognormal", "normal", "gamma"] = Field(description="family of the DCNU body at this temperature")
-    mean_e_per_s: Optional[float] = Field(None, ge=0, le=1e8, description="body mean, e-/s per pixel (give one of the three units)")
-    mean_aA: Optional[float] = Field(None, ge=0, le=1e7, description="body mean, aA per pixel (1 aA = 6.2415 e-/s)")
-    mean_nA_per_cm2: Optional[float] = Field(None, ge=0, le=1e8, description="body mean, nA/cm^2 (needs sensor.pixel_pitch_um)")
-    std_e_per_s: Optional[float] = Field(None, gt=0, le=1e8, description="body standard deviation, e-/s per pixel")
-    std_aA: Optional[float] = Field(None, gt=0, le=1e7, description="body standard deviation, aA per pixel")
-    std_nA_per_cm2: Optional[float] = Field(None, gt=0, le=1e8, description="body standard deviation, nA/cm^2")
-    tail: Optional[DarkTail] = Field(None, description="white-pixel tail (ppm above a threshold); null: no tail")
+    mean_e_per_s: float | None = Field(None, ge=0, le=1e8, description="body mean, e-/s per pixel (give one of the three units)")
+    mean_aA: float | None = Field(None, ge=0, le=1e7, description="body mean, aA per pixel (1 aA = 6.2415 e-/s)")
+    mean_nA_per_cm2: float | None = Field(None, ge=0, le=1e8, description="body mean, nA/cm^2 (needs sensor.pixel_pitch_um)")
+    std_e_per_s: float | None = Field(None, gt=0, le=1e8, description="body standard deviation, e-/s per pixel")
+    std_aA: float | None = Field(None, gt=0, le=1e7, description="body standard deviation, aA per pixel")
+    std_nA_per_cm2: float | None = Field(None, gt=0, le=1e8, description="body standard deviation, nA/cm^2")
+    tail: DarkTail | None = Field(None, description="white-pixel tail (ppm above a threshold); null: no tail")
 
     @model_validator(mode="after")
     def _units(self):
@@ -542,11 +542,11 @@ class DarkCurrentSection(Section):
     points: list[DarkPoint] = Field(default_factory=lambda: [DarkPoint(**p) for p in _default_dark_points()], min_length=1,
                                     description="characterization points (one or more temperatures)")
     rts: DarkCurrentRtsSection = Field(default_factory=DarkCurrentRtsSection)
-    white_threshold_e_per_s: Optional[float] = Field(
+    white_threshold_e_per_s: float | None = Field(
         None, ge=0, le=1e9, description="count white pixels above this rate, e-/s per pixel, at every temperature "
         "(null: the nearest characterization point's tail threshold)")
-    white_threshold_aA: Optional[float] = Field(None, ge=0, le=1e8, description="the white-pixel threshold, aA per pixel")
-    white_threshold_nA_per_cm2: Optional[float] = Field(None, ge=0, le=1e9, description="the white-pixel threshold, "
+    white_threshold_aA: float | None = Field(None, ge=0, le=1e8, description="the white-pixel threshold, aA per pixel")
+    white_threshold_nA_per_cm2: float | None = Field(None, ge=0, le=1e9, description="the white-pixel threshold, "
                                                         "nA/cm^2 (needs sensor.pixel_pitch_um)")
 
     @model_validator(mode="after")
@@ -578,7 +578,7 @@ class FlickerSection(Section):
     enabled: bool = True
     gumbel_loc_e: float = Field(0.8, ge=-1000, le=1000, description="location of the gumbel_r body, e- rms")
     gumbel_scale_e: float = Field(0.25, gt=0, le=1000, description="scale of the gumbel_r body, e- rms")
-    tail: Optional[FlickerTail] = Field(default_factory=lambda: FlickerTail(ppm_above=100, threshold_e=4.0, max_e=12.0),
+    tail: FlickerTail | None = Field(default_factory=lambda: FlickerTail(ppm_above=100, threshold_e=4.0, max_e=12.0),
                                         description="RTS tail of very noisy pixels; null: no tail")
 
 
@@ -615,12 +615,12 @@ class ColumnNoiseSection(Section):
 class AdcSection(Section):
     enabled: bool = Field(True, description="off: ideal readout, 1 DN per e-, no black level, 16-bit range")
     bits: int = Field(12, ge=8, le=16, description="ADC resolution, bits")
-    output_bits: Optional[int] = Field(None, ge=8, le=16, description="the output's range, bits: the ADC's codes "
+    output_bits: int | None = Field(None, ge=8, le=16, description="the output's range, bits: the ADC's codes "
                                        "times 2^(output_bits - bits), as a camera writes a 12- or 14-bit ADC in a "
                                        "16-bit range; K, the black level and DN noise are in output DN; null: bits")
     black_level_dn: float = Field(64.0, ge=0, le=65535, description="offset added before quantization, DN")
-    full_scale_e: Optional[float] = Field(None, ge=1, le=1e9, description="charge mapped to the top code, e-; null: the full well")
-    gain_dn_per_e: Optional[float] = Field(None, gt=0, le=1000, description="system gain K, DN per e- (instead of "
+    full_scale_e: float | None = Field(None, ge=1, le=1e9, description="charge mapped to the top code, e-; null: the full well")
+    gain_dn_per_e: float | None = Field(None, gt=0, le=1000, description="system gain K, DN per e- (instead of "
                                                                             "full_scale_e: the top code is then at (top - black) / K)")
 
     @model_validator(mode="after")
@@ -657,7 +657,7 @@ class PixelOffsetSection(Section):
 
     enabled: bool = False
     sigma_e: float = Field(0.0, ge=0, le=1e5, description="standard deviation of the offsets' normal body, e-")
-    tail: Optional[OffsetTail] = Field(None, description="pixels with large offsets (ppm above a threshold); null: none")
+    tail: OffsetTail | None = Field(None, description="pixels with large offsets (ppm above a threshold); null: none")
 
 
 class NonlinearitySection(Section):
@@ -671,11 +671,11 @@ class NonlinearitySection(Section):
     """
 
     enabled: bool = False
-    linearity_error_pct: Optional[tuple[float, float]] = Field(
+    linearity_error_pct: tuple[float, float] | None = Field(
         None, description="EMVA 1288 linearity error [min, max], % (min <= 0 <= max), over 5-95 % of saturation")
-    curve_e: Optional[list[tuple[float, float]]] = Field(
+    curve_e: list[tuple[float, float]] | None = Field(
         None, description="the transfer as points [[charge_e, output_e], ...], strictly increasing, from [0, 0]")
-    coefficients: Optional[tuple[float, float, float]] = Field(
+    coefficients: tuple[float, float, float] | None = Field(
         None, description="the transfer as the cubic x (1 + a s + b s^2 + c s^3), s = x / full well: [a, b, c]")
     acts_on: Literal["charge", "mean"] = Field(
         "charge", description="charge: the sense node's conversion of each frame's collected charge (after the shot "
@@ -840,13 +840,13 @@ class GainRow(Section):
     given in DN after the gain stays in DN unless the row sets it.
     """
 
-    iso: Optional[float] = Field(None, gt=0, le=1e7, description="the setting as ISO")
-    gain_db: Optional[float] = Field(None, ge=-60, le=120, description="the setting in dB")
-    mode: Optional[str] = Field(None, max_length=40, description="a name for the row's mode, e.g. LCG or HCG")
-    binning: Optional[Literal["1x1", "2x2", "1x2", "2x1"]] = Field(
+    iso: float | None = Field(None, gt=0, le=1e7, description="the setting as ISO")
+    gain_db: float | None = Field(None, ge=-60, le=120, description="the setting in dB")
+    mode: str | None = Field(None, max_length=40, description="a name for the row's mode, e.g. LCG or HCG")
+    binning: Literal["1x1", "2x2", "1x2", "2x1"] | None = Field(
         None, description="the binning mode this row is for (sensor.binning picks it); null: every binning")
     k_dn_per_e: float = Field(gt=0, le=1000, description="system gain K at this setting, DN per e-")
-    set: dict[str, Union[float, bool, str, list, None]] = Field(
+    set: dict[str, float | bool | str | list | None] = Field(
         default_factory=dict, description="configuration keys this setting changes, dotted, e.g. read_noise.scale_dn")
 
     @model_validator(mode="after")

@@ -23,6 +23,7 @@ see it (it traces NumPy's own allocations).
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 
 import numpy as np
@@ -67,10 +68,8 @@ def empty(shape: tuple[int, ...], dtype) -> np.ndarray:
         return np.empty(shape, dtype)
     # a mapping one huge page longer than the array, so that the array can start on a huge page's boundary
     block = mmap.mmap(-1, nbytes + HUGE_PAGE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
-    try:
+    with contextlib.suppress(OSError):  # a kernel without transparent huge pages: 4 KiB pages, as np.empty's
         block.madvise(mmap.MADV_HUGEPAGE)
-    except OSError:  # a kernel without transparent huge pages: 4 KiB pages, as np.empty's
-        pass
     whole = np.frombuffer(block, np.uint8)
     start = -whole.ctypes.data % HUGE_PAGE
     return whole[start:start + nbytes].view(dtype).reshape(shape)

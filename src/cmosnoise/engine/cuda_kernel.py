@@ -200,7 +200,7 @@ def fixed_map(kind: str, shape: tuple[int, int], *args):
     return out
 
 
-def dlpack_view(array) -> "dlpack.View":
+def dlpack_view(array) -> dlpack.View:
     """A device array (a frame left on the GPU) offered by the DLPack protocol, without a copy:
     ``jax.dlpack.from_dlpack``, ``cupy.from_dlpack``, ``torch.from_dlpack`` take it; no framework is needed to make
     it (:mod:`.dlpack`, ctypes alone).
@@ -413,7 +413,7 @@ class DevicePlan:
                      for name, dtype in (("up", np.float64), ("down", np.float64), ("size", np.float64),
                                          ("index", np.uint64), ("slot", np.uint64)))
 
-    def with_means(self, noisy_e=None, exact_e=None) -> "DevicePlan":
+    def with_means(self, noisy_e=None, exact_e=None) -> DevicePlan:
         """This plan with the mean charge (the scene) taken from arrays already on the GPU, without a copy.
 
         Parameters

@@ -185,12 +185,12 @@ def ptrs_candidate(lam, a, b, u1, u2):
 
 def ptrs_quick_accept(us, V, vr):
     """PTRS's quick acceptance of a candidate, before any log (numpy's first test)."""
-    return (us >= 0.07) & (V <= vr)
+    return (us >= 0.07) & (vr >= V)
 
 
 def ptrs_early_reject(k, us, V):
     """PTRS's rejection of a negative candidate and of the corners, before any log (numpy's second test)."""
-    return (k < 0.0) | ((us < 0.013) & (V > us))
+    return (k < 0.0) | ((us < 0.013) & (us < V))
 
 
 def ptrs_log_test(lam, loglam, a, b, log_invalpha, kk, us, V, loggam_k1):

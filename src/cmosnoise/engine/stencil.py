@@ -83,7 +83,7 @@ def leaning_spread(q: np.ndarray, a: np.ndarray, b: np.ndarray, leans: tuple) ->
     out = np.zeros(q.shape)
     if numba is None:  # the same scatter in NumPy, slowly
         rows, cols = q.shape
-        for name, w, (pos, neg) in (("a", a, (ks[0], ks[1])), ("b", b, (ks[2], ks[3]))):
+        for w, (pos, neg) in ((a, (ks[0], ks[1])), (b, (ks[2], ks[3]))):
             for k, part in ((pos, np.clip(w, 0, None)), (neg, np.clip(-w, 0, None))):
                 src = q * part
                 for dy in range(3):

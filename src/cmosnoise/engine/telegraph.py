@@ -85,7 +85,7 @@ class Telegraphs:
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self.index, self.slot, self.size, self.tau_low_s, self.tau_high_s))
 
-    def within(self, region: tuple[int, int, int, int], cols: int) -> "Telegraphs":
+    def within(self, region: tuple[int, int, int, int], cols: int) -> Telegraphs:
         """Those of the pixels in ``region = (row0, row1, col0, col1)`` of a sensor ``cols`` wide."""
         _, _, keep = in_region(self.index, region, cols)
         return Telegraphs(*(a[keep] for a in (self.index, self.slot, self.size, self.tau_low_s, self.tau_high_s)))

@@ -81,7 +81,7 @@ class FolderLock:
         import fcntl
 
         for _ in range(20):
-            fh = open(self.path, "a+")
+            fh = open(self.path, "a+")  # noqa: SIM115 - held open as long as the lock: release() closes it
             try:
                 fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import io
 import mmap
 import os
 import queue
 import threading
+from collections.abc import Iterable
 from pathlib import Path
-from typing import BinaryIO, Iterable
+from typing import BinaryIO
 
 import numpy as np
 
@@ -220,7 +222,7 @@ class TileWriter:
             self._map.close()
             self._map = None
 
-    def __enter__(self) -> "TileWriter":
+    def __enter__(self) -> TileWriter:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -385,17 +387,15 @@ class SeriesWriter:
             self._map = None
         self._raise()
 
-    def __enter__(self) -> "SeriesWriter":
+    def __enter__(self) -> SeriesWriter:
         return self
 
     def __exit__(self, exc_type, *exc) -> None:
         if exc_type is None:
             self.close()
             return
-        try:  # the caller's error is the one that counts
+        with contextlib.suppress(Exception):  # the caller's error is the one that counts
             self.close()
-        except Exception:  # noqa: BLE001
-            pass
 
 
 def _open_direct(path: str | Path) -> int:

@@ -40,9 +40,10 @@ from __future__ import annotations
 
 import glob
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator, Literal, Optional
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -64,22 +65,22 @@ class StackEntry(BaseModel):
     kind: Literal["dark", "flat", "spot"] = Field(
         description="dark (no light), flat (uniform illumination) or spot (light on single, well separated pixels: crosstalk)")
     exposure_s: float = Field(ge=0, le=3600, description="exposure time, s")
-    temperature_c: Optional[float] = Field(None, ge=-60, le=150, description="sensor temperature, C")
-    level: Optional[float] = Field(None, ge=0, le=1e9, description="relative illumination (any unit; flats)")
-    photons: Optional[float] = Field(None, ge=0, le=1e12, description="photons per pixel during the exposure (flats)")
-    iso: Optional[float] = Field(None, gt=0, le=1e7, description="the camera's gain setting (ISO) the stack was taken at")
-    gain_db: Optional[float] = Field(None, ge=-60, le=120, description="the camera's gain setting (dB) the stack was taken at")
-    frame_period_s: Optional[float] = Field(None, gt=0, le=3600, description="seconds from one frame's start to the "
+    temperature_c: float | None = Field(None, ge=-60, le=150, description="sensor temperature, C")
+    level: float | None = Field(None, ge=0, le=1e9, description="relative illumination (any unit; flats)")
+    photons: float | None = Field(None, ge=0, le=1e12, description="photons per pixel during the exposure (flats)")
+    iso: float | None = Field(None, gt=0, le=1e7, description="the camera's gain setting (ISO) the stack was taken at")
+    gain_db: float | None = Field(None, ge=-60, le=120, description="the camera's gain setting (dB) the stack was taken at")
+    frame_period_s: float | None = Field(None, gt=0, le=3600, description="seconds from one frame's start to the "
                                             "next (random telegraph dwell times); default: the exposure time")
     files: list[str] = Field(min_length=1, description="files or globs, relative to the manifest")
 
 
 class Manifest(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    cfa: Optional[Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"]] = None
-    black_level_dn: Optional[float] = Field(None, ge=0, le=65535)
-    bits: Optional[int] = Field(None, ge=8, le=16)
-    temperature_c: Optional[float] = Field(None, ge=-60, le=150, description="default for stacks that give none")
+    cfa: Literal["RGGB", "BGGR", "GRBG", "GBRG", "none"] | None = None
+    black_level_dn: float | None = Field(None, ge=0, le=65535)
+    bits: int | None = Field(None, ge=8, le=16)
+    temperature_c: float | None = Field(None, ge=-60, le=150, description="default for stacks that give none")
     stacks: list[StackEntry] = Field(min_length=1)
 
 
@@ -97,19 +98,19 @@ class StackStats:
     max_dn: float
     kind: str = "dark"
     exposure_s: float = 0.0
-    temperature_c: Optional[float] = None
-    level: Optional[float] = None
-    photons: Optional[float] = None
+    temperature_c: float | None = None
+    level: float | None = None
+    photons: float | None = None
     files: list[str] = field(default_factory=list)
-    pixel_m4: Optional[np.ndarray] = None  #: (rows, cols) float64, per-pixel fourth central moment (ddof 0), as pixel_var
-    iso: Optional[float] = None  #: the gain setting the stack was taken at (ISO), when the manifest says
-    gain_db: Optional[float] = None  #: or in dB
-    frame_period_s: Optional[float] = None  #: seconds from one frame's start to the next, when the manifest says
+    pixel_m4: np.ndarray | None = None  #: (rows, cols) float64, per-pixel fourth central moment (ddof 0), as pixel_var
+    iso: float | None = None  #: the gain setting the stack was taken at (ISO), when the manifest says
+    gain_db: float | None = None  #: or in dB
+    frame_period_s: float | None = None  #: seconds from one frame's start to the next, when the manifest says
     #: the OR of the stack's codes (:func:`cmosnoise.model.stages.adc.code_grid`): its lowest bit, the output DN per
     #: ADC code where a camera scales its ADC's codes to a wider range
     code_grid: int = 0
     #: the stack's frames again, one at a time (a fit that needs the whole series: random telegraph pixels)
-    reread: Optional[Callable[[], Iterator[np.ndarray]]] = field(default=None, repr=False)
+    reread: Callable[[], Iterator[np.ndarray]] | None = field(default=None, repr=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -180,12 +181,12 @@ class Dataset:
 
     stacks: list[StackStats]
     shape: tuple[int, int]
-    bits: Optional[int]
-    cfa: Optional[str]
-    black_level_dn: Optional[float]
+    bits: int | None
+    cfa: str | None
+    black_level_dn: float | None
     source: str
     kind: str  #: "emva" or "manifest"
-    descriptor: Optional[Path] = None  #: the EMVA descriptor, when that was the input
+    descriptor: Path | None = None  #: the EMVA descriptor, when that was the input
     #: whether every stack's temperature came from the data (the manifest), not from ``load``'s ``temperature_c``
     temperatures_stated: bool = False
 
@@ -214,7 +215,7 @@ class Dataset:
                 return index, values
         return None
 
-    def at_setting(self, index: str, value: float) -> "Dataset":
+    def at_setting(self, index: str, value: float) -> Dataset:
         """The stacks taken at one gain setting, as a data set of their own."""
         return Dataset([s for s in self.stacks if getattr(s, index) == value], self.shape, self.bits, self.cfa,
                        self.black_level_dn, f"{self.source} at {index} {value:g}", self.kind, self.descriptor,
@@ -229,9 +230,9 @@ REDUCE_BYTES_PER_PIXEL = 80
 
 @dataclass
 class _Meta:
-    cfa: Optional[str] = None
-    black: Optional[float] = None
-    white: Optional[int] = None
+    cfa: str | None = None
+    black: float | None = None
+    white: int | None = None
 
 
 def _dng_frames(path: Path, meta: _Meta) -> Iterator[np.ndarray]:

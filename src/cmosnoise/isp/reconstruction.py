@@ -205,7 +205,7 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ pictures in one pass
-from ..engine.jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from ..engine.jit import ONE_LAUNCH, announce, numba  # noqa: E402 - numba is None where it is not installed; the section's own import
 
 #: whether :func:`superpixel_srgb8` and :func:`bilinear_srgb8` can run here (without numba, Processor takes the
 #: steps one by one)

@@ -120,7 +120,7 @@ class HeavyTail:
     tail_max: float
 
     @classmethod
-    def from_ppm(cls, body, ppm_above: float, threshold: float, tail_max: float) -> "HeavyTail":
+    def from_ppm(cls, body, ppm_above: float, threshold: float, tail_max: float) -> HeavyTail:
         """Solve the tail fraction that puts ``ppm_above`` ppm above ``threshold``."""
         p = ppm_above * 1e-6
         s0 = float(body.sf(threshold)) if threshold >= 0 else 1.0

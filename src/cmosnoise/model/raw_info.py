@@ -52,7 +52,7 @@ class RawInfo:
         return 2**self.bits - 1
 
     @classmethod
-    def from_metadata(cls, meta: dict) -> "RawInfo":
+    def from_metadata(cls, meta: dict) -> RawInfo:
         return cls(
             cfa=meta["cfa"],
             black_level_dn=float(meta["black_level_dn"]),

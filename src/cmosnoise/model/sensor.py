@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
 
 import numpy as np
 
@@ -177,7 +177,7 @@ class Sensor:
         self._statistics: dict[str, float] = {}
         self.timings["fixed_pattern"] += time.perf_counter() - t0
 
-    def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> "Sensor":
+    def with_exposure(self, integration_time_s: float | None = None, peak_rate_e_per_s: float | None = None) -> Sensor:
         """The same sensor instance at another exposure: the fixed pattern is shared, not redrawn.
 
         Valid because nothing fixed-pattern depends on the exposure (docs/model.md section 1). A
@@ -440,7 +440,7 @@ class Sensor:
                                          c, self.cfa, self.spec.channel_responsivity, self.shape)
         return scene_mod.to_cfa(rgb, self.cfa, self.spec.channel_responsivity)
 
-    def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> "Exposure":
+    def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> Exposure:
         """Mean charge of ``scene`` at the configured exposure and temperature.
 
         ``sequence`` numbers independent frame series of the same sensor
@@ -462,7 +462,7 @@ class Sensor:
         signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))
         return Exposure(self, signal, sequence, signal_parts)
 
-    def dark_frames(self, n: int) -> "Iterator[np.ndarray]":
+    def dark_frames(self, n: int) -> Iterator[np.ndarray]:
         """``n`` dark frames (no light) for dark calibration, from their own noise sequence."""
         n = _whole(n, "n", minimum=1)
         return self.expose("flat:0", sequence=SEQ_DARK_CALIBRATION).frames(n)
@@ -826,7 +826,7 @@ class Exposure:
         return defects.stuck_pixels(d, s.transfer.max_code if adc_on else s.config.sensor.full_well_e,
                                     rounded=adc_on)
 
-    def device_plan(self) -> "cuda_kernel.DevicePlan":
+    def device_plan(self) -> cuda_kernel.DevicePlan:
         """This exposure's :meth:`plan` on the GPU, with its stuck pixels (uploaded once, then reused)."""
         if self._device_plan is None:
             self._device_plan = cuda_kernel.DevicePlan(self.plan(), self.stuck_pixels())

@@ -169,7 +169,7 @@ class SensorSpec:
         white_e = self.peak_rate_e_per_s * c.exposure.integration_time_s
         return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
 
-    def with_config(self, config: Config) -> "SensorSpec":
+    def with_config(self, config: Config) -> SensorSpec:
         """This spec with ``config`` in place of its own, where ``config`` differs only in what implies nothing
         (the exposure, the run, the scene, the processing): nothing is solved again; the frame timing an
         exposure meets is checked (:func:`physics.check_timing`)."""
@@ -177,7 +177,7 @@ class SensorSpec:
         return SensorSpec(config, self.dark_points, self.flicker, self.prnu_seen_per_sigma, self.transfer,
                           self.offsets, self.nonlinearity)
 
-    def updated(self, updates: dict) -> "SensorSpec":
+    def updated(self, updates: dict) -> SensorSpec:
         """A new spec: this configuration with ``updates`` merged in (every value set kept), resolved."""
         return resolve(merge_updates(self.config, updates))
 

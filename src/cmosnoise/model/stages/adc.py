@@ -70,7 +70,7 @@ class Transfer:
         """The quantizer's variance, DN^2: ``step**2 / 12`` (a uniform error over one step)."""
         return self.step**2 / 12.0
 
-    def adc_codes(self) -> "Transfer":
+    def adc_codes(self) -> Transfer:
         """This transfer counted in the ADC's own codes (K, black level and top divided by the step): what the
         quantizer rounds. Exact: the step is a power of two."""
         return Transfer(self.gain_dn_per_e / self.step, self.black_level_dn / self.step, self.bits, 1)
@@ -86,7 +86,7 @@ class Transfer:
 
     @classmethod
     def from_settings(cls, bits: int, black_level_dn: float, full_scale_e: float,
-                      output_bits: int | None = None) -> "Transfer":
+                      output_bits: int | None = None) -> Transfer:
         """The transfer whose top code is at ``full_scale_e`` e- (``output_bits``: the output's range, default
         ``bits``)."""
         step = cls._step(bits, output_bits)
@@ -99,7 +99,7 @@ class Transfer:
 
     @classmethod
     def from_gain(cls, bits: int, black_level_dn: float, gain_dn_per_e: float,
-                  output_bits: int | None = None) -> "Transfer":
+                  output_bits: int | None = None) -> Transfer:
         """The transfer of a given system gain K (output DN per e-): its top code at ``(max_code - black) / K``
         e-."""
         cls.from_settings(bits, black_level_dn, 1.0, output_bits)  # the same checks
@@ -108,7 +108,7 @@ class Transfer:
         return cls(float(gain_dn_per_e), float(black_level_dn), bits, cls._step(bits, output_bits))
 
     @classmethod
-    def ideal(cls) -> "Transfer":
+    def ideal(cls) -> Transfer:
         """1 DN per electron, no black level, 16-bit range (ADC switched off)."""
         return cls(1.0, 0.0, 16)
 
