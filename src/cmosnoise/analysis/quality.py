@@ -98,16 +98,19 @@ class Captures:
         s = self.sensors[chart]
         t = s.transfer
         top = t.black_level_dn + 0.98 * s.saturation_e * t.gain_dn_per_e
-        mean = self.raw[chart].astype(np.float64).mean(axis=0)
+        mean = self.mean_raw(chart)
         return any(float(mean[r0:r1, c0:c1].max()) >= top for r0, r1, c0, c1 in boxes)
+
+    def mean_raw(self, chart: str) -> np.ndarray:
+        """The frames' mean of ``chart`` (rows, cols) float64, DN, made once."""
+        key = f"mean:{chart}"
+        if key not in self.cache:
+            self.cache[key] = self.raw[chart].astype(np.float64).mean(axis=0)
+        return self.cache[key]
 
     def patch(self, chart: str = "flat") -> tuple[slice, slice]:
         r0, r1, c0, c1 = charts.truth(_SOURCES[chart], self.raw[chart].shape[1:])["patches"][0]
         return slice(r0, r1), slice(c0, c1)
-
-    def viewing(self) -> dict:
-        return {"rows": self.rows, "picture_height_cm": self.picture_height_cm,
-                "viewing_distance_cm": self.viewing_distance_cm}
 
 
 @dataclass(frozen=True)
@@ -144,15 +147,11 @@ _SOURCES = {"flat": f"flat:{GREY!r}", "edge": "edge", "colorchecker": "colorchec
 
 
 def _green_snr(c: Captures) -> float:
-    s, shot = c.sensors["flat"], c.shots["flat"]
-    t = s.transfer
-    green = (snr_light._green(c.raw["flat"].astype(np.float64), s.cfa) - t.black_level_dn) / t.gain_dn_per_e
-    signal = float(green.mean()) - snr_light._dark_mean(s, shot)
-    return signal / math.sqrt(float(green.var(axis=0, ddof=1).mean()))
+    return snr_light.measured_snr(c.sensors["flat"], c.shots["flat"], c.raw["flat"])
 
 
 def _green_snr_predicted(c: Captures) -> float:
-    signal, noise = snr_light._predicted(c.sensors["flat"], c.shots["flat"])
+    signal, noise = snr_light.predicted_snr(c.sensors["flat"], c.shots["flat"])
     return signal / noise
 
 
@@ -161,7 +160,7 @@ def _luminance_snr(c: Captures) -> float:
     return float(y.mean()) / math.sqrt(float(y.var(axis=0, ddof=1).mean()))
 
 
-def _visual(c: Captures) -> dict:
+def _visual(c: Captures) -> float:
     if "visual" not in c.cache:
         y = c.luminance["flat"][(slice(None), *c.patch())]
         per = [visual_noise.visual_luminance_noise(np.clip(f, 0, None), c.rows, c.picture_height_cm,
@@ -204,7 +203,7 @@ def _colour(c: Captures) -> dict | None:
     if s.cfa == "none":
         return None
     if "colour" not in c.cache:
-        raw = c.raw["colorchecker"].astype(np.float64).mean(axis=0)
+        raw = c.mean_raw("colorchecker")
         patches = charts.truth("colorchecker", raw.shape)["patches"]
         if c.clipped("colorchecker", patches):
             c.notes.append(f"colour error at {c.lux:g} lux: a ColorChecker patch reaches saturation; not measured")
@@ -228,14 +227,11 @@ def _defects_left(c: Captures) -> float:
     return sum(v["left"] for v in left.values()) / (frame.size / 1e6)
 
 
-def _colour_mean(c: Captures) -> float | None:
-    r = _colour(c)
-    return None if r is None else r["mean_de2000"]
-
-
-def _colour_max(c: Captures) -> float | None:
-    r = _colour(c)
-    return None if r is None else r["max_de2000"]
+def _colour_value(key: str) -> Callable[[Captures], float | None]:
+    def compute(c: Captures) -> float | None:
+        r = _colour(c)
+        return None if r is None else r[key]
+    return compute
 
 
 #: the metrics, in the order tables show them
@@ -259,9 +255,9 @@ METRICS: list[Metric] = [
     Metric("defects_left_per_mp", "defects left after correction", "per MP", "lower", "flat", _defects_left,
            "defect pixels of the truth's mask visible in a frame (6 robust sigma) that processing.defects leaves, "
            "singles, couplets and clusters (scoring.defects_left)"),
-    Metric("colour_de2000_mean", "colour error, mean", "dE00", "lower", "colorchecker", _colour_mean,
+    Metric("colour_de2000_mean", "colour error, mean", "dE00", "lower", "colorchecker", _colour_value("mean_de2000"),
            "CIEDE2000 after a least-squares 3 x 3 matrix, 24 patches (colour_error)"),
-    Metric("colour_de2000_max", "colour error, worst patch", "dE00", "lower", "colorchecker", _colour_max,
+    Metric("colour_de2000_max", "colour error, worst patch", "dE00", "lower", "colorchecker", _colour_value("max_de2000"),
            "the largest patch's CIEDE2000 (colour_error)"),
 ]
 BY_NAME = {m.name: m for m in METRICS}
@@ -393,13 +389,14 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
             raise CmosnoiseError(f"sizes[{chart!r}] = {size}: give a chart of {', '.join(SIZES)} at least 32 x 32")
     config, switched = with_light(config)
     flat = {**SIZES, **(sizes or {})}["flat"]
+    r0, r1, c0, c1 = charts.truth(_SOURCES["flat"], flat)["patches"][0]  # the patch the visual noise reads
     out = {"lux": lux, "metrics": {n: [] for n in names}, "frames": int(frames), "seed": int(seed),
            "f_number": config.optics.f_number, "integration_time_s": config.exposure.integration_time_s,
            "illuminant": config.light.illuminant, "light_switched_on": switched,
            "picture_height_cm": picture_height_cm, "viewing_distance_cm": viewing_distance_cm,
            "picture_rows": int(config.sensor.height),
            "visual_threshold_l": visual_noise.threshold_sigma_l(int(config.sensor.height),
-                                                                (flat[0] - 2 * (flat[0] // 4), flat[1] - 2 * (flat[1] // 4)),
+                                                                (r1 - r0, c1 - c0),
                                                                 picture_height_cm, viewing_distance_cm)}
     out["notes"] = []
     if config.light.spectral_qe is None or _one_column(config.light.spectral_qe):
@@ -421,7 +418,7 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
             key = f"snr{target:g}_lux"
             out[key] = snr_light.crossing_lux(lux, [s or 0.0 for s in out["metrics"]["snr_green"]], target)
             out[key + "_predicted"] = snr_light.predicted_crossing_lux(config, target, flat, GREY, seed)
-        out["dynamic_range"] = snr_light.dynamic_range(config, flat, GREY, seed)
+        out["dynamic_range"] = snr_light.dynamic_range(config, flat, GREY, seed, out["snr1_lux_predicted"])
     if edge_cap is not None:
         r = edge_cap.cache["sfr"]
         keep = r.frequency <= 1.0
@@ -430,7 +427,7 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
     if colour_cap is not None:
         col = colour_cap.cache["colour"]
         out["colour"] = {"lux": colour_cap.lux, "de2000": col["de2000"].tolist(),
-                         "names": charts.truth("colorchecker", (240, 360))["names"],
+                         "names": charts.truth("colorchecker", SIZES["colorchecker"])["names"],
                          "corrected": col["corrected"].tolist()}
     return out
 
@@ -489,11 +486,16 @@ def threshold(config, key: str, low: float, high: float, metric: str, limit: flo
         raise CmosnoiseError(f"instances = {instances}: a threshold's spread needs at least 2 sensor instances")
     if not lux > 0:
         raise CmosnoiseError(f"lux = {lux:g}: give an illuminance above 0")
+    from ..config.loading import apply_values, config_values, default_data, validate_data
+
     config, _ = with_light(config)
+    data, defaults = config_values(config), default_data()
 
     def value(x: float, seed: int) -> float:
+        # the dotted key as --set and --vary take it (a number in it indexes a list)
+        c = apply_values(data, {key: x}, defaults, where="--find")
         try:
-            c = merge_updates(config, _dotted(key, x))
+            c = validate_data(c)
         except CmosnoiseError as exc:
             raise CmosnoiseError(f"{key} = {x:g}: {exc}") from None
         v = BY_NAME[metric].compute(capture(c, lux, frames, sizes, seed, charts_=(BY_NAME[metric].chart,)))
@@ -533,13 +535,3 @@ def threshold(config, key: str, low: float, high: float, metric: str, limit: flo
                    max=max(found, default=None))
     return out
 
-
-def _dotted(key: str, value: float) -> dict:
-    """``{"a": {"b": value}}`` for the key ``a.b``."""
-    out: dict = {}
-    node = out
-    parts = key.split(".")
-    for p in parts[:-1]:
-        node = node.setdefault(p, {})
-    node[parts[-1]] = value
-    return out

@@ -53,6 +53,46 @@ def _green(a: np.ndarray, pattern: str) -> np.ndarray:
     return a[:, mask]
 
 
+def measured_snr(sensor: Sensor, shot, stack: np.ndarray) -> float:
+    """The measured SNR of a grey patch's frames: the green pixels' mean photo-charge (their mean less the
+    exposure's mean dark charge) over their temporal noise (each pixel's variance over the frames, averaged).
+
+    Parameters
+    ----------
+    sensor : Sensor
+        The sensor that made the frames.
+    shot : Exposure
+        Their exposure (its mean dark charge is taken out of the signal).
+    stack : (frames, rows, cols) array, DN
+        Raw frames, at least 2.
+
+    Returns
+    -------
+    float
+    """
+    t = sensor.transfer
+    green = (_green(np.asarray(stack, np.float64), sensor.cfa) - t.black_level_dn) / t.gain_dn_per_e
+    return float(green.mean() - _dark_mean(sensor, shot)) / math.sqrt(float(green.var(axis=0, ddof=1).mean()))
+
+
+def predicted_snr(sensor: Sensor, shot) -> tuple[float, float]:
+    """The noise model's signal and noise of the exposure's green pixels (e-): their mean photo-charge, and the
+    square root of :func:`~cmosnoise.analysis.noise_budget.temporal_variances` plus
+    :func:`~cmosnoise.analysis.noise_budget.after_gain_variances` at that charge.
+
+    Parameters
+    ----------
+    sensor : Sensor
+    shot : Exposure
+
+    Returns
+    -------
+    (float, float)
+        Signal and noise, e-.
+    """
+    return _predicted(sensor, shot)
+
+
 def _predicted(sensor: Sensor, shot) -> tuple[float, float]:
     """(mean green photo-charge, its predicted temporal noise), e-."""
     signal = float(_green(np.asarray(shot.photo_mean_e)[None], sensor.cfa).mean())
@@ -103,16 +143,13 @@ def snr_curve(config, lux, frames: int = 8, shape=(96, 128), reflectance: float 
     for v in lux:
         sensor = _sensor(config, v, shape, seed)
         shot = sensor.expose(f"flat:{reflectance!r}")
-        t = sensor.transfer
-        stack = np.stack(list(shot.frames(int(frames)))).astype(np.float64)
-        green = (_green(stack, sensor.cfa) - t.black_level_dn) / t.gain_dn_per_e
+        stack = np.stack(list(shot.frames(int(frames))))
         signal, noise = _predicted(sensor, shot)
         out["signal_e"].append(signal)
         out["noise_e"].append(noise)
         out["snr_predicted"].append(signal / noise)
-        out["snr_measured"].append(float(green.mean() - _dark_mean(sensor, shot)) /
-                                   math.sqrt(float(green.var(axis=0, ddof=1).mean())))
-        out["pixels"] = int(green.shape[1])
+        out["snr_measured"].append(measured_snr(sensor, shot, stack))
+        out["pixels"] = int(_green(stack[:1], sensor.cfa).shape[1])
     for target in (10.0, 1.0):
         key = f"snr{target:g}_lux"
         out[key] = crossing_lux(out["lux"], out["snr_measured"], target)
@@ -187,37 +224,13 @@ def predicted_crossing_lux(config, target: float = 10.0, shape=(96, 128), reflec
     return float(math.exp(brentq(snr, math.log(1e-6), math.log(1e7))))
 
 
-def saturation_lux(config, shape=(96, 128), reflectance: float = 0.18, seed: int = 0) -> float:
-    """The illuminance at which the patch's green pixels reach saturation on average: their mean photo-charge and
-    dark charge at the sensor's saturation (the full well, or the ADC's top if it clips first), lux.
-
-    Parameters
-    ----------
-    config : Config
-        With ``light.enabled``.
-    shape : (rows, cols)
-        The sensor simulated.
-    reflectance : float
-        The patch's reflectance.
-    seed : int
-        The sensor instance.
-
-    Returns
-    -------
-    float
-        lux.
-    """
-    sensor = _sensor(config, 1.0, shape, seed)
-    shot = sensor.expose(f"flat:{reflectance!r}")
-    per_lux = _predicted(sensor, shot)[0]
-    return float(max(sensor.saturation_e - _dark_mean(sensor, shot), 0.0) / per_lux)
-
-
-def dynamic_range(config, shape=(96, 128), reflectance: float = 0.18, seed: int = 0) -> dict:
+def dynamic_range(config, shape=(96, 128), reflectance: float = 0.18, seed: int = 0,
+                  snr1_lux: float | None = None) -> dict:
     """ISO 15739's dynamic range as the references state it: the largest unclipped scene luminance over the
     luminance at which the SNR is 1, scene-referred. Both are illuminances of the same patch here (the ratio of
-    illuminances is the ratio of its luminances): :func:`saturation_lux` over the model's SNR1 (the raw green
-    SNR, :func:`predicted_crossing_lux`). The wording of ISO 15739 itself was not read: this is the form
+    illuminances is the ratio of its luminances): where the patch's green pixels reach saturation on average
+    (their mean photo-charge and dark charge at the sensor's saturation: the full well, or the ADC's top if it
+    clips first) over the model's SNR1 (the raw green SNR, :func:`predicted_crossing_lux`). The wording of ISO 15739 itself was not read: this is the form
     ``shared/imaging-chain-references.md`` gives, beside EMVA 1288's (saturation over the smallest detectable
     signal, photons at the sensor) that ``characterize`` reports.
 
@@ -231,14 +244,18 @@ def dynamic_range(config, shape=(96, 128), reflectance: float = 0.18, seed: int 
         The patch's reflectance.
     seed : int
         The sensor instance.
+    snr1_lux : float, optional
+        The model's SNR1 where the caller has it (:func:`predicted_crossing_lux` at 1), else computed.
 
     Returns
     -------
     dict
         ``saturation_lux``, ``snr1_lux``, ``ratio`` and ``db`` (20 log10 of the ratio).
     """
-    sat = saturation_lux(config, shape, reflectance, seed)
-    low = predicted_crossing_lux(config, 1.0, shape, reflectance, seed)
+    sensor = _sensor(config, 1.0, shape, seed)
+    shot = sensor.expose(f"flat:{reflectance!r}")
+    sat = max(sensor.saturation_e - _dark_mean(sensor, shot), 0.0) / _predicted(sensor, shot)[0]
+    low = predicted_crossing_lux(config, 1.0, shape, reflectance, seed) if snr1_lux is None else snr1_lux
     ratio = sat / low if low > 0 else math.inf
     return {"saturation_lux": sat, "snr1_lux": low, "ratio": ratio,
             "db": 20 * math.log10(ratio) if 0 < ratio < math.inf else None}

@@ -201,6 +201,16 @@ def _each(doc: dict):
         yield doc["names"][1], doc["b"], "C1"
 
 
+def _finished(fig, ax, xlabel: str, ylabel: str, title: str) -> bytes:
+    """A plot's labels, title, legend and grid (both scales' grid lines), as PNG bytes."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3, which="both")
+    return plots.to_png_bytes(fig)
+
+
 def snr_plot(doc: dict) -> bytes:
     fig, ax = plots.figure(figsize=(6.0, 4.0))
     for name, r, colour in _each(doc):
@@ -215,12 +225,8 @@ def snr_plot(doc: dict) -> bytes:
     ax.axhline(10, color="0.5", lw=0.8, ls=":")
     ax.axhline(1, color="0.5", lw=0.8, ls=":")
     a = doc["a"]
-    ax.set_xlabel(f"illuminance on the scene [lux] (f/{a['f_number']:g}, {a['integration_time_s']:g} s)")
-    ax.set_ylabel("SNR of an 18 % grey")
-    ax.set_title("SNR against illuminance (dash-dot: SNR10)")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3, which="both")
-    return plots.to_png_bytes(fig)
+    return _finished(fig, ax, f"illuminance on the scene [lux] (f/{a['f_number']:g}, {a['integration_time_s']:g} s)",
+                     "SNR of an 18 % grey", "SNR against illuminance (dash-dot: SNR10)")
 
 
 def visual_plot(doc: dict) -> bytes:
@@ -237,13 +243,9 @@ def visual_plot(doc: dict) -> bytes:
                 y = y / r["visual_threshold_l"]
             ax.loglog(lux, y, style, color=colour, ms=4, label=f"{name}: {what}")
     ax.axhline(1, color="0.3", lw=1, ls=":", label="threshold (1 JND)")
-    ax.set_xlabel("illuminance on the scene [lux]")
-    ax.set_ylabel("visibility [just-noticeable differences]")
     a = doc["a"]
-    ax.set_title(f"Visibility ({a['picture_height_cm']:g} cm picture from {a['viewing_distance_cm']:g} cm)")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3, which="both")
-    return plots.to_png_bytes(fig)
+    return _finished(fig, ax, "illuminance on the scene [lux]", "visibility [just-noticeable differences]",
+                     f"Visibility ({a['picture_height_cm']:g} cm picture from {a['viewing_distance_cm']:g} cm)")
 
 
 def mtf_plot(doc: dict) -> bytes:
@@ -255,12 +257,8 @@ def mtf_plot(doc: dict) -> bytes:
     ax.axvline(0.5, color="0.5", lw=0.8, ls=":", label="Nyquist")
     ax.axhline(0.5, color="0.5", lw=0.8, ls="--")
     ax.set_xlim(0, 1)
-    ax.set_xlabel("spatial frequency [cycles/pixel]")
-    ax.set_ylabel("SFR")
-    ax.set_title("ISO 12233 e-SFR of the output luminance (slanted edge)")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    return plots.to_png_bytes(fig)
+    return _finished(fig, ax, "spatial frequency [cycles/pixel]", "SFR",
+                     "ISO 12233 e-SFR of the output luminance (slanted edge)")
 
 
 def colour_plot(doc: dict) -> bytes:
@@ -380,9 +378,5 @@ def threshold_plot(r: dict) -> bytes:
     ax.axhline(r["limit"], color="0.3", ls=":", label=f"limit {r['limit']:g}")
     if r["mean"] is not None:
         ax.axvline(r["mean"], color="k", lw=1, label=f"crossing {r['mean']:.4g}")
-    ax.set_xlabel(r["key"])
-    ax.set_ylabel(f"{m.label} [{m.unit}]" if m.unit else m.label)
-    ax.set_title(f"Where {m.label} crosses {r['limit']:g} at {r['lux']:g} lux")
-    ax.legend(fontsize=7)
-    ax.grid(alpha=0.3)
-    return plots.to_png_bytes(fig)
+    return _finished(fig, ax, r["key"], f"{m.label} [{m.unit}]" if m.unit else m.label,
+                     f"Where {m.label} crosses {r['limit']:g} at {r['lux']:g} lux")
