@@ -421,11 +421,6 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         plots["prnu"] = {"residual": pg["relative_residual"]}
     _instance_offsets_in_black(P, k, rows, cols)
     _include_gain_uncertainty(P, ptc["rel_se"])
-    qe = P.get("quantum_efficiency")
-    if qe is not None and qe["value"] > 1:  # reported as measured; what the configuration can hold is written
-        qe["written"] = 1.0
-        qe["method"] += (f"; above 1, which no QE can be (95 % CI {qe['ci95'][0]:.4g} to {qe['ci95'][1]:.4g}): "
-                         "config.yaml has 1.0" if qe.get("ci95") else "; above 1: config.yaml has 1.0")
     _with_basis(P)
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
             "_crosstalk_off": crosstalk_off, "selection": selection,
@@ -477,7 +472,10 @@ def _written(P: dict, name: str, lo: float, hi: float, value: float | None = Non
     out = min(max(v, lo), hi)
     if out != v and P[name].get("written") != out:
         P[name]["written"] = out
-        P[name]["method"] += f"; outside what the configuration holds ({lo:g} to {hi:g}): config.yaml has {out:g}"
+        ci = P[name].get("ci95")
+        seen = f" (95 % CI {ci[0]:.4g} to {ci[1]:.4g})" if ci else ""
+        P[name]["method"] += (f"; outside what the configuration holds ({lo:g} to {hi:g}){seen}: config.yaml has "
+                              f"{float(out)}")
     return out
 
 
