@@ -106,8 +106,8 @@ class StackStats:
     iso: float | None = None  #: the gain setting the stack was taken at (ISO), when the manifest says
     gain_db: float | None = None  #: or in dB
     frame_period_s: float | None = None  #: seconds from one frame's start to the next, when the manifest says
-    #: the OR of the stack's codes (:func:`cmosnoise.model.stages.adc.code_grid`): its lowest bit, the output DN per
-    #: ADC code where a camera scales its ADC's codes to a wider range
+    #: the OR of the stack's first frame's codes (:func:`cmosnoise.model.stages.adc.code_grid`): its lowest bit, the
+    #: output DN per ADC code where a camera scales its ADC's codes to a wider range
     code_grid: int = 0
     #: the stack's frames again, one at a time (a fit that needs the whole series: random telegraph pixels)
     reread: Callable[[], Iterator[np.ndarray]] | None = field(default=None, repr=False)
@@ -148,7 +148,8 @@ def reduce_stack(frames: Iterator[np.ndarray], **info) -> StackStats:
     grid = 0
     n = 0
     for f in frames:
-        grid |= adc.code_grid(f)
+        if n == 0:  # one frame's codes show the step (tens of thousands of them); reading it once is enough
+            grid = adc.code_grid(f)
         x = np.asarray(f, np.float64)
         if s1 is None:
             s1, s2, c1, c2, c3, c4 = (np.zeros(x.shape) for _ in range(6))
