@@ -343,7 +343,7 @@ def provenance_lines(doc: dict) -> list[str]:
     by: dict[str, list[str]] = {}
     for name, p in doc.get("parameters", {}).items():
         by.setdefault(p.get("basis", "measured"), []).append(name)
-    for basis in ("measured", "derived", "assumed", "not identifiable"):
+    for basis in fitting.BASES:
         if by.get(basis):
             lines.append(f"{basis}: {', '.join(by[basis])}")
     if doc.get("not_fitted"):
