@@ -30,6 +30,10 @@ elif not os.environ.get("NUMBA_CACHE_DIR"):
     # that imports a test module (benchmarks/fit_coverage.py)
     atexit.register(shutil.rmtree, SESSION_CACHE, True)
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
+# The tests' command lines compile in their own process, as the library does (the console script's default is a
+# background compile while the NumPy specification runs: engine/jit.py, compiled), so that no test leaves a
+# compiling process behind; the tests of the background compile set it themselves and stop what they start.
+os.environ["CMOSNOISE_COMPILE"] = "foreground"
 # numba's CUDA simulator stands in for a GPU (set before numba is imported, here and in every child): the GPU
 # kernel's tests (test_cuda.py) and `--device cuda` then run on any machine. CMOSNOISE_TEST_GPU=1 runs them on the
 # machine's real GPU instead.

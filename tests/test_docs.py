@@ -176,7 +176,7 @@ def test_the_sensor_guide_runs_as_written(tmp_path):
 
 #: every command's page (each example runs in a folder of its own, as a reader would run one page)
 COMMAND_PAGES = ["presets", "config", "simulate", "process", "figures", "characterize", "quality", "compare", "sweep",
-                 "measure", "fit", "dataset", "evaluate", "explore"]
+                 "measure", "fit", "dataset", "evaluate", "explore", "compile"]
 
 
 @pytest.mark.slow

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..engine.jit import ONE_LAUNCH, announce, numba
+from ..engine.jit import ONE_LAUNCH, compiled, numba
 from ..engine.telegraph import in_region
 from ..model import cfa as cfa_mod
 from ..model.sensor import Exposure, region_of
@@ -197,12 +197,12 @@ def expected_raw(exposure: Exposure) -> np.ndarray:
     c = sensor.config
     t = sensor.transfer.adc_codes()  # the quantizer's own codes; times the output's step at the end
     step = sensor.transfer.step
-    if c.adc.enabled and _far_pixels is not None:
+    if c.adc.enabled and _far_pixels is not None and compiled("the ground truth's expected raw", _far_pixels,
+                                                              _near_pixels):
         terms = noise_budget.readout_terms(sensor, exposure=exposure)
         shape = sensor.shape
         out = np.empty(shape, np.float32)
         near = np.zeros(shape, np.bool_)
-        announce("the ground truth's expected raw", _far_pixels, _near_pixels)
         parts = [np.broadcast_to(np.asarray(terms[k], np.float64), shape)
                  for k in ("mean_n", "shot", "read", "col_read", "row_off", "col_off", "gain")]
         with ONE_LAUNCH:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..engine.jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from ..engine.jit import ONE_LAUNCH, compiled, numba  # None where numba is not installed
 
 #: the sums one frame contributes: e- total, DN total, saturated count, and,
 #: against the previous frame, sum and sum of squares of the differences (DN, e-)
@@ -97,10 +97,9 @@ if numba is not None:
 
 def frame_sums(raw, electrons, prev_raw, prev_e, max_code: float) -> np.ndarray:
     """The sums of :data:`_FIELDS` for one (rows, cols) frame; compiled where numba is installed."""
-    if numba is None or raw.ndim != 2:
+    if numba is None or raw.ndim != 2 or not compiled("the run statistics", _frame_sums, _row_sums, _row_differences):
         return frame_sums_numpy(raw, electrons, prev_raw, prev_e, max_code)
     has_prev = prev_raw is not None
-    announce("the run statistics", _frame_sums, _row_sums, _row_differences)
     with ONE_LAUNCH:
         return _frame_sums(raw, electrons, prev_raw if has_prev else raw, prev_e if has_prev else electrons,
                            float(max_code), has_prev)

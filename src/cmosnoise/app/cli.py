@@ -9,6 +9,7 @@ import re
 import signal
 import sys
 import threading
+import time
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -708,6 +709,26 @@ def measure(
         fitting.write_measurement(cfg, tmp, cfg.seed, temps, levels, long_frames, say=lambda m: _say(ctx, m),
                                   progress=progress)
     _say(ctx, f"wrote {out}/manifest.yaml and its stacks; fit them with: cmosnoise fit --frames-from {out}/manifest.yaml")
+
+
+@app.command("compile")
+def compile_cmd(
+    ctx: typer.Context,
+    background: bool = typer.Option(False, "--background", hidden=True,
+                                    help="as a run starts it: at a low priority, and only where none runs"),
+):
+    """Compile every compiled loop for this machine now (a run that finds them missing uses the same bits' NumPy
+    code meanwhile, and starts this in the background)."""
+    from ..engine import jit
+    from .compiling import build
+
+    if jit.numba is None:
+        raise CmosnoiseError("numba is not installed: every command runs the NumPy code, nothing to compile")
+    t0 = time.perf_counter()
+    times = build(background, say=lambda line: _say(ctx, line))
+    if times is not None:
+        _say(ctx, f"compiled for this machine ({jit.vectors()}) in {time.perf_counter() - t0:.0f} s; later runs load "
+                  "the loops from numba's cache")
 
 
 @app.command()

@@ -24,6 +24,11 @@ def main() -> None:
     # a value in the environment is kept.)
     for var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
+    # A first run does not wait for the compilers: where numba's cache lacks a loop, this process runs the NumPy
+    # specification (the same bits) while `cmosnoise compile` builds the loops in the background for the next
+    # run (engine/jit.py, compiled). A value in the environment is kept (foreground: compile here, as the
+    # library does).
+    os.environ.setdefault("CMOSNOISE_COMPILE", "background")
     received: list[int] = []
 
     def stop(signum, _frame):

@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import buffers
-from .jit import ONE_LAUNCH, numba
+from .jit import ONE_LAUNCH, compiled, numba
 from .map_values import heavy_tail_value, normal_value, offset_value, ppf_cell, two_point  # noqa: F401 - the spec
 from .philox import uniform_pair
 from .samplers import Stream
@@ -221,14 +221,17 @@ def _compiled(engine: str) -> bool:
         raise ValueError(f"engine must be 'auto', 'numpy', 'compiled' or 'cuda', got {engine!r}")
     if engine == "compiled" and numba is None:
         raise RuntimeError("the compiled fixed-pattern loops need numba")
-    return engine == "compiled" or (engine == "auto" and numba is not None)
+    # auto: where numba is present and the loops are compiled, or compile here (jit.compiled: not while a
+    # background compile builds them, the NumPy specification runs then)
+    return engine == "compiled" or (engine == "auto" and numba is not None
+                                    and compiled("the fixed-pattern loops", *_kernels().values()))
 
 
 _KERNELS: dict = {}
 
 
 def _kernels() -> dict:
-    """The compiled loops (made on first use, loaded from numba's on-disk cache when there)."""
+    """The compiled loops (made on first call, loaded from numba's on-disk cache when there)."""
     if not _KERNELS:
         from . import kernel
 

@@ -27,9 +27,19 @@ kernel to the NumPy implementation bit for bit.
 
 from __future__ import annotations
 
+import hashlib
+import logging
 import os
+import subprocess
 import sys
+import tempfile
 import threading
+from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX: the loops compile in the foreground
+    fcntl = None
 
 
 def host_features() -> str | None:
@@ -135,9 +145,146 @@ def announce(what: str, *dispatchers) -> None:
         _ANNOUNCED.add(what)
     if any(d.signatures for d in dispatchers) or any(cached_for_this_machine(d) for d in dispatchers):
         return
-    import logging
-
     logging.getLogger(__name__).info(f"compiling {what} for this machine (once; a few seconds) ...")
 
 
-__all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH", "cached_for_this_machine", "announce"]
+#: the environment variable that says how the compiled loops are first made where numba's on-disk cache holds
+#: none for this machine: ``foreground`` (compiled in this process when first called: the library's default) or
+#: ``background`` (this process runs the NumPy specification, the same bits, while ``cmosnoise compile`` builds
+#: them in a process of its own for the next run: the command line's default, so a first picture does not wait
+#: for compilers)
+COMPILE_ENV = "CMOSNOISE_COMPILE"
+MODES = ("foreground", "background")
+
+
+def compile_mode() -> str:
+    """How this process first makes compiled loops that numba's cache lacks: ``"foreground"`` or
+    ``"background"`` (:data:`COMPILE_ENV`; foreground where it is unset, or where the system has no file locks)."""
+    mode = os.environ.get(COMPILE_ENV) or "foreground"
+    if mode not in MODES:
+        from ..errors import CmosnoiseError
+
+        raise CmosnoiseError(f"{COMPILE_ENV}={mode!r}: allowed are {', '.join(MODES)}")
+    return mode if fcntl is not None else "foreground"
+
+
+def build_files() -> tuple[Path, Path]:
+    """(lock, log) of the background compile for this installation, vector width and numba cache folder.
+
+    The compiling process holds an exclusive lock on the lock file (its pid
+    written in it) for as long as it runs; the log holds what it printed.
+    Both are in the system's temporary folder, named by a digest of what
+    keys numba's cache, so two installations never wait for each other.
+    """
+    key = "|".join([str(Path(__file__).resolve().parent), sys.executable, os.environ.get("NUMBA_CACHE_DIR", ""),
+                    os.environ.get("NUMBA_CPU_NAME", ""), os.environ.get("NUMBA_CPU_FEATURES", "")])
+    base = Path(tempfile.gettempdir()) / f"cmosnoise-compile-{hashlib.sha256(key.encode()).hexdigest()[:12]}"
+    return base.with_suffix(".lock"), base.with_suffix(".log")
+
+
+#: the background compile this process started: {"process": subprocess.Popen}
+_BUILD: dict = {}
+_BUILD_LOCK = threading.Lock()
+
+
+def building() -> bool:
+    """Whether a compile of the package's loops is running now for this installation (this process's
+    background compile, or any process holding :func:`build_files`' lock)."""
+    proc = _BUILD.get("process")
+    if proc is not None and proc.poll() is None:
+        return True
+    if fcntl is None:  # pragma: no cover
+        return False
+    lock, _ = build_files()
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return False
+    except OSError:  # held exclusively: a compile runs
+        return True
+    finally:
+        os.close(fd)  # releases the shared lock, if taken
+
+
+def build_process() -> subprocess.Popen | None:
+    """The background compile this process started, or None."""
+    return _BUILD.get("process")
+
+
+def start_build() -> subprocess.Popen | None:
+    """Start ``python -m cmosnoise compile --background`` in a session of its own, once a process, unless a
+    compile runs already; returns the process it started, or None.
+
+    It outlives this process (so a short command leaves it to finish for the
+    next), writes its log to :func:`build_files`' log, and compiles in the
+    foreground mode itself.
+    """
+    with _BUILD_LOCK:
+        if "process" in _BUILD or building():
+            return None
+        _, log = build_files()
+        env = {**os.environ, COMPILE_ENV: "foreground"}
+        with open(log, "w") as fh:
+            _BUILD["process"] = subprocess.Popen(
+                [sys.executable, "-m", "cmosnoise", "compile", "--background"], stdin=subprocess.DEVNULL,
+                stdout=fh, stderr=subprocess.STDOUT, env=env, start_new_session=True, close_fds=True)
+        return _BUILD["process"]
+
+
+def compiled(what: str, *dispatchers, say: bool = True) -> bool:
+    """Whether to run ``what``'s compiled loops now (True), or the NumPy specification beside them (False: the
+    same bits). The one gate every compiled loop's caller passes.
+
+    True where the loops are in memory or in numba's on-disk cache for this
+    machine. Where they are not: in the foreground mode (:func:`compile_mode`)
+    True, after saying once that they compile (``say``); in the background
+    mode False while a background compile (started here, once a process, if
+    none runs) builds them, said once a process, and True (compiled here)
+    where that compile ended without them.
+
+    Parameters
+    ----------
+    what : str
+        What the loops are, as a message names them ("the summary's reductions").
+    *dispatchers : numba dispatchers
+        The loops (compiled with ``cache=True``).
+    say : bool
+        Whether to say that they compile here (False where the caller says it itself).
+
+    Returns
+    -------
+    bool
+        False also where numba is not installed.
+    """
+    if numba is None:
+        return False
+    if any(d.signatures for d in dispatchers):
+        return True
+    if compile_mode() == "background" and not any(cached_for_this_machine(d) for d in dispatchers):
+        started = start_build()
+        if started is not None or building():
+            _say_building(started)
+            return False
+    if say:
+        announce(what, *dispatchers)
+    return True
+
+
+def _say_building(started: subprocess.Popen | None) -> None:
+    with _ANNOUNCE_LOCK:
+        if "building" in _ANNOUNCED:
+            return
+        _ANNOUNCED.add("building")
+    _, log = build_files()
+    who = f"`cmosnoise compile` (pid {started.pid}) builds" if started is not None else "another process builds"
+    logging.getLogger(__name__).info(
+        f"the compiled loops are not built for this machine yet: this run takes the NumPy specification (the same "
+        f"bits, slower on large frames) while {who} them in the background for the next run (about a minute; "
+        f"log: {log})")
+
+
+__all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH", "cached_for_this_machine", "announce", "compiled",
+           "compile_mode", "COMPILE_ENV", "build_files", "building", "start_build", "build_process"]

@@ -716,9 +716,8 @@ def tukey_table(lam: float) -> np.ndarray:
 
 
 def fixed_map_kernels() -> dict:
-    """The compiled loops of :mod:`.fixed_maps` (say so once when they are compiled rather than loaded)."""
-    if not (_normal_map.signatures or _heavy_tail_map.signatures) and not jit.cached_for_this_machine(_heavy_tail_map):
-        _logger.info("compiling the fixed-pattern loops for this machine (once; a few seconds) ...")
+    """The compiled loops of :mod:`.fixed_maps` (:func:`.jit.compiled` says when they are compiled rather than
+    loaded)."""
     return {"normal": _normal_map, "heavy_tail": _heavy_tail_map, "offset": _offset_map, "lines": _line_draws}
 
 
@@ -770,6 +769,14 @@ def _needs_compile() -> int:
     if not held and not jit.cached_for_this_machine(_render):
         _logger.info(f"compiling the frame kernel for this machine ({jit.vectors()}; once; about half a minute on idle cores, up to two minutes on a busy machine) ...")
     return held
+
+
+def ready() -> bool:
+    """Whether :func:`render` makes frames now: numba installed, and the kernel in memory, in numba's on-disk cache,
+    or to be compiled at its first call (:func:`.jit.compiled`, the foreground mode). False where the NumPy
+    specification makes them instead (the same bits): without numba, and while a background compile builds the
+    kernel."""
+    return AVAILABLE and jit.compiled("the frame kernel", _render, say=False)  # render says it compiles, and times it
 
 
 def preload() -> bool:

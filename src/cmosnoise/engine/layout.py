@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, compiled, numba  # None where numba is not installed
 
 _BLOCK = 64
 
@@ -73,11 +73,11 @@ def cfa_pick(rgb: np.ndarray, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
     cell = np.ascontiguousarray(cell, dtype=np.int64)
     gain = np.ascontiguousarray(gain, dtype=np.float64)
     out = np.empty((rows, cols), np.result_type(rgb.dtype, np.float64))
-    if numba is None or rows * cols < 1 << 16 or out.dtype != np.float64:
+    if (numba is None or rows * cols < 1 << 16 or out.dtype != np.float64
+            or not compiled("the image layout loops", _interleave, _pick)):
         for (i, j), ch in np.ndenumerate(cell):
             out[i::2, j::2] = rgb[i::2, j::2, ch] * gain[ch]
         return out
-    announce("the image layout loops", _interleave, _pick)
     with ONE_LAUNCH:
         _pick(rgb, cell, gain, out)
     return out
@@ -109,10 +109,9 @@ def interleave_transposed(planes: list[np.ndarray]) -> np.ndarray:
     out = np.empty((rows, cols, len(planes)))
     for c, plane in enumerate(planes):
         plane = np.ascontiguousarray(plane, np.float64)
-        if numba is None or plane.size < 1 << 16:  # small: NumPy's copy is quick, and nothing compiled is loaded
-            out[..., c] = plane.T
+        if numba is None or plane.size < 1 << 16 or not compiled("the image layout loops", _interleave, _pick):
+            out[..., c] = plane.T  # small (NumPy's copy is quick, nothing compiled is loaded), or not compiled yet
             continue
-        announce("the image layout loops", _interleave, _pick)
         with ONE_LAUNCH:
             _interleave(plane, out, c)
     return out

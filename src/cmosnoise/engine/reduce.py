@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, compiled, numba  # None where numba is not installed
 
 #: how the compile message names this module's loops
 WHAT = "the summary's reductions"
@@ -122,12 +122,11 @@ def statistics(a: np.ndarray) -> dict[str, float]:
     if a.ndim != 2:
         a = a.reshape(1, -1) if a.ndim < 2 else a.reshape(-1, a.shape[-1])
     n = a.size
-    if numba is None or n < 1 << 16:  # small: NumPy's own, nothing compiled to load
-        x = a.astype(np.float64)
+    if numba is None or n < 1 << 16 or not compiled(WHAT, _rows, _join):  # small (nothing compiled to load), or
+        x = a.astype(np.float64)  # not compiled yet: NumPy's own
         values = (x.mean(), x.var(), np.mean(x * x), x.min(), x.max())
     else:
         a = np.ascontiguousarray(a)
-        announce(WHAT, _rows, _join)
         with ONE_LAUNCH:
             s = _join(_rows(a), a.shape[1])
         values = (s[0] / n, s[1] / n, s[2] / n, s[3], s[4])
@@ -173,9 +172,8 @@ def total(a: np.ndarray) -> float:
     33.0
     """
     a = np.asarray(a)
-    if numba is None or a.size < 1 << 16 or a.ndim != 2:  # small: NumPy's own, nothing compiled to load
-        return float(a.sum(dtype=np.float64))
-    announce(WHAT, _row_sums)
+    if numba is None or a.size < 1 << 16 or a.ndim != 2 or not compiled(WHAT, _row_sums):  # small, or not compiled
+        return float(a.sum(dtype=np.float64))  # yet: NumPy's own
     with ONE_LAUNCH:
         return float(_row_sums(a).sum())
 
@@ -244,7 +242,6 @@ def _order_statistics(bits: np.ndarray, ks: list[int]) -> list[np.float32]:
     selection on the high 16 bits of a key that orders as the floats do (one pass for every ``k``), then on the low
     16 bits of the keys in each ``k``'s bin (one pass per distinct bin: the two middle values share one)."""
     chunks = 16
-    announce(WHAT, _histogram)
     with ONE_LAUNCH:
         high = np.cumsum(_histogram(bits, 16, np.uint32(0), True, chunks))
     low: dict[int, np.ndarray] = {}
@@ -287,7 +284,7 @@ def median(a: np.ndarray):
     True
     """
     a = np.asarray(a)
-    if numba is None or a.dtype != np.float32 or a.size < 1 << 16:
+    if numba is None or a.dtype != np.float32 or a.size < 1 << 16 or not compiled(WHAT, _histogram):
         return np.median(a)
     bits = np.ascontiguousarray(a).reshape(-1).view(np.uint32)
     n = bits.size
@@ -358,13 +355,12 @@ def positions_above(values: np.ndarray, threshold: float) -> tuple[np.ndarray, n
     (array([0, 1]), array([1, 0]))
     """
     values = np.asarray(values)
-    if numba is None or values.size < 1 << 16 or values.ndim != 2:
+    if numba is None or values.size < 1 << 16 or values.ndim != 2 or not compiled(WHAT, _count_above, _fill_above):
         r, c = np.nonzero(values > threshold)
         return r.astype(np.int64), c.astype(np.int64)
     values = np.ascontiguousarray(values)
     # NumPy compares a float array with a Python float in the array's type (NEP 50), an integer array in float64
     threshold = values.dtype.type(threshold) if values.dtype.kind == "f" else float(threshold)
-    announce(WHAT, _count_above, _fill_above)
     with ONE_LAUNCH:
         counts = _count_above(values, threshold)
         start = np.zeros(counts.size, np.int64)
@@ -410,13 +406,12 @@ def excess_positions(charge: np.ndarray, photo: np.ndarray, read_var: float, k_s
     >>> excess_positions(charge, photo, 1.0, 5.0, 0.1, 100.0)
     (array([0]), array([1]), False)
     """
-    if numba is None or charge.size < 1 << 16:
+    if numba is None or charge.size < 1 << 16 or not compiled(WHAT, _excess):
         photo = np.asarray(photo).astype(np.float64)
         excess = charge - photo - k_sigma * np.sqrt(photo + read_var)
         r, c = np.nonzero(excess / t_int > threshold)
         return r.astype(np.int64), c.astype(np.int64), bool(photo.size and photo.max() > 0)
     keep = np.empty(charge.shape, np.bool_)
-    announce(WHAT, _excess)
     with ONE_LAUNCH:
         lit = bool(_excess(np.ascontiguousarray(charge), np.ascontiguousarray(photo), float(read_var),
                            float(k_sigma), float(t_int), float(threshold), keep))

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, compiled, numba  # None where numba is not installed
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
@@ -68,13 +68,13 @@ def mosaic(planes: np.ndarray, columns: sp.csr_matrix, cell: np.ndarray, gain: n
     cell = np.ascontiguousarray(cell, dtype=np.int64)
     gain = np.ascontiguousarray(gain, dtype=np.float64)
     rows, cols = planes.shape[1], columns.shape[0]
-    if numba is None or rows * cols < 1 << 16:  # small, or nothing compiled: scipy's products and a pick
+    if numba is None or rows * cols < 1 << 16 or not compiled("the scene's resampling through the CFA", _mosaic):
+        # small, or nothing compiled (yet): scipy's products and a pick
         out = np.empty((rows, cols))
         for (i, j), c in np.ndenumerate(cell):
             out[i::2, j::2] = (columns @ planes[c].T).T[i::2, j::2] * gain[c]
         return out
     out = np.empty((rows, cols))
-    announce("the scene's resampling through the CFA", _mosaic)
     with ONE_LAUNCH:
         _mosaic(planes, np.ascontiguousarray(columns.data, np.float64), columns.indices.astype(np.int64),
                 columns.indptr.astype(np.int64), cell, gain, out)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from .jit import ONE_LAUNCH, announce, compiled, numba  # None where numba is not installed
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
@@ -122,14 +122,14 @@ def framed_convolve(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """
     x = np.ascontiguousarray(x)
     k = np.asarray(kernel, dtype=x.dtype).astype(np.float64)
-    if numba is None or x.size < 1 << 16:  # small (a PRNU solve's 16 x 16 fields): ndimage is quicker than a launch
+    if numba is None or x.size < 1 << 16 or not compiled("the crosstalk stencil", _framed):
+        # small (a PRNU solve's 16 x 16 fields: ndimage is quicker than a launch), or not compiled yet
         from scipy import ndimage
 
         return ndimage.convolve(np.pad(x, 1), k.astype(x.dtype), mode="constant")
     flipped = k[::-1, ::-1]  # a convolution is the correlation with the flipped kernel
     dr, dc = np.nonzero(np.abs(flipped) > np.finfo(np.float64).eps)
     out = np.empty((x.shape[0] + 2, x.shape[1] + 2), x.dtype)
-    announce("the crosstalk stencil", _framed)
     with ONE_LAUNCH:
         _framed(x, dr.astype(np.int64), dc.astype(np.int64), np.ascontiguousarray(flipped[dr, dc]), out)
     return out

@@ -166,7 +166,7 @@ class Processor:
         """
         raw = self.check_raw(raw)
         one_pass = (half or (self.settings.demosaic == "bilinear" and min(raw.shape) > reconstruction.EDGE_PAD))
-        if (one_pass and not self.mono and reconstruction.COMPILED
+        if (one_pass and not self.mono and reconstruction.one_pass_ready()
                 and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None)):
             if pre:
                 self.check_shape(raw.shape)

@@ -205,13 +205,25 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ pictures in one pass
-from ..engine.jit import ONE_LAUNCH, announce, numba  # noqa: E402 - numba is None where it is not installed; the section's own import
+from ..engine.jit import ONE_LAUNCH, announce, compiled, numba  # noqa: E402 - numba is None where it is not installed; the section's own import
 
 #: whether :func:`superpixel_srgb8` and :func:`bilinear_srgb8` can run here (without numba, Processor takes the
 #: steps one by one)
 COMPILED = numba is not None
 #: how the compile message names the one-pass picture loops
 _PICTURE_LOOPS = "the pictures' demosaicing to sRGB"
+
+
+def one_pass_ready() -> bool:
+    """Whether :func:`superpixel_srgb8` and :func:`bilinear_srgb8` run now: numba installed and the loops in memory
+    or numba's cache, or compiled here (:func:`cmosnoise.engine.jit.compiled`; False while a background compile
+    builds them, and Processor takes the steps one by one, the same bits).
+
+    Returns
+    -------
+    bool
+    """
+    return COMPILED and compiled(_PICTURE_LOOPS, _bilinear_srgb8, _superpixel_srgb8)
 
 if numba is not None:
     @numba.njit(inline="always", fastmath=False, error_model="numpy")

@@ -796,7 +796,7 @@ class Exposure:
             raw, e = raw.copy_to_host()[0], (e.copy_to_host()[0] if e is not None else None)
             timings["frame_kernel"] += time.perf_counter() - t0
             return raw, e
-        if keep is None and kernel.AVAILABLE:
+        if keep is None and kernel.ready():
             raw, e = kernel.render(self.plan(), k, region, electrons, timings)
             timings["frame_kernel"] += time.perf_counter() - t0
             return self._stick(raw, region, None), e

@@ -1,0 +1,104 @@
+"""``cmosnoise compile``: the package's compiled loops built for this machine now, into numba's on-disk cache.
+
+Every compiled loop (the frame kernel, the fixed-pattern loops, the summary's
+reductions, the pictures' demosaicing, ...) is compiled for the machine it
+first runs on and kept in numba's cache; later runs load it. On the command
+line a run that finds them missing does not wait for the compilers (about
+40 s of a 2-core machine for the default run, measured with ``time``): it
+makes its frames with the NumPy specification (the same bits) and starts this
+command in the background, in a session of its own, for the next run
+(:func:`cmosnoise.engine.jit.compiled`). Run it yourself to build
+everything at once, e.g. in a container image after ``pip install``.
+
+What it compiles is what two runs use, and their ground truth (a data
+set's): the default sensor with processing, and a sensor with every stage
+on (:data:`WARM_UPS`). A configuration whose
+arrays take other types compiles those variants at its first run, and says so.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from ..engine import jit
+
+#: every stage on (the random telegraph loops, the Tukey-lambda table, pixel offsets with their tail, the
+#: nonlinear curve, the black level per frame, defects), beside the default sensor
+EVERY_STAGE = {"sensor": {"frame_rate_hz": 30}, "column_noise": {"gain_sigma_pct": 1.0},
+               "row_noise": {"fixed_sigma_e": 0.5},
+               "pixel_offset": {"enabled": True, "sigma_e": 4.0,
+                                "tail": {"ppm_above": 200, "threshold_e": 20, "max_e": 200}},
+               "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.2, 0.6]},
+               "black_level": {"channel_offsets_dn": [1.5, -0.5, 0.25, 2.0], "frame_sigma_dn": 0.3},
+               "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.2, "shape": -0.05},
+               "source_follower": {"rts": {"enabled": True, "ppm": 1000}},
+               "dark_current": {"rts": {"enabled": True, "ppm": 50}},
+               "defects": {"enabled": True}}
+
+#: (what, the configuration's changes from the defaults): the runs whose loops are built, each 2 frames with
+#: processing (the run statistics compare frames; processed.png takes the pictures' loops)
+WARM_UPS = (("the default sensor", {}), ("every stage on", EVERY_STAGE))
+
+
+def build(background: bool = False, say: Callable[[str], None] = print) -> dict[str, float] | None:
+    """Compile (or load) every loop the runs of :data:`WARM_UPS` use, holding :func:`.jit.build_files`' lock.
+
+    Parameters
+    ----------
+    background : bool
+        Started by a run (:func:`.jit.start_build`): at a lower priority, and
+        nothing done where another process holds the lock. Otherwise it waits
+        for that process, then loads what it built.
+    say : callable
+        Told each step, one line each.
+
+    Returns
+    -------
+    dict or None
+        Seconds each warm-up run took (its compile included); None where a
+        background build found another running.
+    """
+    from ..analysis import ground_truth
+    from ..config.loading import load_config
+    from ..model.sensor import Sensor
+    from .run import simulate
+
+    lock, _ = jit.build_files()
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    mode = os.environ.get(jit.COMPILE_ENV)
+    os.environ[jit.COMPILE_ENV] = "foreground"  # this process is the one that compiles
+    try:
+        if jit.fcntl is not None:
+            try:
+                jit.fcntl.flock(fd, jit.fcntl.LOCK_EX | jit.fcntl.LOCK_NB)
+            except OSError:
+                if background:
+                    say("another process is compiling the loops for this installation: nothing to do")
+                    return None
+                say("another process is compiling the loops for this installation: waiting for it ...")
+                jit.fcntl.flock(fd, jit.fcntl.LOCK_EX)
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        if background:
+            os.nice(10)  # the run that started it goes first
+        times = {}
+        with tempfile.TemporaryDirectory(prefix="cmosnoise-compile-") as tmp:
+            for i, (what, extra) in enumerate(WARM_UPS):
+                say(f"{what}: compiling what its run uses (or loading it from numba's cache) ...")
+                t0 = time.perf_counter()
+                config = load_config(extra={**extra, "run": {"frames": 2}, "processing": {"enabled": True}})
+                simulate(config, Path(tmp) / str(i))
+                ground_truth.expected_raw(Sensor(config).expose())  # a data set's truth
+                times[what] = time.perf_counter() - t0
+                say(f"{what}: {times[what]:.1f} s")
+        return times
+    finally:
+        os.close(fd)  # releases the lock
+        if mode is None:
+            os.environ.pop(jit.COMPILE_ENV, None)
+        else:
+            os.environ[jit.COMPILE_ENV] = mode

@@ -1,0 +1,115 @@
+"""A first run on the command line does not wait for the compilers (#63): the NumPy specification makes its
+frames, the same bits, while `cmosnoise compile` builds the loops in the background; `cmosnoise compile` alone
+builds them, and a run after it compiles nothing."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+
+from cmosnoise.app.cli import run as cli_run
+from cmosnoise.engine import jit
+
+SMALL = ["--set", "sensor.width=64", "--set", "sensor.height=48", "--no-progress"]
+
+
+def _env(tmp_path, **extra) -> dict:
+    """A command line's environment as a user's: the console script's default mode (background), an empty
+    compile cache and a temporary folder of the test's own (the build's lock and log are kept there)."""
+    env = {k: v for k, v in os.environ.items() if k != jit.COMPILE_ENV}
+    (tmp_path / "tmp").mkdir(exist_ok=True)
+    return {**env, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "TMPDIR": str(tmp_path / "tmp"), **extra}
+
+
+def _simulate(env, out, *args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cmosnoise", "simulate", *SMALL, *args, "--out", str(out)], env=env,
+                          capture_output=True, text=True, timeout=600)
+
+
+def _pid_of(stderr: str) -> int:
+    return int(stderr.split("(pid ")[1].split(")")[0])
+
+
+def _stop_group(pid: int) -> None:
+    """End the background compile (the leader of a session of its own) and everything it started, by its id."""
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        return
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        try:  # a child of a child: init reaps it once the process that started it has exited
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return
+        if Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z":
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"the background compile {pid} did not end")
+
+
+@pytest.mark.skipif(jit.numba is None or jit.fcntl is None, reason="needs numba and POSIX file locks")
+def test_a_first_run_takes_the_numpy_specification_while_the_loops_compile_in_the_background(tmp_path):
+    """With nothing compiled for this machine, `cmosnoise simulate` says that it takes the NumPy specification and
+    which process compiles; it writes the same raw frames as a run that compiles in its own process; the
+    background process is `cmosnoise compile --background`, holding the build's lock with its pid in it; a second
+    run meanwhile starts no second compile."""
+    env = _env(tmp_path)
+    first = _simulate(env, tmp_path / "a", "--frames", "2")
+    pid = _pid_of(first.stderr) if "(pid " in first.stderr else None
+    try:
+        assert first.returncode == 0, first.stderr
+        assert "takes the NumPy specification" in first.stderr and pid is not None, first.stderr
+        assert "compiling the frame kernel" not in first.stderr, first.stderr
+        cmdline = Path(f"/proc/{pid}/cmdline").read_text().split("\0")
+        assert cmdline[-4:-1] == ["cmosnoise", "compile", "--background"], cmdline
+        assert os.getpgid(pid) == pid  # a session of its own: it outlives the run, and one signal ends it
+        (log,) = (tmp_path / "tmp").glob("cmosnoise-compile-*.log")  # in the run's temporary folder
+        lock = log.with_suffix(".lock")
+        deadline = time.monotonic() + 60
+        while (not lock.exists() or lock.read_text().strip() != str(pid)) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert lock.read_text().strip() == str(pid)
+        second = _simulate(env, tmp_path / "b")
+        assert second.returncode == 0, second.stderr
+        assert "another process builds them" in second.stderr and "(pid " not in second.stderr, second.stderr
+        # the same bits as a run whose loops compile (or load) in its own process, this one's
+        assert cli_run(["simulate", *SMALL, "--frames", "2", "--out", str(tmp_path / "c")]) == 0
+        assert np.array_equal(tifffile.imread(tmp_path / "a" / "raw.tiff"), tifffile.imread(tmp_path / "c" / "raw.tiff"))
+    finally:
+        if pid is not None:
+            _stop_group(pid)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(jit.numba is None or jit.fcntl is None, reason="needs numba and POSIX file locks")
+def test_cmosnoise_compile_builds_what_a_run_then_loads_without_compiling(tmp_path):
+    """`cmosnoise compile` in an empty cache builds the loops (saying what, and how long); a run afterwards, in the
+    console script's background mode, says nothing of compiling, and its frame comes from the frame kernel."""
+    env = _env(tmp_path)
+    built = subprocess.run([sys.executable, "-m", "cmosnoise", "compile"], env=env, capture_output=True, text=True,
+                           timeout=900)
+    assert built.returncode == 0, built.stderr
+    assert "compiling the frame kernel" in built.stderr and "later runs load the loops" in built.stdout, built.stdout
+    after = _simulate(env, tmp_path / "a")
+    assert after.returncode == 0, after.stderr
+    assert "compil" not in after.stderr and "NumPy" not in after.stderr, after.stderr
+    import json
+
+    stages = json.loads((tmp_path / "a" / "summary.json").read_text())["timings_s"]["stages"]
+    assert "frame_kernel" in stages and "frame_numpy" not in stages, stages
+
+
+def test_an_unknown_compile_mode_is_refused_in_one_line(monkeypatch):
+    """CMOSNOISE_COMPILE takes foreground or background; anything else is named with what is allowed."""
+    from cmosnoise.errors import CmosnoiseError
+
+    monkeypatch.setenv(jit.COMPILE_ENV, "later")
+    with pytest.raises(CmosnoiseError, match="CMOSNOISE_COMPILE='later': allowed are foreground, background"):
+        jit.compile_mode()
