@@ -154,6 +154,47 @@ def test_the_iso_15739_dynamic_range_is_saturation_over_the_snr1_signal():
     assert dr["db"] == pytest.approx(20 * math.log10(8000 / s1), rel=1e-6)
 
 
+def test_the_iso_12232_noise_speed_is_ten_lux_seconds_over_the_exposure_at_snr_40_and_10():
+    """A monochrome sensor with shot noise alone (and the quantizer's q = 1/12 DN^2 in e-^2): one picture's SNR
+    is s / sqrt(s + q), s the grey's photo-charge, which reaches 40 at s40 = (1600 + sqrt(1600^2 + 6400 q)) / 2
+    and 10 at s10 likewise; s is proportional to the lux, so the illuminances are s40 / (s per lux) and the
+    speeds 10 / H, H = the grey's focal-plane exposure there (the camera equation times the integration time).
+
+    The measured SNR: the patch's n pixels' variance in each of F frames, averaged, has relative standard error
+    sqrt(2 / (F (n - 1))); the SNR half that, and the crossing's lux, proportional to SNR^2 here, the whole of it.
+    log SNR is linear in log lux but for q / s < 1e-4 of curvature, far inside that. Within 5 of them."""
+    from conftest import quiet_config
+
+    cfg = quiet_config(shot_noise={"enabled": True}, sensor={"cfa": "none", "quantum_efficiency": 0.5},
+                       light={"enabled": True, "illuminance_lux": 1.0})
+    frames, lux = 4, (1.0, 10.0, 100.0, 1000.0, 10000.0)
+    r = quality.measure(cfg, lux, frames=frames, sizes=SMALL, metrics=["snr_luminance_picture"])
+    cap = quality.capture(cfg, 1.0, 2, SMALL, charts_=("flat",))
+    r0, r1 = cap.patch()[0].start, cap.patch()[0].stop
+    c0, c1 = cap.patch()[1].start, cap.patch()[1].stop
+    n = (r1 - r0) * (c1 - c0)
+    per_lux = float(np.mean(cap.shots["flat"].photo_mean_e[r0:r1, c0:c1]))  # e- of the grey at 1 lux
+    k = cap.sensors["flat"].transfer.gain_dn_per_e
+    q = 1 / 12 / k**2
+    op = cfg.optics
+    h_per_lux = (math.pi * op.transmittance / (4 * op.f_number**2)) * 0.18 / math.pi * cfg.exposure.integration_time_s
+    rel = 5 * math.sqrt(2 / (frames * (n - 1)))
+    ns = r["noise_speed"]
+    assert ns["lux_s_per_lux"] == pytest.approx(h_per_lux, rel=1e-12)
+    for name, target in (("excellent", 40.0), ("acceptable", 10.0)):
+        s_t = (target**2 + math.sqrt(target**4 + 4 * target**2 * q)) / 2
+        expected_lux = s_t / per_lux
+        assert ns[name]["snr"] == target
+        assert abs(ns[name]["lux"] / expected_lux - 1) < rel, (name, ns[name], expected_lux)
+        assert ns[name]["speed"] == pytest.approx(10.0 / (ns[name]["lux"] * h_per_lux), rel=1e-12)
+    # at 10 000 lux the grey clips: its noise is not measured (not an SNR of the clip's zero noise), and said
+    assert r["metrics"]["snr_luminance_picture"][-1] is None
+    assert any("10000 lux: the grey patch reaches saturation" in n for n in r["notes"]), r["notes"]
+    # a curve that does not reach 40 gives no S40
+    short = quality.measure(cfg, lux[:2], frames=frames, sizes=SMALL, metrics=["snr_luminance_picture"])
+    assert short["noise_speed"]["excellent"]["speed"] is None
+
+
 def test_the_threshold_search_finds_each_instances_crossing():
     """The largest column FPN at which column banding stays below 1 JND at 10 lux: each sensor instance keeps its
     random numbers as the FPN moves, so its banding is one curve, close to a line in the FPN (the threshold plot

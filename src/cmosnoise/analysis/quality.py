@@ -146,6 +146,24 @@ class Metric:
 _SOURCES = {"flat": f"flat:{GREY!r}", "edge": "edge", "colorchecker": "colorchecker"}
 
 
+def _grey_clipped(c: Captures) -> bool:
+    """Whether the grey patch reaches saturation (said once in the notes): its noise would read the clip."""
+    if "grey_clipped" not in c.cache:
+        r, col = c.patch()
+        c.cache["grey_clipped"] = c.clipped("flat", [(r.start, r.stop, col.start, col.stop)])
+        if c.cache["grey_clipped"]:
+            c.notes.append(f"noise at {c.lux:g} lux: the grey patch reaches saturation; its SNR, visual noise and "
+                           "banding are not measured")
+    return c.cache["grey_clipped"]
+
+
+def _on_grey(compute: Callable[[Captures], float]) -> Callable[[Captures], float | None]:
+    """``compute`` of the grey patch's noise, None where the patch clips (:func:`_grey_clipped`)."""
+    def guarded(c: Captures) -> float | None:
+        return None if _grey_clipped(c) else compute(c)
+    return guarded
+
+
 def _green_snr(c: Captures) -> float:
     return snr_light.measured_snr(c.sensors["flat"], c.shots["flat"], c.raw["flat"])
 
@@ -158,6 +176,11 @@ def _green_snr_predicted(c: Captures) -> float:
 def _luminance_snr(c: Captures) -> float:
     y = c.luminance["flat"][(slice(None), *c.patch())]
     return float(y.mean()) / math.sqrt(float(y.var(axis=0, ddof=1).mean()))
+
+
+def _luminance_snr_picture(c: Captures) -> float:
+    y = c.luminance["flat"][(slice(None), *c.patch())]
+    return float(y.mean()) / math.sqrt(float(y.reshape(y.shape[0], -1).var(axis=1, ddof=1).mean()))
 
 
 def _visual(c: Captures) -> float:
@@ -236,17 +259,21 @@ def _colour_value(key: str) -> Callable[[Captures], float | None]:
 
 #: the metrics, in the order tables show them
 METRICS: list[Metric] = [
-    Metric("snr_green", "SNR, raw green", "", "higher", "flat", _green_snr,
+    Metric("snr_green", "SNR, raw green", "", "higher", "flat", _on_grey(_green_snr),
            "mean photo-charge over the temporal noise of the green pixels (snr_light)"),
     Metric("snr_green_predicted", "SNR, raw green (model)", "", "higher", "flat", _green_snr_predicted,
            "noise_budget's temporal and after-gain variances at the patch's charge"),
-    Metric("snr_luminance", "SNR, output luminance", "", "higher", "flat", _luminance_snr,
+    Metric("snr_luminance", "SNR, output luminance", "", "higher", "flat", _on_grey(_luminance_snr),
            "mean Y over its temporal noise after the processing and sRGB's luminance weights"),
-    Metric("visual_noise_l", "visual luminance noise", "L*", "lower", "flat", _visual,
+    Metric("snr_luminance_picture", "SNR, output luminance, one picture", "", "higher", "flat",
+           _on_grey(_luminance_snr_picture), "mean Y over Y's standard deviation across the patch in one frame (temporal "
+           "and fixed-pattern noise, as one picture shows them), frames averaged; ISO 12232's noise-based speed "
+           "reads it"),
+    Metric("visual_noise_l", "visual luminance noise", "L*", "lower", "flat", _on_grey(_visual),
            "CSF-weighted sigma of L* (ISO 15739 Annex B's luminance channel, CPIQ CSF; visual_noise)"),
-    Metric("banding_columns", "column banding", "JND", "lower", "flat", _banding("columns"),
+    Metric("banding_columns", "column banding", "JND", "lower", "flat", _on_grey(_banding("columns")),
            "column means' CSF-weighted sigma of L* over the just-detectable 3 % noise (visual_noise.banding)"),
-    Metric("banding_rows", "row banding", "JND", "lower", "flat", _banding("rows"),
+    Metric("banding_rows", "row banding", "JND", "lower", "flat", _on_grey(_banding("rows")),
            "row means' CSF-weighted sigma of L* over the just-detectable 3 % noise (visual_noise.banding)"),
     Metric("mtf50", "MTF50", "cy/px", "higher", "edge", _sfr_value("mtf50"),
            "ISO 12233 e-SFR of the output luminance (sfr)"),
@@ -367,7 +394,8 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
     dict
         ``lux``; ``metrics``: name -> list of values (None where the data cannot give one); ``snr10_lux``,
         ``snr1_lux`` (measured, interpolated; None outside the curve) and their ``_predicted``;
-        ``dynamic_range`` (ISO 15739's form, :func:`.snr_light.dynamic_range`); the conditions
+        ``dynamic_range`` (ISO 15739's form, :func:`.snr_light.dynamic_range`); ``noise_speed`` (ISO 12232's
+        noise-based speeds of the one-picture luminance SNR, :func:`.snr_light.noise_based_speed`); the conditions
         (``f_number``, ``integration_time_s``, ``illuminant``, ``frames``, ``seed``, viewing); ``sfr`` (the curve at
         the brightest illuminance whose edge does not clip) and ``colour`` (the per-patch errors likewise), where
         measured; ``notes`` (why a metric is missing, what it assumes); ``light_switched_on``.
@@ -419,6 +447,9 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
             out[key] = snr_light.crossing_lux(lux, [s or 0.0 for s in out["metrics"]["snr_green"]], target)
             out[key + "_predicted"] = snr_light.predicted_crossing_lux(config, target, flat, GREY, seed)
         out["dynamic_range"] = snr_light.dynamic_range(config, flat, GREY, seed, out["snr1_lux_predicted"])
+    if "snr_luminance_picture" in out["metrics"]:
+        out["noise_speed"] = snr_light.noise_based_speed(
+            config, lux, [s or 0.0 for s in out["metrics"]["snr_luminance_picture"]], GREY)
     if edge_cap is not None:
         r = edge_cap.cache["sfr"]
         keep = r.frequency <= 1.0

@@ -34,7 +34,17 @@ from ..errors import CmosnoiseError
 from ..model.sensor import Sensor
 from . import noise_budget
 
-__all__ = ["snr_curve", "crossing_lux", "predicted_crossing_lux"]
+__all__ = ["snr_curve", "crossing_lux", "predicted_crossing_lux", "noise_based_speed", "NOISE_SPEED_SNR",
+           "NOISE_SPEED_K"]
+
+#: ISO 12232's signal-to-noise ratios of the noise-based speeds: the first "excellent" picture and the first
+#: "acceptable" one (judged on prints of about 70 sensor pixels per cm seen from 25 cm; ISO 12232:2019, note 3 of
+#: the noise-based speed's clause, read in the AS ISO 12232:2019 excerpt)
+NOISE_SPEED_SNR = {"excellent": 40.0, "acceptable": 10.0}
+#: K of ISO 12232's noise-based speed S = K / H, lux-seconds: it places the exposures at a mid-tone, about an
+#: 18 % grey of a 160:1 scene (the same excerpt's note 1 names K; its value 10 is read in JPEG XL's
+#: enc_photon_noise.cc, "ISO = 10 lx s / H", not in the standard's own formula)
+NOISE_SPEED_K = 10.0
 
 
 def _sensor(config, lux: float, shape, seed: int) -> Sensor:
@@ -259,3 +269,56 @@ def dynamic_range(config, shape=(96, 128), reflectance: float = 0.18, seed: int 
     ratio = sat / low if low > 0 else math.inf
     return {"saturation_lux": sat, "snr1_lux": low, "ratio": ratio,
             "db": 20 * math.log10(ratio) if 0 < ratio < math.inf else None}
+
+
+def noise_based_speed(config, lux, snr, reflectance: float = 0.18) -> dict:
+    """ISO 12232's noise-based speeds of a measured SNR curve: ``S = K / H`` (:data:`NOISE_SPEED_K`), ``H`` the
+    focal-plane exposure (lux-seconds) at which the patch's SNR first reaches 40 ("excellent") and 10
+    ("acceptable"), :data:`NOISE_SPEED_SNR`.
+
+    ``H`` is the patch's focal-plane illuminance on the optical axis (the camera equation the configuration
+    chooses, :func:`cmosnoise.model.light.camera_factor`, times its luminance ``reflectance x lux / pi``) times
+    the integration time. The crossing is :func:`crossing_lux`'s. ISO 12232 takes an incremental SNR (the
+    output's slope against exposure times the exposure, over the noise): for a linear output whose black is
+    subtracted, as ``quality``'s luminance, that is its mean over its noise. For a colour camera the standard adds
+    the noise of the colour-difference signals to the luminance's; their weights were not read, so a colour
+    camera's speed here counts the luminance noise alone (an upper bound of the standard's).
+
+    Parameters
+    ----------
+    config : Config
+        The sensor, its lens (``optics``) and exposure time.
+    lux : sequence of float
+        Illuminances on the scene, lux, increasing.
+    snr : sequence of float
+        The SNR at each.
+    reflectance : float
+        The patch's reflectance.
+
+    Returns
+    -------
+    dict
+        For each of ``excellent`` and ``acceptable``: ``{"snr": 40 or 10, "lux": scene illuminance or None,
+        "exposure_lux_s": H or None, "speed": S or None}`` (None where the curve does not reach it), and
+        ``lux_s_per_lux``: H per lux on the scene.
+
+    Examples
+    --------
+    >>> from cmosnoise import load_config
+    >>> from cmosnoise.analysis.snr_light import noise_based_speed
+    >>> c = load_config(overrides=["optics.f_number=2", "exposure.integration_time_s=0.01"])
+    >>> s = noise_based_speed(c, [1.0, 100.0, 10000.0], [1.0, 10.0, 100.0])
+    >>> round(s["acceptable"]["lux"], 6), round(s["acceptable"]["speed"], 1)
+    (100.0, 987.7)
+    """
+    from ..model.light import camera_factor
+
+    op = config.optics
+    per_lux = camera_factor(op.f_number, op.transmittance, op.magnification, op.camera_equation) \
+        * reflectance / math.pi * config.exposure.integration_time_s
+    out = {"lux_s_per_lux": per_lux}
+    for name, target in NOISE_SPEED_SNR.items():
+        at = crossing_lux(lux, snr, target)
+        h = None if at is None else at * per_lux
+        out[name] = {"snr": target, "lux": at, "exposure_lux_s": h, "speed": None if not h else NOISE_SPEED_K / h}
+    return out

@@ -173,6 +173,11 @@ def summary_lines(doc: dict) -> list[str]:
         if dr and dr.get("db") is not None:
             out.append(f"{who}dynamic range (ISO 15739's form: the grey's saturation at {dr['saturation_lux']:.4g} "
                        f"lux over its SNR 1 at {dr['snr1_lux']:.3g} lux, scene-referred) {dr['db']:.1f} dB")
+        ns = r.get("noise_speed")
+        if ns:
+            out.append(f"{who}ISO 12232 noise-based speed (the output luminance's noise in one picture; a colour "
+                       f"camera's colour-difference noise not counted): S40 {_speed(ns['excellent'])}, S10 "
+                       f"{_speed(ns['acceptable'])}")
         if r.get("light_switched_on"):
             out.append(f"{who}light was off in the configuration: switched on with its light section's defaults "
                        f"({r['illuminant']}, f/{r['f_number']:g}), each illuminance set in turn")
@@ -188,6 +193,12 @@ def summary_lines(doc: dict) -> list[str]:
                    f"paired differences over {doc['instances']} sensor instances; * clear (beyond {CLEAR_Z:g} "
                    "standard errors)")
     return out
+
+
+def _speed(point: dict) -> str:
+    if point["speed"] is None:
+        return f"beyond the lux measured (SNR {point['snr']:g} not reached)"
+    return f"{point['speed']:.3g} (SNR {point['snr']:g} at {point['lux']:.3g} lux, H {point['exposure_lux_s']:.3g} lux s)"
 
 
 def _lux(v) -> str:
