@@ -508,6 +508,42 @@ def render_sweep_fig9(d: dict) -> str:
     return "\n".join(lines)
 
 
+#: a yield on visibility: the column FPN at which banding stays below 1 JND at 10 lux, over sensor instances
+QUALITY_YIELD = {"set": ["sensor.quantum_efficiency=0.6"], "vary": ["column_noise.vfpn_sigma_e=1,2,3,4"],
+                 "instances": 10, "quality_lux": 10.0, "spec": ["banding_columns<=1"]}
+
+
+def compute_quality_yield() -> dict:
+    """`cmosnoise sweep --quality-lux 10 --spec banding_columns<=1` over the column FPN: each point's yield and its
+    banding's spread over the instances (the default sensor with a flat QE of 0.6)."""
+    import tempfile
+
+    from cmosnoise import load_config
+    from cmosnoise.app import sweep as sw
+
+    d = QUALITY_YIELD
+    with tempfile.TemporaryDirectory() as tmp:
+        sw.run(load_config(overrides=d["set"]), d["vary"], d["instances"], Path(tmp) / "s", specs=d["spec"],
+               workers=2, quality_lux=d["quality_lux"], metrics=["banding_columns"])
+        import pandas as pd
+
+        summary = pd.read_csv(Path(tmp) / "s" / "summary.csv").to_dict(orient="records")
+    names = {"vfpn_sigma_e": "column_noise.vfpn_sigma_e", "yield": "yield", "yield_lo": "yield_lo",
+             "yield_hi": "yield_hi", "banding_mean": "banding_columns_mean", "banding_p5": "banding_columns_p5",
+             "banding_p95": "banding_columns_p95"}
+    points = [{k: float(r[v]) for k, v in names.items()} for r in summary]
+    return {"command": "python docs/readme_numbers.py compute quality_yield", **d, "points": points}
+
+
+def render_quality_yield(d: dict) -> str:
+    lines = ["| column FPN (e-) | column banding at 10 lux, JND: mean (5th to 95th percentile) | "
+             "yield of banding <= 1 JND, 95 % interval |", "|---|---|---|"]
+    for p in d["points"]:
+        lines.append(f"| {p['vfpn_sigma_e']:g} | {p['banding_mean']:.2f} ({p['banding_p5']:.2f} to "
+                     f"{p['banding_p95']:.2f}) | {p['yield']:.1f} ({p['yield_lo']:.2f} to {p['yield_hi']:.2f}) |")
+    return "\n".join(lines)
+
+
 def render_sweep_speed(d: dict) -> str:
     lines = [f"Measured with `{d['command']}` ({d['machine']}):", "",
              "| how | instances / s | against the plain loop |", "|---|---|---|"]
@@ -816,6 +852,7 @@ SECTIONS = {
     "kernel_parts_avx2": (None, render_kernel_parts),
     "explore": (None, render_explore),
     "sweep_fig9": (compute_sweep_fig9, render_sweep_fig9),
+    "quality_yield": (compute_quality_yield, render_quality_yield),
     "sweep_speed": (None, render_sweep_speed),
     "fit_speed": (None, render_fit_speed),
     "fit_coverage": (None, render_fit_coverage),

@@ -179,6 +179,46 @@ def test_python_api_returns_a_dataframe():
     assert all(math.isfinite(v) for v in df["temporal_noise_e"])
 
 
+def test_image_quality_metrics_are_sweep_responses_with_their_own_numbers(tmp_path):
+    """--quality-lux adds `quality`'s metric registry to every row: the same numbers as `quality.measure` of that
+    point's configuration and instance seed; a --spec on one of them makes the yield; the page names them with
+    their lux and unit. More column FPN gives more column banding on every instance (common random numbers)."""
+    from cmosnoise.analysis import quality
+
+    qe = ["--set", "sensor.quantum_efficiency=0.6"]
+    r = cli("sweep", *SMALL, *qe, "--vary", "column_noise.vfpn_sigma_e=1,6", "--instances", "2", "--frames", "2",
+            "--quality-lux", "10", "--spec", "banding_columns<=1", "--workers", "1", "--out", tmp_path / "s")
+    assert r.returncode == 0, r.stderr
+    df = _sorted(tmp_path / "s" / "results.csv")
+    names = [m.name for m in quality.METRICS]
+    assert set(names) <= set(df.columns)
+    row = df.iloc[3]  # point 1 (6 e-), instance 1 (a row of floats: its seed is read from its own column)
+    cfg = sw.point_config(load_config(overrides=["sensor.width=64", "sensor.height=48", "sensor.quantum_efficiency=0.6"]),
+                          {"column_noise.vfpn_sigma_e": 6})
+    own = quality.measure(cfg, [10.0], frames=2, seed=int(df["seed"].iloc[3]))["metrics"]
+    for name in names:
+        v = own[name][0]
+        assert (math.isnan(row[name]) if v is None else row[name] == v), (name, row[name], v)
+    for j in (0, 1):
+        b = df[df["instance"] == j]["banding_columns"].tolist()
+        assert b[1] > b[0], b
+    assert df["pass"].tolist() == [int(v <= 1) for v in df["banding_columns"]]
+    page = (tmp_path / "s" / "index.html").read_text()
+    assert "column banding at 10 lux, JND" in page.replace("\u200b", "")
+    assert (tmp_path / "s" / "banding_columns.png").exists()
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--spec", "banding_columns<=1"], "(with --quality-lux)"),
+    (["--quality-lux", "10"], "--quality-lux at sweep point (the base): light.enabled needs"),
+    (["--quality-lux", "-3", "--set", "sensor.quantum_efficiency=0.5"], "--quality-lux -3"),
+])
+def test_quality_responses_are_checked_before_any_task(tmp_path, args, needle):
+    r = cli("sweep", *SMALL, "--instances", "2", *args, "--out", tmp_path / "s")
+    assert r.returncode == 2 and needle in r.stderr, r.stderr
+    assert not (tmp_path / "s").exists()
+
+
 @pytest.mark.slow
 def test_a_worker_that_dies_mid_sweep_changes_nothing(tmp_path):
     """Two separately started workers; one is killed (SIGKILL) while tasks run: its tasks run again elsewhere."""

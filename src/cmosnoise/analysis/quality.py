@@ -303,6 +303,19 @@ def with_light(config):
     return merge_updates(config, {"light": {"enabled": True, "illuminance_lux": 100.0}}), True
 
 
+def check_light(config) -> None:
+    """Raise :class:`~cmosnoise.errors.CmosnoiseError` where ``config`` cannot be lit in lux for the charts (a
+    light without a quantum efficiency or spectrum, an unreadable spectrum), before any chart is exposed.
+
+    Parameters
+    ----------
+    config : Config
+    """
+    from ..model.light import channel_light
+
+    channel_light(with_light(config)[0])
+
+
 def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: int = 0,
             picture_height_cm: float = visual_noise.PICTURE_HEIGHT_CM,
             viewing_distance_cm: float = visual_noise.VIEWING_DISTANCE_CM,

@@ -484,6 +484,10 @@ def sweep(
     frames: int = typer.Option(2, "--frames", min=1, max=100, help="frames per instance (2: temporal noise from their difference)"),
     spec: list[str] | None = typer.Option(None, "--spec", help="pass/fail per instance, e.g. couplets_after_correction<=0 (repeatable: all must hold)"),
     metric: list[str] | None = typer.Option(None, "--metric", help="plot only these metrics (repeatable; every metric is in results.csv)"),
+    quality_lux: float | None = typer.Option(None, "--quality-lux", help="also measure each instance's image "
+                                             "quality (visual noise, banding in JND, SNR, MTF, colour error: "
+                                             "`cmosnoise quality`'s metrics) through the charts at this "
+                                             "illuminance, lux; --spec and --metric take them"),
     scheduler: str | None = typer.Option(None, "--scheduler", help="an existing Dask scheduler, e.g. tcp://host:8786 (default: a LocalCluster here)"),
     workers: int | None = typer.Option(None, "--workers", min=1, max=1024, help="LocalCluster worker processes (default: the core count)"),
     resume: bool = typer.Option(False, "--resume", help="continue the sweep in --out: skip the rows results.csv already holds"),
@@ -503,11 +507,13 @@ def sweep(
             raise CmosnoiseError(f"--from {str(from_)!r} is not a sweep.yaml: {exc}") from None
         base = _sensor(None, None, white_threshold_set(white_threshold), opts["base"]).config  # merged over the defaults, checked
         vary, instances, frames, scene, spec = opts["vary"], opts["instances"], opts["frames"], opts["scene"], opts["specs"]
+        quality_lux = opts["quality_lux"] if opts["quality_lux"] is not None else quality_lux
     else:
         base = _sensor(config, preset, [*(set_ or []), *white_threshold_set(white_threshold)]).config
     with _counting(ctx, "sweep") as progress:
         df = sw.run(base, vary or [], instances, out, frames, scene, spec, scheduler, workers, resume, overwrite,
-                    progress=progress, say=lambda m: _say(ctx, m), metrics=metric, device=device)
+                    progress=progress, say=lambda m: _say(ctx, m), metrics=metric, device=device,
+                    quality_lux=quality_lux)
     points = df["point"].nunique()
     msg = f"wrote {len(df)} row(s) ({points} point(s) x {instances} instance(s)) to {out}/results.csv, summary.csv, plots, index.html"
     if "pass" in df:

@@ -212,13 +212,28 @@ class Spec:
                 "==": v == self.value, "!=": v != self.value}[self.op]
 
 
-def parse_spec(text: str) -> Spec:
+def parse_spec(text: str, known: tuple[str, ...] | None = None) -> Spec:
+    """``--spec METRIC OP NUMBER`` checked against ``known`` metrics.
+
+    Parameters
+    ----------
+    text : str
+        The ``--spec`` value, e.g. ``couplets_after_correction<=0``.
+    known : tuple of str, optional
+        The metrics it may name (default :data:`METRICS`; a plan with ``--quality-lux`` adds the quality metrics).
+
+    Returns
+    -------
+    Spec
+    """
+    known = METRICS if known is None else known
     m = SPEC_RE.match(text)
     if not m:
         raise CmosnoiseError(f"--spec {text!r}: expected METRIC OP NUMBER, e.g. couplets_after_correction<=0 "
-                             f"(metrics: {', '.join(METRICS)})")
-    if m.group(1) not in METRICS:
-        raise CmosnoiseError(f"--spec {text!r}: unknown metric {m.group(1)!r}; use one of {', '.join(METRICS)}")
+                             f"(metrics: {', '.join(known)})")
+    if m.group(1) not in known:
+        more = " (with --quality-lux)" if m.group(1) in quality_metrics() else ""
+        raise CmosnoiseError(f"--spec {text!r}: unknown metric {m.group(1)!r}; use one of {', '.join(known)}{more}")
     return Spec(m.group(1), m.group(2), float(m.group(3)))
 
 
@@ -240,7 +255,47 @@ METRIC_LABELS = {
 }
 
 
-def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=None, device: str = "cpu") -> dict:
+def quality_metrics() -> tuple[str, ...]:
+    """The image-quality metrics a sweep measures with ``--quality-lux`` (:data:`cmosnoise.analysis.quality.METRICS`,
+    the one registry), in its order.
+
+    Returns
+    -------
+    tuple of str
+    """
+    from ..analysis import quality
+
+    return tuple(m.name for m in quality.METRICS)
+
+
+def metric_label(name: str, quality_lux: float | None = None) -> str:
+    """What a person reads for a metric: :data:`METRIC_LABELS`, or a quality metric's label, unit and lux.
+
+    Parameters
+    ----------
+    name : str
+        A column of ``results.csv``.
+    quality_lux : float, optional
+        The illuminance the quality metrics were measured at.
+
+    Returns
+    -------
+    str
+    """
+    if name in METRIC_LABELS:
+        return METRIC_LABELS[name]
+    from ..analysis import quality
+
+    m = quality.BY_NAME.get(name)
+    if m is None:
+        return name
+    unit = f", {m.unit}" if m.unit else ""
+    at = f" at {quality_lux:g} lux" if quality_lux is not None else ""
+    return f"{m.label}{at}{unit}"
+
+
+def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=None, device: str = "cpu",
+                 quality_lux: float | None = None) -> dict:
     """The metrics of one sensor instance: a dict of numbers (what a Dask task returns).
 
     ``cache`` (a :class:`~cmosnoise.model.fixed_pattern.PatternCache`) lends the maps that another point of
@@ -260,11 +315,15 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     cache : PatternCache, optional
     device : str
         "cpu" or "cuda".
+    quality_lux : float, optional
+        Also measure the image-quality metrics (:func:`quality_metrics`) of this instance through the charts at
+        this illuminance (:func:`cmosnoise.analysis.quality.measure`: the same seed, ``frames`` frames, at least 2).
 
     Returns
     -------
     dict of str to float
-        Every metric of :data:`METRICS`.
+        Every metric of :data:`METRICS` (and of :func:`quality_metrics` with ``quality_lux``; NaN where the data
+        give none, e.g. colour on a monochrome sensor).
     """
     from ..analysis import figures_of_merit as fom
     from ..analysis import white_pixels
@@ -308,7 +367,14 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     bad = np.abs(proc.cfa_image(raw0) - shot.photo_mean_e * k) > DEFECT_TOLERANCE_E * k
     out["residual_defects"] = int(bad.sum())
     out["couplets_after_correction"] = white_pixels.count_couplets(bad, sensor.cfa)
-    return {m: out.get(m, math.nan) for m in METRICS}
+    names = METRICS
+    if quality_lux is not None:
+        from ..analysis import quality
+
+        measured = quality.measure(cfg, [float(quality_lux)], frames=max(frames, 2), seed=seed)["metrics"]
+        out.update({k: math.nan if v[0] is None else v[0] for k, v in measured.items()})
+        names = METRICS + quality_metrics()
+    return {m: out.get(m, math.nan) for m in names}
 
 
 def worker_attribute(name: str, make: Callable[[], object], anywhere: bool = True):
@@ -358,7 +424,8 @@ def _worker_cache():
     return worker_attribute("patterns", make, anywhere=False)
 
 
-def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int, device: str = "cpu") -> dict:
+def _task(config_data: dict, scene: str, frames: int, point: int, instance: int, seed: int, device: str = "cpu",
+          quality_lux: float | None = None) -> dict:
     """What a worker runs: one instance, tagged with its point and instance.
 
     An error of the input (a :class:`CmosnoiseError`) is returned as
@@ -366,7 +433,7 @@ def _task(config_data: dict, scene: str, frames: int, point: int, instance: int,
     traceback; the sweep stops with the one line instead.
     """
     try:
-        metrics = run_instance(config_data, scene, frames, seed, _worker_cache(), device)
+        metrics = run_instance(config_data, scene, frames, seed, _worker_cache(), device, quality_lux)
     except CmosnoiseError as exc:
         return {"point": point, "instance": instance, "error": " ".join(str(exc).split())}
     return {"point": point, "instance": instance, "seed": seed, **metrics}
@@ -397,6 +464,8 @@ class Plan:
         The metrics plotted.
     scene_why : str
         Why this scene.
+    quality_lux : float or None
+        The illuminance of the image-quality metrics (``--quality-lux``), or None: not measured.
     """
 
     base: object  # Config
@@ -409,22 +478,28 @@ class Plan:
     specs: list[Spec]
     plot_metrics: tuple[str, ...] = METRICS
     scene_why: str = ""
+    quality_lux: float | None = None
+
+    @property
+    def metrics(self) -> tuple[str, ...]:
+        """Every metric each instance gives: :data:`METRICS`, and the quality metrics with ``quality_lux``."""
+        return METRICS + (quality_metrics() if self.quality_lux is not None else ())
 
     @property
     def keys(self) -> list[str]:
         return [k for a in self.axes for k in a.keys]
 
     def columns(self) -> list[str]:
-        return ["point", *self.keys, "instance", "seed", *METRICS] + (["pass"] if self.specs else [])
+        return ["point", *self.keys, "instance", "seed", *self.metrics] + (["pass"] if self.specs else [])
 
     def to_yaml_data(self) -> dict:
         return {"base": self.base.model_dump(mode="json"), "scene": self.scene, "instances": self.instances,
                 "frames": self.frames, "vary": [{"keys": list(a.keys), "values": [list(v) for v in a.values]} for a in self.axes],
-                "spec": [f"{s.metric}{s.op}{s.value:g}" for s in self.specs]}
+                "spec": [f"{s.metric}{s.op}{s.value:g}" for s in self.specs], "quality_lux": self.quality_lux}
 
 
 def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | None = None,
-         specs: list[str] | None = None, metrics: list[str] | None = None) -> Plan:
+         specs: list[str] | None = None, metrics: list[str] | None = None, quality_lux: float | None = None) -> Plan:
     """Check everything a sweep needs before any task runs; returns the plan (``metrics``: those to plot).
 
     Parameters
@@ -443,14 +518,20 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
         ``--spec`` values.
     metrics : list of str, optional
         The metrics to plot.
+    quality_lux : float, optional
+        Also measure the image-quality metrics at this illuminance, lux (``--quality-lux``).
 
     Returns
     -------
     Plan
     """
-    unknown = [m for m in metrics or [] if m not in METRICS]
+    if quality_lux is not None and not (isinstance(quality_lux, (int, float)) and 0 < quality_lux <= 1e7):
+        raise CmosnoiseError(f"--quality-lux {quality_lux!r}: give an illuminance above 0 and up to 1e7 lux")
+    known = METRICS + (quality_metrics() if quality_lux is not None else ())
+    unknown = [m for m in metrics or [] if m not in known]
     if unknown:
-        raise CmosnoiseError(f"--metric {unknown[0]!r}: use one of {', '.join(METRICS)}")
+        more = "" if quality_lux is not None or unknown[0] not in quality_metrics() else " (with --quality-lux)"
+        raise CmosnoiseError(f"--metric {unknown[0]!r}: use one of {', '.join(known)}{more}")
     if not isinstance(instances, int) or not 1 <= instances <= 1_000_000:
         raise CmosnoiseError(f"--instances {instances!r}: give 1 to 1000000")
     if not isinstance(frames, int) or not 1 <= frames <= 100:
@@ -462,7 +543,7 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
     points = grid(axes) if axes else [{}]
     checked = [point_config(base, p) for p in points]
     configs = [c.model_dump(mode="json") for c in checked]
-    parsed_specs = [parse_spec(s) for s in specs or []]
+    parsed_specs = [parse_spec(s, known) for s in specs or []]
     from ..model import footprint
     from ..model import scene as scene_mod
 
@@ -495,8 +576,17 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
         except CmosnoiseError as exc:
             shown = ", ".join(f"{k}={v}" for k, v in point.items())
             raise CmosnoiseError(f"sweep point {shown}: {exc}" if shown else str(exc)) from None
+    if quality_lux is not None:  # the charts' light: each point's configuration takes lux (a QE, a spectrum)
+        from ..analysis import quality
+
+        for point, cfg in zip(points, checked):
+            try:
+                quality.check_light(cfg)
+            except CmosnoiseError as exc:
+                shown = ", ".join(f"{k}={v}" for k, v in point.items())
+                raise CmosnoiseError(f"--quality-lux at sweep point {shown or '(the base)'}: {exc}") from None
     return Plan(base, axes, points, configs, instances, frames, scene, parsed_specs,
-                tuple(metrics) if metrics else METRICS, why)
+                tuple(metrics) if metrics else known, why, None if quality_lux is None else float(quality_lux))
 
 
 def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -668,7 +758,7 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
         def submit(item):
             i, j = item
             return client.submit(_task, p.configs[i], p.scene, p.frames, i, j, instance_seed(p.base.seed, j),
-                                 device, pure=False, retries=2)
+                                 device, p.quality_lux, pure=False, retries=2)
 
         queue = iter(todo)
         running = as_completed([submit(x) for x in itertools.islice(queue, window)])
@@ -680,7 +770,7 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
                 shown = ", ".join(f"{k}={v}" for k, v in p.points[rec["point"]].items())
                 raise CmosnoiseError(f"sweep point {shown or '(the base)'}, instance {rec['instance']}: {rec['error']}")
             row = [rec["point"], *[_cell(p.points[rec["point"]][k]) for k in p.keys], rec["instance"], rec["seed"],
-                   *[_cell(rec[m]) for m in METRICS]]
+                   *[_cell(rec[m]) for m in p.metrics]]
             if p.specs:
                 row.append(int(all(s.passes(rec) for s in p.specs)))
             writer.writerow(row)
@@ -736,7 +826,7 @@ def summarize(p: Plan, out: Path):
     for i, point in enumerate(p.points):
         sub = df[df["point"] == i]
         row = {"point": i, **point, "instances": len(sub)}
-        for m in METRICS:
+        for m in p.metrics:
             v = sub[m].astype(float)
             v = v[np.isfinite(v)]
             if len(v):
@@ -788,7 +878,7 @@ def _plots(p: Plan, summary, out: Path) -> list[str]:
                 if m == "couplets" and "couplets_expected_random_mean" in s:
                     ax.plot(xs, s["couplets_expected_random_mean"], ls=":", color=line.get_color())
         ax.set_xlabel(xkey)
-        name = METRIC_LABELS.get(m, m)
+        name = metric_label(m, p.quality_lux)
         ax.set_ylabel(name + (" (Wilson 95 % interval)" if m == "yield" else "\nmean; band: 5th to 95th percentile"))
         title = f"{name} over {p.instances} instance(s) per point"
         if m == "couplets":
@@ -810,14 +900,26 @@ def _index(p: Plan, summary, plots: list[str], out: Path) -> None:
     import html
 
     varied = ", ".join(" & ".join(a.keys) for a in p.axes) or "nothing (one point)"
-    shown = summary[[c for c in summary.columns if c in ("point", *p.keys, "instances") or c.endswith("_mean")]].copy()
-    if "yield" in summary:  # the yield and its interval in one column
-        shown.insert(len(p.keys) + 2, "yield", [f"{y:.2f} ({lo:.2f} to {hi:.2f})" for y, lo, hi in
-                                                zip(summary["yield"], summary["yield_lo"], summary["yield_hi"])])
-    shown = shown.rename(columns=lambda c: METRIC_LABELS.get(c[:-5], c) if c.endswith("_mean") else
-                         ("yield (Wilson 95 %)" if c == "yield" else c))
-    shown = shown.rename(columns=lambda c: re.sub(r"([_.])", "\\1\u200b", c))  # long names break at _ and ., not mid-word
-    table = shown.to_html(index=False, float_format=lambda v: f"{v:.4g}", border=0)
+
+    def table(metrics: tuple[str, ...], with_yield: bool) -> str:
+        means = [f"{m}_mean" for m in metrics]
+        shown = summary[[c for c in summary.columns if c in ("point", *p.keys, "instances") or c in means]].copy()
+        if with_yield and "yield" in summary:  # the yield and its interval in one column
+            shown.insert(len(p.keys) + 2, "yield", [f"{y:.2f} ({lo:.2f} to {hi:.2f})" for y, lo, hi in
+                                                    zip(summary["yield"], summary["yield_lo"], summary["yield_hi"])])
+        shown = shown.rename(columns=lambda c: metric_label(c[:-5], p.quality_lux) if c.endswith("_mean") else
+                             ("yield (Wilson 95 %)" if c == "yield" else c))
+        shown = shown.rename(columns=lambda c: re.sub(r"([_.])", "\\1\u200b", c))  # names break at _ and ., not mid-word
+        return shown.to_html(index=False, float_format=lambda v: f"{v:.4g}", border=0)
+
+    # the sensor's figures, and the image quality through the charts (--quality-lux) in a table of its own, so
+    # that each fits a window
+    tables = f'<div class="table">{table(METRICS, True)}</div>'
+    if p.quality_lux is not None:
+        tables += (f"<h2>Image quality at {p.quality_lux:g} lux</h2><p>Each instance through the test charts "
+                   "(an 18 % grey, a slanted edge, the ColorChecker), as <code>cmosnoise quality</code> measures "
+                   "them; the mean over the instances.</p>"
+                   f'<div class="table">{table(quality_metrics(), False)}</div>')
     imgs = "\n".join(f'<figure><img src="{html.escape(n)}" alt="{html.escape(n)}"></figure>' for n in plots)
     (out / "index.html").write_text(f"""<!doctype html><html><head><meta charset="utf-8"><title>cmosnoise sweep</title>
 <style>body{{font:14px system-ui,sans-serif;margin:20px}}figure{{display:inline-block;margin:4px;width:600px;max-width:100%;vertical-align:top}}
@@ -827,7 +929,7 @@ img{{width:100%;height:auto}}</style></head><body>
 <h1>cmosnoise sweep</h1><p>Varied: {html.escape(varied)}; {p.instances} instance(s) per point; scene {html.escape(p.scene)}
 ({html.escape(p.scene_why)}).
 Rows: results.csv; per point: summary.csv; the sweep itself: sweep.yaml.</p>
-<div class="table">{table}</div>
+{tables}
 {imgs}
 </body></html>
 """)
@@ -836,7 +938,7 @@ Rows: results.csv; per point: summary.csv; the sweep itself: sweep.yaml.</p>
 def run(base, vary: list[str], instances: int, out: str | Path | None = None, frames: int = 2, scene: str | None = None,
         specs: list[str] | None = None, scheduler: str | None = None, workers: int | None = None, resume: bool = False,
         overwrite: bool = False, progress=None, say: Callable[[str], None] = lambda m: None,
-        metrics: list[str] | None = None, device: str = "cpu"):
+        metrics: list[str] | None = None, device: str = "cpu", quality_lux: float | None = None):
     """The Python API: run a sweep and return ``results.csv`` as a pandas DataFrame (sorted by point and instance).
 
     ``base`` is a Config (or anything :class:`~cmosnoise.Sensor` takes as a
@@ -854,7 +956,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
         Sensor instances per point.
     out : str or Path, optional
         The sweep's folder.
-    frames, scene, specs, metrics
+    frames, scene, specs, metrics, quality_lux
         As :func:`plan` takes them.
     scheduler, workers
         As :func:`connect` takes them.
@@ -880,7 +982,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
 
     base = as_spec(base).config
     check_device(device, "--device")
-    p = plan(base, vary, instances, frames, scene, specs, metrics)
+    p = plan(base, vary, instances, frames, scene, specs, metrics, quality_lux)
     say(f"scene: {p.scene} ({p.scene_why})")
     tmp = None
     if out is None:
@@ -1007,7 +1109,7 @@ def sweep_from_yaml(path: Path) -> dict:
     Returns
     -------
     dict
-        ``base``, ``scene``, ``instances``, ``frames``, ``vary`` and ``specs``.
+        ``base``, ``scene``, ``instances``, ``frames``, ``vary``, ``specs`` and ``quality_lux`` (None: none).
     """
     from .. import inputs
 
@@ -1024,4 +1126,4 @@ def sweep_from_yaml(path: Path) -> dict:
         vals = ",".join("x".join(json.dumps(v) if isinstance(v, str) else repr(v) for v in step) for step in a["values"])
         vary.append(f"{','.join(a['keys'])}={vals}")
     return {"base": data["base"], "scene": data["scene"], "instances": data["instances"], "frames": data["frames"],
-            "vary": vary, "specs": data.get("spec", [])}
+            "vary": vary, "specs": data.get("spec", []), "quality_lux": data.get("quality_lux")}
