@@ -282,7 +282,7 @@ def _say_building(started: subprocess.Popen | None) -> None:
     who = f"`cmosnoise compile` (pid {started.pid}) builds" if started is not None else "another process builds"
     logging.getLogger(__name__).info(
         f"the compiled loops are not built for this machine yet: this run takes the NumPy specification (the same "
-        f"bits, slower on large frames) while {who} them in the background for the next run (about a minute; "
+        f"bits, slower on large frames) while {who} them in the background for the next run (about a minute on 2 idle cores; "
         f"log: {log})")
 
 
