@@ -424,3 +424,31 @@ def test_the_summarys_compiled_loops_say_once_that_they_compile(tmp_path):
         "a = np.random.default_rng(0).random((300, 300)).astype(np.float32)\n"
         "reduce.statistics(a); reduce.median(a); reduce.positions_above(a, 0.5); reduce.statistics(a)\n", tmp_path)
     assert said.count("compiling the summary's reductions for this machine") == 1, said
+
+
+def test_the_kernels_read_switches_and_key_rows_by_name_from_one_table():
+    """#58: the switches and the key rows are declared once (kernel.SWITCHES, kernel.KEY_ROWS); the CPU and the GPU
+    loops read them by indices derived by name, never by a typed number; switches() fills each by its name, and a
+    plan's key rows are the streams of those names."""
+    import re
+    from pathlib import Path
+
+    from cmosnoise.model.seeds import stream_key
+
+    src = Path(kernel.__file__).parent
+    for name in ("kernel.py", "cuda_device.py"):
+        text = (src / name).read_text()
+        literal = re.findall(r"\b(?:flags|keys)\[(?:p, )?\d", text)
+        assert not literal, f"{name} reads a switch or a key row by a typed index: {literal}"
+    names = [n for n, _ in kernel.SWITCHES]
+    assert [kernel.S_NOISY, kernel.S_ROW, kernel.S_BLINK_EXACT] == [names.index(n) for n in ("noisy", "row",
+                                                                                           "blink_exact")]
+    cfg = load_config(extra={"sensor": {"width": 32, "height": 16}, "row_noise": {"enabled": True, "sigma_e": 1.0},
+                             "column_noise": {"enabled": False}, "source_follower": {"enabled": False}})
+    plan = Sensor(cfg, seed=5).expose("flat:0.5").plan()
+    flags = kernel.switches(plan, electrons=False, traps=False, blinkers=False)
+    on = {n for n, v in zip(names, flags) if v}
+    assert on == {"noisy", "row", "adc", "blink_exact"} - ({"blink_exact"} if plan.blink_noisy else set()), on
+    for row, stage in enumerate(kernel.KEY_ROWS):
+        assert tuple(int(w) for w in plan.keys[row]) == stream_key(5, stage), stage
+    assert plan.keys.shape[0] == len(kernel.KEY_ROWS) and kernel.KEY_ROW == kernel.KEY_ROWS.index("row_noise")

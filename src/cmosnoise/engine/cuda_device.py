@@ -35,6 +35,26 @@ from .cuda_table import (
     TOP,
     scalar_numpy,
 )
+from .kernel import (  # the switches' and the key rows' indices, derived from kernel's tables by name
+    KEY_BLACK,
+    KEY_COL,
+    KEY_ROW,
+    KEY_SF,
+    KEY_SHOT,
+    S_ADC,
+    S_BLINK_EXACT,
+    S_BLINKERS,
+    S_COL,
+    S_ELECTRONS,
+    S_EXACT,
+    S_NL,
+    S_NOISY,
+    S_OFFSET,
+    S_READ,
+    S_ROW,
+    S_SF,
+    S_TRAPS,
+)
 
 npx = scalar_numpy(cuda)  #: what ``np`` stands for in the helpers on the device
 dev = cuda.jit(device=True, fastmath=False)
@@ -111,17 +131,17 @@ def lines(frames, which, corners, h, w, seqs, keys, flags, numbers, row_offset, 
     fr = np.uint64(frames[b])
     sq = seqs[p]
     if t < h:
-        if flags[p, 3]:
+        if flags[p, S_ROW]:
             r = corners[b, 0] + t
-            rowval[b, t] = numbers[p, ROW_SIGMA] * normal(r, fr, sq, keys[p, 2, 0], keys[p, 2, 1]) + row_offset[p, r]
+            rowval[b, t] = numbers[p, ROW_SIGMA] * normal(r, fr, sq, keys[p, KEY_ROW, 0], keys[p, KEY_ROW, 1]) + row_offset[p, r]
     elif t < h + w:
-        if flags[p, 4]:
+        if flags[p, S_COL]:
             c = corners[b, 1] + (t - h)
-            colterm[b, t - h] = col_offset[p, c] + col_sigma[p, c] * normal(c, fr, sq, keys[p, 3, 0], keys[p, 3, 1])
+            colterm[b, t - h] = col_offset[p, c] + col_sigma[p, c] * normal(c, fr, sq, keys[p, KEY_COL, 0], keys[p, KEY_COL, 1])
     else:
         q = t - h - w
         sigma = numbers[p, FRAME_BLACK_SIGMA]
-        err = sigma * normal(0, fr, sq, keys[p, 4, 0], keys[p, 4, 1]) if sigma > 0.0 else 0.0
+        err = sigma * normal(0, fr, sq, keys[p, KEY_BLACK, 0], keys[p, KEY_BLACK, 1]) if sigma > 0.0 else 0.0
         cell_black[b, q] = (numbers[p, BLACK] + cell_offsets[p, q]) + err
 
 
@@ -214,9 +234,10 @@ def pixels(noisy, exact, flags, ints, numbers, sf, rowval, colterm, gain, keys, 
         return
     p = which[b]
     has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
-        flags[p, 0], flags[p, 1], flags[p, 2], flags[p, 3], flags[p, 4], flags[p, 5], flags[p, 6])
-    has_nl, has_offset, has_read = flags[p, 7], flags[p, 8], flags[p, 9]
-    has_rts, has_blink, blink_exact = flags[p, 10], flags[p, 11], flags[p, 12]
+        flags[p, S_NOISY], flags[p, S_EXACT], flags[p, S_SF], flags[p, S_ROW], flags[p, S_COL], flags[p, S_ADC],
+        flags[p, S_ELECTRONS])
+    has_nl, has_offset, has_read = flags[p, S_NL], flags[p, S_OFFSET], flags[p, S_READ]
+    has_rts, has_blink, blink_exact = flags[p, S_TRAPS], flags[p, S_BLINKERS], flags[p, S_BLINK_EXACT]
     r = corners[b, 0] + i
     c = corners[b, 1] + j
     fr = np.uint64(frames[b])
@@ -232,7 +253,7 @@ def pixels(noisy, exact, flags, ints, numbers, sf, rowval, colterm, gain, keys, 
         m = np.float64(noisy[p, r, c])
         if blink >= 0 and not blink_exact:  # a blinking pixel's count at this frame's mean
             m = blink_mean
-        n = poisson_one(m, index, fr, sq, keys[p, 0, 0], keys[p, 0, 1], numbers[p, NORMAL_ABOVE])
+        n = poisson_one(m, index, fr, sq, keys[p, KEY_SHOT, 0], keys[p, KEY_SHOT, 1], numbers[p, NORMAL_ABOVE])
     if has_exact:
         if blink >= 0 and blink_exact:  # a blinking pixel's mean dark charge of this frame
             n = n + blink_mean
@@ -251,7 +272,7 @@ def pixels(noisy, exact, flags, ints, numbers, sf, rowval, colterm, gain, keys, 
             n = n * (1.0 + sx * (numbers[p, NL_A] + sx * (numbers[p, NL_B] + sx * numbers[p, NL_C])))
     z = partner = 0.0
     if has_sf or has_read:  # the source follower's block: its cosine normal is stage 6's, its sine normal 9a's
-        u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[p, 1, 0], keys[p, 1, 1])
+        u1, u2 = uniform_pair(index, fr, sq, np.uint64(0), keys[p, KEY_SF, 0], keys[p, KEY_SF, 1])
         z, partner = normal_pair_from(u1, u2)
     if has_sf:
         noise = np.float64(sf[p, r, c]) * z

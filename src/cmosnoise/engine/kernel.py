@@ -110,6 +110,44 @@ class FramePlan:
         return samplers.loggam_table(min(float(self.noisy_e.max()), self.normal_above_e))
 
 
+# ------------------------------------------------------------------ the kernels' switches and key rows
+#: The kernels' switches, each (name, what turns it on), in the order of the flags array that the CPU's and the
+#: GPU's pixel loops read (:func:`switches` makes it, by name). The loops read each switch by an index derived
+#: from this table by name (``S_*`` below), never typed. The table lives in this file, whose source keys numba's
+#: on-disk cache of the frame kernel: a change of it recompiles the kernel instead of loading an older table's
+#: indices.
+SWITCHES = (
+    ("noisy", "a mean charge with shot noise: plan.noisy_e"),
+    ("exact", "a mean charge without shot noise: plan.exact_e"),
+    ("source_follower", "the source follower's noise: plan.sf_sigma_e"),
+    ("row", "row noise: plan.row_sigma_e"),
+    ("column", "column noise and gain: plan.col_gain"),
+    ("adc", "the ADC, codes out: plan.adc"),
+    ("electrons", "the charge at the ADC input out too: asked for, or the ADC off"),
+    ("nonlinearity", "the charge-to-voltage curve: plan.nonlinearity"),
+    ("offset", "per-pixel offsets: plan.offset_e"),
+    ("read", "read noise after the gain: plan.read_noise, with the ADC"),
+    ("traps", "source-follower traps inside the frame's region"),
+    ("blinkers", "blinking pixels inside the frame's region"),
+    ("blink_exact", "the blinking pixels' dark charge without shot noise: not plan.blink_noisy"),
+)
+_SWITCH = {name: i for i, (name, _) in enumerate(SWITCHES)}
+S_NOISY, S_EXACT, S_SF = _SWITCH["noisy"], _SWITCH["exact"], _SWITCH["source_follower"]
+S_ROW, S_COL, S_ADC, S_ELECTRONS = _SWITCH["row"], _SWITCH["column"], _SWITCH["adc"], _SWITCH["electrons"]
+S_NL, S_OFFSET, S_READ = _SWITCH["nonlinearity"], _SWITCH["offset"], _SWITCH["read"]
+S_TRAPS, S_BLINKERS, S_BLINK_EXACT = _SWITCH["traps"], _SWITCH["blinkers"], _SWITCH["blink_exact"]
+#: how many switches a plan has (the flags array's length)
+_FLAGS = len(SWITCHES)
+
+#: The rows of :attr:`FramePlan.keys`: each temporal stream's stage, as :func:`cmosnoise.model.seeds.stream_key`
+#: names it, in row order (the read noise after the gain takes the source follower's second normal). The loops
+#: read a row by an index derived by name (``KEY_*``); here for the same reason as :data:`SWITCHES`.
+KEY_ROWS = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level")
+_KEY = {name: i for i, name in enumerate(KEY_ROWS)}
+KEY_SHOT, KEY_SF, KEY_ROW = _KEY["shot_noise"], _KEY["source_follower"], _KEY["row_noise"]
+KEY_COL, KEY_BLACK = _KEY["column_noise"], _KEY["black_level"]
+
+
 # ------------------------------------------------------------------ compiled helpers
 #: the helpers compiled from their own source, module by module, callees first
 HELPERS = [(philox, ["philox4x32", "open_uniform", "uniform_pair"]),
@@ -419,14 +457,14 @@ if numba is not None:
         function's loops alike.
         """
         has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
-            flags[0], flags[1], flags[2], flags[3], flags[4], flags[5], flags[6])
-        has_nl, has_offset, has_read = flags[7], flags[8], flags[9]
-        has_rts, has_blink, blink_exact = flags[10], flags[11], flags[12]
+            flags[S_NOISY], flags[S_EXACT], flags[S_SF], flags[S_ROW], flags[S_COL], flags[S_ADC], flags[S_ELECTRONS])
+        has_nl, has_offset, has_read = flags[S_NL], flags[S_OFFSET], flags[S_READ]
+        has_rts, has_blink, blink_exact = flags[S_TRAPS], flags[S_BLINKERS], flags[S_BLINK_EXACT]
         nl_last = np.float64(nl_table.size - 2)
         inv_step = 1.0 / step  # exact: the step is a power of two
         zero = np.uint64(0)
         w = c1 - c0
-        s0, s1, f0, f1 = keys[0, 0], keys[0, 1], keys[1, 0], keys[1, 1]
+        s0, s1, f0, f1 = keys[KEY_SHOT, 0], keys[KEY_SHOT, 1], keys[KEY_SF, 0], keys[KEY_SF, 1]
         one_black = cell_black[0] == cell_black[1] == cell_black[2] == cell_black[3]
         laid_out = 0 if (one_black and not has_read) else w  # only the per-pixel ADC pass reads them
         black_even = np.empty(laid_out)  # the black level of each pixel of an even row, and of an odd one (CFA cells)
@@ -532,7 +570,7 @@ if numba is not None:
                     j = rts_col[e]
                     n[j] = n[j] + rts_val[e]
             if has_row:
-                rowval = row_sigma * _normal(r, fr, sq, keys[2, 0], keys[2, 1]) + row_offset[ra]
+                rowval = row_sigma * _normal(r, fr, sq, keys[KEY_ROW, 0], keys[KEY_ROW, 1]) + row_offset[ra]
                 for j in range(w):
                     n[j] = n[j] + rowval
             if has_col:
@@ -574,19 +612,19 @@ if numba is not None:
         fr = np.uint64(frame)
         sq = np.uint64(seq)
         # the black level of each 2 x 2 cell position in this frame (read_noise.cell_black)
-        err = frame_black_sigma * _normal(0, fr, sq, keys[4, 0], keys[4, 1]) if frame_black_sigma > 0.0 else 0.0
+        err = frame_black_sigma * _normal(0, fr, sq, keys[KEY_BLACK, 0], keys[KEY_BLACK, 1]) if frame_black_sigma > 0.0 else 0.0
         cell_black = np.empty(4)
         for q in range(4):
             cell_black[q] = (black + cell_offsets[q]) + err
         w = c1 - c0
         h = r1 - r0
-        has_col = flags[4]
+        has_col = flags[S_COL]
         colterm = np.zeros(w)
         gain = np.ones(w)
         if has_col:
             for j in range(w):
                 c = c0 + j
-                colterm[j] = col_offset[c - ac0] + col_sigma[c - ac0] * _normal(c, fr, sq, keys[3, 0], keys[3, 1])
+                colterm[j] = col_offset[c - ac0] + col_sigma[c - ac0] * _normal(c, fr, sq, keys[KEY_COL, 0], keys[KEY_COL, 1])
                 gain[j] = col_gain[c - ac0]
         nblocks = (h + _ROWS_PER_BLOCK - 1) // _ROWS_PER_BLOCK
         for blk in numba.prange(nblocks):
@@ -755,9 +793,6 @@ _DUMMY_NL.flags.writeable = False
 _DUMMY_PTR = np.zeros(2, np.int64)
 _DUMMY_COL = np.zeros(1, np.int64)
 _DUMMY_F32 = np.zeros(1, np.float32)
-#: the kernel's switches: noisy, exact, source follower, row, column, ADC, electrons out, nonlinearity, offset, read,
-#: traps, blinking pixels, blinking pixels' dark charge without shot noise
-_FLAGS = 13
 
 
 def _needs_compile() -> int:
@@ -811,14 +846,30 @@ def preload() -> bool:
 
 
 def switches(plan: FramePlan, electrons: bool, traps: bool, blinkers: bool) -> np.ndarray:
-    """The kernels' switches, (_FLAGS,) bool, in the order the CPU's and the GPU's pixel loops read them: noisy,
-    exact, source follower, row, column, ADC, electrons out, nonlinearity, offset, read noise, traps (``traps``:
-    some in the frame's region), blinking pixels (likewise), blinking pixels' dark charge without shot noise."""
+    """The kernels' switches of ``plan``, (_FLAGS,) bool, each at its place in :data:`SWITCHES`.
+
+    Parameters
+    ----------
+    plan : FramePlan
+    electrons : bool
+        Whether the charge at the ADC input is asked for.
+    traps, blinkers : bool
+        Whether some source-follower traps (blinking pixels) lie inside the frame's region.
+
+    Returns
+    -------
+    (_FLAGS,) bool array
+    """
     adc_on = plan.adc is not None
-    return np.array([plan.noisy_e is not None, plan.exact_e is not None, plan.sf_sigma_e is not None,
-                     plan.row_sigma_e is not None, plan.col_gain is not None, adc_on, electrons or not adc_on,
-                     plan.nonlinearity is not None, plan.offset_e is not None, adc_on and plan.read_noise is not None,
-                     traps, blinkers, not plan.blink_noisy])
+    on = {"noisy": plan.noisy_e is not None, "exact": plan.exact_e is not None,
+          "source_follower": plan.sf_sigma_e is not None, "row": plan.row_sigma_e is not None,
+          "column": plan.col_gain is not None, "adc": adc_on, "electrons": electrons or not adc_on,
+          "nonlinearity": plan.nonlinearity is not None, "offset": plan.offset_e is not None,
+          "read": adc_on and plan.read_noise is not None, "traps": traps, "blinkers": blinkers,
+          "blink_exact": not plan.blink_noisy}
+    if on.keys() != _SWITCH.keys():  # a switch added to one of the two and not the other
+        raise RuntimeError(f"kernel.switches sets {sorted(on)}, SWITCHES declares {sorted(_SWITCH)}")
+    return np.array([on[name] for name, _ in SWITCHES])
 
 
 def curve_constants(plan: FramePlan) -> tuple[np.ndarray, float, tuple[float, float, float]]:

@@ -53,10 +53,6 @@ STAGE_IDS = {
 }
 
 
-#: the stages with temporal noise, in the engine's key order
-TEMPORAL_STAGES = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level")
-
-
 @functools.lru_cache(maxsize=1024)  # a pure function; a SeedSequence costs some 9 us, five of them a sensor
 def fixed_key(seed: int, stage: str, part: int = 0) -> tuple[int, int]:
     """The two 32-bit key words of a stage's fixed map ``part``, from ``(seed, FIXED, stage, 2**31 + part)``.

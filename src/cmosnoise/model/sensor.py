@@ -35,7 +35,7 @@ from . import optics as optics_mod
 from . import scene as scene_mod
 from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
 from .raw_info import RawInfo
-from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, TEMPORAL_STAGES, fixed_key, pixel_index, stream_key, temporal_stream
+from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, fixed_key, pixel_index, stream_key, temporal_stream
 from .spec import SensorSpec, resolve
 from .stages import (
     adc,
@@ -592,7 +592,7 @@ class Exposure:
             s = self.sensor
             c = s.config
             fp = s.fixed_pattern
-            keys = np.array([stream_key(c.seed, st) for st in TEMPORAL_STAGES], dtype=np.uint64)
+            keys = np.array([stream_key(c.seed, st) for st in kernel.KEY_ROWS], dtype=np.uint64)
             cols = s.map_shape[1]
 
             rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
