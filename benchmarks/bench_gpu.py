@@ -39,18 +39,13 @@ from bench_chain import numpy_reference  # noqa: E402
 
 from cmosnoise import Sensor, frames_together, load_config  # noqa: E402
 from cmosnoise.analysis import ground_truth  # noqa: E402
+from cmosnoise.app.compiling import EVERY_STAGE  # noqa: E402
 from cmosnoise.config.loading import preset_names  # noqa: E402
 from cmosnoise.engine import cuda_kernel, kernel  # noqa: E402
 
-#: every stage on at realistic rates (the tests' EVERY is denser, to meet a 64 x 48 frame)
-EVERY = {"sensor": {"frame_rate_hz": 30}, "column_noise": {"gain_sigma_pct": 1.0}, "row_noise": {"fixed_sigma_e": 0.5},
-         "pixel_offset": {"enabled": True, "sigma_e": 4.0, "tail": {"ppm_above": 200, "threshold_e": 20, "max_e": 200}},
-         "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.2, 0.6]},
-         "black_level": {"channel_offsets_dn": [1.5, -0.5, 0.25, 2.0], "frame_sigma_dn": 0.3},
-         "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.2, "shape": -0.05},
-         "source_follower": {"rts": {"enabled": True, "ppm": 1000}},
-         "dark_current": {"rts": {"enabled": True, "ppm": 50}},
-         "defects": {"enabled": True}}
+#: every stage on at realistic rates (the tests' EVERY is denser, to meet a 64 x 48 frame): what `cmosnoise compile`
+#: warms up, the one definition
+EVERY = EVERY_STAGE
 
 
 def sized(extra: dict | None, width: int, height: int) -> dict:
