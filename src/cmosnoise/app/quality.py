@@ -198,7 +198,8 @@ def summary_lines(doc: dict) -> list[str]:
 def _speed(point: dict) -> str:
     if point["speed"] is None:
         return f"beyond the lux measured (SNR {point['snr']:g} not reached)"
-    return f"{point['speed']:.3g} (SNR {point['snr']:g} at {point['lux']:.3g} lux, H {point['exposure_lux_s']:.3g} lux s)"
+    speed = f"{point['speed']:.0f}" if point["speed"] >= 10 else f"{point['speed']:.2g}"  # ISO speeds are whole
+    return f"{speed} (SNR {point['snr']:g} at {point['lux']:.3g} lux, H {point['exposure_lux_s']:.3g} lux s)"
 
 
 def _lux(v) -> str:
