@@ -51,6 +51,9 @@ def _close(a, b):
     if isinstance(b, dict):
         assert a.keys() == b.keys()
         return all(_close(a[k], b[k]) for k in b)
+    if isinstance(b, list):  # a table's rows: each value to 9 digits (a CSV's round trip may move the 15th)
+        assert len(a) == len(b)
+        return all(_close(x, y) for x, y in zip(a, b))
     if isinstance(b, float):
         assert a == pytest.approx(b, rel=1e-9, abs=1e-12)
         return True
