@@ -1,6 +1,6 @@
 """A first run on the command line does not wait for the compilers (#63): the NumPy specification makes its
-frames, the same bits, while `cmosnoise compile` builds the loops in the background; `cmosnoise compile` alone
-builds them, and a run after it compiles nothing."""
+frames, the same bits, while `cmosnoise compile` builds the loops in the background; once it has, a process
+loads them (mid-run too), and a run after it compiles nothing."""
 
 import os
 import signal
@@ -89,19 +89,36 @@ def test_a_first_run_takes_the_numpy_specification_while_the_loops_compile_in_th
 
 @pytest.mark.slow
 @pytest.mark.skipif(jit.numba is None or jit.fcntl is None, reason="needs numba and POSIX file locks")
-def test_cmosnoise_compile_builds_what_a_run_then_loads_without_compiling(tmp_path):
-    """`cmosnoise compile` in an empty cache builds the loops (saying what, and how long); a run afterwards, in the
-    console script's background mode, says nothing of compiling, and its frame comes from the frame kernel."""
+def test_a_process_takes_the_loops_once_the_background_compile_has_built_them(tmp_path):
+    """The background compile runs to its end (`cmosnoise compile --background`, every warm-up): a process that
+    found the frame kernel missing then finds it in the cache and loads it, without compiling (numba counts no
+    cache miss), mid-run, as a long first run does; a later command line run says nothing of compiling and its
+    frame comes from the kernel."""
+    import json
+
     env = _env(tmp_path)
-    built = subprocess.run([sys.executable, "-m", "cmosnoise", "compile"], env=env, capture_output=True, text=True,
-                           timeout=900)
-    assert built.returncode == 0, built.stderr
-    assert "compiling the frame kernel" in built.stderr and "later runs load the loops" in built.stdout, built.stdout
+    probe = ("from cmosnoise.engine import jit, kernel\n"
+             "from cmosnoise import Sensor, load_config\n"
+             "first = jit.compiled('the frame kernel', kernel._render, say=False)\n"
+             "proc = jit.build_process()\n"
+             "print(proc.pid, flush=True)\n"
+             "proc.wait(timeout=1200)\n"
+             "now = jit.compiled('the frame kernel', kernel._render, say=False)\n"
+             "Sensor(load_config(extra={'sensor': {'width': 64, 'height': 48}})).expose().frame(0)\n"
+             "print(first, proc.returncode, now, len(kernel._render.signatures),\n"
+             "      sum(kernel._render.stats.cache_misses.values()))\n")
+    r = subprocess.run([sys.executable, "-c", probe], env={**env, jit.COMPILE_ENV: "background"}, capture_output=True,
+                       text=True, timeout=1500)
+    pid = int(r.stdout.split()[0]) if r.stdout.split() else None
+    try:
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.split()[1:] == ["False", "0", "True", "1", "0"], r.stdout + r.stderr
+    finally:
+        if pid is not None:
+            _stop_group(pid)
     after = _simulate(env, tmp_path / "a")
     assert after.returncode == 0, after.stderr
     assert "compil" not in after.stderr and "NumPy" not in after.stderr, after.stderr
-    import json
-
     stages = json.loads((tmp_path / "a" / "summary.json").read_text())["timings_s"]["stages"]
     assert "frame_kernel" in stages and "frame_numpy" not in stages, stages
 
