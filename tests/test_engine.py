@@ -452,3 +452,12 @@ def test_the_kernels_read_switches_and_key_rows_by_name_from_one_table():
     for row, stage in enumerate(kernel.KEY_ROWS):
         assert tuple(int(w) for w in plan.keys[row]) == stream_key(5, stage), stage
     assert plan.keys.shape[0] == len(kernel.KEY_ROWS) and kernel.KEY_ROW == kernel.KEY_ROWS.index("row_noise")
+    # the GPU's per-plan table: its columns by name too, each row filled by name and refused short of one
+    from cmosnoise.engine import cuda_table
+
+    assert [cuda_table.NORMAL_ABOVE, cuda_table.STEP, cuda_table.EXPOSURE, cuda_table.CDS] == [
+        cuda_table.NUMBERS.index("normal_above"), cuda_table.NUMBERS.index("step"),
+        cuda_table.NUMBERS.index("exposure"), cuda_table.INTS.index("cds")]
+    assert cuda_table.row(cuda_table.INTS, {"cds": 1, "nl_size": 2, "read_kind": 0}) == [0, 2, 1]
+    with pytest.raises(RuntimeError, match="its columns are"):
+        cuda_table.row(cuda_table.INTS, {"read_kind": 0, "nl_size": 2})

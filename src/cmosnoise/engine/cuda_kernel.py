@@ -334,24 +334,24 @@ class DevicePlan:
         self.keys = up(np.stack([p.keys for p in plans]), np.uint64)
         self.seqs = up(np.array([p.sequence for p in plans], np.uint64))
         self.cell_offsets = up(np.array([p.cell_offsets_dn for p in plans], np.float64))
-        numbers = np.zeros((len(plans), cuda_table.EXPOSURE + 1))
-        ints = np.zeros((len(plans), cuda_table.CDS + 1), np.int64)
+        numbers = np.zeros((len(plans), len(cuda_table.NUMBERS)))
+        ints = np.zeros((len(plans), len(cuda_table.INTS)), np.int64)
         nl_tables, read_tables = [], []
         for q, p in enumerate(plans):
             table, nl_scale, (a, b, c) = kernel.curve_constants(p)
             read_kind, read_scale, read_table = kernel.read_constants(p)
             k_adc, black, top, step = p.adc if p.adc is not None else (1.0, 0.0, 0, 1)
-            for column, value in ((cuda_table.NORMAL_ABOVE, p.normal_above_e), (cuda_table.FULL_WELL, p.full_well_e), (cuda_table.K_ADC, k_adc),
-                                  (cuda_table.BLACK, black), (cuda_table.TOP, top), (cuda_table.STEP, step),
-                                  (cuda_table.NL_SCALE, nl_scale), (cuda_table.NL_A, a), (cuda_table.NL_B, b), (cuda_table.NL_C, c),
-                                  (cuda_table.READ_SCALE, read_scale), (cuda_table.ROW_SIGMA, p.row_sigma_e or 0.0),
-                                  (cuda_table.FRAME_BLACK_SIGMA, p.frame_black_sigma_dn), (cuda_table.FRAME_PERIOD, p.frame_period_s),
-                                  (cuda_table.CDS_INTERVAL, p.cds_interval_s or 0.0), (cuda_table.EXPOSURE, p.exposure_s)):
-                numbers[q, column] = value
-            ints[q, cuda_table.READ_KIND], ints[q, cuda_table.NL_SIZE], ints[q, cuda_table.CDS] = read_kind, table.size, p.cds_interval_s is not None
+            numbers[q] = cuda_table.row(cuda_table.NUMBERS, {
+                "normal_above": p.normal_above_e, "full_well": p.full_well_e, "k_adc": k_adc, "black": black,
+                "top": top, "step": step, "nl_scale": nl_scale, "nl_a": a, "nl_b": b, "nl_c": c,
+                "read_scale": read_scale, "row_sigma": p.row_sigma_e or 0.0,
+                "frame_black_sigma": p.frame_black_sigma_dn, "frame_period": p.frame_period_s,
+                "cds_interval": p.cds_interval_s or 0.0, "exposure": p.exposure_s})
+            ints[q] = cuda_table.row(cuda_table.INTS, {"read_kind": read_kind, "nl_size": table.size,
+                                                       "cds": p.cds_interval_s is not None})
             nl_tables.append(table)
             read_tables.append(read_table)
-        #: each plan's scalars (P, EXPOSURE + 1) float64 and (P, CDS + 1) int64 (the columns named above)
+        #: each plan's scalars (P, len(NUMBERS)) float64 and (P, len(INTS)) int64 (cuda_table's named columns)
         self.numbers, self.ints = up(numbers), up(ints)
         self.nl = up(self._padded(nl_tables))
         self.read_table = up(self._padded(read_tables))
