@@ -239,11 +239,12 @@ def compiled(what: str, *dispatchers, say: bool = True) -> bool:
     same bits). The one gate every compiled loop's caller passes.
 
     True where the loops are in memory or in numba's on-disk cache for this
-    machine. Where they are not: in the foreground mode (:func:`compile_mode`)
-    True, after saying once that they compile (``say``); in the background
-    mode False while a background compile (started here, once a process, if
-    none runs) builds them, said once a process, and True (compiled here)
-    where that compile ended without them.
+    machine. In the background mode (:func:`compile_mode`) False while a
+    background compile runs (this process's or another's: numba's index is
+    then not read at every call), and False where they are missing and a
+    background compile is started here (once a process), said once; True
+    (compiled here) where that compile ended without them. In the foreground
+    mode True, after saying once that they compile (``say``).
 
     Parameters
     ----------
@@ -263,11 +264,15 @@ def compiled(what: str, *dispatchers, say: bool = True) -> bool:
         return False
     if any(d.signatures for d in dispatchers):
         return True
-    if compile_mode() == "background" and not any(cached_for_this_machine(d) for d in dispatchers):
-        started = start_build()
-        if started is not None or building():
-            _say_building(started)
+    if compile_mode() == "background":
+        if building():  # a syscall, no file read: the NumPy specification until the build ends
+            _say_building(None)
             return False
+        if not any(cached_for_this_machine(d) for d in dispatchers):
+            started = start_build()
+            if started is not None:
+                _say_building(started)
+                return False
     if say:
         announce(what, *dispatchers)
     return True
