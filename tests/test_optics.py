@@ -311,3 +311,43 @@ def test_the_compiled_lean_is_four_spreads_of_signed_charge():
         assert np.allclose(crosstalk.lean(q, leans, a, b), want, rtol=0, atol=1e-12 * np.abs(want).max())
     finally:
         stencil.numba = numba
+
+
+FIELDS = [["optics.relative_illumination=cos4", "optics.focal_length_mm=0.4"],
+          ["optics.relative_illumination=cos4", "optics.chief_ray_angle=[[0, 0], [0.1, 12], [0.2, 25]]",
+           "optics.microlens_compensation=0.3", "optics.angle_relative_qe=[[0, 1], [20, 0.7]]"],
+          ["optics.chief_ray_angle=[[0, 0], [0.05, -10], [0.15, -25]]",
+           "optics.angle_relative_qe=[[0, 1, 0.9, 0.95], [5, 0.9, 0.8, 0.7], [20, 0.6, 0.5, 0.4]]"],
+          ["optics.relative_illumination=TABLE", "optics.chief_ray_angle=[[0.02, 3], [0.1, 25]]",
+           "optics.angle_relative_qe=[[0, 1, 0.9, 0.95], [10, 0.9, 0.8, 0.7]]"]]
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG", "none"])
+@pytest.mark.parametrize("sets", FIELDS, ids=["cos4", "cos4+angle", "angle per channel", "table+angle"])
+def test_the_compiled_field_factors_are_the_specifications_bits(tmp_path, pattern, sets):
+    # engine/lens.py computes relative illumination, the angle's QE loss and the leaning shares pixel by pixel;
+    # optics' NumPy maps are the specification: equal bit for bit on an odd size (a pixel on the axis, h = 0),
+    # on regions at odd corners (the CFA's phase), and on image heights beyond each table's ends
+    from cmosnoise.engine import lens
+
+    (tmp_path / "ri.csv").write_text("height_mm,ri\n0.01,1\n0.08,0.8\n0.12,0.55\n")
+    sets = [s.replace("TABLE", str(tmp_path / "ri.csv")) for s in sets]
+    c = load_config(overrides=sets + [f"sensor.cfa={pattern}", "sensor.width=131", "sensor.height=97",
+                                      "sensor.pixel_pitch_um=1.4", "crosstalk.kernel_at_angle_pct="
+                                      "[[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]"])
+    assert lens.ready()
+    shape = (97, 131)
+    for region in (None, (3, 50, 7, 91), (48, 97, 64, 131)):
+        r0, r1, c0, c1 = (0, 97, 0, 131) if region is None else region
+        signal = np.random.default_rng(r0 + c0).random((r1 - r0, c1 - c0))
+        want = signal.copy()
+        for factor in (optics.relative_illumination(c, shape, region), optics.angle_qe(c, pattern, shape, region)):
+            if factor is not None:
+                want = want * factor
+        assert np.array_equal(optics.shade(signal.copy(), c, pattern, shape, region), want), region
+        seen, got = optics.incidence(c, shape, region), optics.lean_weights(c, shape, region)
+        if seen is None:
+            assert got is None
+            continue
+        share = np.clip(seen[0] / c.crosstalk.reference_angle_deg, -1.0, 1.0)
+        assert np.array_equal(got[0], share * seen[1]) and np.array_equal(got[1], share * seen[2]), region

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import inputs
+from ..engine import lens
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
 from . import scene as scene_mod
@@ -53,7 +54,7 @@ MAX_KERNEL = 257
 MAX_FILE_BYTES = 64 * 2**20
 
 __all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "incidence",
-           "angle_qe", "lean_weights", "cfa_signal", "blur", "active", "BLOCK"]
+           "angle_qe", "lean_weights", "shade", "cfa_signal", "blur", "active", "BLOCK"]
 
 
 # ------------------------------------------------------------------ point spread functions
@@ -310,6 +311,25 @@ def _rows(value, key: str, widths: tuple[int, ...]) -> np.ndarray:
     return t
 
 
+def _angle_table(op) -> np.ndarray | None:
+    """``optics.chief_ray_angle`` checked, (n, 2): image height (mm) and angle (deg); None where no angle reaches
+    the photodiodes (none configured, or the microlenses take all of it back)."""
+    if op.chief_ray_angle is None or op.microlens_compensation >= 1:
+        return None
+    t = _rows(op.chief_ray_angle, "optics.chief_ray_angle", (2,))
+    if (np.abs(t[:, 1]) > 60).any():
+        raise CmosnoiseError("optics.chief_ray_angle: angles must be from -60 to 60 degrees")
+    return t
+
+
+def _qe_table(op) -> np.ndarray:
+    """``optics.angle_relative_qe`` checked, (n, 2) or (n, 4): angle (deg) and relative QE (one, or R, G, B)."""
+    t = _rows(op.angle_relative_qe, "optics.angle_relative_qe", (2, 4))
+    if (t[:, 1:] <= 0).any() or (t[:, 1:] > 1).any():
+        raise CmosnoiseError("optics.angle_relative_qe: each relative QE must be in (0, 1]")
+    return t
+
+
 def incidence(config, shape: tuple[int, int], region=None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Each pixel's angle of incidence after the microlenses, and its direction from the optical centre.
 
@@ -331,11 +351,9 @@ def incidence(config, shape: tuple[int, int], region=None) -> tuple[np.ndarray, 
         pixel's direction from the centre (cos: along the columns, sin: along the rows, down).
     """
     op, pitch = config.optics, config.sensor.pixel_pitch_um
-    if op.chief_ray_angle is None or op.microlens_compensation >= 1:
+    t = _angle_table(op)
+    if t is None:
         return None
-    t = _rows(op.chief_ray_angle, "optics.chief_ray_angle", (2,))
-    if (np.abs(t[:, 1]) > 60).any():
-        raise CmosnoiseError("optics.chief_ray_angle: angles must be from -60 to 60 degrees")
     y, x = _offsets_mm(shape, region, pitch)
     h = np.sqrt(np.add.outer(y * y, x * x))
     angle = np.interp(h, t[:, 0], t[:, 1])
@@ -369,9 +387,7 @@ def angle_qe(config, pattern: str, shape: tuple[int, int], region=None) -> np.nd
     seen = incidence(config, shape, region)
     if seen is None:
         return None
-    t = _rows(op.angle_relative_qe, "optics.angle_relative_qe", (2, 4))
-    if (t[:, 1:] <= 0).any() or (t[:, 1:] > 1).any():
-        raise CmosnoiseError("optics.angle_relative_qe: each relative QE must be in (0, 1]")
+    t = _qe_table(op)
     angle = np.abs(seen[0])
     if t.shape[1] == 2 or cfa_mod.is_mono(pattern):
         return np.interp(angle, t[:, 0], t[:, 1])
@@ -403,6 +419,13 @@ def lean_weights(config, shape: tuple[int, int], region=None) -> tuple[np.ndarra
     """
     if config.crosstalk.kernel_at_angle_pct is None or not config.crosstalk.enabled:
         return None
+    if lens.ready():  # the same expressions pixel by pixel, without the maps between them
+        t = _angle_table(config.optics)
+        if t is None:
+            return None
+        y, x = _offsets_mm(shape, region, config.sensor.pixel_pitch_um)
+        return lens.lean_shares(y, x, t[:, 0], t[:, 1], 1.0 - config.optics.microlens_compensation,
+                                config.crosstalk.reference_angle_deg)
     seen = incidence(config, shape, region)
     if seen is None:
         return None
@@ -514,7 +537,54 @@ def cfa_signal(draw, config, pattern: str, responsivity, shape: tuple[int, int],
         signal = scene_mod.cfa_signal(draw, pattern, responsivity, region)
     else:
         signal = scene_mod.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)
-    for factor in (relative_illumination(config, shape, region), angle_qe(config, pattern, shape, region)):
-        if factor is not None:
-            signal = np.multiply(signal, factor, out=signal if signal.flags.writeable else None)
-    return signal
+    return shade(signal, config, pattern, shape, region)
+
+
+def shade(signal: np.ndarray, config, pattern: str, shape: tuple[int, int], region=None) -> np.ndarray:
+    """``signal`` times each pixel's relative illumination, then times its QE at its angle of incidence.
+
+    Parameters
+    ----------
+    signal : (rows, cols) float64 array
+        The region's relative signal; changed in place where it is writeable.
+    config : Config
+    pattern : str
+        The CFA.
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1), optional
+        The pixels ``signal`` holds.
+
+    Returns
+    -------
+    (rows, cols) float64 array
+        ``signal * relative_illumination(...) * angle_qe(...)`` (each factor where it is configured): with the
+        compiled loops (:mod:`cmosnoise.engine.lens`) in one pass, the same bits.
+    """
+    op = config.optics
+    kind = op.relative_illumination.lower()
+    angles = _angle_table(op) if op.angle_relative_qe is not None else None
+    if kind == "none" and angles is None:
+        return signal
+    if not lens.ready():  # the specification: each factor's map, multiplied in
+        for factor in (relative_illumination(config, shape, region), angle_qe(config, pattern, shape, region)):
+            if factor is not None:
+                signal = np.multiply(signal, factor, out=signal if signal.flags.writeable else None)
+        return signal
+    if not (signal.flags.writeable and signal.flags.c_contiguous and signal.dtype == np.float64):
+        signal = np.array(signal, np.float64)
+    y, x = _offsets_mm(shape, region, config.sensor.pixel_pitch_um)
+    ri_kind = {"none": lens.RI_NONE, "cos4": lens.RI_COS4}.get(kind, lens.RI_TABLE)
+    table = qe = None
+    cells = np.zeros((2, 2), np.int64)
+    if angles is not None:
+        t = _qe_table(op)
+        if t.shape[1] == 2 or cfa_mod.is_mono(pattern):
+            qe = t[:, :2]
+        else:
+            r0, c0 = (0, 0) if region is None else (region[0], region[2])
+            qe, cells = t, cfa_mod.tile(cfa_mod.crop_pattern(pattern, r0, c0))
+        table = (np.ascontiguousarray(angles[:, 0]), np.ascontiguousarray(angles[:, 1]),
+                 1.0 - op.microlens_compensation)
+    return lens.shade(signal, y, x, ri_kind, op.focal_length_mm, _ri_table(op.relative_illumination)
+                      if ri_kind == lens.RI_TABLE else None, table, qe, cells)

@@ -1,0 +1,170 @@
+"""The lens's per-pixel factors across the field, compiled: relative illumination and the chief-ray angle's QE loss
+multiplied into a signal in one pass, and the leaning crosstalk's shares.
+
+:mod:`cmosnoise.model.optics` is the specification (:func:`~cmosnoise.model.optics.relative_illumination`,
+:func:`~cmosnoise.model.optics.angle_qe`, :func:`~cmosnoise.model.optics.lean_weights`): NumPy over whole
+arrays, each a few passes of a 12 MP map (about 0.6 s of a 12 MP exposure on 2 cores). These loops compute the
+same expressions pixel by pixel, in the same order of operations and with :func:`interp` written as NumPy's
+``np.interp`` computes it, so they give the same bits without the intermediate maps; the tests hold them to the
+specification bit for bit. Each pixel needs only its distance from the optical centre: ``h^2 = y^2 + x^2`` (mm),
+``y`` and ``x`` the row's and the column's offsets.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import ONE_LAUNCH, compiled, numba  # None where numba is not installed
+
+#: relative illumination kinds: none, cos^4 of the field angle, a table of image height
+RI_NONE, RI_COS4, RI_TABLE = 0, 1, 2
+
+if numba is not None:
+    @numba.njit(cache=True, nogil=True, inline="always")
+    def interp(x, xp, fp):  # pragma: no cover - compiled
+        """``np.interp(x, xp, fp)`` for one value, as NumPy computes it (``numpy/_core/src/multiarray/
+        compiled_base.c``, ``arr_interp``): the end values beyond the table, the last value at its last point,
+        ``fp[j]`` at a point, ``slope * (x - xp[j]) + fp[j]`` between, and the other end's form where that is
+        NaN."""
+        n = xp.size
+        if x > xp[n - 1]:
+            return fp[n - 1]
+        if x < xp[0]:
+            return fp[0]
+        if x == xp[n - 1]:
+            return fp[n - 1]
+        if x != x:
+            return x
+        lo, hi = 0, n - 1  # xp[lo] <= x < xp[hi]
+        while hi - lo > 1:
+            mid = (lo + hi) >> 1
+            if xp[mid] <= x:
+                lo = mid
+            else:
+                hi = mid
+        if xp[lo] == x:  # NumPy avoids a non-finite interpolation there
+            return fp[lo]
+        slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
+        out = slope * (x - xp[lo]) + fp[lo]
+        if out != out:
+            out = slope * (x - xp[lo + 1]) + fp[lo + 1]
+            if out != out and fp[lo] == fp[lo + 1]:
+                out = fp[lo]
+        return out
+
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _shade(signal, y, x, ri_kind, f2, ri_h, ri_v, qe_on, cra_h, cra_a, keep, qe_a, qe_v, cells):
+        # pragma: no cover - compiled
+        rows, cols = signal.shape
+        for i in numba.prange(rows):
+            yy = y[i] * y[i]
+            for j in range(cols):
+                h2 = yy + x[j] * x[j]
+                s = signal[i, j]
+                if ri_kind == RI_COS4:  # 1 / (1 + h^2 / f^2)^2, as optics.relative_illumination
+                    t = h2 / f2
+                    t += 1.0
+                    t = t * t
+                    s = s * (1.0 / t)
+                elif ri_kind == RI_TABLE:
+                    s = s * interp(np.sqrt(h2), ri_h, ri_v)
+                if qe_on:  # as optics.incidence, then optics.angle_qe by the pixel's channel
+                    angle = interp(np.sqrt(h2), cra_h, cra_a)
+                    angle *= keep
+                    s = s * interp(abs(angle), qe_a, qe_v[cells[i & 1, j & 1]])
+                signal[i, j] = s
+
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _lean(y, x, cra_h, cra_a, keep, reference, a, b):  # pragma: no cover - compiled
+        rows, cols = a.shape
+        for i in numba.prange(rows):
+            yy = y[i] * y[i]
+            for j in range(cols):
+                h = np.sqrt(yy + x[j] * x[j])
+                angle = interp(h, cra_h, cra_a)
+                angle *= keep
+                inv = 1.0 / h if h > 0 else 0.0
+                share = min(max(angle / reference, -1.0), 1.0)
+                a[i, j] = share * (x[j] * inv)
+                b[i, j] = share * (y[i] * inv)
+
+
+def _line(v) -> np.ndarray:
+    """A 1-D float64 C-contiguous array (one compiled variant for every table)."""
+    return np.ascontiguousarray(v, np.float64)
+
+
+def ready() -> bool:
+    """Whether the compiled loops run now (:func:`cmosnoise.engine.jit.compiled`); False: the NumPy specification."""
+    return numba is not None and compiled("the lens's field maps", _shade, _lean)
+
+
+def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, focal_length_mm: float,
+          ri_table: tuple[np.ndarray, np.ndarray] | None, angle: tuple[np.ndarray, np.ndarray, float] | None,
+          qe_table: np.ndarray | None, cells: np.ndarray) -> np.ndarray:
+    """Multiply ``signal`` in place by each pixel's relative illumination, then by its QE at its angle.
+
+    Parameters
+    ----------
+    signal : (rows, cols) float64 array, C-contiguous
+        Relative signal; changed in place.
+    y_mm : (rows,) float64 array
+        Each row's offset from the optical centre, mm.
+    x_mm : (cols,) float64 array
+        Each column's offset, mm.
+    ri_kind : {RI_NONE, RI_COS4, RI_TABLE}
+    focal_length_mm : float
+        f, for cos^4.
+    ri_table : (heights_mm, relative_illumination) or None
+        For RI_TABLE.
+    angle : (heights_mm, chief_ray_angle_deg, 1 - microlens_compensation) or None
+        None: no QE loss.
+    qe_table : (n, 1 + channels) array or None
+        Angle (deg), then the relative QE of each channel column.
+    cells : (2, 2) int array
+        The column of ``qe_table`` (from 0, after the angle) of each cell of the region's 2 x 2 pattern.
+
+    Returns
+    -------
+    (rows, cols) float64 array
+        ``signal``.
+    """
+    empty = np.zeros(2)
+    ri_h, ri_v = ri_table if ri_table is not None else (empty, empty)
+    cra_h, cra_a, keep = angle if angle is not None else (empty, empty, 1.0)
+    qe_a = _line(qe_table[:, 0]) if qe_table is not None else empty
+    qe_v = np.ascontiguousarray(np.asarray(qe_table, np.float64)[:, 1:].T) if qe_table is not None else np.zeros((1, 2))
+    with ONE_LAUNCH:
+        _shade(signal, _line(y_mm), _line(x_mm), ri_kind, float(focal_length_mm) ** 2, _line(ri_h), _line(ri_v),
+               angle is not None, _line(cra_h), _line(cra_a), float(keep), qe_a, qe_v, np.asarray(cells, np.int64))
+    return signal
+
+
+def lean_shares(y_mm: np.ndarray, x_mm: np.ndarray, heights_mm: np.ndarray, angles_deg: np.ndarray, keep: float,
+                reference_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The leaning crosstalk's signed shares along the columns and the rows per pixel.
+
+    Parameters
+    ----------
+    y_mm, x_mm : (rows,) and (cols,) float64 arrays
+        The rows' and columns' offsets from the optical centre, mm.
+    heights_mm, angles_deg : (n,) float64 arrays
+        The chief-ray angle's table.
+    keep : float
+        ``1 - microlens_compensation``.
+    reference_deg : float
+        The angle of the leaning kernel.
+
+    Returns
+    -------
+    (toward_col, toward_row), each (rows, cols) float64
+    """
+    a = np.empty((y_mm.size, x_mm.size))
+    b = np.empty_like(a)
+    with ONE_LAUNCH:
+        _lean(_line(y_mm), _line(x_mm), _line(heights_mm), _line(angles_deg), float(keep), float(reference_deg),
+              a, b)
+    return a, b
+
+
+__all__ = ["ready", "shade", "lean_shares", "RI_NONE", "RI_COS4", "RI_TABLE"]
