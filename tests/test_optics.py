@@ -306,6 +306,16 @@ def test_the_compiled_lean_is_four_spreads_of_signed_charge():
     got = crosstalk.lean(q, leans, a, b)
     assert np.allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
     assert abs(got.sum()) < 1e-9 * q.sum()  # it only moves charge
+    # each value's terms are added in an order fixed by the sensor's rows: a band of rows from row 31 gives the
+    # whole's bits away from its edges, and so does one thread
+    band = crosstalk.lean(q[31:71], leans, a[31:71], b[31:71], row0=31)
+    assert np.array_equal(band[1:-1], got[32:70])
+    threads = stencil.numba.get_num_threads()
+    try:
+        stencil.numba.set_num_threads(1)
+        assert np.array_equal(crosstalk.lean(q, leans, a, b), got)
+    finally:
+        stencil.numba.set_num_threads(threads)
     numba = stencil.numba
     try:
         stencil.numba = None

@@ -42,28 +42,35 @@ if numba is not None:
 
 
 if numba is not None:
-    @numba.njit(cache=True, nogil=True)
-    def _leaning(q, a, b, right, left, down, up, out):  # pragma: no cover - compiled
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _leaning(q, a, b, right, left, down, up, row0, out):  # pragma: no cover - compiled
         rows, cols = q.shape
-        for y in range(rows):
-            for x in range(cols):
-                wa, wb = q[y, x] * a[y, x], q[y, x] * b[y, x]
-                if wa == 0.0 and wb == 0.0:
-                    continue
-                kx = right if wa >= 0.0 else left
-                ky = down if wb >= 0.0 else up
-                wa, wb = abs(wa), abs(wb)
-                for dy in range(3):
-                    ty = min(max(y + dy - 1, 0), rows - 1)  # off the array: back into the edge pixel it left
-                    for dx in range(3):
-                        tx = min(max(x + dx - 1, 0), cols - 1)
-                        out[ty, tx] += wa * kx[dy, dx] + wb * ky[dy, dx]
+        # a source row writes the rows next to it only: rows three apart never write the same values, so each
+        # third of the rows (by the sensor's own row number, row0 + y, so that a tile adds each value's terms in
+        # the whole's order) is scattered in parallel, one third after another
+        for phase in range(3):
+            first = (phase - row0) % 3
+            for t in numba.prange(max(rows - first + 2, 0) // 3):
+                y = first + 3 * t
+                for x in range(cols):
+                    wa, wb = q[y, x] * a[y, x], q[y, x] * b[y, x]
+                    if wa == 0.0 and wb == 0.0:
+                        continue
+                    kx = right if wa >= 0.0 else left
+                    ky = down if wb >= 0.0 else up
+                    wa, wb = abs(wa), abs(wb)
+                    for dy in range(3):
+                        ty = min(max(y + dy - 1, 0), rows - 1)  # off the array: back into the edge pixel it left
+                        for dx in range(3):
+                            tx = min(max(x + dx - 1, 0), cols - 1)
+                            out[ty, tx] += wa * kx[dy, dx] + wb * ky[dy, dx]
 
 
-def leaning_spread(q: np.ndarray, a: np.ndarray, b: np.ndarray, leans: tuple) -> np.ndarray:
+def leaning_spread(q: np.ndarray, a: np.ndarray, b: np.ndarray, leans: tuple, row0: int = 0) -> np.ndarray:
     """Charge scattered by a kernel that leans per pixel: pixel p sends ``q[p] (|a[p]| D_a + |b[p]| D_b)[d]`` to
     p + d, D_a the column kernel of ``a``'s sign and D_b the row kernel of ``b``'s (off the array: into the edge
-    pixel it left). One compiled pass, in row order.
+    pixel it left). One compiled pass over the cores, each value's terms added in an order fixed by the rows'
+    numbers on the sensor (a tile's values are the whole's, bit for bit, away from its edges).
 
     Parameters
     ----------
@@ -73,6 +80,8 @@ def leaning_spread(q: np.ndarray, a: np.ndarray, b: np.ndarray, leans: tuple) ->
         The signed shares along the columns and the rows.
     leans : tuple of four (3, 3) arrays
         The kernels' changes toward +column, -column, +row, -row (:func:`cmosnoise.model.stages.crosstalk.lean_kernels`).
+    row0 : int
+        The sensor's row number of ``q``'s first row.
 
     Returns
     -------
@@ -93,7 +102,8 @@ def leaning_spread(q: np.ndarray, a: np.ndarray, b: np.ndarray, leans: tuple) ->
                         np.add.at(out, (ty[:, None], tx[None, :]), src * k[dy, dx])
         return out
     announce("the leaning crosstalk", _leaning)
-    _leaning(q, a, b, ks[0], ks[1], ks[2], ks[3], out)
+    with ONE_LAUNCH:
+        _leaning(q, a, b, ks[0], ks[1], ks[2], ks[3], int(row0), out)
     return out
 
 

@@ -298,7 +298,7 @@ class Sensor:
                 weights = optics_mod.lean_weights(c, self.shape, (r0, r1, c0, c1))
                 if weights is not None:
                     leans = crosstalk.lean_kernels(kernel, crosstalk.kernel_fractions(c.crosstalk.kernel_at_angle_pct))
-                    mean = mean + crosstalk.lean(after_prnu, leans, *weights)
+                    mean = mean + crosstalk.lean(after_prnu, leans, *weights, row0=r0)
         return after_prnu, mean
 
     @property

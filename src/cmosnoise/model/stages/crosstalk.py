@@ -125,7 +125,7 @@ def lean_kernels(kernel, kernel_at_angle) -> tuple[np.ndarray, np.ndarray, np.nd
     return d, d[:, ::-1], d.T, d.T[::-1, :]
 
 
-def lean(mean_e: np.ndarray, leans: tuple, toward_col: np.ndarray, toward_row: np.ndarray) -> np.ndarray:
+def lean(mean_e: np.ndarray, leans: tuple, toward_col: np.ndarray, toward_row: np.ndarray, row0: int = 0) -> np.ndarray:
     """The charge that leaning crosstalk moves: what :func:`spread` adds for a kernel that depends on the pixel.
 
     Pixel q spreads with ``kernel + a(q) D_col + b(q) D_row``, where ``a`` and ``b`` are the signed shares of
@@ -144,13 +144,16 @@ def lean(mean_e: np.ndarray, leans: tuple, toward_col: np.ndarray, toward_row: n
         :func:`lean_kernels`.
     toward_col, toward_row : (rows, cols) arrays
         ``a`` and ``b`` per pixel, each from -1 to 1.
+    row0 : int
+        The sensor's row number of the first row (the compiled pass adds each pixel's terms in an order fixed by
+        the sensor's rows, so that a tile's values are the whole's).
 
     Returns
     -------
     (rows, cols) float64 array, e-
         To add to :func:`apply`'s result.
     """
-    return stencil.leaning_spread(mean_e, toward_col, toward_row, leans)
+    return stencil.leaning_spread(mean_e, toward_col, toward_row, leans, row0)
 
 
 def channel_mixing_matrix(kernel, pattern: str) -> np.ndarray:
