@@ -6,7 +6,8 @@ arrays against its memory order and took 3 to 5 s at 50 MP; blocks of 64 x 64 th
 parallel over row blocks, take a tenth of it. Only values move, so the result is the same bits.
 
 The mosaic a colour filter array samples from such an image (:func:`cfa_pick`, what ``scene.to_cfa`` calls):
-each pixel's own channel times its gain in one parallel pass, the same product as NumPy's.
+each pixel's own channel times its gain in one parallel pass, the same product as NumPy's; and from planes of
+any strides (:func:`plane_pick`, what the lens's blur gives), negative values taken as 0.
 """
 
 from __future__ import annotations
@@ -80,6 +81,50 @@ def cfa_pick(rgb: np.ndarray, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
         return out
     with ONE_LAUNCH:
         _pick(rgb, cell, gain, out)
+    return out
+
+
+if numba is not None:
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _plane_pick(planes, cell, gain, out):  # pragma: no cover - compiled
+        rows, cols = out.shape
+        for i in numba.prange(rows):
+            for j in range(cols):
+                c = cell[i & 1, j & 1]
+                v = np.float64(planes[c, i, j])
+                out[i, j] = (v if v > 0.0 else 0.0) * gain[c]
+
+
+def plane_pick(planes: np.ndarray, cell: np.ndarray, gain: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Each pixel's own channel of an image held as planes, at least 0, times that channel's gain, into ``out``.
+
+    Parameters
+    ----------
+    planes : (C, rows, cols) float32 or float64 array
+        The image, any strides (a transposed view too).
+    cell : (2, 2) int array
+        The channel of each position of the 2 x 2 cell (row and column parity).
+    gain : (C,) float64 array
+        Each channel's factor.
+    out : (rows, cols) float64 array
+        Where the mosaic goes (a view of a larger array too).
+
+    Returns
+    -------
+    (rows, cols) float64 array
+        ``out``: ``max(planes[c, i, j], 0) * gain[c]``, ``c = cell[i % 2, j % 2]`` (NaN taken as 0), the same
+        bits as NumPy's product.
+    """
+    cell = np.ascontiguousarray(cell, dtype=np.int64)
+    gain = np.ascontiguousarray(gain, dtype=np.float64)
+    if numba is None or out.size < 1 << 14 or not compiled("the blur's mosaic", _plane_pick):
+        for (i, j), ch in np.ndenumerate(cell):
+            v = planes[ch, i::2, j::2].astype(np.float64)
+            v[~(v > 0.0)] = 0.0
+            np.multiply(v, gain[ch], out=out[i::2, j::2])
+        return out
+    with ONE_LAUNCH:
+        _plane_pick(planes, cell, gain, out)
     return out
 
 

@@ -21,11 +21,11 @@ RI_NONE, RI_COS4, RI_TABLE = 0, 1, 2
 
 if numba is not None:
     @numba.njit(cache=True, nogil=True, inline="always")
-    def interp(x, xp, fp):  # pragma: no cover - compiled
+    def interp(x, xp, fp, slopes):  # pragma: no cover - compiled
         """``np.interp(x, xp, fp)`` for one value, as NumPy computes it (``numpy/_core/src/multiarray/
         compiled_base.c``, ``arr_interp``): the end values beyond the table, the last value at its last point,
         ``fp[j]`` at a point, ``slope * (x - xp[j]) + fp[j]`` between, and the other end's form where that is
-        NaN."""
+        NaN. ``slopes``: :func:`slopes` of the table, as NumPy computes them once for a long ``x``."""
         n = xp.size
         if x > xp[n - 1]:
             return fp[n - 1]
@@ -44,7 +44,7 @@ if numba is not None:
                 hi = mid
         if xp[lo] == x:  # NumPy avoids a non-finite interpolation there
             return fp[lo]
-        slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
+        slope = slopes[lo]
         out = slope * (x - xp[lo]) + fp[lo]
         if out != out:
             out = slope * (x - xp[lo + 1]) + fp[lo + 1]
@@ -53,7 +53,8 @@ if numba is not None:
         return out
 
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def _shade(signal, y, x, ri_kind, f2, ri_h, ri_v, qe_on, cra_h, cra_a, keep, qe_a, qe_v, cells):
+    def _shade(signal, y, x, ri_kind, f2, ri_h, ri_v, ri_s, qe_on, cra_h, cra_a, cra_s, keep, qe_a, qe_v, qe_s,
+               cells):
         # pragma: no cover - compiled
         rows, cols = signal.shape
         for i in numba.prange(rows):
@@ -67,26 +68,33 @@ if numba is not None:
                     t = t * t
                     s = s * (1.0 / t)
                 elif ri_kind == RI_TABLE:
-                    s = s * interp(np.sqrt(h2), ri_h, ri_v)
+                    s = s * interp(np.sqrt(h2), ri_h, ri_v, ri_s)
                 if qe_on:  # as optics.incidence, then optics.angle_qe by the pixel's channel
-                    angle = interp(np.sqrt(h2), cra_h, cra_a)
+                    angle = interp(np.sqrt(h2), cra_h, cra_a, cra_s)
                     angle *= keep
-                    s = s * interp(abs(angle), qe_a, qe_v[cells[i & 1, j & 1]])
+                    c = cells[i & 1, j & 1]
+                    s = s * interp(abs(angle), qe_a, qe_v[c], qe_s[c])
                 signal[i, j] = s
 
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def _lean(y, x, cra_h, cra_a, keep, reference, a, b):  # pragma: no cover - compiled
+    def _lean(y, x, cra_h, cra_a, cra_s, keep, reference, a, b):  # pragma: no cover - compiled
         rows, cols = a.shape
         for i in numba.prange(rows):
             yy = y[i] * y[i]
             for j in range(cols):
                 h = np.sqrt(yy + x[j] * x[j])
-                angle = interp(h, cra_h, cra_a)
+                angle = interp(h, cra_h, cra_a, cra_s)
                 angle *= keep
                 inv = 1.0 / h if h > 0 else 0.0
                 share = min(max(angle / reference, -1.0), 1.0)
                 a[i, j] = share * (x[j] * inv)
                 b[i, j] = share * (y[i] * inv)
+
+
+def slopes(xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """A table's slopes between its points, ``(fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])``, as ``np.interp`` makes
+    them (along the last axis of ``fp``)."""
+    return np.ascontiguousarray(np.diff(fp, axis=-1) / np.diff(xp))
 
 
 def _line(v) -> np.ndarray:
@@ -129,14 +137,16 @@ def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, 
     (rows, cols) float64 array
         ``signal``.
     """
-    empty = np.zeros(2)
-    ri_h, ri_v = ri_table if ri_table is not None else (empty, empty)
-    cra_h, cra_a, keep = angle if angle is not None else (empty, empty, 1.0)
-    qe_a = _line(qe_table[:, 0]) if qe_table is not None else empty
+    axis, zero = np.array([0.0, 1.0]), np.zeros(2)  # a table that is not read
+    ri_h, ri_v = ri_table if ri_table is not None else (axis, zero)
+    cra_h, cra_a, keep = angle if angle is not None else (axis, zero, 1.0)
+    qe_a = _line(qe_table[:, 0]) if qe_table is not None else axis
     qe_v = np.ascontiguousarray(np.asarray(qe_table, np.float64)[:, 1:].T) if qe_table is not None else np.zeros((1, 2))
     with ONE_LAUNCH:
         _shade(signal, _line(y_mm), _line(x_mm), ri_kind, float(focal_length_mm) ** 2, _line(ri_h), _line(ri_v),
-               angle is not None, _line(cra_h), _line(cra_a), float(keep), qe_a, qe_v, np.asarray(cells, np.int64))
+               slopes(_line(ri_h), _line(ri_v)), angle is not None, _line(cra_h), _line(cra_a),
+               slopes(_line(cra_h), _line(cra_a)), float(keep), qe_a, qe_v, slopes(qe_a, qe_v),
+               np.asarray(cells, np.int64))
     return signal
 
 
@@ -162,8 +172,8 @@ def lean_shares(y_mm: np.ndarray, x_mm: np.ndarray, heights_mm: np.ndarray, angl
     a = np.empty((y_mm.size, x_mm.size))
     b = np.empty_like(a)
     with ONE_LAUNCH:
-        _lean(_line(y_mm), _line(x_mm), _line(heights_mm), _line(angles_deg), float(keep), float(reference_deg),
-              a, b)
+        _lean(_line(y_mm), _line(x_mm), _line(heights_mm), _line(angles_deg),
+              slopes(_line(heights_mm), _line(angles_deg)), float(keep), float(reference_deg), a, b)
     return a, b
 
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import inputs
-from ..engine import lens
+from ..engine import layout, lens
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
 from . import scene as scene_mod
@@ -452,14 +452,23 @@ def active(config) -> bool:
             or (op.angle_relative_qe is not None and op.chief_ray_angle is not None))
 
 
+def _planes(draw, region) -> tuple[np.ndarray, bool]:
+    """The picture over ``region`` as float32 planes: (3, rows, cols), or (3, cols, rows) and True where the scene
+    gives its channels transposed (a resampled picture: no interleaved copy is made)."""
+    if isinstance(draw, scene_mod.Resampled):
+        return draw.transposed_planes(region, np.float32), True
+    return np.ascontiguousarray(np.asarray(draw(region)).transpose(2, 0, 1), np.float32), False
+
+
 def _blocks(draw, shape: tuple[int, int], kernels: np.ndarray, region=None):
-    """The blurred picture a block of the sensor's grid at a time: yields ``(q0, q1, p0, p1, rgb)``, the part of
-    ``region`` in one block (sensor coordinates) and its (q1 - q0, p1 - p0, 3) float32 values (a view).
+    """The blurred picture a block of the sensor's grid at a time: yields ``(q0, q1, p0, p1, planes)``, the part
+    of ``region`` in one block (sensor coordinates) and its (3, q1 - q0, p1 - p0) float32 values (a view).
 
     Each block of :data:`BLOCK` pixels, with a margin of the kernel's radius (the picture's edge pixels repeated
-    beyond it), is convolved with one kernel per channel by real FFTs in single precision: the three channels in
-    one transform each way, every core on each (pocketfft's threads split the other axes: the same bits on any
-    number). A tile is made of the same blocks as the whole, so it is that crop bit for bit.
+    beyond it), is convolved with one kernel per channel by real FFTs in single precision, every core on each
+    transform (pocketfft's threads split the other axes: the same bits on any number). Where the scene gives its
+    channels transposed, the blocks are transformed transposed, with the kernels transposed. A tile is made of
+    the same blocks as the whole, so it is that crop bit for bit.
     """
     import scipy.fft as sfft
 
@@ -471,29 +480,35 @@ def _blocks(draw, shape: tuple[int, int], kernels: np.ndarray, region=None):
     b_r0, b_c0 = r0 // BLOCK * BLOCK, c0 // BLOCK * BLOCK
     b_r1, b_c1 = min(-(-r1 // BLOCK) * BLOCK, rows), min(-(-c1 // BLOCK) * BLOCK, cols)
     g0, g1, h0, h1 = max(b_r0 - m, 0), min(b_r1 + m, rows), max(b_c0 - m, 0), min(b_c1 + m, cols)
-    picture = np.asarray(draw((g0, g1, h0, h1)), np.float64)
-    taps = np.ascontiguousarray(kernels.transpose(1, 2, 0), np.float32)
+    picture, transposed = _planes(draw, (g0, g1, h0, h1))
+    if transposed:  # (3, cols, rows): each block is cut and padded along the picture's own axes
+        picture = picture.transpose(0, 2, 1)
+    taps = np.ascontiguousarray(kernels.transpose(0, 2, 1) if transposed else kernels, np.float32)
     spectra = {}
     for br in range(b_r0, r1, BLOCK):
         for bc in range(b_c0, c1, BLOCK):
             be_r, be_c = min(br + BLOCK, rows), min(bc + BLOCK, cols)
             # the block with its margins, clamped to the picture, its edge pixels repeated beyond it
             a0, a1, d0, d1 = max(br - m, 0), min(be_r + m, rows), max(bc - m, 0), min(be_c + m, cols)
-            src = picture[a0 - g0:a1 - g0, d0 - h0:d1 - h0].astype(np.float32)
-            edges = ((a0 - (br - m), be_r + m - a1), (d0 - (bc - m), be_c + m - d1), (0, 0))
-            if any(edges[0] + edges[1]):
+            src = picture[:, a0 - g0:a1 - g0, d0 - h0:d1 - h0]
+            edges = ((0, 0), (a0 - (br - m), be_r + m - a1), (d0 - (bc - m), be_c + m - d1))
+            if any(edges[1] + edges[2]):
                 src = np.pad(src, edges, mode="edge")
+            if transposed:
+                src = src.transpose(0, 2, 1)
             # a linear convolution, zero-padded to a fast size: the wrapped part falls in the first 2m rows and
             # columns, outside the valid part kept
-            size = (sfft.next_fast_len(src.shape[0], real=True), sfft.next_fast_len(src.shape[1], real=True))
+            size = (sfft.next_fast_len(src.shape[1], real=True), sfft.next_fast_len(src.shape[2], real=True))
             if size not in spectra:
-                spectra[size] = sfft.rfft2(taps, s=size, axes=(0, 1))
-            f = sfft.rfft2(src, s=size, axes=(0, 1), workers=-1)
+                spectra[size] = sfft.rfft2(taps, s=size, axes=(1, 2))
+            f = sfft.rfft2(src, s=size, axes=(1, 2), workers=-1)
             f *= spectra[size]
-            full = sfft.irfft2(f, s=size, axes=(0, 1), workers=-1)
+            full = sfft.irfft2(f, s=size, axes=(1, 2), workers=-1)
+            if transposed:
+                full = full.transpose(0, 2, 1)
             q0, q1, p0, p1 = max(r0, br), min(r1, be_r), max(c0, bc), min(c1, be_c)
             # the 'valid' part starts at 2m: the block's own pixels
-            yield q0, q1, p0, p1, full[2 * m + q0 - br:2 * m + q1 - br, 2 * m + p0 - bc:2 * m + p1 - bc]
+            yield q0, q1, p0, p1, full[:, 2 * m + q0 - br:2 * m + q1 - br, 2 * m + p0 - bc:2 * m + p1 - bc]
 
 
 def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.ndarray:
@@ -518,14 +533,16 @@ def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.n
     Returns
     -------
     (rows, cols, 3) float64 array
-        At least 0 (the transforms' rounding leaves values of about -1e-8 where the picture is black).
+        At least 0 (the transforms' rounding leaves values of about -1e-8 where the picture is black; they are
+        taken as 0).
     """
     rows, cols = shape
     r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
     out = np.empty((r1 - r0, c1 - c0, 3))
     for q0, q1, p0, p1, part in _blocks(draw, shape, kernels, region):
-        out[q0 - r0:q1 - r0, p0 - c0:p1 - c0] = part
-    return np.clip(out, 0.0, None, out=out)
+        out[q0 - r0:q1 - r0, p0 - c0:p1 - c0] = part.transpose(1, 2, 0)
+    out[~(out > 0.0)] = 0.0
+    return out
 
 
 def blur_cfa(draw, shape: tuple[int, int], kernels: np.ndarray, pattern: str, responsivity,
@@ -550,11 +567,15 @@ def blur_cfa(draw, shape: tuple[int, int], kernels: np.ndarray, pattern: str, re
     rows, cols = shape
     r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
     out = np.empty((r1 - r0, c1 - c0))
+    gain = np.asarray(responsivity, np.float64)
     for q0, q1, p0, p1, part in _blocks(draw, shape, kernels, region):
-        rgb = np.clip(part.astype(np.float64), 0.0, None)
-        # the block's CFA phase: its first pixel's row and column in the region
-        phase = cfa_mod.crop_pattern(pattern, q0 - r0, p0 - c0) if not cfa_mod.is_mono(pattern) else pattern
-        out[q0 - r0:q1 - r0, p0 - c0:p1 - c0] = scene_mod.to_cfa(rgb, phase, responsivity)
+        dst = out[q0 - r0:q1 - r0, p0 - c0:p1 - c0]
+        if cfa_mod.is_mono(pattern):
+            rgb = part.transpose(1, 2, 0).astype(np.float64, order="C")
+            rgb[~(rgb > 0.0)] = 0.0
+            dst[...] = scene_mod.to_cfa(rgb, pattern, responsivity)
+        else:  # the block's CFA phase: its first pixel's row and column in the region
+            layout.plane_pick(part, cfa_mod.tile(cfa_mod.crop_pattern(pattern, q0 - r0, p0 - c0)), gain, dst)
     return out
 
 

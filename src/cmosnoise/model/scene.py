@@ -461,6 +461,28 @@ class Resampled:
         """:func:`resample` of the picture: (rows, cols, 3) float64, the region's size (None: the whole)."""
         return _columns_pass(*_row_pass(self.img, self.shape, region, self.axes))
 
+    def transposed_planes(self, region=None, dtype=np.float32) -> np.ndarray:
+        """The picture's channels over ``region``, each transposed, as the separable resampling gives them: no
+        interleaved copy.
+
+        Parameters
+        ----------
+        region : (row0, row1, col0, col1), optional
+            The rectangle to make (None: the whole).
+        dtype : dtype
+            Of the result (each value is ``self(region)``'s, rounded to it).
+
+        Returns
+        -------
+        (3, cols, rows) array
+            ``self(region).transpose(2, 1, 0)``, the same values.
+        """
+        planes, wc = _row_pass(self.img, self.shape, region, self.axes)
+        out = np.empty((len(planes), wc.shape[0], planes.shape[1]), dtype)
+        for c, plane in enumerate(planes):
+            out[c] = wc @ plane.T
+        return out
+
     def cfa(self, pattern: str, responsivity=(1.0, 1.0, 1.0), region=None) -> np.ndarray:
         """``to_cfa(self(region), pattern, responsivity)``, bit for bit, without making the three channels at the
         sensor's size: the columns' weights are applied only for each pixel's own channel
