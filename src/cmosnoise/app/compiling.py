@@ -10,9 +10,9 @@ command in the background, in a session of its own, for the next run
 (:func:`cmosnoise.engine.jit.compiled`). Run it yourself to build
 everything at once, e.g. in a container image after ``pip install``.
 
-What it compiles is what two runs use, and their ground truth (a data
-set's): the default sensor with processing, and a sensor with every stage
-on (:data:`WARM_UPS`). A configuration whose
+What it compiles is what three runs use, and their ground truth (a data
+set's): the default sensor with processing, a sensor with every stage
+on, and one behind a lens (:data:`WARM_UPS`). A configuration whose
 arrays take other types compiles those variants at its first run, and says so.
 """
 
@@ -39,9 +39,15 @@ EVERY_STAGE = {"sensor": {"frame_rate_hz": 30}, "column_noise": {"gain_sigma_pct
                "dark_current": {"rts": {"enabled": True, "ppm": 50}},
                "defects": {"enabled": True}}
 
+#: a lens in front of the sensor: a PSF (the blur's mosaic), shading and a chief-ray angle with its QE loss and
+#: leaning crosstalk (the lens's field loops)
+LENS = {"optics": {"psf": "gaussian", "relative_illumination": "cos4", "chief_ray_angle": [[0, 0], [1, 25]],
+                   "angle_relative_qe": [[0, 1], [20, 0.7]]},
+        "crosstalk": {"kernel_at_angle_pct": [[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]}}
+
 #: (what, the configuration's changes from the defaults): the runs whose loops are built, each 2 frames with
 #: processing (the run statistics compare frames; processed.png takes the pictures' loops)
-WARM_UPS = (("the default sensor", {}), ("every stage on", EVERY_STAGE))
+WARM_UPS = (("the default sensor", {}), ("every stage on", EVERY_STAGE), ("a lens", LENS))
 
 
 def build(background: bool = False, say: Callable[[str], None] = print) -> dict[str, float] | None:
