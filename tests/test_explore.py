@@ -431,3 +431,41 @@ def test_the_quick_settings_show_whole_names_and_light_in_lux_renders(app_page):
     _wait(page, f"S.seq.A > {seq} && !S.busy.A")
     _wait_rendered(page, "A")
     assert _pixels(page, "canvasA") != before
+
+
+def test_image_quality_of_both_panes_and_their_difference_in_jnd(app_page, server, tmp_path):
+    """#61: the explorer measures each pane's image quality at one illuminance (quality's metric registry) and
+    shows A - B, in JND for banding; the numbers are `quality.measure`'s for the pane's configuration and seed."""
+    from cmosnoise.analysis import quality
+    from cmosnoise.config import Config
+
+    page = app_page
+    page.evaluate("S.panes.A.config.sensor.quantum_efficiency = 0.6; S.panes.B.config.sensor.quantum_efficiency = 0.6;"
+                  "S.panes.B.config.column_noise.vfpn_sigma_e = 6")
+    page.fill("#qLux", "10")
+    page.click("#qMeasure")
+    _wait(page, "document.querySelectorAll('#qTable tbody tr').length > 0")
+    rows = page.eval_on_selector_all("#qTable tbody tr", "rs => rs.map(r => [r.dataset.metric, "
+                                                          "...[...r.cells].map(c => c.textContent)])")
+    assert [r[0] for r in rows] == [m.name for m in quality.METRICS]
+    got = {r[0]: r[1:] for r in rows}
+    # the page's numbers are the server's, and the server's are quality.measure's, for each pane
+    for pane in "AB":
+        body = page.evaluate(f"JSON.stringify({{config: S.panes.{pane}.config, lux: 10}})")
+        status, data, _ = _post(server + "api/quality", body.encode())
+        assert status == 200
+        served = json.loads(data)
+        config = Config.model_validate(json.loads(body)["config"])
+        want = quality.measure(config, [10.0], frames=served["frames"], seed=config.seed)
+        assert served["metrics"] == {k: v[0] for k, v in want["metrics"].items()}, pane
+    # six times the column FPN in B: B's banding is the larger, A - B is negative in JND, and A is the better
+    label, a, b, diff = got["banding_columns"]
+    assert label == "column banding (JND)" and float(b) > float(a)
+    assert diff.startswith("-") and "JND" in diff and diff.endswith("A better")
+    assert "thresholds" in got["visual_noise_l"][3]
+    page.screenshot(path=str(tmp_path / "quality.png"), full_page=True)
+    # a bad illuminance is one line in the box, no table
+    page.fill("#qLux", "-3")
+    page.click("#qMeasure")
+    _wait(page, "document.getElementById('qStatus').classList.contains('err')")
+    assert "lux" in page.text_content("#qStatus") and page.eval_on_selector_all("#qTable tbody tr", "r => r.length") == 0

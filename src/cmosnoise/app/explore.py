@@ -266,6 +266,16 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         return JSONResponse(await in_thread(bench.figures, spec, scene, lock=bench.figures_lock))
 
     @errors
+    async def quality_route(request: Request):
+        """A pane's image-quality metrics at the page's illuminance (:meth:`Workbench.quality`)."""
+        data = await json_body(request)
+        spec = validate(data.get("config"))
+        lux = data.get("lux")
+        if isinstance(lux, bool) or not isinstance(lux, (int, float)):
+            raise BadRequest("lux must be a number (the illuminance on the charts)")
+        return JSONResponse(await in_thread(bench.quality, spec, lux, lock=bench.figures_lock))
+
+    @errors
     async def raw_route(request: Request):
         """Frame k of a pane as .npy (uint16 DN), whole: what ``cmosnoise simulate`` with the exported config writes."""
         data = await json_body(request)
@@ -317,6 +327,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     routes = [Route(path, page) for path in files] + [
         Route("/api/meta", meta), Route("/api/stats", stats), Route("/api/preset", preset), Route("/api/check", check, methods=["POST"]),
         Route("/api/render", render, methods=["POST"]), Route("/api/figures", figures_route, methods=["POST"]),
+        Route("/api/quality", quality_route, methods=["POST"]),
         Route("/api/raw", raw_route, methods=["POST"]), Route("/api/upload", upload, methods=["POST"]),
         Route("/api/yaml", to_yaml, methods=["POST"]), Route("/api/load", from_yaml, methods=["POST"]),
     ]

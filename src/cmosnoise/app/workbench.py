@@ -53,6 +53,10 @@ MAX_UPLOADS_BYTES = 200_000_000
 #: demosaicing and defect correction see real neighbours at the viewport's edges
 MARGIN = 4
 VIEWS = ("raw", "pre", "processed")
+#: the charts' frames a pane's image quality averages (a 640 x 480 default sensor's: about 0.2 s on 2 cores)
+QUALITY_FRAMES = 8
+#: the illuminances the page may ask quality at, lux
+QUALITY_LUX = (1e-3, 1e6)
 
 
 class BadRequest(Exception):
@@ -246,6 +250,39 @@ class Workbench:
             return fom.pane(shot.sensor, shot)
 
         return self._figures.get("figures", (spec.config, scene), make)
+
+    def quality(self, spec: SensorSpec, lux: float) -> dict:
+        """A pane's image quality at ``lux`` (:func:`cmosnoise.analysis.quality.measure` of its configuration and
+        seed, :data:`QUALITY_FRAMES` frames of each chart): each metric's value, name, unit and better direction,
+        and the visibility threshold of visual noise in L*.
+
+        Parameters
+        ----------
+        spec : SensorSpec
+            The pane's sensor (its light switched on at ``lux`` where it is off).
+        lux : float
+            The illuminance on the charts, lux.
+
+        Returns
+        -------
+        dict
+            ``lux``, ``metrics`` (name -> value or None), ``labels`` (name -> [label, unit, better]),
+            ``visual_threshold_l``, ``notes``, ``frames``.
+        """
+        from ..analysis import quality
+
+        lux = float(lux)
+        if not QUALITY_LUX[0] <= lux <= QUALITY_LUX[1]:
+            raise BadRequest(f"lux = {lux:g}: give an illuminance from {QUALITY_LUX[0]:g} to {QUALITY_LUX[1]:g} lux")
+
+        def make():
+            r = quality.measure(spec.config, [lux], frames=QUALITY_FRAMES, seed=spec.seed)
+            return {"lux": lux, "frames": QUALITY_FRAMES, "visual_threshold_l": r["visual_threshold_l"],
+                    "metrics": {k: v[0] for k, v in r["metrics"].items()},
+                    "labels": {m.name: [m.label, m.unit, m.better] for m in quality.METRICS},
+                    "notes": sorted(set(r["notes"]))}
+
+        return self._figures.get("quality", (spec.config, lux), make)
 
     def couplets(self, spec: SensorSpec, region) -> list:
         """Couplets of the dark map (both white pixels) inside ``region``: [[r1, c1, r2, c2], ...]."""

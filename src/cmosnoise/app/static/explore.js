@@ -258,6 +258,7 @@ function layout() {
   const h = Math.round(w * CANVAS_MAX[1] / CANVAS_MAX[0]);
   const wasFit = !S.zoom || (S.panes.A && Math.abs(S.zoom - fitZoom()) < 1e-9);
   for (const p of ["A", "B"]) { canvasFor(p).width = w; canvasFor(p).height = h; $("figures" + p).style.width = `${w}px`; }
+  $("quality").style.width = `${2 * w + 10}px`;   // under both panes
   canvasFor("Diff").width = 2 * w + gap; canvasFor("Diff").height = h;
   if (wasFit) S.zoom = null;
 }
@@ -433,6 +434,54 @@ function showFigures(p, d) {
   box.appendChild(bars);
 }
 
+// ------------------------------------------------------------------ image quality of both panes at one illuminance
+// (the server's quality metrics: analysis/quality.py's METRICS, one table for the command, the sweep and this page)
+async function qualityOf(p, lux) {
+  const resp = await fetch("api/quality", { method: "POST", headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" },
+    body: JSON.stringify({ config: S.panes[p].config, lux }) });
+  const d = await resp.json().catch(() => ({ error: `HTTP ${resp.status}` }));
+  if (!resp.ok) throw new Error(`${p}: ${d.error || resp.status}`);
+  return d;
+}
+async function measureQuality() {
+  const lux = Number($("qLux").value), status = $("qStatus");
+  $("qTable").textContent = ""; $("qNotes").textContent = "";
+  status.classList.remove("err");
+  if (!(lux > 0)) { status.classList.add("err"); status.textContent = `lux = ${$("qLux").value}: give an illuminance above 0`; return; }
+  status.textContent = `measuring A and B at ${fmt(lux)} lux ...`;
+  let a, b;
+  try { a = await qualityOf("A", lux); b = await qualityOf("B", lux); }
+  catch (e) { status.classList.add("err"); status.textContent = e.message; return; }
+  status.textContent = `${fmt(a.lux)} lux: the charts (18 % grey, slanted edge, ColorChecker), ${a.frames} frames each, on each pane's sensor`;
+  showQuality(a, b);
+}
+function showQuality(a, b) {
+  const t = $("qTable");
+  const head = t.createTHead().insertRow();
+  for (const h of ["metric", "A", "B", "A - B"]) {
+    const c = document.createElement("th"); c.textContent = h; if (h !== "metric") c.className = "v"; head.appendChild(c);
+  }
+  const body = t.createTBody();
+  for (const [k, [label, unit, better]] of Object.entries(a.labels)) {
+    const va = a.metrics[k], vb = b.metrics[k], r = body.insertRow();
+    r.dataset.metric = k;
+    r.insertCell().textContent = unit ? `${label} (${unit})` : label;
+    for (const v of [va, vb]) { const c = r.insertCell(); c.className = "v"; c.textContent = fmt(v); }
+    const d = r.insertCell(); d.className = "v";
+    if (va == null || vb == null) { d.textContent = "-"; continue; }
+    const diff = va - vb;
+    let text = fmt(diff) + (unit === "JND" ? " JND" : unit ? ` ${unit}` : "");
+    // visual noise in thresholds: the L* sigma at which noise becomes just visible (one JND at detection)
+    if (k === "visual_noise_l" && a.visual_threshold_l > 0) text += ` (${fmt(diff / a.visual_threshold_l, 2)} thresholds)`;
+    const winner = diff === 0 ? "" : (better === "lower") === (diff < 0) ? "A" : "B";
+    if (winner) { text += `, ${winner} better`; d.classList.add("better" + winner); }
+    d.textContent = text;
+  }
+  const notes = [...new Set([...a.notes, ...b.notes])].map((n) =>
+    `${a.notes.includes(n) && b.notes.includes(n) ? "A and B" : a.notes.includes(n) ? "A" : "B"}: ${n}.`);
+  $("qNotes").textContent = notes.join(" ");
+}
+
 // ------------------------------------------------------------------ pan, zoom, video, panes
 function zoomBy(f, sx, sy) {
   const c = canvasFor("A");
@@ -503,6 +552,7 @@ async function init() {
   $("zoomFit").addEventListener("click", () => { S.zoom = null; geometry(); saveUrl(); redraw(); scheduleAll(); });
   $("zoom1").addEventListener("click", () => zoomBy(1 / S.zoom));
   $("copyAB").addEventListener("click", () => { S.panes.B = clone(S.panes.A); setEdit(S.edit); saveUrl(); scheduleAll(); });
+  $("qMeasure").addEventListener("click", measureQuality);
   $("swap").addEventListener("click", () => { [S.panes.A, S.panes.B] = [S.panes.B, S.panes.A]; setEdit(S.edit); saveUrl(); scheduleAll(); });
   $("editA").addEventListener("click", () => setEdit("A"));
   $("editB").addEventListener("click", () => setEdit("B"));
