@@ -12,7 +12,7 @@ from conftest import cli, refuse_direct_writes, takes_o_direct
 from cmosnoise import Sensor, load_config
 from cmosnoise.analysis import white_pixels
 from cmosnoise.analysis.run_stats import RunStats
-from cmosnoise.app import sweep
+from cmosnoise.app import cluster as dask_cluster
 from cmosnoise.app.run import simulate
 from cmosnoise.errors import CmosnoiseError
 from cmosnoise.model import footprint, scene, tiles
@@ -248,11 +248,11 @@ def test_run_statistics_of_parts_are_those_of_the_whole():
 def test_tiles_on_dask_workers_give_the_same_file(tmp_path):
     cfg = _config({}, rows=100, cols=160, run={"frames": 2}, scene={"source": "photo"})
     simulate(cfg, tmp_path / "here", tile=32)
-    client, cluster = sweep.connect(None, 2)
+    client, cluster = dask_cluster.connect(None, 2)
     try:
         summary = simulate(cfg, tmp_path / "dask", tile=32, client=client)
     finally:
-        sweep.disconnect(client, cluster)
+        dask_cluster.disconnect(client, cluster)
     assert np.array_equal(tifffile.imread(tmp_path / "here" / "raw.tiff"), tifffile.imread(tmp_path / "dask" / "raw.tiff"))
     here = json.loads((tmp_path / "here" / "summary.json").read_text())
     assert summary["signal"] == here["signal"] and summary["temporal_noise"] == here["temporal_noise"]

@@ -278,7 +278,7 @@ def simulate(
     client = cluster = None
     try:
         if scheduler or workers:
-            from .sweep import connect
+            from .cluster import connect
 
             client, cluster = connect(scheduler, workers, lambda m: _say(ctx, m))
         pixels = cfg.sensor.width * cfg.sensor.height
@@ -289,7 +289,7 @@ def simulate(
         if status is not None:
             status.stop()
         if client is not None:
-            from .sweep import disconnect
+            from .cluster import disconnect
 
             disconnect(client, cluster)
     sig, tn = summary["signal"], summary["temporal_noise"]

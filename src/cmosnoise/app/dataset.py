@@ -747,8 +747,8 @@ def _shards_here(recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterat
 
 def _shard_task(recipe_json: str, shard: int, device: str) -> bytes:
     """A Dask task: :func:`shard_bytes` with the worker's source images, read by its first shard task of this
-    recipe and kept on the worker for its next ones (:func:`~cmosnoise.app.sweep.worker_attribute`)."""
-    from .sweep import worker_attribute
+    recipe and kept on the worker for its next ones (:func:`~cmosnoise.app.cluster.worker_attribute`)."""
+    from .cluster import worker_attribute
 
     held = worker_attribute("dataset_sources", dict)
     if held.get("recipe") != recipe_json:
@@ -759,7 +759,7 @@ def _shard_task(recipe_json: str, shard: int, device: str) -> bytes:
 def _shards_on(client, recipe: Recipe, todo: list[int], device: str = "cpu") -> Iterator[tuple[int, bytes]]:
     from distributed import as_completed
 
-    from .sweep import task_result
+    from .cluster import task_result
 
     recipe_json = recipe.to_json()
     futures = {client.submit(_shard_task, recipe_json, s, device, pure=False, retries=2): s for s in todo}
@@ -802,7 +802,7 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
         The folder.
     """
     from ..io.output import OutputFolder
-    from .sweep import connect, disconnect
+    from .cluster import connect, disconnect
 
     check(recipe)
     check_device(device, "--device")

@@ -93,7 +93,7 @@ def tile_task(config_data: dict, size: int, region: tuple[int, int, int, int], f
         ``frames_s``: where its time went (two tiles are made at once: the run's sums of them overlap).
     """
     from ..config.schema import Config
-    from .sweep import worker_attribute
+    from .cluster import worker_attribute
 
     # the worker's tiling of this run, kept between its tasks (a picture decoded once a worker, not once a tile)
     key = json.dumps([config_data, size], sort_keys=True, default=str)
@@ -205,7 +205,7 @@ def simulate_tiled(spec: SensorSpec, tmp: Path, size: int, progress=None, phase:
                 while pending:
                     yield pending.popleft().result()
             return
-        from .sweep import task_result
+        from .cluster import task_result
 
         shared = client.scatter(populations, broadcast=True)
         ahead = max(1, IN_FLIGHT_PER_WORKER * len(client.scheduler_info().get("workers", {})))
