@@ -6,6 +6,7 @@ import pandas as pd
 import pytest
 from conftest import cli
 
+from cmosnoise.analysis import scoring
 from cmosnoise.app import dataset as ds
 
 WORST = ["--camera", "paper-fig9-vga", "--light", "200:2000", "--set", "exposure.integration_time_s=0.1",
@@ -43,7 +44,11 @@ def test_median_leaves_couplets_and_clusters_and_the_dark_map_removes_them(data,
     html = (tmp_path / "e" / "report.html").read_text()
     assert "data:image/png;base64," in html and "dark-map" in html and "http" not in html.replace("http-equiv", "")
     summary = pd.read_csv(tmp_path / "e" / "summary.csv")
-    assert {"method", "camera", "light", "psnr_db", "ssim", "clusters_left"} <= set(summary.columns)
+    assert {"method", "camera", "light", "clusters_left"} <= set(summary.columns)
+    # every score of the one list (scoring.SCORES) in the scores, the summary and the report's table
+    names = [name for name, *_ in scoring.SCORES]
+    assert set(names) <= set(s.columns) and set(names) <= set(summary.columns)
+    assert all(f"<th>{name}</th>" in html for name in names)
     # each score names the image its sample was cut from, and the report weighs the methods per image
     assert set(s["source"]) <= set(ds.BUILTIN_SCENES) and s["source"].notna().all()
     assert "Per scene" in html and all(f"<td>{src}</td>" in html for src in set(s["source"]))
@@ -99,6 +104,7 @@ def test_psnr_over_the_targets_own_range_is_the_literatures():
 
     target = np.tile(np.linspace(200.0, 300.0, 64), (32, 1))
     s = scoring.image_scores(target + 1.0, target, 64.0, 4095.0)
+    assert list(s) == [name for name, *_ in scoring.SCORES]
     assert s["psnr_own_range_db"] == pytest.approx(40.0, abs=1e-9)
     assert s["psnr_db"] == pytest.approx(10 * np.log10((4095.0 - 64.0) ** 2), abs=1e-9)
     assert np.isnan(scoring.image_scores(np.full((8, 8), 5.0), np.full((8, 8), 4.0), 0.0, 255.0)["psnr_own_range_db"])

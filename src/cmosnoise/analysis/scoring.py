@@ -36,6 +36,13 @@ KINDS = {
 }
 #: the departures a pixel is visible (left) above, in robust sigmas
 Z_VISIBLE = 6.0
+#: the image scores :func:`image_scores` gives, each (name, what it is, unit, which way is better): the one list
+#: that ``evaluate``'s tables, summary and report iterate
+SCORES = (
+    ("psnr_db", "PSNR over the camera's white-minus-black range", "dB", "higher"),
+    ("psnr_own_range_db", "PSNR over the target's own range", "dB", "higher"),
+    ("ssim", "SSIM over the CFA's colour planes", "", "higher"),
+)
 
 
 def planes(a: np.ndarray) -> np.ndarray:
@@ -44,7 +51,8 @@ def planes(a: np.ndarray) -> np.ndarray:
 
 
 def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: float) -> dict:
-    """PSNR (dB) and SSIM of ``output`` against ``target`` (both (H, W), DN), normalized to [0, 1] of the range.
+    """PSNR (dB) and SSIM of ``output`` against ``target`` (both (H, W), DN), normalized to [0, 1] of the range:
+    the scores of :data:`SCORES`, by name.
 
     ``psnr_db`` is over the white-minus-black range (the camera's whole code range: comparable across samples
     of one camera, high for dark samples); ``psnr_own_range_db`` over the target's own range (its largest minus
@@ -70,9 +78,9 @@ def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: fl
     mse = float(np.mean((np.asarray(output, np.float64) - np.asarray(target, np.float64)) ** 2))
     with np.errstate(divide="ignore"):
         own_db = float(10.0 * np.log10(own * own / mse)) if own > 0 else float("nan")
-    return {"psnr_db": float(peak_signal_noise_ratio(ref, out, data_range=1.0)),
-            "psnr_own_range_db": own_db,
-            "ssim": float(structural_similarity(p_ref, p_out, data_range=1.0, channel_axis=0, win_size=win))}
+    values = (float(peak_signal_noise_ratio(ref, out, data_range=1.0)), own_db,
+              float(structural_similarity(p_ref, p_out, data_range=1.0, channel_axis=0, win_size=win)))
+    return {name: v for (name, *_), v in zip(SCORES, values)}
 
 
 def _frame(a, name: str) -> np.ndarray:

@@ -194,15 +194,19 @@ def score(data: str | Path, methods: list[str], outputs: str | Path | None = Non
     return pd.DataFrame(rows)
 
 
+def _means() -> dict:
+    """Each image score of :data:`.scoring.SCORES` as a pandas aggregation: its mean, under its own name."""
+    return {name: (name, "mean") for name, *_ in scoring.SCORES}
+
+
 def summarize(scores):
-    """Per method, camera, mode and light level: mean PSNR and SSIM, and the defects visible and left by kind."""
+    """Per method, camera, mode and light level: each image score's mean (:data:`.scoring.SCORES`: PSNR, SSIM),
+    and the defects visible and left by kind."""
     s = scores.copy()
     s["light"] = _light_bin(s["light_e"])
     counts = [c for c in s.columns if c.endswith("_visible") or c.endswith("_left")]
     g = s.groupby(["method", "camera", "mode", "light"], sort=True, dropna=False)
-    out = g.agg(samples=("sample", "count"), psnr_db=("psnr_db", "mean"),
-                psnr_own_range_db=("psnr_own_range_db", "mean"), ssim=("ssim", "mean"),
-                **{c: (c, "sum") for c in counts}).reset_index()
+    out = g.agg(samples=("sample", "count"), **_means(), **{c: (c, "sum") for c in counts}).reset_index()
     return out
 
 
@@ -272,8 +276,7 @@ def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target:
     manifest = ds.read_manifest(data)
     r = manifest["recipe"]
     per_method = scores.groupby("method", sort=False).agg(
-        psnr_db=("psnr_db", "mean"), psnr_own_range_db=("psnr_own_range_db", "mean"), ssim=("ssim", "mean"),
-        **{c: (c, "sum") for c in scores.columns if c.endswith("_visible") or c.endswith("_left")})
+        **_means(), **{c: (c, "sum") for c in scores.columns if c.endswith("_visible") or c.endswith("_left")})
     per_scene = scene_table(scores)
 
     def cell(v) -> str:  # numbers right-aligned, floats to 4 digits
