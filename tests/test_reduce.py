@@ -1,5 +1,5 @@
 """The compiled reductions a run's summary takes from its maps (engine/reduce.py): statistics in one pass, the
-median by radix selection, sums, the positions above a threshold; and the flat response's statistics made in bands."""
+sums, the positions above a threshold; and the flat response's statistics made in bands."""
 
 import numpy as np
 import pytest
@@ -60,13 +60,6 @@ def test_total_agrees_with_numpys_sum_on_views_and_threads():
             finally:
                 numba.set_num_threads(before)
     assert reduce.total(np.arange(6.0).reshape(2, 3)) == 15.0  # small: NumPy's own
-
-
-def test_median_is_numpys_value_exactly():
-    for a in _maps():
-        assert reduce.median(a) == np.median(a)
-        odd = a.reshape(-1)[:-1] if a.size % 2 == 0 else a.reshape(-1)
-        assert reduce.median(odd.reshape(1, -1)) == np.median(odd)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64, np.uint16])

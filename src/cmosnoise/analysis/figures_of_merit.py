@@ -182,7 +182,7 @@ def dark_current(sensor: Sensor, shot: Exposure | None = None, electrons0: np.nd
         "body": {"family": state.family, "mean_e_per_s": state.mean, "std_e_per_s": state.std},
         "tail": {"fraction": state.tail_fraction, "max_e_per_s": state.tail_max},
         "map_mean_e_per_s": mean,
-        "map_median_e_per_s": float(reduce.median(rate)),  # radix selection: no sorted copy
+        "map_median_e_per_s": float(np.median(rate)),
         "mean_dark_e_per_frame": mean * t_int,
         "interpolation": (f"per-pixel exponential between the points at {state.temperature_c:g} C (weight {state.w:.3f})"
                           if state.between else "at a characterization point, or scaled from the nearest one"),

@@ -1,5 +1,5 @@
-"""A map's mean, variance, mean square and extremes in one compiled pass, without a float64 copy of it; and its
-median by a radix selection, without a sorted copy.
+"""A map's mean, variance, mean square and extremes in one compiled pass, without a float64 copy of it; its sum;
+and the positions above a threshold.
 
 NumPy's ``np.var(a.astype(np.float64))`` makes a copy of the map, then its deviations, then their squares: at
 50 MP some 1.2 GB of temporaries and half a second a map. :func:`statistics` reads each row of the map once from
@@ -8,9 +8,9 @@ deviations from the row's own mean; the rows are joined in order by Chan, Golub 
 the result is the same on any number of threads. It agrees with NumPy's to float64 rounding (NumPy sums pairwise,
 this row by row), not bit for bit: these are summary figures, not frames.
 
-:func:`median` selects the middle values by their bits (a radix selection on 16 high bits, then 16 low bits of the
-bins that hold them) instead of partitioning a copy: the same value as ``np.median``, at 50 MP a fifth of its
-time.
+A map's median is ``np.median``'s: a radix selection here took a fifth of its time at 50 MP (0.06 against 0.58 s),
+but a 50 MP ``cmosnoise simulate`` of 2 frames took the same time and peak memory either way (the dark map's
+figures are made on a thread of their own beside the frames), so it was removed (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -214,83 +214,6 @@ def combine(parts: list[tuple[int, dict[str, float]]]) -> dict[str, float]:
                "min": min(out["min"], st["min"]), "max": max(out["max"], st["max"])}
         n = total
     return out
-
-
-if numba is not None:
-    @numba.njit(parallel=True, cache=True, nogil=True)
-    def _histogram(keys, shift, prefix, every, chunks):  # pragma: no cover - compiled
-        """Counts of ``(key >> shift) & 0xFFFF`` over every key (``every``), or over the keys whose high 16 bits
-        are ``prefix``; a key is the float's bits made to order as the floats do (sign flipped, or all bits for
-        a negative)."""
-        n = keys.size
-        step = (n + chunks - 1) // chunks
-        counts = np.zeros((chunks, 1 << 16), np.int64)
-        for p in numba.prange(chunks):
-            for i in range(p * step, min(n, (p + 1) * step)):
-                u = keys[i]
-                if u & np.uint32(0x80000000):
-                    u = ~u
-                else:
-                    u = u | np.uint32(0x80000000)
-                if every or (u >> np.uint32(16)) == prefix:
-                    counts[p, (u >> shift) & np.uint32(0xFFFF)] += 1
-        return counts.sum(axis=0)
-
-
-def _order_statistics(bits: np.ndarray, ks: list[int]) -> list[np.float32]:
-    """The ``k``-th smallest (0-based) for each ``k`` of float32 values given as their bits (uint32, 1-D): a radix
-    selection on the high 16 bits of a key that orders as the floats do (one pass for every ``k``), then on the low
-    16 bits of the keys in each ``k``'s bin (one pass per distinct bin: the two middle values share one)."""
-    chunks = 16
-    with ONE_LAUNCH:
-        high = np.cumsum(_histogram(bits, 16, np.uint32(0), True, chunks))
-    low: dict[int, np.ndarray] = {}
-    out = []
-    for k in ks:
-        b = int(np.searchsorted(high, k, side="right"))
-        rank = k - (int(high[b - 1]) if b else 0)
-        if b not in low:
-            with ONE_LAUNCH:
-                low[b] = np.cumsum(_histogram(bits, 0, np.uint32(b), False, chunks))
-        key = np.uint32((b << 16) | int(np.searchsorted(low[b], rank, side="right")))
-        u = ~key if not key & np.uint32(0x80000000) else key & np.uint32(0x7FFFFFFF)
-        out.append(np.array([u], np.uint32).view(np.float32)[0])
-    return out
-
-
-def median(a: np.ndarray):
-    """The median of every value of ``a``, as ``np.median`` gives it, without its sorted copy.
-
-    A float32 map of 65 536 values or more is selected by radix (two passes over its bits per order statistic,
-    in parallel, nothing copied); anything else goes to ``np.median``. NaN is not handled: a map has none.
-
-    Parameters
-    ----------
-    a : array
-        A map (any shape), finite.
-
-    Returns
-    -------
-    float
-        ``np.median(a)``, the same value (the mean of the two middle values where the count is even, in ``a``'s
-        dtype).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from cmosnoise.engine.reduce import median
-    >>> a = np.random.default_rng(1).standard_normal((300, 400)).astype(np.float32)
-    >>> bool(median(a) == np.median(a))
-    True
-    """
-    a = np.asarray(a)
-    if numba is None or a.dtype != np.float32 or a.size < 1 << 16 or not compiled(WHAT, _histogram):
-        return np.median(a)
-    bits = np.ascontiguousarray(a).reshape(-1).view(np.uint32)
-    n = bits.size
-    if n % 2:
-        return _order_statistics(bits, [n // 2])[0]
-    return np.mean(np.array(_order_statistics(bits, [n // 2 - 1, n // 2]), np.float32))
 
 
 if numba is not None:
