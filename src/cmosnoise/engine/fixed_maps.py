@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import buffers
 from .jit import ONE_LAUNCH, compiled, numba
 from .map_values import heavy_tail_value, normal_value, offset_value, ppf_cell, two_point  # noqa: F401 - the spec
 from .philox import uniform_pair
@@ -127,7 +126,7 @@ def _made(kind: str, region, cols: int, key, params, spec, engine: str) -> np.nd
     compiled loop ``kind`` (:func:`_kernels`), both given the rectangle's corner, the sensor's width, the key and
     ``params()``; or the NumPy specification ``spec(index, k0, k1)`` band by band (a band's pixel addresses)."""
     region = _check(region, cols)
-    out = buffers.empty((region[1] - region[0], region[3] - region[2]), np.float32)  # 2 to 4 MiB: huge pages
+    out = np.empty((region[1] - region[0], region[3] - region[2]), np.float32)
     k0, k1 = _key(key)
     if engine == "cuda" or _compiled(engine):
         args = (region[0], region[2], np.uint64(cols), k0, k1, *params())
