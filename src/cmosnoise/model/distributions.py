@@ -16,9 +16,11 @@ Each is a frozen distribution with the interface of :mod:`scipy.stats`
 plus :func:`gumbel` (``gumbel_r``), the source-follower and column
 amplifiers' noise sigma over the array (docs/model.md stages 6 and 8).
 
-Why not :mod:`scipy.stats` itself: importing it takes about 0.6 s, a third
-of a whole ``cmosnoise simulate`` run's start-up, and making a sensor needs
-only quantiles, survival functions and moments. :class:`Frozen` computes those
+Why not :mod:`scipy.stats` itself: importing it takes about 0.6 s, and a
+default ``cmosnoise simulate`` took 1.67 s with it imported against 1.34 s
+without (``docs/performance.md``, "Machinery measured against the library's
+own way"); making a sensor needs only quantiles, survival functions and
+moments. :class:`Frozen` computes those
 with :mod:`scipy.special` in exactly the operations scipy.stats uses (the
 same bits; a test holds them), and hands every other method to the
 equivalent frozen scipy.stats distribution, made on first use.
