@@ -151,8 +151,9 @@ class TileWriter:
     64, float32 ones of 32), it goes to the file directly, not through the page cache. Copying a 400 MP frame's
     800 MB into the page cache took this project's 2-core machine some 1.2 to 1.5 s of system time a frame
     (``perf``: mostly ``copy_folio_from_iter_atomic``; a 4-frame run's system time 7.4 s, 1.3 to 2.8 s direct;
-    see ``docs/sensor/large-sensors.md``; on a 400 MP run of 4 frames, 12 % of its CPU time: ``docs/performance.md``). Anywhere else, or where the file system refuses a direct write
-    (``EINVAL``), or at an offset off the :data:`DIRECT_ALIGN` grid, through the page cache: the same bytes.
+    see ``docs/sensor/large-sensors.md``; 12 % of that run's CPU time: ``docs/performance.md``). Anywhere else,
+    or where the file system refuses a direct write (``EINVAL``), or at an offset off the :data:`DIRECT_ALIGN`
+    grid, through the page cache: the same bytes.
 
     Parameters
     ----------
