@@ -28,26 +28,21 @@ import numpy as np
 from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
 from ..engine import cuda_kernel, fixed_maps, kernel, reduce
-from ..engine.telegraph import per_pixel, positions
 from ..errors import CmosnoiseError
-from . import footprint
+from . import footprint, reference
 from . import optics as optics_mod
 from . import scene as scene_mod
 from .fixed_pattern import FixedPattern, PatternCache, cached, dependencies, draw
 from .raw_info import RawInfo
-from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, fixed_key, pixel_index, stream_key, temporal_stream
+from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, fixed_key, stream_key
 from .spec import SensorSpec, resolve
 from .stages import (
     adc,
-    column_noise,
     crosstalk,
     dark_current,
     defects,
     prnu,
     random_telegraph,
-    read_noise,
-    row_noise,
-    shot_noise,
     source_follower,
 )
 
@@ -647,108 +642,64 @@ class Exposure:
         return rows_on, (s.spec.row_sigma_e if c.row_noise.enabled else 0.0), row_offset, columns_on, col_offset
 
     def _electrons(self, k: int, region: tuple[int, int, int, int], keep: dict | None) -> np.ndarray:
-        """Charge at the ADC input in frame ``k`` (e-, float64) of ``region``, stage by stage.
+        """Charge at the ADC input in frame ``k`` (e-, float64) of ``region``, stage by stage: :mod:`.reference`
+        (the NumPy specification the kernels are held to). Fills ``keep`` with each stage's part."""
+        parts = {} if keep is not None else None
+        n = reference.electrons(self.plan(), k, region, parts)
+        if keep is not None:
+            self._contributions(n, region, parts, keep)
+        return n
 
-        The NumPy implementation of the engine's scheme: the fused kernel
-        gives the same bits. Fills ``keep`` with each stage's part.
-        """
+    def _contributions(self, n: np.ndarray, region: tuple[int, int, int, int], parts: dict, keep: dict) -> None:
+        """Each stage's part of frame ``n`` (what :func:`.reference.electrons` reported in ``parts``), in e-, into
+        ``keep``: the means' parts (perfect image, PRNU, crosstalk, dark current), then the temporal stages'."""
         s = self.sensor
-        c = s.config
+        fp = s.fixed_pattern
         r0, r1, c0, c1 = region
-        rows, cols = np.arange(r0, r1), np.arange(c0, c1)
         w0, _, v0, _ = s.region  # the region in this instance's arrays (a window's own)
         win = (slice(r0 - w0, r1 - w0), slice(c0 - v0, c1 - v0))
-        index = pixel_index(region, s.shape[1])
+        keep["perfect"] = self.perfect_e[win]
+        keep["prnu"] = self.after_prnu_e[win] - self.perfect_e[win]
+        keep["crosstalk"] = self.photo_mean_e[win] - self.after_prnu_e[win]
+        if self.dark_mean_e is not None:
+            keep["dark_current"] = self.dark_mean_e[win]
 
-        def stream(stage):
-            return temporal_stream(c.seed, stage, k, self.sequence)
+        def sparse(at, values):  # a map of the region, zero but at ``at``
+            out = np.zeros(n.shape, np.float32)
+            out[at] = values
+            return out
 
-        noisy = self._noisy_e[win] if self._noisy_e is not None else None
-        exact = self._exact_e[win] if self._exact_e is not None else None
-        fp = s.fixed_pattern
-        plan = self.plan()
-        blinking = None
-        if fp.blinkers is not None:  # stage 4b: this frame's mean at each blinking pixel
-            pixels = fp.blinkers.within(region, s.shape[1])
-            extra = random_telegraph.blink_charge(pixels, k, self.sequence, plan.frame_period_s, plan.exposure_s,
-                                                  plan.blink_key)
-            means = kernel.plus_charge(plan.blink_mean_e, pixels.index, extra, plan.origin, s.shape[1])
-            at_blink = positions(pixels.index, region, s.shape[1])
-            patched = (noisy if plan.blink_noisy else exact).copy()
-            blinking = means - patched[at_blink]
-            patched[at_blink] = means
-            noisy, exact = (patched, exact) if plan.blink_noisy else (noisy, patched)
-        n = shot_noise.collect(noisy, exact, c.sensor.full_well_e, stream("shot_noise") if noisy is not None else None,
-                               c.shot_noise.gaussian_above_e, index)
-        collected = n
-        on_charge = s.spec.nonlinearity_on("charge")
-        if on_charge is not None:
-            n = on_charge.apply(n)
-        converted = n
+        mean = self.mean_charge_e[win]
+        if "blinking" in parts:
+            keep["dark_current_rts"] = sparse(*parts["blinking"])
+            mean = mean + keep["dark_current_rts"]
+        collected, converted = parts["collected"], parts["converted"]
+        keep["shot_noise"] = (collected - mean).astype(np.float32)
+        if converted is not collected:
+            keep["nonlinearity"] = (converted - collected).astype(np.float32)
         if fp.pixel_offset is not None:
-            n = n + fp.pixel_offset[win]
-        if c.source_follower.enabled:
-            sfn = source_follower.noise(s.source_follower_sigma[win], stream("source_follower"), index)
-            n = n + sfn
-        traps = None
-        if plan.traps is not None:  # stage 6b
-            inside = plan.traps.within(region, s.shape[1])
-            pixels, traps = per_pixel(inside.index, random_telegraph.trap_output(
-                inside, k, self.sequence, plan.frame_period_s, plan.cds_interval_s, plan.trap_key))
-            at = positions(pixels, region, s.shape[1])
-            n[at] = n[at] + traps
-        rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
-        if rows_on:
-            rown = row_noise.temporal(rows, row_sigma, stream("row_noise")) + row_offset[win[0], None]
-            n = n + rown
-        before_columns = n
-        if columns_on:
-            offset = col_offset[None, win[1]]
-            if fp.column_sigma is not None:
-                offset = offset + column_noise.temporal(fp.column_sigma, cols, stream("column_noise"), first=v0)
-            n = column_noise.apply(n, fp.column_gain[:, win[1]] if fp.column_gain is not None else None, offset)
-        if keep is not None:
-            keep["perfect"] = self.perfect_e[win]
-            keep["prnu"] = self.after_prnu_e[win] - self.perfect_e[win]
-            keep["crosstalk"] = self.photo_mean_e[win] - self.after_prnu_e[win]
-            if self.dark_mean_e is not None:
-                keep["dark_current"] = self.dark_mean_e[win]
-            def sparse(at, values):  # a map of the region, zero but at ``at``
-                out = np.zeros(n.shape, np.float32)
-                out[at] = values
-                return out
-
-            mean = self.mean_charge_e[win]
-            if blinking is not None:
-                keep["dark_current_rts"] = sparse(at_blink, blinking)
-                mean = mean + keep["dark_current_rts"]
-            keep["shot_noise"] = (collected - mean).astype(np.float32)
-            if converted is not collected:
-                keep["nonlinearity"] = (converted - collected).astype(np.float32)
-            if fp.pixel_offset is not None:
-                keep["pixel_offset"] = fp.pixel_offset[win]
-            if c.source_follower.enabled:
-                keep["source_follower"] = sfn.astype(np.float32)
-            if traps is not None:
-                keep["source_follower_rts"] = sparse(at, traps)
-            if rows_on:
-                keep["row_noise"] = np.broadcast_to(rown, n.shape).astype(np.float32)
-            if columns_on:
-                keep["column_noise"] = (n - before_columns).astype(np.float32)
-            if fp.defects is not None:  # stage 15: the change of the mean charge and the offset lines
-                part = np.zeros(n.shape, np.float32)
-                if self.collected_photo_e is not self.photo_mean_e:
-                    part = (self.mean_charge_e[win] - self._mean_without_defects()[win]).astype(np.float32)
-                # the offset lines ran with the row and column stages: their part moves from those stages' to this
-                lines_r, lines_c = (a[lo:hi] for a, (lo, hi) in zip(defects.line_offsets(fp.defects),
-                                                                    ((r0, r1), (c0, c1))))
-                on_r, on_c = fp.defects.has_offsets
-                if on_r:
-                    keep["row_noise"] = keep["row_noise"] - lines_r[:, None].astype(np.float32)
-                if on_c:
-                    keep["column_noise"] = keep["column_noise"] - lines_c[None, :].astype(np.float32)
-                keep["defects"] = part + (lines_r[:, None] + lines_c[None, :]).astype(np.float32)
-        return n
+            keep["pixel_offset"] = fp.pixel_offset[win]
+        if "source_follower" in parts:
+            keep["source_follower"] = parts["source_follower"].astype(np.float32)
+        if "traps" in parts:
+            keep["source_follower_rts"] = sparse(*parts["traps"])
+        if parts["rows_on"]:
+            keep["row_noise"] = np.broadcast_to(parts["row_noise"], n.shape).astype(np.float32)
+        if parts["columns_on"]:
+            keep["column_noise"] = (n - parts["before_columns"]).astype(np.float32)
+        if fp.defects is not None:  # stage 15: the change of the mean charge and the offset lines
+            part = np.zeros(n.shape, np.float32)
+            if self.collected_photo_e is not self.photo_mean_e:
+                part = (self.mean_charge_e[win] - self._mean_without_defects()[win]).astype(np.float32)
+            # the offset lines ran with the row and column stages: their part moves from those stages' to this
+            lines_r, lines_c = (a[lo:hi] for a, (lo, hi) in zip(defects.line_offsets(fp.defects),
+                                                                ((r0, r1), (c0, c1))))
+            on_r, on_c = fp.defects.has_offsets
+            if on_r:
+                keep["row_noise"] = keep["row_noise"] - lines_r[:, None].astype(np.float32)
+            if on_c:
+                keep["column_noise"] = keep["column_noise"] - lines_c[None, :].astype(np.float32)
+            keep["defects"] = part + (lines_r[:, None] + lines_c[None, :]).astype(np.float32)
 
     def _mean_without_defects(self) -> np.ndarray:
         return self.photo_mean_e if self.dark_mean_e is None else self.photo_mean_e + self.dark_mean_e
@@ -763,21 +714,6 @@ class Exposure:
         if not (w0 <= r0 and r1 <= w1 and v0 <= c0 and c1 <= v1):
             raise CmosnoiseError(f"region = {(r0, r1, c0, c1)}: must lie inside the sensor's window {s.window}")
         return r0, r1, c0, c1
-
-    def _after_gain(self, k: int, region: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray | None]:
-        """Frame ``k``'s black level per pixel (DN, the cell offsets and the frame's error in it) and read
-        noise after the gain (DN, or None) over ``region``: stage 9a on the NumPy samplers."""
-        c = self.sensor.config
-        b, rn = c.black_level, c.read_noise
-        err = read_noise.frame_error(b.frame_sigma_dn, temporal_stream(c.seed, "black_level", k, self.sequence))
-        cell = read_noise.cell_black(self.sensor.transfer.black_level_dn, b.channel_offsets_dn, err)
-        black = read_noise.black_map(cell, region)
-        read = None
-        if rn.enabled:
-            read = read_noise.noise(rn.distribution, rn.scale_dn, rn.shape,
-                                    temporal_stream(c.seed, "source_follower", k, self.sequence),
-                                    pixel_index(region, self.sensor.shape[1]))
-        return black, read
 
     def _render(self, k: int, keep: dict | None = None, region=None, electrons: bool = True):
         """(raw, charge at the ADC input in e- or None) of frame ``k``.
@@ -803,7 +739,7 @@ class Exposure:
         e = self._electrons(k, region, keep)
         t = self.sensor.transfer
         if self.sensor.config.adc.enabled:
-            black, read = self._after_gain(k, region)
+            black, read = reference.after_gain(self.plan(), k, region)
             raw = adc.convert(e, t, black, read)
             if keep is not None:  # in e-, beside the quantization
                 if self.sensor.spec.black_level_varies:
