@@ -17,6 +17,7 @@ generator. ``fastmath`` is off: no fused multiply-add, no reordering.
 
 from __future__ import annotations
 
+import collections
 import functools
 import logging
 import math
@@ -146,6 +147,27 @@ KEY_ROWS = ("shot_noise", "source_follower", "row_noise", "column_noise", "black
 _KEY = {name: i for i, name in enumerate(KEY_ROWS)}
 KEY_SHOT, KEY_SF, KEY_ROW = _KEY["shot_noise"], _KEY["source_follower"], _KEY["row_noise"]
 KEY_COL, KEY_BLACK = _KEY["column_noise"], _KEY["black_level"]
+
+#: The frame kernel's inputs from a plan, by name: what every frame of an exposure shares (the mean charges, the
+#: maps, the tables, the ADC) and the frame's sparse telegraph pixels, one value a field (:func:`render` fills it
+#: from a :class:`FramePlan`). The compiled loops read each by its name; numba passes a named tuple's fields as it
+#: passes arguments. The fields: the means (``noisy`` and ``exact`` e-, float32 (h, w)); ``flags`` (:data:`SWITCHES`);
+#: shot noise's ``normal_above`` and the ``full_well`` (e-); ``sf`` (the source follower's sigma map); the row
+#: noise's ``row_sigma`` and ``row_offset``; the columns' ``col_sigma``, ``col_offset`` and ``col_gain``; ``keys``
+#: (:data:`KEY_ROWS`); the ADC's ``k_adc`` (DN/e-), ``black`` (DN), ``top`` (its largest code) and ``step``; the
+#: Poisson sampler's ``loggam_table``; the charge's nonlinearity (``nl_table``, ``nl_scale``, ``nl_a``, ``nl_b``,
+#: ``nl_c``); the pixel ``offset`` map; the black level's ``cell_offsets`` and ``frame_black_sigma``; the read noise
+#: (``read_kind``, ``read_scale``, ``read_table``); the traps' and the blinking pixels' sparse rows (``rts_ptr``,
+#: ``rts_col``, ``rts_val``; ``blink_ptr``, ``blink_col``, ``blink_mean``).
+Inputs = collections.namedtuple("Inputs", (
+    "noisy", "exact", "flags", "normal_above", "full_well", "sf", "row_sigma", "row_offset", "col_sigma",
+    "col_offset", "col_gain", "keys", "k_adc", "black", "top", "step", "loggam_table", "nl_table", "nl_scale",
+    "nl_a", "nl_b", "nl_c", "offset", "cell_offsets", "frame_black_sigma", "read_kind", "read_scale", "read_table",
+    "rts_ptr", "rts_col", "rts_val", "blink_ptr", "blink_col", "blink_mean"))
+#: Where a call of the frame kernel draws: the ``frame`` and the frame series (``seq``), the region (``r0``, ``r1``,
+#: ``c0``, ``c1``) of a frame ``cols`` wide, and the plan arrays' first row and column in the frame (``ar0``,
+#: ``ac0``: a tile's window).
+Where = collections.namedtuple("Where", ("frame", "seq", "r0", "r1", "c0", "c1", "cols", "ar0", "ac0"))
 
 
 # ------------------------------------------------------------------ compiled helpers
@@ -445,17 +467,23 @@ if numba is not None:
             res[big[t]] = _ptrs_from(bl[t], base + np.uint64(big[t]), frame, seq, k0, k1, attempt)
 
     @numba.njit(**_JIT)
-    def _render_rows(i0, i1, noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, colterm,
-                     gain, keys, fr, sq, r0, c0, c1, cols, ar0, ac0, k_adc, cell_black, top, step, loggam_table, nl_table,
-                     nl_scale, nl_a, nl_b, nl_c, offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val,
-                     blink_ptr, blink_col, blink_mean, out_dn, out_e):
+    def _render_rows(i0, i1, p, at, colterm, gain, fr, sq, cell_black, out_dn, out_e):
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
 
         Compiled on its own, not inside :func:`_render`'s parallel loop: numba's
         parfor passes then see a loop of calls, not the inlined samplers, which
         saves some 30 s of the first compile (measured); LLVM vectorizes this
-        function's loops alike.
+        function's loops alike. ``p`` (:data:`Inputs`) and ``at`` (:data:`Where`) are read by name; ``colterm``,
+        ``gain`` and ``cell_black`` are the frame's, made once by :func:`_render`.
         """
+        noisy, exact, flags, normal_above, full_well, sf = p.noisy, p.exact, p.flags, p.normal_above, p.full_well, p.sf
+        row_sigma, row_offset, keys, k_adc, top, step = p.row_sigma, p.row_offset, p.keys, p.k_adc, p.top, p.step
+        loggam_table, nl_table, nl_scale, nl_a, nl_b, nl_c = (p.loggam_table, p.nl_table, p.nl_scale, p.nl_a, p.nl_b,
+                                                              p.nl_c)
+        offset, read_kind, read_scale, read_table = p.offset, p.read_kind, p.read_scale, p.read_table
+        rts_ptr, rts_col, rts_val, blink_ptr, blink_col, blink_mean = (p.rts_ptr, p.rts_col, p.rts_val, p.blink_ptr,
+                                                                       p.blink_col, p.blink_mean)
+        r0, c0, c1, cols, ar0, ac0 = at.r0, at.c0, at.c1, at.cols, at.ar0, at.ac0
         has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
             flags[S_NOISY], flags[S_EXACT], flags[S_SF], flags[S_ROW], flags[S_COL], flags[S_ADC], flags[S_ELECTRONS])
         has_nl, has_offset, has_read = flags[S_NL], flags[S_OFFSET], flags[S_READ]
@@ -605,12 +633,12 @@ if numba is not None:
                 n[:] = 0.0
 
     @numba.njit(parallel=True, cache=True, nogil=True, **_JIT)
-    def _render(noisy, exact, flags, normal_above, full_well, sf, row_sigma, row_offset, col_sigma, col_offset,
-                col_gain, keys, frame, seq, r0, r1, c0, c1, cols, ar0, ac0, k_adc, black, top, step, loggam_table, nl_table,
-                nl_scale, nl_a, nl_b, nl_c, offset, cell_offsets, frame_black_sigma, read_kind, read_scale, read_table, rts_ptr,
-                rts_col, rts_val, blink_ptr, blink_col, blink_mean, out_dn, out_e):
-        fr = np.uint64(frame)
-        sq = np.uint64(seq)
+    def _render(p, at, out_dn, out_e):
+        flags, keys, black, cell_offsets, frame_black_sigma = p.flags, p.keys, p.black, p.cell_offsets, p.frame_black_sigma
+        col_sigma, col_offset, col_gain = p.col_sigma, p.col_offset, p.col_gain
+        r0, r1, c0, c1, ac0 = at.r0, at.r1, at.c0, at.c1, at.ac0
+        fr = np.uint64(at.frame)
+        sq = np.uint64(at.seq)
         # the black level of each 2 x 2 cell position in this frame (read_noise.cell_black)
         err = frame_black_sigma * _normal(0, fr, sq, keys[KEY_BLACK, 0], keys[KEY_BLACK, 1]) if frame_black_sigma > 0.0 else 0.0
         cell_black = np.empty(4)
@@ -628,12 +656,8 @@ if numba is not None:
                 gain[j] = col_gain[c - ac0]
         nblocks = (h + _ROWS_PER_BLOCK - 1) // _ROWS_PER_BLOCK
         for blk in numba.prange(nblocks):
-            _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), noisy, exact, flags,
-                         normal_above, full_well, sf, row_sigma, row_offset, colterm, gain, keys, fr, sq, r0, c0,
-                         c1, cols, ar0, ac0, k_adc, cell_black, top, step, loggam_table, nl_table, nl_scale, nl_a,
-                         nl_b, nl_c,
-                         offset, read_kind, read_scale, read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col,
-                         blink_mean, out_dn, out_e)
+            _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), p, at, colterm, gain, fr, sq,
+                         cell_black, out_dn, out_e)
 
 
 if numba is not None:
@@ -828,10 +852,14 @@ def preload() -> bool:
     if numba is None or _render.signatures:
         return False
     flags = np.zeros(_FLAGS, np.bool_)
-    args = (_DUMMY2, _DUMMY2, flags, 0.0, 1.0, _DUMMY2, 0.0, _DUMMY1, _DUMMY1, _DUMMY1, _DUMMY1,
-            np.zeros((5, 2), np.uint64), 0, 0, 0, 1, 0, 1, 1, 0, 0, 1.0, 0.0, 0.0, 1.0, _DUMMY_TABLE, _DUMMY_NL, 0.0,
-            0.0, 0.0, 0.0, _DUMMY2, _DUMMY1, 0.0, 0, 0.0, _DUMMY_NL, _DUMMY_PTR, _DUMMY_COL, _DUMMY1, _DUMMY_PTR,
-            _DUMMY_COL, _DUMMY_F32, np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
+    inputs = Inputs(noisy=_DUMMY2, exact=_DUMMY2, flags=flags, normal_above=0.0, full_well=1.0, sf=_DUMMY2,
+                    row_sigma=0.0, row_offset=_DUMMY1, col_sigma=_DUMMY1, col_offset=_DUMMY1, col_gain=_DUMMY1,
+                    keys=np.zeros((5, 2), np.uint64), k_adc=1.0, black=0.0, top=0.0, step=1.0,
+                    loggam_table=_DUMMY_TABLE, nl_table=_DUMMY_NL, nl_scale=0.0, nl_a=0.0, nl_b=0.0, nl_c=0.0,
+                    offset=_DUMMY2, cell_offsets=_DUMMY1, frame_black_sigma=0.0, read_kind=0, read_scale=0.0,
+                    read_table=_DUMMY_NL, rts_ptr=_DUMMY_PTR, rts_col=_DUMMY_COL, rts_val=_DUMMY1,
+                    blink_ptr=_DUMMY_PTR, blink_col=_DUMMY_COL, blink_mean=_DUMMY_F32)
+    args = (inputs, Where(0, 0, 0, 1, 0, 1, 1, 0, 0), np.empty((1, 1), np.uint16), np.empty((1, 1), np.float32))
     sig = tuple(numba.typeof(a) for a in args)
     try:
         index = _render._cache._cache_file._load_index()  # {(signature, target, ...): file}
@@ -931,20 +959,23 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
     held = _needs_compile()
     t0 = time.perf_counter()
     with ONE_LAUNCH:
-        _render(plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
-                plan.exact_e if plan.exact_e is not None else _DUMMY2, flags, float(plan.normal_above_e),
-                float(plan.full_well_e), plan.sf_sigma_e if plan.sf_sigma_e is not None else _DUMMY2,
-                float(plan.row_sigma_e or 0.0), plan.row_offset_e if plan.row_offset_e is not None else _DUMMY1,
-                plan.col_sigma_e if plan.col_sigma_e is not None else _DUMMY1,
-                plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
-                plan.col_gain if plan.col_gain is not None else _DUMMY1,
-                plan.keys, int(frame), int(plan.sequence), r0, r1, c0, c1, cols, ar0, ac0, float(k_adc), float(black),
-                float(top), float(step),
-                plan.loggam_table, nl, float(nl_scale), nl_a, nl_b, nl_c,
-                plan.offset_e if plan.offset_e is not None else _DUMMY2,
-                np.asarray(plan.cell_offsets_dn, np.float64), float(plan.frame_black_sigma_dn),
-                read_kind, float(read_scale), read_table, rts_ptr, rts_col, rts_val, blink_ptr, blink_col, blink_mean,
-                out_dn, out_e)
+        inputs = Inputs(
+            noisy=plan.noisy_e if plan.noisy_e is not None else _DUMMY2,
+            exact=plan.exact_e if plan.exact_e is not None else _DUMMY2, flags=flags,
+            normal_above=float(plan.normal_above_e), full_well=float(plan.full_well_e),
+            sf=plan.sf_sigma_e if plan.sf_sigma_e is not None else _DUMMY2, row_sigma=float(plan.row_sigma_e or 0.0),
+            row_offset=plan.row_offset_e if plan.row_offset_e is not None else _DUMMY1,
+            col_sigma=plan.col_sigma_e if plan.col_sigma_e is not None else _DUMMY1,
+            col_offset=plan.col_offset_e if plan.col_offset_e is not None else _DUMMY1,
+            col_gain=plan.col_gain if plan.col_gain is not None else _DUMMY1, keys=plan.keys, k_adc=float(k_adc),
+            black=float(black), top=float(top), step=float(step), loggam_table=plan.loggam_table, nl_table=nl,
+            nl_scale=float(nl_scale), nl_a=nl_a, nl_b=nl_b, nl_c=nl_c,
+            offset=plan.offset_e if plan.offset_e is not None else _DUMMY2,
+            cell_offsets=np.asarray(plan.cell_offsets_dn, np.float64),
+            frame_black_sigma=float(plan.frame_black_sigma_dn), read_kind=read_kind, read_scale=float(read_scale),
+            read_table=read_table, rts_ptr=rts_ptr, rts_col=rts_col, rts_val=rts_val, blink_ptr=blink_ptr,
+            blink_col=blink_col, blink_mean=blink_mean)
+        _render(inputs, Where(int(frame), int(plan.sequence), r0, r1, c0, c1, cols, ar0, ac0), out_dn, out_e)
     elapsed = time.perf_counter() - t0
     if len(_render.signatures) > held and elapsed > 2.0:  # a cache load takes well under a second: a compile
         what = "the frame kernel" if held == 0 else "a variant of the frame kernel for these switches' types"
