@@ -45,7 +45,7 @@ class FramePlan:
     e-; ``row_offset_e`` (rows,), ``col_sigma_e``, ``col_offset_e``,
     ``col_gain`` (cols,) float64; ``shape`` is always the whole frame's (it
     addresses the random numbers). ``keys`` holds the two key words of the
-    shot-noise, source-follower, row, column and black-level streams, (5, 2)
+    streams of :data:`KEY_ROWS`, in its order, (len(KEY_ROWS), 2)
     uint64 (read noise after the gain takes the source follower's second normal).
     A ``None`` switches that term off.
     """
@@ -854,7 +854,7 @@ def preload() -> bool:
     flags = np.zeros(_FLAGS, np.bool_)
     inputs = Inputs(noisy=_DUMMY2, exact=_DUMMY2, flags=flags, normal_above=0.0, full_well=1.0, sf=_DUMMY2,
                     row_sigma=0.0, row_offset=_DUMMY1, col_sigma=_DUMMY1, col_offset=_DUMMY1, col_gain=_DUMMY1,
-                    keys=np.zeros((5, 2), np.uint64), k_adc=1.0, black=0.0, top=0.0, step=1.0,
+                    keys=np.zeros((len(KEY_ROWS), 2), np.uint64), k_adc=1.0, black=0.0, top=0.0, step=1.0,
                     loggam_table=_DUMMY_TABLE, nl_table=_DUMMY_NL, nl_scale=0.0, nl_a=0.0, nl_b=0.0, nl_c=0.0,
                     offset=_DUMMY2, cell_offsets=_DUMMY1, frame_black_sigma=0.0, read_kind=0, read_scale=0.0,
                     read_table=_DUMMY_NL, rts_ptr=_DUMMY_PTR, rts_col=_DUMMY_COL, rts_val=_DUMMY1,
