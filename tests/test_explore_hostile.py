@@ -118,6 +118,9 @@ def _png(rows, cols, frames=1) -> bytes:
 
 def test_bombs_of_many_frames_or_pages_are_refused_from_the_header(server, tmp_path):
     url, proc = server
+    # the server's high-water mark before the bombs: an earlier test's render may have compiled the frame kernel in
+    # the server's process (about 600 MB at its peak) where this session's compile cache did not have it yet
+    before = _memory_mb(proc.pid)
     import tifffile
     from PIL import Image
 
@@ -140,8 +143,8 @@ def test_bombs_of_many_frames_or_pages_are_refused_from_the_header(server, tmp_p
                                                         "X-Filename": name})
         msg = json.loads(body)["error"]
         assert status == 413 and needle in msg and "megapixels" in msg, (name, status, msg)
-    # the server's peak memory: the libraries and a small sensor, never a decoded bomb
-    assert _memory_mb(proc.pid) < 500
+    # never a decoded bomb: the smaller one is 480 MB as RGB bytes; the high-water mark rises by less than 100 MB
+    assert _memory_mb(proc.pid) - before < 100
 
 
 @pytest.mark.slow
