@@ -10,7 +10,11 @@ the kernel; the frames after it cost what they cost without it. Each is the fast
 - **exposure, with light and lens**: the same with light in lux (a spectral QE), a diffraction PSF, cos^4
   shading, a chief-ray angle with a QE loss and a leaning crosstalk kernel; the light's integral is made once
   per light (cached), so it is timed apart (**light integral**, first call);
-- **frame with light and lens**: a frame of that exposure (must equal the reference's cost).
+- **frame with light and lens**: a frame of that exposure;
+- **a frame of the same charge without the lens**: a sensor with the same light and no lens part, exposing the
+  lens's own signal (the same mean charge): what a frame of that charge costs today. The frame with the lens
+  must cost this; it differs from the reference's frame only as its charge does (the shot-noise sampler's cost
+  depends on the mean).
 
 "optics' worth" is (exposure with lens - exposure without) over a frame.
 
@@ -68,13 +72,16 @@ def main(argv=None) -> int:
     integral = time.perf_counter() - t0
     lens = Sensor(lens_config, seed=1)
     shot, lens_shot = plain.expose("photo"), lens.expose("photo")
-    shot.frame(0), lens_shot.frame(0)
+    # the same light and no lens part, exposing the lens's own signal: a frame of the same charge
+    same = Sensor(load_config(overrides=size + LENS[:4]), seed=1).expose(lens.scene_signal("photo"))
+    shot.frame(0), lens_shot.frame(0), same.frame(0)
     res = {
         "megapixels": width * height / 1e6, "size": [height, width], "repeats": args.repeats,
         "frame_s": fastest(lambda: shot.frame(1), args.repeats),
         "exposure_s": fastest(lambda: plain.expose("photo"), args.repeats),
         "exposure_lens_s": fastest(lambda: lens.expose("photo"), args.repeats),
         "frame_lens_s": fastest(lambda: lens_shot.frame(1), args.repeats),
+        "frame_same_charge_s": fastest(lambda: same.frame(1), args.repeats),
         "light_integral_s": integral,
     }
     res["optics_frames_worth"] = (res["exposure_lens_s"] - res["exposure_s"]) / res["frame_s"]
@@ -87,7 +94,8 @@ def main(argv=None) -> int:
                                            - res["exposure_s"]) / res["frame_s"]
     print(f"{res['megapixels']:.1f} MP: frame {res['frame_s'] * 1e3:.0f} ms; exposure {res['exposure_s'] * 1e3:.0f} ms, "
           f"with light and lens {res['exposure_lens_s'] * 1e3:.0f} ms ({res['optics_frames_worth']:.2f} frames' "
-          f"worth); a frame with them {res['frame_lens_s'] * 1e3:.0f} ms; the light's integral "
+          f"worth); a frame with them {res['frame_lens_s'] * 1e3:.0f} ms (of the same charge without the lens "
+          f"{res['frame_same_charge_s'] * 1e3:.0f} ms); the light's integral "
           f"{res['light_integral_s'] * 1e3:.0f} ms once")
     print("  each part alone, frames' worth: " + ", ".join(f"{k} {v:.2f}" for k, v in res["parts_frames_worth"].items()))
     if args.json:

@@ -419,7 +419,9 @@ def render_optics_speed(d: dict) -> str:
     rows = [f"{mp} ({d['size'][1]} x {d['size'][0]}), fastest of {d['repeats']}: a frame of the kernel "
             f"{d['frame_s'] * 1e3:.0f} ms; an exposure of the photo {d['exposure_s'] * 1e3:.0f} ms, with every "
             f"part below {d['exposure_lens_s'] * 1e3:.0f} ms ({d['optics_frames_worth']:.1f} frames' worth); a frame "
-            f"of that exposure {d['frame_lens_s'] * 1e3:.0f} ms; the light's spectral integral "
+            f"of that exposure {d['frame_lens_s'] * 1e3:.0f} ms"
+            + (f", and a frame of the same charge without the lens {d['frame_same_charge_s'] * 1e3:.0f} ms"
+               if "frame_same_charge_s" in d else "") + "; the light's spectral integral "
             f"{d['light_integral_s'] * 1e3:.0f} ms, once per light.", "",
             "| part, alone | its cost on an exposure, frames' worth |", "|---|---|"]
     rows += [f"| {k} | {max(v, 0):.1f} |" for k, v in d["parts_frames_worth"].items()]
@@ -891,7 +893,7 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "tile_speed": ["bench_tiles.py", "--sizes", "50,400", "--many", "4", "--runs", "3", "--json",
                              "tile_speed.json"],
               "run_speed": ["bench_run.py", "--megapixels", "50", "--json", "run_speed.json"],
-              "optics_speed": ["bench_optics.py", "--megapixels", "12", "--repeats", "3", "--json",
+              "optics_speed": ["bench_optics.py", "--megapixels", "12", "--repeats", "9", "--json",
                                "optics_speed.json"],
               "quality_speed": ["bench_quality.py", "--megapixels", "12", "--json", "quality_speed.json"]}
 SLOW = {"sweep_fig9"}
