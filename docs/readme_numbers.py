@@ -973,48 +973,9 @@ def images() -> None:
 
 
 def explore_quality_picture(path: Path) -> None:
-    """The explorer's image-quality box (docs/sensor/explore.md): A the default sensor, B with 6 e- of column FPN,
-    both at QE 0.6, measured at 10 lux in headless Chromium against a real `cmosnoise explore` server."""
-    import os
-    import shutil
-    import signal
-    import socket
-    import time
-    import urllib.request
-
-    from playwright.sync_api import sync_playwright
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-    proc = subprocess.Popen([sys.executable, "-m", "cmosnoise", "explore", "--no-browser", "--port", str(port)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    url = f"http://127.0.0.1:{port}/"
-    try:
-        for _ in range(600):
-            try:
-                urllib.request.urlopen(url + "api/meta", timeout=2).read()
-                break
-            except OSError:
-                time.sleep(0.2)
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1440, "height": 1000})
-            page.goto(url)
-            while not page.evaluate("() => typeof S !== 'undefined' && S.panes.B !== null && S.seq.B > 0"):
-                page.wait_for_timeout(50)
-            page.evaluate("() => { S.panes.A.config.sensor.quantum_efficiency = 0.6; "
-                          "S.panes.B.config.sensor.quantum_efficiency = 0.6; "
-                          "S.panes.B.config.column_noise.vfpn_sigma_e = 6; }")
-            page.fill("#qLux", "10")
-            page.click("#qMeasure")
-            while not page.evaluate("() => document.querySelectorAll('#qTable tbody tr').length > 0"):
-                page.wait_for_timeout(50)
-            page.locator("#quality").screenshot(path=str(path))
-            browser.close()
-    finally:
-        os.kill(proc.pid, signal.SIGTERM)
-        proc.wait(timeout=30)
+    """The explorer's image-quality box (docs/sensor/explore.md), made by ``benchmarks/bench_explore.py``."""
+    subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_explore.py"), "--quality-picture", str(path)],
+                   check=True)
 
 
 def dataset_picture(arrays: dict, columns: dict, path: Path) -> None:
