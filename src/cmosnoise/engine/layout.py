@@ -34,12 +34,27 @@ if numba is not None:
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def _pick(rgb, cell, gain, out):  # pragma: no cover - compiled
+    def _pick(planes, cell, gain, clip, out):  # pragma: no cover - compiled
         rows, cols = out.shape
         for i in numba.prange(rows):
             for j in range(cols):
                 c = cell[i & 1, j & 1]
-                out[i, j] = np.float64(rgb[i, j, c]) * gain[c]
+                v = np.float64(planes[c, i, j])
+                if clip and not v > 0.0:
+                    v = 0.0
+                out[i, j] = v * gain[c]
+
+
+def _pick_numpy(planes, cell, gain, clip: bool, out):
+    """:func:`_pick` by NumPy's strided copies, one per position of the 2 x 2 cell (small images, or nothing
+    compiled yet): the same products."""
+    for (i, j), ch in np.ndenumerate(cell):
+        v = planes[ch, i::2, j::2]
+        if clip:
+            v = v.astype(np.float64)
+            v[~(v > 0.0)] = 0.0
+        np.multiply(v, gain[ch], out=out[i::2, j::2])
+    return out
 
 
 def cfa_pick(rgb: np.ndarray, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
@@ -74,25 +89,13 @@ def cfa_pick(rgb: np.ndarray, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
     cell = np.ascontiguousarray(cell, dtype=np.int64)
     gain = np.ascontiguousarray(gain, dtype=np.float64)
     out = np.empty((rows, cols), np.result_type(rgb.dtype, np.float64))
+    planes = np.moveaxis(rgb, -1, 0)  # a view: channel first, as _pick reads it
     if (numba is None or rows * cols < 1 << 16 or out.dtype != np.float64
             or not compiled("the image layout loops", _interleave, _pick)):
-        for (i, j), ch in np.ndenumerate(cell):
-            out[i::2, j::2] = rgb[i::2, j::2, ch] * gain[ch]
-        return out
+        return _pick_numpy(planes, cell, gain, False, out)
     with ONE_LAUNCH:
-        _pick(rgb, cell, gain, out)
+        _pick(planes, cell, gain, False, out)
     return out
-
-
-if numba is not None:
-    @numba.njit(parallel=True, cache=True, nogil=True)
-    def _plane_pick(planes, cell, gain, out):  # pragma: no cover - compiled
-        rows, cols = out.shape
-        for i in numba.prange(rows):
-            for j in range(cols):
-                c = cell[i & 1, j & 1]
-                v = np.float64(planes[c, i, j])
-                out[i, j] = (v if v > 0.0 else 0.0) * gain[c]
 
 
 def plane_pick(planes: np.ndarray, cell: np.ndarray, gain: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -117,14 +120,10 @@ def plane_pick(planes: np.ndarray, cell: np.ndarray, gain: np.ndarray, out: np.n
     """
     cell = np.ascontiguousarray(cell, dtype=np.int64)
     gain = np.ascontiguousarray(gain, dtype=np.float64)
-    if numba is None or out.size < 1 << 14 or not compiled("the blur's mosaic", _plane_pick):
-        for (i, j), ch in np.ndenumerate(cell):
-            v = planes[ch, i::2, j::2].astype(np.float64)
-            v[~(v > 0.0)] = 0.0
-            np.multiply(v, gain[ch], out=out[i::2, j::2])
-        return out
+    if numba is None or out.size < 1 << 14 or not compiled("the image layout loops", _interleave, _pick):
+        return _pick_numpy(planes, cell, gain, True, out)
     with ONE_LAUNCH:
-        _plane_pick(planes, cell, gain, out)
+        _pick(planes, cell, gain, True, out)
     return out
 
 
