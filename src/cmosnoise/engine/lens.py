@@ -61,6 +61,7 @@ if numba is not None:
             yy = y[i] * y[i]
             for j in range(cols):
                 h2 = yy + x[j] * x[j]
+                h = np.sqrt(h2) if (ri_kind == RI_TABLE or qe_on) else 0.0  # the image height, where a table reads it
                 s = signal[i, j]
                 if ri_kind == RI_COS4:  # 1 / (1 + h^2 / f^2)^2, as optics.relative_illumination
                     t = h2 / f2
@@ -68,9 +69,9 @@ if numba is not None:
                     t = t * t
                     s = s * (1.0 / t)
                 elif ri_kind == RI_TABLE:
-                    s = s * interp(np.sqrt(h2), ri_h, ri_v, ri_s)
+                    s = s * interp(h, ri_h, ri_v, ri_s)
                 if qe_on:  # as optics.incidence, then optics.angle_qe by the pixel's channel
-                    angle = interp(np.sqrt(h2), cra_h, cra_a, cra_s)
+                    angle = interp(h, cra_h, cra_a, cra_s)
                     angle *= keep
                     c = cells[i & 1, j & 1]
                     s = s * interp(abs(angle), qe_a, qe_v[c], qe_s[c])
@@ -142,10 +143,10 @@ def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, 
     cra_h, cra_a, keep = angle if angle is not None else (axis, zero, 1.0)
     qe_a = _line(qe_table[:, 0]) if qe_table is not None else axis
     qe_v = np.ascontiguousarray(np.asarray(qe_table, np.float64)[:, 1:].T) if qe_table is not None else np.zeros((1, 2))
+    ri_h, ri_v, cra_h, cra_a = _line(ri_h), _line(ri_v), _line(cra_h), _line(cra_a)
     with ONE_LAUNCH:
-        _shade(signal, _line(y_mm), _line(x_mm), ri_kind, float(focal_length_mm) ** 2, _line(ri_h), _line(ri_v),
-               slopes(_line(ri_h), _line(ri_v)), angle is not None, _line(cra_h), _line(cra_a),
-               slopes(_line(cra_h), _line(cra_a)), float(keep), qe_a, qe_v, slopes(qe_a, qe_v),
+        _shade(signal, _line(y_mm), _line(x_mm), ri_kind, float(focal_length_mm) ** 2, ri_h, ri_v, slopes(ri_h, ri_v),
+               angle is not None, cra_h, cra_a, slopes(cra_h, cra_a), float(keep), qe_a, qe_v, slopes(qe_a, qe_v),
                np.asarray(cells, np.int64))
     return signal
 
@@ -171,9 +172,10 @@ def lean_shares(y_mm: np.ndarray, x_mm: np.ndarray, heights_mm: np.ndarray, angl
     """
     a = np.empty((y_mm.size, x_mm.size))
     b = np.empty_like(a)
+    heights_mm, angles_deg = _line(heights_mm), _line(angles_deg)
     with ONE_LAUNCH:
-        _lean(_line(y_mm), _line(x_mm), _line(heights_mm), _line(angles_deg),
-              slopes(_line(heights_mm), _line(angles_deg)), float(keep), float(reference_deg), a, b)
+        _lean(_line(y_mm), _line(x_mm), heights_mm, angles_deg, slopes(heights_mm, angles_deg), float(keep),
+              float(reference_deg), a, b)
     return a, b
 
 
