@@ -661,7 +661,6 @@ def shade(signal: np.ndarray, config, pattern: str, shape: tuple[int, int], regi
         else:
             r0, c0 = (0, 0) if region is None else (region[0], region[2])
             qe, cells = t, cfa_mod.tile(cfa_mod.crop_pattern(pattern, r0, c0))
-        table = (np.ascontiguousarray(angles[:, 0]), np.ascontiguousarray(angles[:, 1]),
-                 1.0 - op.microlens_compensation)
+        table = (angles[:, 0], angles[:, 1], 1.0 - op.microlens_compensation)
     return lens.shade(signal, y, x, ri_kind, op.focal_length_mm, _ri_table(op.relative_illumination)
                       if ri_kind == lens.RI_TABLE else None, table, qe, cells)
