@@ -14,6 +14,9 @@ const S = {
   valid: { A: null, B: null },          // each pane's last {config, scene} the server drew: what the URL keeps
 };
 const $ = (id) => document.getElementById(id);
+// a JSON request to the server, with the header it asks of the page's requests (it refuses others)
+const postJson = (path, body, init = {}) => fetch(path, { method: "POST", body: JSON.stringify(body), ...init,
+  headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" } });
 const clone = (x) => JSON.parse(JSON.stringify(x));
 
 // ------------------------------------------------------------------ configuration paths
@@ -301,8 +304,7 @@ async function render(p) {
     region: g.region, step: g.step, couplets: S.couplets };
   let resp;
   try {
-    resp = await fetch("api/render", { method: "POST", body: JSON.stringify(body), signal: ctl.signal,
-      headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" } });
+    resp = await postJson("api/render", body, { signal: ctl.signal });
   } catch (e) { if (seq === S.seq[p]) S.busy[p] = false; return; }
   if (seq !== S.seq[p]) return;                            // stale
   S.busy[p] = false;
@@ -386,8 +388,7 @@ function figures(p) {
   clearTimeout(figTimers[p]);
   figTimers[p] = setTimeout(async () => {
     const pane = S.panes[p];
-    const resp = await fetch("api/figures", { method: "POST", headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" },
-      body: JSON.stringify({ config: pane.config, scene: pane.scene }) }).catch(() => null);
+    const resp = await postJson("api/figures", { config: pane.config, scene: pane.scene }).catch(() => null);
     if (!resp || !resp.ok) return;
     showFigures(p, await resp.json());
   }, 500);   // once the slider rests: the figures never take the CPU from the next picture
@@ -437,8 +438,7 @@ function showFigures(p, d) {
 // ------------------------------------------------------------------ image quality of both panes at one illuminance
 // (the server's quality metrics: analysis/quality.py's METRICS, one table for the command, the sweep and this page)
 async function qualityOf(p, lux) {
-  const resp = await fetch("api/quality", { method: "POST", headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" },
-    body: JSON.stringify({ config: S.panes[p].config, lux }) });
+  const resp = await postJson("api/quality", { config: S.panes[p].config, lux });
   const d = await resp.json().catch(() => ({ error: `HTTP ${resp.status}` }));
   if (!resp.ok) throw new Error(`${p}: ${d.error || resp.status}`);
   return d;
@@ -575,8 +575,7 @@ async function init() {
   });
   $("export").addEventListener("click", async () => {
     const pane = S.panes[S.edit];
-    const r = await fetch("api/yaml", { method: "POST", headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" },
-      body: JSON.stringify({ config: pane.config, scene: pane.scene }) });
+    const r = await postJson("api/yaml", { config: pane.config, scene: pane.scene });
     if (!r.ok) { $("paneError").textContent = (await r.json()).error; return; }
     const a = document.createElement("a");
     a.href = URL.createObjectURL(new Blob([await r.text()], { type: "application/x-yaml" }));
@@ -584,8 +583,7 @@ async function init() {
   });
   $("load").addEventListener("change", async () => {
     const f = $("load").files[0]; if (!f) return;
-    const r = await fetch("api/load", { method: "POST", body: JSON.stringify({ yaml: await f.text() }),
-      headers: { "Content-Type": "application/json", "X-Cmosnoise": "1" } });
+    const r = await postJson("api/load", { yaml: await f.text() });
     const j = await r.json();
     if (!r.ok) { $("paneError").textContent = j.error; return; }
     S.panes[S.edit].config = j.config; buildPanel(); saveUrl(); schedule(S.edit);
