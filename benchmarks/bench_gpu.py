@@ -41,7 +41,7 @@ from cmosnoise import Sensor, frames_together, load_config  # noqa: E402
 from cmosnoise.analysis import ground_truth  # noqa: E402
 from cmosnoise.app.compiling import EVERY_STAGE  # noqa: E402
 from cmosnoise.config.loading import preset_names  # noqa: E402
-from cmosnoise.engine import cuda_kernel, kernel  # noqa: E402
+from cmosnoise.engine.frame import cuda_kernel, kernel  # noqa: E402
 
 #: every stage on at realistic rates (the tests' EVERY is denser, to meet a 64 x 48 frame): what `cmosnoise compile`
 #: warms up, the one definition

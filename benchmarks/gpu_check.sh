@@ -39,7 +39,7 @@ print(sys.version.split()[0], 'numpy', numpy.__version__, 'numba', numba.__versi
       'scipy', scipy.__version__)
 import numba.cuda as c; print('cuda available:', c.is_available()); c.detect()"
   nproc
-  python3 -c "import cmosnoise.model.sensor, cmosnoise.engine.cuda_kernel; print('cmosnoise imports')"
+  python3 -c "import cmosnoise.model.sensor, cmosnoise.engine.frame.cuda_kernel; print('cmosnoise imports')"
 } 2>&1 | tee "$OUT/environment.txt"
 
 echo "== GPU tests (CMOSNOISE_TEST_GPU=1)"

@@ -31,7 +31,8 @@ import numpy as np
 from bench_chain import best_fps, cpu, numpy_reference, per_frame
 
 from cmosnoise import Sensor, load_config
-from cmosnoise.engine import kernel
+from cmosnoise.engine.frame import kernel
+from cmosnoise.engine.frame.plan import FramePlan
 from cmosnoise.engine.jit import numba
 
 _JIT = dict(fastmath=False, error_model="numpy")
@@ -43,12 +44,12 @@ def best_ms(fn, repeats: int) -> float:
     return 1000 / best_fps(lambda _k: fn(), 1, repeats)
 
 
-def kernel_ms(plan: kernel.FramePlan, repeats: int) -> float:
+def kernel_ms(plan: FramePlan, repeats: int) -> float:
     kernel.render(plan, 0)
     return 1000 / best_fps(lambda k: kernel.render(plan, k), 1, repeats)
 
 
-def building_blocks(plan: kernel.FramePlan, repeats: int) -> list[tuple[str, float]]:
+def building_blocks(plan: FramePlan, repeats: int) -> list[tuple[str, float]]:
     """(label, ms per 1080p frame) of each building block alone, one thread."""
     h = kernel._h
     uniform_pair, log, cos_turn, normal_from = h["uniform_pair"], h["log"], h["cos_turn"], h["normal_from"]

@@ -97,7 +97,7 @@ def test_a_process_takes_the_loops_once_the_background_compile_has_built_them(tm
     import json
 
     env = _env(tmp_path)
-    probe = ("from cmosnoise.engine import jit, kernel\n"
+    probe = ("from cmosnoise.engine import jit\nfrom cmosnoise.engine.frame import kernel\n"
              "from cmosnoise import Sensor, load_config\n"
              "first = jit.compiled('the frame kernel', kernel._render, say=False)\n"
              "proc = jit.build_process()\n"

@@ -1,4 +1,4 @@
-"""The frame kernel on the GPU (engine/cuda_kernel): the CPU kernel's bits, every stage, crops and batches.
+"""The frame kernel on the GPU (engine/frame/cuda_kernel): the CPU kernel's bits, every stage, crops and batches.
 
 Where no GPU is present (CI), numba's CUDA simulator runs the same kernel source (conftest sets
 NUMBA_ENABLE_CUDASIM before numba is imported), so small frames: the simulator runs each pixel as Python.
@@ -17,7 +17,7 @@ import pytest
 from conftest import cli
 
 from cmosnoise import Sensor, load_config
-from cmosnoise.engine import cuda_kernel
+from cmosnoise.engine.frame import cuda_kernel
 from cmosnoise.errors import CmosnoiseError
 
 SIMULATED = cuda_kernel.simulated()
@@ -235,7 +235,7 @@ _PTX_PROBE = textwrap.dedent('''
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=(9, 0))
     import numpy as np
     from cmosnoise import Sensor
-    from cmosnoise.engine import cuda_device, cuda_kernel
+    from cmosnoise.engine.frame import cuda_device, cuda_kernel
 
     calls = []
 

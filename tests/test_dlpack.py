@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from cmosnoise import Sensor
-from cmosnoise.engine import cuda_kernel, dlpack
+from cmosnoise.engine import dlpack
+from cmosnoise.engine.frame import cuda_kernel
 from cmosnoise.errors import CmosnoiseError
 
 torch = pytest.importorskip("torch", reason="the DLPack tests read and write PyTorch tensors: pip install '.[torch]'")

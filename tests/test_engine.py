@@ -1,5 +1,6 @@
 """The noise engine (docs/model.md section 1): Philox, the samplers, and frames that never change a bit."""
 
+import dataclasses
 import json
 import math
 import os
@@ -10,7 +11,9 @@ from conftest import assert_close, on_threads
 from scipy import stats
 
 from cmosnoise import Sensor, load_config
-from cmosnoise.engine import fdmath, kernel
+from cmosnoise.engine import fdmath
+from cmosnoise.engine.frame import kernel
+from cmosnoise.engine.frame.plan import FramePlan
 from cmosnoise.engine.philox import philox4x32
 from cmosnoise.engine.samplers import Stream, normal_pair_from, poisson_inversion
 
@@ -195,7 +198,7 @@ def test_kernel_ptrs_takes_loggam_from_a_table_and_redoes_the_counts_past_it(low
 
     lam = np.random.default_rng(5).uniform(low, high, (40, 50)).astype(np.float32)
     keys = np.array([[21, 22], [0, 0], [0, 0], [0, 0]], np.uint64)
-    plan = kernel.FramePlan(shape=lam.shape, keys=keys, sequence=0, full_well_e=1e9, noisy_e=lam)
+    plan = FramePlan(shape=lam.shape, keys=keys, sequence=0, full_well_e=1e9, noisy_e=lam)
     if table_for is not None:
         plan.__dict__["loggam_table"] = samplers.loggam_table(table_for)  # what the cached property holds
     table = plan.loggam_table
@@ -325,7 +328,7 @@ def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path
     assert timings["frame_s"] > 0 and "kernel_compile" not in timings["stages"] and "ms/frame after" in second.stdout
     # the cache is found by a run's preload (in a process of its own, and in this one, which renders with the
     # same numba target: conftest imported engine.jit first), and it loads what render then uses
-    probe = ("from cmosnoise.engine import kernel\n"
+    probe = ("from cmosnoise.engine.frame import kernel\n"
              "from cmosnoise import Sensor, load_config\n"
              "print(kernel.preload(), len(kernel._render.signatures))\n"
              "Sensor(load_config(extra={'sensor': {'width': 64, 'height': 48}})).expose().frame(0)\n"
@@ -333,14 +336,14 @@ def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path
     third = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=600)
     assert third.returncode == 0, third.stderr
     assert third.stdout.split() == ["True", "1", "1", "0"], third.stdout + third.stderr
-    empty = subprocess.run([sys.executable, "-c", "from cmosnoise.engine import kernel\n"
+    empty = subprocess.run([sys.executable, "-c", "from cmosnoise.engine.frame import kernel\n"
                             "print(kernel.preload(), len(kernel._render.signatures))\n"],
                            env={**env, "NUMBA_CACHE_DIR": str(tmp_path / "empty")}, capture_output=True, text=True,
                            timeout=600)
     assert empty.stdout.split() == ["False", "0"], empty.stdout + empty.stderr  # nothing cached: never compiles
     # this process and its children key numba's cache alike (conftest imported engine.jit first), so what one
     # compiles the other loads; where this test's child compiled into the session's cache, this process loads it
-    key = "from cmosnoise.engine import kernel\nprint(repr(kernel._render.targetctx.codegen().magic_tuple()))\n"
+    key = "from cmosnoise.engine.frame import kernel\nprint(repr(kernel._render.targetctx.codegen().magic_tuple()))\n"
     child = subprocess.run([sys.executable, "-c", key], env=env, capture_output=True, text=True, timeout=600)
     assert child.stdout.strip() == repr(kernel._render.targetctx.codegen().magic_tuple()), child.stdout + child.stderr
     if shared:
@@ -404,7 +407,7 @@ def test_the_run_statistics_truth_and_picture_loops_say_once_that_they_compile(t
         "ground_truth.expected_raw(Sensor({'sensor': {'width': 60, 'height': 40}}).expose('flat:0.5'))\n"
         "reconstruction.bilinear_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n"
         "reconstruction.superpixel_srgb8(raw, 'RGGB', 64.0, 1000.0, None, np.ones(3, np.float32))\n"
-        "from cmosnoise.engine import kernel\n"
+        "from cmosnoise.engine.frame import kernel\n"
         "rts = {'sensor': {'width': 60, 'height': 40}, 'dark_current': {'rts': {'enabled': True, 'ppm': 50000}},\n"
         "       'source_follower': {'rts': {'enabled': True, 'ppm': 50000}}}\n"
         "plan = Sensor(rts).expose('flat:0.5').plan()\n"
@@ -427,37 +430,60 @@ def test_the_summarys_compiled_loops_say_once_that_they_compile(tmp_path):
 
 
 def test_the_kernels_read_switches_and_key_rows_by_name_from_one_table():
-    """#58: the switches and the key rows are declared once (kernel.SWITCHES, kernel.KEY_ROWS); the CPU and the GPU
-    loops read them by indices derived by name, never by a typed number; switches() fills each by its name, and a
-    plan's key rows are the streams of those names."""
+    """#58: the switches, the key rows and the GPU table's columns are derived from one table of the temporal
+    stages (frame/plan.STAGES); the CPU and the GPU loops read them by indices derived by name, never by a typed
+    number; switches() fills each by its stage's own test, and a plan's key rows are the streams of those names."""
     import re
     from pathlib import Path
 
-    from cmosnoise.model.seeds import stream_key
+    from cmosnoise.engine.frame import cuda_table
+    from cmosnoise.engine.frame import plan as frame
+    from cmosnoise.model.seeds import STAGE_IDS, stream_key
 
     src = Path(kernel.__file__).parent
     for name in ("kernel.py", "cuda_device.py"):
         text = (src / name).read_text()
         literal = re.findall(r"\b(?:flags|keys)\[(?:p, )?\d", text)
         assert not literal, f"{name} reads a switch or a key row by a typed index: {literal}"
-    names = [n for n, _ in kernel.SWITCHES]
-    assert [kernel.S_NOISY, kernel.S_ROW, kernel.S_BLINK_EXACT] == [names.index(n) for n in ("noisy", "row",
-                                                                                           "blink_exact")]
+    names = [n for n, _ in frame.SWITCHES]
+    assert names == [s.name for stage in frame.STAGES for s in stage.switches] and len(set(names)) == len(names)
+    assert [frame.S_NOISY, frame.S_ROW, frame.S_BLINK_EXACT] == [names.index(n) for n in ("noisy", "row",
+                                                                                       "blink_exact")]
+    assert frame.KEY_ROWS == tuple(s.key for s in frame.STAGES if s.key)
+    assert frame.NUMBERS == tuple(n for s in frame.STAGES for n in s.numbers)
+    # every stage is a stage of the random-number scheme, and every plan field but the address is one stage's
+    assert {s.name for s in frame.STAGES} - set(STAGE_IDS) == {"nonlinearity", "adc"}
+    owned = [f for s in frame.STAGES for f in s.fields]
+    fields = [f.name for f in dataclasses.fields(frame.FramePlan)]
+    assert sorted(owned + list(frame.ADDRESS_FIELDS)) == sorted(fields), "a plan field no stage (or two) reads"
     cfg = load_config(extra={"sensor": {"width": 32, "height": 16}, "row_noise": {"enabled": True, "sigma_e": 1.0},
                              "column_noise": {"enabled": False}, "source_follower": {"enabled": False}})
     plan = Sensor(cfg, seed=5).expose("flat:0.5").plan()
-    flags = kernel.switches(plan, electrons=False, traps=False, blinkers=False)
+    flags = frame.switches(plan, electrons=False, traps=False, blinkers=False)
     on = {n for n, v in zip(names, flags) if v}
     assert on == {"noisy", "row", "adc", "blink_exact"} - ({"blink_exact"} if plan.blink_noisy else set()), on
-    for row, stage in enumerate(kernel.KEY_ROWS):
+    asked = frame.switches(plan, electrons=True, traps=True, blinkers=True)
+    assert {n for n, v in zip(names, asked) if v} - on == {"electrons", "traps", "blinkers"}
+    for row, stage in enumerate(frame.KEY_ROWS):
         assert tuple(int(w) for w in plan.keys[row]) == stream_key(5, stage), stage
-    assert plan.keys.shape[0] == len(kernel.KEY_ROWS) and kernel.KEY_ROW == kernel.KEY_ROWS.index("row_noise")
+    assert plan.keys.shape[0] == len(frame.KEY_ROWS) and frame.KEY_ROW == frame.KEY_ROWS.index("row_noise")
     # the GPU's per-plan table: its columns by name too, each row filled by name and refused short of one
-    from cmosnoise.engine import cuda_table
-
     assert [cuda_table.NORMAL_ABOVE, cuda_table.STEP, cuda_table.EXPOSURE, cuda_table.CDS] == [
-        cuda_table.NUMBERS.index("normal_above"), cuda_table.NUMBERS.index("step"),
-        cuda_table.NUMBERS.index("exposure"), cuda_table.INTS.index("cds")]
-    assert cuda_table.row(cuda_table.INTS, {"cds": 1, "nl_size": 2, "read_kind": 0}) == [0, 2, 1]
+        frame.NUMBERS.index("normal_above"), frame.NUMBERS.index("step"),
+        frame.NUMBERS.index("exposure"), frame.INTS.index("cds")]
+    ints = {"cds": 1, "nl_size": 2, "read_kind": 0}
+    assert cuda_table.row(frame.INTS, ints) == [ints[n] for n in frame.INTS]
     with pytest.raises(RuntimeError, match="its columns are"):
-        cuda_table.row(cuda_table.INTS, {"read_kind": 0, "nl_size": 2})
+        cuda_table.row(frame.INTS, {"read_kind": 0, "nl_size": 2})
+
+
+def test_numbas_cache_of_the_kernel_is_keyed_on_the_stages_table():
+    """The kernel takes the table's indices as constants: its on-disk cache entry carries plan.py's stamp beside
+    its own file's, so an edit of the table alone recompiles it instead of loading stale indices."""
+    import os
+
+    from cmosnoise.engine.frame import plan as frame
+
+    stamp = kernel._render._cache._cache_file._source_stamp
+    st = os.stat(frame.__file__)
+    assert stamp[1] == ((st.st_mtime, st.st_size),), stamp

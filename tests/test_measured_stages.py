@@ -314,7 +314,7 @@ def test_tabulated_tukey_lambda_of_a_normal_is_scipys(shape):
 def test_the_kernels_tukey_table_is_the_specifications_bits(shape):
     """The frame kernel's Tukey-lambda table (compiled, made for every new shape: a data set of virtual cameras
     asks for one every sample) is samplers.tukey_lambda_table's, bit for bit, and read-only."""
-    from cmosnoise.engine import kernel
+    from cmosnoise.engine.frame import kernel
     from cmosnoise.engine.samplers import tukey_lambda_table
 
     ours, spec = kernel.tukey_table(shape), tukey_lambda_table(shape)

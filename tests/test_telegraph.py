@@ -14,7 +14,8 @@ from conftest import Z, assert_close, cli, on_threads, quiet_config
 from scipy import stats
 
 from cmosnoise import Sensor
-from cmosnoise.engine import kernel, telegraph
+from cmosnoise.engine import telegraph
+from cmosnoise.engine.frame import kernel
 from cmosnoise.engine.telegraph import Telegraphs
 from cmosnoise.errors import CmosnoiseError
 from cmosnoise.model.stages import random_telegraph

@@ -96,7 +96,7 @@ def white_threshold_set(text: str | None) -> list[str]:
 def _version(value: bool):
     if value:
         from .._version import __version__
-        from ..engine.kernel import generator_info
+        from ..engine.frame.kernel import generator_info
 
         g = generator_info()
         typer.echo(f"cmosnoise {__version__} (random-number scheme {g['scheme_version']}, numpy {g['numpy']}, "

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..analysis.run_stats import RunStats
 from ..config import Config, ProcessingSection, load_config, merge_updates
-from ..engine import kernel
+from ..engine.frame import kernel
 from ..errors import CmosnoiseError
 from ..io.dng import write_dng
 from ..io.output import OutputFolder, write_json, write_png

@@ -16,7 +16,7 @@ from .._version import __version__
 from ..analysis import figures_of_merit as fom
 from ..analysis import noise_budget
 from ..analysis.run_stats import RunStats
-from ..engine.kernel import generator_info
+from ..engine.frame.kernel import generator_info
 from ..io.raw_tiff import raw_metadata
 from ..model.sensor import Sensor
 

@@ -53,7 +53,7 @@ def to_tensors(arrays: dict, columns: dict, device=None) -> dict:
 
     def tensor(a):
         if hasattr(a, "copy_to_host"):  # the GPU kernel's frame
-            from ..engine import cuda_kernel
+            from ..engine.frame import cuda_kernel
 
             if cuda_kernel.simulated():  # numba's simulator keeps it on the host
                 return torch.from_numpy(a.copy_to_host()).to(device)
@@ -158,7 +158,7 @@ class NoisyRawDataset(Dataset):
         """The torch device the tensors go to (None: the CPU)."""
         if self.device != "cuda":
             return None
-        from ..engine import cuda_kernel
+        from ..engine.frame import cuda_kernel
 
         return "cpu" if cuda_kernel.simulated() else "cuda"
 

@@ -4,8 +4,8 @@ protocol (``__dlpack__`` / ``__dlpack_device__``), with ctypes alone.
 A producer builds a ``DLManagedTensor`` (the DLPack 0.8 structs below) over memory another object owns, and hands
 it out in a ``PyCapsule`` named ``"dltensor"``; the consumer renames the capsule ``"used_dltensor"`` and calls the
 tensor's ``deleter`` when it is done, which releases the owner. A capsule nobody consumed calls the deleter when it
-is collected. :class:`View` is the producer (:func:`cmosnoise.engine.cuda_kernel.dlpack` wraps a frame left on the
-GPU in one); :func:`read` is the consumer (what :func:`cmosnoise.engine.cuda_kernel.as_device_array` does with an
+is collected. :class:`View` is the producer (:func:`cmosnoise.engine.frame.cuda_kernel.dlpack` wraps a frame left on the
+GPU in one); :func:`read` is the consumer (what :func:`cmosnoise.engine.frame.cuda_kernel.as_device_array` does with an
 array that only speaks DLPack).
 
 The deleter is a C callback, so it and the owners of the tensors handed out and not yet deleted live in this

@@ -4,7 +4,7 @@ The platform's libm differs in its last bits between systems, and its calls
 stop LLVM from vectorizing a loop. These are written with operators and a
 few exact helpers (``frexp``, ``ldexp``, ``floor``, ``where``) only, so they
 give the same bits everywhere: on NumPy arrays as written, and compiled by
-numba (:mod:`cmosnoise.engine.kernel` binds the helpers to their scalar
+numba (:mod:`cmosnoise.engine.frame.kernel` binds the helpers to their scalar
 forms). Accuracy: within about 1 ulp of the correctly rounded result on
 the ranges the samplers use (tests compare with ``math``).
 """

@@ -26,7 +26,7 @@ The functions :func:`ppf_cell`, :func:`heavy_tail_value`, :func:`two_point`
 and :func:`normal_value` (in :mod:`.map_values`, which the kernel compiles
 without importing this dispatcher) are written once, on scalars or NumPy arrays: the
 NumPy path (``engine="numpy"``) runs them over arrays, row band by row band,
-and is the specification; the compiled path (:mod:`.kernel` compiles the same
+and is the specification; the compiled path (:mod:`.frame.kernel` compiles the same
 sources) runs them pixel by pixel in a parallel loop and must give the same
 bits (``tests/test_fixed_maps.py``). Logs and exps are :mod:`.fdmath`'s, so
 the bits do not depend on the platform's libm.
@@ -209,7 +209,7 @@ def heavy_tail_map(region, cols: int, key: tuple[int, int], grid: tuple[float, f
 
 def _on_device(kind: str, out: np.ndarray, args: tuple) -> np.ndarray:
     """A map made by the GPU's kernel (:func:`.cuda_kernel.fixed_map`), brought into ``out``."""
-    from . import cuda_kernel
+    from .frame import cuda_kernel
 
     cuda_kernel.fixed_map(kind, out.shape, *args).copy_to_host(out)
     return out
@@ -232,7 +232,7 @@ _KERNELS: dict = {}
 def _kernels() -> dict:
     """The compiled loops (made on first call, loaded from numba's on-disk cache when there)."""
     if not _KERNELS:
-        from . import kernel
+        from .frame import kernel
 
         _KERNELS.update(kernel.fixed_map_kernels())
     return _KERNELS

@@ -123,6 +123,33 @@ def cached_for_this_machine(dispatcher) -> bool:
         return True
 
 
+def keyed_on(dispatcher, *modules) -> None:
+    """Make numba's on-disk cache of ``dispatcher`` stale whenever the source of one of ``modules`` changes, as it
+    is when its own file does.
+
+    numba keys a cached compile on the function's own file (its time and size) and takes other modules' globals
+    as constants of the machine code. A loop that reads indices derived in another module (the frame kernel's
+    switches, from :mod:`.frame.plan`'s table) would otherwise load an older table's indices after that module
+    changed. The modules' stamps join the file's in the cache index's stamp; where numba's internals cannot
+    take them, the dispatcher is not cached on disk at all (slower to start, never stale).
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher
+        A function compiled with ``cache=True``.
+    *modules : module
+        The modules whose sources its machine code depends on.
+    """
+    stamps = tuple((os.stat(m.__file__).st_mtime, os.stat(m.__file__).st_size) for m in modules)
+    try:
+        cache_file = dispatcher._cache._cache_file
+        cache_file._source_stamp = (cache_file._source_stamp, stamps)
+    except Exception:  # numba's internals moved: no disk cache rather than a stale one
+        from numba.core.caching import NullCache
+
+        dispatcher._cache = NullCache()
+
+
 _ANNOUNCED: set = set()
 _ANNOUNCE_LOCK = threading.Lock()
 
@@ -291,5 +318,5 @@ def _say_building(started: subprocess.Popen | None) -> None:
         f"log: {log})")
 
 
-__all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH", "cached_for_this_machine", "announce", "compiled",
+__all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH", "cached_for_this_machine", "keyed_on", "announce", "compiled",
            "compile_mode", "COMPILE_ENV", "build_files", "building", "start_build", "build_process"]

@@ -1,7 +1,7 @@
 """One pixel's value of a fixed map, the formulas written once (docs/model.md sections 1 and 4).
 
 On scalars or NumPy arrays: :mod:`.fixed_maps` runs them over arrays (the specification) and dispatches each map
-to the compiled loops or the GPU; :mod:`.kernel` compiles these same sources for the CPU and the GPU
+to the compiled loops or the GPU; :mod:`.frame.kernel` compiles these same sources for the CPU and the GPU
 (:func:`.kernel.compile_helpers`). They live apart from the dispatcher so that the kernel, which compiles them,
 and the dispatcher, which calls the kernel, do not import each other.
 """

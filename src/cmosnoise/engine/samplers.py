@@ -14,7 +14,7 @@ pixel. ``attempt`` advances only inside a rejection sampler.
   ``scipy.stats.poisson.ppf`` and PTRS numpy's ``random_poisson_ptrs``.
 
 All arithmetic is IEEE float64 with :mod:`.fdmath`'s log and exp, so the
-fused kernel (:mod:`.kernel`) reproduces these results bit for bit.
+fused kernel (:mod:`.frame.kernel`) reproduces these results bit for bit.
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ interior is drawn); the two ends of the whole range use node 0 with their own
 purposes.
 
 Every function is written for NumPy arrays and for scalars alike, with
-:mod:`.fdmath`'s exp and IEEE operators only, so :mod:`.kernel` compiles them
+:mod:`.fdmath`'s exp and IEEE operators only, so :mod:`.frame.kernel` compiles them
 from this source with the same bits.
 """
 

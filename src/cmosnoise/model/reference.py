@@ -1,11 +1,11 @@
-"""The frame chain in NumPy, stage by stage: frame ``k`` of a :class:`~cmosnoise.engine.kernel.FramePlan` over a
+"""The frame chain in NumPy, stage by stage: frame ``k`` of a :class:`~cmosnoise.engine.frame.plan.FramePlan` over a
 region, the specification the compiled kernels are held to bit for bit.
 
 A plan holds what every frame of an exposure shares (the mean charges, the per-pixel, per-row and per-column
 maps, the ADC, the stream keys); a frame adds its index. :func:`electrons` runs stages 3b to 8 (shot noise with
 the blinking pixels' charge, the charge's nonlinearity, pixel offsets, the source follower and its traps, row and
 column noise) on the NumPy samplers; :func:`after_gain` makes stage 9a's black level and read noise in DN. The
-frame kernel (``engine/kernel.py``, ``_render_rows``) and the GPU's (``engine/cuda_device.py``, ``pixels``) fuse
+frame kernel (``engine/frame/kernel.py``, ``_render_rows``) and the GPU's (``engine/frame/cuda_device.py``, ``pixels``) fuse
 the same stages per pixel with the same draws: ``tests/test_engine.py`` and ``tests/test_cuda.py`` hold them to
 this, and the golden digests hold all three (docs/model.md section 1).
 
@@ -29,15 +29,16 @@ import math
 
 import numpy as np
 
-from ..engine import kernel
+from ..engine.frame import kernel
+from ..engine.frame.plan import KEY_ROWS, FramePlan
 from ..engine.samplers import Stream
 from ..engine.telegraph import per_pixel, positions
 from .seeds import pixel_index
 from .stages import column_noise, random_telegraph, read_noise, row_noise, shot_noise, source_follower
 
 
-def stream(plan: kernel.FramePlan, name: str, k: int) -> Stream:
-    """Frame ``k``'s random numbers of the temporal stream ``name`` (a row of :data:`.kernel.KEY_ROWS`).
+def stream(plan: FramePlan, name: str, k: int) -> Stream:
+    """Frame ``k``'s random numbers of the temporal stream ``name`` (a row of :data:`~cmosnoise.engine.frame.plan.KEY_ROWS`).
 
     Parameters
     ----------
@@ -52,11 +53,11 @@ def stream(plan: kernel.FramePlan, name: str, k: int) -> Stream:
     Stream
         The draws :func:`cmosnoise.model.seeds.temporal_stream` gives for the plan's seed, stage, frame and series.
     """
-    row = plan.keys[kernel.KEY_ROWS.index(name)]
+    row = plan.keys[KEY_ROWS.index(name)]
     return Stream((int(row[0]), int(row[1])), int(k), int(plan.sequence))
 
 
-def electrons(plan: kernel.FramePlan, k: int, region: tuple[int, int, int, int],
+def electrons(plan: FramePlan, k: int, region: tuple[int, int, int, int],
               parts: dict | None = None) -> np.ndarray:
     """Charge at the ADC input in frame ``k`` over ``region``, stage by stage (e-, float64).
 
@@ -138,7 +139,7 @@ def electrons(plan: kernel.FramePlan, k: int, region: tuple[int, int, int, int],
     return n
 
 
-def after_gain(plan: kernel.FramePlan, k: int, region: tuple[int, int, int, int]
+def after_gain(plan: FramePlan, k: int, region: tuple[int, int, int, int]
                ) -> tuple[np.ndarray, np.ndarray | None]:
     """Frame ``k``'s black level per pixel and read noise after the gain over ``region`` (stage 9a), DN.
 

@@ -27,7 +27,9 @@ import numpy as np
 
 from ..config import Config, ExposureSection, build_section, load_config
 from ..config.schema import LAST_FRAME
-from ..engine import cuda_kernel, fixed_maps, kernel, reduce
+from ..engine import fixed_maps, reduce
+from ..engine.frame import cuda_kernel, kernel
+from ..engine.frame.plan import KEY_ROWS, FramePlan
 from ..errors import CmosnoiseError
 from . import footprint, reference
 from . import optics as optics_mod
@@ -84,7 +86,7 @@ class FrameDetail:
     contributions: dict[str, np.ndarray]
 
 
-#: where frames are made: the CPU kernel, or an NVIDIA GPU (engine/cuda_kernel)
+#: where frames are made: the CPU kernel, or an NVIDIA GPU (engine/frame/cuda_kernel)
 DEVICES = ("cpu", "cuda")
 
 
@@ -541,7 +543,7 @@ class Exposure:
             (noisy if c.dark_current.shot_noise else exact).append(self.collected_dark_e)
         self._noisy_e = sum(noisy[1:], noisy[0]) if noisy else None
         self._exact_e = sum(exact[1:], exact[0]) if exact else None
-        self._plan: kernel.FramePlan | None = None
+        self._plan: FramePlan | None = None
         self._device_plan = None
         timings["expose"] += time.perf_counter() - t0
 
@@ -581,13 +583,13 @@ class Exposure:
         return random_telegraph.frame_period_s(c.sensor.frame_rate_hz, c.exposure.integration_time_s)
 
     # ------------------------------------------------------------ frames
-    def plan(self) -> kernel.FramePlan:
+    def plan(self) -> FramePlan:
         """What every frame of this exposure shares, for the engine (built once, then reused)."""
         if self._plan is None:
             s = self.sensor
             c = s.config
             fp = s.fixed_pattern
-            keys = np.array([stream_key(c.seed, st) for st in kernel.KEY_ROWS], dtype=np.uint64)
+            keys = np.array([stream_key(c.seed, st) for st in KEY_ROWS], dtype=np.uint64)
             cols = s.map_shape[1]
 
             rows_on, row_sigma, row_offset, columns_on, col_offset = self.readout_lines()
@@ -596,7 +598,7 @@ class Exposure:
                 return np.full(cols, fill) if a is None else a.ravel().astype(np.float64)
 
             t = s.transfer
-            self._plan = kernel.FramePlan(
+            self._plan = FramePlan(
                 shape=s.shape, keys=keys, sequence=self.sequence, full_well_e=float(c.sensor.full_well_e),
                 noisy_e=self._noisy_e, exact_e=self._exact_e,
                 normal_above_e=c.shot_noise.gaussian_above_e if c.shot_noise.gaussian_above_e is not None else np.inf,

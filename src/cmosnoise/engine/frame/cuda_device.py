@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import cuda
 
-from . import kernel, telegraph
+from .. import telegraph
+from . import kernel
 from .cuda_table import (
     BLACK,
     CDS,
@@ -35,7 +36,7 @@ from .cuda_table import (
     TOP,
     scalar_numpy,
 )
-from .kernel import (  # the switches' and the key rows' indices, derived from kernel's tables by name
+from .plan import (  # the switches' and the key rows' indices, derived from the stages' table by name
     KEY_BLACK,
     KEY_COL,
     KEY_ROW,

@@ -38,14 +38,14 @@ import threading
 
 import numpy as np
 
-from ..errors import CmosnoiseError
+from ...errors import CmosnoiseError
+from .. import dlpack
+from ..jit import numba
 from . import (
     cuda_table,  # the per-plan table's columns, by name (cuda_device reads the same)
-    dlpack,
     kernel,
 )
 from .cuda_table import scalar_numpy, simulated  # noqa: F401 - callers ask cuda_kernel
-from .jit import numba
 
 #: threads per block of the pixel kernel (along a row: coalesced loads of the maps and stores of the frame)
 BLOCK = 128

@@ -11,24 +11,18 @@ import types
 
 import numpy as np
 
-from .jit import numba
+from ..jit import numba
+from .plan import INTS, NUMBERS
 
-#: the columns of :attr:`DevicePlan.numbers`, each plan's scalars (float64), by name: the Poisson draw's normal
-#: approximation from, the full well (e-); K (DN/e-), black level (DN), the ADC's top code and the output DN per ADC
-#: code; the curve's charge scale and cubic; the read noise's scale (DN); the row noise's sigma (e-), the black
-#: level's error per frame (DN); the frame period, CDS interval and exposure (s; telegraph noise and blinking
-#: pixels). The host fills a row by these names (:func:`row`); the device reads the indices derived from them.
-NUMBERS = ("normal_above", "full_well", "k_adc", "black", "top", "step", "nl_scale", "nl_a", "nl_b", "nl_c",
-           "read_scale", "row_sigma", "frame_black_sigma", "frame_period", "cds_interval", "exposure")
+#: the indices of :attr:`DevicePlan.numbers`' columns, each plan's scalars (float64), by name (:data:`.plan.NUMBERS`,
+#: derived from the stages' table). The host fills a row by these names (:func:`row`); the device reads the indices.
 _NUMBER = {name: i for i, name in enumerate(NUMBERS)}
 NORMAL_ABOVE, FULL_WELL, K_ADC, BLACK = _NUMBER["normal_above"], _NUMBER["full_well"], _NUMBER["k_adc"], _NUMBER["black"]
 TOP, STEP, NL_SCALE, NL_A = _NUMBER["top"], _NUMBER["step"], _NUMBER["nl_scale"], _NUMBER["nl_a"]
 NL_B, NL_C, READ_SCALE, ROW_SIGMA = _NUMBER["nl_b"], _NUMBER["nl_c"], _NUMBER["read_scale"], _NUMBER["row_sigma"]
 FRAME_BLACK_SIGMA, FRAME_PERIOD = _NUMBER["frame_black_sigma"], _NUMBER["frame_period"]
 CDS_INTERVAL, EXPOSURE = _NUMBER["cds_interval"], _NUMBER["exposure"]
-#: the columns of :attr:`DevicePlan.ints` (int64), by name: the read noise's law (0 normal, 1 Tukey-lambda), the
-#: curve table's length (2: the cubic), whether the traps are read by CDS
-INTS = ("read_kind", "nl_size", "cds")
+#: the indices of :attr:`DevicePlan.ints`' columns (int64), by name (:data:`.plan.INTS`)
 _INT = {name: i for i, name in enumerate(INTS)}
 READ_KIND, NL_SIZE, CDS = _INT["read_kind"], _INT["nl_size"], _INT["cds"]
 

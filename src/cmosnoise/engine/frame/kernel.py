@@ -20,15 +20,38 @@ from __future__ import annotations
 import collections
 import functools
 import logging
-import math
 import time
 import types
-from dataclasses import dataclass
 
 import numpy as np
 
-from . import fdmath, jit, map_values, philox, samplers, telegraph
-from .jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from .. import fdmath, jit, map_values, philox, samplers, telegraph
+from ..jit import ONE_LAUNCH, announce, numba  # None where numba is not installed
+from . import plan as _stages  # the module of the stages' table (numba's cache of the kernel is keyed on it)
+from .plan import (  # the plan, and the switches' and key rows' indices its table derives by name
+    KEY_BLACK,
+    KEY_COL,
+    KEY_ROW,
+    KEY_ROWS,
+    KEY_SF,
+    KEY_SHOT,
+    N_SWITCHES,
+    S_ADC,
+    S_BLINK_EXACT,
+    S_BLINKERS,
+    S_COL,
+    S_ELECTRONS,
+    S_EXACT,
+    S_NL,
+    S_NOISY,
+    S_OFFSET,
+    S_READ,
+    S_ROW,
+    S_SF,
+    S_TRAPS,
+    FramePlan,
+    switches,
+)
 
 _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it on stderr (app/logs.said)
 
@@ -36,125 +59,13 @@ _logger = logging.getLogger(__name__)  # cmosnoise.*: the command line shows it 
 AVAILABLE = numba is not None
 
 
-@dataclass(frozen=True)
-class FramePlan:
-    """What a frame needs that does not change from frame to frame (per sensor and exposure).
-
-    Arrays cover the frame, or its ``window`` (a tile):
-    ``noisy_e``/``exact_e``/``sf_sigma_e``/``offset_e`` (rows, cols) float32,
-    e-; ``row_offset_e`` (rows,), ``col_sigma_e``, ``col_offset_e``,
-    ``col_gain`` (cols,) float64; ``shape`` is always the whole frame's (it
-    addresses the random numbers). ``keys`` holds the two key words of the
-    streams of :data:`KEY_ROWS`, in its order, (len(KEY_ROWS), 2)
-    uint64 (read noise after the gain takes the source follower's second normal).
-    A ``None`` switches that term off.
-    """
-
-    shape: tuple[int, int]
-    keys: np.ndarray
-    sequence: int
-    full_well_e: float
-    noisy_e: np.ndarray | None = None
-    exact_e: np.ndarray | None = None
-    normal_above_e: float = math.inf
-    sf_sigma_e: np.ndarray | None = None
-    row_sigma_e: float | None = None
-    row_offset_e: np.ndarray | None = None
-    col_sigma_e: np.ndarray | None = None
-    col_offset_e: np.ndarray | None = None
-    col_gain: np.ndarray | None = None
-    #: (K output DN/e-, black level output DN, the ADC's top code, output DN per ADC code); None: float32 e-
-    adc: tuple[float, float, int, int] | None = None
-    #: the charge-to-voltage transfer (stage 5b): a nonlinearity.Curve (a cubic, or a table)
-    nonlinearity: object | None = None
-    offset_e: np.ndarray | None = None  #: per-pixel offsets (rows, cols) float32, e- (stage 5c)
-    cell_offsets_dn: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  #: black level per 2 x 2 cell position
-    frame_black_sigma_dn: float = 0.0  #: the black level's error per frame, DN (keys row 4)
-    #: (normal | tukey_lambda, scale DN, shape): from the sine normal of the source follower's block (keys row 1)
-    read_noise: tuple[str, float, float] | None = None
-    #: source-follower random telegraph noise (stage 6b): the traps, their temporal key, and the CDS interval (s;
-    #: None: no CDS, the trap's level)
-    traps: telegraph.Telegraphs | None = None
-    trap_key: tuple[int, int] = (0, 0)
-    cds_interval_s: float | None = None
-    #: blinking white pixels (stage 4b): the pixels (size: the rate step, e-/s) and their temporal key
-    blinkers: telegraph.Telegraphs | None = None
-    blink_key: tuple[int, int] = (0, 0)
-    frame_period_s: float = 1.0  #: frame k starts at k frame_period_s (s)
-    exposure_s: float = 1.0  #: the exposure of a frame, s (blinking pixels integrate their rate over it)
-    blink_noisy: bool = True  #: whether the dark charge is in ``noisy_e`` (with shot noise) or in ``exact_e``
-    #: the rectangle of the frame the arrays cover, (row0, row1, col0, col1); None: the whole frame. A tile's plan
-    #: holds arrays of its window only (per-pixel maps (h, w), row maps (h,), column maps (w,)); the random numbers
-    #: stay addressed by the frame's pixel index
-    window: tuple[int, int, int, int] | None = None
-
-    @property
-    def origin(self) -> tuple[int, int]:
-        """Where the arrays' first pixel sits in the frame, (row, col)."""
-        return (0, 0) if self.window is None else (self.window[0], self.window[2])
-
-    @property
-    def region(self) -> tuple[int, int, int, int]:
-        """The rectangle the arrays cover, (row0, row1, col0, col1): the window, or the whole frame."""
-        return (0, self.shape[0], 0, self.shape[1]) if self.window is None else tuple(self.window)
-
-    @property
-    def blink_mean_e(self) -> np.ndarray:
-        """The mean charge that holds the dark charge: ``noisy_e`` or ``exact_e``."""
-        return self.noisy_e if self.blink_noisy else self.exact_e
-
-    @functools.cached_property
-    def loggam_table(self) -> np.ndarray:
-        """``loggam(n)`` for the counts PTRS's log test meets in this plan (:func:`samplers.loggam_table`)."""
-        if self.noisy_e is None:
-            return samplers.loggam_table(0.0)
-        return samplers.loggam_table(min(float(self.noisy_e.max()), self.normal_above_e))
-
-
-# ------------------------------------------------------------------ the kernels' switches and key rows
-#: The kernels' switches, each (name, what turns it on), in the order of the flags array that the CPU's and the
-#: GPU's pixel loops read (:func:`switches` makes it, by name). The loops read each switch by an index derived
-#: from this table by name (``S_*`` below), never typed. The table lives in this file, whose source keys numba's
-#: on-disk cache of the frame kernel: a change of it recompiles the kernel instead of loading an older table's
-#: indices.
-SWITCHES = (
-    ("noisy", "a mean charge with shot noise: plan.noisy_e"),
-    ("exact", "a mean charge without shot noise: plan.exact_e"),
-    ("source_follower", "the source follower's noise: plan.sf_sigma_e"),
-    ("row", "row noise: plan.row_sigma_e"),
-    ("column", "column noise and gain: plan.col_gain"),
-    ("adc", "the ADC, codes out: plan.adc"),
-    ("electrons", "the charge at the ADC input out too: asked for, or the ADC off"),
-    ("nonlinearity", "the charge-to-voltage curve: plan.nonlinearity"),
-    ("offset", "per-pixel offsets: plan.offset_e"),
-    ("read", "read noise after the gain: plan.read_noise, with the ADC"),
-    ("traps", "source-follower traps inside the frame's region"),
-    ("blinkers", "blinking pixels inside the frame's region"),
-    ("blink_exact", "the blinking pixels' dark charge without shot noise: not plan.blink_noisy"),
-)
-_SWITCH = {name: i for i, (name, _) in enumerate(SWITCHES)}
-S_NOISY, S_EXACT, S_SF = _SWITCH["noisy"], _SWITCH["exact"], _SWITCH["source_follower"]
-S_ROW, S_COL, S_ADC, S_ELECTRONS = _SWITCH["row"], _SWITCH["column"], _SWITCH["adc"], _SWITCH["electrons"]
-S_NL, S_OFFSET, S_READ = _SWITCH["nonlinearity"], _SWITCH["offset"], _SWITCH["read"]
-S_TRAPS, S_BLINKERS, S_BLINK_EXACT = _SWITCH["traps"], _SWITCH["blinkers"], _SWITCH["blink_exact"]
-#: how many switches a plan has (the flags array's length)
-_FLAGS = len(SWITCHES)
-
-#: The rows of :attr:`FramePlan.keys`: each temporal stream's stage, as :func:`cmosnoise.model.seeds.stream_key`
-#: names it, in row order (the read noise after the gain takes the source follower's second normal). The loops
-#: read a row by an index derived by name (``KEY_*``); here for the same reason as :data:`SWITCHES`.
-KEY_ROWS = ("shot_noise", "source_follower", "row_noise", "column_noise", "black_level")
-_KEY = {name: i for i, name in enumerate(KEY_ROWS)}
-KEY_SHOT, KEY_SF, KEY_ROW = _KEY["shot_noise"], _KEY["source_follower"], _KEY["row_noise"]
-KEY_COL, KEY_BLACK = _KEY["column_noise"], _KEY["black_level"]
-
 #: The frame kernel's inputs from a plan, by name: what every frame of an exposure shares (the mean charges, the
 #: maps, the tables, the ADC) and the frame's sparse telegraph pixels, one value a field (:func:`render` fills it
 #: from a :class:`FramePlan`). The compiled loops read each by its name; numba passes a named tuple's fields as it
-#: passes arguments. The fields: the means (``noisy`` and ``exact`` e-, float32 (h, w)); ``flags`` (:data:`SWITCHES`);
+#: passes arguments. The fields: the means (``noisy`` and ``exact`` e-, float32 (h, w)); ``flags`` (:data:`.plan.SWITCHES`);
 #: shot noise's ``normal_above`` and the ``full_well`` (e-); ``sf`` (the source follower's sigma map); the row
 #: noise's ``row_sigma`` and ``row_offset``; the columns' ``col_sigma``, ``col_offset`` and ``col_gain``; ``keys``
-#: (:data:`KEY_ROWS`); the ADC's ``k_adc`` (DN/e-), ``black`` (DN), ``top`` (its largest code) and ``step``; the
+#: (:data:`.plan.KEY_ROWS`); the ADC's ``k_adc`` (DN/e-), ``black`` (DN), ``top`` (its largest code) and ``step``; the
 #: Poisson sampler's ``loggam_table``; the charge's nonlinearity (``nl_table``, ``nl_scale``, ``nl_a``, ``nl_b``,
 #: ``nl_c``); the pixel ``offset`` map; the black level's ``cell_offsets`` and ``frame_black_sigma``; the read noise
 #: (``read_kind``, ``read_scale``, ``read_table``); the traps' and the blinking pixels' sparse rows (``rts_ptr``,
@@ -659,6 +570,8 @@ if numba is not None:
             _render_rows(blk * _ROWS_PER_BLOCK, min(h, (blk + 1) * _ROWS_PER_BLOCK), p, at, colterm, gain, fr, sq,
                          cell_black, out_dn, out_e)
 
+    jit.keyed_on(_render, _stages)  # its switches' and key rows' indices are the stages' table's (plan.py)
+
 
 if numba is not None:
     _ppf_cell, _heavy_tail_value, _two_point, _normal_value, _offset_value = (
@@ -851,7 +764,7 @@ def preload() -> bool:
     """
     if numba is None or _render.signatures:
         return False
-    flags = np.zeros(_FLAGS, np.bool_)
+    flags = np.zeros(N_SWITCHES, np.bool_)
     inputs = Inputs(noisy=_DUMMY2, exact=_DUMMY2, flags=flags, normal_above=0.0, full_well=1.0, sf=_DUMMY2,
                     row_sigma=0.0, row_offset=_DUMMY1, col_sigma=_DUMMY1, col_offset=_DUMMY1, col_gain=_DUMMY1,
                     keys=np.zeros((len(KEY_ROWS), 2), np.uint64), k_adc=1.0, black=0.0, top=0.0, step=1.0,
@@ -872,32 +785,6 @@ def preload() -> bool:
     _render.compile(sig)
     return True
 
-
-def switches(plan: FramePlan, electrons: bool, traps: bool, blinkers: bool) -> np.ndarray:
-    """The kernels' switches of ``plan``, (_FLAGS,) bool, each at its place in :data:`SWITCHES`.
-
-    Parameters
-    ----------
-    plan : FramePlan
-    electrons : bool
-        Whether the charge at the ADC input is asked for.
-    traps, blinkers : bool
-        Whether some source-follower traps (blinking pixels) lie inside the frame's region.
-
-    Returns
-    -------
-    (_FLAGS,) bool array
-    """
-    adc_on = plan.adc is not None
-    on = {"noisy": plan.noisy_e is not None, "exact": plan.exact_e is not None,
-          "source_follower": plan.sf_sigma_e is not None, "row": plan.row_sigma_e is not None,
-          "column": plan.col_gain is not None, "adc": adc_on, "electrons": electrons or not adc_on,
-          "nonlinearity": plan.nonlinearity is not None, "offset": plan.offset_e is not None,
-          "read": adc_on and plan.read_noise is not None, "traps": traps, "blinkers": blinkers,
-          "blink_exact": not plan.blink_noisy}
-    if on.keys() != _SWITCH.keys():  # a switch added to one of the two and not the other
-        raise RuntimeError(f"kernel.switches sets {sorted(on)}, SWITCHES declares {sorted(_SWITCH)}")
-    return np.array([on[name] for name, _ in SWITCHES])
 
 
 def curve_constants(plan: FramePlan) -> tuple[np.ndarray, float, tuple[float, float, float]]:
