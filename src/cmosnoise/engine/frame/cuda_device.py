@@ -121,10 +121,14 @@ def find(ptr, col, r, c):
 
 
 @cuda.jit(fastmath=False)
-def lines(frames, which, corners, h, w, seqs, keys, flags, numbers, row_offset, col_sigma, col_offset, cell_offsets,
-          rowval, colterm, cell_black):
+def lines(s, it):
     """Each item's row terms (B, h), column terms (B, w) and black level per 2 x 2 cell (B, 4), from its plan
-    ``which[b]``."""
+    ``which[b]``: ``s`` the plans' arrays (:data:`.cuda_table.Shared`), ``it`` the launch's (:data:`.cuda_table.Items`;
+    ``rowval``, ``colterm`` and ``cell_black`` are written), each read by name."""
+    frames, which, corners, h, w, flags = it.frames, it.which, it.corners, it.h, it.w, it.flags
+    rowval, colterm, cell_black = it.rowval, it.colterm, it.cell_black
+    seqs, keys, numbers, row_offset, col_sigma, col_offset, cell_offsets = (s.seqs, s.keys, s.numbers, s.row_offset,
+                                                                            s.col_sigma, s.col_offset, s.cell_offsets)
     t, b = cuda.grid(2)
     if b >= frames.size or t >= h + w + 4:
         return
@@ -225,11 +229,15 @@ def pixel_sums(which, groups, start, first, index, corners, h, w, cols, values, 
 
 
 @cuda.jit(fastmath=False)
-def pixels(noisy, exact, flags, ints, numbers, sf, rowval, colterm, gain, keys, frames, which, corners, seqs, h, w,
-           cols, cell_black, nl_table, offset, read_table, rts_ptr, rts_col, groups, rts_sum, blink_ptr, blink_col,
-           blinks, blink_extra, out_dn, out_e):
+def pixels(s, it, out_dn, out_e):
     """Every stage of one pixel of one item (kernel._render_rows, in its order): grid (columns, rows, items). Item
-    ``b`` reads plan ``which[b]``'s maps, switches and numbers (:class:`.cuda_kernel.DevicePlan`)."""
+    ``b`` reads plan ``which[b]``'s maps, switches and numbers: ``s`` the plans' arrays (:data:`.cuda_table.Shared`),
+    ``it`` the launch's (:data:`.cuda_table.Items`), each read by name."""
+    noisy, exact, sf, ints, numbers, gain, keys, seqs = s.noisy, s.exact, s.sf, s.ints, s.numbers, s.col_gain, s.keys, s.seqs
+    nl_table, offset, read_table, rts_ptr, rts_col, groups = s.nl, s.offset, s.read_table, s.rts_ptr, s.rts_col, s.trap_groups
+    blink_ptr, blink_col, blinks = s.blink_ptr, s.blink_col, s.blink_start
+    frames, which, corners, h, w, cols, flags = it.frames, it.which, it.corners, it.h, it.w, it.cols, it.flags
+    rowval, colterm, cell_black, rts_sum, blink_extra = it.rowval, it.colterm, it.cell_black, it.rts_sum, it.blink_extra
     j, i, b = cuda.grid(3)
     if j >= w or i >= h or b >= frames.size:
         return

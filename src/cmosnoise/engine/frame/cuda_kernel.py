@@ -397,6 +397,16 @@ class DevicePlan:
                                       zip(plans, self.has_traps, self.has_blinkers)]))
                       for e in (False, True)}
 
+    @property
+    def shared(self) -> cuda_table.Shared:
+        """What the line and pixel kernels read of this plan, by name (:data:`.cuda_table.Shared`)."""
+        return cuda_table.Shared(
+            noisy=self.noisy, exact=self.exact, sf=self.sf, ints=self.ints, numbers=self.numbers,
+            row_offset=self.row_offset, col_sigma=self.col_sigma, col_offset=self.col_offset, col_gain=self.col_gain,
+            cell_offsets=self.cell_offsets, keys=self.keys, seqs=self.seqs, nl=self.nl, offset=self.offset,
+            read_table=self.read_table, rts_ptr=self.rts_ptr, rts_col=self.rts_col, trap_groups=self.d_trap_groups,
+            blink_ptr=self.blink_ptr, blink_col=self.blink_col, blink_start=self.d_blink_start)
+
     @staticmethod
     def _padded(tables: list) -> np.ndarray:
         """Tables of different lengths as the rows of one (P, longest) array (the rest zeros, never read)."""
@@ -518,37 +528,35 @@ class DevicePlan:
         def most(start):  # the longest of the plans' lists, at least 1 (a grid is never empty)
             return max(1, int(np.diff(start).max()))
 
+        has_traps, has_blinkers = any(self.has_traps), any(self.has_blinkers)
+        rts_sum = cuda.device_array((n, most(self.trap_groups)) if has_traps else (1, 1), np.float64, stream=stream)
+        blink_extra = cuda.device_array((n, most(self.blink_start)) if has_blinkers else (1, 1), np.float64,
+                                        stream=stream)
+        shared = self.shared
+        items = cuda_table.Items(frames=d_frames, which=d_which, corners=d_corners, h=h, w=w, cols=cols, flags=flags,
+                                 rowval=rowval, colterm=colterm, cell_black=cell_black, rts_sum=rts_sum,
+                                 blink_extra=blink_extra)
         with strict_arithmetic():
             span = h + w + 4
-            self.k.lines[((span + 63) // 64, n), (64, 1), stream](
-                d_frames, d_which, d_corners, h, w, self.seqs, self.keys, flags, self.numbers, self.row_offset,
-                self.col_sigma, self.col_offset, self.cell_offsets, rowval, colterm, cell_black)
-            rts_sum = cuda.device_array((1, 1), np.float64, stream=stream)
-            if any(self.has_traps):
+            self.k.lines[((span + 63) // 64, n), (64, 1), stream](shared, items)
+            if has_traps:
                 traps, groups = most(self.trap_start), most(self.trap_groups)
                 values = cuda.device_array((n, traps), np.float64, stream=stream)
                 self.k.trap_values[((traps + 127) // 128, n), (128, 1), stream](
                     d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_trap_start, *self.trap_arrays,
                     self.numbers, self.ints, self.trap_keys, values)
-                rts_sum = cuda.device_array((n, groups), np.float64, stream=stream)
                 self.k.pixel_sums[((groups + 127) // 128, n), (128, 1), stream](
                     d_which, self.d_trap_groups, self.d_trap_start, self.trap_first, self.trap_arrays[3], d_corners,
                     h, w, cols, values, rts_sum)
-            blink_extra = cuda.device_array((1, 1), np.float64, stream=stream)
-            if any(self.has_blinkers):
+            if has_blinkers:
                 blinks = most(self.blink_start)
-                blink_extra = cuda.device_array((n, blinks), np.float64, stream=stream)
                 self.k.blink_values[((blinks + 127) // 128, n), (128, 1), stream](
                     d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_blink_start, *self.blink_arrays,
                     self.numbers, self.blink_keys, blink_extra)
             out_dn = cuda.device_array((n, h, w) if adc_on else (1, 1, 1), np.uint16, stream=stream)
             out_e = cuda.device_array((n, h, w) if want_e else (1, 1, 1), np.float32, stream=stream)
             grid = ((w + self.block - 1) // self.block, h, n)
-            self.k.pixels[grid, (self.block, 1, 1), stream](
-                self.noisy, self.exact, flags, self.ints, self.numbers, self.sf, rowval, colterm, self.col_gain,
-                self.keys, d_frames, d_which, d_corners, self.seqs, h, w, cols, cell_black, self.nl, self.offset,
-                self.read_table, self.rts_ptr, self.rts_col, self.d_trap_groups, rts_sum, self.blink_ptr,
-                self.blink_col, self.d_blink_start, blink_extra, out_dn, out_e)
+            self.k.pixels[grid, (self.block, 1, 1), stream](shared, items, out_dn, out_e)
             raw = out_dn if adc_on else out_e
             if self.stuck is not None:
                 where, value, start = self.stuck

@@ -7,6 +7,7 @@ imports the other for them.
 
 from __future__ import annotations
 
+import collections
 import types
 
 import numpy as np
@@ -25,6 +26,28 @@ CDS_INTERVAL, EXPOSURE = _NUMBER["cds_interval"], _NUMBER["exposure"]
 #: the indices of :attr:`DevicePlan.ints`' columns (int64), by name (:data:`.plan.INTS`)
 _INT = {name: i for i, name in enumerate(INTS)}
 READ_KIND, NL_SIZE, CDS = _INT["read_kind"], _INT["nl_size"], _INT["cds"]
+
+
+#: What the line and pixel kernels read of a :class:`.cuda_kernel.DevicePlan`, by name: its plans' arrays on the
+#: GPU, stacked (P, ...), uploaded once: the means ``noisy``, ``exact`` and the source follower's ``sf`` (float32
+#: (P, rows, cols)); the table's ``ints`` and ``numbers``; the row offsets, the columns' sigma, offset and gain
+#: (float64); the black level's ``cell_offsets`` (P, 4); the ``keys`` (P, len(KEY_ROWS), 2) and each plan's frame
+#: series ``seqs``; the curve and read-noise tables ``nl`` and ``read_table``; the pixel ``offset`` map; the
+#: traps' and the blinking pixels' row lists (``rts_ptr``, ``rts_col``, ``trap_groups``; ``blink_ptr``,
+#: ``blink_col``, ``blink_start``). numba passes a named tuple of device arrays to a kernel field by field, as it
+#: passes arguments.
+Shared = collections.namedtuple("Shared", (
+    "noisy", "exact", "sf", "ints", "numbers", "row_offset", "col_sigma", "col_offset", "col_gain", "cell_offsets",
+    "keys", "seqs", "nl", "offset", "read_table", "rts_ptr", "rts_col", "trap_groups", "blink_ptr", "blink_col",
+    "blink_start"))
+#: What they read of one launch, by name: each item's ``frames``, plan (``which``) and ``corners`` (B, 2); the
+#: items' ``h`` x ``w`` of a frame ``cols`` wide; the plans' ``flags`` (P, len(SWITCHES)) for this launch; the
+#: items' row terms ``rowval`` (B, h), column terms ``colterm`` (B, w) and ``cell_black`` (B, 4) that the line
+#: kernel makes for the pixel kernel; the trapped pixels' sums ``rts_sum`` and the blinking pixels'
+#: ``blink_extra`` (B, ...), made by the telegraph kernels.
+Items = collections.namedtuple("Items", (
+    "frames", "which", "corners", "h", "w", "cols", "flags", "rowval", "colterm", "cell_black", "rts_sum",
+    "blink_extra"))
 
 
 def row(columns: tuple[str, ...], values: dict) -> list:
