@@ -5,7 +5,9 @@ stack; the fit's ppm should fall in the Clopper-Pearson interval of the configur
 and dwell times within 10 % of the configured laws' medians (lognormal: the median; log-uniform: the geometric
 mean of its ends), and its 95 % intervals should hold those truths at least 17 times in 20.
 
-    python benchmarks/fit_telegraph_coverage.py [--sensors 20] [--json FILE]
+    python benchmarks/fit_telegraph_coverage.py [--sensors 20] [--size 256] [--json FILE]
+
+``--size`` is the sensors' side, pixels: the suite runs it at 64, to see it run (a study needs 256).
 """
 
 from __future__ import annotations
@@ -30,14 +32,15 @@ from cmosnoise.analysis import fit_telegraph  # noqa: E402
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sensors", type=int, default=20)
+    ap.add_argument("--size", type=int, default=256, help="the sensors' width and height, pixels")
     ap.add_argument("--json")
     a = ap.parse_args()
     rts = CONFIG["source_follower"]["rts"]
-    config = {**CONFIG, "sensor": {**CONFIG["sensor"], "width": 256, "height": 256}}
+    config = {**CONFIG, "sensor": {**CONFIG["sensor"], "width": a.size, "height": a.size}}
     truth = {"amplitude_e": rts["amplitude_e"]["median"],
              "tau_low_s": math.sqrt(rts["tau_capture_s"]["min_s"] * rts["tau_capture_s"]["max_s"]),
              "tau_high_s": math.sqrt(rts["tau_emission_s"]["min_s"] * rts["tau_emission_s"]["max_s"])}
-    n_pix = 256 * 256
+    n_pix = a.size * a.size
     ci = stats.binomtest(round(rts["ppm"] * 1e-6 * n_pix), n_pix).proportion_ci(0.95, method="exact")
     ppm_band = (1e6 * ci.low, 1e6 * ci.high)
     rows = []
@@ -57,7 +60,7 @@ def main() -> None:
     summary = {key: sum(r[key] for r in rows) for key in rows[0] if isinstance(rows[0][key], bool)}
     print(f"of {len(rows)} sensors: {summary}")
     if a.json:
-        Path(a.json).write_text(json.dumps({"truth": truth, "ppm_band": ppm_band, "frames": FRAMES, "rows": rows,
+        Path(a.json).write_text(json.dumps({"truth": truth, "ppm_band": ppm_band, "frames": FRAMES, "size": a.size, "rows": rows,
                                             "summary": summary},
                                            indent=1))
 

@@ -26,7 +26,7 @@ SMALLEST = {
     "bench_setup.py": ["--sizes", "1", "--repeats", "1"],
     "bench_sweep.py": ["--instances", "2"],
     "bias_source_follower.py": ["--fits", "2", "--frames", "8"],
-    "fit_telegraph_coverage.py": ["--sensors", "1"],
+    "fit_telegraph_coverage.py": ["--sensors", "1", "--size", "64"],
     "fit_selection.py": ["--seeds", "1"],
     "kernel_parts.py": ["--repeats", "1"],
 }
