@@ -100,14 +100,23 @@ def test_a_looping_or_many_page_tiff_is_refused_from_its_structure_by_simulate_a
     assert size < 40e6
     for args in (["simulate", "--scene", bad, "--set", "sensor.width=64", "--set", "sensor.height=48"],
                  ["process", bad]):
-        r, took, peak = _timed_memory(lambda args=args: cli(*args, "--out", tmp_path / "out"))
+        t0 = time.perf_counter()
+        r = cli(*args, "--out", tmp_path / "out")
+        took = time.perf_counter() - t0
         assert r.returncode == 2 and needle in r.stderr and _one_line(r.stderr), r.stderr
-        assert took < FAST_S and peak < SMALL_MEMORY, (args[0], took, peak)
+        assert took < FAST_S, (args[0], took)
         assert not (tmp_path / "out").exists()
     renamed = tmp_path / "bad.png"  # by its bytes, whatever its name
     bad.rename(renamed)
-    with pytest.raises(CmosnoiseError, match=needle):
-        inputs.check_image_pixels(renamed, "scene", 10**9)
+
+    def refused():
+        with pytest.raises(CmosnoiseError, match=needle):
+            inputs.check_image_pixels(renamed, "scene", 10**9)
+
+    # the memory bound is the gate's that both commands pass, measured once: tracemalloc slows the walk of a
+    # chain of 100 000 pages thirtyfold (16 s against 0.5)
+    _, took, peak = _timed_memory(refused)
+    assert took < FAST_S and peak < SMALL_MEMORY, (took, peak)
 
 
 def test_the_walker_reads_every_page_tifffile_reads(tmp_path):
