@@ -162,12 +162,14 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--scene", default="photo")
+    ap.add_argument("--width", type=int, default=1920, help="the sensor's width (the suite's smoke run: 320)")
+    ap.add_argument("--height", type=int, default=1080, help="the sensor's height")
     ap.add_argument("--cli-frames", type=int, default=50)
     ap.add_argument("--cli-repeats", type=int, default=3, help="runs of each command line; the best is kept")
     ap.add_argument("--json", help="also write the results here (docs/numbers/speed.json feeds the README)")
     args = ap.parse_args()
 
-    cfg = load_config(extra={"sensor": {"width": 1920, "height": 1080, "cfa": "RGGB"}})
+    cfg = load_config(extra={"sensor": {"width": args.width, "height": args.height, "cfa": "RGGB"}})
     # the first sensor of a process also loads the compiled fixed-pattern loops (numba's registries with them);
     # a second one of the same size is what each further sensor costs
     t0 = time.perf_counter()
@@ -197,7 +199,7 @@ def main() -> None:
                  *against_reference(lambda k: shot.frame(k, detail=True), 2, 1, reference, args.frames)))
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "cmosnoise", "simulate", "--frames", str(args.cli_frames), "--no-progress",
-               "--set", "sensor.width=1920", "--set", "sensor.height=1080", "--scene", args.scene]
+               "--set", f"sensor.width={args.width}", "--set", f"sensor.height={args.height}", "--scene", args.scene]
         _run(cmd + ["--out", f"{tmp}/warm"])  # warm the compile cache
         # the same command with twice the frames: the difference is what each further frame costs, start-up
         # (imports, fixed pattern, scene, summary, preview) taken out. Each is timed --cli-repeats times,
@@ -230,7 +232,7 @@ def main() -> None:
     t_ref = min(r[2] for r in rows)
     rows.append(("NumPy reference (Poisson+Gauss+q)", t_ref, t_ref))
 
-    print(f"cmosnoise full chain, 1920 x 1080 {cfg.sensor.cfa}, stages on: {', '.join(on)}")
+    print(f"cmosnoise full chain, {args.width} x {args.height} {cfg.sensor.cfa}, stages on: {', '.join(on)}")
     host = cpu()
     print("  on {cpu} ({vectors}), numba {numba}".format(**host))
     print(f"  sensor set-up (fixed pattern)     {t_fixed * 1000:8.1f} ms (once per sensor; the first of a process "
@@ -247,7 +249,8 @@ def main() -> None:
     processing = []
     raw = shot.frame(0)
     master = calibration.master_dark(sensor.dark_frames(4))
-    print("  processing one 1920 x 1080 frame into an 8-bit picture (best of --repeats, after a warm-up):")
+    print(f"  processing one {args.width} x {args.height} frame into an 8-bit picture (best of --repeats, after a "
+          "warm-up):")
     for label, settings in [
         ("pre-processing view", ProcessingSection()),
         ("dark cal + median defects", ProcessingSection(dark_frames=4, defects={"method": "median"})),

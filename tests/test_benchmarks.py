@@ -16,7 +16,8 @@ BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 #: script -> its smallest run's arguments
 SMALLEST = {
-    "bench_chain.py": ["--frames", "2", "--repeats", "1", "--cli-frames", "2", "--cli-repeats", "1"],
+    "bench_chain.py": ["--frames", "2", "--repeats", "1", "--cli-frames", "2", "--cli-repeats", "1", "--width",
+                       "320", "--height", "180"],
     "bench_dataset.py": ["--samples", "2", "--crop", "64", "--repeats", "1"],
     "bench_measured_stages.py": ["--frames", "2", "--repeats", "1"],
     "bench_telegraph.py": ["--frames", "2", "--repeats", "1"],
