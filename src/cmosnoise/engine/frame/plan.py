@@ -118,32 +118,20 @@ Switch = collections.namedtuple("Switch", ("name", "doc", "on"))
 #: source-follower trap (``traps``) or blinking pixel (``blinkers``) lies inside the frame's region.
 Asked = collections.namedtuple("Asked", ("electrons", "traps", "blinkers"))
 
-#: The frame chain's temporal stages, in the order a pixel meets them. The loops read each switch, key row and
-#: GPU column by an index this module derives from the table by name, never by a typed number.
+#: The frame chain's temporal stages. The loops read each switch, key row and GPU column by an index this module
+#: derives from the table by name, never by a typed number. The rows' order is the flags array's order, and the
+#: compiled CPU kernel's speed depends on it: with the switches in the chain's order (shot noise, blinking
+#: pixels, nonlinearity, ...) the 1080p frame took 38.7 ms on one thread, in this order (the order the kernel
+#: was tuned in) 34.1 (benchmarks/kernel_parts.py, AVX-512, the same run). Append a new stage's row at the end.
 STAGES = (
     Stage("shot_noise", "shot_noise",
           (Switch("noisy", "a mean charge with shot noise: plan.noisy_e", lambda p, a: p.noisy_e is not None),
            Switch("exact", "a mean charge without shot noise: plan.exact_e", lambda p, a: p.exact_e is not None)),
           ("noisy_e", "exact_e", "normal_above_e", "full_well_e"), ("normal_above", "full_well"), ()),
-    Stage("dark_current_rts", None,
-          (Switch("blinkers", "blinking pixels inside the frame's region", lambda p, a: a.blinkers),
-           Switch("blink_exact", "the blinking pixels' dark charge without shot noise: not plan.blink_noisy",
-                  lambda p, a: not p.blink_noisy)),
-          ("blinkers", "blink_key", "frame_period_s", "exposure_s", "blink_noisy"), ("frame_period", "exposure"), ()),
-    Stage("nonlinearity", None,
-          (Switch("nonlinearity", "the charge-to-voltage curve: plan.nonlinearity",
-                  lambda p, a: p.nonlinearity is not None),),
-          ("nonlinearity",), ("nl_scale", "nl_a", "nl_b", "nl_c"), ("nl_size",)),
-    Stage("pixel_offset", None,
-          (Switch("offset", "per-pixel offsets: plan.offset_e", lambda p, a: p.offset_e is not None),),
-          ("offset_e",), (), ()),
     Stage("source_follower", "source_follower",
           (Switch("source_follower", "the source follower's noise: plan.sf_sigma_e",
                   lambda p, a: p.sf_sigma_e is not None),),
           ("sf_sigma_e",), (), ()),
-    Stage("source_follower_rts", None,
-          (Switch("traps", "source-follower traps inside the frame's region", lambda p, a: a.traps),),
-          ("traps", "trap_key", "cds_interval_s"), ("cds_interval",), ("cds",)),
     Stage("row_noise", "row_noise",
           (Switch("row", "row noise: plan.row_sigma_e", lambda p, a: p.row_sigma_e is not None),),
           ("row_sigma_e", "row_offset_e"), ("row_sigma",), ()),
@@ -155,10 +143,25 @@ STAGES = (
            Switch("electrons", "the charge at the ADC input out too: asked for, or the ADC off",
                   lambda p, a: a.electrons or p.adc is None)),
           ("adc",), ("k_adc", "black", "top", "step"), ()),
+    Stage("nonlinearity", None,
+          (Switch("nonlinearity", "the charge-to-voltage curve: plan.nonlinearity",
+                  lambda p, a: p.nonlinearity is not None),),
+          ("nonlinearity",), ("nl_scale", "nl_a", "nl_b", "nl_c"), ("nl_size",)),
+    Stage("pixel_offset", None,
+          (Switch("offset", "per-pixel offsets: plan.offset_e", lambda p, a: p.offset_e is not None),),
+          ("offset_e",), (), ()),
     Stage("read_noise", None,  # its normal is the source follower's second (scheme 3)
           (Switch("read", "read noise after the gain: plan.read_noise, with the ADC",
                   lambda p, a: p.adc is not None and p.read_noise is not None),),
           ("read_noise",), ("read_scale",), ("read_kind",)),
+    Stage("source_follower_rts", None,
+          (Switch("traps", "source-follower traps inside the frame's region", lambda p, a: a.traps),),
+          ("traps", "trap_key", "cds_interval_s"), ("cds_interval",), ("cds",)),
+    Stage("dark_current_rts", None,
+          (Switch("blinkers", "blinking pixels inside the frame's region", lambda p, a: a.blinkers),
+           Switch("blink_exact", "the blinking pixels' dark charge without shot noise: not plan.blink_noisy",
+                  lambda p, a: not p.blink_noisy)),
+          ("blinkers", "blink_key", "frame_period_s", "exposure_s", "blink_noisy"), ("frame_period", "exposure"), ()),
     Stage("black_level", "black_level", (), ("cell_offsets_dn", "frame_black_sigma_dn"), ("frame_black_sigma",),
           ()),
 )
