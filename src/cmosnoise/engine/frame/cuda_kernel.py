@@ -529,9 +529,9 @@ class DevicePlan:
             return max(1, int(np.diff(start).max()))
 
         has_traps, has_blinkers = any(self.has_traps), any(self.has_blinkers)
-        rts_sum = cuda.device_array((n, most(self.trap_groups)) if has_traps else (1, 1), np.float64, stream=stream)
-        blink_extra = cuda.device_array((n, most(self.blink_start)) if has_blinkers else (1, 1), np.float64,
-                                        stream=stream)
+        groups, blinks = most(self.trap_groups), most(self.blink_start)
+        rts_sum = cuda.device_array((n, groups) if has_traps else (1, 1), np.float64, stream=stream)
+        blink_extra = cuda.device_array((n, blinks) if has_blinkers else (1, 1), np.float64, stream=stream)
         shared = self.shared
         items = cuda_table.Items(frames=d_frames, which=d_which, corners=d_corners, h=h, w=w, cols=cols, flags=flags,
                                  rowval=rowval, colterm=colterm, cell_black=cell_black, rts_sum=rts_sum,
@@ -540,7 +540,7 @@ class DevicePlan:
             span = h + w + 4
             self.k.lines[((span + 63) // 64, n), (64, 1), stream](shared, items)
             if has_traps:
-                traps, groups = most(self.trap_start), most(self.trap_groups)
+                traps = most(self.trap_start)
                 values = cuda.device_array((n, traps), np.float64, stream=stream)
                 self.k.trap_values[((traps + 127) // 128, n), (128, 1), stream](
                     d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_trap_start, *self.trap_arrays,
@@ -549,7 +549,6 @@ class DevicePlan:
                     d_which, self.d_trap_groups, self.d_trap_start, self.trap_first, self.trap_arrays[3], d_corners,
                     h, w, cols, values, rts_sum)
             if has_blinkers:
-                blinks = most(self.blink_start)
                 self.k.blink_values[((blinks + 127) // 128, n), (128, 1), stream](
                     d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_blink_start, *self.blink_arrays,
                     self.numbers, self.blink_keys, blink_extra)

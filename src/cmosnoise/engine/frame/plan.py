@@ -2,7 +2,7 @@
 
 :class:`FramePlan` holds what every frame of an exposure shares (the mean
 charges, the maps, the ADC). :data:`STAGES` declares each stage that acts
-on every frame, in the chain's order: its name (as :mod:`cmosnoise.model.seeds`
+on every frame (in the order its comment explains): its name (as :mod:`cmosnoise.model.seeds`
 names it), the temporal stream it draws (a row of the plan's ``keys``), the
 kernels' switches that turn its blocks on (each with what turns it on), the
 plan fields it reads, and its scalars in the GPU's per-plan table. Everything
