@@ -1,4 +1,5 @@
-"""A separable resampling's second axis, sampled through a colour filter array in the same pass.
+"""A separable resampling's second axis, sampled through a colour filter array in the same pass, or made for every
+channel straight into the transposed, single-precision planes a lens's blur reads.
 
 A picture resampled to a sensor (:func:`cmosnoise.model.scene.resample`) is two sparse products per channel:
 the rows' weights, then the columns'. Through a CFA each pixel keeps one channel of three, so making the three
@@ -9,7 +10,9 @@ the mosaic, in parallel over rows.
 The sums are the same terms in the same order as scipy's ``csr_matvecs`` makes them (start at 0, add each stored
 weight times its value, in the stored order) and the channel's responsivity multiplies the sum afterwards, as
 ``to_cfa`` does: the same bits (``fastmath`` is off, so nothing is fused or reordered), which the tests check
-against the three-channel path.
+against the three-channel path. :func:`transposed` makes every channel, each column of the result a row in
+memory (the same sums, rounded once to the result's dtype): a 12 MP picture's three float32 planes in about a
+third of the time of scipy's products and a cast.
 """
 
 from __future__ import annotations
@@ -30,6 +33,22 @@ if numba is not None:
                 for k in range(indptr[j], indptr[j + 1]):
                     acc += data[k] * planes[c, i, indices[k]]
                 out[i, j] = acc * gain[c]
+
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _transposed(planes_t, data, indices, indptr, out):  # pragma: no cover - compiled
+        channels, cols, rows = out.shape
+        for j in numba.prange(cols):
+            acc = np.empty(rows)
+            for c in range(channels):
+                for t in range(rows):
+                    acc[t] = 0.0
+                for k in range(indptr[j], indptr[j + 1]):
+                    w = data[k]
+                    src = planes_t[c, indices[k]]
+                    for t in range(rows):
+                        acc[t] += w * src[t]
+                for t in range(rows):
+                    out[c, j, t] = acc[t]
 
 
 def mosaic(planes: np.ndarray, columns: sp.csr_matrix, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
@@ -78,4 +97,37 @@ def mosaic(planes: np.ndarray, columns: sp.csr_matrix, cell: np.ndarray, gain: n
     with ONE_LAUNCH:
         _mosaic(planes, np.ascontiguousarray(columns.data, np.float64), columns.indices.astype(np.int64),
                 columns.indptr.astype(np.int64), cell, gain, out)
+    return out
+
+
+def transposed(planes: np.ndarray, columns: sp.csr_matrix, dtype=np.float32) -> np.ndarray:
+    """Every channel of ``planes`` through ``columns``, transposed: ``out[c] = columns @ planes[c].T``, rounded to
+    ``dtype``.
+
+    Parameters
+    ----------
+    planes : (C, rows, n) float64 array
+        Each channel after the rows' weights.
+    columns : (cols, n) scipy CSR matrix, float64
+        The columns' weights.
+    dtype : dtype
+        Of the result.
+
+    Returns
+    -------
+    (C, cols, rows) array
+        Bit for bit scipy's ``columns @ planes[c].T`` (its sums in the stored order, started at 0), each rounded
+        once to ``dtype``.
+    """
+    columns = sp.csr_matrix(columns)
+    channels, rows = planes.shape[0], planes.shape[1]
+    out = np.empty((channels, columns.shape[0], rows), dtype)
+    if numba is None or out[0].size < 1 << 16 or not compiled("the scene's resampling", _transposed):
+        for c in range(channels):
+            out[c] = columns @ planes[c].T
+        return out
+    planes_t = np.ascontiguousarray(np.asarray(planes, np.float64).transpose(0, 2, 1))
+    with ONE_LAUNCH:
+        _transposed(planes_t, np.ascontiguousarray(columns.data, np.float64), columns.indices.astype(np.int64),
+                    columns.indptr.astype(np.int64), out)
     return out
