@@ -127,6 +127,7 @@ def test_the_blur_is_the_exact_convolution_to_single_precision_and_its_mosaic_is
     shape = (700, 1100)  # blocks of 512 cut both axes
     draw = scene.prepare(source, shape)
     kernels = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=8"]))
+    assert not optics.direct(kernels)  # 39 x 39: FFT blocks
     rgb = optics.blur(draw, shape, kernels)
     picture, m = draw(), kernels.shape[1] // 2
     exact = np.stack([scipy.signal.fftconvolve(np.pad(picture[..., c], m, mode="edge"), kernels[c], mode="valid")
@@ -141,12 +142,78 @@ def test_the_blur_is_the_exact_convolution_to_single_precision_and_its_mosaic_is
             assert np.array_equal(got, scene.to_cfa(part, pattern, (0.9, 1.0, 0.8))), (pattern, region)
 
 
+@pytest.mark.parametrize("source", ["photo", "edge"])
+def test_a_small_kernel_is_convolved_directly_within_five_single_precision_roundings(source):
+    # f/2.8 at 2.2 um: a 13 x 13 kernel, convolved directly (engine/convolve.py). Every term is non-negative
+    # (the picture and the kernel are), and each carries at most five float32 roundings: the picture's value, the
+    # weight, their product and the two additions of its group of four; the groups' float64 total adds k^2 2^-53
+    # of the value. So each value is within 5u (plus that) of the exact convolution, relative to itself: a bound
+    # that holds for every value, not in probability. SciPy's direct double-precision convolution (ndimage,
+    # edge pixels repeated) is the reference; its own error is some k^2 2^-53 of the value too. Seen: 3.3u and
+    # 2.3u at most. The mosaic is to_cfa of the blurred picture, bit for bit, for every CFA phase and a region at odd
+    # corners, and a region's values are the whole's
+    from scipy import ndimage
+
+    shape = (301, 453)
+    draw = scene.prepare(source, shape)
+    kernels = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=2.8"]))
+    assert kernels.shape[1] == 13 and optics.direct(kernels)
+    rgb = optics.blur(draw, shape, kernels)
+    picture = draw()
+    exact = np.stack([ndimage.convolve(picture[..., c], kernels[c], mode="nearest") for c in range(3)], axis=-1)
+    slack = (5 + 2 * 13**2 * 2.0**-53 / U32) * U32
+    assert (np.abs(rgb - exact) <= slack * exact + 1e-300).all()
+    assert np.abs(rgb - exact).max() > 0  # single precision, not double: the bound is what is tested
+    for pattern in ("RGGB", "GBRG", "BGGR", "GRBG", "none"):
+        for region in (None, (3, 250, 5, 401)):
+            part = rgb if region is None else rgb[region[0]:region[1], region[2]:region[3]]
+            got = optics.blur_cfa(draw, shape, kernels, pattern, (0.9, 1.0, 0.8), region)
+            assert np.array_equal(got, scene.to_cfa(part, pattern, (0.9, 1.0, 0.8))), (pattern, region)
+
+
+@pytest.mark.parametrize("k", [3, 5, 7, 13, 25])
+def test_the_direct_convolutions_compiled_loop_is_its_numpy_specification_bit_for_bit(k):
+    # engine/convolve.py: the compiled loop against mosaic_numpy (what runs while a background compile builds
+    # it), on random pictures and lopsided kernels of each size (k mod 4 = 1 and 3: the last rows one at a time),
+    # even and odd numbers of rows and columns, every CFA phase and a single channel
+    from cmosnoise.engine import convolve
+
+    rng = np.random.default_rng(k)
+    for rows, cols in [(97, 131), (100, 70)]:
+        m = k // 2
+        planes = rng.random((3, cols + 2 * m, rows + 2 * m)).astype(np.float32)
+        kernels = rng.random((3, k, k)) ** 3
+        kernels /= kernels.sum(axis=(1, 2), keepdims=True)
+        for cells in ([[0, 1], [1, 2]], [[1, 2], [0, 1]], [[2, 2], [2, 2]]):
+            cells, gain = np.array(cells), np.array([0.83, 1.0, 1.21])
+            got = convolve.mosaic(planes, kernels, cells, gain, np.empty((rows, cols)))
+            want = convolve.mosaic_numpy(planes, kernels, cells, gain, np.empty((rows, cols)))
+            assert np.array_equal(got.view(np.uint64), want.view(np.uint64)), (rows, cols, cells.tolist())
+    # and both are the convolution (not the correlation: the kernels are lopsided): each pixel's own channel of
+    # SciPy's double-precision convolution of the window, within the four float32 roundings of each term (the
+    # weight, the product, the group's two additions; the planes are float32 already)
+    from scipy import ndimage
+
+    window = np.empty_like(planes)  # the last case's, 100 x 70: the window's rows back in order from the halves
+    window[:, :, np.r_[0:rows + 2 * m:2, 1:rows + 2 * m:2]] = planes
+    cells = np.array([[0, 1], [1, 2]])
+    got = convolve.mosaic(planes, kernels, cells, np.ones(3), np.empty((rows, cols)))
+    exact = [ndimage.convolve(window[c].T.astype(np.float64), kernels[c])[m:rows + m, m:cols + m] for c in range(3)]
+    for a in range(2):
+        for b in range(2):
+            e = exact[cells[a, b]][a::2, b::2]
+            assert (np.abs(got[a::2, b::2] - e) <= (4 + 1e-6) * U32 * e).all(), (a, b)
+
+
 # ------------------------------------------------------------------ tiles keep their bits
-@pytest.mark.parametrize("source", ["photo", "edge", "colorchecker"])
-def test_with_optics_every_tile_is_that_rectangle_of_the_whole_frame(source):
-    # 300 x 530 crosses the FFT blocks of 256 in both axes; tiles of 96 straddle them
-    cfg = load_config(overrides=["optics.psf=diffraction", "optics.f_number=11", "optics.relative_illumination=cos4",
-                                 "optics.focal_length_mm=1.5", "sensor.width=530", "sensor.height=300"])
+@pytest.mark.parametrize(("source", "f_number"), [("photo", 11), ("edge", 11), ("colorchecker", 11), ("photo", 2.8)])
+def test_with_optics_every_tile_is_that_rectangle_of_the_whole_frame(source, f_number):
+    # 300 x 530 crosses the FFT blocks of 256 in both axes; tiles of 96 straddle them. At f/2.8 the kernel is
+    # 13 x 13 and convolved directly, at f/11 it is 53 x 53 and convolved by FFT blocks
+    cfg = load_config(overrides=["optics.psf=diffraction", f"optics.f_number={f_number}",
+                                 "optics.relative_illumination=cos4", "optics.focal_length_mm=1.5",
+                                 "sensor.width=530", "sensor.height=300"])
+    assert optics.direct(optics.psf_kernels(cfg)) == (f_number < 5)
     whole = Sensor(cfg).expose(source).frame(0)
     tiling = tiles.Tiling(cfg, 96, source)
     for region in tiling.regions:
@@ -155,14 +222,17 @@ def test_with_optics_every_tile_is_that_rectangle_of_the_whole_frame(source):
         assert np.array_equal(raw, whole[r0:r1, c0:c1]), region
 
 
-def test_a_tile_of_a_50_mp_sensor_is_the_crop_of_a_larger_part_bit_for_bit():
+@pytest.mark.parametrize("sigma_px", [2, 7])
+def test_a_tile_of_a_50_mp_sensor_is_the_crop_of_a_larger_part_bit_for_bit(sigma_px):
     # a 50 MP sensor (8688 x 5792): the blur of one tile against that of a part four blocks wide around it; the
-    # whole frame is the union of such parts (the blocks are fixed to the sensor), so this is its crop
+    # whole frame is the union of such parts (the blocks are fixed to the sensor), so this is its crop. A kernel
+    # of sigma 2 (19 x 19) is convolved directly, one of sigma 7 (59 x 59) by FFT blocks
     shape = (5792, 8688)
-    cfg = load_config(overrides=["optics.psf=gaussian", "optics.psf_sigma_px=2", "sensor.width=8688",
+    cfg = load_config(overrides=["optics.psf=gaussian", f"optics.psf_sigma_px={sigma_px}", "sensor.width=8688",
                                  "sensor.height=5792"])
     draw = scene.prepare("photo", shape)
     kernels = optics.psf_kernels(cfg)
+    assert optics.direct(kernels) == (sigma_px < 5)
     big = (2048, 3072, 4096, 5120)
     part = optics.blur(draw, shape, kernels, big)
     for tile in [(2100, 2400, 4200, 4500), (2048, 2304, 4350, 4700), (2500, 3000, 4097, 4300)]:

@@ -7,9 +7,11 @@ colour filter array takes each pixel's channel:
   diffraction-limited lens at its f-number, weighted by the channel's photo-electron spectrum (with light in lux;
   otherwise at :data:`DEFAULT_WAVELENGTHS_NM`), a Gaussian, or a user's 2-D array. Each kernel is the continuous
   PSF averaged over a pixel's square around each offset, so a point PSF leaves the picture as it is; it sums to 1.
-  It is applied by FFT convolution in blocks of :data:`BLOCK` pixels on a grid fixed to the whole sensor, each
-  block with a margin of the kernel's radius (the picture's edge pixels repeated beyond it): a tile of a sensor is
-  made of the same blocks as the whole, so it equals that crop bit for bit;
+  It is convolved directly at each pixel's own channel where it is at most
+  :data:`~cmosnoise.engine.convolve.MAX_SIDE` pixels across (:mod:`cmosnoise.engine.convolve`), otherwise by FFT
+  in blocks of :data:`BLOCK` pixels on a grid fixed to the whole sensor, each block with a margin of the kernel's
+  radius; the picture's edge pixels are repeated beyond it. Either way a tile of a sensor equals that crop of the
+  whole bit for bit;
 - **the relative illumination** (``optics.relative_illumination``): cos^4 of each pixel's field angle
   (``tan theta = h / f``, h the pixel centre's distance from the sensor's centre), or a table of image height
   against relative illumination. It multiplies each pixel's signal.
@@ -35,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import inputs
-from ..engine import layout, lens
+from ..engine import convolve, layout, lens
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
 from . import scene as scene_mod
@@ -54,7 +56,7 @@ MAX_KERNEL = 257
 MAX_FILE_BYTES = 64 * 2**20
 
 __all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "incidence",
-           "angle_qe", "lean_weights", "shade", "cfa_signal", "blur_cfa", "blur", "active", "BLOCK"]
+           "angle_qe", "lean_weights", "shade", "cfa_signal", "blur_cfa", "blur", "direct", "active", "BLOCK"]
 
 
 # ------------------------------------------------------------------ point spread functions
@@ -511,14 +513,38 @@ def _blocks(draw, shape: tuple[int, int], kernels: np.ndarray, region=None):
             yield q0, q1, p0, p1, full[:, 2 * m + q0 - br:2 * m + q1 - br, 2 * m + p0 - bc:2 * m + p1 - bc]
 
 
-def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.ndarray:
-    """The picture ``draw`` convolved with one kernel per channel, in blocks of :data:`BLOCK` on the sensor's grid.
+def direct(kernels: np.ndarray) -> bool:
+    """Whether ``kernels`` are convolved directly (:mod:`cmosnoise.engine.convolve`: at most
+    :data:`~cmosnoise.engine.convolve.MAX_SIDE` pixels across) rather than by FFT blocks."""
+    return kernels.shape[1] <= convolve.MAX_SIDE
 
-    The transforms are in single precision (three times quicker than double). Their rounding error is about
-    ``u sqrt(2 log2 n + 1)`` times the block's RMS value (u = 6e-8, float32's unit roundoff; n = 540^2 points a
-    block with its margins: about 4e-7 times the RMS), a few times the single-precision rounding the mean charge
-    is kept in after it and far below shot noise (1e-2 of the charge even at a full well of 10 000 e-); the tests
-    hold the error to 6 of these sigma.
+
+def _window_planes(draw, shape: tuple[int, int], radius: int, region) -> np.ndarray:
+    """The picture over ``region`` and a margin of ``radius`` (its edge pixels repeated beyond the sensor), in the
+    layout :func:`cmosnoise.engine.convolve.mosaic` reads: (3, cols + 2 radius, rows + 2 radius) float32."""
+    rows, cols = shape
+    r0, r1, c0, c1 = region
+    ri = convolve.layout_indices(r0, r1, rows, radius, True)
+    ci = convolve.layout_indices(c0, c1, cols, radius, False)
+    if isinstance(draw, scene_mod.Resampled):  # only the rows and columns asked for, no full-size RGB
+        return draw.planes_at(ri, ci, np.float32)
+    g0, h0 = max(r0 - radius, 0), max(c0 - radius, 0)
+    picture = np.asarray(draw((g0, min(r1 + radius, rows), h0, min(c1 + radius, cols))))
+    return np.ascontiguousarray(picture[ri - g0][:, ci - h0].transpose(2, 1, 0), np.float32)
+
+
+def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.ndarray:
+    """The picture ``draw`` convolved with one kernel per channel, its edge pixels repeated beyond the sensor.
+
+    A kernel of up to :data:`~cmosnoise.engine.convolve.MAX_SIDE` pixels across (a diffraction PSF's, unless the
+    f-number is large for the pitch) is convolved directly (:func:`cmosnoise.engine.convolve.mosaic`): the
+    picture in float32, each pixel's sum in a fixed order, in float64 by groups of four float32 products (some
+    ``3u`` of the value, ``u = 6e-8``). A larger one by FFTs in blocks of :data:`BLOCK` on the sensor's grid, in
+    single precision: their rounding error is about ``u sqrt(2 log2 n + 1)`` times the block's RMS value (n =
+    540^2 points a block with its margins: about 4e-7 times the RMS), a few times the single-precision rounding
+    the mean charge is kept in after it and far below shot noise (1e-2 of the charge even at a full well of
+    10 000 e-); the tests hold each method to its bound. Either way any region is bit for bit that crop of the
+    whole.
 
     Parameters
     ----------
@@ -541,6 +567,12 @@ def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.n
     rows, cols = shape
     r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
     out = np.empty((r1 - r0, c1 - c0, 3))
+    if direct(kernels):  # each channel at every pixel
+        planes = _window_planes(draw, shape, kernels.shape[1] // 2, (r0, r1, c0, c1))
+        plane = np.empty((r1 - r0, c1 - c0))
+        for c in range(3):
+            out[..., c] = convolve.mosaic(planes, kernels, np.full((2, 2), c), np.ones(3), plane)
+        return out
     for q0, q1, p0, p1, part in _blocks(draw, shape, kernels, region):
         out[q0 - r0:q1 - r0, p0 - c0:p1 - c0] = part.transpose(1, 2, 0)
     out[~(out > 0.0)] = 0.0
@@ -549,8 +581,9 @@ def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.n
 
 def blur_cfa(draw, shape: tuple[int, int], kernels: np.ndarray, pattern: str, responsivity,
              region=None) -> np.ndarray:
-    """``scene.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)``, bit for bit, each block's
-    pixels taken through the CFA as it is made (no full-size RGB).
+    """``scene.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)``, bit for bit, each pixel's own
+    channel alone made (a direct kernel) or each block's pixels taken through the CFA as it is made (FFTs): no
+    full-size RGB.
 
     Parameters
     ----------
@@ -568,16 +601,17 @@ def blur_cfa(draw, shape: tuple[int, int], kernels: np.ndarray, pattern: str, re
     """
     rows, cols = shape
     r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
+    if cfa_mod.is_mono(pattern):  # the luminance of the three blurred channels
+        return scene_mod.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)
     out = np.empty((r1 - r0, c1 - c0))
     gain = np.asarray(responsivity, np.float64)
+    if direct(kernels):
+        planes = _window_planes(draw, shape, kernels.shape[1] // 2, (r0, r1, c0, c1))
+        return convolve.mosaic(planes, kernels, cfa_mod.tile(pattern), gain, out)
     for q0, q1, p0, p1, part in _blocks(draw, shape, kernels, region):
         dst = out[q0 - r0:q1 - r0, p0 - c0:p1 - c0]
-        if cfa_mod.is_mono(pattern):
-            rgb = part.transpose(1, 2, 0).astype(np.float64, order="C")
-            rgb[~(rgb > 0.0)] = 0.0
-            dst[...] = scene_mod.to_cfa(rgb, pattern, responsivity)
-        else:  # the block's CFA phase: its first pixel's row and column in the region
-            layout.plane_pick(part, cfa_mod.tile(cfa_mod.crop_pattern(pattern, q0 - r0, p0 - c0)), gain, dst)
+        # the block's CFA phase: its first pixel's row and column in the region
+        layout.plane_pick(part, cfa_mod.tile(cfa_mod.crop_pattern(pattern, q0 - r0, p0 - c0)), gain, dst)
     return out
 
 
