@@ -451,6 +451,32 @@ def test_the_compiled_lean_is_four_spreads_of_signed_charge():
         stencil.numba = numba
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_lean_made_from_the_field_is_the_lean_of_its_maps_bit_for_bit(dtype):
+    # optics.leaning_charge makes each pixel's shares where it scatters its charge (engine/lens.leaning_spread);
+    # the same bits as crosstalk.lean of optics.lean_weights' maps, whole and for regions at odd corners (row0),
+    # for a float32 charge (as an exposure's) and a float64 one; and with the compiled loops off, the maps' path
+    from cmosnoise.engine import lens
+    from cmosnoise.model.stages import crosstalk
+
+    c = load_config(overrides=LEAN + ["optics.chief_ray_angle=[[0, 0], [0.1, 12], [0.25, -20]]",
+                                      "optics.microlens_compensation=0.3", "sensor.width=131", "sensor.height=97",
+                                      "sensor.pixel_pitch_um=1.4"])
+    shape = (97, 131)
+    leans = crosstalk.lean_kernels(crosstalk.kernel_fractions(c.crosstalk.kernel_pct),
+                                   crosstalk.kernel_fractions(c.crosstalk.kernel_at_angle_pct))
+    q = (np.random.default_rng(4).random(shape) * 1000).astype(dtype)
+    assert lens.ready()
+    for region in ((0, 97, 0, 131), (3, 50, 7, 91), (48, 97, 64, 131)):
+        r0, r1, c0, c1 = region
+        part = q[r0:r1, c0:c1]
+        want = crosstalk.lean(part, leans, *optics.lean_weights(c, shape, region), row0=r0)
+        got = optics.leaning_charge(part, c, shape, region, leans)
+        assert np.array_equal(got.view(np.uint64), want.view(np.uint64)), region
+    off = load_config(overrides=["sensor.width=131", "sensor.height=97"])
+    assert optics.leaning_charge(q, off, shape, (0, 97, 0, 131), leans) is None
+
+
 FIELDS = [["optics.relative_illumination=cos4", "optics.focal_length_mm=0.4"],
           ["optics.relative_illumination=cos4", "optics.chief_ray_angle=[[0, 0], [0.1, 12], [0.2, 25]]",
            "optics.microlens_compensation=0.3", "optics.angle_relative_qe=[[0, 1], [20, 0.7]]"],

@@ -14,7 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .jit import ONE_LAUNCH, compiled, numba  # None where numba is not installed
+from . import stencil
+from .jit import ONE_LAUNCH, compiled, keyed_on, numba  # None where numba is not installed
+
+if numba is not None:
+    from .stencil import scatter
 
 #: relative illumination kinds: none, cos^4 of the field angle, a table of image height
 RI_NONE, RI_COS4, RI_TABLE = 0, 1, 2
@@ -77,19 +81,41 @@ if numba is not None:
                     s = s * interp(abs(angle), qe_a, qe_v[c], qe_s[c])
                 signal[i, j] = s
 
+    @numba.njit(cache=True, nogil=True, inline="always")
+    def _shares(yy, y, x, cra_h, cra_a, cra_s, keep, reference):  # pragma: no cover - compiled
+        """One pixel's lean shares along the columns and the rows, as optics.lean_weights: ``yy = y * y``."""
+        h = np.sqrt(yy + x * x)
+        angle = interp(h, cra_h, cra_a, cra_s)
+        angle *= keep
+        inv = 1.0 / h if h > 0 else 0.0
+        share = min(max(angle / reference, -1.0), 1.0)
+        return share * (x * inv), share * (y * inv)
+
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _lean(y, x, cra_h, cra_a, cra_s, keep, reference, a, b):  # pragma: no cover - compiled
         rows, cols = a.shape
         for i in numba.prange(rows):
             yy = y[i] * y[i]
             for j in range(cols):
-                h = np.sqrt(yy + x[j] * x[j])
-                angle = interp(h, cra_h, cra_a, cra_s)
-                angle *= keep
-                inv = 1.0 / h if h > 0 else 0.0
-                share = min(max(angle / reference, -1.0), 1.0)
-                a[i, j] = share * (x[j] * inv)
-                b[i, j] = share * (y[i] * inv)
+                a[i, j], b[i, j] = _shares(yy, y[i], x[j], cra_h, cra_a, cra_s, keep, reference)
+
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def _leaning(q, y, x, cra_h, cra_a, cra_s, keep, reference, right, left, down, up, row0, out):
+        # pragma: no cover - compiled
+        # stencil._leaning with each pixel's shares made where it is scattered (no maps): a third of the rows at a
+        # time by the sensor's row number, each pixel's terms in the same order, the same bits
+        rows, cols = q.shape
+        for phase in range(3):
+            first = (phase - row0) % 3
+            for t in numba.prange(max(rows - first + 2, 0) // 3):
+                i = first + 3 * t
+                yy = y[i] * y[i]
+                for j in range(cols):
+                    a, b = _shares(yy, y[i], x[j], cra_h, cra_a, cra_s, keep, reference)
+                    qv = np.float64(q[i, j])
+                    scatter(out, i, j, qv * a, qv * b, right, left, down, up)
+
+    keyed_on(_leaning, stencil)  # it inlines stencil.scatter
 
 
 def slopes(xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
@@ -105,7 +131,7 @@ def _line(v) -> np.ndarray:
 
 def ready() -> bool:
     """Whether the compiled loops run now (:func:`cmosnoise.engine.jit.compiled`); False: the NumPy specification."""
-    return numba is not None and compiled("the lens's field maps", _shade, _lean)
+    return numba is not None and compiled("the lens's field maps", _shade, _lean, _leaning)
 
 
 def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, focal_length_mm: float,
@@ -179,4 +205,35 @@ def lean_shares(y_mm: np.ndarray, x_mm: np.ndarray, heights_mm: np.ndarray, angl
     return a, b
 
 
-__all__ = ["ready", "shade", "lean_shares", "RI_NONE", "RI_COS4", "RI_TABLE"]
+def leaning_spread(q: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, heights_mm: np.ndarray,
+                   angles_deg: np.ndarray, keep: float, reference_deg: float, leans: tuple,
+                   row0: int = 0) -> np.ndarray:
+    """:func:`.stencil.leaning_spread` of ``q`` with the shares of :func:`lean_shares`, each pixel's made where it
+    is scattered: the same bits, without the two maps (only where :func:`ready`).
+
+    Parameters
+    ----------
+    q : (rows, cols) float32 or float64 array
+        Charge, e-.
+    y_mm, x_mm, heights_mm, angles_deg, keep, reference_deg
+        As :func:`lean_shares`; ``y_mm`` and ``x_mm`` give ``q``'s rows and columns.
+    leans : tuple of four (3, 3) arrays
+        As :func:`.stencil.leaning_spread`.
+    row0 : int
+        The sensor's row number of ``q``'s first row.
+
+    Returns
+    -------
+    (rows, cols) float64 array
+    """
+    q = np.ascontiguousarray(q, np.float32 if q.dtype == np.float32 else np.float64)
+    ks = [np.ascontiguousarray(k, np.float64) for k in leans]
+    out = np.zeros(q.shape)
+    heights_mm, angles_deg = _line(heights_mm), _line(angles_deg)
+    with ONE_LAUNCH:
+        _leaning(q, _line(y_mm), _line(x_mm), heights_mm, angles_deg, slopes(heights_mm, angles_deg), float(keep),
+                 float(reference_deg), ks[0], ks[1], ks[2], ks[3], int(row0), out)
+    return out
+
+
+__all__ = ["ready", "shade", "lean_shares", "leaning_spread", "RI_NONE", "RI_COS4", "RI_TABLE"]

@@ -42,6 +42,24 @@ if numba is not None:
 
 
 if numba is not None:
+    @numba.njit(cache=True, nogil=True, inline="always")
+    def scatter(out, y, x, wa, wb, right, left, down, up):  # pragma: no cover - compiled
+        """Pixel (y, x) sends ``|wa| D_a + |wb| D_b`` to its 3 x 3 neighbours (off the array: into the edge pixel
+        it left), D_a the column kernel of ``wa``'s sign, D_b the row kernel of ``wb``'s: one pixel of
+        :func:`leaning_spread`, shared by the loops that take the shares from maps and from the lens's field
+        (:mod:`.lens`)."""
+        rows, cols = out.shape
+        if wa == 0.0 and wb == 0.0:
+            return
+        kx = right if wa >= 0.0 else left
+        ky = down if wb >= 0.0 else up
+        wa, wb = abs(wa), abs(wb)
+        for dy in range(3):
+            ty = min(max(y + dy - 1, 0), rows - 1)  # off the array: back into the edge pixel it left
+            for dx in range(3):
+                tx = min(max(x + dx - 1, 0), cols - 1)
+                out[ty, tx] += wa * kx[dy, dx] + wb * ky[dy, dx]
+
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _leaning(q, a, b, right, left, down, up, row0, out):  # pragma: no cover - compiled
         rows, cols = q.shape
@@ -53,17 +71,7 @@ if numba is not None:
             for t in numba.prange(max(rows - first + 2, 0) // 3):
                 y = first + 3 * t
                 for x in range(cols):
-                    wa, wb = q[y, x] * a[y, x], q[y, x] * b[y, x]
-                    if wa == 0.0 and wb == 0.0:
-                        continue
-                    kx = right if wa >= 0.0 else left
-                    ky = down if wb >= 0.0 else up
-                    wa, wb = abs(wa), abs(wb)
-                    for dy in range(3):
-                        ty = min(max(y + dy - 1, 0), rows - 1)  # off the array: back into the edge pixel it left
-                        for dx in range(3):
-                            tx = min(max(x + dx - 1, 0), cols - 1)
-                            out[ty, tx] += wa * kx[dy, dx] + wb * ky[dy, dx]
+                    scatter(out, y, x, q[y, x] * a[y, x], q[y, x] * b[y, x], right, left, down, up)
 
 
 def leaning_spread(q: np.ndarray, a: np.ndarray, b: np.ndarray, leans: tuple, row0: int = 0) -> np.ndarray:

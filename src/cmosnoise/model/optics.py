@@ -41,6 +41,7 @@ from ..engine import convolve, layout, lens
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
 from . import scene as scene_mod
+from .stages import crosstalk
 
 #: the FFT blocks' side, pixels (a block and its margins make one transform)
 BLOCK = 512
@@ -56,7 +57,7 @@ MAX_KERNEL = 257
 MAX_FILE_BYTES = 64 * 2**20
 
 __all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "incidence",
-           "angle_qe", "lean_weights", "shade", "cfa_signal", "blur_cfa", "blur", "direct", "active", "BLOCK"]
+           "angle_qe", "lean_weights", "leaning_charge", "shade", "cfa_signal", "blur_cfa", "blur", "direct", "active", "BLOCK"]
 
 
 # ------------------------------------------------------------------ point spread functions
@@ -437,6 +438,43 @@ def lean_weights(config, shape: tuple[int, int], region=None) -> tuple[np.ndarra
 
 
 # ------------------------------------------------------------------ the picture through the lens
+def leaning_charge(q: np.ndarray, config, shape: tuple[int, int], region, leans: tuple) -> np.ndarray | None:
+    """The charge crosstalk's lean moves (:func:`.stages.crosstalk.lean`) with each pixel's shares of
+    :func:`lean_weights`, or None where the kernel does not lean.
+
+    Compiled (:func:`cmosnoise.engine.lens.leaning_spread`), each pixel's shares are made where its charge is
+    scattered, without the two maps: the same bits as ``crosstalk.lean(q, leans, *lean_weights(...))``.
+
+    Parameters
+    ----------
+    q : (rows, cols) array, e-
+        The charge over ``region``, before diffusion.
+    config : Config
+    shape : (rows, cols)
+        The whole sensor.
+    region : (row0, row1, col0, col1)
+        The pixels ``q`` holds.
+    leans : tuple of four (3, 3) arrays
+        :func:`.stages.crosstalk.lean_kernels`.
+
+    Returns
+    -------
+    (rows, cols) float64 array or None
+        To add to the crosstalk's result.
+    """
+    if not lens.ready():
+        weights = lean_weights(config, shape, region)
+        return None if weights is None else crosstalk.lean(q, leans, *weights, row0=region[0])
+    if config.crosstalk.kernel_at_angle_pct is None or not config.crosstalk.enabled:
+        return None
+    t = _angle_table(config.optics)
+    if t is None:
+        return None
+    y, x = _offsets_mm(shape, region, config.sensor.pixel_pitch_um)
+    return lens.leaning_spread(q, y, x, t[:, 0], t[:, 1], 1.0 - config.optics.microlens_compensation,
+                               config.crosstalk.reference_angle_deg, leans, region[0])
+
+
 def active(config) -> bool:
     """Whether the lens changes the picture: a PSF, a relative illumination or an angle-dependent QE configured.
 
@@ -514,8 +552,18 @@ def _blocks(draw, shape: tuple[int, int], kernels: np.ndarray, region=None):
 
 
 def direct(kernels: np.ndarray) -> bool:
-    """Whether ``kernels`` are convolved directly (:mod:`cmosnoise.engine.convolve`: at most
-    :data:`~cmosnoise.engine.convolve.MAX_SIDE` pixels across) rather than by FFT blocks."""
+    """Whether ``kernels`` are convolved directly rather than by FFT blocks.
+
+    Parameters
+    ----------
+    kernels : (3, k, k) array
+        The PSF's kernels (:func:`psf_kernels`).
+
+    Returns
+    -------
+    bool
+        True where k is at most :data:`~cmosnoise.engine.convolve.MAX_SIDE` (:mod:`cmosnoise.engine.convolve`).
+    """
     return kernels.shape[1] <= convolve.MAX_SIDE
 
 

@@ -292,10 +292,10 @@ class Sensor:
                 r0, r1, c0, c1 = self.region
                 if rows is not None:
                     r0, r1 = r0 + rows[0], r0 + rows[1]
-                weights = optics_mod.lean_weights(c, self.shape, (r0, r1, c0, c1))
-                if weights is not None:
-                    leans = crosstalk.lean_kernels(kernel, crosstalk.kernel_fractions(c.crosstalk.kernel_at_angle_pct))
-                    mean = mean + crosstalk.lean(after_prnu, leans, *weights, row0=r0)
+                leans = crosstalk.lean_kernels(kernel, crosstalk.kernel_fractions(c.crosstalk.kernel_at_angle_pct))
+                moved = optics_mod.leaning_charge(after_prnu, c, self.shape, (r0, r1, c0, c1), leans)
+                if moved is not None:
+                    mean = np.add(mean, moved, out=moved)  # into the lean's own float64 array: no new one
         return after_prnu, mean
 
     @property
