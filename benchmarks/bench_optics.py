@@ -16,7 +16,16 @@ the kernel; the frames after it cost what they cost without it. Each is the fast
   must cost this; it differs from the reference's frame only as its charge does (the shot-noise sampler's cost
   depends on the mean).
 
-"optics' worth" is (exposure with lens - exposure without) over a frame.
+"optics' worth" is (exposure with lens - exposure without) over a frame. Two such figures:
+
+- **light and PSF** (``optics_spectral_frames_worth``): light in lux with a measured spectral QE and the
+  diffraction PSF of those spectra, the issue's "optics and spectral work" (its "Optics" is the PSF; lens
+  shading and the chief-ray angle are a bullet of their own);
+- **the whole lens** (``optics_frames_worth``): that and cos^4 shading, the chief-ray angle's QE loss and its
+  leaning crosstalk.
+
+colour-science's import (about a second, once a process; the light's integral needs it) is timed apart from the
+integral itself.
 
     python benchmarks/bench_optics.py [--megapixels 12] [--repeats 5] [--json FILE]
 """
@@ -58,7 +67,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
-    from cmosnoise import Sensor, load_config
+    from cmosnoise import Sensor, colour_lib, load_config
     from cmosnoise.model import light
 
     width = int(round(math.sqrt(args.megapixels * 1e6 * 4 / 3) / 2) * 2)
@@ -67,6 +76,9 @@ def main(argv=None) -> int:
     Sensor(load_config(overrides=["sensor.width=64", "sensor.height=48"])).expose().frame(0)  # compile first
     plain = Sensor(load_config(overrides=size), seed=1)
     lens_config = load_config(overrides=size + LENS)
+    t0 = time.perf_counter()
+    colour_lib.colour()  # its import, once a process
+    imported = time.perf_counter() - t0
     t0 = time.perf_counter()
     light.channel_light(lens_config)
     integral = time.perf_counter() - t0
@@ -83,8 +95,13 @@ def main(argv=None) -> int:
         "frame_lens_s": fastest(lambda: lens_shot.frame(1), args.repeats),
         "frame_same_charge_s": fastest(lambda: same.frame(1), args.repeats),
         "light_integral_s": integral,
+        "colour_import_s": imported,
     }
     res["optics_frames_worth"] = (res["exposure_lens_s"] - res["exposure_s"]) / res["frame_s"]
+    spectral = Sensor(load_config(overrides=size + LENS[:6]), seed=1)
+    spectral.expose("photo")
+    res["exposure_spectral_s"] = fastest(lambda: spectral.expose("photo"), args.repeats)
+    res["optics_spectral_frames_worth"] = (res["exposure_spectral_s"] - res["exposure_s"]) / res["frame_s"]
     # where it goes: each part alone on top of the plain exposure, in frames' worth
     res["parts_frames_worth"] = {}
     for name, sets in PARTS.items():
@@ -93,10 +110,12 @@ def main(argv=None) -> int:
         res["parts_frames_worth"][name] = (fastest(lambda part=part: part.expose("photo"), args.repeats)
                                            - res["exposure_s"]) / res["frame_s"]
     print(f"{res['megapixels']:.1f} MP: frame {res['frame_s'] * 1e3:.0f} ms; exposure {res['exposure_s'] * 1e3:.0f} ms, "
-          f"with light and lens {res['exposure_lens_s'] * 1e3:.0f} ms ({res['optics_frames_worth']:.2f} frames' "
-          f"worth); a frame with them {res['frame_lens_s'] * 1e3:.0f} ms (of the same charge without the lens "
-          f"{res['frame_same_charge_s'] * 1e3:.0f} ms); the light's integral "
-          f"{res['light_integral_s'] * 1e3:.0f} ms once")
+          f"with light in lux and the PSF {res['exposure_spectral_s'] * 1e3:.0f} ms "
+          f"({res['optics_spectral_frames_worth']:.2f} frames' worth), with the whole lens "
+          f"{res['exposure_lens_s'] * 1e3:.0f} ms ({res['optics_frames_worth']:.2f}); a frame with them "
+          f"{res['frame_lens_s'] * 1e3:.0f} ms (of the same charge without the lens "
+          f"{res['frame_same_charge_s'] * 1e3:.0f} ms); the light's integral {res['light_integral_s'] * 1e3:.0f} ms "
+          f"once (colour-science's import before it {res['colour_import_s'] * 1e3:.0f} ms)")
     print("  each part alone, frames' worth: " + ", ".join(f"{k} {v:.2f}" for k, v in res["parts_frames_worth"].items()))
     if args.json:
         with open(args.json, "w") as f:

@@ -417,12 +417,14 @@ LENS_SETS = [*LIGHT_SETS, "optics.relative_illumination=cos4", "optics.focal_len
 def render_optics_speed(d: dict) -> str:
     mp = f"{d['megapixels']:.0f} MP"
     rows = [f"{mp} ({d['size'][1]} x {d['size'][0]}), fastest of {d['repeats']}: a frame of the kernel "
-            f"{d['frame_s'] * 1e3:.0f} ms; an exposure of the photo {d['exposure_s'] * 1e3:.0f} ms, with every "
-            f"part below {d['exposure_lens_s'] * 1e3:.0f} ms ({d['optics_frames_worth']:.1f} frames' worth); a frame "
-            f"of that exposure {d['frame_lens_s'] * 1e3:.0f} ms"
-            + (f", and a frame of the same charge without the lens {d['frame_same_charge_s'] * 1e3:.0f} ms"
-               if "frame_same_charge_s" in d else "") + "; the light's spectral integral "
-            f"{d['light_integral_s'] * 1e3:.0f} ms, once per light.", "",
+            f"{d['frame_s'] * 1e3:.0f} ms; an exposure of the photo {d['exposure_s'] * 1e3:.0f} ms, with light in "
+            f"lux and the diffraction PSF {d['exposure_spectral_s'] * 1e3:.0f} ms "
+            f"(**{d['optics_spectral_frames_worth']:.1f} frames' worth**), with every part below "
+            f"{d['exposure_lens_s'] * 1e3:.0f} ms ({d['optics_frames_worth']:.1f} frames' worth); a frame "
+            f"of that exposure {d['frame_lens_s'] * 1e3:.0f} ms, and a frame of the same charge without the lens "
+            f"{d['frame_same_charge_s'] * 1e3:.0f} ms; the light's spectral integral "
+            f"{d['light_integral_s'] * 1e3:.0f} ms, once per light (colour-science's import before it, once a "
+            f"process: {d['colour_import_s'] * 1e3:.0f} ms).", "",
             "| part, alone | its cost on an exposure, frames' worth |", "|---|---|"]
     rows += [f"| {k} | {max(v, 0):.1f} |" for k, v in d["parts_frames_worth"].items()]
     return "\n".join(rows)
