@@ -13,8 +13,9 @@ each its rows ``u`` four at a time, the four products added in single precision 
 that sum added to the pixel's double-precision total, started at 0.0 (a last one to three rows one at a time).
 So a tile's pixels are the whole frame's, bit for bit, and the compiled loop and the NumPy specification
 (:func:`mosaic_numpy`, which runs while a background compile builds the loop) give the same bits. The rounding:
-the picture in float32 (its values to ``u = 6e-8`` relative), each group of four in float32 (a few ``u`` of the
-group), the total in float64: some ``3u`` of the value.
+every term is non-negative (a PSF and a picture are) and carries at most five float32 roundings (the picture's
+value, the weight, their product, the group's two additions), the total in float64: each value within ``5u`` of
+the exact convolution, relative to itself, ``u = 6e-8``.
 
 The planes come in the layout the loop reads along its vectors (:func:`layout_indices`): channels first,
 transposed (a column of the picture is a row in memory), and the rows of the region's window (the region and a

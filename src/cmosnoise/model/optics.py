@@ -57,7 +57,8 @@ MAX_KERNEL = 257
 MAX_FILE_BYTES = 64 * 2**20
 
 __all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "incidence",
-           "angle_qe", "lean_weights", "leaning_charge", "shade", "cfa_signal", "blur_cfa", "blur", "direct", "active", "BLOCK"]
+           "angle_qe", "lean_weights", "leaning_charge", "shade", "cfa_signal", "blur_cfa", "blur", "direct",
+           "active", "BLOCK"]
 
 
 # ------------------------------------------------------------------ point spread functions
@@ -586,8 +587,8 @@ def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.n
 
     A kernel of up to :data:`~cmosnoise.engine.convolve.MAX_SIDE` pixels across (a diffraction PSF's, unless the
     f-number is large for the pitch) is convolved directly (:func:`cmosnoise.engine.convolve.mosaic`): the
-    picture in float32, each pixel's sum in a fixed order, in float64 by groups of four float32 products (some
-    ``3u`` of the value, ``u = 6e-8``). A larger one by FFTs in blocks of :data:`BLOCK` on the sensor's grid, in
+    picture in float32, each pixel's sum in a fixed order, in float64 by groups of four float32 products (within
+    ``5u`` of the value, ``u = 6e-8``: five float32 roundings of each non-negative term at most). A larger one by FFTs in blocks of :data:`BLOCK` on the sensor's grid, in
     single precision: their rounding error is about ``u sqrt(2 log2 n + 1)`` times the block's RMS value (n =
     540^2 points a block with its margins: about 4e-7 times the RMS), a few times the single-precision rounding
     the mean charge is kept in after it and far below shot noise (1e-2 of the charge even at a full well of
