@@ -36,7 +36,14 @@ EXTRA = {"measured-stages": {
     "pixel_offset": {"enabled": True, "sigma_e": 4.0, "tail": {"ppm_above": 2000, "threshold_e": 20, "max_e": 200}},
     "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.2, 0.6]},
     "black_level": {"channel_offsets_dn": [1.5, -0.5, 0.25, 2.0], "frame_sigma_dn": 0.3},
-    "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.2, "shape": -0.05}}}
+    "read_noise": {"enabled": True, "distribution": "tukey_lambda", "scale_dn": 1.2, "shape": -0.05}},
+    # the lens: a diffraction PSF (convolved directly), cos^4 shading, the chief-ray angle's QE loss per channel and
+    # its leaning crosstalk (a 2 mm lens, so that the 96 x 64 sensor's corners see 1.6 degrees of field)
+    "lens": {
+    "optics": {"psf": "diffraction", "f_number": 2.8, "relative_illumination": "cos4", "focal_length_mm": 2.0,
+               "chief_ray_angle": [[0, 0], [0.1, 25]], "microlens_compensation": 0.4,
+               "angle_relative_qe": [[0, 1, 1, 1], [20, 0.7, 0.8, 0.9]]},
+    "crosstalk": {"kernel_at_angle_pct": [[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]}}}
 
 
 def digest(a: np.ndarray) -> str:
