@@ -326,6 +326,13 @@ def _angle_table(op) -> np.ndarray | None:
     return t
 
 
+def _lean_table(config) -> np.ndarray | None:
+    """The chief-ray angle's table where crosstalk's kernel leans with it (:func:`_angle_table`), else None."""
+    if config.crosstalk.kernel_at_angle_pct is None or not config.crosstalk.enabled:
+        return None
+    return _angle_table(config.optics)
+
+
 def _qe_table(op) -> np.ndarray:
     """``optics.angle_relative_qe`` checked, (n, 2) or (n, 4): angle (deg) and relative QE (one, or R, G, B)."""
     t = _rows(op.angle_relative_qe, "optics.angle_relative_qe", (2, 4))
@@ -421,19 +428,14 @@ def lean_weights(config, shape: tuple[int, int], region=None) -> tuple[np.ndarra
     (toward_col, toward_row), each (rows, cols) float64
         ``min(|angle| / reference_angle, 1) * cos(phi)`` and ``* sin(phi)``, the sign of the angle kept.
     """
-    if config.crosstalk.kernel_at_angle_pct is None or not config.crosstalk.enabled:
+    t = _lean_table(config)
+    if t is None:
         return None
     if lens.ready():  # the same expressions pixel by pixel, without the maps between them
-        t = _angle_table(config.optics)
-        if t is None:
-            return None
         y, x = _offsets_mm(shape, region, config.sensor.pixel_pitch_um)
         return lens.lean_shares(y, x, t[:, 0], t[:, 1], 1.0 - config.optics.microlens_compensation,
                                 config.crosstalk.reference_angle_deg)
-    seen = incidence(config, shape, region)
-    if seen is None:
-        return None
-    angle, cos_phi, sin_phi = seen
+    angle, cos_phi, sin_phi = incidence(config, shape, region)
     share = np.clip(angle / config.crosstalk.reference_angle_deg, -1.0, 1.0)
     return share * cos_phi, share * sin_phi
 
@@ -463,14 +465,11 @@ def leaning_charge(q: np.ndarray, config, shape: tuple[int, int], region, leans:
     (rows, cols) float64 array or None
         To add to the crosstalk's result.
     """
-    if not lens.ready():
-        weights = lean_weights(config, shape, region)
-        return None if weights is None else crosstalk.lean(q, leans, *weights, row0=region[0])
-    if config.crosstalk.kernel_at_angle_pct is None or not config.crosstalk.enabled:
-        return None
-    t = _angle_table(config.optics)
+    t = _lean_table(config)
     if t is None:
         return None
+    if not lens.ready():
+        return crosstalk.lean(q, leans, *lean_weights(config, shape, region), row0=region[0])
     y, x = _offsets_mm(shape, region, config.sensor.pixel_pitch_um)
     return lens.leaning_spread(q, y, x, t[:, 0], t[:, 1], 1.0 - config.optics.microlens_compensation,
                                config.crosstalk.reference_angle_deg, leans, region[0])
