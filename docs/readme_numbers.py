@@ -329,7 +329,6 @@ def compute_light() -> dict:
     import numpy as np
 
     from cmosnoise import Sensor, load_config
-    from cmosnoise.model import light
 
     rows = []
     for lux in LIGHT_LUX:
@@ -343,9 +342,9 @@ def compute_light() -> dict:
         mean = float(green.mean())
         snr = mean / float(np.sqrt(green.var(axis=0, ddof=1).mean()))
         charge = shot.photo_mean_e + (shot.dark_mean_e if shot.dark_mean_e is not None else 0)
-        li = light.channel_light(c)
-        rows.append({"lux": lux, "focal_plane_lux_s": light.focal_plane_illuminance_lux(c) * 0.18 * t_s,
-                     "green_e_light": float(li.rates_e_per_s[1] * 0.18 * t_s),
+        fp = sensor.spec.focal_plane
+        rows.append({"lux": lux, "focal_plane_lux_s": fp.focal_plane_lux * 0.18 * t_s,
+                     "green_e_light": float(fp.white_e_per_s[1] * 0.18 * t_s),
                      "green_e_mean": float(charge[0::2, 1::2].mean()), "green_e_measured": mean,
                      "snr_measured": snr})
     return {"rows": rows}

@@ -16,6 +16,8 @@ import os
 import stat
 from pathlib import Path
 
+import numpy as np
+
 from .errors import CmosnoiseError
 
 #: pixels of one decoded frame or page (400 MP: a 20000 x 20000 sensor), and of a whole file read frame by frame
@@ -192,6 +194,9 @@ def fits_data_bytes(path: str | Path, what: str, limit: int) -> int:
             if naxis < 0 or naxis > 999 or n < 0:
                 raise CmosnoiseError(f"{what} {str(p)!r}: a FITS header with an impossible size")
             nbytes = n * bits // 8
+            decoded = _tile_compressed_bytes(cards, p, what)  # a tile-compressed image decodes to its ZNAXISn
+            if decoded is not None:
+                total += decoded - nbytes
             padded = -(-nbytes // 2880) * 2880
             if at + nbytes > size:
                 raise CmosnoiseError(f"{what} {str(p)!r}: a FITS header promises {_size(nbytes)} of data that the "
@@ -203,6 +208,73 @@ def fits_data_bytes(path: str | Path, what: str, limit: int) -> int:
             fh.seek(at)
     check_decoded(total, p, what, limit)
     return total
+
+
+def _tile_compressed_bytes(cards: dict, p: Path, what: str) -> int | None:
+    """The decoded bytes of a tile-compressed FITS image (``ZIMAGE = T``: ``ZNAXISn`` by ``ZBITPIX``), or None for
+    an ordinary header: its data unit's size is the compressed tiles', not what it decodes to."""
+    if cards.get("ZIMAGE", "").strip().upper() not in ("T", "'T'"):
+        return None
+    try:
+        znaxis = int(cards.get("ZNAXIS", "0"))
+        zbits = abs(int(cards.get("ZBITPIX", "0")))
+        n = 1 if znaxis else 0
+        for i in range(1, znaxis + 1):
+            n *= int(cards.get(f"ZNAXIS{i}", "0"))
+    except ValueError:
+        raise CmosnoiseError(f"{what} {str(p)!r}: a tile-compressed FITS header with a size that is not a "
+                             "number") from None
+    if znaxis < 0 or znaxis > 999 or n < 0 or zbits not in (8, 16, 32, 64):
+        raise CmosnoiseError(f"{what} {str(p)!r}: a tile-compressed FITS header with an impossible size")
+    return n * zbits // 8
+
+
+def read_npy(path: str | Path, what: str, limit: int, kinds: str = "uif") -> np.ndarray:
+    """A ``.npy`` array, read after its header is checked: a regular file, a dtype of the ``kinds`` given (no
+    objects, no pickles), non-negative dimensions whose bytes are at most ``limit`` and are all in the file (a
+    truncated file is refused before it is read, a sparse one is read only as far as its header says).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    what : str
+        The key it was given for, named in errors.
+    limit : int
+        The most bytes the array may hold.
+    kinds : str
+        The dtype kinds allowed (``numpy.dtype.kind``).
+
+    Returns
+    -------
+    ndarray
+        The array, read whole.
+    """
+    from numpy.lib import format as npformat
+
+    p = check_regular(path, what)
+    size = os.stat(p).st_size
+    with open_regular(p, what) as fh:
+        try:
+            version = npformat.read_magic(fh)
+            if version == (1, 0):
+                shape, fortran, dtype = npformat.read_array_header_1_0(fh, max_header_size=10_000)
+            else:
+                shape, fortran, dtype = npformat.read_array_header_2_0(fh, max_header_size=10_000)
+        except (ValueError, OSError, EOFError, SyntaxError) as exc:
+            raise CmosnoiseError(f"{what} {str(p)!r} is not a readable .npy file: {exc}") from None
+        if dtype.hasobject or dtype.kind not in kinds or dtype.fields is not None:
+            raise CmosnoiseError(f"{what} {str(p)!r} holds {dtype}; give an array of "
+                                 f"{' or '.join({'u': 'unsigned integers', 'i': 'integers', 'f': 'reals', 'b': 'booleans'}.get(k, k) for k in kinds)}")
+        if any((not isinstance(d, int)) or d < 0 for d in shape):
+            raise CmosnoiseError(f"{what} {str(p)!r}: an impossible shape {shape}")
+        nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        check_decoded(nbytes, p, what, limit)
+        if fh.tell() + nbytes > size:
+            raise CmosnoiseError(f"{what} {str(p)!r}: its header promises {_size(nbytes)} of data that the file does "
+                                 "not hold (a truncated file)")
+        data = np.fromfile(fh, dtype=dtype, count=int(np.prod(shape, dtype=object)))
+    return data.reshape(shape, order="F" if fortran else "C")
 
 
 def check_frame(a, name: str, finite: bool = True):

@@ -311,9 +311,9 @@ def check_light(config) -> None:
     ----------
     config : Config
     """
-    from ..model.light import channel_light
+    from ..model.focal_plane import focal_plane
 
-    channel_light(with_light(config)[0])
+    focal_plane(with_light(config)[0])
 
 
 def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: int = 0,

@@ -277,7 +277,7 @@ def noise_based_speed(config, lux, snr, reflectance: float = 0.18) -> dict:
     ("acceptable"), :data:`NOISE_SPEED_SNR`.
 
     ``H`` is the patch's focal-plane illuminance on the optical axis (the camera equation the configuration
-    chooses, :func:`cmosnoise.model.light.focal_plane_illuminance_lux`, of a luminance ``reflectance x lux / pi``)
+    chooses, :func:`cmosnoise.model.focal_plane.axis_illuminance_lux`, of a luminance ``reflectance x lux / pi``)
     times the integration time. The crossing is :func:`crossing_lux`'s. ISO 12232 takes an incremental SNR (the
     output's slope against exposure times the exposure, over the noise): for a linear output whose black is
     subtracted, as ``quality``'s luminance, that is its mean over its noise. For a colour camera the standard adds
@@ -311,11 +311,11 @@ def noise_based_speed(config, lux, snr, reflectance: float = 0.18) -> dict:
     >>> round(s["acceptable"]["lux"], 6), round(s["acceptable"]["speed"], 1)
     (100.0, 987.7)
     """
-    from ..model.light import focal_plane_illuminance_lux
+    from ..model.focal_plane import axis_illuminance_lux
 
     # the camera equation's one place: a white's focal-plane illuminance under 1 lux, times the patch and the time
     at_one_lux = merge_updates(config, {"light": {"illuminance_lux": 1.0, "luminance_cd_m2": None}})
-    per_lux = focal_plane_illuminance_lux(at_one_lux) * reflectance * config.exposure.integration_time_s
+    per_lux = axis_illuminance_lux(at_one_lux) * reflectance * config.exposure.integration_time_s
     out = {"lux_s_per_lux": per_lux}
     for name, target in NOISE_SPEED_SNR.items():
         at = crossing_lux(lux, snr, target)

@@ -98,7 +98,7 @@ def _light_axis(spec, m: Measurement) -> dict | None:
     li = spec.light
     if li is None:
         return None
-    e_per_lux_s = float(li.rates_e_per_s.mean()) / li.focal_plane_lux  # e- per pixel per lux-second, a white's
+    e_per_lux_s = spec.peak_rate_e_per_s / li.focal_plane_lux  # e- per pixel per lux-second, a white's
     electrons = np.asarray(m.mu_p, float) * (spec.config.sensor.qe_mean() or 1.0)
     return {"focal_plane_lux_s": electrons / e_per_lux_s, "electrons_per_lux_s": e_per_lux_s,
             "illuminant": spec.config.light.illuminant,

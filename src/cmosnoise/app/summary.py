@@ -113,13 +113,14 @@ def light_figures(sensor: Sensor) -> dict:
         in each channel (R, G, B).
     """
     c, li = sensor.config, sensor.spec.light
+    white = sensor.spec.focal_plane.white_e_per_s
     t = c.exposure.integration_time_s
     given = ({"illuminance_lux": c.light.illuminance_lux} if c.light.illuminance_lux is not None
              else {"luminance_cd_m2": c.light.luminance_cd_m2})
     return {**given, "illuminant": c.light.illuminant, "f_number": c.optics.f_number,
             "camera_equation": c.optics.camera_equation, "focal_plane_lux": li.focal_plane_lux,
-            "focal_plane_lux_s": li.focal_plane_lux * t, "white_e_per_s": [float(v) for v in li.rates_e_per_s],
-            "white_e": [float(v * t) for v in li.rates_e_per_s]}
+            "focal_plane_lux_s": li.focal_plane_lux * t, "white_e_per_s": [float(v) for v in white],
+            "white_e": [float(v * t) for v in white]}
 
 
 def signal_figures(perfect_mean_e: float, expected_mean_e: float, measured: dict) -> dict:

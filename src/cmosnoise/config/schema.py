@@ -21,10 +21,27 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 MAX_EXPOSURE_S = 3600.0
 
 
+def frozen(value):
+    """A configuration value as a hashable, comparable nested tuple: sections as their (key, value) pairs in
+    field order, lists as tuples, mappings by sorted key. Equal values give equal keys (a cache's key without a
+    JSON string)."""
+    if isinstance(value, BaseModel):
+        return tuple((name, frozen(getattr(value, name))) for name in type(value).model_fields)
+    if isinstance(value, dict):
+        return tuple(sorted((str(k), frozen(v)) for k, v in value.items()))
+    if isinstance(value, (list, tuple)):
+        return tuple(frozen(v) for v in value)
+    return value
+
+
 class Section(BaseModel):
     """Base of every section: unknown keys are errors, values are re-validated on assignment, inf and NaN refused."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
+
+    def key(self) -> tuple:
+        """This section's values as a hashable nested tuple (:func:`frozen`): what a cache keys on."""
+        return frozen(self)
 
     @field_validator("*", mode="before")
     @classmethod
@@ -292,8 +309,34 @@ class OpticsSection(Section):
                           "normal incidence: rows of (degrees, QE) or (degrees, QE_R, QE_G, QE_B), or a CSV; null: "
                           "no loss with angle")
     psf_sigma_px: float = Field(0.5, gt=0, le=100, description="sigma of the gaussian PSF, pixels")
-    psf_sampling_um: float | None = Field(None, gt=0, le=100, description="a PSF file's sample spacing, um; "
-                                                                              "null: the pixel pitch")
+    psf_sampling_um: float | None = Field(None, gt=0, le=100, description="a PSF file's sample spacing, um (the "
+                                                                              "fine grid's pitch, pitch / oversample, "
+                                                                              "must be a whole number of them); null: "
+                                                                              "the pixel pitch")
+    oversample: int | Literal["auto"] = Field(
+        "auto", description="the optical image's fine cells per pixel along each axis, 1 to 4: the PSF, the "
+                            "optical low-pass filter and the pixel's aperture act on that grid, and detail finer "
+                            "than a pixel aliases as a camera shows it; auto: the smallest at which the PSF is "
+                            "sampled at Nyquist (its folded transfer at most 0.01), 1 without a PSF")
+    olpf: float | None = Field(None, gt=0, le=100, description="an optical low-pass filter: a birefringent "
+                                                                 "four-spot filter, its spots this many um apart "
+                                                                 "along the rows and the columns (MTF |cos(pi d f)|); "
+                                                                 "null: none")
+
+    @field_validator("oversample", mode="before")
+    @classmethod
+    def _oversample(cls, v):
+        if isinstance(v, str) and v.strip().lower() == "auto":
+            return "auto"
+        if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+            raise ValueError(f"give auto or a whole number from 1 to 4, not {v!r}")
+        try:
+            n = float(v)
+        except ValueError:
+            raise ValueError(f"give auto or a whole number from 1 to 4, not {v!r}") from None
+        if not (math.isfinite(n) and n == int(n) and 1 <= n <= 4):
+            raise ValueError(f"{v!r} is not allowed: give auto or a whole number of fine cells per pixel from 1 to 4")
+        return int(n)
 
     @field_validator("relative_illumination", "psf")
     @classmethod

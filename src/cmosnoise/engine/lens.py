@@ -134,7 +134,7 @@ def ready() -> bool:
     return numba is not None and compiled("the lens's field maps", _shade, _lean, _leaning)
 
 
-def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, focal_length_mm: float,
+def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, image_distance_mm: float,
           ri_table: tuple[np.ndarray, np.ndarray] | None, angle: tuple[np.ndarray, np.ndarray, float] | None,
           qe_table: np.ndarray | None, cells: np.ndarray) -> np.ndarray:
     """Multiply ``signal`` in place by each pixel's relative illumination, then by its QE at its angle.
@@ -148,8 +148,8 @@ def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, 
     x_mm : (cols,) float64 array
         Each column's offset, mm.
     ri_kind : {RI_NONE, RI_COS4, RI_TABLE}
-    focal_length_mm : float
-        f, for cos^4.
+    image_distance_mm : float
+        The lens's image distance ``f (1 + m)``, for cos^4 (``tan theta = h / i``).
     ri_table : (heights_mm, relative_illumination) or None
         For RI_TABLE.
     angle : (heights_mm, chief_ray_angle_deg, 1 - microlens_compensation) or None
@@ -171,7 +171,7 @@ def shade(signal: np.ndarray, y_mm: np.ndarray, x_mm: np.ndarray, ri_kind: int, 
     qe_v = np.ascontiguousarray(np.asarray(qe_table, np.float64)[:, 1:].T) if qe_table is not None else np.zeros((1, 2))
     ri_h, ri_v, cra_h, cra_a = _line(ri_h), _line(ri_v), _line(cra_h), _line(cra_a)
     with ONE_LAUNCH:
-        _shade(signal, _line(y_mm), _line(x_mm), ri_kind, float(focal_length_mm) ** 2, ri_h, ri_v, slopes(ri_h, ri_v),
+        _shade(signal, _line(y_mm), _line(x_mm), ri_kind, float(image_distance_mm) ** 2, ri_h, ri_v, slopes(ri_h, ri_v),
                angle is not None, cra_h, cra_a, slopes(cra_h, cra_a), float(keep), qe_a, qe_v, slopes(qe_a, qe_v),
                np.asarray(cells, np.int64))
     return signal

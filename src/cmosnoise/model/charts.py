@@ -51,7 +51,7 @@ EDGE_ANGLE_DEG, EDGE_LOW, EDGE_HIGH = 5.0, 0.1, 0.4
 GREYS_N, GREYS_DENSITY, GREYS_SURROUND = 20, 3.0, 0.18
 
 __all__ = ["colorchecker", "colorchecker_patches", "edge", "edge_parameters", "greys", "greys_levels",
-           "greys_patches", "truth", "COLORCHECKER_SRGB8"]
+           "greys_patches", "truth", "zoneplate", "siemens", "COLORCHECKER_SRGB8"]
 
 
 # ------------------------------------------------------------------ ColorChecker
@@ -176,6 +176,141 @@ def edge_parameters(text: str) -> tuple[float, float, float]:
     if not (0 <= low <= 1 and 0 <= high <= 1 and low != high):
         raise CmosnoiseError(f"scene {text!r}: LOW and HIGH must be two different levels from 0 to 1")
     return angle, low, high
+
+
+# ------------------------------------------------------------------ zone plate and Siemens star
+#: the zone plate's default local frequency at the middle of the picture's shorter edge, cycles per pixel
+ZONEPLATE_EDGE_CY_PER_PX = 0.5
+#: the Siemens star's default number of black and white sectors
+SIEMENS_SPOKES = 36
+
+
+def _fresnel_parts(lo: np.ndarray, hi: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """The integrals of ``cos(alpha x^2)`` and ``sin(alpha x^2)`` over ``[lo, hi]``: Fresnel's integrals,
+    ``sqrt(pi / (2 alpha)) (C(hi s) - C(lo s))`` with ``s = sqrt(2 alpha / pi)`` (scipy's ``fresnel``)."""
+    from scipy.special import fresnel
+
+    scale = math.sqrt(2.0 * alpha / math.pi)
+    s_hi, c_hi = fresnel(hi * scale)
+    s_lo, c_lo = fresnel(lo * scale)
+    return (c_hi - c_lo) / scale, (s_hi - s_lo) / scale
+
+
+def zoneplate(shape: tuple[int, int], region=None, edge_cy_per_px: float = ZONEPLATE_EDGE_CY_PER_PX,
+              cells: int = 1) -> np.ndarray:
+    """A circular zone plate ``(1 + cos(alpha r^2)) / 2``, each cell its exact area average.
+
+    The local frequency ``alpha r / pi`` reaches ``edge_cy_per_px`` cycles per pixel at the middle of the shorter
+    edge; beyond Nyquist (0.5) a sensor shows it at ``1 - f``. The average over a cell is separable:
+    ``cos(a (x^2 + y^2)) = cos(a x^2) cos(a y^2) - sin(a x^2) sin(a y^2)``, each factor's integral a difference of
+    Fresnel integrals.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, cells (``cells`` to a pixel along each axis).
+    region : (row0, row1, col0, col1), optional
+        The rectangle to draw, the same values as that crop of the whole.
+    edge_cy_per_px : float
+        The local frequency at the shorter edge's middle, cycles per pixel.
+    cells : int
+        Cells per pixel along each axis (the optical image's fine grid).
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        0 to 1.
+    """
+    rows, cols = shape
+    r0, r1, c0, c1 = span(shape, region)
+    r_edge = min(rows, cols) / 2.0 / cells  # pixels
+    alpha = math.pi * edge_cy_per_px / r_edge  # rad per pixel^2
+    y = (np.arange(r0, r1 + 1) - rows / 2.0) / cells  # the cells' edges, pixels from the centre
+    x = (np.arange(c0, c1 + 1) - cols / 2.0) / cells
+    cy, sy = _fresnel_parts(y[:-1], y[1:], alpha)
+    cx, sx = _fresnel_parts(x[:-1], x[1:], alpha)
+    mean = (np.outer(cy, cx) - np.outer(sy, sx)) * (cells * cells)
+    v = 0.5 + 0.5 * mean
+    return np.repeat(np.clip(v, 0.0, 1.0)[..., None], 3, axis=2)
+
+
+def _halfplane_share(x0: np.ndarray, y0: np.ndarray, size: float, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The share of each square ``[x0, x0 + size] x [y0, y0 + size]`` where ``a x + b y > 0`` (a line through the
+    origin), exactly: the mean over the square's y of the covered share of its width, a clipped ramp's integral
+    (:func:`_ramp_integral`), as the slanted edge's."""
+    x0, y0, a, b = np.broadcast_arrays(*(np.asarray(v, float) for v in (x0, y0, a, b)))
+    out = np.empty(x0.shape)
+    flat = np.abs(a) < 1e-12 * np.abs(b)
+    ylo, yhi = y0[flat], y0[flat] + size  # a = 0: b y > 0
+    above = (np.clip(yhi, 0, None) - np.clip(ylo, 0, None)) / size
+    out[flat] = np.where(b[flat] > 0, above, 1.0 - above)
+    m = ~flat
+    t = -b[m] / a[m]  # the line is x = t y
+    right = a[m] > 0  # a > 0: the side x > t y; else x < t y
+    # the covered share of the width at y, before clipping to [0, 1]: linear in y, u0 at y0 and u1 at y0 + size
+    u0 = np.where(right, x0[m] + size - t * y0[m], t * y0[m] - x0[m]) / size
+    u1 = u0 + np.where(right, -t, t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean = (_ramp_integral(u1) - _ramp_integral(u0)) / (u1 - u0)
+    out[m] = np.where(np.abs(u1 - u0) < 1e-12, np.clip(u0, 0.0, 1.0), mean)
+    return out
+
+
+def siemens(shape: tuple[int, int], spokes: int = SIEMENS_SPOKES, region=None) -> np.ndarray:
+    """A Siemens star: ``spokes`` sectors around the centre, white (0.95) and black (0.05) in turn, each cell its
+    area share of white.
+
+    A cell that one sector boundary crosses is split exactly (the share of a square on one side of a line through
+    the centre); the few cells near the centre that two or more boundaries cross are integrated at 64 x 64
+    points.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The picture's size, cells.
+    spokes : int
+        The number of sectors (even).
+    region : (row0, row1, col0, col1), optional
+        The rectangle to draw, the same values as that crop of the whole.
+
+    Returns
+    -------
+    (rows, cols, 3) float64 array
+        The star fills the picture whatever its cells' size (an optical image's fine grid too).
+    """
+    rows, cols = shape
+    r0, r1, c0, c1 = span(shape, region)
+    y0 = (np.arange(r0, r1) - rows / 2.0)[:, None] * np.ones((1, c1 - c0))
+    x0 = np.ones((r1 - r0, 1)) * (np.arange(c0, c1) - cols / 2.0)[None, :]
+    step = 2.0 * math.pi / spokes  # white where the angle mod 2 step lies in (0, step): sin(spokes theta / 2) > 0
+    centre = np.arctan2(y0 + 0.5, x0 + 0.5)
+    span_lo = np.full(centre.shape, np.inf)
+    span_hi = np.full(centre.shape, -np.inf)
+    for dy in (0.0, 1.0):
+        for dx in (0.0, 1.0):
+            d = np.angle(np.exp(1j * (np.arctan2(y0 + dy, x0 + dx) - centre)))  # from the centre's, (-pi, pi]
+            span_lo, span_hi = np.minimum(span_lo, d), np.maximum(span_hi, d)
+    first = np.ceil((centre + span_lo) / step)
+    last = np.floor((centre + span_hi) / step)
+    count = last - first + 1
+    inside = (x0 <= 0) & (x0 + 1 >= 0) & (y0 <= 0) & (y0 + 1 >= 0)  # the cell holds the centre
+    white = np.where(np.mod(centre, 2 * step) < step, 1.0, 0.0)  # no boundary crosses it
+    one = (count == 1) & ~inside
+    j = first[one]
+    theta = j * step
+    # the side past the boundary (angles above theta, cross product > 0) is white where j is even
+    share_above = _halfplane_share(x0[one], y0[one], 1.0, -np.sin(theta), np.cos(theta))
+    white[one] = np.where(np.mod(j, 2) == 0, share_above, 1.0 - share_above)
+    many = ((count > 1) | inside)
+    if many.any():
+        n = 64
+        sub = (np.arange(n) + 0.5) / n
+        for (i, c) in zip(*np.nonzero(many)):
+            yy = y0[i, c] + sub[:, None]
+            xx = x0[i, c] + sub[None, :]
+            white[i, c] = float((np.mod(np.arctan2(yy, xx), 2 * step) < step).mean())
+    v = 0.05 + 0.9 * white
+    return np.repeat(v[..., None], 3, axis=2)
 
 
 # ------------------------------------------------------------------ grey patches

@@ -10,29 +10,28 @@ docs/model.md section 2b is the specification. The chain, per wavelength lambda 
    luminance ``L_v`` (cd/m2) is the same with ``E_v = pi L_v``;
 3. the lens puts the focal-plane irradiance ``k L`` on the optical axis (:func:`camera_factor`): ISO 12232's
    ``k = pi T / (4 N^2 (1 + m)^2)`` or the non-paraxial ``pi T / (1 + 4 N^2 (1 + m)^2)`` that ISETCam uses;
-4. photons: ``k L(lambda) lambda / (h c)`` per second and square metre and nm, times the pixel's area
-   (pitch squared times the fill factor);
+4. photons: ``k L(lambda) lambda / (h c)`` per second and square metre and nm, times the pixel's area (pitch
+   squared; the share its aperture collects, the fill factor, is the optical image's: :mod:`.focal_plane`);
 5. electrons: times the channel's quantum efficiency ``QE_c(lambda)``, integrated over lambda (trapezoid rule).
 
 The result, for a scene value of 1, is one rate per colour channel (:attr:`ChannelLight.rates_e_per_s`). A scene
 value is a reflectance; an RGB picture is turned into spectra by Mallett and Yuksel's (2019) up-sampling, which is
 linear in RGB, so the whole spectral integral of a picture is one 3 x 3 matrix (:attr:`ChannelLight.mix`) made once
-per exposure: the frame kernel never sees a wavelength.
+per exposure: the frame kernel never sees a wavelength. :class:`~cmosnoise.model.focal_plane.FocalPlane` reads the
+configuration (the light, the lens's numbers, the pixel) and calls :func:`integrate` with them.
 
 Examples
 --------
->>> from cmosnoise import load_config
 >>> from cmosnoise.model import light
->>> c = load_config(overrides=["light.enabled=true", "light.illuminance_lux=100", "sensor.quantum_efficiency=0.5",
-...                            "sensor.pixel_pitch_um=2.2", "optics.f_number=2.8", "optics.transmittance=1"])
->>> round(float(light.channel_light(c).rates_e_per_s[1] * 0.03 * 0.18))   # an 18 % grey card, 30 ms
+>>> k = light.camera_factor(2.8, 1.0)                        # f/2.8, every photon through
+>>> li = light.integrate("D65", 100.0, None, None, 0.5, None, k, 2.2**2)
+>>> round(float(li.rates_e_per_s[1] * 0.03 * 0.18))          # an 18 % grey card at 100 lux, 30 ms, 2.2 um
 579
 """
 
 from __future__ import annotations
 
 import functools
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,8 +54,8 @@ COLORCHECKER_SPECTRA = "ColorChecker N Ohta"
 #: the largest CSV table read (rows of a spectrum)
 MAX_TABLE_BYTES = 4_000_000
 
-__all__ = ["ChannelLight", "channel_light", "read_table", "camera_factor", "illuminant_spectrum", "qe_spectrum",
-           "photopic_efficiency", "focal_plane_illuminance_lux", "reflectance_channels", "colorchecker_reflectances"]
+__all__ = ["ChannelLight", "integrate", "read_table", "camera_factor", "illuminant_spectrum", "qe_spectrum",
+           "photopic_efficiency", "reflectance_channels", "colorchecker_reflectances"]
 
 
 def _colour():
@@ -119,7 +118,7 @@ def illuminant_spectrum(name: str) -> tuple[np.ndarray, np.ndarray]:
     Returns
     -------
     wavelengths : (n,) float64, nm, increasing
-    power : (n,) float64, relative (any scale: :func:`channel_light` sets the illuminance)
+    power : (n,) float64, relative (any scale: :func:`integrate` sets the illuminance)
     """
     key = "light.illuminant"
     low = name.lower()
@@ -248,23 +247,6 @@ def camera_factor(f_number: float, transmittance: float, magnification: float = 
     return float(np.pi * transmittance / (n2 if equation == "iso12232" else 1.0 + n2))
 
 
-def focal_plane_illuminance_lux(config) -> float:
-    """The focal-plane illuminance on the optical axis from a white (reflectance 1) of the configured light, lux.
-
-    Parameters
-    ----------
-    config : Config
-
-    Returns
-    -------
-    float
-        lux; times the integration time: the focal-plane exposure in lux-seconds.
-    """
-    li, op = config.light, config.optics
-    luminance = li.luminance_cd_m2 if li.luminance_cd_m2 is not None else li.illuminance_lux / np.pi
-    return camera_factor(op.f_number, op.transmittance, op.magnification, op.camera_equation) * luminance
-
-
 @dataclass(frozen=True, eq=False)
 class ChannelLight:
     """The configured light at the pixels, per colour channel, integrated once.
@@ -274,11 +256,12 @@ class ChannelLight:
     wavelengths : (n,) float64, nm
         The working grid.
     photon_flux : (n,) float64
-        Photons per second per pixel and nm on the optical axis from a white (reflectance 1) scene.
+        Photons per second and nm on the optical axis from a white (reflectance 1) scene, on a pixel's area (its
+        whole square: the aperture's share is the optical image's).
     qe : (n, 3) float64
         The channels' quantum efficiency on the grid (the IR cut applied).
     rates_e_per_s : (3,) float64
-        Photo-electrons per second per pixel of each channel from a white scene: the integral of
+        Photo-electrons per second of each channel from a white scene on a pixel's area: the integral of
         ``photon_flux * qe``.
     mix : (3, 3) float64
         Linear-sRGB reflectances to the channels' relative signal (1 for a white): row c, column k is channel c's
@@ -308,13 +291,29 @@ def _on_grid(wl: np.ndarray, values: np.ndarray, grid: np.ndarray) -> np.ndarray
     return np.column_stack([np.interp(grid, wl, values[:, j]) for j in range(values.shape[1])])
 
 
-def channel_light(config) -> ChannelLight:
-    """The light a configuration sets, integrated over wavelength per colour channel (see the module docstring).
+def integrate(illuminant: str, illuminance_lux: float, spectral_qe, qe_peak: float | None, flat_qe,
+              ir_cut_nm: float | None, camera_k: float, area_um2: float) -> ChannelLight:
+    """The light at the pixels, integrated over wavelength per colour channel (see the module docstring).
+
+    :class:`cmosnoise.model.focal_plane.FocalPlane` reads the configuration's light, lens and pixel once and calls
+    this with the numbers; the result is kept for the same numbers.
 
     Parameters
     ----------
-    config : Config
-        With ``light.enabled``.
+    illuminant : str
+        ``light.illuminant`` (:func:`illuminant_spectrum`).
+    illuminance_lux : float
+        The illuminance on the scene, lux (a luminance L as ``pi L``).
+    spectral_qe, qe_peak
+        ``light.spectral_qe`` (rows as nested tuples) and ``light.qe_peak`` (:func:`qe_spectrum`).
+    flat_qe : float, (3,) tuple or None
+        ``sensor.quantum_efficiency``, for a flat QE.
+    ir_cut_nm : float or None
+        An ideal IR-cut filter's edge, nm.
+    camera_k : float
+        The camera equation's factor (:func:`camera_factor`).
+    area_um2 : float
+        The area the rates are for, um^2: the pixel's (its aperture's share is the optical image's to apply).
 
     Returns
     -------
@@ -326,40 +325,37 @@ def channel_light(config) -> ChannelLight:
         An unknown illuminant, a QE table outside [0, 1] or with non-increasing wavelengths, spectra that do not
         overlap.
     """
-    # the sections it reads, as its cache's key (not the whole configuration: a spec asks for it several times)
-    parts = {"light": config.light.model_dump(mode="json"), "optics": config.optics.model_dump(mode="json"),
-             "sensor": {k: getattr(config.sensor, k) for k in ("pixel_pitch_um", "quantum_efficiency")}}
-    return _channel_light(json.dumps(parts, sort_keys=True))
+    rows = spectral_qe
+    if isinstance(rows, list):
+        rows = tuple(tuple(r) for r in rows)
+    flat = tuple(flat_qe) if isinstance(flat_qe, (list, tuple)) else flat_qe
+    return _integrate(illuminant, float(illuminance_lux), rows, qe_peak, flat, ir_cut_nm, float(camera_k),
+                      float(area_um2))
 
 
 @functools.lru_cache(maxsize=16)
-def _channel_light(parts_json: str) -> ChannelLight:
-    parts = json.loads(parts_json)
-    li, op, sen = parts["light"], parts["optics"], parts["sensor"]
-    q = sen["quantum_efficiency"]
-    s_wl, s_pow = illuminant_spectrum(li["illuminant"])
-    q_wl, q_tab = qe_spectrum(li["spectral_qe"], li["qe_peak"], q if not isinstance(q, list) else tuple(q))
+def _integrate(illuminant, e_lux, spectral_qe, qe_peak, flat_qe, ir_cut_nm, k, area_um2) -> ChannelLight:
+    s_wl, s_pow = illuminant_spectrum(illuminant)
+    table = [list(r) for r in spectral_qe] if isinstance(spectral_qe, tuple) else spectral_qe
+    q_wl, q_tab = qe_spectrum(table, qe_peak, flat_qe)
     lo, hi = max(s_wl[0], q_wl[0]), min(s_wl[-1], q_wl[-1])
-    if li["ir_cut_nm"] is not None:
-        hi = min(hi, li["ir_cut_nm"])
+    if ir_cut_nm is not None:
+        hi = min(hi, ir_cut_nm)
     if hi - lo < STEP_NM:
         raise CmosnoiseError(f"light: the illuminant ({s_wl[0]:g}-{s_wl[-1]:g} nm) and the quantum efficiency "
                              f"({q_wl[0]:g}-{q_wl[-1]:g} nm) do not overlap"
-                             + (f" below the IR cut at {li['ir_cut_nm']:g} nm" if li["ir_cut_nm"] else ""))
+                             + (f" below the IR cut at {ir_cut_nm:g} nm" if ir_cut_nm else ""))
     grid = np.arange(np.ceil(lo / STEP_NM) * STEP_NM, hi + 1e-9, STEP_NM)
     # 1. the illuminant scaled to its illuminance: 683 * integral(E V) = E_v, over the illuminant's own range
     v_wl, v = photopic_efficiency()
     lum_wl = v_wl[(v_wl >= s_wl[0]) & (v_wl <= s_wl[-1])]
     per_unit = KM_LM_PER_W * _integral(np.interp(lum_wl, s_wl, s_pow) * np.interp(lum_wl, v_wl, v), lum_wl)
     if per_unit <= 0:
-        raise CmosnoiseError(f"light.illuminant = {li['illuminant']!r} has no visible light (no power from 360 to "
+        raise CmosnoiseError(f"light.illuminant = {illuminant!r} has no visible light (no power from 360 to "
                              "830 nm): it has no illuminance to scale")
-    e_lux = li["illuminance_lux"] if li["illuminance_lux"] is not None else np.pi * li["luminance_cd_m2"]
     irradiance = np.interp(grid, s_wl, s_pow) * (e_lux / per_unit)  # W m^-2 nm^-1 on the scene
     # 2.-4. a white Lambertian reflector's radiance, the lens, photons on one pixel
-    k = camera_factor(op["f_number"], op["transmittance"], op["magnification"], op["camera_equation"])
-    area_m2 = (sen["pixel_pitch_um"] * 1e-6) ** 2 * li["fill_factor"]
-    photon_flux = k * irradiance / np.pi * (grid * 1e-9) / (PLANCK_J_S * LIGHT_M_PER_S) * area_m2
+    photon_flux = k * irradiance / np.pi * (grid * 1e-9) / (PLANCK_J_S * LIGHT_M_PER_S) * (area_um2 * 1e-12)
     # 5. electrons per channel
     qe = _on_grid(q_wl, q_tab, grid)
     rates = _integral(photon_flux[None, :] * qe.T, grid)

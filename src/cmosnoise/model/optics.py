@@ -1,64 +1,77 @@
-"""The lens between the scene and the pixels: relative illumination across the field and the point spread function.
+"""The lens between the scene and the pixels: its point spread function on the optical image's fine grid, the
+optical low-pass filter and the pixel's aperture, the relative illumination across the field and the chief-ray
+angle.
 
-docs/model.md section 2b is the specification. Both act on the scene's light at the sensor's pixels, before the
-colour filter array takes each pixel's channel:
+docs/model.md section 2b is the specification. The optical image (:mod:`.focal_plane`) is sampled ``k x k`` finer
+than the pixels (``optics.oversample``); what acts on it is defined here as numbers on that grid:
 
-- **the point spread function** (``optics.psf``), one per colour channel: the polychromatic Airy pattern of a
-  diffraction-limited lens at its f-number, weighted by the channel's photo-electron spectrum (with light in lux;
-  otherwise at :data:`DEFAULT_WAVELENGTHS_NM`), a Gaussian, or a user's 2-D array. Each kernel is the continuous
-  PSF averaged over a pixel's square around each offset, so a point PSF leaves the picture as it is; it sums to 1.
-  It is convolved directly at each pixel's own channel where it is at most
-  :data:`~cmosnoise.engine.convolve.MAX_SIDE` pixels across (:mod:`cmosnoise.engine.convolve`), otherwise by FFT
-  in blocks of :data:`BLOCK` pixels on a grid fixed to the whole sensor, each block with a margin of the kernel's
-  radius; the picture's edge pixels are repeated beyond it. Either way a tile of a sensor equals that crop of the
-  whole bit for bit;
+- **the point spread function** (``optics.psf``), one per colour channel, point-sampled at the fine cells'
+  centres: the polychromatic Airy pattern of a diffraction-limited lens at its f-number, weighted by the channel's
+  photo-electron spectrum (:func:`diffraction_psf`), a Gaussian (:func:`gaussian_psf`), or a user's 2-D array
+  binned onto the fine grid (:func:`file_psf`). The Airy pattern's core is kept out to the radius that holds
+  :data:`CORE_ENERGY` of its light (its outer half tapered by a cosine); the rest of its light, the pattern's slowly
+  falling rings, is a Gaussian halo of :data:`HALO_WIDTH` times that radius, so every kernel sums to 1 and the MTF
+  is the full pattern's (within 0.01 of it from 0.03 cycles per pixel up);
+- **the pixel's aperture** (``light.fill_factor``: a centred square of side ``pitch sqrt(fill factor)``) and the
+  **optical low-pass filter** (``optics.olpf``: a birefringent four-spot filter, each spot a quarter of the light,
+  ``d`` um apart along the rows and the columns): as weights on the fine cells a pixel integrates
+  (:func:`aperture`), MTF ``sinc(a f) |cos(pi d f)|`` per axis;
+- **k itself** (:func:`oversample`): ``auto`` takes the smallest ``k`` (1 to :data:`MAX_OVERSAMPLE`) at which the
+  PSF's transfer folded back from beyond the fine grid's Nyquist frequency, weighted by the aperture's, is at most
+  :data:`ALIAS_LIMIT`; 1 without a PSF;
 - **the relative illumination** (``optics.relative_illumination``): cos^4 of each pixel's field angle
-  (``tan theta = h / f``, h the pixel centre's distance from the sensor's centre), or a table of image height
-  against relative illumination. It multiplies each pixel's signal.
-
-With ``psf`` and ``relative_illumination`` at ``none``, :func:`cfa_signal` is :func:`.scene.cfa_signal`.
+  (``tan theta = h / (f (1 + m))``, h the pixel centre's image height, f (1 + m) the image distance), or a table
+  of image height against relative illumination; and **the chief-ray angle**'s QE loss and leaning crosstalk.
+  These act on each pixel's signal (they change by far less than a part in a million over a pixel).
 
 Examples
 --------
->>> import numpy as np
 >>> from cmosnoise.model import optics
->>> k = optics.gaussian_kernel(0.8)
->>> k.shape, round(float(k.sum()), 12)
-((11, 11), 1.0)
+>>> psf = optics.gaussian_psf(0.8, 2)
+>>> psf.core.shape, round(float(psf.core[0].sum()), 12)
+((3, 15, 15), 1.0)
 """
 
 from __future__ import annotations
 
 import functools
-import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .. import inputs
-from ..engine import convolve, layout, lens
+from ..engine import lens
 from ..errors import CmosnoiseError
 from . import cfa as cfa_mod
-from . import scene as scene_mod
 from .stages import crosstalk
 
-#: the FFT blocks' side, pixels (a block and its margins make one transform)
-BLOCK = 512
 #: the wavelengths of a diffraction PSF without light in lux (R, G, B), nm
 DEFAULT_WAVELENGTHS_NM = (610.0, 540.0, 465.0)
-#: sub-samples a pixel is averaged over along each axis when a continuous PSF becomes a kernel
-SUBSAMPLES = 8
-#: the radius of an Airy kernel, in first-dark-ring radii of the longest wavelength
-AIRY_RINGS = 6
-#: the largest PSF kernel, pixels across
-MAX_KERNEL = 257
-#: the largest PSF file (a float64 array of MAX_KERNEL^2 with room for its header) and relative-illumination table
-MAX_FILE_BYTES = 64 * 2**20
+#: the most fine cells a pixel is split into along each axis (``optics.oversample``)
+MAX_OVERSAMPLE = 4
+#: ``auto``'s bound on the PSF's transfer aliased from beyond the fine grid's Nyquist frequency (times the
+#: aperture's transfer where it lands): the error it leaves in the system MTF
+ALIAS_LIMIT = 0.01
+#: the share of a diffraction PSF's light its core holds (its encircled energy at the core's radius)
+CORE_ENERGY = 0.95
+#: the share of the core's radius over which it is tapered to 0 by a raised cosine (fewer separable terms)
+CORE_TAPER = 0.5
+#: the halo's sigma, in core radii: the light outside the core spread as a Gaussian (its MTF is the Airy tail's
+#: within 0.01 from 0.03 cycles per pixel up, measured in docs/model.md)
+HALO_WIDTH = 1.5
+#: a Gaussian's taps (a PSF's or the halo's) out to this many sigmas (its light beyond: 6e-5 of it, put back by
+#: normalising)
+GAUSS_SIGMAS = 4.0
+#: the widest PSF core, fine cells across
+MAX_CORE = 257
+#: the largest PSF file (a float64 array of 1024^2 with room for its header) and relative-illumination table
+MAX_FILE_BYTES = 8 * 2**20 + 4096
 
-__all__ = ["airy", "airy_kernel", "gaussian_kernel", "psf_kernels", "relative_illumination", "incidence",
-           "angle_qe", "lean_weights", "leaning_charge", "shade", "cfa_signal", "blur_cfa", "blur", "direct",
-           "active", "BLOCK"]
+__all__ = ["PointSpread", "airy", "encircled_energy", "diffraction_otf", "diffraction_psf", "gaussian_psf",
+           "file_psf", "aperture", "oversample", "alias_error", "relative_illumination", "incidence", "angle_qe",
+           "lean_weights", "leaning_charge", "shade", "active", "psf_active", "image_distance_mm"]
 
 
 # ------------------------------------------------------------------ point spread functions
@@ -77,7 +90,8 @@ def airy(r_um: np.ndarray, wavelength_um: float, f_number: float) -> np.ndarray:
     Returns
     -------
     array
-        The irradiance relative to the centre's; its first zero lies at ``1.2197 lambda N``.
+        The irradiance relative to the centre's; its first zero lies at ``1.2197 lambda N``; its integral over the
+        plane is ``4 (lambda N)^2 / pi`` um^2 (Goodman, *Introduction to Fourier Optics*).
     """
     from scipy.special import j1
 
@@ -87,160 +101,457 @@ def airy(r_um: np.ndarray, wavelength_um: float, f_number: float) -> np.ndarray:
     return np.where(v == 0, 1.0, out)
 
 
-def _pixel_averaged(psf, radius: int, step: float) -> np.ndarray:
-    """A continuous PSF ``psf(x, y)`` (pixels) averaged over each pixel's square at offsets -radius..radius, summing
-    to 1: (2 radius + 1, 2 radius + 1)."""
-    n = 2 * radius + 1
-    sub = (np.arange(SUBSAMPLES) + 0.5) / SUBSAMPLES - 0.5
-    axis = (np.arange(n) - radius)[:, None] + sub[None, :]  # (n, SUBSAMPLES) sample positions, pixels
-    x = axis.reshape(-1)
-    values = psf(x[None, :] * step, x[:, None] * step)
-    k = values.reshape(n, SUBSAMPLES, n, SUBSAMPLES).mean(axis=(1, 3))
-    return k / k.sum()
+def encircled_energy(r_um, wavelengths_um, weights, f_number: float) -> np.ndarray:
+    """The share of a polychromatic Airy pattern's light within radius ``r``: ``sum_l w_l (1 - J0(v)^2 - J1(v)^2)``,
+    ``v = pi r / (lambda_l N)`` (Lord Rayleigh's formula; Born and Wolf, *Principles of Optics*, 8.5.2).
+
+    Parameters
+    ----------
+    r_um : array
+        Radii, um.
+    wavelengths_um : (n,) array
+    weights : (n,) array
+        Each wavelength's share of the light (summing to 1).
+    f_number : float
+
+    Returns
+    -------
+    array
+        0 to 1, the shape of ``r_um``.
+    """
+    from scipy.special import j0, j1
+
+    r = np.asarray(r_um, float)[..., None]
+    v = np.pi * r / (np.asarray(wavelengths_um, float) * f_number)
+    return ((1.0 - j0(v) ** 2 - j1(v) ** 2) * np.asarray(weights, float)).sum(axis=-1)
 
 
-def airy_kernel(wavelengths_nm: np.ndarray, weights: np.ndarray, f_number: float, pitch_um: float) -> np.ndarray:
-    """The polychromatic Airy pattern, averaged over each pixel, as a kernel summing to 1.
+def diffraction_otf(f_cy_per_um, wavelengths_um, weights, f_number: float) -> np.ndarray:
+    """The OTF of a diffraction-limited circular pupil, averaged over a spectrum:
+    ``sum_l w_l (2 / pi) (acos(x) - x sqrt(1 - x^2))``, ``x = f lambda_l N`` (0 beyond ``x = 1``; Goodman).
+
+    Parameters
+    ----------
+    f_cy_per_um : array
+        Spatial frequencies in the image plane, cycles per um.
+    wavelengths_um, weights : (n,) arrays
+    f_number : float
+
+    Returns
+    -------
+    array
+        The shape of ``f_cy_per_um``; 1 at 0.
+    """
+    x = np.clip(np.abs(np.asarray(f_cy_per_um, float))[..., None] * np.asarray(wavelengths_um, float) * f_number,
+                0.0, 1.0)
+    return ((2.0 / np.pi) * (np.arccos(x) - x * np.sqrt(1.0 - x * x)) * np.asarray(weights, float)).sum(axis=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class PointSpread:
+    """A PSF per colour channel on the optical image's fine grid.
+
+    Parameters
+    ----------
+    kind : str
+        ``diffraction``, ``gaussian`` or the file's path.
+    core : (3, s, s) float64 array
+        Each channel's core, point-sampled (or binned, for a file) at the fine cells' offsets ``-(s // 2)`` to
+        ``s // 2``: the share of a point's light each fine cell receives. Each sums to ``1 - halo_share``.
+    halo_share : (3,) float64 array
+        The light outside each core, spread as a Gaussian halo (0 but for a diffraction PSF).
+    halo_sigma_cells : (3,) float64 array
+        The halo's sigma, fine cells.
+    transfer : callable
+        ``f (cycles per pixel) -> (3, n)``: each channel's MTF, for :func:`oversample`.
+    """
+
+    kind: str
+    core: np.ndarray
+    halo_share: np.ndarray
+    halo_sigma_cells: np.ndarray
+    transfer: object
+
+    def mtf(self, f_cy_per_px) -> np.ndarray:
+        """Each channel's MTF at ``f_cy_per_px`` (cycles per pixel): (3, n)."""
+        return self.transfer(np.atleast_1d(np.asarray(f_cy_per_px, float)))
+
+
+def _core_radius(wl_um: np.ndarray, w: np.ndarray, f_number: float) -> float:
+    """The radius (um) within which a polychromatic Airy pattern holds :data:`CORE_ENERGY` of its light."""
+    lo, hi = 0.0, 2.0 * wl_um.max() * f_number
+    while encircled_energy(hi, wl_um, w, f_number) < CORE_ENERGY:
+        hi *= 2.0
+    for _ in range(60):  # bisection: the encircled energy rises with r
+        mid = 0.5 * (lo + hi)
+        if encircled_energy(mid, wl_um, w, f_number) < CORE_ENERGY:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def _airy_core(wl_um: np.ndarray, w: np.ndarray, f_number: float, cell_um: float, radius_um: float,
+               half: int) -> np.ndarray:
+    """The polychromatic Airy pattern's light per fine cell (its density at the cell's centre times the cell's
+    area), out to ``radius_um`` with a raised-cosine taper over the outer :data:`CORE_TAPER` of it:
+    (2 half + 1, 2 half + 1)."""
+    x = (np.arange(-half, half + 1) * cell_um)
+    r = np.hypot(x[:, None], x[None, :])
+    density = np.zeros_like(r)
+    for li, wi in zip(wl_um, w):  # each wavelength's pattern normalised to unit light: its integral 4 (l N)^2 / pi
+        density += wi * airy(r, li, f_number) / (4.0 * (li * f_number) ** 2 / np.pi)
+    r1 = radius_um * (1.0 - CORE_TAPER)
+    taper = np.where(r <= r1, 1.0, np.where(r >= radius_um, 0.0,
+                                            0.5 + 0.5 * np.cos(np.pi * (r - r1) / (radius_um - r1))))
+    return density * taper * cell_um**2
+
+
+def diffraction_psf(wavelengths_nm: np.ndarray, weights: np.ndarray, f_number: float, pitch_um: float,
+                    k: int) -> PointSpread:
+    """The diffraction-limited PSF of each channel on the fine grid: the Airy core and its halo.
 
     Parameters
     ----------
     wavelengths_nm : (n,) array
         Wavelengths, nm.
-    weights : (n,) array
-        Each wavelength's share of the channel's photo-electrons (any scale).
+    weights : (3, n) array
+        Each channel's photo-electrons per wavelength (any scale).
     f_number : float
         N.
     pitch_um : float
         The pixel pitch, um.
+    k : int
+        Fine cells per pixel along each axis: the cells' pitch is ``pitch_um / k``.
 
     Returns
     -------
-    (k, k) float64 array
-        k odd, the kernel's radius :data:`AIRY_RINGS` first dark rings of the longest wavelength (at most
-        :data:`MAX_KERNEL` across).
+    PointSpread
+        Cores of one common size (the largest channel's, at most :data:`MAX_CORE` cells across), each the
+        pattern's light in each cell out to its :data:`CORE_ENERGY` radius; the halo holds the rest (one minus the
+        core's sum, so each channel's PSF sums to exactly 1), its sigma :data:`HALO_WIDTH` core radii.
     """
+    cell_um = pitch_um / k
     wl = np.asarray(wavelengths_nm, float) * 1e-3
-    w = np.asarray(weights, float)
-    keep = w > 0
-    wl, w = wl[keep], w[keep] / w[keep].sum()
-    ring = 1.22 * wl.max() * f_number / pitch_um
-    radius = int(min(max(math.ceil(AIRY_RINGS * ring), 2), (MAX_KERNEL - 1) // 2))
-    # each wavelength's Airy pattern carries its share of the power: normalised by its integral, pi/4 (lambda N)^2 * 4/pi
-    norms = (wl * f_number) ** 2 / np.pi * 4.0
+    spectra = []
+    for w in np.atleast_2d(np.asarray(weights, float)):
+        keep = w > 0
+        spectra.append((wl[keep], w[keep] / w[keep].sum()))
+    radii = [_core_radius(li, wi, f_number) for li, wi in spectra]
+    half = min(int(math.ceil(max(radii) / cell_um)), (MAX_CORE - 1) // 2)
+    cores = np.stack([_airy_core(li, wi, f_number, cell_um, ri, half) for (li, wi), ri in zip(spectra, radii)])
+    share = 1.0 - cores.sum(axis=(1, 2))
+    sigma = HALO_WIDTH * np.asarray(radii) / cell_um
 
-    # the polychromatic profile on a fine radial grid (1/64 of the shortest first ring), read at each sub-sample
-    r_grid = np.linspace(0.0, (radius + 1) * math.sqrt(2) * pitch_um,
-                         int((radius + 1) * math.sqrt(2) * pitch_um / (1.22 * wl.min() * f_number / 64)) + 2)
-    profile = sum(wi * airy(r_grid, li, f_number) / ni for wi, li, ni in zip(w, wl, norms))
+    def transfer(f_px):
+        return np.stack([diffraction_otf(f_px / pitch_um, li, wi, f_number) for li, wi in spectra])
 
-    def psf(x_um, y_um):
-        return np.interp(np.hypot(x_um, y_um), r_grid, profile)
-
-    return _pixel_averaged(psf, radius, pitch_um)
+    return PointSpread("diffraction", cores, share, sigma, transfer)
 
 
-def gaussian_kernel(sigma_px: float) -> np.ndarray:
-    """A Gaussian of ``sigma_px`` integrated exactly over each pixel (the normal CDF's differences), summing to 1.
+def gaussian_psf(sigma_px: float, k: int) -> PointSpread:
+    """A Gaussian PSF of ``sigma_px`` pixels point-sampled on a grid ``k`` times finer, out to
+    :data:`GAUSS_SIGMAS` sigmas, normalised to sum 1.
 
     Parameters
     ----------
     sigma_px : float
         sigma, pixels.
+    k : int
+        Fine cells per pixel along each axis.
 
     Returns
     -------
-    (k, k) float64 array
-        Radius ``ceil(4 sigma) + 1`` (at most :data:`MAX_KERNEL` across).
+    PointSpread
+        The same core for the three channels, no halo.
     """
-    from scipy.special import ndtr
+    sigma = sigma_px * k
+    half = int(min(math.ceil(GAUSS_SIGMAS * sigma), (MAX_CORE - 1) // 2))
+    line = np.exp(-0.5 * (np.arange(-half, half + 1) / sigma) ** 2)
+    core = np.outer(line, line)
+    core = core / core.sum()
 
-    radius = int(min(math.ceil(4 * sigma_px) + 1, (MAX_KERNEL - 1) // 2))
-    edges = (np.arange(-radius, radius + 2) - 0.5) / sigma_px
-    line = np.diff(ndtr(edges))
-    k = np.outer(line, line)
-    return k / k.sum()
+    def transfer(f_px):
+        return np.repeat(np.exp(-2.0 * np.pi**2 * sigma_px**2 * f_px**2)[None, :], 3, axis=0)
+
+    return PointSpread("gaussian", np.stack([core] * 3), np.zeros(3), np.zeros(3), transfer)
 
 
-def _file_kernel(path: str, sampling_um: float | None, pitch_um: float) -> np.ndarray:
-    """A user's PSF (.npy or FITS, one 2-D array) at the pixel pitch, odd-sized, summing to 1."""
+def _bins(n: int, j: int) -> np.ndarray:
+    """(cells, n) weights binning ``n`` samples (odd, centred) into cells of ``j`` samples centred on the middle
+    sample: each sample's share of each cell (1, or 1/2 where an even ``j`` puts a cell's edge through it)."""
+    centre = (n - 1) / 2.0
+    # cell c spans samples' positions [centre + (c - 1/2) j - 1/2 + 1/2 ...]: in sample units, cell c covers
+    # [centre - j / 2 + c j, centre + j / 2 + c j] of the samples' centres' line (each sample spans +-1/2)
+    reach = int(math.ceil(((n - 1) / 2.0 + 0.5) / j + 0.5))
+    cells = np.arange(-reach, reach + 1)
+    lo = centre + cells * j - j / 2.0
+    hi = lo + j
+    s0 = np.arange(n) - 0.5
+    s1 = s0 + 1.0
+    return np.clip(np.minimum(hi[:, None], s1[None, :]) - np.maximum(lo[:, None], s0[None, :]), 0.0, 1.0)
+
+
+def file_psf(path: str, sampling_um: float | None, pitch_um: float, k: int) -> PointSpread:
+    """A user's PSF (one 2-D array in a ``.npy`` or FITS file) binned onto the fine grid, normalised to sum 1.
+
+    Parameters
+    ----------
+    path : str
+        The file: samples of a PSF on a square grid of ``sampling_um``, its middle sample (odd sides; an even side
+        is padded with a zero) the PSF's centre.
+    sampling_um : float or None
+        The samples' spacing, um; None: the pixel pitch.
+    pitch_um : float
+        The pixel pitch, um.
+    k : int
+        Fine cells per pixel: the fine grid's pitch ``pitch / k`` must be a whole number ``j`` of samples, each
+        fine cell then the sum of ``j x j`` samples.
+
+    Returns
+    -------
+    PointSpread
+        The same core for the three channels, no halo.
+    """
+    a = _file_array(path)
+    j = _samples_per_cell(path, sampling_um, pitch_um, k)
+    if max(a.shape) / j > MAX_CORE:
+        raise CmosnoiseError(f"optics.psf {path}: {a.shape[0]} x {a.shape[1]} samples make "
+                             f"{-(-max(a.shape) // j)} fine cells across; at most {MAX_CORE}")
+    a = np.pad(a, [(0, 1 - s % 2) for s in a.shape])
+    binned = _bins(a.shape[0], j) @ a @ _bins(a.shape[1], j).T
+    side = max(binned.shape)
+    binned = np.pad(binned, [((side - binned.shape[0]) // 2,) * 2, ((side - binned.shape[1]) // 2,) * 2])
+    core = binned / binned.sum()
+    s_um = pitch_um if sampling_um is None else sampling_um
+    spectrum = np.abs(np.fft.fft2(a / a.sum(), s=(4 * a.shape[0], 4 * a.shape[1])))
+    # cycles per pixel: the samples are s_um / pitch_um pixels apart
+    step = s_um / pitch_um
+    freq = np.hypot(np.fft.fftfreq(4 * a.shape[0], step)[:, None], np.fft.fftfreq(4 * a.shape[1], step)[None, :])
+    order = np.argsort(freq.ravel())
+    f_sorted = freq.ravel()[order]
+    envelope = np.maximum.accumulate(spectrum.ravel()[order][::-1])[::-1]  # the largest MTF at f or beyond
+    top = f_sorted[-1]
+
+    def transfer(f):
+        return np.repeat(np.where(f > top, envelope[-1], np.interp(f, f_sorted, envelope))[None, :], 3, axis=0)
+
+    return PointSpread(path, np.stack([core] * 3), np.zeros(3), np.zeros(3), transfer)
+
+
+def _samples_per_cell(path: str, sampling_um: float | None, pitch_um: float, k: int) -> int:
+    """How many of a PSF file's samples make a fine cell: ``pitch / k / sampling``, a whole number, or a one-line
+    error."""
+    s = pitch_um if sampling_um is None else float(sampling_um)
+    j = pitch_um / k / s
+    if abs(j - round(j)) > 1e-9 * max(j, 1) or round(j) < 1:
+        raise CmosnoiseError(
+            f"optics.psf {path}: samples {s:g} um apart (optics.psf_sampling_um) do not divide into the fine grid's "
+            f"{pitch_um / k:g} um cells (the pitch over optics.oversample = {k}); give samples pitch / k / j apart "
+            "for a whole j, or an optics.oversample that makes them so")
+    return int(round(j))
+
+
+@functools.lru_cache(maxsize=8)
+def _file_array(path: str) -> np.ndarray:
+    """A PSF file's one 2-D array, through the input gate, checked: finite, >= 0, summing to more than 0."""
     key = "optics.psf"
     suffix = Path(path).suffix.lower()
     if suffix == ".npy":
-        with inputs.open_regular(path, f"{key} file") as f:
-            a = np.load(f, allow_pickle=False)
+        a = inputs.read_npy(path, f"{key} file", MAX_FILE_BYTES)
     elif suffix in (".fits", ".fit", ".fts"):
         from astropy.io import fits
 
         inputs.fits_data_bytes(path, f"{key} file", MAX_FILE_BYTES)
-        with fits.open(inputs.check_regular(path, f"{key} file"), memmap=False) as hdus:
-            a = next((h.data for h in hdus if h.data is not None), None)
+        try:
+            with fits.open(inputs.check_regular(path, f"{key} file"), memmap=False) as hdus:
+                a = next((np.array(h.data) for h in hdus if h.data is not None), None)
+        except (OSError, ValueError, TypeError, IndexError) as exc:
+            raise CmosnoiseError(f"{key} {path!r} is not a readable FITS file: {exc}") from None
     else:
         raise CmosnoiseError(f"{key} = {path!r}: give none, diffraction, gaussian, or a .npy or .fits file")
     a = np.asarray(a) if a is not None else np.zeros(0)
     if a.ndim != 2 or min(a.shape) < 1 or a.dtype.kind not in "uif":
         raise CmosnoiseError(f"{key} {path}: a PSF is one 2-D array of real numbers; this is {a.shape} {a.dtype}")
     a = a.astype(np.float64)
-    if not np.isfinite(a).all() or (a < 0).any() or a.sum() <= 0:
-        raise CmosnoiseError(f"{key} {path}: a PSF's values must be finite, >= 0 and sum to more than 0")
-    if sampling_um is not None and sampling_um != pitch_um:
-        from scipy.ndimage import zoom
-
-        a = np.clip(zoom(a, sampling_um / pitch_um, order=1), 0, None)
-    pad = [(0, 1 - s % 2) for s in a.shape]  # odd sides: the centre is the middle sample
-    a = np.pad(a, pad)
-    if max(a.shape) > MAX_KERNEL:
-        raise CmosnoiseError(f"{key} {path}: {a.shape[0]} x {a.shape[1]} samples at the pixel pitch; at most "
-                             f"{MAX_KERNEL} across")
-    side = max(a.shape)
-    a = np.pad(a, [((side - a.shape[0]) // 2,) * 2, ((side - a.shape[1]) // 2,) * 2])
-    return a / a.sum()
+    if not np.isfinite(a).all() or (a < 0).any():
+        raise CmosnoiseError(f"{key} {path}: a PSF's values must be finite and >= 0")
+    total = float(a.sum(dtype=np.float64))
+    if not (np.isfinite(total) and total > 0):
+        raise CmosnoiseError(f"{key} {path}: a PSF's values must sum to a finite number above 0 (they sum to "
+                             f"{total:g})")
+    a = a / a.max()  # its scale is free: kept away from overflow in the sums that follow
+    a.setflags(write=False)
+    return a
 
 
-def psf_kernels(config) -> np.ndarray | None:
-    """The configured PSF, one kernel per colour channel (R, G, B), or None for ``optics.psf: none``.
+def psf_active(config) -> bool:
+    """Whether a PSF is configured (``optics.psf`` other than ``none``)."""
+    return config.optics.psf.lower() != "none"
+
+
+# ------------------------------------------------------------------ the pixel's aperture and the OLPF
+#: the aperture's taps beyond the pixel's own cells on each side, where it is fitted (a fill factor below 1, a
+#: filter)
+APERTURE_MARGIN = 2
+
+
+def aperture(k: int, fill_factor: float, olpf_cells: float | None = None, weight=None) -> tuple[int, np.ndarray]:
+    """The weights a pixel integrates the optical image's fine cells with, along one axis.
+
+    The fine cells hold averages of the optical image over each cell, so their sum over the pixel's ``k`` cells
+    is the integral over the pixel exactly (transfer ``sinc(f)``, f in cycles per pixel): the weights of a full
+    aperture are ``1 / k`` each. A smaller aperture (side ``a = sqrt(fill_factor)`` pixels, centred) and a
+    four-spot optical low-pass filter (``d`` pixels between spots) have the transfer
+    ``T(f) = a sinc(a f) cos(pi d f)``; on cell averages the weights must give ``T(f) / sinc(f / k)``, which no
+    set of whole cells gives. They are then the least-squares fit of a symmetric set of taps (the pixel's cells
+    and :data:`APERTURE_MARGIN` on each side) to it over the fine grid's band, 0 to ``k / 2`` cycles per pixel,
+    weighted by ``weight(f)`` (the PSF's MTF, where the image has its detail; 1 without one); their sum is
+    ``a`` exactly. The 2-D weights are the outer product of two of these.
 
     Parameters
     ----------
-    config : Config
+    k : int
+        Fine cells per pixel.
+    fill_factor : float
+        The aperture's area over the pixel's, (0, 1].
+    olpf_cells : float, optional
+        The filter's spot separation, fine cells; None or 0: no filter.
+    weight : callable, optional
+        ``f (cycles per pixel) -> weight``, the fit's weight at each frequency.
 
     Returns
     -------
-    (3, k, k) float64 array or None
-        Each kernel sums to 1.
+    offset : int
+        The first weight's cell, relative to the pixel's first cell.
+    weights : (n,) float64 array
+        Summing to ``sqrt(fill_factor)`` (one axis of the aperture's area, in pixels).
+
+    Examples
+    --------
+    >>> from cmosnoise.model.optics import aperture
+    >>> aperture(3, 1.0)
+    (0, array([0.33333333, 0.33333333, 0.33333333]))
     """
-    op = config.optics
-    if op.psf.lower() == "none":
-        return None
-    spectra = None
-    if config.light.enabled and op.psf.lower() == "diffraction":  # each channel's photo-electron spectrum
-        from . import light as light_mod
+    if fill_factor == 1.0 and not olpf_cells:
+        return 0, np.full(k, 1.0 / k)
+    a = math.sqrt(fill_factor)
+    d = (olpf_cells or 0.0) / k  # pixels
+    n = np.arange(-APERTURE_MARGIN, k + APERTURE_MARGIN)
+    x = (n + 0.5 - k / 2.0) / k  # the taps' centres from the pixel's, pixels (symmetric about 0)
+    half = n.size // 2
+    f = np.linspace(0.0, k / 2.0, 64 * k + 1)
+    target = a * np.sinc(a * f) * np.cos(np.pi * d * f) / np.sinc(f / k)
+    w = np.ones_like(f) if weight is None else np.asarray(weight(f), float) + 1e-3
+    # symmetric pairs: tap i and its mirror n.size - 1 - i share a weight; the design is cos(2 pi f x_i) of each
+    basis = np.stack([2.0 * np.cos(2.0 * np.pi * f * x[i]) for i in range(half)], axis=1)
+    if n.size % 2:
+        basis = np.column_stack([basis, np.ones_like(f)])
+    # the sum fixed at a: the last pair's weight follows from the others'
+    pair_sum = np.full(basis.shape[1], 2.0)
+    if n.size % 2:
+        pair_sum[-1] = 1.0
+    last = basis.shape[1] - 1
+    reduced = basis[:, :last] - np.outer(basis[:, last] / pair_sum[last], pair_sum[:last])
+    rhs = target - basis[:, last] * a / pair_sum[last]
+    sol = _least_squares(reduced * w[:, None], rhs * w)
+    coef = np.append(sol, (a - math.fsum((pair_sum[:last] * sol).tolist())) / pair_sum[last])
+    taps = np.empty(n.size)
+    taps[:half] = coef[:half]
+    taps[n.size - half:] = coef[:half][::-1]
+    if n.size % 2:
+        taps[half] = coef[-1]
+    return int(n[0]), taps
 
-        li = light_mod.channel_light(config)
-        spectra = (tuple(li.wavelengths), tuple(tuple(li.photon_flux * li.qe[:, ch]) for ch in range(3)))
-    parts = json.dumps({"optics": op.model_dump(mode="json"), "pitch": config.sensor.pixel_pitch_um}, sort_keys=True)
-    return _psf_kernels(parts, spectra)
+
+def _least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The least-squares solution of ``a x = b`` (a few unknowns) by its normal equations, every sum correctly
+    rounded (``math.fsum``) and Gaussian elimination with partial pivoting in plain floats: the same bits on any
+    machine (LAPACK's would be its BLAS's)."""
+    m = a.shape[1]
+    g = [[math.fsum((a[:, i] * a[:, j]).tolist()) for j in range(m)] + [math.fsum((a[:, i] * b).tolist())]
+         for i in range(m)]
+    for col in range(m):
+        pivot = max(range(col, m), key=lambda r: (abs(g[r][col]), -r))
+        g[col], g[pivot] = g[pivot], g[col]
+        if g[col][col] == 0.0:
+            continue
+        for r in range(col + 1, m):
+            factor = g[r][col] / g[col][col]
+            g[r] = [x - factor * y for x, y in zip(g[r], g[col])]
+    x = [0.0] * m
+    for r in range(m - 1, -1, -1):
+        x[r] = 0.0 if g[r][r] == 0.0 else (g[r][m] - math.fsum(g[r][c] * x[c] for c in range(r + 1, m))) / g[r][r]
+    return np.asarray(x)
 
 
-@functools.lru_cache(maxsize=8)
-def _psf_kernels(parts: str, spectra: tuple | None) -> np.ndarray:
-    p = json.loads(parts)
-    op, pitch = p["optics"], p["pitch"]
-    kind = op["psf"].lower()
-    if kind == "gaussian":
-        k = gaussian_kernel(op["psf_sigma_px"])
-        out = np.stack([k, k, k])
-    elif kind == "diffraction":
-        if spectra is not None:
-            each = [airy_kernel(spectra[0], w, op["f_number"], pitch) for w in spectra[1]]
-        else:
-            each = [airy_kernel([w], [1.0], op["f_number"], pitch) for w in DEFAULT_WAVELENGTHS_NM]
-        side = max(k.shape[0] for k in each)  # one size for the three (each padded with zeros about its centre)
-        out = np.stack([np.pad(k, (side - k.shape[0]) // 2) for k in each])
-    else:
-        k = _file_kernel(op["psf"], op["psf_sampling_um"], pitch)
-        out = np.stack([k, k, k])
-    out.setflags(write=False)
+def aperture_transfer(f_cy_per_px, fill_factor: float, olpf_px: float | None) -> np.ndarray:
+    """The aperture's and the filter's MTF along one axis: ``|sinc(a f) cos(pi d f)|``, ``a = sqrt(fill_factor)``
+    pixels, ``d`` the filter's separation in pixels."""
+    f = np.asarray(f_cy_per_px, float)
+    out = np.abs(np.sinc(math.sqrt(fill_factor) * f))
+    if olpf_px:
+        out = out * np.abs(np.cos(np.pi * olpf_px * f))
     return out
+
+
+# ------------------------------------------------------------------ the fine grid's sampling
+def alias_error(psf: PointSpread, k: int, fill_factor: float, olpf_px: float | None = None) -> float:
+    """The largest error the fine grid's sampling of ``psf`` leaves in the system MTF: the PSF's transfer at
+    ``|g - m k / pitch|`` (m = +-1, +-2: what folds onto frequency ``g`` of the fine grid) times the aperture's
+    transfer at ``g``, the largest over ``0 < g <= k / (2 pitch)`` and the channels.
+
+    Parameters
+    ----------
+    psf : PointSpread
+    k : int
+        Fine cells per pixel.
+    fill_factor : float
+    olpf_px : float, optional
+        The filter's separation, pixels.
+
+    Returns
+    -------
+    float
+    """
+    g = np.linspace(1e-6, k / 2.0, 400)  # cycles per pixel
+    folded = np.zeros((3, g.size))
+    for m in (1, 2):
+        for sign in (-1.0, 1.0):
+            f = np.abs(g + sign * m * k)
+            folded += np.abs(psf.mtf(f))
+    return float((folded * aperture_transfer(g, fill_factor, olpf_px)[None, :]).max())
+
+
+def oversample(setting, psf: PointSpread | None, fill_factor: float, olpf_px: float | None = None,
+               candidates=None) -> int:
+    """``optics.oversample`` resolved: a number is itself; ``auto`` is 1 without a PSF, else the smallest k of 1 to
+    :data:`MAX_OVERSAMPLE` (among ``candidates``) whose :func:`alias_error` is at most :data:`ALIAS_LIMIT`, or
+    the largest.
+
+    Parameters
+    ----------
+    setting : int or "auto"
+    psf : PointSpread or None
+        The PSF, made at any k (its transfer does not depend on it).
+    fill_factor, olpf_px
+        The pixel's aperture and its filter's separation (pixels).
+    candidates : iterable of int, optional
+        The k that a PSF file's sampling allows; default 1 to :data:`MAX_OVERSAMPLE`.
+
+    Returns
+    -------
+    int
+    """
+    if setting != "auto":
+        return int(setting)
+    if psf is None:
+        return 1
+    ks = list(candidates) if candidates is not None else list(range(1, MAX_OVERSAMPLE + 1))
+    for k in ks:
+        if alias_error(psf, k, fill_factor, olpf_px) <= ALIAS_LIMIT:
+            return k
+    return ks[-1]
 
 
 # ------------------------------------------------------------------ relative illumination
@@ -269,6 +580,21 @@ def _ri_table(path: str) -> tuple[np.ndarray, np.ndarray]:
     return t[:, 0], t[:, 1]
 
 
+def image_distance_mm(op) -> float:
+    """The lens's image distance, ``f (1 + m)`` mm (a thin lens focused at magnification m): what a field angle's
+    tangent divides the image height by.
+
+    Parameters
+    ----------
+    op : OpticsSection
+
+    Returns
+    -------
+    float
+    """
+    return op.focal_length_mm * (1.0 + op.magnification)
+
+
 def relative_illumination(config, shape: tuple[int, int], region=None) -> np.ndarray | None:
     """The relative illumination of each pixel (1 on the axis), or None for ``none``.
 
@@ -283,15 +609,15 @@ def relative_illumination(config, shape: tuple[int, int], region=None) -> np.nda
     Returns
     -------
     (rows, cols) float64 array or None
-        ``cos(theta)^4`` for ``cos4``; the table interpolated at each pixel's image height (its end values
+        ``cos(theta)^4`` for ``cos4`` (``tan theta = h / i``, :func:`image_distance_mm`); the table interpolated at each pixel's image height (its end values
         beyond it) for a file.
     """
     op, pitch = config.optics, config.sensor.pixel_pitch_um
     kind = op.relative_illumination
     if kind.lower() == "none":
         return None
-    if kind.lower() == "cos4":  # cos(atan(h / f))^4 = 1 / (1 + h^2 / f^2)^2, without the angle
-        h2 = _image_height_squared_mm2(shape, region, pitch) / op.focal_length_mm**2
+    if kind.lower() == "cos4":  # cos(atan(h / i))^4 = 1 / (1 + h^2 / i^2)^2, without the angle
+        h2 = _image_height_squared_mm2(shape, region, pitch) / image_distance_mm(op) ** 2
         h2 += 1.0
         np.multiply(h2, h2, out=h2)
         return np.divide(1.0, h2, out=h2)
@@ -492,213 +818,6 @@ def active(config) -> bool:
             or (op.angle_relative_qe is not None and op.chief_ray_angle is not None))
 
 
-def _planes(draw, region) -> tuple[np.ndarray, bool]:
-    """The picture over ``region`` as float32 planes: (3, rows, cols), or (3, cols, rows) and True where the scene
-    gives its channels transposed (a resampled picture: no interleaved copy is made)."""
-    if isinstance(draw, scene_mod.Resampled):
-        return draw.transposed_planes(region, np.float32), True
-    return np.ascontiguousarray(np.asarray(draw(region)).transpose(2, 0, 1), np.float32), False
-
-
-def _blocks(draw, shape: tuple[int, int], kernels: np.ndarray, region=None):
-    """The blurred picture a block of the sensor's grid at a time: yields ``(q0, q1, p0, p1, planes)``, the part
-    of ``region`` in one block (sensor coordinates) and its (3, q1 - q0, p1 - p0) float32 values (a view).
-
-    Each block of :data:`BLOCK` pixels, with a margin of the kernel's radius (the picture's edge pixels repeated
-    beyond it), is convolved with one kernel per channel by real FFTs in single precision, every core on each
-    transform (pocketfft's threads split the other axes: the same bits on any number). Where the scene gives its
-    channels transposed, the blocks are transformed transposed, with the kernels transposed. A tile is made of
-    the same blocks as the whole, so it is that crop bit for bit.
-    """
-    import scipy.fft as sfft
-
-    rows, cols = shape
-    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
-    m = kernels.shape[1] // 2
-    # the blocks the region touches, and the picture under them with their margins, drawn once (each block's part
-    # of it is what a draw of the block alone gives: any region of a scene is that crop of the whole)
-    b_r0, b_c0 = r0 // BLOCK * BLOCK, c0 // BLOCK * BLOCK
-    b_r1, b_c1 = min(-(-r1 // BLOCK) * BLOCK, rows), min(-(-c1 // BLOCK) * BLOCK, cols)
-    g0, g1, h0, h1 = max(b_r0 - m, 0), min(b_r1 + m, rows), max(b_c0 - m, 0), min(b_c1 + m, cols)
-    picture, transposed = _planes(draw, (g0, g1, h0, h1))
-    if transposed:  # (3, cols, rows): each block is cut and padded along the picture's own axes
-        picture = picture.transpose(0, 2, 1)
-    taps = np.ascontiguousarray(kernels.transpose(0, 2, 1) if transposed else kernels, np.float32)
-    spectra = {}
-    for br in range(b_r0, r1, BLOCK):
-        for bc in range(b_c0, c1, BLOCK):
-            be_r, be_c = min(br + BLOCK, rows), min(bc + BLOCK, cols)
-            # the block with its margins, clamped to the picture, its edge pixels repeated beyond it
-            a0, a1, d0, d1 = max(br - m, 0), min(be_r + m, rows), max(bc - m, 0), min(be_c + m, cols)
-            src = picture[:, a0 - g0:a1 - g0, d0 - h0:d1 - h0]
-            edges = ((0, 0), (a0 - (br - m), be_r + m - a1), (d0 - (bc - m), be_c + m - d1))
-            if any(edges[1] + edges[2]):
-                src = np.pad(src, edges, mode="edge")
-            if transposed:
-                src = src.transpose(0, 2, 1)
-            # a linear convolution, zero-padded to a fast size: the wrapped part falls in the first 2m rows and
-            # columns, outside the valid part kept
-            size = (sfft.next_fast_len(src.shape[1], real=True), sfft.next_fast_len(src.shape[2], real=True))
-            if size not in spectra:
-                spectra[size] = sfft.rfft2(taps, s=size, axes=(1, 2))
-            f = sfft.rfft2(src, s=size, axes=(1, 2), workers=-1)
-            f *= spectra[size]
-            full = sfft.irfft2(f, s=size, axes=(1, 2), workers=-1)
-            if transposed:
-                full = full.transpose(0, 2, 1)
-            q0, q1, p0, p1 = max(r0, br), min(r1, be_r), max(c0, bc), min(c1, be_c)
-            # the 'valid' part starts at 2m: the block's own pixels
-            yield q0, q1, p0, p1, full[:, 2 * m + q0 - br:2 * m + q1 - br, 2 * m + p0 - bc:2 * m + p1 - bc]
-
-
-def direct(kernels: np.ndarray) -> bool:
-    """Whether ``kernels`` are convolved directly rather than by FFT blocks.
-
-    Parameters
-    ----------
-    kernels : (3, k, k) array
-        The PSF's kernels (:func:`psf_kernels`).
-
-    Returns
-    -------
-    bool
-        True where k is at most :data:`~cmosnoise.engine.convolve.MAX_SIDE` (:mod:`cmosnoise.engine.convolve`).
-    """
-    return kernels.shape[1] <= convolve.MAX_SIDE
-
-
-def _window_planes(draw, shape: tuple[int, int], radius: int, region) -> np.ndarray:
-    """The picture over ``region`` and a margin of ``radius`` (its edge pixels repeated beyond the sensor), in the
-    layout :func:`cmosnoise.engine.convolve.mosaic` reads: (3, cols + 2 radius, rows + 2 radius) float32."""
-    rows, cols = shape
-    r0, r1, c0, c1 = region
-    ri = convolve.layout_indices(r0, r1, rows, radius, True)
-    ci = convolve.layout_indices(c0, c1, cols, radius, False)
-    if isinstance(draw, scene_mod.Resampled):  # only the rows and columns asked for, no full-size RGB
-        return draw.planes_at(ri, ci, np.float32)
-    g0, h0 = max(r0 - radius, 0), max(c0 - radius, 0)
-    picture = np.asarray(draw((g0, min(r1 + radius, rows), h0, min(c1 + radius, cols))))
-    return np.ascontiguousarray(picture[ri - g0][:, ci - h0].transpose(2, 1, 0), np.float32)
-
-
-def blur(draw, shape: tuple[int, int], kernels: np.ndarray, region=None) -> np.ndarray:
-    """The picture ``draw`` convolved with one kernel per channel, its edge pixels repeated beyond the sensor.
-
-    A kernel of up to :data:`~cmosnoise.engine.convolve.MAX_SIDE` pixels across (a diffraction PSF's, unless the
-    f-number is large for the pitch) is convolved directly (:func:`cmosnoise.engine.convolve.mosaic`): the
-    picture in float32, each pixel's sum in a fixed order, in float64 by groups of four float32 products (within
-    ``5u`` of the value, ``u = 6e-8``: five float32 roundings of each non-negative term at most). A larger one by FFTs in blocks of :data:`BLOCK` on the sensor's grid, in
-    single precision: their rounding error is about ``u sqrt(2 log2 n + 1)`` times the block's RMS value (n =
-    540^2 points a block with its margins: about 4e-7 times the RMS), a few times the single-precision rounding
-    the mean charge is kept in after it and far below shot noise (1e-2 of the charge even at a full well of
-    10 000 e-); the tests hold each method to its bound. Either way any region is bit for bit that crop of the
-    whole.
-
-    Parameters
-    ----------
-    draw : callable
-        ``region -> (rows, cols, 3)``: a prepared scene (:func:`.scene.prepare`), whose any region is that crop
-        of the whole.
-    shape : (rows, cols)
-        The whole sensor.
-    kernels : (3, k, k) array
-        One kernel per channel, k odd.
-    region : (row0, row1, col0, col1), optional
-        The pixels to make (None: all); any region is bit for bit that crop of the whole.
-
-    Returns
-    -------
-    (rows, cols, 3) float64 array
-        At least 0 (the transforms' rounding leaves values of about -1e-8 where the picture is black; they are
-        taken as 0).
-    """
-    rows, cols = shape
-    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
-    out = np.empty((r1 - r0, c1 - c0, 3))
-    if direct(kernels):  # each channel at every pixel
-        planes = _window_planes(draw, shape, kernels.shape[1] // 2, (r0, r1, c0, c1))
-        plane = np.empty((r1 - r0, c1 - c0))
-        for c in range(3):
-            out[..., c] = convolve.mosaic(planes, kernels, np.full((2, 2), c), np.ones(3), plane)
-        return out
-    for q0, q1, p0, p1, part in _blocks(draw, shape, kernels, region):
-        out[q0 - r0:q1 - r0, p0 - c0:p1 - c0] = part.transpose(1, 2, 0)
-    out[~(out > 0.0)] = 0.0
-    return out
-
-
-def blur_cfa(draw, shape: tuple[int, int], kernels: np.ndarray, pattern: str, responsivity,
-             region=None) -> np.ndarray:
-    """``scene.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)``, bit for bit, each pixel's own
-    channel alone made (a direct kernel) or each block's pixels taken through the CFA as it is made (FFTs): no
-    full-size RGB.
-
-    Parameters
-    ----------
-    draw, shape, kernels, region
-        As :func:`blur`.
-    pattern : str
-        The CFA.
-    responsivity : (float, float, float)
-        The channels' relative responsivity.
-
-    Returns
-    -------
-    (rows, cols) float64 array
-        Relative signal per pixel.
-    """
-    rows, cols = shape
-    r0, r1, c0, c1 = (0, rows, 0, cols) if region is None else tuple(int(v) for v in region)
-    if cfa_mod.is_mono(pattern):  # the luminance of the three blurred channels
-        return scene_mod.to_cfa(blur(draw, shape, kernels, region), pattern, responsivity)
-    out = np.empty((r1 - r0, c1 - c0))
-    gain = np.asarray(responsivity, np.float64)
-    if direct(kernels):
-        planes = _window_planes(draw, shape, kernels.shape[1] // 2, (r0, r1, c0, c1))
-        return convolve.mosaic(planes, kernels, cfa_mod.tile(pattern), gain, out)
-    for q0, q1, p0, p1, part in _blocks(draw, shape, kernels, region):
-        dst = out[q0 - r0:q1 - r0, p0 - c0:p1 - c0]
-        # the block's CFA phase: its first pixel's row and column in the region
-        layout.plane_pick(part, cfa_mod.tile(cfa_mod.crop_pattern(pattern, q0 - r0, p0 - c0)), gain, dst)
-    return out
-
-
-def cfa_signal(draw, config, pattern: str, responsivity, shape: tuple[int, int], region=None) -> np.ndarray:
-    """A prepared scene through the lens (PSF, relative illumination) and the CFA: relative signal per pixel.
-
-    Parameters
-    ----------
-    draw : callable
-        :func:`.scene.prepare`'s result.
-    config : Config
-        Its ``optics`` (and ``light``, for a diffraction PSF's spectra).
-    pattern : str
-        The CFA.
-    responsivity : (float, float, float)
-        The channels' relative responsivity.
-    shape : (rows, cols)
-        The whole sensor.
-    region : (row0, row1, col0, col1), optional
-        The pixels to make.
-
-    Returns
-    -------
-    (rows, cols) float64 array
-        :func:`.scene.cfa_signal` where the lens changes nothing (:func:`active` false), bit for bit.
-    """
-    if not active(config):  # no lens: the scene's own CFA signal, bit for bit
-        return scene_mod.cfa_signal(draw, pattern, responsivity, region)
-    if isinstance(draw, scene_mod.RawDraw):
-        raise CmosnoiseError("scene: a raw photograph already went through its own lens; set optics.psf, "
-                             "optics.relative_illumination and optics.angle_relative_qe to none for it")
-    kernels = psf_kernels(config)
-    if kernels is None:
-        signal = scene_mod.cfa_signal(draw, pattern, responsivity, region)
-    else:
-        signal = blur_cfa(draw, shape, kernels, pattern, responsivity, region)
-    return shade(signal, config, pattern, shape, region)
-
-
 def shade(signal: np.ndarray, config, pattern: str, shape: tuple[int, int], region=None) -> np.ndarray:
     """``signal`` times each pixel's relative illumination, then times its QE at its angle of incidence.
 
@@ -744,5 +863,5 @@ def shade(signal: np.ndarray, config, pattern: str, shape: tuple[int, int], regi
             r0, c0 = (0, 0) if region is None else (region[0], region[2])
             qe, cells = t, cfa_mod.tile(cfa_mod.crop_pattern(pattern, r0, c0))
         table = (angles[:, 0], angles[:, 1], 1.0 - op.microlens_compensation)
-    return lens.shade(signal, y, x, ri_kind, op.focal_length_mm, _ri_table(op.relative_illumination)
+    return lens.shade(signal, y, x, ri_kind, image_distance_mm(op), _ri_table(op.relative_illumination)
                       if ri_kind == lens.RI_TABLE else None, table, qe, cells)

@@ -8,8 +8,9 @@ the sensor's peak rate). It comes from a file or a built-in:
 ``flat:LEVEL``            uniform grey at LEVEL in [0, 1]
 ``ramp``                  horizontal linear ramp 0 -> 1
 ``colorchecker``          the 24 patches of the ColorChecker Classic
-``zoneplate``             circular zone plate (frequency sweep to Nyquist)
-``siemens``               Siemens star with 36 spokes
+``zoneplate[:F]``         circular zone plate, a frequency sweep to F cycles per pixel (0.5, Nyquist) at
+                          the middle of the shorter edge; each cell its exact area average
+``siemens``               Siemens star with 36 spokes, each cell its area share of white
 ``steps:N``               N horizontal bands, light levels 4**-(N-1) .. 1/16, 1/4, 1
                           from top to bottom (N = 4 by default)
 ``spot``                  one lit pixel (value 1) at the centre, on black:
@@ -43,6 +44,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from importlib import resources
 from pathlib import Path
 
@@ -62,7 +64,7 @@ from .encoding import span as _span
 #: Rec. 709 / sRGB luminance weights for linear RGB
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
-BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate", "siemens", "steps:N", "spot", "edge",
+BUILTINS = ("photo", "flat:LEVEL", "ramp", "colorchecker", "zoneplate:F", "siemens", "steps:N", "spot", "edge",
             "greys:N")
 
 # ------------------------------------------------------------------ built-ins
@@ -109,62 +111,6 @@ def ramp(shape: tuple[int, int], region=None) -> np.ndarray:
     return np.broadcast_to(x[None, :, None], (r1 - r0, c1 - c0, 3)).copy()
 
 
-def zoneplate(shape: tuple[int, int], region=None) -> np.ndarray:
-    """Circular zone plate: cos(a r^2), local frequency a r / pi cycles/pixel.
-
-    The frequency reaches Nyquist (0.5 cycles/pixel) at the middle of the
-    shorter edge, so the corners alias, as a zone plate should show.
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-        The picture's size, pixels.
-
-    region : (row0, row1, col0, col1), optional
-        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
-
-    Returns
-    -------
-    (rows, cols, 3) float64 array
-        Linear light, 0 to 1 (1: the peak rate).
-    """
-    rows, cols = shape
-    r0, r1, c0, c1 = _span(shape, region)
-    y = np.arange(r0, r1) - (rows - 1) / 2
-    x = np.arange(c0, c1) - (cols - 1) / 2
-    r2 = y[:, None] ** 2 + x[None, :] ** 2
-    r_edge = min(rows, cols) / 2
-    v = 0.5 + 0.5 * np.cos(np.pi / 2 * r2 / r_edge)
-    return np.repeat(v[..., None], 3, axis=2)
-
-
-def siemens(shape: tuple[int, int], spokes: int = 36, region=None) -> np.ndarray:
-    """Siemens star: ``spokes`` black and white sectors around the centre.
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-        The picture's size, pixels.
-    spokes : int
-        The number of black and white sectors.
-
-    region : (row0, row1, col0, col1), optional
-        The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
-
-    Returns
-    -------
-    (rows, cols, 3) float64 array
-        Linear light, 0 to 1 (1: the peak rate).
-    """
-    rows, cols = shape
-    r0, r1, c0, c1 = _span(shape, region)
-    y = np.arange(r0, r1) - (rows - 1) / 2
-    x = np.arange(c0, c1) - (cols - 1) / 2
-    theta = np.arctan2(y[:, None], x[None, :])
-    v = (np.sin(spokes / 2 * theta) > 0).astype(np.float64) * 0.9 + 0.05
-    return np.repeat(v[..., None], 3, axis=2)
-
-
 def steps(shape: tuple[int, int], n: int = 4, region=None) -> np.ndarray:
     """``n`` horizontal bands at levels ``4**-(n-1-i)``, darkest at the top.
 
@@ -205,16 +151,17 @@ def steps_levels(n: int = 4) -> np.ndarray:
     return 4.0 ** -(n - 1 - np.arange(n))
 
 
-def spot(shape: tuple[int, int], region=None) -> np.ndarray:
-    """One lit pixel (value 1) at ``(rows // 2, cols // 2)``, all else black.
+def spot(shape: tuple[int, int], region=None, cells: int = 1) -> np.ndarray:
+    """One lit pixel (value 1) at ``(rows // 2, cols // 2)`` of the pixels, all else black.
 
     Parameters
     ----------
     shape : (rows, cols)
-        The picture's size, pixels.
-
+        The picture's size, cells (``cells`` to a pixel along each axis).
     region : (row0, row1, col0, col1), optional
         The rectangle of the picture to draw (a tile), the same values as that crop of the whole.
+    cells : int
+        Cells per pixel: the pixel's ``cells x cells`` cells are lit.
 
     Returns
     -------
@@ -223,9 +170,8 @@ def spot(shape: tuple[int, int], region=None) -> np.ndarray:
     """
     r0, r1, c0, c1 = _span(shape, region)
     img = np.zeros((r1 - r0, c1 - c0, 3))
-    r, c = shape[0] // 2, shape[1] // 2
-    if r0 <= r < r1 and c0 <= c < c1:
-        img[r - r0, c - c0] = 1.0
+    r, c = shape[0] // cells // 2 * cells, shape[1] // cells // 2 * cells
+    img[max(r - r0, 0):max(r + cells - r0, 0), max(c - c0, 0):max(c + cells - c0, 0)] = 1.0
     return img
 
 
@@ -358,6 +304,25 @@ def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MA
 
 
 # ------------------------------------------------------------------ resampling
+@functools.lru_cache(maxsize=32)
+def axis_weights(n_in: int, n_out: int) -> sp.csr_matrix:
+    """The weights that resample ``n_in`` pixels to ``n_out`` along one axis (:func:`resample`'s: area averages
+    down, linear interpolation up), made once for each pair of sizes: (n_out, n_in) CSR, read-only.
+
+    Parameters
+    ----------
+    n_in, n_out : int
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix
+    """
+    m = _axis_matrix(n_in, n_out)
+    for a in (m.data, m.indices, m.indptr):
+        a.setflags(write=False)
+    return m
+
+
 def _axis_matrix(n_in: int, n_out: int) -> sp.csr_matrix:
     """(n_out, n_in) weights: area average when shrinking, linear interpolation when growing."""
     if n_out == n_in:
@@ -455,7 +420,7 @@ class Resampled:
         self.img = img
         self.shape = tuple(shape)
         #: the two axes' whole weights, made once for every region asked for
-        self.axes = (_axis_matrix(img.shape[0], self.shape[0]), _axis_matrix(img.shape[1], self.shape[1]))
+        self.axes = (axis_weights(img.shape[0], self.shape[0]), axis_weights(img.shape[1], self.shape[1]))
 
     def __call__(self, region=None) -> np.ndarray:
         """:func:`resample` of the picture: (rows, cols, 3) float64, the region's size (None: the whole)."""
@@ -646,8 +611,8 @@ def builtin_name(source: str) -> str | None:
     """
     low = str(source).strip().lower()
     head = low.partition(":")[0]
-    if head in ("flat", "steps", "edge", "greys") or (low == head and low in ("photo", "ramp", "colorchecker",
-                                                                                  "zoneplate", "siemens", "spot")):
+    if head in ("flat", "steps", "edge", "greys", "zoneplate") or (low == head and low in (
+            "photo", "ramp", "colorchecker", "siemens", "spot")):
         return head
     return None
 
@@ -705,7 +670,7 @@ def render(source: str, shape: tuple[int, int], scale: float | None = None, fit:
 
 def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop",
             window: tuple[int, int] | None = None, source_size: tuple[int, int] | None = None, light=None,
-            raw: tuple | None = None):
+            raw: tuple | None = None, cells: int = 1):
     """:func:`render` in two steps: the source read (an image file decoded, cropped; a built-in's name checked)
     once, then any region rendered from it. What a sensor made in tiles uses, so that a picture is decoded once,
     not once a tile.
@@ -716,11 +681,16 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
         As :func:`render` takes them.
     raw : (raw_cfa, raw_black_dn, raw_white_dn), optional
         ``scene``'s keys for a ``.npy`` mosaic (a camera raw carries its own).
+    cells : int
+        The optical image's fine cells per pixel along each axis (:mod:`.focal_plane`): the scene is drawn on a
+        grid ``cells`` times finer than ``shape``, regions in its cells (a picture resampled from its own
+        pixels to it, a chart drawn there: the edge's exact area shares, the zone plate's area integrals).
 
     Returns
     -------
     callable
-        ``region -> (rows, cols, 3) float64 array``: :func:`render`'s result for that region (None: the whole).
+        ``region -> (rows, cols, 3) float64 array``: :func:`render`'s result for that region (None: the whole),
+        a :class:`Resampled` picture or a chart's drawing function.
 
     Examples
     --------
@@ -731,11 +701,16 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     ((10, 15, 3), True)
     """
     if isinstance(source, str) and not is_builtin(source) and raw_scene.is_raw(source, (raw or (None,))[0]):
+        if cells != 1:
+            raise CmosnoiseError(f"scene {source!r} is a raw photograph, already sampled by its camera's pixels: "
+                                 f"set optics.oversample to 1 (or auto) for it, not {cells}")
         return RawDraw(raw_scene.read(source, *(raw or ())), tuple(window or (0, 0)), tuple(shape))
     if window is None:
-        return _fitted(source, shape, scale, fit, light)
+        return _fitted(source, shape, scale, fit, light, cells)
     img = source_image(source, source_size or shape, scale, fit, light)
     _check_window(img.shape, window, shape)  # the whole window must lie in the source (checked, not copied)
+    if cells != 1:  # the window's own pixels, the sensor's, resampled to the fine grid
+        return Resampled(window_of(img, tuple(window), tuple(shape)), (shape[0] * cells, shape[1] * cells))
 
     def draw(region=None):
         r0, r1, c0, c1 = _span(shape, region)
@@ -744,7 +719,7 @@ def prepare(source: str, shape: tuple[int, int], scale: float | None = None, fit
     return draw
 
 
-def prepare_configured(source: str, shape: tuple[int, int], section, light=None):
+def prepare_configured(source: str, shape: tuple[int, int], section, light=None, cells: int = 1):
     """:func:`prepare` with a configuration's ``scene`` section's settings (its scale, fit, window, source size and
     a ``.npy`` mosaic's raw keys): what a sensor and a tiling draw from.
 
@@ -758,6 +733,8 @@ def prepare_configured(source: str, shape: tuple[int, int], section, light=None)
         ``config.scene``.
     light : cmosnoise.model.light.ChannelLight, optional
         Light in lux.
+    cells : int
+        The optical image's fine cells per pixel.
 
     Returns
     -------
@@ -765,7 +742,7 @@ def prepare_configured(source: str, shape: tuple[int, int], section, light=None)
         As :func:`prepare`.
     """
     return prepare(source, shape, section.scale, section.fit, section.window, section.source_size, light,
-                   (section.raw_cfa, section.raw_black_dn, section.raw_white_dn))
+                   (section.raw_cfa, section.raw_black_dn, section.raw_white_dn), cells)
 
 
 def source_image(source: str, size: tuple[int, int], scale: float | None = None, fit: str = "crop",
@@ -888,19 +865,22 @@ def mixed(rgb: np.ndarray, light=None) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(rgb, np.float64) @ light.mix.T)
 
 
-def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop", light=None):
-    """The source at ``shape``, prepared: a function of a region (None: the whole) that draws it there."""
+def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit: str = "crop", light=None,
+            cells: int = 1):
+    """The source at ``shape`` (pixels) on a grid ``cells`` times finer, prepared: a function of a region (fine
+    cells; None: the whole) that draws it there."""
     if not isinstance(source, str) or not source:
         raise CmosnoiseError(f"scene.source = {source!r}: give a built-in ({', '.join(BUILTINS)}) or an image path")
     name = source.strip()
     low = name.lower()
+    fine = (shape[0] * cells, shape[1] * cells)
     if light is not None and low == "colorchecker":  # the patches' reflectance spectra under the light
         from . import light as light_mod
 
         wl, refl = light_mod.colorchecker_reflectances()
         values = light.reflectance_channels(refl, wl)
         surround = float(srgb_to_linear(np.array(charts.SURROUND_SRGB8 / 255.0)))
-        return lambda region=None: colorchecker(shape, region, values, surround)
+        return lambda region=None: colorchecker(fine, region, values, surround)
     if not is_builtin(name) or low == "photo":
         if low == "photo":
             img = load_file(bundled_photo_path())
@@ -908,15 +888,16 @@ def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit
             img = load_file(name, scale)
         if fit == "crop":
             img = crop_to_aspect(img, shape)
-        return Resampled(mixed(img, light), shape)
-    draw = _builtin(name, shape)
+        return Resampled(mixed(img, light), fine)
+    draw = _builtin(name, fine, cells)
     if light is None:
         return draw
     return lambda region=None: mixed(draw(region), light)
 
 
-def _builtin(name: str, shape: tuple[int, int]):
-    """A built-in scene other than the photo, prepared: a function of a region that draws it."""
+def _builtin(name: str, shape: tuple[int, int], cells: int = 1):
+    """A built-in scene other than the photo, prepared: a function of a region that draws it (``shape`` and the
+    regions in cells, ``cells`` to a pixel)."""
     low = name.lower()
     if low.startswith("flat:") or low == "flat":
         text = name.partition(":")[2]
@@ -934,12 +915,13 @@ def _builtin(name: str, shape: tuple[int, int]):
         return lambda region=None: ramp(shape, region)
     if low == "colorchecker":
         return lambda region=None: colorchecker(shape, region)
-    if low == "zoneplate":
-        return lambda region=None: zoneplate(shape, region)
+    if low.startswith("zoneplate"):
+        edge_f = zoneplate_frequency(low)
+        return lambda region=None: charts.zoneplate(shape, region, edge_f, cells)
     if low == "siemens":
-        return lambda region=None: siemens(shape, region=region)
+        return lambda region=None: charts.siemens(shape, region=region)
     if low == "spot":
-        return lambda region=None: spot(shape, region)
+        return lambda region=None: spot(shape, region, cells)
     if low.startswith("edge"):
         angle, lo, hi = charts.edge_parameters(low)
         return lambda region=None: charts.edge(shape, angle, lo, hi, region)
@@ -950,6 +932,32 @@ def _builtin(name: str, shape: tuple[int, int]):
     if not text.isdigit() or not 1 <= int(text) <= 16:
         raise CmosnoiseError(f"scene 'steps:{text}': N must be a whole number of bands from 1 to 16")
     return lambda region=None: steps(shape, int(text), region)
+
+
+def zoneplate_frequency(text: str) -> float:
+    """``zoneplate[:F]`` read: F, the local frequency at the shorter edge's middle (cycles per pixel, 0.5 by
+    default, more than 0 and at most 4), or a one-line error.
+
+    Parameters
+    ----------
+    text : str
+        The scene's name.
+
+    Returns
+    -------
+    float
+    """
+    part = text.partition(":")[2].strip()
+    if not part:
+        return charts.ZONEPLATE_EDGE_CY_PER_PX
+    try:
+        f = float(part)
+    except ValueError:
+        f = float("nan")
+    if not (0 < f <= 4):
+        raise CmosnoiseError(f"scene {text!r}: give zoneplate or zoneplate:F, F the frequency at the middle of the "
+                             "shorter edge in cycles per pixel, more than 0 and at most 4 (0.5: Nyquist)")
+    return f
 
 
 def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:

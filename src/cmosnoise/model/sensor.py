@@ -400,11 +400,11 @@ class Sensor:
         at the sensor's size (the window's, for a window); default: the configuration's scene.
         """
         c = self.config
+        fp = self.spec.focal_plane
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            draw = scene_mod.prepare_configured(scene, self.shape, c.scene, self.spec.light)
-            return optics_mod.cfa_signal(draw, c, self.cfa, self.spec.channel_responsivity, self.shape, self.window)
+            return fp.pixel_signal(fp.prepare(scene, c.scene), self.cfa, self.window)
         try:
             given = np.asarray(scene)
             if given.dtype.kind not in "uifb":  # complex, object, text: not light levels (a cast would drop parts)
@@ -422,20 +422,19 @@ class Sensor:
         if bad.any() or (rgb < 0).any():
             what = f"{int(bad.sum())} NaN or infinite" if bad.any() else f"{int((rgb < 0).sum())} negative"
             raise CmosnoiseError(f"scene array has {what} values; a scene is finite light levels >= 0")
-        if rgb.ndim == 2:
-            return rgb
+        if rgb.ndim == 2:  # a CFA signal relative to the peak rate, in the focal plane's unit
+            return rgb if fp.unit_e_per_s == fp.peak_rate_e_per_s else rgb * (fp.peak_rate_e_per_s / fp.unit_e_per_s)
         if rgb.shape[2] == 1:
             rgb = np.repeat(rgb, 3, axis=2)
         rgb = scene_mod.mixed(rgb, self.spec.light)
-        if optics_mod.active(c):
-            if self.window is not None:
-                raise CmosnoiseError("scene array: with optics.psf or optics.relative_illumination on, give a sensor "
-                                     "of the whole array the scene (the lens acts across the whole picture), or a "
-                                     "CFA signal (rows, cols) already through it")
-            return optics_mod.cfa_signal(lambda region=None: rgb if region is None else rgb[region[0]:region[1],
-                                                                                             region[2]:region[3]],
-                                         c, self.cfa, self.spec.channel_responsivity, self.shape)
-        return scene_mod.to_cfa(rgb, self.cfa, self.spec.channel_responsivity)
+        if fp.trivial and not optics_mod.active(c):
+            return scene_mod.to_cfa(rgb, self.cfa, tuple(fp.cfa_gain))
+        if self.window is not None:
+            raise CmosnoiseError("scene array: with a lens (optics.psf, optics.relative_illumination, optics.olpf) or "
+                                 "an optical image finer than the pixels, give a sensor of the whole array the scene "
+                                 "(the lens acts across the whole picture), or a CFA signal (rows, cols) already "
+                                 "through it")
+        return fp.pixel_signal(fp.picture(rgb), self.cfa)
 
     def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> Exposure:
         """Mean charge of ``scene`` at the configured exposure and temperature.
@@ -454,8 +453,9 @@ class Sensor:
                         c.scene.fit, c.scene.window, c.scene.source_size)
         if c.scene.raw_cfa is not None:
             signal_parts += (c.scene.raw_cfa, c.scene.raw_black_dn, c.scene.raw_white_dn)
-        if c.light.enabled or optics_mod.active(c):  # what the light and the lens make of it (absent: the same keys)
-            signal_parts += (c.light, c.optics, c.sensor.pixel_pitch_um, c.sensor.quantum_efficiency)
+        fp = self.spec.focal_plane
+        if c.light.enabled or not fp.trivial or optics_mod.active(c):  # the optical image (absent: the same keys)
+            signal_parts += (fp.key,)
         signal = self.cache.get("signal", signal_parts, lambda: self.scene_signal(scene))
         return Exposure(self, signal, sequence, signal_parts)
 
@@ -510,13 +510,13 @@ class Exposure:
         on_mean = sensor.spec.nonlinearity_on("mean")
 
         def photo():
-            perfect = scene_mod.photo_electrons(signal, sensor.spec.peak_rate_e_per_s, ex.integration_time_s)
+            perfect = scene_mod.photo_electrons(signal, sensor.spec.signal_unit_e_per_s, ex.integration_time_s)
             after_prnu, mean = sensor.photo_response(perfect)
             if on_mean is not None:  # stage 5b on the mean photo-charge: the collection saturates, the shot noise follows
                 mean = on_mean.apply(mean)
             return perfect, after_prnu, mean.astype(np.float32)
 
-        photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.window, sensor.spec.peak_rate_e_per_s, ex.integration_time_s,
+        photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.window, sensor.spec.signal_unit_e_per_s, ex.integration_time_s,
                        deps["prnu_gain"], c.crosstalk, c.nonlinearity if on_mean is not None else None)
         if c.crosstalk.kernel_at_angle_pct is not None:  # the lean reads the chief-ray angle
             photo_parts += (c.optics, c.sensor.pixel_pitch_um)

@@ -27,6 +27,7 @@ import numpy as np
 from ..config import Config, merge_updates
 from . import light as light_mod
 from . import physics
+from .focal_plane import FocalPlane, focal_plane
 from .heavy_tail import HeavyTail
 from .stages import adc
 from .stages.dark_current import Point
@@ -132,35 +133,39 @@ class SensorSpec:
         return float(np.sqrt(rn.sigma_e**2 + (rn.sigma_dn / self.transfer.gain_dn_per_e) ** 2))
 
     @property
+    def focal_plane(self) -> FocalPlane:
+        """The optical image of this configuration's light, lens and pixel (:func:`.focal_plane.focal_plane`, made
+        once per light and lens): what every scene is drawn into and each pixel integrates."""
+        return focal_plane(self.config)
+
+    @property
     def peak_rate_e_per_s(self) -> float:
         """Photo-electrons per second per pixel at a scene value of 1: the configuration's, or its photons times
-        the quantum efficiency (the channels' mean; :attr:`channel_responsivity` carries their ratios)."""
-        if self.light is not None:
-            return float(self.light.rates_e_per_s.mean())
-        ex, q = self.config.exposure, self.config.sensor.qe_mean()
-        return ex.peak_rate_e_per_s if ex.peak_rate_photons_per_s is None else ex.peak_rate_photons_per_s * q
+        the quantum efficiency, or with light in lux the channels' mean (:attr:`channel_responsivity` carries their
+        ratios)."""
+        return self.focal_plane.peak_rate_e_per_s
+
+    @property
+    def signal_unit_e_per_s(self) -> float:
+        """The e-/s a scene signal of 1 stands for (:attr:`.focal_plane.FocalPlane.unit_e_per_s`): the peak rate,
+        or 1 with light in lux (the signal is then each pixel's rate)."""
+        return self.focal_plane.unit_e_per_s
 
     @property
     def light(self) -> light_mod.ChannelLight | None:
-        """The light in lux at the pixels, per channel (:func:`.light.channel_light`, made once per light and
-        lens), or None where the light is ``exposure``'s peak rate."""
-        return light_mod.channel_light(self.config) if self.config.light.enabled else None
+        """The light in lux at the pixels, per channel (made once per light and lens), or None where the light is
+        ``exposure``'s peak rate."""
+        return self.focal_plane.light if self.config.light.enabled else None
 
     @property
     def channel_responsivity(self) -> tuple[float, float, float]:
         """Relative R, G, B responsivity: the filters', times each channel's quantum efficiency over their mean
         when light is given in photons with a QE per channel, or each channel's rate over their mean with light
         in lux."""
-        sen = self.config.sensor
-        r = tuple(sen.channel_responsivity)
-        if self.light is not None:  # each channel's rate over their mean, times the filters' given ratios
-            rates = self.light.rates_e_per_s
-            return tuple(float(ri * qi / rates.mean()) for ri, qi in zip(r, rates))
-        q = sen.quantum_efficiency
-        if self.config.exposure.peak_rate_photons_per_s is None or q is None or isinstance(q, (int, float)):
-            return r
-        m = sen.qe_mean()
-        return tuple(ri * qi / m for ri, qi in zip(r, q))
+        fp = self.focal_plane
+        if fp.light is None:
+            return tuple(float(v) for v in fp.cfa_gain)
+        return fp.responsivity
 
     @property
     def white_dn(self) -> float:

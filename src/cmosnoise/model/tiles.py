@@ -28,7 +28,6 @@ import numpy as np
 
 from ..config import Config
 from ..errors import CmosnoiseError
-from . import optics as optics_mod
 from . import scene as scene_mod
 from .fixed_pattern import FixedPattern
 from .sensor import Exposure, Sensor, as_spec
@@ -187,7 +186,7 @@ class Tiling:
         self._source = source
         self._picture = None
         if scene_mod.builtin_name(source) in (None, "photo") or c.scene.window is not None:
-            self._picture = scene_mod.prepare_configured(source, self.spec.shape, c.scene, self.spec.light)
+            self._picture = self.spec.focal_plane.prepare(source, c.scene)
 
     @property
     def populations(self) -> FixedPattern | None:
@@ -244,9 +243,8 @@ class Tiling:
         if self._picture is None:
             return sensor.expose(self._source, sequence=self.sequence)
         # the lens's blocks are fixed to the whole sensor: the tile's signal is that crop of the whole
-        signal = optics_mod.cfa_signal(self._picture, self.spec.config, sensor.cfa, self.spec.channel_responsivity,
-                                       self.spec.shape, window)
-        return sensor.expose(signal, sequence=self.sequence)
+        signal = self.spec.focal_plane.pixel_signal(self._picture, sensor.cfa, window)
+        return Exposure(sensor, signal, self.sequence)
 
     def frames(self, region: tuple[int, int, int, int], n: int, first: int = 0,
                electrons: bool = False) -> Iterator[np.ndarray | tuple[np.ndarray, np.ndarray]]:
