@@ -25,9 +25,16 @@ the kernel; the frames after it cost what they cost without it. Each is the fast
   leaning crosstalk.
 
 colour-science's import (about a second, once a process; the light's integral needs it) is timed apart from the
-integral itself.
+optical image's set-up (the light's integral, the PSF on the fine grid and its separable terms, made once per
+light and lens).
 
-    python benchmarks/bench_optics.py [--megapixels 12] [--repeats 5] [--json FILE]
+**The optical image's fine grid** (#73): with light in lux (the spectral QE), the diffraction PSF at f/2.8 and at
+f/8 at ``optics.oversample`` auto and 1 to 4, each exposure against the same light without a PSF, in frames'
+worth (the issue's bound: 3 at auto). And the memory an exposure takes at ``--memory-megapixels`` (50) with the
+PSF at f/2.8 at auto (its k = 3): the peak of what NumPy allocates (tracemalloc) while the scene's signal is made,
+and the whole exposure's, against the same without the PSF.
+
+    python benchmarks/bench_optics.py [--megapixels 12] [--repeats 5] [--memory-megapixels 50] [--json FILE]
 """
 
 from __future__ import annotations
@@ -64,11 +71,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--megapixels", type=float, default=12.0)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--memory-megapixels", type=float, default=50.0)
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
     from cmosnoise import Sensor, colour_lib, load_config
-    from cmosnoise.model import light
+    from cmosnoise.model.focal_plane import focal_plane
 
     width = int(round(math.sqrt(args.megapixels * 1e6 * 4 / 3) / 2) * 2)
     height = int(round(width * 3 / 4 / 2) * 2)
@@ -80,7 +88,7 @@ def main(argv=None) -> int:
     colour_lib.colour()  # its import, once a process
     imported = time.perf_counter() - t0
     t0 = time.perf_counter()
-    light.channel_light(lens_config)
+    focal_plane(lens_config)
     integral = time.perf_counter() - t0
     lens = Sensor(lens_config, seed=1)
     shot, lens_shot = plain.expose("photo"), lens.expose("photo")
@@ -94,7 +102,7 @@ def main(argv=None) -> int:
         "exposure_lens_s": fastest(lambda: lens.expose("photo"), args.repeats),
         "frame_lens_s": fastest(lambda: lens_shot.frame(1), args.repeats),
         "frame_same_charge_s": fastest(lambda: same.frame(1), args.repeats),
-        "light_integral_s": integral,
+        "focal_plane_setup_s": integral,
         "colour_import_s": imported,
     }
     res["optics_frames_worth"] = (res["exposure_lens_s"] - res["exposure_s"]) / res["frame_s"]
@@ -114,13 +122,62 @@ def main(argv=None) -> int:
           f"({res['optics_spectral_frames_worth']:.2f} frames' worth), with the whole lens "
           f"{res['exposure_lens_s'] * 1e3:.0f} ms ({res['optics_frames_worth']:.2f}); a frame with them "
           f"{res['frame_lens_s'] * 1e3:.0f} ms (of the same charge without the lens "
-          f"{res['frame_same_charge_s'] * 1e3:.0f} ms); the light's integral {res['light_integral_s'] * 1e3:.0f} ms "
-          f"once (colour-science's import before it {res['colour_import_s'] * 1e3:.0f} ms)")
+          f"{res['frame_same_charge_s'] * 1e3:.0f} ms); the optical image's set-up "
+          f"{res['focal_plane_setup_s'] * 1e3:.0f} ms once (colour-science's import before it "
+          f"{res['colour_import_s'] * 1e3:.0f} ms)")
     print("  each part alone, frames' worth: " + ", ".join(f"{k} {v:.2f}" for k, v in res["parts_frames_worth"].items()))
+    # the fine grid: the diffraction PSF at f/2.8 and f/8, k auto and 1 to 4, against the same light alone
+    lit = Sensor(load_config(overrides=size + LENS[:4]), seed=1)
+    lit.expose("photo")
+    lit_s = fastest(lambda: lit.expose("photo"), args.repeats)
+    res["exposure_light_s"] = lit_s
+    res["oversample"] = {}
+    for f_number in (2.8, 8.0):
+        rows = {}
+        for k in ("auto", 1, 2, 3, 4):
+            s = Sensor(load_config(overrides=size + LENS[:4] + ["optics.psf=diffraction", f"optics.f_number={f_number}",
+                                                               f"optics.oversample={k}"]), seed=1)
+            s.expose("photo")
+            rows[str(k)] = {"k": s.spec.focal_plane.k,
+                            "frames_worth": (fastest(lambda s=s: s.expose("photo"), args.repeats) - lit_s)
+                            / res["frame_s"]}
+        res["oversample"][f"f/{f_number:g}"] = rows
+        print(f"  f/{f_number:g}, frames' worth: " + ", ".join(
+            f"{k} (k = {v['k']}) {v['frames_worth']:.2f}" for k, v in rows.items()))
+    res["memory"] = memory(args.memory_megapixels)
+    m = res["memory"]
+    print(f"  {m['megapixels']:.0f} MP, f/2.8 (k = {m['k']}): the signal's peak {m['signal_mb']:.0f} MB "
+          f"({m['signal_plain_mb']:.0f} MB without the PSF), the exposure's {m['exposure_mb']:.0f} MB "
+          f"({m['exposure_plain_mb']:.0f} MB)")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(res, f, indent=2)
     return 0
+
+
+def memory(megapixels: float) -> dict:
+    """The peak of NumPy's allocations (tracemalloc) while a sensor of ``megapixels`` makes the photo's signal and its
+    whole exposure, with light in lux and the diffraction PSF at f/2.8 (auto) and without the PSF, MB."""
+    import tracemalloc
+
+    from cmosnoise import Sensor, load_config
+
+    width = int(round(math.sqrt(megapixels * 1e6 * 3 / 2) / 2) * 2)
+    height = int(round(width * 2 / 3 / 2) * 2)
+    size = [f"sensor.width={width}", f"sensor.height={height}"]
+    out = {"megapixels": width * height / 1e6, "size": [height, width]}
+    for name, extra in (("", ["optics.psf=diffraction", "optics.f_number=2.8"]), ("_plain", [])):
+        sensor = Sensor(load_config(overrides=size + LENS[:4] + extra), seed=1)
+        out.setdefault("k", sensor.spec.focal_plane.k)
+        for what, fn in (("signal", lambda s=sensor: s.scene_signal("photo")),
+                         ("exposure", lambda s=sensor: s.expose("photo"))):
+            tracemalloc.start()
+            result = fn()
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+            del result
+            out[f"{what}{name}_mb"] = peak / 1e6
+    return out
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@ page under docs/). Data live in ``docs/numbers/NAME.json``.
     python docs/readme_numbers.py render               # rewrite the pages' blocks from the JSON
     python docs/readme_numbers.py check                # exit 1 if a page and its JSON disagree
     python docs/readme_numbers.py images               # the pages' pictures, into docs/img
-    python docs/readme_numbers.py images light         # the light page's two pictures alone
+    python docs/readme_numbers.py images light         # the light page's pictures alone
     python docs/readme_numbers.py images explore_quality  # the explorer's image-quality box alone
 
 ``speed`` and ``kernel_parts`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and
@@ -413,19 +413,100 @@ LENS_SETS = [*LIGHT_SETS, "optics.relative_illumination=cos4", "optics.focal_len
              "optics.angle_relative_qe=[[0, 1], [5, 0.97], [10, 0.9], [20, 0.7]]"]
 
 
+#: the optical image's MTF table (docs/model.md 2b): the issue's lenses, (pitch um, f-number), each at two fill factors
+MTF_LENSES = [(2.2, 2.8), (2.2, 4.0), (2.2, 8.0), (1.0, 2.8), (1.0, 4.0)]
+
+
+def compute_focal_plane_mtf() -> dict:
+    """A slanted edge through the diffraction PSF on a monochrome sensor of flat QE under D65 (every noise off),
+    measured by the e-SFR, against ``OTF(f) |sinc(a f)|`` written from the formulas (tests/test_focal_plane.py's
+    truth): MTF50 and the MTF at Nyquist, measured and true, at each lens and fill factor."""
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    import test_focal_plane as t
+
+    rows = []
+    for pitch, n in MTF_LENSES:
+        for ff in (1.0, 0.5):
+            sets = t.MONO_LIGHT + ["optics.psf=diffraction", f"optics.f_number={n}", f"sensor.pixel_pitch_um={pitch}",
+                                   f"light.fill_factor={ff}"]
+            r = t._edge_sfr(sets)
+            want = t._airy_mtf(r.frequency, pitch, n, ff)
+            from cmosnoise import load_config
+            from cmosnoise.model.focal_plane import focal_plane
+
+            rows.append({"pitch_um": pitch, "f_number": n, "fill_factor": ff,
+                         "k": focal_plane(load_config(overrides=t.QUIET + sets)).k,
+                         "mtf50": r.mtf50, "mtf50_true": t.sfr.mtf50(r.frequency, want),
+                         "nyquist": r.mtf_nyquist, "nyquist_true": float(np.interp(0.5, r.frequency, want))})
+    return {"rows": rows}
+
+
+def render_focal_plane_mtf(d: dict) -> str:
+    out = ["| pixel, f-number, fill factor | k | MTF50 (cy/px): measured, true, error | MTF at Nyquist: measured, "
+           "true, error |", "|---|---|---|---|"]
+    for r in d["rows"]:
+        out.append(f"| {r['pitch_um']:g} um, f/{r['f_number']:g}, {r['fill_factor']:g} | {r['k']} | "
+                   f"{r['mtf50']:.4f}, {r['mtf50_true']:.4f}, {100 * (r['mtf50'] / r['mtf50_true'] - 1):+.1f} % | "
+                   f"{r['nyquist']:.4f}, {r['nyquist_true']:.4f}, {r['nyquist'] - r['nyquist_true']:+.4f} |")
+    return "\n".join(out)
+
+
+def aliasing_picture(path: Path) -> None:
+    """The light page's zone plate to 1 cycle per pixel through an f/2 lens on 2.2 um pixels: a monochrome sensor
+    and a Bayer one (demosaiced, Malvar), each without and with a four-spot filter of one pixel's separation."""
+    import numpy as np
+
+    from cmosnoise import Sensor, load_config
+    from cmosnoise.app import plots
+    from cmosnoise.isp import reconstruction
+    from cmosnoise.model.encoding import linear_to_srgb
+
+    quiet = ["shot_noise.enabled=false", "source_follower.enabled=false", "row_noise.enabled=false",
+             "column_noise.enabled=false", "dark_current.enabled=false", "prnu.enabled=false",
+             "crosstalk.enabled=false", "adc.enabled=false", "sensor.width=360", "sensor.height=360",
+             "optics.psf=diffraction", "optics.f_number=2"]
+    fig, axes = plots.figure(1, 4, figsize=(15.6, 4.3))  # each panel at its own pixels (a resampled one would alias)
+    for ax, (cfa, olpf, title) in zip(axes, [("none", None, "monochrome"), ("none", 2.2, "monochrome, OLPF 1 px"),
+                                            ("RGGB", None, "Bayer, demosaiced"),
+                                            ("RGGB", 2.2, "Bayer, OLPF 1 px")]):
+        sets = quiet + [f"sensor.cfa={cfa}"] + ([f"optics.olpf={olpf}"] if olpf else [])
+        signal = Sensor(load_config(overrides=sets)).scene_signal("zoneplate:1").astype(np.float32)
+        rgb = np.repeat(signal[..., None], 3, axis=2) if cfa == "none" else \
+            reconstruction.demosaic(signal, cfa, "malvar2004")
+        ax.imshow(linear_to_srgb(np.clip(rgb, 0, 1)), interpolation="nearest")
+        ax.set_title(title, fontsize=10)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.subplots_adjust(left=0.005, right=0.995, top=0.93, bottom=0.005, wspace=0.02)
+    path.write_bytes(plots.to_png_bytes(fig, dpi=100))
+
+
 def render_optics_speed(d: dict) -> str:
     mp = f"{d['megapixels']:.0f} MP"
     rows = [f"{mp} ({d['size'][1]} x {d['size'][0]}), fastest of {d['repeats']}: a frame of the kernel "
             f"{d['frame_s'] * 1e3:.0f} ms; an exposure of the photo {d['exposure_s'] * 1e3:.0f} ms, with light in "
-            f"lux and the diffraction PSF {d['exposure_spectral_s'] * 1e3:.0f} ms "
-            f"(**{d['optics_spectral_frames_worth']:.1f} frames' worth**), with every part below "
+            f"lux and the diffraction PSF at f/2.8 {d['exposure_spectral_s'] * 1e3:.0f} ms "
+            f"({d['optics_spectral_frames_worth']:.1f} frames' worth), with every part below "
             f"{d['exposure_lens_s'] * 1e3:.0f} ms ({d['optics_frames_worth']:.1f} frames' worth); a frame "
             f"of that exposure {d['frame_lens_s'] * 1e3:.0f} ms, and a frame of the same charge without the lens "
-            f"{d['frame_same_charge_s'] * 1e3:.0f} ms; the light's spectral integral "
-            f"{d['light_integral_s'] * 1e3:.0f} ms, once per light (colour-science's import before it, once a "
-            f"process: {d['colour_import_s'] * 1e3:.0f} ms).", "",
-            "| part, alone | its cost on an exposure, frames' worth |", "|---|---|"]
+            f"{d['frame_same_charge_s'] * 1e3:.0f} ms; the optical image's set-up (the light's spectral integral, the "
+            f"PSF on the fine grid, its separable terms) {d['focal_plane_setup_s'] * 1e3:.0f} ms, once per light "
+            f"and lens (colour-science's import before it, once a process: {d['colour_import_s'] * 1e3:.0f} ms).",
+            "", "| part, alone | its cost on an exposure, frames' worth |", "|---|---|"]
     rows += [f"| {k} | {max(v, 0):.1f} |" for k, v in d["parts_frames_worth"].items()]
+    rows += ["", "The diffraction PSF on the optical image's fine grid, against the same light without it, frames' "
+             "worth:", "", "| lens | auto | k = 1 | k = 2 | k = 3 | k = 4 |", "|---|---|---|---|---|---|"]
+    for lens, r in d["oversample"].items():
+        rows.append(f"| {lens} | **{r['auto']['frames_worth']:.1f}** (k = {r['auto']['k']}) | "
+                    + " | ".join(f"{r[str(k)]['frames_worth']:.1f}" for k in (1, 2, 3, 4)) + " |")
+    m = d["memory"]
+    rows += ["", f"At {m['megapixels']:.0f} MP ({m['size'][1]} x {m['size'][0]}), f/2.8 (k = {m['k']}): the peak "
+             f"of NumPy's allocations while the photo's signal is made, {m['signal_mb']:.0f} MB "
+             f"({m['signal_plain_mb']:.0f} MB without the PSF; the signal itself, float64, is "
+             f"{m['megapixels'] * 8:.0f} MB); while the whole exposure is made, {m['exposure_mb']:.0f} MB "
+             f"({m['exposure_plain_mb']:.0f} MB)."]
     return "\n".join(rows)
 
 
@@ -871,6 +952,7 @@ SECTIONS = {
     "tile_speed": (None, render_tile_speed),
     "run_speed": (None, render_run_speed),
     "optics_speed": (None, render_optics_speed),
+    "focal_plane_mtf": (compute_focal_plane_mtf, render_focal_plane_mtf),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -894,7 +976,7 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "tile_speed": ["bench_tiles.py", "--sizes", "50,400", "--many", "4", "--runs", "3", "--json",
                              "tile_speed.json"],
               "run_speed": ["bench_run.py", "--megapixels", "50", "--json", "run_speed.json"],
-              "optics_speed": ["bench_optics.py", "--megapixels", "12", "--repeats", "9", "--json",
+              "optics_speed": ["bench_optics.py", "--megapixels", "12", "--repeats", "5", "--json",
                                "optics_speed.json"],
               "quality_speed": ["bench_quality.py", "--megapixels", "12", "--json", "quality_speed.json"]}
 SLOW = {"sweep_fig9"}
@@ -970,6 +1052,7 @@ def images() -> None:
         shutil.copyfile(f"{tmp}/c/photon_transfer.png", out / "photon_transfer.png")
         dataset_picture(*_dataset_sample(tmp), out / "dataset_sample.png")
     light_pictures(out)
+    aliasing_picture(out / "zoneplate_aliasing.png")
     explore_quality_picture(out / "explore_quality.png")
 
 
@@ -1032,8 +1115,9 @@ def main(argv: list[str]) -> int:
             print(f"measured {name}")
         return 0
     if cmd == "images":
-        if names == ["light"]:  # the light page's two pictures alone
+        if names == ["light"]:  # the light page's pictures alone
             light_pictures(ROOT / "docs" / "img")
+            aliasing_picture(ROOT / "docs" / "img" / "zoneplate_aliasing.png")
         elif names == ["explore_quality"]:  # the explorer's image-quality box alone
             explore_quality_picture(ROOT / "docs" / "img" / "explore_quality.png")
         else:

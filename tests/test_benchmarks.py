@@ -22,7 +22,7 @@ SMALLEST = {
     "bench_measured_stages.py": ["--frames", "2", "--repeats", "1"],
     "bench_telegraph.py": ["--frames", "2", "--repeats", "1"],
     "bench_run.py": ["--megapixels", "1", "--repeats", "1"],
-    "bench_optics.py": ["--megapixels", "0.1", "--repeats", "1"],
+    "bench_optics.py": ["--megapixels", "0.1", "--repeats", "1", "--memory-megapixels", "0.1"],
     "bench_quality.py": ["--megapixels", "0.1", "--repeats", "1"],
     "bench_setup.py": ["--sizes", "1", "--repeats", "1"],
     "bench_sweep.py": ["--instances", "2"],

@@ -14,6 +14,7 @@ from conftest import cli
 from cmosnoise import Sensor, load_config
 from cmosnoise.errors import CmosnoiseError
 from cmosnoise.model import light, scene
+from cmosnoise.model.focal_plane import axis_illuminance_lux, focal_plane
 from cmosnoise.model.spec import resolve
 
 #: every noise stage off, no ADC: the exposure's mean is the light alone
@@ -71,7 +72,7 @@ def test_the_sanity_figure_of_the_references_comes_out():
     # imaging-chain-references.md section 1: about 14 000 photons per lux-second per square micrometre (D65), so an
     # 18 % grey card at 100 lux, f/2.8, 30 ms on a 2.2 um pixel receives about 1 150 photons
     c = _config("light.illuminance_lux=100", "sensor.quantum_efficiency=1", "optics.transmittance=1")
-    photons = light.channel_light(c).rates_e_per_s[1] * 0.03 * 0.18
+    photons = focal_plane(c).white_e_per_s[1] * 0.03 * 0.18
     assert photons == pytest.approx(1150, rel=0.02)
 
 
@@ -80,7 +81,7 @@ def test_the_sanity_figure_of_the_references_comes_out():
 def test_the_focal_plane_exposure_is_colour_hdris(f_number, seconds, magnification, luminance):
     c = _config(f"light.luminance_cd_m2={luminance}", f"optics.f_number={f_number}",
                 f"optics.magnification={magnification}", "sensor.quantum_efficiency=0.5")
-    ours = light.focal_plane_illuminance_lux(c) * seconds
+    ours = axis_illuminance_lux(c) * seconds
     focal = 0.05  # the thin lens: the image distance is f (1 + m)
     theirs = colour_hdri.focal_plane_exposure(luminance, f_number, seconds, focal, focal * (1 + magnification), 0.0,
                                               T=0.9, f_v=1.0, theta=0.0)
@@ -90,18 +91,18 @@ def test_the_focal_plane_exposure_is_colour_hdris(f_number, seconds, magnificati
 def test_the_non_paraxial_equation_is_isetcams():
     c = _config("light.illuminance_lux=100", "optics.f_number=2", "optics.camera_equation=non_paraxial",
                 "sensor.quantum_efficiency=0.5")
-    assert light.focal_plane_illuminance_lux(c) == pytest.approx(np.pi * (100 / np.pi) * 0.9 / (1 + 4 * 2**2), rel=1e-12)
+    assert axis_illuminance_lux(c) == pytest.approx(np.pi * (100 / np.pi) * 0.9 / (1 + 4 * 2**2), rel=1e-12)
 
 
 def test_a_grey_through_the_spectral_path_is_the_rgb_path_with_the_integrated_responsivities():
     c = _config("light.illuminance_lux=20", "light.spectral_qe=Nikon 5100 (NPL)", "light.qe_peak=0.55",
                 "light.illuminant=FL2", "sensor.width=64", "sensor.height=48")
     spec = resolve(c)
-    rates = spec.light.rates_e_per_s
+    rates = spec.focal_plane.white_e_per_s
     assert spec.channel_responsivity == pytest.approx(tuple(rates / rates.mean()), rel=1e-15)
     sensor = Sensor(c)
-    spectral = sensor.scene_signal("flat:0.3")
-    rgb = scene.to_cfa(np.full((48, 64, 3), 0.3), "RGGB", spec.channel_responsivity)
+    spectral = sensor.scene_signal("flat:0.3")  # each pixel's rate, e-/s (the focal plane's unit with light in lux)
+    rgb = scene.to_cfa(np.full((48, 64, 3), 0.3), "RGGB", rates)
     assert np.allclose(spectral, rgb, rtol=4e-16, atol=0)
     # and in electrons: 0.3 of each channel's rate for the integration time
     e = sensor.expose("flat:0.3").photo_mean_e
@@ -176,7 +177,7 @@ def test_an_illuminant_and_a_qe_from_csv_files(tmp_path):
     (tmp_path / "qe.csv").write_text("# wavelength, QE\n380 0.5\n780 0.5\n")
     c = _config("light.illuminance_lux=10", f"light.illuminant={tmp_path / 'flat.csv'}",
                 f"light.spectral_qe={tmp_path / 'qe.csv'}")
-    li = light.channel_light(c)
+    li = focal_plane(c).light
     assert li.rates_e_per_s[0] == li.rates_e_per_s[2] and np.allclose(li.mix, li.mix[0])
     e = light.illuminant_spectrum("E")  # the equal-energy illuminant closes the same way
     assert np.allclose(e[1], e[1][0])
@@ -186,7 +187,7 @@ def test_light_leaves_numpys_print_options_as_they_were():
     # colour-science's import sets numpy's legacy printing (12 digits) for the whole process; a CSV written after a
     # light run lost digits through it. cmosnoise.colour_lib puts the options back.
     before = np.get_printoptions()
-    light.channel_light(_config("light.illuminance_lux=3", "sensor.quantum_efficiency=0.4"))
+    focal_plane(_config("light.illuminance_lux=3", "sensor.quantum_efficiency=0.4"))
     from cmosnoise.isp import reconstruction
 
     reconstruction.demosaic(np.ones((8, 8), np.float32), "RGGB", "malvar2004")
@@ -203,10 +204,10 @@ def test_characterize_reports_its_light_axis_in_lux_seconds(tmp_path):
     assert r.returncode == 0, r.stderr
     data = json.loads((tmp_path / "c" / "characterization.json").read_text())
     h = np.asarray(data["series"]["focal_plane_lux_s"])
-    li = light.channel_light(load_config(overrides=sets))
-    # a white at this light gives rates.mean() e-/s at li.focal_plane_lux lux: each step's electrons over that ratio
+    fp = focal_plane(load_config(overrides=sets))
+    # a white at this light gives its peak rate at fp.focal_plane_lux lux: each step's electrons over that ratio
     electrons = np.asarray(data["series"]["mu_p"]) * 0.5
-    assert np.allclose(h, electrons * li.focal_plane_lux / li.rates_e_per_s.mean(), rtol=1e-12)
+    assert np.allclose(h, electrons * fp.focal_plane_lux / fp.peak_rate_e_per_s, rtol=1e-12)
     assert (np.diff(h) > 0).all() and data["light"]["illuminant"] == "D65"
 
 
@@ -219,7 +220,7 @@ def test_a_run_with_light_says_what_a_white_gives(tmp_path):
     assert r.returncode == 0, r.stderr
     got = json.loads((tmp_path / "run" / "summary.json").read_text())["light"]
     c = load_config(tmp_path / "run" / "config.yaml")
-    li = light.channel_light(c)
+    fp = focal_plane(c)
     assert got["illuminance_lux"] == 50 and got["illuminant"] == "D65" and got["f_number"] == 2.8
-    assert got["focal_plane_lux"] == pytest.approx(light.focal_plane_illuminance_lux(c), rel=1e-12)
-    assert got["white_e"] == pytest.approx(list(li.rates_e_per_s * 0.03), rel=1e-12)
+    assert got["focal_plane_lux"] == pytest.approx(axis_illuminance_lux(c), rel=1e-12)
+    assert got["white_e"] == pytest.approx(list(fp.white_e_per_s * 0.03), rel=1e-12)

@@ -1,24 +1,23 @@
-"""The lens (#60): PSFs that sum to 1 and put the Airy ring where diffraction does, a blur whose tiles are the
-whole's crop bit for bit (a 50 MP sensor's included), relative illumination against its law and its SNR, and the
-test charts with their truth."""
-
-import math
+"""The lens (#60, #73): PSFs on the optical image's fine grid that sum to 1 and put the Airy ring where diffraction
+does, an optical image whose pixels are its integral over each aperture and whose tiles are the whole's crop bit
+for bit (a 50 MP sensor's included), relative illumination against its law and its SNR, and the test charts with
+their truth."""
 
 import numpy as np
 import pytest
-from scipy.fft import next_fast_len
 from scipy.special import jn_zeros
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.errors import CmosnoiseError
-from cmosnoise.model import charts, optics, scene, tiles
+from cmosnoise.model import cfa, charts, optics, scene, tiles
+from cmosnoise.model.focal_plane import TERM_TOLERANCE, focal_plane
 
 QUIET = ["shot_noise.enabled=false", "source_follower.enabled=false", "row_noise.enabled=false",
          "column_noise.enabled=false", "dark_current.enabled=false", "prnu.enabled=false",
          "crosstalk.enabled=false", "adc.enabled=false"]
 
 
-# ------------------------------------------------------------------ PSFs
+# ------------------------------------------------------------------ PSFs on the fine grid
 @pytest.mark.parametrize("wavelength_um, f_number", [(0.55, 2.8), (0.45, 8.0), (0.7, 1.4)])
 def test_the_airy_patterns_first_dark_ring_is_at_1_22_lambda_n(wavelength_um, f_number):
     ring = 1.22 * wavelength_um * f_number
@@ -28,225 +27,186 @@ def test_the_airy_patterns_first_dark_ring_is_at_1_22_lambda_n(wavelength_um, f_
     assert first_min == pytest.approx(exact, abs=1e-5 * ring) and first_min == pytest.approx(ring, rel=0.001)
 
 
+def test_the_encircled_energy_is_the_patterns_own_integral_and_its_otf_is_goodmans():
+    # Rayleigh's closed form against the pattern integrated numerically (2 pi r dr over 4 (l N)^2 / pi), at the
+    # first three dark rings (83.8, 91.0 and 93.8 % of the light, Born and Wolf 8.5.2) and at 40 rings; and the
+    # OTF's two ends: 1 at 0, 0 from the cut-off 1 / (lambda N) on
+    from scipy.integrate import quad
+
+    lam, n = 0.55, 4.0
+    for r_um, want in [(z * lam * n / np.pi, w) for z, w in zip(jn_zeros(1, 3), (0.838, 0.910, 0.938))]:
+        got = float(optics.encircled_energy(r_um, [lam], [1.0], n))
+        assert got == pytest.approx(want, abs=1e-3)
+        integral = quad(lambda r: 2 * np.pi * r * optics.airy(r, lam, n), 0, r_um, limit=200)[0]
+        assert got == pytest.approx(integral / (4 * (lam * n) ** 2 / np.pi), rel=1e-7)
+    assert float(optics.diffraction_otf(0.0, [lam], [1.0], n)) == 1.0
+    assert float(optics.diffraction_otf(1 / (lam * n), [lam], [1.0], n)) == 0.0
+
+
 @pytest.mark.parametrize("psf, extra", [("gaussian", ["optics.psf_sigma_px=0.3"]), ("gaussian", ["optics.psf_sigma_px=3"]),
                                         ("diffraction", ["optics.f_number=1.4"]), ("diffraction", ["optics.f_number=16"]),
                                         ("diffraction", ["optics.f_number=4", "light.enabled=true",
                                                          "light.illuminance_lux=10", "sensor.quantum_efficiency=0.5"])])
-def test_every_psf_kernel_sums_to_one_is_odd_and_centred(psf, extra):
-    k = optics.psf_kernels(load_config(overrides=[f"optics.psf={psf}"] + extra))
-    assert k.shape[0] == 3 and k.shape[1] == k.shape[2] and k.shape[1] % 2 == 1
-    assert np.allclose(k.sum(axis=(1, 2)), 1.0, rtol=0, atol=1e-12) and (k >= 0).all()
+def test_every_psf_sums_to_one_is_odd_and_centred(psf, extra):
+    fp = focal_plane(load_config(overrides=[f"optics.psf={psf}"] + extra))
+    core = fp.psf.core
+    assert core.shape[0] == 3 and core.shape[1] == core.shape[2] and core.shape[1] % 2 == 1
+    # the core and the halo hold every electron
+    assert np.allclose(core.sum(axis=(1, 2)) + fp.psf.halo_share, 1.0, rtol=0, atol=1e-12) and (core >= 0).all()
     for ch in range(3):  # symmetric about its centre: the picture is not shifted
-        assert np.allclose(k[ch], k[ch][::-1, ::-1], atol=1e-15)
+        assert np.allclose(core[ch], core[ch][::-1, ::-1], atol=1e-15)
+        assert np.allclose(core[ch], core[ch].T, atol=1e-15)
+    if psf == "diffraction":  # the halo holds what the core's 95 % radius and its taper leave: 5 to 8 %
+        assert ((fp.psf.halo_share > 0.05) & (fp.psf.halo_share < 0.08)).all()
 
 
-def test_the_diffraction_kernels_widen_with_wavelength_and_f_number():
-    k = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=8"]))
-    centre = k.shape[1] // 2
-    assert k[0, centre, centre] < k[1, centre, centre] < k[2, centre, centre]  # red (610 nm) widest, blue narrowest
-    wide = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=16"]))
-    assert wide[1, wide.shape[1] // 2, wide.shape[1] // 2] < k[1, centre, centre]
+def test_the_diffraction_psf_widens_with_wavelength_and_f_number():
+    fp = focal_plane(load_config(overrides=["optics.psf=diffraction", "optics.f_number=8", "optics.oversample=2"]))
+    c = fp.psf.core.shape[1] // 2
+    core = fp.psf.core
+    assert core[0, c, c] < core[1, c, c] < core[2, c, c]  # red (610 nm) widest, blue narrowest
+    wide = focal_plane(load_config(overrides=["optics.psf=diffraction", "optics.f_number=16", "optics.oversample=2"]))
+    w = wide.psf.core.shape[1] // 2
+    assert wide.psf.core[1, w, w] < core[1, c, c]
 
 
-def test_the_gaussian_kernel_has_its_sigma():
-    k = optics.gaussian_kernel(1.7)
-    x = np.arange(k.shape[0]) - k.shape[0] // 2
-    line = k.sum(axis=0)
-    # the variance of the pixel-integrated Gaussian is sigma^2 + 1/12 (a uniform pixel added); the kernel ends at
-    # 5 sigma here (radius ceil(4 sigma) + 1), which drops 2e-5 of the variance
-    assert np.sum(line * x**2) == pytest.approx(1.7**2 + 1 / 12, rel=5e-5)
+def test_the_gaussian_psf_has_its_sigma():
+    # point-sampled on a grid of 1 / k pixel: by Poisson's summation its variance is sigma^2 up to
+    # exp(-2 pi^2 (sigma k)^2) (nothing here); cut at 4 sigma, a truncated normal's: sigma^2 (1 - 8 phi(4) /
+    # (2 Phi(4) - 1)), phi and Phi the standard normal's density and CDF
+    from scipy.stats import norm
+
+    sigma, k = 1.7, 2
+    core = optics.gaussian_psf(sigma, k).core[0]
+    x = (np.arange(core.shape[0]) - core.shape[0] // 2) / k
+    line = core.sum(axis=0)
+    want = sigma**2 * (1 - 8 * norm.pdf(4) / (2 * norm.cdf(4) - 1))
+    assert np.sum(line * x**2) == pytest.approx(want, rel=2e-3)  # the cut falls between samples: within 1/(4 sigma k)
 
 
-def test_a_psf_file_is_read_and_bad_ones_are_one_line(tmp_path):
-    good = np.zeros((5, 5))
-    good[2, 2], good[2, 3] = 3.0, 1.0
+def test_a_psf_file_is_binned_onto_the_fine_grid_and_bad_ones_are_one_line(tmp_path):
+    good = np.zeros((9, 9))
+    good[4, 4], good[4, 5] = 3.0, 1.0
     np.save(tmp_path / "psf.npy", good)
-    k = optics.psf_kernels(load_config(overrides=[f"optics.psf={tmp_path / 'psf.npy'}"]))
-    assert k[0, 2, 2] == 0.75 and k.sum() == pytest.approx(3.0)
+    fp = focal_plane(load_config(overrides=[f"optics.psf={tmp_path / 'psf.npy'}"]))
+    assert fp.k == 1 and fp.psf.core[0, 4, 4] == 0.75 and fp.psf.core.sum() == pytest.approx(3.0)
+    # sampled at a third of a 2.2 um pixel: each fine cell of k = 3 is one sample; of k = 1, three by three
+    third = [f"optics.psf={tmp_path / 'psf.npy'}", f"optics.psf_sampling_um={2.2 / 3}"]
+    assert focal_plane(load_config(overrides=third + ["optics.oversample=3"])).psf.core[0, 4, 4] == 0.75
+    binned = focal_plane(load_config(overrides=third + ["optics.oversample=1"])).psf.core[0]
+    assert binned.shape == (3, 3) and binned[1, 1] == 1.0  # nine samples in three cells: both in the centre one
+    with pytest.raises(CmosnoiseError, match="do not divide into the fine grid") as info:
+        focal_plane(load_config(overrides=[f"optics.psf={tmp_path / 'psf.npy'}", "optics.oversample=2"]))
+    assert "optics.oversample = 2" in str(info.value) and "\n" not in str(info.value)
     np.save(tmp_path / "cube.npy", np.ones((3, 3, 3)))
     nan = good.copy()
     nan[0, 0] = np.nan
     np.save(tmp_path / "nan.npy", nan)
-    for name, needle in [("cube.npy", "2-D"), ("nan.npy", "finite")]:
+    np.save(tmp_path / "huge.npy", np.full((9, 9), 1e308))  # a sum that overflows
+    np.save(tmp_path / "objects.npy", np.array([[1, None]], dtype=object), allow_pickle=True)
+    (tmp_path / "short.npy").write_bytes((tmp_path / "psf.npy").read_bytes()[:200])
+    for name, needle in [("cube.npy", "2-D"), ("nan.npy", "finite"), ("huge.npy", "sum to a finite"),
+                         ("objects.npy", "holds object"), ("short.npy", "truncated")]:
         with pytest.raises(CmosnoiseError, match=needle) as info:
-            optics.psf_kernels(load_config(overrides=[f"optics.psf={tmp_path / name}"]))
+            focal_plane(load_config(overrides=[f"optics.psf={tmp_path / name}"]))
         assert "optics.psf" in str(info.value) and "\n" not in str(info.value)
     with pytest.raises(CmosnoiseError, match="give none, diffraction, gaussian"):
-        optics.psf_kernels(load_config(overrides=["optics.psf=airy"]))
+        focal_plane(load_config(overrides=["optics.psf=airy"]))
 
 
-#: float32's unit roundoff
-U32 = np.finfo(np.float32).eps / 2
-
-
-def fft32_sigma(x_rms: float, n: int) -> float:
-    """The standard deviation of the rounding error of a float32 FFT convolution (forward transform, product with
-    the kernel's spectrum, inverse transform) of a signal of RMS ``x_rms`` over ``n`` points.
-
-    An FFT's RMS relative error grows as ``u sqrt(log2 n)`` (Schatzman 1996, "Accuracy of the discrete Fourier
-    transform and the fast Fourier transform", SIAM J. Sci. Comput. 17, 1150), taken here with a constant of 1 for
-    each of the two transforms; the product adds one rounding (the spectrum of a kernel of non-negative weights
-    summing to 1 has modulus <= 1, so it does not grow the error): ``u sqrt(2 log2 n + 1) x_rms``.
-    """
-    return U32 * math.sqrt(2 * math.log2(n) + 1) * x_rms
-
-
-def _transform_points(side_rows: int, side_cols: int) -> int:
-    """The points of a block's transform: each side with its margins, at the FFT's fast length."""
-    return next_fast_len(side_rows, real=True) * next_fast_len(side_cols, real=True)
-
-
-def test_a_point_through_the_blur_is_the_pixel_integrated_gaussian():
-    # a Gaussian PSF of sigma 1.2 px integrated over each pixel is the outer product of differences of the normal
-    # CDF across the pixels' edges (normalised over the kernel's radius, ceil(4 sigma) + 1 = 6). Its 13 x 13 kernel
-    # is convolved directly (engine/convolve.py): at a lone pixel of 1 each product is 1 times the weight rounded
-    # to float32 and every other term is an exact 0, so each value is the weight to one float32 rounding (u); a
-    # monochrome sensor then takes the luminance of three equal channels (weights summing to 1, a few 2^-53 of
-    # the value). Seen: 5.2e-8 of the value at most.
-    from scipy.special import ndtr
-
-    sigma = 1.2
+def test_a_point_through_a_gaussian_lens_is_the_gaussian_integrated_over_the_pixel():
+    # a spot (one pixel lit) on a monochrome sensor, through a Gaussian of sigma 1.2 px on a grid of k = 2 (the
+    # PSF point-sampled there, normalised over 4 sigma): each pixel collects the PSF's light over its four cells,
+    # its own cells' light spread too: the discrete convolution of the pixel's 2 x 2 cells with the sampled
+    # Gaussian, summed over the pixels' 2 x 2 cells, written here from the samples alone. Float64 sums of a few
+    # hundred terms: within 1e-15 of each value's scale
+    sigma, k = 1.2, 2
     c = load_config(overrides=QUIET + ["optics.psf=gaussian", f"optics.psf_sigma_px={sigma}", "sensor.cfa=none",
-                                       "sensor.width=40", "sensor.height=30"])
-    assert optics.direct(optics.psf_kernels(c))
+                                       "sensor.width=40", "sensor.height=30", f"optics.oversample={k}"])
     signal = Sensor(c).scene_signal("spot")
-    r = 6
-    line = np.diff(ndtr((np.arange(-r, r + 2) - 0.5) / sigma))
-    want = np.outer(line, line) / line.sum() ** 2
-    got = signal[15 - r:15 + r + 1, 20 - r:20 + r + 1]
-    bound = (U32 + 8 * 2.0**-53) * want
-    assert (np.abs(got - want) <= bound).all()
-    assert np.abs(got - want).max() > 0  # single precision: the bound is what is tested
-    outside = np.ones(signal.shape, bool)
-    outside[15 - r:15 + r + 1, 20 - r:20 + r + 1] = False
-    assert (signal[outside] == 0).all()  # nothing beyond the kernel's radius
-    assert abs(signal.sum() - 1.0) <= U32 + 1e-15
-
-
-@pytest.mark.parametrize("sigma", [1.0, 2.0])
-def test_a_slanted_edge_through_a_gaussian_psf_has_the_kernels_analytic_mtf(sigma):
-    # The edge chart's pixels are the exact area shares of a step (MTF sinc(f), test_sfr's ideal edge); the lens
-    # convolves them with the Gaussian averaged over each pixel (docs/model.md 2b), whose discrete transform is,
-    # by Poisson's summation, D(f) = sum_m G(f + m) sinc(f + m), G(f) = exp(-2 pi^2 sigma^2 f^2) the Gaussian's
-    # transform. So ISO 12233's e-SFR of the sensor's edge is sinc(f) D(f) up to Nyquist, within the 0.02 that
-    # test_sfr holds the e-SFR to against analytic MTFs. Seen: 0.003 (sigma 1) and 0.006 (sigma 2).
-    # A camera integrating the continuous blurred image over each pixel would give G(f) sinc(f): the kernel's
-    # pixel average on a scene already sampled at the pixel pitch adds the pixel's aperture once more, 0.028 at
-    # sigma 1 (docs/model.md says so). A point-sampled kernel fails this test at sigma 1 (checked); at sigma 2
-    # the two differ by less than the e-SFR's own 0.02.
-    from cmosnoise.analysis import sfr
-
-    c = load_config(overrides=QUIET + ["optics.psf=gaussian", f"optics.psf_sigma_px={sigma}", "sensor.cfa=none",
-                                       "sensor.width=160", "sensor.height=120"])
-    assert optics.direct(optics.psf_kernels(c))
-    r = sfr.esfr(Sensor(c).scene_signal("edge")[20:100, 40:120])
-    band = r.frequency <= 0.5
-    f = r.frequency[band]
-    want = np.sinc(f) * sum(np.exp(-2 * np.pi**2 * sigma**2 * (f + m) ** 2) * np.sinc(f + m) for m in range(-3, 4))
-    assert np.abs(r.sfr[band] - want).max() < 0.02
+    half = int(np.ceil(4 * sigma * k))
+    g = np.exp(-0.5 * (np.arange(-half, half + 1) / (sigma * k)) ** 2)
+    g /= g.sum()
+    box = np.convolve(np.convolve(g, np.ones(k)), np.ones(k) / k)  # a lit pixel's k cells, then a pixel's k cells
+    # the lit pixel's first cell is at 2 * 15 (rows) and 2 * 20 (columns): pixel i's first cell at 2 i
+    offsets = np.arange(box.size) - half - (k - 1)
+    line_r = np.zeros(30)
+    line_c = np.zeros(40)
+    for d, v in zip(offsets, box):
+        if d % k == 0:
+            line_r[15 + d // k] += v
+            line_c[20 + d // k] += v
+    want = np.outer(line_r, line_c)
+    assert np.abs(signal - want).max() <= 1e-15
+    assert signal.sum() == pytest.approx(1.0, abs=1e-14)  # the light is kept
 
 
 @pytest.mark.parametrize("source", ["photo", "edge"])
-def test_the_blur_is_the_exact_convolution_to_single_precision_and_its_mosaic_is_to_cfas(source):
-    # the blocks' float32 transforms against SciPy's double-precision convolution of the whole picture (its edge
-    # pixels repeated): each value within 6 sigma of the transforms' rounding (fft32_sigma, the picture's largest
-    # value bounding any block's RMS; past 6 sigma a Gaussian error has odds of 2e-9 a value, 0.005 over these
-    # 2.3 million) plus the picture's own rounding to float32 (u times its largest value: the kernel's weights are
-    # non-negative and sum to 1). Seen: 4.6e-7 against a bound of 2.3e-6. And the mosaic made block by block
-    # (through the CFA as each block is made) is to_cfa of the blurred picture, bit for bit, for a resampled photo
-    # (its planes transposed) and a chart (drawn as an image)
-    import scipy.signal
-
-    shape = (700, 1100)  # blocks of 512 cut both axes
-    draw = scene.prepare(source, shape)
-    kernels = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=8"]))
-    assert not optics.direct(kernels)  # 39 x 39: FFT blocks
-    rgb = optics.blur(draw, shape, kernels)
-    picture, m = draw(), kernels.shape[1] // 2
-    exact = np.stack([scipy.signal.fftconvolve(np.pad(picture[..., c], m, mode="edge"), kernels[c], mode="valid")
-                      for c in range(3)], axis=-1)
-    n = _transform_points(optics.BLOCK + 2 * m, optics.BLOCK + 2 * m)
-    bound = 6 * fft32_sigma(picture.max(), n) + U32 * picture.max()
-    assert np.abs(rgb - np.clip(exact, 0, None)).max() <= bound
-    for pattern in ("RGGB", "GBRG", "none"):
-        for region in (None, (3, 600, 5, 1001)):
-            part = rgb if region is None else rgb[region[0]:region[1], region[2]:region[3]]
-            got = optics.blur_cfa(draw, shape, kernels, pattern, (0.9, 1.0, 0.8), region)
-            assert np.array_equal(got, scene.to_cfa(part, pattern, (0.9, 1.0, 0.8))), (pattern, region)
-
-
-@pytest.mark.parametrize("source", ["photo", "edge"])
-def test_a_small_kernel_is_convolved_directly_within_five_single_precision_roundings(source):
-    # f/2.8 at 2.2 um: a 13 x 13 kernel, convolved directly (engine/convolve.py). Every term is non-negative
-    # (the picture and the kernel are), and each carries at most five float32 roundings: the picture's value, the
-    # weight, their product and the two additions of its group of four; the groups' float64 total adds k^2 2^-53
-    # of the value. So each value is within 5u (plus that) of the exact convolution, relative to itself: a bound
-    # that holds for every value, not in probability. SciPy's direct double-precision convolution (ndimage,
-    # edge pixels repeated) is the reference; its own error is some k^2 2^-53 of the value too. Seen: 3.3u and
-    # 2.3u at most. The mosaic is to_cfa of the blurred picture, bit for bit, for every CFA phase and a region at odd
-    # corners, and a region's values are the whole's
+def test_the_separable_terms_are_the_fine_grids_own_convolution_within_their_tolerance(source):
+    # the optical image made explicitly on the fine grid (the scene's cells convolved with the PSF's core and halo,
+    # scipy's direct convolution of the cells drawn with their edge cells repeated) against the separable terms'
+    # irradiance: the terms are within TERM_TOLERANCE of each core's peak (their construction) and the halo is
+    # exact, so each cell is within TERM_TOLERANCE x peak x (the core's cells) x (the scene's largest value)
     from scipy import ndimage
 
-    shape = (301, 453)
-    draw = scene.prepare(source, shape)
-    kernels = optics.psf_kernels(load_config(overrides=["optics.psf=diffraction", "optics.f_number=2.8"]))
-    assert kernels.shape[1] == 13 and optics.direct(kernels)
-    rgb = optics.blur(draw, shape, kernels)
-    picture = draw()
-    exact = np.stack([ndimage.convolve(picture[..., c], kernels[c], mode="nearest") for c in range(3)], axis=-1)
-    slack = (5 + 2 * 13**2 * 2.0**-53 / U32) * U32
-    assert (np.abs(rgb - exact) <= slack * exact + 1e-300).all()
-    assert np.abs(rgb - exact).max() > 0  # single precision, not double: the bound is what is tested
-    for pattern in ("RGGB", "GBRG", "BGGR", "GRBG", "none"):
-        for region in (None, (3, 250, 5, 401)):
-            part = rgb if region is None else rgb[region[0]:region[1], region[2]:region[3]]
-            got = optics.blur_cfa(draw, shape, kernels, pattern, (0.9, 1.0, 0.8), region)
-            assert np.array_equal(got, scene.to_cfa(part, pattern, (0.9, 1.0, 0.8))), (pattern, region)
+    c = load_config(overrides=QUIET + ["optics.psf=diffraction", "optics.f_number=4", "sensor.width=60",
+                                       "sensor.height=44"])
+    fp = focal_plane(c)
+    draw = fp.prepare(source, c.scene)
+    got = fp.irradiance(draw)
+    cells = np.asarray(draw((0, fp.fine_shape[0], 0, fp.fine_shape[1])), float)
+    for ch in range(3):
+        psf = fp.psf
+        sigma = psf.halo_sigma_cells[ch]
+        half = int(np.ceil(optics.GAUSS_SIGMAS * sigma))
+        gl = np.exp(-0.5 * (np.arange(-half, half + 1) / sigma) ** 2)
+        gl /= gl.sum()
+        kernel = np.outer(gl, gl) * psf.halo_share[ch]
+        m = psf.core.shape[1] // 2
+        kernel[half - m:half + m + 1, half - m:half + m + 1] += psf.core[ch]
+        want = ndimage.convolve(cells[..., ch], kernel, mode="nearest") * fp.cfa_gain[ch]
+        bound = TERM_TOLERANCE * psf.core[ch].max() * psf.core[ch].size * cells.max() * fp.cfa_gain[ch]
+        assert np.abs(got[..., ch] - want).max() <= bound, ch
 
 
-@pytest.mark.parametrize("k", [3, 5, 7, 13, 25])
-def test_the_direct_convolutions_compiled_loop_is_its_numpy_specification_bit_for_bit(k):
-    # engine/convolve.py: the compiled loop against mosaic_numpy (what runs while a background compile builds
-    # it), on random pictures and lopsided kernels of each size (k mod 4 = 1 and 3: the last rows one at a time),
-    # even and odd numbers of rows and columns, every CFA phase and a single channel
-    from cmosnoise.engine import convolve
-
-    rng = np.random.default_rng(k)
-    for rows, cols in [(97, 131), (100, 70)]:
-        m = k // 2
-        planes = rng.random((3, cols + 2 * m, rows + 2 * m)).astype(np.float32)
-        kernels = rng.random((3, k, k)) ** 3
-        kernels /= kernels.sum(axis=(1, 2), keepdims=True)
-        for cells in ([[0, 1], [1, 2]], [[1, 2], [0, 1]], [[2, 2], [2, 2]]):
-            cells, gain = np.array(cells), np.array([0.83, 1.0, 1.21])
-            got = convolve.mosaic(planes, kernels, cells, gain, np.empty((rows, cols)))
-            want = convolve.mosaic_numpy(planes, kernels, cells, gain, np.empty((rows, cols)))
-            assert np.array_equal(got.view(np.uint64), want.view(np.uint64)), (rows, cols, cells.tolist())
-    # and both are the convolution (not the correlation: the kernels are lopsided): each pixel's own channel of
-    # SciPy's double-precision convolution of the window, within the four float32 roundings of each term (the
-    # weight, the product, the group's two additions; the planes are float32 already)
-    from scipy import ndimage
-
-    window = np.empty_like(planes)  # the last case's, 100 x 70: the window's rows back in order from the halves
-    window[:, :, np.r_[0:rows + 2 * m:2, 1:rows + 2 * m:2]] = planes
-    cells = np.array([[0, 1], [1, 2]])
-    got = convolve.mosaic(planes, kernels, cells, np.ones(3), np.empty((rows, cols)))
-    exact = [ndimage.convolve(window[c].T.astype(np.float64), kernels[c])[m:rows + m, m:cols + m] for c in range(3)]
+def test_the_optical_image_integrated_over_each_pixel_is_what_the_pixel_gets_and_the_light_is_kept():
+    # the irradiance on the fine grid summed over each pixel's k x k cells (a full aperture) is the pixel's
+    # signal: the same linear operation in another order of float64 sums (within 1e-13 of the values); over the
+    # sensor it is the light that came through the lens (a spot far from the edges: nothing is lost past them)
+    c = load_config(overrides=QUIET + ["optics.psf=diffraction", "optics.f_number=2.8", "sensor.width=64",
+                                       "sensor.height=48", "sensor.cfa=RGGB"])
+    fp = focal_plane(c)
+    k = fp.k
+    draw = fp.prepare("spot", c.scene)
+    fine = fp.irradiance(draw)
+    pixel = fp.pixel_signal(draw, "RGGB", shade=False)
+    summed = fine.reshape(48, k, 64, k, 3).mean(axis=(1, 3))
+    cells = cfa.tile("RGGB")
+    want = np.empty((48, 64))
     for a in range(2):
         for b in range(2):
-            e = exact[cells[a, b]][a::2, b::2]
-            assert (np.abs(got[a::2, b::2] - e) <= (4 + 1e-6) * U32 * e).all(), (a, b)
+            want[a::2, b::2] = summed[a::2, b::2, cells[a, b]]
+    assert np.abs(pixel - want).max() <= 1e-13 * pixel.max()
+    assert summed.sum(axis=(0, 1)) == pytest.approx(fp.cfa_gain, rel=1e-12)  # each channel's light, all of it
+
+
+@pytest.mark.parametrize("psf", ["diffraction", "gaussian"])
+def test_a_flat_field_is_unchanged_by_a_psf_away_from_the_border(psf):
+    # every kernel sums to 1 (core and halo), so a flat field stays flat to float64 rounding
+    c = load_config(overrides=QUIET + [f"optics.psf={psf}", "optics.f_number=8", "optics.psf_sigma_px=1.5",
+                                       "sensor.width=160", "sensor.height=120"])
+    sharp = Sensor(load_config(overrides=QUIET + ["sensor.width=160", "sensor.height=120"])).scene_signal("flat:0.4")
+    blurred = Sensor(c).scene_signal("flat:0.4")
+    assert np.abs(blurred - sharp).max() <= 1e-12
 
 
 # ------------------------------------------------------------------ tiles keep their bits
-@pytest.mark.parametrize(("source", "f_number"), [("photo", 11), ("edge", 11), ("colorchecker", 11), ("photo", 2.8)])
+@pytest.mark.parametrize(("source", "f_number"), [("photo", 11), ("edge", 11), ("colorchecker", 11), ("photo", 2.8),
+                                                  ("zoneplate:0.9", 2.8)])
 def test_with_optics_every_tile_is_that_rectangle_of_the_whole_frame(source, f_number):
-    # 300 x 530 crosses the FFT blocks of 256 in both axes; tiles of 96 straddle them. At f/2.8 the kernel is
-    # 13 x 13 and convolved directly, at f/11 it is 53 x 53 and convolved by FFT blocks
     cfg = load_config(overrides=["optics.psf=diffraction", f"optics.f_number={f_number}",
                                  "optics.relative_illumination=cos4", "optics.focal_length_mm=1.5",
                                  "sensor.width=530", "sensor.height=300"])
-    assert optics.direct(optics.psf_kernels(cfg)) == (f_number < 5)
     whole = Sensor(cfg).expose(source).frame(0)
     tiling = tiles.Tiling(cfg, 96, source)
     for region in tiling.regions:
@@ -257,19 +217,16 @@ def test_with_optics_every_tile_is_that_rectangle_of_the_whole_frame(source, f_n
 
 @pytest.mark.parametrize("sigma_px", [2, 7])
 def test_a_tile_of_a_50_mp_sensor_is_the_crop_of_a_larger_part_bit_for_bit(sigma_px):
-    # a 50 MP sensor (8688 x 5792): the blur of one tile against that of a part four blocks wide around it; the
-    # whole frame is the union of such parts (the blocks are fixed to the sensor), so this is its crop. A kernel
-    # of sigma 2 (19 x 19) is convolved directly, one of sigma 7 (59 x 59) by FFT blocks
-    shape = (5792, 8688)
+    # a 50 MP sensor (8688 x 5792): the signal of a tile against that of a part of 3000 x 1000 pixels around it
+    # (the bands of the columns' pass start at the region's first row: tiles cut them elsewhere)
     cfg = load_config(overrides=["optics.psf=gaussian", f"optics.psf_sigma_px={sigma_px}", "sensor.width=8688",
-                                 "sensor.height=5792"])
-    draw = scene.prepare("photo", shape)
-    kernels = optics.psf_kernels(cfg)
-    assert optics.direct(kernels) == (sigma_px < 5)
-    big = (2048, 3072, 4096, 5120)
-    part = optics.blur(draw, shape, kernels, big)
+                                 "sensor.height=5792", "optics.oversample=2"])
+    fp = focal_plane(cfg)
+    draw = fp.prepare("photo", cfg.scene)
+    big = (2048, 3072, 3000, 6000)
+    part = fp.pixel_signal(draw, "RGGB", big)
     for tile in [(2100, 2400, 4200, 4500), (2048, 2304, 4350, 4700), (2500, 3000, 4097, 4300)]:
-        got = optics.blur(draw, shape, kernels, tile)
+        got = fp.pixel_signal(draw, "RGGB", tile)
         assert np.array_equal(got, part[tile[0] - big[0]:tile[1] - big[0], tile[2] - big[2]:tile[3] - big[2]]), tile
 
 

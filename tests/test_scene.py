@@ -120,25 +120,6 @@ def test_a_resampled_picture_through_the_cfa_is_the_three_channel_path_bit_for_b
             assert np.array_equal(got.view(np.uint64), want.view(np.uint64)), (shape, region)
 
 
-def test_the_planes_a_lens_reads_are_the_pictures_own_values_bit_for_bit():
-    """Resampled.planes_at (the rows and columns a blur's window reads, edges repeated, rows in two halves) and
-    transposed_planes: the columns' product made by engine/resample.transposed (compiled above 65 536 values) is
-    scipy's, each value the full resampling's, in float64 and rounded once to float32."""
-    rng = np.random.default_rng(12)
-    for img, shape in [(rng.random((40, 60, 3)), (301, 451)), (rng.random((900, 700, 3)), (333, 259))]:
-        picture = scene.Resampled(img, shape)
-        whole = picture()
-        rows = np.concatenate([np.clip(np.arange(-5, shape[0] + 5), 0, shape[0] - 1)[0::2], [7, 7, 0]])
-        cols = np.clip(np.arange(-5, shape[1] + 5), 0, shape[1] - 1)
-        want = whole[rows][:, cols].transpose(2, 1, 0)
-        for dtype in (np.float64, np.float32):
-            got = picture.planes_at(rows, cols, dtype)
-            assert got.dtype == dtype and np.array_equal(got, want.astype(dtype))
-        region = (3, shape[0] - 2, 10, shape[1] - 1)
-        got = picture.transposed_planes(region, np.float64)
-        assert np.array_equal(got, whole[3:shape[0] - 2, 10:shape[1] - 1].transpose(2, 1, 0))
-
-
 def test_a_sensor_takes_a_picture_through_the_cfa_without_its_full_size_rgb():
     """Sensor.scene_signal of a picture (the photo) equals to_cfa of scene.render, bit for bit, whole and in a window."""
     cfg = {"sensor": {"width": 640, "height": 480, "cfa": "GBRG"}}

@@ -6,8 +6,7 @@ arrays against its memory order and took 3 to 5 s at 50 MP; blocks of 64 x 64 th
 parallel over row blocks, take a tenth of it. Only values move, so the result is the same bits.
 
 The mosaic a colour filter array samples from such an image (:func:`cfa_pick`, what ``scene.to_cfa`` calls):
-each pixel's own channel times its gain in one parallel pass, the same product as NumPy's; and from planes of
-any strides (:func:`plane_pick`, what the lens's blur gives), negative values taken as 0.
+each pixel's own channel times its gain in one parallel pass, the same product as NumPy's.
 """
 
 from __future__ import annotations
@@ -34,26 +33,19 @@ if numba is not None:
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def _pick(planes, cell, gain, clip, out):  # pragma: no cover - compiled
+    def _pick(planes, cell, gain, out):  # pragma: no cover - compiled
         rows, cols = out.shape
         for i in numba.prange(rows):
             for j in range(cols):
                 c = cell[i & 1, j & 1]
-                v = np.float64(planes[c, i, j])
-                if clip and not v > 0.0:
-                    v = 0.0
-                out[i, j] = v * gain[c]
+                out[i, j] = np.float64(planes[c, i, j]) * gain[c]
 
 
-def _pick_numpy(planes, cell, gain, clip: bool, out):
+def _pick_numpy(planes, cell, gain, out):
     """:func:`_pick` by NumPy's strided copies, one per position of the 2 x 2 cell (small images, or nothing
     compiled yet): the same products."""
     for (i, j), ch in np.ndenumerate(cell):
-        v = planes[ch, i::2, j::2]
-        if clip:
-            v = v.astype(np.float64)
-            v[~(v > 0.0)] = 0.0
-        np.multiply(v, gain[ch], out=out[i::2, j::2])
+        np.multiply(planes[ch, i::2, j::2], gain[ch], out=out[i::2, j::2])
     return out
 
 
@@ -92,38 +84,9 @@ def cfa_pick(rgb: np.ndarray, cell: np.ndarray, gain: np.ndarray) -> np.ndarray:
     planes = np.moveaxis(rgb, -1, 0)  # a view: channel first, as _pick reads it
     if (numba is None or rows * cols < 1 << 16 or out.dtype != np.float64
             or not compiled("the image layout loops", _interleave, _pick)):
-        return _pick_numpy(planes, cell, gain, False, out)
+        return _pick_numpy(planes, cell, gain, out)
     with ONE_LAUNCH:
-        _pick(planes, cell, gain, False, out)
-    return out
-
-
-def plane_pick(planes: np.ndarray, cell: np.ndarray, gain: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """Each pixel's own channel of an image held as planes, at least 0, times that channel's gain, into ``out``.
-
-    Parameters
-    ----------
-    planes : (C, rows, cols) float32 or float64 array
-        The image, any strides (a transposed view too).
-    cell : (2, 2) int array
-        The channel of each position of the 2 x 2 cell (row and column parity).
-    gain : (C,) float64 array
-        Each channel's factor.
-    out : (rows, cols) float64 array
-        Where the mosaic goes (a view of a larger array too).
-
-    Returns
-    -------
-    (rows, cols) float64 array
-        ``out``: ``max(planes[c, i, j], 0) * gain[c]``, ``c = cell[i % 2, j % 2]`` (NaN taken as 0), the same
-        bits as NumPy's product.
-    """
-    cell = np.ascontiguousarray(cell, dtype=np.int64)
-    gain = np.ascontiguousarray(gain, dtype=np.float64)
-    if numba is None or out.size < 1 << 14 or not compiled("the image layout loops", _interleave, _pick):
-        return _pick_numpy(planes, cell, gain, True, out)
-    with ONE_LAUNCH:
-        _pick(planes, cell, gain, True, out)
+        _pick(planes, cell, gain, out)
     return out
 
 

@@ -1,5 +1,5 @@
-"""A separable resampling's second axis, sampled through a colour filter array in the same pass, or made for every
-channel straight into the transposed, single-precision planes a lens's blur reads.
+"""A separable resampling's second axis, sampled through a colour filter array in the same pass; and the optical
+image's separable terms, rows' pass and columns' pass, at each pixel's own channel.
 
 A picture resampled to a sensor (:func:`cmosnoise.model.scene.resample`) is two sparse products per channel:
 the rows' weights, then the columns'. Through a CFA each pixel keeps one channel of three, so making the three
@@ -10,9 +10,9 @@ the mosaic, in parallel over rows.
 The sums are the same terms in the same order as scipy's ``csr_matvecs`` makes them (start at 0, add each stored
 weight times its value, in the stored order) and the channel's responsivity multiplies the sum afterwards, as
 ``to_cfa`` does: the same bits (``fastmath`` is off, so nothing is fused or reordered), which the tests check
-against the three-channel path. :func:`transposed` makes every channel, each column of the result a row in
-memory (the same sums, rounded once to the result's dtype): a 12 MP picture's three float32 planes in about a
-third of the time of scipy's products and a cast.
+against the three-channel path. :func:`rows_transposed` and :func:`mosaic_transposed` make the optical image's
+terms (:mod:`cmosnoise.model.focal_plane`): each channel's own weights, the rows' pass written transposed so that
+the columns' pass sums every row of a column at once (each sum still in the stored order: scipy's bits).
 """
 
 from __future__ import annotations
@@ -34,46 +34,40 @@ if numba is not None:
                     acc += data[k] * planes[c, i, indices[k]]
                 out[i, j] = acc * gain[c]
 
-    @numba.njit(parallel=True, cache=True, nogil=True)
-    def _transposed(planes_t, data, indices, indptr, out):  # pragma: no cover - compiled
-        channels, cols, rows = out.shape
-        for j in numba.prange(cols):
-            acc = np.empty(rows)
-            for c in range(channels):
-                for t in range(rows):
-                    acc[t] = 0.0
-                for k in range(indptr[j], indptr[j + 1]):
-                    w = data[k]
-                    src = planes_t[c, indices[k]]
-                    for t in range(rows):
-                        acc[t] += w * src[t]
-                for t in range(rows):
-                    out[c, j, t] = acc[t]
 
 
-#: source columns (:func:`rows_transposed`) and output columns (:func:`mosaic_transposed`) each parallel task makes
-_BLOCK = 16
+#: output rows (:func:`rows_transposed`) and output columns (:func:`mosaic_transposed`) each parallel task makes
+_ROWS, _BLOCK = 32, 16
 
 if numba is not None:
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _rows_transposed(x, indptr, indices, data, half, out_t):  # pragma: no cover - compiled
+        # a block of _ROWS consecutive rows of one parity at a time: each row's sums along the source's rows
+        # (contiguous, in the stored order), then the block written transposed
         n = indptr.size - 1
         width = x.shape[1]
-        for blk in numba.prange((width + _BLOCK - 1) // _BLOCK):
-            b0 = blk * _BLOCK
-            b1 = min(b0 + _BLOCK, width)
-            acc = np.empty(_BLOCK)
-            for i in range(n):
-                pos = (i & 1) * half + (i >> 1)
-                for q in range(b1 - b0):
-                    acc[q] = 0.0
+        even = (half + _ROWS - 1) // _ROWS
+        blocks = even + (n - half + _ROWS - 1) // _ROWS
+        for blk in numba.prange(blocks):
+            if blk < even:
+                a, p0 = 0, blk * _ROWS
+                p1 = min(p0 + _ROWS, half)
+            else:
+                a, p0 = 1, (blk - even) * _ROWS
+                p1 = min(p0 + _ROWS, n - half)
+            acc = np.zeros((_ROWS, width))
+            for p in range(p0, p1):
+                i = 2 * p + a
+                dst = acc[p - p0]
                 for k in range(indptr[i], indptr[i + 1]):
                     w = data[k]
                     row = x[indices[k]]
-                    for q in range(b1 - b0):
-                        acc[q] += w * row[b0 + q]
-                for q in range(b1 - b0):
-                    out_t[b0 + q, pos] = acc[q]
+                    for b in range(width):
+                        dst[b] += w * row[b]
+            base = a * half
+            for b in range(width):
+                for p in range(p0, p1):
+                    out_t[b, base + p] = acc[p - p0, b]
 
     @numba.njit(parallel=True, cache=True, nogil=True)
     def _mosaic_transposed(planes_t, half, data, indices, indptr, cell, gain, out):  # pragma: no cover - compiled
@@ -146,8 +140,8 @@ def rows_transposed(x: np.ndarray, rows: sp.csr_matrix, out_t: np.ndarray) -> np
         out_t[:] = (rows @ x)[parity_order(n)].T
         return out_t
     with ONE_LAUNCH:
-        _rows_transposed(np.ascontiguousarray(x, np.float64), rows.indptr.astype(np.int64),
-                         rows.indices.astype(np.int64), np.asarray(rows.data, np.float64), (n + 1) // 2, out_t)
+        _rows_transposed(np.ascontiguousarray(x, np.float64), rows.indptr, rows.indices,
+                         np.asarray(rows.data, np.float64), (n + 1) // 2, out_t)
     return out_t
 
 
@@ -192,7 +186,7 @@ def mosaic_transposed(planes_t: np.ndarray, columns: list, cell: np.ndarray, gai
         return out
     starts = np.cumsum([0] + [m.nnz for m in columns])
     data = np.concatenate([np.asarray(m.data, np.float64) for m in columns])
-    indices = np.concatenate([m.indices.astype(np.int64) for m in columns])
+    indices = np.concatenate([m.indices for m in columns]).astype(np.int32, copy=False)
     indptr = np.stack([m.indptr.astype(np.int64) + starts[c] for c, m in enumerate(columns)])
     with ONE_LAUNCH:
         _mosaic_transposed(np.ascontiguousarray(planes_t, np.float64), (rows + 1) // 2, data, indices, indptr, cell,
@@ -246,37 +240,4 @@ def mosaic(planes: np.ndarray, columns: sp.csr_matrix, cell: np.ndarray, gain: n
     with ONE_LAUNCH:
         _mosaic(planes, np.ascontiguousarray(columns.data, np.float64), columns.indices.astype(np.int64),
                 columns.indptr.astype(np.int64), cell, gain, out)
-    return out
-
-
-def transposed(planes: np.ndarray, columns: sp.csr_matrix, dtype=np.float32) -> np.ndarray:
-    """Every channel of ``planes`` through ``columns``, transposed: ``out[c] = columns @ planes[c].T``, rounded to
-    ``dtype``.
-
-    Parameters
-    ----------
-    planes : (C, rows, n) float64 array
-        Each channel after the rows' weights.
-    columns : (cols, n) scipy CSR matrix, float64
-        The columns' weights.
-    dtype : dtype
-        Of the result.
-
-    Returns
-    -------
-    (C, cols, rows) array
-        Bit for bit scipy's ``columns @ planes[c].T`` (its sums in the stored order, started at 0), each rounded
-        once to ``dtype``.
-    """
-    columns = sp.csr_matrix(columns)
-    channels, rows = planes.shape[0], planes.shape[1]
-    out = np.empty((channels, columns.shape[0], rows), dtype)
-    if numba is None or out[0].size < 1 << 16 or not compiled("the scene's resampling", _transposed):
-        for c in range(channels):
-            out[c] = columns @ planes[c].T
-        return out
-    planes_t = np.ascontiguousarray(np.asarray(planes, np.float64).transpose(0, 2, 1))
-    with ONE_LAUNCH:
-        _transposed(planes_t, np.ascontiguousarray(columns.data, np.float64), columns.indices.astype(np.int64),
-                    columns.indptr.astype(np.int64), out)
     return out

@@ -227,11 +227,31 @@ class FocalPlane:
                                      "optics.psf, optics.relative_illumination, optics.angle_relative_qe and "
                                      "optics.olpf to none and optics.oversample to 1 for it")
             return scene_mod.cfa_signal(draw, pattern, region=region)
-        if self.trivial:
+        if self.trivial and cfa_mod.is_mono(pattern) and self.light is not None:
+            signal = self.through_cfa(np.asarray(draw(region), np.float64), pattern)
+        elif self.trivial:
             signal = scene_mod.cfa_signal(draw, pattern, tuple(self.cfa_gain), region)
         else:
             signal = self._convolved(draw, pattern, region, self.pixel_terms, self.k, self.shape)
         return optics.shade(signal, self.config, pattern, self.shape, region) if shade else signal
+
+    def through_cfa(self, rgb: np.ndarray, pattern: str) -> np.ndarray:
+        """An image at the pixels (each channel relative to its white) through the CFA, in the signal's unit: each
+        pixel's channel times its :attr:`cfa_gain`; a monochrome sensor's luminance, each channel weighted by its
+        gain with light in lux (the luminance alone without: the peak rate is the unit).
+
+        Parameters
+        ----------
+        rgb : (rows, cols, 3) float64 array
+        pattern : str
+
+        Returns
+        -------
+        (rows, cols) float64 array
+        """
+        if cfa_mod.is_mono(pattern) and self.light is not None:
+            return rgb @ (scene_mod.LUMINANCE * self.cfa_gain)
+        return scene_mod.to_cfa(rgb, pattern, tuple(self.cfa_gain))
 
     def irradiance(self, draw, region=None) -> np.ndarray:
         """The optical image on the fine grid: the scene through the PSF (before the filter and the aperture), each

@@ -70,7 +70,7 @@ MAX_CORE = 257
 MAX_FILE_BYTES = 8 * 2**20 + 4096
 
 __all__ = ["PointSpread", "airy", "encircled_energy", "diffraction_otf", "diffraction_psf", "gaussian_psf",
-           "file_psf", "aperture", "oversample", "alias_error", "relative_illumination", "incidence", "angle_qe",
+           "file_psf", "aperture", "aperture_error", "oversample", "alias_error", "relative_illumination", "incidence", "angle_qe",
            "lean_weights", "leaning_charge", "shade", "active", "psf_active", "image_distance_mm"]
 
 
@@ -281,9 +281,9 @@ def _bins(n: int, j: int) -> np.ndarray:
     """(cells, n) weights binning ``n`` samples (odd, centred) into cells of ``j`` samples centred on the middle
     sample: each sample's share of each cell (1, or 1/2 where an even ``j`` puts a cell's edge through it)."""
     centre = (n - 1) / 2.0
-    # cell c spans samples' positions [centre + (c - 1/2) j - 1/2 + 1/2 ...]: in sample units, cell c covers
-    # [centre - j / 2 + c j, centre + j / 2 + c j] of the samples' centres' line (each sample spans +-1/2)
-    reach = int(math.ceil(((n - 1) / 2.0 + 0.5) / j + 0.5))
+    # cell c covers [centre + c j - j / 2, centre + c j + j / 2] of the line the samples' centres lie on (sample s
+    # spans [s - 1/2, s + 1/2]); the outermost cell that still reaches a sample: c < (n + j) / (2 j)
+    reach = int(math.ceil((n + j) / (2.0 * j))) - 1
     cells = np.arange(-reach, reach + 1)
     lo = centre + cells * j - j / 2.0
     hi = lo + j
@@ -386,7 +386,17 @@ def _file_array(path: str) -> np.ndarray:
 
 
 def psf_active(config) -> bool:
-    """Whether a PSF is configured (``optics.psf`` other than ``none``)."""
+    """Whether a PSF is configured.
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    bool
+        ``optics.psf`` is other than ``none``.
+    """
     return config.optics.psf.lower() != "none"
 
 
@@ -407,7 +417,8 @@ def aperture(k: int, fill_factor: float, olpf_cells: float | None = None, weight
     set of whole cells gives. They are then the least-squares fit of a symmetric set of taps (the pixel's cells
     and :data:`APERTURE_MARGIN` on each side) to it over the fine grid's band, 0 to ``k / 2`` cycles per pixel,
     weighted by ``weight(f)`` (the PSF's MTF, where the image has its detail; 1 without one); their sum is
-    ``a`` exactly. The 2-D weights are the outer product of two of these.
+    ``a`` exactly. Beyond 1 cycle per pixel (where detail aliases into the pixels' band from the second order on)
+    the weight is a tenth. The 2-D weights are the outer product of two of these.
 
     Parameters
     ----------
@@ -430,8 +441,9 @@ def aperture(k: int, fill_factor: float, olpf_cells: float | None = None, weight
     Examples
     --------
     >>> from cmosnoise.model.optics import aperture
-    >>> aperture(3, 1.0)
-    (0, array([0.33333333, 0.33333333, 0.33333333]))
+    >>> offset, weights = aperture(3, 1.0)
+    >>> offset, weights.round(4).tolist()
+    (0, [0.3333, 0.3333, 0.3333])
     """
     if fill_factor == 1.0 and not olpf_cells:
         return 0, np.full(k, 1.0 / k)
@@ -442,7 +454,7 @@ def aperture(k: int, fill_factor: float, olpf_cells: float | None = None, weight
     half = n.size // 2
     f = np.linspace(0.0, k / 2.0, 64 * k + 1)
     target = a * np.sinc(a * f) * np.cos(np.pi * d * f) / np.sinc(f / k)
-    w = np.ones_like(f) if weight is None else np.asarray(weight(f), float) + 1e-3
+    w = (np.ones_like(f) if weight is None else np.asarray(weight(f), float) + 1e-3) * np.where(f <= 1.0, 1.0, 0.1)
     # symmetric pairs: tap i and its mirror n.size - 1 - i share a weight; the design is cos(2 pi f x_i) of each
     basis = np.stack([2.0 * np.cos(2.0 * np.pi * f * x[i]) for i in range(half)], axis=1)
     if n.size % 2:
@@ -485,9 +497,52 @@ def _least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.asarray(x)
 
 
+def aperture_error(k: int, fill_factor: float, olpf_px: float | None = None, weight=None) -> float:
+    """How far :func:`aperture`'s weights on cell averages fall from the aperture's and the filter's transfer
+    ``a sinc(a f) cos(pi d f)`` (over ``a``: relative to it at 0), the largest up to 1 cycle per pixel, weighted by
+    ``weight(f)`` (the PSF's MTF; 1 without one): 0 for a full aperture without a filter.
+
+    Parameters
+    ----------
+    k : int
+    fill_factor : float
+    olpf_px : float, optional
+        The filter's separation, pixels.
+    weight : callable, optional
+
+    Returns
+    -------
+    float
+    """
+    if fill_factor == 1.0 and not olpf_px:
+        return 0.0
+    offset, taps = aperture(k, fill_factor, None if not olpf_px else olpf_px * k, weight)
+    x = (np.arange(offset, offset + taps.size) + 0.5 - k / 2.0) / k
+    f = np.linspace(0.0, 1.0, 201)
+    got = (taps[None, :] * np.cos(2 * np.pi * f[:, None] * x[None, :])).sum(axis=1) * np.sinc(f / k)
+    a = math.sqrt(fill_factor)
+    want = a * np.sinc(a * f) * np.cos(np.pi * (olpf_px or 0.0) * f)
+    w = np.ones_like(f) if weight is None else np.asarray(weight(f), float)
+    return float((np.abs(got - want) * w).max() / a)
+
+
 def aperture_transfer(f_cy_per_px, fill_factor: float, olpf_px: float | None) -> np.ndarray:
-    """The aperture's and the filter's MTF along one axis: ``|sinc(a f) cos(pi d f)|``, ``a = sqrt(fill_factor)``
-    pixels, ``d`` the filter's separation in pixels."""
+    """The aperture's and the filter's MTF along one axis.
+
+    Parameters
+    ----------
+    f_cy_per_px : array
+        Frequencies, cycles per pixel.
+    fill_factor : float
+        The aperture's area over the pixel's: its side is ``a = sqrt(fill_factor)`` pixels.
+    olpf_px : float or None
+        The four-spot filter's separation ``d``, pixels.
+
+    Returns
+    -------
+    array
+        ``|sinc(a f) cos(pi d f)|``.
+    """
     f = np.asarray(f_cy_per_px, float)
     out = np.abs(np.sinc(math.sqrt(fill_factor) * f))
     if olpf_px:
@@ -525,9 +580,10 @@ def alias_error(psf: PointSpread, k: int, fill_factor: float, olpf_px: float | N
 
 def oversample(setting, psf: PointSpread | None, fill_factor: float, olpf_px: float | None = None,
                candidates=None) -> int:
-    """``optics.oversample`` resolved: a number is itself; ``auto`` is 1 without a PSF, else the smallest k of 1 to
-    :data:`MAX_OVERSAMPLE` (among ``candidates``) whose :func:`alias_error` is at most :data:`ALIAS_LIMIT`, or
-    the largest.
+    """``optics.oversample`` resolved: a number is itself; ``auto`` is the smallest k of 1 to
+    :data:`MAX_OVERSAMPLE` (among ``candidates``) whose :func:`alias_error` (the PSF's sampling) and
+    :func:`aperture_error` (the aperture's and the filter's weights) are both at most :data:`ALIAS_LIMIT`, or the
+    largest: 1 without a PSF, a smaller aperture or a filter.
 
     Parameters
     ----------
@@ -545,11 +601,13 @@ def oversample(setting, psf: PointSpread | None, fill_factor: float, olpf_px: fl
     """
     if setting != "auto":
         return int(setting)
-    if psf is None:
+    if psf is None and fill_factor == 1.0 and not olpf_px:
         return 1
     ks = list(candidates) if candidates is not None else list(range(1, MAX_OVERSAMPLE + 1))
+    weight = None if psf is None else (lambda f: psf.mtf(f).max(axis=0))
     for k in ks:
-        if alias_error(psf, k, fill_factor, olpf_px) <= ALIAS_LIMIT:
+        if ((psf is None or alias_error(psf, k, fill_factor, olpf_px) <= ALIAS_LIMIT)
+                and aperture_error(k, fill_factor, olpf_px, weight) <= ALIAS_LIMIT):
             return k
     return ks[-1]
 

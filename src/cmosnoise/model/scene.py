@@ -426,49 +426,6 @@ class Resampled:
         """:func:`resample` of the picture: (rows, cols, 3) float64, the region's size (None: the whole)."""
         return _columns_pass(*_row_pass(self.img, self.shape, region, self.axes))
 
-    def transposed_planes(self, region=None, dtype=np.float32) -> np.ndarray:
-        """The picture's channels over ``region``, each transposed, as the separable resampling gives them: no
-        interleaved copy.
-
-        Parameters
-        ----------
-        region : (row0, row1, col0, col1), optional
-            The rectangle to make (None: the whole).
-        dtype : dtype
-            Of the result (each value is ``self(region)``'s, rounded to it).
-
-        Returns
-        -------
-        (3, cols, rows) array
-            ``self(region).transpose(2, 1, 0)``, the same values.
-        """
-        planes, wc = _row_pass(self.img, self.shape, region, self.axes)
-        return resample_engine.transposed(planes, wc, dtype)
-
-    def planes_at(self, rows: np.ndarray, cols: np.ndarray, dtype=np.float32) -> np.ndarray:
-        """The picture at the given rows and columns of the sensor, in any order (repeats too), channels first and
-        transposed, as the separable resampling gives them.
-
-        Parameters
-        ----------
-        rows : (p,) int array
-            Rows of the sensor, each in ``0:shape[0]``.
-        cols : (q,) int array
-            Columns, each in ``0:shape[1]``.
-        dtype : dtype
-            Of the result (each value is ``self()``'s, rounded to it).
-
-        Returns
-        -------
-        (3, q, p) array
-            ``self()[rows][:, cols].transpose(2, 1, 0)``, the same values: each is the same weights' sum in the
-            same order, whatever else is asked for with it.
-        """
-        wr, (a0, a1) = _band(self.axes[0][np.asarray(rows)])
-        wc, (b0, b1) = _band(self.axes[1][np.asarray(cols)])
-        part = self.img[a0:a1, b0:b1]
-        return resample_engine.transposed(np.stack([wr @ part[..., c] for c in range(part.shape[2])]), wc, dtype)
-
     def cfa(self, pattern: str, responsivity=(1.0, 1.0, 1.0), region=None) -> np.ndarray:
         """``to_cfa(self(region), pattern, responsivity)``, bit for bit, without making the three channels at the
         sensor's size: the columns' weights are applied only for each pixel's own channel

@@ -428,7 +428,7 @@ class Sensor:
             rgb = np.repeat(rgb, 3, axis=2)
         rgb = scene_mod.mixed(rgb, self.spec.light)
         if fp.trivial and not optics_mod.active(c):
-            return scene_mod.to_cfa(rgb, self.cfa, tuple(fp.cfa_gain))
+            return fp.through_cfa(rgb, self.cfa)
         if self.window is not None:
             raise CmosnoiseError("scene array: with a lens (optics.psf, optics.relative_illumination, optics.olpf) or "
                                  "an optical image finer than the pixels, give a sensor of the whole array the scene "
