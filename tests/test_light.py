@@ -224,3 +224,29 @@ def test_a_run_with_light_says_what_a_white_gives(tmp_path):
     assert got["illuminance_lux"] == 50 and got["illuminant"] == "D65" and got["f_number"] == 2.8
     assert got["focal_plane_lux"] == pytest.approx(axis_illuminance_lux(c), rel=1e-12)
     assert got["white_e"] == pytest.approx(list(fp.white_e_per_s * 0.03), rel=1e-12)
+
+
+def test_a_multispectral_cube_is_each_pixels_spectrum_through_the_light_and_the_qe(tmp_path):
+    # a cube of two halves: the ColorChecker's "red" patch's spectrum and a flat 0.5. Each pixel's channels are
+    # its spectrum's integral with the light and the channel's QE over a white's (the chart's own integral,
+    # light.reflectance_channels), so the flat half reads 0.5 of each channel's white and the red half the red
+    # patch's channels of the spectral ColorChecker
+    wl, refl = light.colorchecker_reflectances()
+    red = refl[14]
+    cube = np.empty((48, 64, wl.size))
+    cube[:, :32] = red
+    cube[:, 32:] = 0.5
+    np.savez(tmp_path / "cube.npz", reflectance=cube, wavelengths_nm=wl)
+    c = _config("light.illuminance_lux=100", "light.spectral_qe=Nikon 5100 (NPL)", "light.qe_peak=0.5",
+                "sensor.width=64", "sensor.height=48")
+    signal = Sensor(c).scene_signal(str(tmp_path / "cube.npz"))
+    fp = focal_plane(c)
+    want_red = fp.light.reflectance_channels(red[None, :], wl)[0] * fp.cfa_gain
+    assert signal[0, 0] == pytest.approx(want_red[0], rel=1e-9) and signal[1, 1] == pytest.approx(want_red[2], rel=1e-9)
+    assert signal[0, 33] == pytest.approx(0.5 * fp.cfa_gain[1], rel=1e-12)
+    with pytest.raises(CmosnoiseError, match="needs light in lux"):
+        Sensor(load_config(overrides=["sensor.width=64", "sensor.height=48"])).scene_signal(str(tmp_path / "cube.npz"))
+    np.savez(tmp_path / "bad.npz", cube=cube)
+    with pytest.raises(CmosnoiseError, match="'reflectance'") as info:
+        Sensor(c).scene_signal(str(tmp_path / "bad.npz"))
+    assert "\n" not in str(info.value)

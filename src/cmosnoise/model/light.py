@@ -55,7 +55,8 @@ COLORCHECKER_SPECTRA = "ColorChecker N Ohta"
 MAX_TABLE_BYTES = 4_000_000
 
 __all__ = ["ChannelLight", "integrate", "read_table", "camera_factor", "illuminant_spectrum", "qe_spectrum",
-           "photopic_efficiency", "reflectance_channels", "colorchecker_reflectances"]
+           "photopic_efficiency", "reflectance_channels", "spectral_channels", "read_cube",
+           "colorchecker_reflectances"]
 
 
 def _colour():
@@ -393,6 +394,66 @@ def reflectance_channels(light: ChannelLight, reflectance: np.ndarray, wavelengt
     on = np.stack([np.interp(light.wavelengths, wavelengths, row) for row in r])
     weight = light.photon_flux[None, :] * light.qe.T  # (3, n)
     return _integral(on[:, None, :] * weight[None, :, :], light.wavelengths) / light.rates_e_per_s[None, :]
+
+
+#: the largest multispectral cube read, bytes decoded
+MAX_CUBE_BYTES = 2_000_000_000
+
+
+def read_cube(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """A multispectral scene: an ``.npz`` holding ``reflectance`` (rows, cols, n), each pixel's reflectance
+    spectrum, 0 to 1 (a radiance relative to a white's), and ``wavelengths_nm`` (n,), increasing, through the
+    input gate (its members' decoded size from the zip directory before anything is inflated).
+
+    Parameters
+    ----------
+    path : str
+        The file.
+
+    Returns
+    -------
+    wavelengths : (n,) float64, nm
+    reflectance : (rows, cols, n) float64
+    """
+    key = "scene"
+    members = inputs.npz_members(path, f"{key} cube", MAX_CUBE_BYTES)
+    need = {"reflectance.npy", "wavelengths_nm.npy"}
+    if not need <= set(members):
+        raise CmosnoiseError(f"{key} {path!r}: a multispectral cube is an .npz of 'reflectance' (rows, cols, n) and "
+                             f"'wavelengths_nm' (n,); it holds {sorted(m.removesuffix('.npy') for m in members)}")
+    try:
+        with np.load(inputs.check_regular(path, f"{key} cube"), allow_pickle=False) as z:
+            wl = np.asarray(z["wavelengths_nm"], np.float64)
+            cube = np.asarray(z["reflectance"])
+    except (ValueError, OSError, EOFError) as exc:
+        raise CmosnoiseError(f"{key} {path!r} is not a readable .npz file: {exc}") from None
+    if cube.ndim != 3 or wl.ndim != 1 or cube.shape[2] != wl.size or wl.size < 2 or cube.dtype.kind not in "uif":
+        raise CmosnoiseError(f"{key} {path!r}: 'reflectance' must be (rows, cols, n) real numbers and "
+                             f"'wavelengths_nm' (n,); got {cube.shape} {cube.dtype} and {wl.shape}")
+    _check_wavelengths(wl, f"{key} {path} wavelengths_nm")
+    cube = cube.astype(np.float64)
+    if not np.isfinite(cube).all() or (cube < 0).any():
+        raise CmosnoiseError(f"{key} {path!r}: every reflectance must be finite and >= 0")
+    return wl, cube
+
+
+def spectral_channels(light: ChannelLight, wavelengths: np.ndarray) -> np.ndarray:
+    """The matrix that takes spectra sampled at ``wavelengths`` (held at their ends beyond them, linearly
+    interpolated between) to each channel's signal relative to a white's under the light: (3, n). Its rows sum to
+    1: a flat reflectance r gives r in every channel.
+
+    Parameters
+    ----------
+    light : ChannelLight
+    wavelengths : (n,) array, nm
+
+    Returns
+    -------
+    (3, n) float64 array
+        :func:`reflectance_channels` of each unit spectrum: a cube's pixels times it are their channels.
+    """
+    wl = np.asarray(wavelengths, float)
+    return reflectance_channels(light, np.eye(wl.size), wl).T
 
 
 def colorchecker_reflectances() -> tuple[np.ndarray, np.ndarray]:

@@ -18,6 +18,9 @@ the sensor's peak rate). It comes from a file or a built-in:
 ``edge:ANGLE:LOW:HIGH``   a slanted edge, 5 degrees, 4:1 by default (``edge``, ``edge:ANGLE``;
                           ISO 12233 e-SFR; :mod:`.charts`)
 ``greys[:N]``             N grey patches from 1 to 0.001 in equal density steps (:mod:`.charts`)
+a ``.npz`` cube           ``reflectance`` (rows, cols, n) spectra and ``wavelengths_nm`` (n,): a
+                          multispectral scene, each pixel's spectrum through the light and the QE
+                          (light in lux only)
 a path                    8-bit PNG/JPEG/TIFF: sRGB-encoded, decoded to linear;
                           16-bit or float TIFF/PNG and ``.npy``: already linear,
                           scaled by the file's maximum (or a given ``scale``)
@@ -233,6 +236,11 @@ def check_file(path: str | Path, max_pixels: int = MAX_SCENE_PIXELS) -> None:
     p = inputs.check_regular(path, "scene")
     if raw_scene.is_raw(p):  # a raw photograph: read whole here, so a damaged one is refused before any work
         raw_scene.read(p)
+        return
+    if p.suffix.lower() == ".npz":  # a multispectral cube: its members' sizes from the zip directory
+        from .light import MAX_CUBE_BYTES
+
+        inputs.npz_members(p, "scene cube", MAX_CUBE_BYTES)
         return
     inputs.check_image_pixels(path, "scene", max_pixels,
                               hint=" (a scene is resampled to the sensor anyway: scale it down first)")
@@ -838,6 +846,16 @@ def _fitted(source: str, shape: tuple[int, int], scale: float | None = None, fit
         values = light.reflectance_channels(refl, wl)
         surround = float(srgb_to_linear(np.array(charts.SURROUND_SRGB8 / 255.0)))
         return lambda region=None: colorchecker(fine, region, values, surround)
+    if low.endswith(".npz"):  # a multispectral cube: each pixel's spectrum through the light and each channel's QE
+        from . import light as light_mod
+
+        if light is None:
+            raise CmosnoiseError(f"scene {name!r} is a multispectral cube of reflectance spectra: it needs light in "
+                                 "lux (light.enabled=true, light.illuminance_lux) to be seen through the QE")
+        wl, cube = light_mod.read_cube(name)
+        if fit == "crop":
+            cube = crop_to_aspect(cube, shape)
+        return Resampled(np.ascontiguousarray(cube @ light_mod.spectral_channels(light, wl).T), fine)
     if not is_builtin(name) or low == "photo":
         if low == "photo":
             img = load_file(bundled_photo_path())
