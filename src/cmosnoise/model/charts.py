@@ -51,7 +51,7 @@ EDGE_ANGLE_DEG, EDGE_LOW, EDGE_HIGH = 5.0, 0.1, 0.4
 GREYS_N, GREYS_DENSITY, GREYS_SURROUND = 20, 3.0, 0.18
 
 __all__ = ["colorchecker", "colorchecker_patches", "edge", "edge_parameters", "greys", "greys_levels",
-           "greys_patches", "truth", "zoneplate", "siemens", "COLORCHECKER_SRGB8"]
+           "greys_patches", "truth", "zoneplate", "zoneplate_frequency", "siemens", "COLORCHECKER_SRGB8"]
 
 
 # ------------------------------------------------------------------ ColorChecker
@@ -232,6 +232,32 @@ def zoneplate(shape: tuple[int, int], region=None, edge_cy_per_px: float = ZONEP
     mean = (np.outer(cy, cx) - np.outer(sy, sx)) * (cells * cells)
     v = 0.5 + 0.5 * mean
     return np.repeat(np.clip(v, 0.0, 1.0)[..., None], 3, axis=2)
+
+
+def zoneplate_frequency(text: str) -> float:
+    """``zoneplate[:F]`` read: F, the local frequency at the shorter edge's middle (cycles per pixel, 0.5 by
+    default, more than 0 and at most 4), or a one-line error.
+
+    Parameters
+    ----------
+    text : str
+        The scene's name.
+
+    Returns
+    -------
+    float
+    """
+    part = text.partition(":")[2].strip()
+    if not part:
+        return ZONEPLATE_EDGE_CY_PER_PX
+    try:
+        f = float(part)
+    except ValueError:
+        f = float("nan")
+    if not (0 < f <= 4):
+        raise CmosnoiseError(f"scene {text!r}: give zoneplate or zoneplate:F, F the frequency at the middle of the "
+                             "shorter edge in cycles per pixel, more than 0 and at most 4 (0.5: Nyquist)")
+    return f
 
 
 def _halfplane_share(x0: np.ndarray, y0: np.ndarray, size: float, a: np.ndarray, b: np.ndarray) -> np.ndarray:

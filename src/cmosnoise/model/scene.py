@@ -891,7 +891,7 @@ def _builtin(name: str, shape: tuple[int, int], cells: int = 1):
     if low == "colorchecker":
         return lambda region=None: colorchecker(shape, region)
     if low.startswith("zoneplate"):
-        edge_f = zoneplate_frequency(low)
+        edge_f = charts.zoneplate_frequency(low)
         return lambda region=None: charts.zoneplate(shape, region, edge_f, cells)
     if low == "siemens":
         return lambda region=None: charts.siemens(shape, region=region)
@@ -907,32 +907,6 @@ def _builtin(name: str, shape: tuple[int, int], cells: int = 1):
     if not text.isdigit() or not 1 <= int(text) <= 16:
         raise CmosnoiseError(f"scene 'steps:{text}': N must be a whole number of bands from 1 to 16")
     return lambda region=None: steps(shape, int(text), region)
-
-
-def zoneplate_frequency(text: str) -> float:
-    """``zoneplate[:F]`` read: F, the local frequency at the shorter edge's middle (cycles per pixel, 0.5 by
-    default, more than 0 and at most 4), or a one-line error.
-
-    Parameters
-    ----------
-    text : str
-        The scene's name.
-
-    Returns
-    -------
-    float
-    """
-    part = text.partition(":")[2].strip()
-    if not part:
-        return charts.ZONEPLATE_EDGE_CY_PER_PX
-    try:
-        f = float(part)
-    except ValueError:
-        f = float("nan")
-    if not (0 < f <= 4):
-        raise CmosnoiseError(f"scene {text!r}: give zoneplate or zoneplate:F, F the frequency at the middle of the "
-                             "shorter edge in cycles per pixel, more than 0 and at most 4 (0.5: Nyquist)")
-    return f
 
 
 def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.ndarray:
