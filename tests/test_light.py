@@ -152,7 +152,6 @@ def test_light_off_keeps_the_peak_rate_and_the_bits():
     (["light.illuminance_lux=10", "light.illuminance_lux=10", "light.luminance_cd_m2=3"], "give the light once"),
     (["light.illuminance_lux=10", "light.illuminant=D66"], "light.illuminant = 'D66' is not known"),
     (["light.illuminance_lux=10", "light.illuminant=blackbody:20"], "blackbody:KELVIN"),
-    (["light.illuminance_lux=10"], "sensor.quantum_efficiency"),
     (["light.illuminance_lux=10", "light.spectral_qe=[[400, 0.5], [500, 1.4]]"], "in [0, 1]"),
     (["light.illuminance_lux=10", "light.spectral_qe=[[500, 0.5], [400, 0.4]]"], "increasing"),
     (["light.illuminance_lux=10", "light.spectral_qe=[[900, 0.5], [1000, 0.4]]"], "do not overlap"),
@@ -250,3 +249,14 @@ def test_a_multispectral_cube_is_each_pixels_spectrum_through_the_light_and_the_
     with pytest.raises(CmosnoiseError, match="'reflectance'") as info:
         Sensor(c).scene_signal(str(tmp_path / "bad.npz"))
     assert "\n" not in str(info.value)
+
+
+def test_without_a_qe_the_default_sensor_has_a_measured_cameras_spectra():
+    # neither light.spectral_qe nor sensor.quantum_efficiency: the Nikon D5100's three spectra at a peak of 0.65, so
+    # the channels differ (colour) and a flat grey's green collects what those spectra give, not a flat QE's 3.6x
+    fp = focal_plane(load_config(overrides=["light.enabled=true", "light.illuminance_lux=10"]))
+    assert abs(fp.light.qe.max() - light.DEFAULT_QE_PEAK) < 1e-12
+    assert len({round(float(v), 6) for v in fp.white_e_per_s}) == 3
+    flat = focal_plane(load_config(overrides=["light.enabled=true", "light.illuminance_lux=10",
+                                              f"sensor.quantum_efficiency={light.DEFAULT_QE_PEAK}"]))
+    assert 3.0 < flat.white_e_per_s[1] / fp.white_e_per_s[1] < 4.5

@@ -99,8 +99,10 @@ def test_an_edge_or_a_patch_that_reaches_saturation_is_not_measured_and_says_so(
 
 
 def test_one_qe_for_all_channels_is_named_beside_the_colour_error():
-    r = _measure(lux=(30.0,))
-    assert any("one QE spectrum for every colour channel" in n for n in r["notes"])
+    r = _measure(lux=(30.0,))  # BASE: a flat QE of 0.6 at every wavelength
+    assert any(n.startswith("a flat QE") and "times the electrons" in n for n in r["notes"])
+    one = _measure(["light.spectral_qe=[[380, 0.5], [780, 0.5]]"], lux=(30.0,))
+    assert any("one QE spectrum for every colour channel" in n for n in one["notes"])
     nikon = _measure(["light.enabled=true", "light.illuminance_lux=1", "light.spectral_qe=Nikon 5100 (NPL)",
                       "light.qe_peak=0.6", "light.ir_cut_nm=680"], lux=(300.0,))
     assert not any("one QE spectrum" in n for n in nikon["notes"]) and not nikon["light_switched_on"]
@@ -211,17 +213,25 @@ def test_the_threshold_search_finds_each_instances_crossing():
         pts = r["points"][s]  # sorted by value: the interval's ends first and last
         assert abs(again - 1.0) <= abs(pts[-1][1] - pts[0][1]) / 2**12, (again, pts[0], pts[-1])
     assert r["min"] <= r["mean"] <= r["max"] and r["se"] > 0
-    # more light allows more FPN. The FPN's banding scales as sigma / signal; with the rest of the column profile
-    # (the white noise a column mean keeps: the banding at no FPN, f0) adding in quadrature, the crossing is at
-    # sigma* proportional to lux sqrt(1 - f0^2): x(100) / x(10) = 10 sqrt(1 - f100^2) / sqrt(1 - f10^2) per
-    # instance. The quadrature holds on average; one instance's two profiles correlate by about 1 / sqrt(columns)
-    # (48 in the patch), which moves its crossing by that times f0 / sqrt(1 - f0^2): 5 of those is the tolerance
+    # more light allows more FPN. The lines' banding (the noise's share taken out) scales as sigma / signal, so the
+    # crossing is at sigma* proportional to the lux: x(100) / x(10) = 10 per instance. What is left of the noise
+    # is a cross term of the lines with it, relative to the lines' banding about f0 / sqrt(columns) (f0 the noise's
+    # own banding over the unit, the line means' noise at no FPN: sigma_l_with_noise; 48 columns in the patch),
+    # which moves a crossing by about that: 5 of those, both illuminances', is the tolerance
     brighter = quality.threshold(cfg, "column_noise.vfpn_sigma_e", 0.0, 40.0, "banding_columns", 1.0, 100.0,
                                  instances=2, frames=3, sizes=SMALL)
+
+    def noise_banding(lux, seed):
+        cap = quality.capture(quality.merge_updates(quality.with_light(cfg)[0], {"column_noise": {"vfpn_sigma_e": 0}}),
+                              lux, 3, SMALL, seed, charts_=("flat",))
+        y = cap.luminance["flat"][(slice(None), *cap.patch())].mean(axis=0)
+        b = quality.visual_noise.banding(np.clip(y, 0, None), "columns", viewing=cap.print_view)
+        return b["sigma_l_with_noise"] / b["threshold_sigma_l"]
+
     for s in range(2):
-        f10, f100 = r["points"][s][0][1], brighter["points"][s][0][1]
-        expected = r["crossings"][s] * 10 * math.sqrt(1 - f100**2) / math.sqrt(1 - f10**2)
-        wobble = math.hypot(f10 / math.sqrt(1 - f10**2), f100 / math.sqrt(1 - f100**2)) / math.sqrt(48)
+        f10, f100 = noise_banding(10.0, s), noise_banding(100.0, s)
+        expected = r["crossings"][s] * 10
+        wobble = math.hypot(f10, f100) / math.sqrt(48)
         assert abs(brighter["crossings"][s] / expected - 1) < 5 * wobble, (brighter["crossings"][s], expected)
 
 
@@ -230,7 +240,8 @@ def test_the_threshold_command_says_its_sentence_and_refuses_what_it_cannot_sear
     r = cli("quality", *sets, "--find", "column_noise.vfpn_sigma_e=0:20", "--until", "banding_columns=1",
             "--lux", "10", "--instances", "2", "--frames", "2", "--out", tmp_path / "t")
     assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith("the largest column_noise.vfpn_sigma_e at which column banding stays below 1 JND")
+    assert r.stdout.startswith("the largest column_noise.vfpn_sigma_e at which column banding, print stays below 1 "
+                               "JND")
     doc = json.loads((tmp_path / "t" / "threshold.json").read_text())
     assert doc["mean"] > 0 and (tmp_path / "t" / "threshold.png").exists()
     # nothing to cross: said, not invented

@@ -37,3 +37,24 @@ def robust_centre(values: np.ndarray) -> tuple[float, float]:
 def robust_sigma(values: np.ndarray) -> float:
     """The robust sigma of :func:`robust_centre` alone."""
     return robust_centre(values)[1]
+
+
+def snr(signal: float, noise: float) -> float:
+    """A signal-to-noise ratio that stays defined without noise: ``signal / noise``, infinite for a positive signal
+    without noise (every noise source switched off), 0 for none.
+
+    Parameters
+    ----------
+    signal, noise : float
+        The mean and the standard deviation, in one unit.
+
+    Returns
+    -------
+    float
+        ``inf`` where ``noise`` is 0 and ``signal`` above 0 (JSON writes it as null); 0 where ``signal`` is 0 or
+        less.
+    """
+    signal, noise = float(signal), float(noise)
+    if not signal > 0:
+        return 0.0
+    return signal / noise if noise > 0 else float("inf")

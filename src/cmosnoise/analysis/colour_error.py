@@ -1,10 +1,20 @@
 """Colour error: CIEDE2000 per ColorChecker patch after a 3 x 3 colour matrix fitted by least squares.
 
 A camera's RGB (each patch's mean in each colour channel, linear, black subtracted) is mapped to linear sRGB by
-the matrix ``M`` that minimises ``sum |M cam - ref|^2`` over the 24 patches (the reference: the ColorChecker's
-sRGB values decoded, or a given table), then each patch is compared with its reference in CIELAB (sRGB's D65
-white, colour-science's conversions) by CIEDE2000 (``colour.delta_E(..., method="CIE 2000")``). About 1 is one
-just-noticeable difference for colour patches.
+the matrix ``M`` that minimises ``sum |M cam - ref|^2`` over the 24 patches, then each patch is compared with its
+reference in CIELAB (sRGB's D65 white, colour-science's conversions) by CIEDE2000
+(``colour.delta_E(..., method="CIE 2000")``). About 1 is one just-noticeable difference for colour patches.
+
+The reference (:data:`REFERENCES`):
+
+- ``spectral`` (the default): the chart's own colours, from the same reflectance spectra the simulated chart is
+  drawn from (Ohta's ColorChecker, colour-science's "ColorChecker N Ohta"), under the same illuminant, seen by the
+  CIE 1931 2 degree observer (colour-science's ``sd_to_XYZ``, the ASTM E308 integration), adapted to D65 by
+  Bradford (a camera white-balanced to the scene's white) and expressed in linear sRGB. A camera whose spectral
+  sensitivities are a linear combination of the observer's (a Luther camera) then scores 0, whatever the light:
+  the error measures the camera, not the reference;
+- ``xrite``: X-Rite's published sRGB values (post-2014) of a ColorChecker Classic, decoded to linear: another
+  chart's measured colours under D65, which a perfect camera viewing Ohta's chart misses by about 0.7 dE00.
 
 Examples
 --------
@@ -25,7 +35,13 @@ from ..errors import CmosnoiseError
 from ..model import charts
 from ..model.encoding import srgb_to_linear
 
-__all__ = ["reference_linear_srgb", "fit_matrix", "ciede2000", "colour_error", "mosaic_patch_means"]
+#: the references :func:`reference` gives
+REFERENCES = ("spectral", "xrite")
+#: the observer and the adaptation of the spectral reference
+OBSERVER, ADAPTATION = "CIE 1931 2 Degree Standard Observer", "Bradford"
+
+__all__ = ["reference_linear_srgb", "spectral_reference", "reference", "fit_matrix", "ciede2000", "colour_error",
+           "mosaic_patch_means", "REFERENCES"]
 
 
 def reference_linear_srgb() -> np.ndarray:
@@ -36,6 +52,69 @@ def reference_linear_srgb() -> np.ndarray:
     (24, 3) float64 array
     """
     return srgb_to_linear(charts.COLORCHECKER_SRGB8 / 255.0)
+
+
+def spectral_reference(illuminant: str = "D65") -> np.ndarray:
+    """The ColorChecker's 24 patches in linear sRGB from their reflectance spectra under ``illuminant``, seen by
+    :data:`OBSERVER` and adapted to D65 by :data:`ADAPTATION` (see the module docstring).
+
+    Parameters
+    ----------
+    illuminant : str
+        As ``light.illuminant`` takes it (a CIE name, ``blackbody:K``, a CSV file).
+
+    Returns
+    -------
+    (24, 3) float64 array
+        Linear sRGB (the illuminant's white 1; a patch outside sRGB's gamut has a negative component).
+
+    Raises
+    ------
+    CmosnoiseError
+        An illuminant without light from 380 to 780 nm (the observer's range): no white to adapt from.
+    """
+    from .. import colour_lib
+    from ..model import light
+
+    colour = colour_lib.colour()
+    wl, power = light.illuminant_spectrum(illuminant)
+    grid = np.arange(380.0, 781.0, 5.0)
+    inside = (grid >= wl[0]) & (grid <= wl[-1])
+    if inside.sum() < 2 or not (np.interp(grid[inside], wl, power) > 0).any():
+        raise CmosnoiseError(f"colour reference: light.illuminant = {illuminant!r} has no light from 380 to 780 nm "
+                             "(the observer's range); the spectral reference cannot be seen under it: give one that "
+                             "does, or --colour-reference xrite")
+    sd_illuminant = colour.SpectralDistribution(dict(zip(grid, np.interp(grid, wl, power, left=0.0, right=0.0))))
+    cmfs = colour.MSDS_CMFS[OBSERVER]
+    patches = colour.SDS_COLOURCHECKERS[light.COLORCHECKER_SPECTRA]
+    xyz = np.stack([colour.sd_to_XYZ(sd.copy().align(colour.SpectralShape(380, 780, 5)), cmfs, sd_illuminant)
+                    for sd in patches.values()]) / 100.0
+    white = np.asarray(colour.sd_to_XYZ(colour.sd_ones(colour.SpectralShape(380, 780, 5)), cmfs, sd_illuminant),
+                       float) / 100.0
+    srgb = colour.RGB_COLOURSPACES["sRGB"]
+    d65 = np.asarray(colour.xy_to_XYZ(srgb.whitepoint), float)
+    adapt = colour.adaptation.matrix_chromatic_adaptation_VonKries(white, d65, transform=ADAPTATION)
+    return (xyz @ np.asarray(adapt, float).T) @ np.asarray(srgb.matrix_XYZ_to_RGB, float).T
+
+
+def reference(kind: str = "spectral", illuminant: str = "D65") -> np.ndarray:
+    """The reference colours :func:`colour_error` compares with.
+
+    Parameters
+    ----------
+    kind : {"spectral", "xrite"}
+        :func:`spectral_reference` under ``illuminant``, or X-Rite's published values (:func:`reference_linear_srgb`).
+    illuminant : str
+        The scene's illuminant (the spectral reference's).
+
+    Returns
+    -------
+    (24, 3) float64 array
+        Linear sRGB.
+    """
+    if kind not in REFERENCES:
+        raise CmosnoiseError(f"colour reference = {kind!r} is not known; give one of {', '.join(REFERENCES)}")
+    return spectral_reference(illuminant) if kind == "spectral" else reference_linear_srgb()
 
 
 def fit_matrix(camera: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -94,7 +173,7 @@ def colour_error(camera: np.ndarray, reference: np.ndarray | None = None) -> dic
     camera : (24, 3) array
         The patches' camera RGB means, linear (:func:`mosaic_patch_means`), any scale: the matrix absorbs it.
     reference : (24, 3) array, optional
-        Their linear sRGB; default: :func:`reference_linear_srgb`.
+        Their linear sRGB; default: :func:`reference_linear_srgb` (:func:`reference` gives the spectral one).
 
     Returns
     -------
@@ -105,7 +184,7 @@ def colour_error(camera: np.ndarray, reference: np.ndarray | None = None) -> dic
     ref = reference_linear_srgb() if reference is None else np.asarray(reference, float)
     m = fit_matrix(camera, ref)
     corrected = np.asarray(camera, float) @ m.T
-    de = ciede2000(np.clip(corrected, 0, None), ref)
+    de = ciede2000(corrected, ref)  # outside sRGB's gamut too: CIELAB of the linear values, negatives included
     return {"de2000": de, "mean_de2000": float(de.mean()), "max_de2000": float(de.max()), "matrix": m,
             "corrected": corrected}
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..engine import reduce
 from ..engine import telegraph as telegraph_chain
+from ..estimators import snr
 from ..model.sensor import Exposure, Sensor
 from ..model.units import e_per_s_to_aa
 from . import noise_budget, white_pixels
@@ -108,13 +109,14 @@ def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
     at = {f"{lvl:g}": noise_budget.budget(sensor, lvl, _parts=parts) for lvl in levels if lvl < sat}
 
     def db(v):
-        return 20 * math.log10(v) if v > 0 else None
+        return 20 * math.log10(v) if 0 < v < math.inf else None
 
+    dr = snr(sat, dark)  # infinite without dark noise (every noise source off): JSON's null, said as such
     return {
         "saturation_e": sat,
         "dark_temporal_noise_e": dark,
-        "dynamic_range": sat / dark,
-        "dynamic_range_db": 20 * math.log10(sat / dark),
+        "dynamic_range": dr,
+        "dynamic_range_db": db(dr),
         # temporal SNR (the EMVA 1288 convention), and with the fixed pattern added
         "snr_temporal_db_at_signal_e": {k: db(b["snr_temporal"]) for k, b in at.items()},
         "snr_total_db_at_signal_e": {k: db(b["snr"]) for k, b in at.items()},

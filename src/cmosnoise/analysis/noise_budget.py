@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..engine.reduce import statistics
+from ..estimators import snr
 
 if TYPE_CHECKING:
     from ..model.sensor import Sensor
@@ -741,6 +742,6 @@ def budget(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | None = N
         "dominant_temporal": max(tv, key=tv.get) if tv else None,
         "fixed_pattern_rms_e": _rms(fv),
         "fixed_pattern_total_e": math.sqrt(total_f),
-        "snr_temporal": signal_e / math.sqrt(total_t) if signal_e > 0 else 0.0,
-        "snr": signal_e / math.sqrt(total_t + total_f) if signal_e > 0 else 0.0,
+        "snr_temporal": snr(signal_e, math.sqrt(total_t)),
+        "snr": snr(signal_e, math.sqrt(total_t + total_f)),
     }

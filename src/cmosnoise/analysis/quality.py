@@ -44,12 +44,13 @@ import numpy as np
 
 from ..config.loading import merge_updates
 from ..errors import CmosnoiseError
+from ..estimators import snr
 from ..model import charts
 from ..model.sensor import Sensor
 from . import colour_error, sfr, snr_light, visual_noise
 
 #: the charts' default sizes (rows, cols): enough pixels for each metric's estimate, few enough for speed
-SIZES = {"flat": (256, 256), "edge": (192, 192), "colorchecker": (240, 360)}
+SIZES = {"flat": (512, 512), "edge": (192, 192), "colorchecker": (240, 360)}
 #: the grey the flat field, the SNR and the visual noise are measured on (ISO 15739 and SNR10's reference grey)
 GREY = 0.18
 #: sRGB's (Rec. 709) luminance weights of linear R, G, B (IEC 61966-2-1)
@@ -77,7 +78,16 @@ class Captures:
     rows : int
         The whole picture's height, pixels (the viewing conditions' scale).
     picture_height_cm, viewing_distance_cm : float
-        The viewing conditions.
+        A print's viewing conditions.
+    rgb : dict
+        Chart name -> (frames, rows, cols, 3) output linear sRGB, scaled as ``luminance`` (the flat grey's, for the
+        colour visual noise).
+    display : Viewing
+        A display's viewing conditions at 100 %.
+    colour_reference : str
+        ``spectral`` or ``xrite`` (:data:`.colour_error.REFERENCES`).
+    pitch_um : float
+        The pixel pitch, for line pairs per mm.
     """
 
     lux: float
@@ -89,6 +99,10 @@ class Captures:
     rows: int
     picture_height_cm: float
     viewing_distance_cm: float
+    rgb: dict = field(default_factory=dict)
+    display: visual_noise.Viewing = field(default_factory=visual_noise.display_viewing)
+    colour_reference: str = "spectral"
+    pitch_um: float = 2.2
     cache: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)  #: why a metric is not measured here, one line each
 
@@ -111,6 +125,11 @@ class Captures:
     def patch(self, chart: str = "flat") -> tuple[slice, slice]:
         r0, r1, c0, c1 = charts.truth(_SOURCES[chart], self.raw[chart].shape[1:])["patches"][0]
         return slice(r0, r1), slice(c0, c1)
+
+    @property
+    def print_view(self) -> visual_noise.Viewing:
+        """The print's viewing conditions: the whole picture, :attr:`rows` pixels high."""
+        return visual_noise.print_viewing(self.rows, self.picture_height_cm, self.viewing_distance_cm)
 
 
 @dataclass(frozen=True)
@@ -169,36 +188,53 @@ def _green_snr(c: Captures) -> float:
 
 
 def _green_snr_predicted(c: Captures) -> float:
-    signal, noise = snr_light.predicted_snr(c.sensors["flat"], c.shots["flat"])
-    return signal / noise
+    return snr(*snr_light.predicted_snr(c.sensors["flat"], c.shots["flat"]))
 
 
 def _luminance_snr(c: Captures) -> float:
     y = c.luminance["flat"][(slice(None), *c.patch())]
-    return float(y.mean()) / math.sqrt(float(y.var(axis=0, ddof=1).mean()))
+    return snr(float(y.mean()), math.sqrt(float(y.var(axis=0, ddof=1).mean())))
 
 
 def _luminance_snr_picture(c: Captures) -> float:
     y = c.luminance["flat"][(slice(None), *c.patch())]
-    return float(y.mean()) / math.sqrt(float(y.reshape(y.shape[0], -1).var(axis=1, ddof=1).mean()))
+    return snr(float(y.mean()), math.sqrt(float(y.reshape(y.shape[0], -1).var(axis=1, ddof=1).mean())))
 
 
 def _visual(c: Captures) -> float:
     if "visual" not in c.cache:
         y = c.luminance["flat"][(slice(None), *c.patch())]
-        per = [visual_noise.visual_luminance_noise(np.clip(f, 0, None), c.rows, c.picture_height_cm,
-                                                   c.viewing_distance_cm)["sigma_l"] for f in y]
+        per = [visual_noise.visual_luminance_noise(np.clip(f, 0, None), viewing=c.print_view)["sigma_l"] for f in y]
         c.cache["visual"] = float(np.mean(per))
     return c.cache["visual"]
 
 
-def _banding(axis: str) -> Callable[[Captures], float]:
+def _visual_colour(variant: str, key: str = "value") -> Callable[[Captures], float | None]:
+    """A colour visual noise (:func:`.visual_noise.visual_noise`) of the grey patch, each frame's, their mean; None
+    on a monochrome sensor (no colour) and where the figure is infinite (S-CIELAB's vSNR of a noise-free patch, said
+    in the notes)."""
+    def compute(c: Captures) -> float | None:
+        if c.sensors["flat"].cfa == "none":
+            return None
+        name = f"visual:{variant}"
+        if name not in c.cache:
+            rgb = c.rgb["flat"][(slice(None), *c.patch())]
+            c.cache[name] = [visual_noise.visual_noise(np.clip(f, 0, None), variant, c.print_view) for f in rgb]
+        values = [r[key] for r in c.cache[name]]
+        if not all(math.isfinite(v) for v in values):
+            c.notes.append(f"{variant} {key} at {c.lux:g} lux: infinite (the patch has no noise)")
+            return None
+        return float(np.mean(values))
+    return compute
+
+
+def _banding(axis: str, display: bool = False) -> Callable[[Captures], float]:
     def compute(c: Captures) -> float:
         # the frames' mean: banding is the fixed pattern a still picture shows (the temporal part averages out
         # over the frames as a viewer's eye does over a video; one frame's adds the row noise of that frame)
         y = c.luminance["flat"][(slice(None), *c.patch())].mean(axis=0)
-        return visual_noise.banding(np.clip(y, 0, None), axis, c.rows, c.picture_height_cm,
-                                    c.viewing_distance_cm)["visibility"]
+        return visual_noise.banding(np.clip(y, 0, None), axis,
+                                    viewing=c.display if display else c.print_view)["visibility"]
     return compute
 
 
@@ -214,10 +250,30 @@ def _esfr(c: Captures) -> sfr.SfrResult | None:
     return c.cache["sfr"]
 
 
-def _sfr_value(name: str) -> Callable[[Captures], float | None]:
+def _raw_sfr(c: Captures) -> sfr.SfrResult | None:
+    """The e-SFR of the raw mosaic's green pixels (a monochrome sensor's every pixel), before demosaicing."""
+    if "raw_sfr" not in c.cache:
+        s = c.sensors["edge"]
+        raw = c.mean_raw("edge")
+        region = charts.truth("edge", raw.shape)["region"]
+        c.cache["raw_sfr"] = None if c.clipped("edge", [region]) else sfr.raw_channel(
+            raw - s.transfer.black_level_dn, s.cfa, region)
+    return c.cache["raw_sfr"]
+
+
+def _sfr_value(name: str, raw: bool = False, unit: str = "cy/px") -> Callable[[Captures], float | None]:
+    """An e-SFR figure of the picture's luminance (or the raw green pixels'), in cycles per pixel, line pairs per
+    mm (over the pixel pitch) or line widths per picture height (two a cycle, over the whole picture's rows)."""
     def compute(c: Captures) -> float | None:
-        r = _esfr(c)
-        return None if r is None else getattr(r, name)
+        r = _raw_sfr(c) if raw else _esfr(c)
+        if r is None:
+            return None
+        v = getattr(r, name)
+        if unit == "lp/mm":
+            return v / (c.pitch_um * 1e-3)
+        if unit == "LW/PH":
+            return 2.0 * v * c.rows
+        return v
     return compute
 
 
@@ -233,7 +289,8 @@ def _colour(c: Captures) -> dict | None:
             c.cache["colour"] = None
         else:
             cam = colour_error.mosaic_patch_means(raw, s.cfa, patches, s.transfer.black_level_dn)
-            c.cache["colour"] = colour_error.colour_error(cam)
+            ref = colour_error.reference(c.colour_reference, s.config.light.illuminant)
+            c.cache["colour"] = colour_error.colour_error(cam, ref)
     return c.cache["colour"]
 
 
@@ -270,20 +327,53 @@ METRICS: list[Metric] = [
            "and fixed-pattern noise, as one picture shows them), frames averaged; ISO 12232's noise-based speed "
            "reads it"),
     Metric("visual_noise_l", "visual luminance noise", "L*", "lower", "flat", _on_grey(_visual),
-           "CSF-weighted sigma of L* (ISO 15739 Annex B's luminance channel, CPIQ CSF; visual_noise)"),
-    Metric("banding_columns", "column banding", "JND", "lower", "flat", _on_grey(_banding("columns")),
-           "column means' CSF-weighted sigma of L* over the just-detectable 3 % noise (visual_noise.banding)"),
-    Metric("banding_rows", "row banding", "JND", "lower", "flat", _on_grey(_banding("rows")),
-           "row means' CSF-weighted sigma of L* over the just-detectable 3 % noise (visual_noise.banding)"),
-    Metric("mtf50", "MTF50", "cy/px", "higher", "edge", _sfr_value("mtf50"),
-           "ISO 12233 e-SFR of the output luminance (sfr)"),
-    Metric("mtf_nyquist", "MTF at Nyquist", "", "higher", "edge", _sfr_value("mtf_nyquist"),
-           "ISO 12233 e-SFR at 0.5 cy/px (sfr)"),
+           "CSF-weighted sigma of L* (ISO 15739 Annex B's luminance channel, CPIQ CSF; visual_noise), print viewing"),
+    Metric("visual_noise_iso15739", "visual noise, ISO 15739:2013", "", "lower", "flat",
+           _on_grey(_visual_colour("iso15739_2013")),
+           "sigma(L*) + 0.852 sigma(u*) + 0.323 sigma(v*) of the CSF-filtered opponent channels, as ISO 15739:2013's "
+           "public re-implementations write it (visual_noise.visual_noise), print viewing"),
+    Metric("visual_noise_scielab", "visual noise, S-CIELAB", "dE", "lower", "flat",
+           _on_grey(_visual_colour("scielab")),
+           "sqrt(var L* + var a* + var b*) of S-CIELAB (ISETCam's matrix and filters; visual_noise), print viewing"),
+    Metric("vsnr_scielab", "vSNR, S-CIELAB", "", "higher", "flat", _on_grey(_visual_colour("scielab", "vsnr")),
+           "ISETCam's vSNR: 1 / sqrt(var L* + var a* + var b*) of S-CIELAB, print viewing"),
+    Metric("visual_noise_cpiq", "visual noise, CPIQ (Keelan)", "L*^2", "lower", "flat",
+           _on_grey(_visual_colour("cpiq")),
+           "100 var(L*) + 5 var(a*) + 12 cov(L*, a*) of the CSF-filtered CIELAB (Keelan et al. 2011), no JND "
+           "mapping, print viewing"),
+    Metric("banding_columns", "column banding, print", "JND", "lower", "flat", _on_grey(_banding("columns")),
+           "the column lines' CSF-weighted sigma of L* (two halves' cross-estimate: the noise's share out) over the "
+           "just-detectable 3 % noise (visual_noise.banding), print viewing"),
+    Metric("banding_rows", "row banding, print", "JND", "lower", "flat", _on_grey(_banding("rows")),
+           "the row lines' CSF-weighted sigma of L* over the just-detectable 3 % noise, print viewing"),
+    Metric("banding_columns_display", "column banding, display", "JND", "lower", "flat",
+           _on_grey(_banding("columns", display=True)),
+           "as banding_columns, at 100 % on a display (visual_noise.display_viewing)"),
+    Metric("banding_rows_display", "row banding, display", "JND", "lower", "flat",
+           _on_grey(_banding("rows", display=True)), "as banding_rows, at 100 % on a display"),
+    Metric("mtf50", "MTF50, picture", "cy/px", "higher", "edge", _sfr_value("mtf50"),
+           "ISO 12233 e-SFR of the output luminance, after demosaicing (sfr)"),
+    Metric("mtf50_lp_mm", "MTF50, picture", "lp/mm", "higher", "edge", _sfr_value("mtf50", unit="lp/mm"),
+           "mtf50 over the pixel pitch"),
+    Metric("mtf50_lw_ph", "MTF50, picture", "LW/PH", "higher", "edge", _sfr_value("mtf50", unit="LW/PH"),
+           "mtf50 in line widths per picture height (2 a cycle, the whole picture's rows)"),
+    Metric("mtf_nyquist", "MTF at Nyquist, picture", "", "higher", "edge", _sfr_value("mtf_nyquist"),
+           "ISO 12233 e-SFR of the output luminance at 0.5 cy/px (sfr)"),
+    Metric("mtf50_raw", "MTF50, raw", "cy/px", "higher", "edge", _sfr_value("mtf50", raw=True),
+           "ISO 12233 e-SFR of the raw mosaic's green pixels before demosaicing (every pixel of a monochrome "
+           "sensor; sfr.raw_channel)"),
+    Metric("mtf50_raw_lp_mm", "MTF50, raw", "lp/mm", "higher", "edge", _sfr_value("mtf50", True, "lp/mm"),
+           "mtf50_raw over the pixel pitch"),
+    Metric("mtf50_raw_lw_ph", "MTF50, raw", "LW/PH", "higher", "edge", _sfr_value("mtf50", True, "LW/PH"),
+           "mtf50_raw in line widths per picture height"),
+    Metric("mtf_nyquist_raw", "MTF at Nyquist, raw", "", "higher", "edge", _sfr_value("mtf_nyquist", raw=True),
+           "the raw green pixels' e-SFR at 0.5 cy/px of the sensor"),
     Metric("defects_left_per_mp", "defects left after correction", "per MP", "lower", "flat", _defects_left,
            "defect pixels of the truth's mask visible in a frame (6 robust sigma) that processing.defects leaves, "
            "singles, couplets and clusters (scoring.defects_left)"),
     Metric("colour_de2000_mean", "colour error, mean", "dE00", "lower", "colorchecker", _colour_value("mean_de2000"),
-           "CIEDE2000 after a least-squares 3 x 3 matrix, 24 patches (colour_error)"),
+           "CIEDE2000 after a least-squares 3 x 3 matrix on the raw patch means, 24 patches, against the chart's own "
+           "colours (its spectra under the light, CIE 1931 2 degree, Bradford to D65; colour_error)"),
     Metric("colour_de2000_max", "colour error, worst patch", "dE00", "lower", "colorchecker", _colour_value("max_de2000"),
            "the largest patch's CIEDE2000 (colour_error)"),
 ]
@@ -319,7 +409,8 @@ def check_light(config) -> None:
 def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: int = 0,
             picture_height_cm: float = visual_noise.PICTURE_HEIGHT_CM,
             viewing_distance_cm: float = visual_noise.VIEWING_DISTANCE_CM,
-            charts_: tuple[str, ...] = ("flat", "edge", "colorchecker")) -> Captures:
+            charts_: tuple[str, ...] = ("flat", "edge", "colorchecker"), display: visual_noise.Viewing | None = None,
+            colour_reference: str = "spectral") -> Captures:
     """The charts at one illuminance: ``frames`` frames of each, and their output luminance.
 
     Parameters
@@ -335,9 +426,13 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
     seed : int
         The sensor instance.
     picture_height_cm, viewing_distance_cm : float
-        The viewing conditions.
+        A print's viewing conditions.
     charts_ : tuple of str
         The charts to expose (the flat grey sets the output's scale; without it the scale is the processing's).
+    display : Viewing, optional
+        A display's viewing conditions (default: :func:`.visual_noise.display_viewing`'s).
+    colour_reference : {"spectral", "xrite"}
+        What the colour error compares with (:func:`.colour_error.reference`).
 
     Returns
     -------
@@ -346,7 +441,7 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
     from ..isp.process import Processor
 
     sizes = {**SIZES, **(sizes or {})}
-    raw, lum, sensors, shots, procs = {}, {}, {}, {}, {}
+    raw, lum, sensors, shots, procs, rgbs = {}, {}, {}, {}, {}, {}
     grey_scale = None
     for chart in [c for c in ("flat", "edge", "colorchecker") if c in charts_]:
         rows, cols = sizes[chart]
@@ -365,24 +460,32 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
         # the optical-black clamp: the mean dark signal goes with the black level, as a camera's optically black
         # pixels (dark current and all) take it out; the dark signal's pattern and noise stay
         clamp = 0.0 if shot.dark_mean_e is None else float(np.mean(shot.dark_mean_e)) * s.transfer.gain_dn_per_e
-        y = []
+        y, colour_frames = [], []
         for f in stack:
             rgb = proc.linear_rgb(proc.cfa_image(f) - np.float32(clamp)).astype(np.float64)
             y.append(rgb if rgb.ndim == 2 else rgb @ LUMA)
+            if chart == "flat" and rgb.ndim == 3:
+                colour_frames.append(rgb)
         y = np.stack(y)
         if grey_scale is None and chart == "flat":  # the grey's mean to 0.18: an auto-exposure's level, for each chart
             r0, r1, c0, c1 = charts.truth(_SOURCES["flat"], (rows, cols))["patches"][0]
             mean = float(y[:, r0:r1, c0:c1].mean())
             grey_scale = GREY / mean if mean > 0 else 1.0
         raw[chart], lum[chart], sensors[chart], shots[chart] = stack, y * (grey_scale or 1.0), s, shot
+        if colour_frames:
+            rgbs[chart] = np.stack(colour_frames) * (grey_scale or 1.0)
         procs[chart] = proc
     return Captures(float(lux), raw, procs, lum, sensors, shots, int(config.sensor.height), picture_height_cm,
-                    viewing_distance_cm)
+                    viewing_distance_cm, rgbs, display or visual_noise.display_viewing(), colour_reference,
+                    float(config.sensor.pixel_pitch_um))
 
 
 def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int = 0, metrics=None,
             picture_height_cm: float = visual_noise.PICTURE_HEIGHT_CM,
-            viewing_distance_cm: float = visual_noise.VIEWING_DISTANCE_CM) -> dict:
+            viewing_distance_cm: float = visual_noise.VIEWING_DISTANCE_CM,
+            display_pixel_pitch_mm: float = visual_noise.DISPLAY_PIXEL_PITCH_MM,
+            display_distance_cm: float = visual_noise.DISPLAY_DISTANCE_CM,
+            colour_reference: str = "spectral") -> dict:
     """Every metric at each illuminance, SNR10 and SNR1, and the curves the plots draw.
 
     Parameters
@@ -400,7 +503,11 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
     metrics : sequence of str, optional
         Names in :data:`METRICS` (default: all).
     picture_height_cm, viewing_distance_cm : float
-        The viewing conditions (positive).
+        A print's viewing conditions (positive).
+    display_pixel_pitch_mm, display_distance_cm : float
+        A display's at 100 % (positive): the banding's second reading.
+    colour_reference : {"spectral", "xrite"}
+        What the colour error compares with (:func:`.colour_error.reference`).
 
     Returns
     -------
@@ -418,9 +525,11 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
         raise CmosnoiseError(f"lux = {lux}: give increasing illuminances above 0")
     if int(frames) < 2:
         raise CmosnoiseError(f"frames = {frames}: the temporal noise needs at least 2")
-    if not (picture_height_cm > 0 and viewing_distance_cm > 0):
-        raise CmosnoiseError(f"viewing conditions: picture height {picture_height_cm:g} cm and distance "
-                             f"{viewing_distance_cm:g} cm must both be above 0")
+    visual_noise.print_viewing(int(config.sensor.height), picture_height_cm, viewing_distance_cm)  # one line if bad
+    display = visual_noise.display_viewing(display_pixel_pitch_mm, display_distance_cm)
+    if colour_reference not in colour_error.REFERENCES:
+        raise CmosnoiseError(f"colour reference = {colour_reference!r} is not known; give one of "
+                             f"{', '.join(colour_error.REFERENCES)}")
     names = [m.name for m in METRICS] if metrics is None else list(metrics)
     unknown = [n for n in names if n not in BY_NAME]
     if unknown:
@@ -436,18 +545,28 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
            "illuminant": config.light.illuminant, "light_switched_on": switched,
            "picture_height_cm": picture_height_cm, "viewing_distance_cm": viewing_distance_cm,
            "picture_rows": int(config.sensor.height),
+           "viewing": {"print": visual_noise.print_viewing(int(config.sensor.height), picture_height_cm,
+                                                           viewing_distance_cm).as_dict(),
+                       "display": display.as_dict()},
+           "colour_reference": {"reference": colour_reference, "illuminant": config.light.illuminant,
+                                **({"observer": colour_error.OBSERVER, "adaptation": f"{colour_error.ADAPTATION} to "
+                                    "D65", "chart": "ColorChecker N Ohta (reflectance spectra)"}
+                                   if colour_reference == "spectral" else
+                                   {"chart": "X-Rite's published sRGB values (post-2014), D65"}),
+                                "fit": "3 x 3 matrix by least squares from the raw patch means to linear sRGB",
+                                "difference": "CIEDE2000 in CIELAB, D65"},
            "visual_threshold_l": visual_noise.threshold_sigma_l(int(config.sensor.height),
                                                                 (r1 - r0, c1 - c0),
                                                                 picture_height_cm, viewing_distance_cm)}
-    out["notes"] = []
-    if config.light.spectral_qe is None or _one_column(config.light.spectral_qe):
-        out["notes"].append("one QE spectrum for every colour channel (light.spectral_qe gives no R, G, B "
-                            "columns): the channels see the same light, so the colour error measures only that")
+    out["notes"] = qe_notes(config)
     edge_cap = colour_cap = None
+    seen = {n: [] for n in names}  # the values as measured (an SNR without noise infinite), for the crossings
     for v in lux:
-        cap = capture(config, v, frames, sizes, seed, picture_height_cm, viewing_distance_cm)
+        cap = capture(config, v, frames, sizes, seed, picture_height_cm, viewing_distance_cm, display=display,
+                      colour_reference=colour_reference)
         for n in names:
             val = BY_NAME[n].compute(cap)
+            seen[n].append(0.0 if val is None else float(val))
             out["metrics"][n].append(None if val is None or not math.isfinite(val) else float(val))
         out["notes"] += cap.notes
         if cap.cache.get("sfr") is not None:
@@ -457,12 +576,12 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
     if "snr_green" in out["metrics"]:
         for target in (10.0, 1.0):
             key = f"snr{target:g}_lux"
-            out[key] = snr_light.crossing_lux(lux, [s or 0.0 for s in out["metrics"]["snr_green"]], target)
+            out[key] = snr_light.crossing_lux(lux, seen["snr_green"], target)
+            out[key + "_side"] = snr_light.crossing_side(lux, seen["snr_green"], target)
             out[key + "_predicted"] = snr_light.predicted_crossing_lux(config, target, flat, GREY, seed)
         out["dynamic_range"] = snr_light.dynamic_range(config, flat, GREY, seed, out["snr1_lux_predicted"])
     if "snr_luminance_picture" in out["metrics"]:
-        out["noise_speed"] = snr_light.noise_based_speed(
-            config, lux, [s or 0.0 for s in out["metrics"]["snr_luminance_picture"]], GREY)
+        out["noise_speed"] = snr_light.noise_based_speed(config, lux, seen["snr_luminance_picture"], GREY)
     if edge_cap is not None:
         r = edge_cap.cache["sfr"]
         keep = r.frequency <= 1.0
@@ -473,6 +592,41 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
         out["colour"] = {"lux": colour_cap.lux, "de2000": col["de2000"].tolist(),
                          "names": charts.truth("colorchecker", SIZES["colorchecker"])["names"],
                          "corrected": col["corrected"].tolist()}
+    return out
+
+
+def qe_notes(config) -> list[str]:
+    """What a configuration's quantum efficiency does to colour and signal, one line each: a flat QE (the same at
+    every wavelength for each channel, ``sensor.quantum_efficiency`` without ``light.spectral_qe``) and a one-column
+    table (the same spectrum for R, G and B).
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    list of str
+    """
+    from ..model import light
+    from ..model.focal_plane import focal_plane
+
+    li = config.light
+    out = []
+    if li.spectral_qe is None and config.sensor.quantum_efficiency is not None:
+        lit, _ = with_light(config)
+        camera = merge_updates(lit, {"sensor": {"quantum_efficiency": None}, "light": {"qe_peak": None}})
+        flat_g = float(focal_plane(lit).white_e_per_s[1])
+        peak = float(np.max(config.sensor.quantum_efficiency))
+        spectra_g = float(focal_plane(camera).white_e_per_s[1]) * peak / light.DEFAULT_QE_PEAK
+        out.append(f"a flat QE (sensor.quantum_efficiency at every wavelength from 380 to 780 nm, no "
+                   f"light.spectral_qe): every channel sees the whole spectrum, so colours come out grey and the "
+                   f"colour error measures only that; and a green pixel collects {flat_g / spectra_g:.1f} times the "
+                   f"electrons of a measured camera's spectra at the same peak ({light.DEFAULT_SPECTRAL_QE}): give "
+                   "light.spectral_qe for a camera's colour and signal")
+    elif li.spectral_qe is not None and _one_column(li.spectral_qe):
+        out.append("one QE spectrum for every colour channel (light.spectral_qe gives no R, G, B columns): the "
+                   "channels see the same light, so the colour error measures only that")
     return out
 
 

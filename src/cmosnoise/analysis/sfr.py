@@ -45,7 +45,7 @@ MIN_CONTRAST = 0.2
 #: the slant an edge must have to spread its phases over the bins, and at most, degrees from vertical
 MIN_ANGLE_DEG, MAX_ANGLE_DEG = 1.0, 45.0
 
-__all__ = ["SfrResult", "esfr", "mtf50", "OVERSAMPLING"]
+__all__ = ["SfrResult", "esfr", "raw_channel", "mtf50", "OVERSAMPLING"]
 
 
 @dataclass(frozen=True)
@@ -221,3 +221,56 @@ def esfr(image: np.ndarray, region: tuple[int, int, int, int] | None = None) -> 
     total = float(trapezoid(sfr[inside], freq[inside]))
     above = float(trapezoid(sfr[inside & (freq >= 0.5)], freq[inside & (freq >= 0.5)]))
     return SfrResult(freq, sfr, angle, contrast, mtf50(freq, sfr), nyq, above / total if total > 0 else float("nan"))
+
+
+def raw_channel(raw: np.ndarray, pattern: str, region: tuple[int, int, int, int] | None = None) -> SfrResult:
+    """The e-SFR of a raw mosaic before demosaicing: a monochrome sensor's every pixel, a Bayer sensor's green
+    pixels.
+
+    The green pixels of a Bayer mosaic lie on two grids of every other row and column (G1 and G2); each is an image
+    of the edge at twice the pitch, its pixels the sensor's own (so its MTF holds the pixel's aperture, ``sinc(f)``
+    in the sensor's cycles per pixel). The e-SFR of each (``esfr``, frequencies halved to the sensor's cycles per
+    pixel) is averaged, the second interpolated at the first's frequencies: the MTF the raw channel has, without
+    the demosaicing's interpolation.
+
+    Parameters
+    ----------
+    raw : (rows, cols) array
+        The mosaic, black subtracted (a frames' mean, or one frame).
+    pattern : str
+        Its CFA: RGGB, BGGR, GRBG, GBRG or none.
+    region : (row0, row1, col0, col1), optional
+        The edge's part of the mosaic (sensor pixels).
+
+    Returns
+    -------
+    SfrResult
+        Frequencies in the sensor's cycles per pixel (from 0 to 1); MTF50 and the MTF at 0.5 cycles per pixel of the
+        sensor.
+    """
+    from ..model import cfa as cfa_mod
+
+    a = np.asarray(raw, np.float64)
+    if cfa_mod.is_mono(pattern):
+        return esfr(a, region)
+    r0, r1, c0, c1 = (0, a.shape[0], 0, a.shape[1]) if region is None else (int(v) for v in region)
+    tile = cfa_mod.tile(pattern)
+    results = []
+    for i in range(2):
+        for j in range(2):
+            if tile[i, j] != 1:  # the green pixels' two grids
+                continue
+            sub = a[i::2, j::2]
+            sub_region = ((r0 - i + 1) // 2, (r1 - i) // 2, (c0 - j + 1) // 2, (c1 - j) // 2)
+            results.append(esfr(sub, sub_region))
+    f = results[0].frequency / 2.0
+    curve = np.mean([np.interp(f, r.frequency / 2.0, r.sfr) for r in results], axis=0)
+    keep = f <= 1.0
+    f, curve = f[keep], curve[keep]
+    from scipy.integrate import trapezoid
+
+    total = float(trapezoid(curve, f))
+    above = float(trapezoid(curve[f >= 0.5], f[f >= 0.5]))
+    return SfrResult(f, curve, float(np.mean([r.angle_deg for r in results])),
+                     float(np.mean([r.contrast for r in results])), mtf50(f, curve),
+                     float(np.interp(0.5, f, curve)), above / total if total > 0 else float("nan"))

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..config import merge_updates
 from ..errors import CmosnoiseError
+from ..estimators import snr
 from ..model.sensor import Sensor
 from . import noise_budget
 
@@ -82,7 +83,7 @@ def measured_snr(sensor: Sensor, shot, stack: np.ndarray) -> float:
     """
     t = sensor.transfer
     green = (_green(np.asarray(stack, np.float64), sensor.cfa) - t.black_level_dn) / t.gain_dn_per_e
-    return float(green.mean() - _dark_mean(sensor, shot)) / math.sqrt(float(green.var(axis=0, ddof=1).mean()))
+    return snr(float(green.mean() - _dark_mean(sensor, shot)), math.sqrt(float(green.var(axis=0, ddof=1).mean())))
 
 
 def predicted_snr(sensor: Sensor, shot) -> tuple[float, float]:
@@ -157,7 +158,7 @@ def snr_curve(config, lux, frames: int = 8, shape=(96, 128), reflectance: float 
         signal, noise = _predicted(sensor, shot)
         out["signal_e"].append(signal)
         out["noise_e"].append(noise)
-        out["snr_predicted"].append(signal / noise)
+        out["snr_predicted"].append(snr(signal, noise))
         out["snr_measured"].append(measured_snr(sensor, shot, stack))
         out["pixels"] = int(_green(stack[:1], sensor.cfa).shape[1])
     for target in (10.0, 1.0):
@@ -193,9 +194,29 @@ def crossing_lux(lux, snr, target: float = 10.0) -> float | None:
     x, y = np.log(np.asarray(lux, float)), np.asarray(snr, float)
     for i in range(1, len(y)):
         if y[i - 1] < target <= y[i] and y[i - 1] > 0:
+            if not math.isfinite(y[i]):  # no noise from here on: the crossing lies at the interval's end
+                return float(math.exp(x[i]))
             a, b = math.log(y[i - 1]), math.log(y[i])
             return float(math.exp(x[i - 1] + (math.log(target) - a) * (x[i] - x[i - 1]) / (b - a)))
     return None
+
+
+def crossing_side(lux, snr, target: float = 10.0) -> str | None:
+    """Where a curve that does not cross ``target`` stands: ``"below"`` (it is at or above it already at the lowest
+    illuminance), ``"beyond"`` (below it at the highest), or None (it crosses: :func:`crossing_lux`).
+
+    Parameters
+    ----------
+    lux, snr : sequences of float
+    target : float
+
+    Returns
+    -------
+    str or None
+    """
+    if crossing_lux(lux, snr, target) is not None or not len(snr):
+        return None
+    return "below" if float(snr[0]) >= target else "beyond"
 
 
 def predicted_crossing_lux(config, target: float = 10.0, shape=(96, 128), reflectance: float = 0.18,
@@ -225,13 +246,16 @@ def predicted_crossing_lux(config, target: float = 10.0, shape=(96, 128), reflec
     sensor = _sensor(config, 1.0, shape, seed)
     per_lux = _predicted(sensor, sensor.expose(f"flat:{reflectance!r}"))[0]
 
-    def snr(log_lux):
+    def excess(log_lux):
         s = per_lux * math.exp(log_lux)
         var = sum(noise_budget.temporal_variances(sensor, s).values())
         var += sum(noise_budget.after_gain_variances(sensor).values())
-        return s / math.sqrt(var) - target
+        return (s / math.sqrt(var) if var > 0 else math.inf) - target
 
-    return float(math.exp(brentq(snr, math.log(1e-6), math.log(1e7))))
+    if sum(noise_budget.temporal_variances(sensor, per_lux * 1e-6).values()) + sum(
+            noise_budget.after_gain_variances(sensor).values()) == 0:
+        return 0.0  # no noise at any light: any light at all reaches every SNR
+    return float(math.exp(brentq(excess, math.log(1e-6), math.log(1e7))))
 
 
 def dynamic_range(config, shape=(96, 128), reflectance: float = 0.18, seed: int = 0,
@@ -320,5 +344,6 @@ def noise_based_speed(config, lux, snr, reflectance: float = 0.18) -> dict:
     for name, target in NOISE_SPEED_SNR.items():
         at = crossing_lux(lux, snr, target)
         h = None if at is None else at * per_lux
-        out[name] = {"snr": target, "lux": at, "exposure_lux_s": h, "speed": None if not h else NOISE_SPEED_K / h}
+        out[name] = {"snr": target, "lux": at, "exposure_lux_s": h, "speed": None if not h else NOISE_SPEED_K / h,
+                     "side": crossing_side(lux, snr, target)}
     return out

@@ -570,8 +570,15 @@ def quality(
                                        "at which the --until metric crosses its limit (bisection on each of "
                                        "--instances sensor instances, at the one --lux)"),
     until: str | None = typer.Option(None, "--until", help="with --find: METRIC=LIMIT, e.g. banding_columns=1"),
-    picture_height_cm: float = typer.Option(20.0, "--picture-height-cm", help="viewing: the picture's height, cm"),
-    viewing_distance_cm: float = typer.Option(50.0, "--viewing-distance-cm", help="viewing: the distance, cm"),
+    picture_height_cm: float = typer.Option(20.0, "--picture-height-cm", help="print viewing: the picture's "
+                                            "height, cm"),
+    viewing_distance_cm: float = typer.Option(50.0, "--viewing-distance-cm", help="print viewing: the distance, cm"),
+    display_pitch_mm: float = typer.Option(0.254, "--display-pixel-pitch-mm", help="display viewing at 100 %: the "
+                                           "screen's pixel pitch, mm"),
+    display_distance_cm: float = typer.Option(60.0, "--display-distance-cm", help="display viewing: the distance, cm"),
+    colour_reference: str = typer.Option("spectral", "--colour-reference", help="what the colour error compares "
+                                         "with: spectral (the chart's own spectra under the light) or xrite "
+                                         "(X-Rite's published values)"),
     out: Path = typer.Option(Path("cmosnoise-quality"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
@@ -585,7 +592,10 @@ def quality(
         levels = [float(v) for v in lux.split(",") if v.strip()]
     except ValueError:
         raise CmosnoiseError(f"--lux {lux!r}: give illuminances in lux, comma-separated (e.g. 1,10,100)") from None
-    spec = _sensor(config, preset, set_, {"seed": seed} if seed is not None else None)
+    # --lux gives the illuminances: light switched on without one takes the first (each is set in turn)
+    lit = [f"light.illuminance_lux={levels[0]!r}"] if levels and not any(
+        s.split("=", 1)[0].strip() in ("light.illuminance_lux", "light.luminance_cd_m2") for s in set_ or []) else []
+    spec = _sensor(config, preset, [*lit, *(set_ or [])], {"seed": seed} if seed is not None else None)
     if find is not None or until is not None:
         if find is None or until is None:
             raise CmosnoiseError("--find and --until go together: the parameter's interval and the metric's limit")
@@ -609,7 +619,9 @@ def quality(
     with _counting(ctx, "measuring", "sensors") as progress:
         doc = job.run(spec.config, out, overwrite, levels, frames, spec.config.seed if seed is None else seed, other,
                       instances, compare_from=origin, picture_height_cm=picture_height_cm,
-                      viewing_distance_cm=viewing_distance_cm, progress=progress)
+                      viewing_distance_cm=viewing_distance_cm, display_pixel_pitch_mm=display_pitch_mm,
+                      display_distance_cm=display_distance_cm, colour_reference=colour_reference,
+                      progress=progress)
     if _level(ctx) >= 0:
         head, rows = job.console_rows(doc)
         tab = Table(title="Image quality at each illuminance, lux (an 18 % grey, the edge, the ColorChecker)")

@@ -37,6 +37,8 @@ def run(config, out: Path, overwrite: bool = False, lux=DEFAULT_LUX, frames: int
         compare=None, instances: int = 3, names: tuple[str, str] = ("A", "B"), compare_from: str = "",
         picture_height_cm: float = quality.visual_noise.PICTURE_HEIGHT_CM,
         viewing_distance_cm: float = quality.visual_noise.VIEWING_DISTANCE_CM,
+        display_pixel_pitch_mm: float = quality.visual_noise.DISPLAY_PIXEL_PITCH_MM,
+        display_distance_cm: float = quality.visual_noise.DISPLAY_DISTANCE_CM, colour_reference: str = "spectral",
         progress: Callable[[int, int], None] | None = None) -> dict:
     """Measure ``config`` (and ``compare``) and write the folder ``out``; returns the document of quality.json.
 
@@ -56,11 +58,15 @@ def run(config, out: Path, overwrite: bool = False, lux=DEFAULT_LUX, frames: int
         What the two are called in tables and plots.
     compare_from : str
         Where the second configuration came from, for the summary (e.g. "A with sensor.temperature_c=65").
+    picture_height_cm, viewing_distance_cm, display_pixel_pitch_mm, display_distance_cm, colour_reference
+        The viewing conditions and the colour error's reference (:func:`cmosnoise.analysis.quality.measure`).
     progress : callable, optional
         ``progress(done, total)``, told after each measured sensor instance.
     """
     folder = OutputFolder(out, overwrite)
-    kw = {"frames": frames, "picture_height_cm": picture_height_cm, "viewing_distance_cm": viewing_distance_cm}
+    kw = {"frames": frames, "picture_height_cm": picture_height_cm, "viewing_distance_cm": viewing_distance_cm,
+          "display_pixel_pitch_mm": display_pixel_pitch_mm, "display_distance_cm": display_distance_cm,
+          "colour_reference": colour_reference}
     if compare is None:
         a = quality.measure(config, lux, seed=seed, **kw)
         if progress:
@@ -165,9 +171,11 @@ def summary_lines(doc: dict) -> list[str]:
         if r is None:
             continue
         who = f"{key}: " if doc["b"] is not None else ""
-        out.append(f"{who}SNR10 {_lux(r.get('snr10_lux'))} (model {_lux(r.get('snr10_lux_predicted'))}), SNR1 "
-                   f"{_lux(r.get('snr1_lux'))} (model {_lux(r.get('snr1_lux_predicted'))}), an 18 % grey at "
-                   f"f/{r['f_number']:g}, {r['integration_time_s']:g} s, {r['illuminant']}")
+        out.append(f"{who}SNR10 of the raw green pixels (photo-charge over temporal noise) "
+                   f"{_lux(r.get('snr10_lux'), r.get('snr10_lux_side'), r['lux'])} (model "
+                   f"{_lux(r.get('snr10_lux_predicted'))}), SNR1 {_lux(r.get('snr1_lux'), r.get('snr1_lux_side'), r['lux'])} "
+                   f"(model {_lux(r.get('snr1_lux_predicted'))}), an 18 % grey at f/{r['f_number']:g}, "
+                   f"{r['integration_time_s']:g} s, {r['illuminant']}")
         out += [f"{who}{line}" for line in r.get("notes", [])]
         dr = r.get("dynamic_range")
         if dr and dr.get("db") is not None:
@@ -182,9 +190,19 @@ def summary_lines(doc: dict) -> list[str]:
             out.append(f"{who}light was off in the configuration: switched on with its light section's defaults "
                        f"({r['illuminant']}, f/{r['f_number']:g}), each illuminance set in turn")
     a = doc["a"]
-    out.append(f"viewing: the {a['picture_rows']}-row picture {a['picture_height_cm']:g} cm high from "
+    out.append(f"viewing: print, the {a['picture_rows']}-row picture {a['picture_height_cm']:g} cm high from "
                f"{a['viewing_distance_cm']:g} cm; the just-detectable visual noise there is "
                f"{a['visual_threshold_l']:.3g} L* (banding in JND: 1 is the threshold)")
+    d = a.get("viewing", {}).get("display")
+    if d:
+        out.append(f"viewing: display at 100 %, {d['display_pixel_pitch_mm']:g} mm pixels from "
+                   f"{d['viewing_distance_cm']:g} cm ({d['pixels_per_degree']:.0f} pixels per degree): the display "
+                   "banding rows")
+    ref = a.get("colour_reference")
+    if ref:
+        seen = (f"{ref['chart']} under {ref['illuminant']}, {ref['observer']}, {ref['adaptation']}"
+                if ref["reference"] == "spectral" else ref["chart"])
+        out.append(f"colour error against {seen}; {ref['fit']}; {ref['difference']}")
     if doc["b"] is not None:
         a_name, b_name = doc["names"]
         if doc.get("compare_from"):
@@ -196,14 +214,20 @@ def summary_lines(doc: dict) -> list[str]:
 
 
 def _speed(point: dict) -> str:
+    if point["speed"] is None and point.get("side") == "below":
+        return f"above the lowest lux measured's (SNR {point['snr']:g} reached there already)"
     if point["speed"] is None:
         return f"beyond the lux measured (SNR {point['snr']:g} not reached)"
     speed = f"{point['speed']:.0f}" if point["speed"] >= 10 else f"{point['speed']:.2g}"  # ISO speeds are whole
     return f"{speed} (SNR {point['snr']:g} at {point['lux']:.3g} lux, H {point['exposure_lux_s']:.3g} lux s)"
 
 
-def _lux(v) -> str:
-    return "beyond the lux measured" if v is None else f"{v:.3g} lux"
+def _lux(v, side: str | None = None, lux=None) -> str:
+    if v is not None:
+        return f"{v:.3g} lux"
+    if side == "below" and lux:
+        return f"reached at or below {min(lux):g} lux, the lowest measured"
+    return "beyond the lux measured"
 
 
 # ------------------------------------------------------------------ plots

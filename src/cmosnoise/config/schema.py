@@ -250,7 +250,8 @@ class LightSection(Section):
         None, description="the pixels' quantum efficiency against wavelength (colour filter, photodiode, microlens): "
                           "a CSV file or inline rows of (nm, QE) or (nm, QE_R, QE_G, QE_B), or a camera set that "
                           "colour-science ships ('Nikon 5100 (NPL)', 'Sigma SDMerill (NPL)': relative, give qe_peak); "
-                          "null: sensor.quantum_efficiency at every wavelength from 380 to 780 nm")
+                          "null: sensor.quantum_efficiency at every wavelength from 380 to 780 nm (a flat QE), or "
+                          "without it a measured colour camera's: the Nikon D5100's spectra (NPL) at a peak of 0.65")
     qe_peak: float | None = Field(None, gt=0, le=1, description="scale the spectral QE so its highest value is "
                                                                   "this (a relative table made absolute); null: as given")
     ir_cut_nm: float | None = Field(None, ge=300, le=1200, description="an ideal IR-cut filter: no light beyond "

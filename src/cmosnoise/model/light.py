@@ -49,6 +49,13 @@ PLANCK_J_S = 6.62607015e-34
 LIGHT_M_PER_S = 299792458.0
 #: the wavelengths a flat quantum efficiency (``light.spectral_qe`` null) covers, nm
 FLAT_QE_NM = (380.0, 780.0)
+#: the default sensor's spectral QE, where neither light.spectral_qe nor sensor.quantum_efficiency is given: a colour
+#: camera's measured relative spectral sensitivities (the Nikon D5100's, NPL's measurement: Darrodi et al., "Reference
+#: data set for camera spectral sensitivity estimation", JOSA A 32, 2015; colour-science's "Nikon 5100 (NPL)",
+#: its colour filters, IR cut and silicon together) scaled so that their peak is DEFAULT_QE_PEAK: the green
+#: channel's QE Basler gives for a current colour CMOS camera (the acA4112-30uc: its monochrome twin's 70 % at
+#: 545 nm times the IR-cut filter's 93 %; docs.baslerweb.com, "About EMVA1288 Reports for Color Sensors")
+DEFAULT_SPECTRAL_QE, DEFAULT_QE_PEAK = "Nikon 5100 (NPL)", 0.65
 #: the ColorChecker's reflectance spectra: colour-science's name for them (Ohta's measurement, 380-780 nm)
 COLORCHECKER_SPECTRA = "ColorChecker N Ohta"
 #: the largest CSV table read (rows of a spectrum)
@@ -158,7 +165,8 @@ def qe_spectrum(spectral_qe, qe_peak: float | None, quantum_efficiency) -> tuple
     ----------
     spectral_qe : str, list of rows, or None
         A CSV file or inline rows of (nm, QE) or (nm, QE_R, QE_G, QE_B); a camera set colour-science ships
-        (relative: give ``qe_peak``); None: ``quantum_efficiency`` at every wavelength of :data:`FLAT_QE_NM`.
+        (relative: give ``qe_peak``); None: ``quantum_efficiency`` at every wavelength of :data:`FLAT_QE_NM`, or,
+        without that either, :data:`DEFAULT_SPECTRAL_QE` at :data:`DEFAULT_QE_PEAK` (or ``qe_peak``).
     qe_peak : float or None
         Scale the table so its highest value is this.
     quantum_efficiency : float, (3,) or None
@@ -170,10 +178,9 @@ def qe_spectrum(spectral_qe, qe_peak: float | None, quantum_efficiency) -> tuple
     qe : (n, 3) float64, electrons per photon, R, G, B (a monochrome table repeated)
     """
     key = "light.spectral_qe"
+    if spectral_qe is None and quantum_efficiency is None:  # the default sensor's measured spectra
+        return qe_spectrum(DEFAULT_SPECTRAL_QE, DEFAULT_QE_PEAK if qe_peak is None else qe_peak, None)
     if spectral_qe is None:
-        if quantum_efficiency is None:
-            raise CmosnoiseError("light.enabled needs the pixels' quantum efficiency: light.spectral_qe (a table) or "
-                                 "sensor.quantum_efficiency (a flat QE, 0 to 1)")
         q = np.broadcast_to(np.asarray(quantum_efficiency, float), (3,))
         wl = np.arange(FLAT_QE_NM[0], FLAT_QE_NM[1] + STEP_NM / 2, STEP_NM)
         table = np.repeat(q[None, :], wl.size, axis=0)
