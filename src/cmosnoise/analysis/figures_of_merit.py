@@ -46,6 +46,7 @@ __all__ = ["temporal_noise", "key_figures", "dark_map", "dark_current", "frame0_
 #: each figure's name and unit as the docs and the pages show them ({level}: the signal, e-, of a per-level figure)
 FIGURE_NAMES = {
     "saturation_e": "saturation (e-)",
+    "read_noise_e": "read noise, dark temporal without the dark shot noise (e- rms)",
     "dark_temporal_noise_e": "dark temporal noise (e- rms)",
     "dynamic_range": "dynamic range (ratio)",
     "dynamic_range_db": "dynamic range (dB)",
@@ -98,7 +99,9 @@ def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
     Returns
     -------
     dict
-        ``saturation_e`` and ``dark_temporal_noise_e`` (e-), ``dynamic_range`` (ratio) and ``dynamic_range_db``;
+        ``saturation_e``, ``read_noise_e`` (the dark temporal noise without the dark current's shot noise: what a data
+        sheet calls the read noise) and ``dark_temporal_noise_e`` (e-), ``dynamic_range`` (ratio) and
+        ``dynamic_range_db``;
         ``snr_temporal_db_at_signal_e`` and ``snr_total_db_at_signal_e``, dB by level keyed as text (``"100"``).
         :data:`FIGURE_NAMES` names them.
     """
@@ -112,8 +115,12 @@ def key_figures(sensor: Sensor, levels_e=(10.0, 100.0, 1000.0)) -> dict:
         return 20 * math.log10(v) if 0 < v < math.inf else None
 
     dr = snr(sat, dark)  # infinite without dark noise (every noise source off): JSON's null, said as such
+    # the read noise as a data sheet gives it: the dark temporal noise without the dark current's shot noise (EMVA
+    # 1288's sigma_d at no exposure), what source_follower.read_noise_e sets
+    read = noise_budget.temporal_variances(sensor, 0.0)
     return {
         "saturation_e": sat,
+        "read_noise_e": math.sqrt(sum(v for k, v in read.items() if k not in ("dark_shot", "rts_blinking"))),
         "dark_temporal_noise_e": dark,
         "dynamic_range": dr,
         "dynamic_range_db": db(dr),

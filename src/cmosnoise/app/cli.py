@@ -41,7 +41,11 @@ def _sensor(config: Path | None, preset: str | None, overrides: list[str] | None
     do without it (and without scipy.special, a fifth of a second)."""
     from ..model.spec import resolve
 
-    return resolve(load_config(config, preset, overrides, extra))
+    notes: list[str] = []
+    spec = resolve(load_config(config, preset, overrides, extra, notes))
+    for line in notes:  # settings that do nothing, or a section switched on: one line each, on stderr
+        err_console.print(f"cmosnoise: note: {line}", highlight=False, markup=False, soft_wrap=True)
+    return spec
 
 
 app = typer.Typer(

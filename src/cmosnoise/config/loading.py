@@ -250,6 +250,7 @@ def load_config(
     preset: str | None = None,
     overrides: list[str] | None = None,
     extra: dict | None = None,
+    notes: list | None = None,
 ) -> Config:
     """A configuration: defaults <- preset <- file <- ``extra`` <- ``--set`` overrides, validated.
 
@@ -263,6 +264,9 @@ def load_config(
         ``--set`` strings, ``key.path=value`` in YAML syntax, applied last (a number indexes a list).
     extra : dict, optional
         A (partial) configuration as data, merged over the file.
+    notes : list, optional
+        Told, one line each, what the file, ``extra`` and the overrides set that the configuration does not use
+        (:func:`inactive_notes`; light in lux is switched on where an illuminance was given without it).
 
     Returns
     -------
@@ -279,15 +283,85 @@ def load_config(
     (640, 45.0)
     """
     data: dict = {}
+    given: dict = {}  # what the file, extra and --set gave: the user's keys, not the preset's
     if preset:
         data = deep_merge(data, preset_data(preset))
     if path:
-        data = deep_merge(data, read_yaml(path))
+        file_data = read_yaml(path)
+        data, given = deep_merge(data, file_data), deep_merge(given, file_data)
     if extra:
-        data = deep_merge(data, extra)
+        data, given = deep_merge(data, extra), deep_merge(given, extra)
     if overrides:
         data = apply_overrides(data, overrides, default_data())
+        given = apply_overrides(given, overrides, default_data())
+    said = inactive_notes(data, given)
+    if notes is not None:
+        notes.extend(said)
     return validate_data(data)
+
+
+#: the sections (dotted) whose ``enabled`` switches their other keys on or off
+_SWITCHED = ("light", "prnu", "crosstalk", "dark_current", "dark_current.rts", "shot_noise", "source_follower",
+             "source_follower.flicker", "source_follower.rts", "row_noise", "column_noise", "column_noise.temporal",
+             "adc", "pixel_offset", "nonlinearity", "read_noise", "defects")
+
+
+def inactive_notes(data: dict, given: dict) -> list[str]:
+    """What ``given`` (the user's keys) sets that ``data`` does not use, one line each; ``data`` changed where the
+    intent is unambiguous.
+
+    - A key of a section whose ``enabled`` is false (and not set by ``given``): light in lux is switched on where
+      ``light.illuminance_lux`` or ``light.luminance_cd_m2`` is given (``data`` changed, said so); any other
+      section's keys are said to have no effect.
+    - ``sensor.pixel_pitch_um`` given while the dark current is per pixel (no point in nA/cm^2): it stays as it was.
+
+    Parameters
+    ----------
+    data : dict
+        The whole configuration's data (defaults not in it).
+    given : dict
+        The part of it the user gave.
+
+    Returns
+    -------
+    list of str
+    """
+    defaults = default_data()
+    out = []
+
+    def node(d, dotted):
+        for part in dotted.split("."):
+            d = d.get(part) if isinstance(d, dict) else None
+        return d
+
+    for dotted in _SWITCHED:
+        mine = node(given, dotted)
+        if not isinstance(mine, dict) or "enabled" in mine:
+            continue
+        keys = sorted(k for k in mine if f"{dotted}.{k}" not in _SWITCHED)
+        if not keys:
+            continue
+        section = node(data, dotted)
+        enabled = section.get("enabled") if isinstance(section, dict) and "enabled" in section else node(
+            defaults, dotted).get("enabled")
+        if enabled:
+            continue
+        if dotted == "light" and ("illuminance_lux" in keys or "luminance_cd_m2" in keys):
+            data.setdefault("light", {})["enabled"] = True
+            key = "light.illuminance_lux" if "illuminance_lux" in keys else "light.luminance_cd_m2"
+            out.append(f"{key} given: light in lux switched on (light.enabled=true)")
+            continue
+        shown = ", ".join(f"{dotted}.{k}" for k in keys)
+        out.append(f"{shown} set while {dotted}.enabled is false: no effect (set {dotted}.enabled=true to use it)")
+    sensor = given.get("sensor") if isinstance(given.get("sensor"), dict) else {}
+    if "pixel_pitch_um" in sensor:
+        dark = data.get("dark_current", {}) if isinstance(data.get("dark_current"), dict) else {}
+        points = dark.get("points", defaults["dark_current"]["points"])
+        if not any(isinstance(p, dict) and p.get("mean_nA_per_cm2") is not None for p in points or []):
+            out.append(f"sensor.pixel_pitch_um = {sensor['pixel_pitch_um']}: the dark current is per pixel "
+                       "(dark_current.points' e-/s or aA) and stays as it was; give their mean_nA_per_cm2 to "
+                       "scale it with the pixel's area")
+    return out
 
 
 def config_values(config: Config) -> dict:

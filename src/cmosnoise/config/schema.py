@@ -631,6 +631,13 @@ class SourceFollowerSection(Section):
 
     enabled: bool = True
     thermal_sigma_e: float = Field(2.0, ge=0, le=10000, description="thermal noise, e- rms per pixel per frame")
+    read_noise_e: float | None = Field(
+        None, gt=0, le=10000, description="the dark temporal read noise, e- rms, as a data sheet gives it (EMVA "
+                                          "1288's sigma_d at no exposure, over K): thermal, flicker, row and column "
+                                          "temporal noise, the ADC's read noise, black-level error and "
+                                          "quantization, as the population expects them; thermal_sigma_e is solved "
+                                          "from it (random telegraph traps not counted); null: thermal_sigma_e as "
+                                          "given")
     flicker: FlickerSection = Field(default_factory=FlickerSection)
     rts: SourceFollowerRtsSection = Field(default_factory=SourceFollowerRtsSection)
 

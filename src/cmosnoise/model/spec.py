@@ -20,6 +20,7 @@ read it and never recompute any of it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -209,6 +210,94 @@ def transfer(config: Config) -> adc.Transfer:
     return adc.Transfer.from_settings(a.bits, a.black_level_dn, full_scale, a.output_bits)
 
 
+def _mean_square(sf, upper: float) -> float:
+    """E[X^2] of a non-negative quantity from its survival function: ``int_0^inf 2 x sf(x) dx``."""
+    from scipy.integrate import quad
+
+    return float(quad(lambda x: 2.0 * x * float(sf(x)), 0.0, upper, limit=200)[0])
+
+
+def dark_read_variances(config: Config) -> dict[str, float]:
+    """The dark temporal read noise's parts at no exposure, e-^2, as the population of sensor instances expects
+    them: ``source_follower.read_noise_e``'s terms (the thermal noise, each pixel's flicker sigma's mean square over
+    its distribution, the row noise, each column's temporal sigma's mean square, the ADC's read noise, black-level
+    error and quantization referred to e-). An instance's own (:mod:`cmosnoise.analysis.noise_budget`) differs by
+    its maps' sampling.
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    dict of str to float
+    """
+    from .distributions import gumbel
+    from .stages.read_noise import variance_dn2
+
+    out: dict[str, float] = {}
+    sf_cfg = config.source_follower
+    if sf_cfg.enabled:
+        out["thermal"] = sf_cfg.thermal_sigma_e**2
+        if sf_cfg.flicker.enabled:
+            model = physics.flicker_model(config)
+            upper = float(model.tail_max) + max(float(model.body.ppf(1.0 - 1e-12)), 0.0)
+            out["flicker"] = _mean_square(model.sf, upper)
+    if config.row_noise.enabled:
+        rn = config.row_noise
+        k = transfer(config).gain_dn_per_e
+        out["row"] = rn.sigma_e**2 + (rn.sigma_dn / k) ** 2
+    cn = config.column_noise
+    if cn.enabled and cn.temporal.enabled:
+        col = gumbel(cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e)
+        out["column"] = _mean_square(col.sf, abs(cn.temporal.gumbel_loc_e) + 60 * cn.temporal.gumbel_scale_e)
+    if config.adc.enabled:
+        t = transfer(config)
+        k2 = t.gain_dn_per_e**2
+        if config.read_noise.enabled:
+            rd = config.read_noise
+            out["read_after_gain"] = variance_dn2(rd.distribution, rd.scale_dn, rd.shape) / k2
+        if config.black_level.frame_sigma_dn > 0:
+            out["black_level_frame"] = config.black_level.frame_sigma_dn**2 / k2
+        out["quantization"] = t.quantization_var_dn2 / k2
+    return out
+
+
+def resolve_read_noise(config: Config) -> Config:
+    """``config`` with ``source_follower.thermal_sigma_e`` solved from ``source_follower.read_noise_e`` where that is
+    given: ``thermal^2 = read_noise^2 - the other parts of`` :func:`dark_read_variances`.
+
+    Parameters
+    ----------
+    config : Config
+
+    Returns
+    -------
+    Config
+
+    Raises
+    ------
+    CmosnoiseError
+        A total below what the other sources already give.
+    """
+    from ..errors import CmosnoiseError
+
+    sf_cfg = config.source_follower
+    if sf_cfg.read_noise_e is None:
+        return config
+    if not sf_cfg.enabled:
+        raise CmosnoiseError(f"source_follower.read_noise_e = {sf_cfg.read_noise_e:g}: the thermal noise it is solved "
+                             "for is the source follower's; set source_follower.enabled=true")
+    others = {k: v for k, v in dark_read_variances(config).items() if k != "thermal"}
+    rest = sum(others.values())
+    thermal2 = sf_cfg.read_noise_e**2 - rest
+    if thermal2 < 0:
+        raise CmosnoiseError(f"source_follower.read_noise_e = {sf_cfg.read_noise_e:g} e-: the other dark sources "
+                             f"already give {math.sqrt(rest):.3g} e- ({', '.join(f'{k} {math.sqrt(v):.2g}' for k, v in others.items())}); "
+                             f"give at least {math.sqrt(rest):.3g}")
+    return merge_updates(config, {"source_follower": {"thermal_sigma_e": math.sqrt(thermal2)}})
+
+
 def resolve(config: Config | SensorSpec) -> SensorSpec:
     """The :class:`SensorSpec` of ``config``; raises CmosnoiseError on what its values cannot mean.
 
@@ -239,7 +328,7 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     """
     if isinstance(config, SensorSpec):
         return config
-    config = physics.resolve_prnu(physics.apply_gain(config))
+    config = resolve_read_noise(physics.resolve_prnu(physics.apply_gain(config)))
     physics.check_timing(config)
     # every section is checked, those switched off too (a file must stay valid when one is switched on)
     return SensorSpec(config, tuple(physics.dark_points(config)), physics.flicker_model(config),
