@@ -596,9 +596,10 @@ def quality(
         levels = [float(v) for v in lux.split(",") if v.strip()]
     except ValueError:
         raise CmosnoiseError(f"--lux {lux!r}: give illuminances in lux, comma-separated (e.g. 1,10,100)") from None
-    # --lux gives the illuminances: light switched on without one takes the first (each is set in turn)
-    lit = [f"light.illuminance_lux={levels[0]!r}"] if levels and not any(
-        s.split("=", 1)[0].strip() in ("light.illuminance_lux", "light.luminance_cd_m2") for s in set_ or []) else []
+    # --lux gives the illuminances: light switched on by --set without one takes the first (each is set in turn)
+    keys = [s.split("=", 1)[0].strip() for s in set_ or []]
+    lit = ([f"light.illuminance_lux={levels[0]!r}"] if levels and "light.enabled" in keys
+           and not {"light.illuminance_lux", "light.luminance_cd_m2"} & set(keys) else [])
     spec = _sensor(config, preset, [*lit, *(set_ or [])], {"seed": seed} if seed is not None else None)
     if find is not None or until is not None:
         if find is None or until is None:

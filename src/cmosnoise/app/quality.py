@@ -389,12 +389,23 @@ def run_threshold(config, out: Path, overwrite: bool, find: str, until: str, lux
     return r
 
 
+def _range(values: list[float]) -> str:
+    """Values over sensor instances as ``a`` or ``a to b``."""
+    lo, hi = min(values), max(values)
+    return f"{lo:.3g}" if f"{lo:.3g}" == f"{hi:.3g}" else f"{lo:.3g} to {hi:.3g}"
+
+
 def threshold_sentence(r: dict) -> str:
     m = quality.BY_NAME[r["metric"]]
     unit = f" {m.unit}" if m.unit else ""
     if r["mean"] is None:
+        ends = [(p[0][1], p[-1][1]) for p in r["points"] if p]
+        lo = [a for a, _ in ends]
+        hi = [b for _, b in ends]
+        where = ("above" if min(lo + hi) > r["limit"] else "below" if max(lo + hi) < r["limit"] else "on one side of")
         return (f"{m.label} does not cross {r['limit']:g}{unit} between {r['key']} = {r['low']:g} and {r['high']:g} "
-                f"at {r['lux']:g} lux on any of {r['instances']} sensor instances")
+                f"at {r['lux']:g} lux on any of {r['instances']} sensor instances: it is {where} it at both ends "
+                f"({_range(lo)}{unit} at {r['low']:g}, {_range(hi)}{unit} at {r['high']:g})")
     side = "largest" if r["below_at"] == "low" else "smallest" if r["below_at"] == "high" else "value of"
     good = "below" if m.better == "lower" else "above"
     spread = (f" ± {r['se']:.2g} (standard error; {r['min']:.4g} to {r['max']:.4g} over "
