@@ -7,8 +7,9 @@ first compile (2 cores); each metric on a 12 MP image under a second. Each time 
 - **quality, 6 illuminances**: :func:`cmosnoise.analysis.quality.measure` of the same sensor at 1 to 1000 lux,
   8 frames of each chart (what the command measures; the charts are crops of their own size, so the sensor's
   size enters through the viewing conditions only);
-- **each metric on a whole 12 MP image**: the visual luminance noise and both bandings of a 12 MP grey, the
-  e-SFR of a 12 MP edge, the colour error of a 12 MP ColorChecker mosaic (its patch means and the fit).
+- **each metric on a whole 12 MP image**: the visual luminance noise, the three colour visual noises (ISO 15739,
+  S-CIELAB, CPIQ) and both bandings of a 12 MP grey, the e-SFR of a 12 MP edge and of its raw green pixels, the
+  colour error of a 12 MP ColorChecker mosaic (its patch means and the fit).
 
     python benchmarks/bench_quality.py [--megapixels 12] [--repeats 3] [--json FILE]
 """
@@ -40,7 +41,7 @@ def main(argv=None) -> int:
 
     width = int(round(math.sqrt(args.megapixels * 1e6 * 4 / 3) / 2) * 2)
     height = int(round(width * 3 / 4 / 2) * 2)
-    size = [f"sensor.width={width}", f"sensor.height={height}", "sensor.quantum_efficiency=0.6"]
+    size = [f"sensor.width={width}", f"sensor.height={height}"]
     cfg = load_config(overrides=size)
     shot = Sensor(cfg, seed=0).expose("photo")
     shot.frame(0)  # compiled and warm
@@ -54,6 +55,12 @@ def main(argv=None) -> int:
     grey = np.clip(0.18 + 0.01 * rng.standard_normal((height, width)), 0, None)
     rows.append({"label": "visual luminance noise of a whole grey",
                  "s": fastest(lambda: visual_noise.visual_luminance_noise(grey, height), args.repeats)})
+    grey_rgb = np.clip(0.18 + 0.01 * rng.standard_normal((height, width, 3)), 0, None).astype(np.float32)
+    view = visual_noise.print_viewing(height)
+    for variant, label in [("iso15739_2013", "ISO 15739 visual noise"), ("scielab", "S-CIELAB"),
+                           ("cpiq", "CPIQ visual noise")]:
+        rows.append({"label": f"{label} of a whole colour grey",
+                     "s": fastest(lambda v=variant: visual_noise.visual_noise(grey_rgb, v, view), args.repeats)})
     rows.append({"label": "column banding of a whole grey",
                  "s": fastest(lambda: visual_noise.banding(grey, "columns", height), args.repeats)})
     rows.append({"label": "row banding of a whole grey",
@@ -62,6 +69,8 @@ def main(argv=None) -> int:
     region = charts.truth("edge", (height, width))["region"]
     rows.append({"label": "e-SFR of a whole edge (its region: 60 % of the rows, half the columns)",
                  "s": fastest(lambda: sfr.esfr(edge, region), args.repeats)})
+    rows.append({"label": "raw e-SFR of the same edge's green pixels (two grids of a quarter each)",
+                 "s": fastest(lambda: sfr.raw_channel(edge, cfg.sensor.cfa, region), args.repeats)})
     mosaic = Sensor(load_config(overrides=[*size, "light.enabled=true", "light.illuminance_lux=300",
                                            "light.spectral_qe=Nikon 5100 (NPL)", "light.qe_peak=0.6",
                                            "light.ir_cut_nm=680"]), seed=0).expose("colorchecker").frame(0)

@@ -594,13 +594,13 @@ def render_sweep_fig9(d: dict) -> str:
 
 
 #: a yield on visibility: the column FPN at which banding stays below 1 JND at 10 lux, over sensor instances
-QUALITY_YIELD = {"set": ["sensor.quantum_efficiency=0.6"], "vary": ["column_noise.vfpn_sigma_e=1,2,3,4"],
-                 "instances": 10, "quality_lux": 10.0, "spec": ["banding_columns<=1"]}
+QUALITY_YIELD = {"set": [], "vary": ["column_noise.vfpn_sigma_e=0.3,0.5,0.7,0.9"],
+                 "instances": 10, "frames": 8, "quality_lux": 10.0, "spec": ["banding_columns<=1"]}
 
 
 def compute_quality_yield() -> dict:
     """`cmosnoise sweep --quality-lux 10 --spec banding_columns<=1` over the column FPN: each point's yield and its
-    banding's spread over the instances (the default sensor with a flat QE of 0.6)."""
+    banding's spread over the instances (the default sensor)."""
     import tempfile
 
     from cmosnoise import load_config
@@ -608,7 +608,8 @@ def compute_quality_yield() -> dict:
 
     d = QUALITY_YIELD
     with tempfile.TemporaryDirectory() as tmp:
-        sw.run(load_config(overrides=d["set"]), d["vary"], d["instances"], Path(tmp) / "s", specs=d["spec"],
+        sw.run(load_config(overrides=d["set"]), d["vary"], d["instances"], Path(tmp) / "s", frames=d["frames"],
+               specs=d["spec"],
                workers=2, quality_lux=d["quality_lux"], metrics=["banding_columns"])
         import pandas as pd
 
@@ -875,20 +876,20 @@ def render_run_speed(d: dict) -> str:
 
 
 def compute_quality_hot() -> dict:
-    """`cmosnoise quality`'s comparison of the default sensor (QE 0.6) at 25 C and at 65 C: 1, 10 and 100 lux,
+    """`cmosnoise quality`'s comparison of the default sensor at 25 C and at 65 C: 1, 10 and 100 lux,
     8 frames, the default charts, 3 paired sensor instances."""
     from cmosnoise import load_config
     from cmosnoise.analysis import quality
     from cmosnoise.app.quality import difference
 
-    base = ["sensor.quantum_efficiency=0.6"]
-    a_cfg = load_config(overrides=base)
-    b_cfg = load_config(overrides=[*base, "sensor.temperature_c=65"])
+    a_cfg = load_config()
+    b_cfg = load_config(overrides=["sensor.temperature_c=65"])
     lux = [1.0, 10.0, 100.0]
     a = [quality.measure(a_cfg, lux, frames=8, seed=s) for s in range(3)]
     b = [quality.measure(b_cfg, lux, frames=8, seed=s) for s in range(3)]
     d = difference(a, b)
-    keys = ["snr_green", "visual_noise_l", "banding_columns", "banding_rows", "mtf50"]
+    keys = ["snr_green", "visual_noise_l", "visual_noise_iso15739", "visual_noise_scielab", "banding_columns",
+            "banding_rows", "mtf50"]
     return {"lux": lux, "a": {k: a[0]["metrics"][k] for k in keys}, "b": {k: b[0]["metrics"][k] for k in keys},
             "diff": {k: d[k] for k in keys}, "snr10": [a[0]["snr10_lux"], b[0]["snr10_lux"]],
             "threshold_l": a[0]["visual_threshold_l"]}
@@ -903,9 +904,13 @@ def render_quality_hot(d: dict) -> str:
         m = quality.BY_NAME[k]
         cells = []
         for i in range(len(d["lux"])):
-            diff = d["diff"][k][i]
+            diff, a, b = d["diff"][k][i], d["a"][k][i], d["b"][k][i]
+            if a is None or b is None or diff is None or diff.get("mean") is None:
+                cells.append(f"{'not measured' if a is None else format(a, '.3g')} / "
+                             f"{'not measured' if b is None else format(b, '.3g')}")
+                continue
             star = " **clear**" if diff["clear"] else ""
-            cells.append(f"{d['a'][k][i]:.3g} / {d['b'][k][i]:.3g} ({diff['mean']:+.2g} ± {diff['se']:.1g}){star}")
+            cells.append(f"{a:.3g} / {b:.3g} ({diff['mean']:+.2g} ± {diff['se']:.1g}){star}")
         lines.append(f"| {m.label} | {m.unit} | " + " | ".join(cells) + " |")
     lines += ["", f"SNR10: {d['snr10'][0]:.3g} lux at 25 C, {d['snr10'][1]:.3g} lux at 65 C (f/2.8, 0.03 s, D65). "
                   f"The just-detectable visual noise at these viewing conditions is {d['threshold_l']:.3g} L*."]

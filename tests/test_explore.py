@@ -460,7 +460,7 @@ def test_image_quality_of_both_panes_and_their_difference_in_jnd(app_page, serve
         assert served["metrics"] == {k: v[0] for k, v in want["metrics"].items()}, pane
     # six times the column FPN in B: B's banding is the larger, A - B is negative in JND, and A is the better
     label, a, b, diff = got["banding_columns"]
-    assert label == "column banding (JND)" and float(b) > float(a)
+    assert label == "column banding, print (JND)" and float(b) > float(a)
     assert diff.startswith("-") and "JND" in diff and diff.endswith("A better")
     assert "thresholds" in got["visual_noise_l"][3]
     page.screenshot(path=str(tmp_path / "quality.png"), full_page=True)

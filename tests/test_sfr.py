@@ -79,3 +79,43 @@ def test_bad_edges_are_one_line(img, region, needle):
     with pytest.raises(CmosnoiseError, match=needle) as info:
         sfr.esfr(img, region)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG", "none"])
+def test_the_raw_channels_mtf_of_an_edge_through_no_lens_is_the_pixels_sinc(pattern):
+    # the edge drawn by exact area shares, sampled by a mosaic's pixels: the green pixels' two grids (every pixel of
+    # a monochrome sensor) are images of it through the pixel's square, MTF sinc(f) in the sensor's cycles per
+    # pixel up to Nyquist, within test_sfr's 0.02 (the e-SFR's own accuracy against analytic MTFs)
+    from cmosnoise.model import charts as charts_mod
+
+    img = charts_mod.edge((200, 240), 5.0, 0.1, 0.4)[..., 0]
+    r = sfr.raw_channel(img, pattern, charts_mod.truth("edge", img.shape)["region"])
+    band = r.frequency <= 0.5
+    assert np.abs(r.sfr[band] - np.sinc(r.frequency[band])).max() < 0.02
+    assert r.mtf_nyquist == pytest.approx(2 / np.pi, abs=0.02)
+
+
+def test_the_sfrs_standard_error_is_its_spread_over_noise_draws():
+    # 200 draws of white noise on a blurred edge: the SFR's standard deviation over them at each frequency against
+    # the mean of the estimate each draw makes from its own pixels. A standard deviation from n = 200 draws has a
+    # relative standard error 1 / sqrt(2 (n - 1)) = 5 %: 5 of them is 25 %, the tolerance. Only where the signal
+    # stands above the noise (the estimate is the magnitude's first-order spread; far below it the Rician spread is
+    # narrower); MTF50's error (the SFR's over the slope) likewise
+    from scipy.ndimage import gaussian_filter
+
+    base = gaussian_filter(charts.edge((120, 100), 5.0, 0.1, 0.4)[..., 0], 0.7)
+    rng = np.random.default_rng(7)
+    freqs = [0.1, 0.25, 0.5]
+    values, ses, m50, m50_se = [], [], [], []
+    for _ in range(200):
+        r = sfr.esfr(base + rng.normal(0.0, 0.01, base.shape))
+        values.append(np.interp(freqs, r.frequency, r.sfr))
+        ses.append([r.se_at(f) for f in freqs])
+        m50.append(r.mtf50)
+        m50_se.append(r.mtf50_se)
+    ratio = np.std(values, axis=0, ddof=1) / np.mean(ses, axis=0)
+    assert np.all(np.abs(ratio - 1) < 0.25), ratio
+    assert abs(np.std(m50, ddof=1) / np.mean(m50_se) - 1) < 0.25
+    # no noise: what is left is the ESF's curvature between bin centres (the residual is taken from a linear
+    # interpolation), under a tenth of the noisy draws' error
+    assert sfr.esfr(base).se_at(0.25) < 0.1 * np.mean(ses, axis=0)[1]

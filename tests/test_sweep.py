@@ -204,13 +204,14 @@ def test_image_quality_metrics_are_sweep_responses_with_their_own_numbers(tmp_pa
         assert b[1] > b[0], b
     assert df["pass"].tolist() == [int(v <= 1) for v in df["banding_columns"]]
     page = (tmp_path / "s" / "index.html").read_text()
-    assert "column banding at 10 lux, JND" in page.replace("\u200b", "")
+    assert "column banding, print at 10 lux, JND" in page.replace("\u200b", "")
     assert (tmp_path / "s" / "banding_columns.png").exists()
 
 
 @pytest.mark.parametrize("args, needle", [
     (["--spec", "banding_columns<=1"], "(with --quality-lux)"),
-    (["--quality-lux", "10"], "--quality-lux at sweep point (the base): light.enabled needs"),
+    (["--quality-lux", "10", "--set", "light.spectral_qe=[[900, 0.5], [1000, 0.4]]"],
+     "--quality-lux at sweep point (the base): light: the illuminant"),
     (["--quality-lux", "-3", "--set", "sensor.quantum_efficiency=0.5"], "--quality-lux -3"),
 ])
 def test_quality_responses_are_checked_before_any_task(tmp_path, args, needle):

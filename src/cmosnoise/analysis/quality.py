@@ -50,7 +50,13 @@ from ..model.sensor import Sensor
 from . import colour_error, sfr, snr_light, visual_noise
 
 #: the charts' default sizes (rows, cols): enough pixels for each metric's estimate, few enough for speed
-SIZES = {"flat": (512, 512), "edge": (192, 192), "colorchecker": (240, 360)}
+SIZES = {"flat": (1024, 1024), "edge": (192, 192), "colorchecker": (240, 360)}
+#: the share of the flat field's side the banding reads (its middle): the more lines and the longer, the smaller the
+#: noise's spread in the lines' estimate (it falls as the side to the power -3/4)
+BANDING_SHARE = 0.875
+#: the largest standard error of the SFR at the frequency an MTF figure reads (:attr:`.sfr.SfrResult.se`): above it
+#: an MTF of 0.5 cannot be told from 0.3 or 0.7 at 2 standard errors, and the figure is not given
+SFR_SE_LIMIT = 0.1
 #: the grey the flat field, the SNR and the visual noise are measured on (ISO 15739 and SNR10's reference grey)
 GREY = 0.18
 #: sRGB's (Rec. 709) luminance weights of linear R, G, B (IEC 61966-2-1)
@@ -88,6 +94,13 @@ class Captures:
         ``spectral`` or ``xrite`` (:data:`.colour_error.REFERENCES`).
     pitch_um : float
         The pixel pitch, for line pairs per mm.
+    mean_luminance : dict
+        Chart name -> the frames' mean output luminance over the whole chart (the flat grey's, for the banding).
+
+    Notes
+    -----
+    ``luminance["flat"]`` and ``rgb["flat"]`` hold the grey patch alone (:meth:`patch` gives where it lies in the
+    chart): each frame is processed over it and a margin.
     """
 
     lux: float
@@ -103,6 +116,7 @@ class Captures:
     display: visual_noise.Viewing = field(default_factory=visual_noise.display_viewing)
     colour_reference: str = "spectral"
     pitch_um: float = 2.2
+    mean_luminance: dict = field(default_factory=dict)
     cache: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)  #: why a metric is not measured here, one line each
 
@@ -122,9 +136,21 @@ class Captures:
             self.cache[key] = self.raw[chart].astype(np.float64).mean(axis=0)
         return self.cache[key]
 
+    def black_dn(self, chart: str) -> float:
+        """The raw frame's black, DN: the black level and the mean dark signal, as a camera's optically black
+        pixels (dark current and all) take it out (:func:`capture` clamps the processed pictures so too)."""
+        return float(self.sensors[chart].transfer.black_level_dn) + _dark_clamp_dn(self.sensors[chart],
+                                                                                   self.shots[chart])
+
     def patch(self, chart: str = "flat") -> tuple[slice, slice]:
         r0, r1, c0, c1 = charts.truth(_SOURCES[chart], self.raw[chart].shape[1:])["patches"][0]
         return slice(r0, r1), slice(c0, c1)
+
+    def banding_patch(self) -> tuple[slice, slice]:
+        """The flat field's middle :data:`BANDING_SHARE` of each side, where banding is read."""
+        rows, cols = self.raw["flat"].shape[1:]
+        dr, dc = int(rows * (1 - BANDING_SHARE) / 2), int(cols * (1 - BANDING_SHARE) / 2)
+        return slice(dr, rows - dr), slice(dc, cols - dc)
 
     @property
     def print_view(self) -> visual_noise.Viewing:
@@ -192,18 +218,18 @@ def _green_snr_predicted(c: Captures) -> float:
 
 
 def _luminance_snr(c: Captures) -> float:
-    y = c.luminance["flat"][(slice(None), *c.patch())]
+    y = c.luminance["flat"]
     return snr(float(y.mean()), math.sqrt(float(y.var(axis=0, ddof=1).mean())))
 
 
 def _luminance_snr_picture(c: Captures) -> float:
-    y = c.luminance["flat"][(slice(None), *c.patch())]
+    y = c.luminance["flat"]
     return snr(float(y.mean()), math.sqrt(float(y.reshape(y.shape[0], -1).var(axis=1, ddof=1).mean())))
 
 
 def _visual(c: Captures) -> float:
     if "visual" not in c.cache:
-        y = c.luminance["flat"][(slice(None), *c.patch())]
+        y = c.luminance["flat"]
         per = [visual_noise.visual_luminance_noise(np.clip(f, 0, None), viewing=c.print_view)["sigma_l"] for f in y]
         c.cache["visual"] = float(np.mean(per))
     return c.cache["visual"]
@@ -218,7 +244,7 @@ def _visual_colour(variant: str, key: str = "value") -> Callable[[Captures], flo
             return None
         name = f"visual:{variant}"
         if name not in c.cache:
-            rgb = c.rgb["flat"][(slice(None), *c.patch())]
+            rgb = c.rgb["flat"]
             c.cache[name] = [visual_noise.visual_noise(np.clip(f, 0, None), variant, c.print_view) for f in rgb]
         values = [r[key] for r in c.cache[name]]
         if not all(math.isfinite(v) for v in values):
@@ -232,33 +258,39 @@ def _banding(axis: str, display: bool = False) -> Callable[[Captures], float]:
     def compute(c: Captures) -> float:
         # the frames' mean: banding is the fixed pattern a still picture shows (the temporal part averages out
         # over the frames as a viewer's eye does over a video; one frame's adds the row noise of that frame)
-        y = c.luminance["flat"][(slice(None), *c.patch())].mean(axis=0)
-        return visual_noise.banding(np.clip(y, 0, None), axis,
+        y = c.mean_luminance["flat"][c.banding_patch()]
+        return visual_noise.banding(y, axis,
                                     viewing=c.display if display else c.print_view)["visibility"]
     return compute
 
 
-def _esfr(c: Captures) -> sfr.SfrResult | None:
-    if "sfr" not in c.cache:
-        y = c.luminance["edge"].mean(axis=0)
-        region = charts.truth("edge", y.shape)["region"]
+def _edge_measured(c: Captures, key: str, what: str, measure: Callable[[tuple], sfr.SfrResult],
+                   shape: tuple[int, int]) -> sfr.SfrResult | None:
+    """An e-SFR of the edge chart, made once; None with a note where the edge clips or is too faint to read."""
+    if key not in c.cache:
+        region = charts.truth("edge", shape)["region"]
+        c.cache[key] = None
         if c.clipped("edge", [region]):
-            c.notes.append(f"MTF at {c.lux:g} lux: the edge's bright side reaches saturation; not measured")
-            c.cache["sfr"] = None
+            c.notes.append(f"{what} at {c.lux:g} lux: the edge's bright side reaches saturation; not measured")
         else:
-            c.cache["sfr"] = sfr.esfr(y, region)
-    return c.cache["sfr"]
+            try:
+                c.cache[key] = measure(region)
+            except CmosnoiseError as e:  # an edge the noise or the light leaves without the contrast to read
+                c.notes.append(f"{what} at {c.lux:g} lux: not measured ({e})")
+    return c.cache[key]
+
+
+def _esfr(c: Captures) -> sfr.SfrResult | None:
+    y = c.luminance["edge"].mean(axis=0)
+    return _edge_measured(c, "sfr", "MTF", lambda region: sfr.esfr(y, region), y.shape)
 
 
 def _raw_sfr(c: Captures) -> sfr.SfrResult | None:
-    """The e-SFR of the raw mosaic's green pixels (a monochrome sensor's every pixel), before demosaicing."""
-    if "raw_sfr" not in c.cache:
-        s = c.sensors["edge"]
-        raw = c.mean_raw("edge")
-        region = charts.truth("edge", raw.shape)["region"]
-        c.cache["raw_sfr"] = None if c.clipped("edge", [region]) else sfr.raw_channel(
-            raw - s.transfer.black_level_dn, s.cfa, region)
-    return c.cache["raw_sfr"]
+    """The e-SFR of the raw mosaic's green pixels (a monochrome sensor's every pixel), before demosaicing, its
+    black (the black level and the mean dark signal) taken out."""
+    raw = c.mean_raw("edge")
+    return _edge_measured(c, "raw_sfr", "raw MTF", lambda region: sfr.raw_channel(
+        raw - c.black_dn("edge"), c.sensors["edge"].cfa, region), raw.shape)
 
 
 def _sfr_value(name: str, raw: bool = False, unit: str = "cy/px") -> Callable[[Captures], float | None]:
@@ -269,6 +301,19 @@ def _sfr_value(name: str, raw: bool = False, unit: str = "cy/px") -> Callable[[C
         if r is None:
             return None
         v = getattr(r, name)
+        at = 0.5 if name == "mtf_nyquist" else v
+        se = r.se_at(at)
+        what = f"{'raw ' if raw else ''}{'MTF at Nyquist' if name == 'mtf_nyquist' else 'MTF50'} at {c.lux:g} lux"
+        note = None
+        if not math.isfinite(at):
+            note = f"{what}: the SFR does not fall to 0.5 (the noise's floor); not measured"
+        elif not se <= SFR_SE_LIMIT:
+            note = (f"{what}: the edge is too noisy to read (the SFR's standard error at {at:.2f} cycles/pixel is "
+                    f"{se:.2f}, over {SFR_SE_LIMIT:g}: more light or frames); not measured")
+        if note is not None:
+            if note not in c.notes:
+                c.notes.append(note)
+            return None
         if unit == "lp/mm":
             return v / (c.pitch_um * 1e-3)
         if unit == "LW/PH":
@@ -441,7 +486,7 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
     from ..isp.process import Processor
 
     sizes = {**SIZES, **(sizes or {})}
-    raw, lum, sensors, shots, procs, rgbs = {}, {}, {}, {}, {}, {}
+    raw, lum, sensors, shots, procs, rgbs, means = {}, {}, {}, {}, {}, {}, {}
     grey_scale = None
     for chart in [c for c in ("flat", "edge", "colorchecker") if c in charts_]:
         rows, cols = sizes[chart]
@@ -457,27 +502,57 @@ def capture(config, lux: float, frames: int, sizes: dict | None = None, seed: in
             n = max(int(c.processing.dark_frames), 8)
             dark = np.mean(np.stack(list(s.dark_frames(n))).astype(np.float64), axis=0).astype(np.float32)
         proc = Processor(c.processing, s.raw_info(), dark)
-        # the optical-black clamp: the mean dark signal goes with the black level, as a camera's optically black
-        # pixels (dark current and all) take it out; the dark signal's pattern and noise stay
-        clamp = 0.0 if shot.dark_mean_e is None else float(np.mean(shot.dark_mean_e)) * s.transfer.gain_dn_per_e
-        y, colour_frames = [], []
+        clamp = _dark_clamp_dn(s, shot)
+        # the grey: each frame processed over its patch alone (and a margin: the processing is local), the frames'
+        # mean over the whole field for the banding (the processing is linear: the mean's picture is the pictures'
+        # mean)
+        crop = _patch_window((rows, cols), s.cfa) if chart == "flat" else None
+        y, colour_frames, total = [], [], None
         for f in stack:
-            rgb = proc.linear_rgb(proc.cfa_image(f) - np.float32(clamp)).astype(np.float64)
+            cfa_img = proc.cfa_image(f) - np.float32(clamp)
+            if crop is not None:
+                total = cfa_img.astype(np.float64) if total is None else total + cfa_img
+                (a0, a1, b0, b1), inner = crop
+                cfa_img = cfa_img[a0:a1, b0:b1]
+            rgb = proc.linear_rgb(cfa_img).astype(np.float64)
+            if crop is not None:
+                rgb = rgb[inner]
             y.append(rgb if rgb.ndim == 2 else rgb @ LUMA)
             if chart == "flat" and rgb.ndim == 3:
                 colour_frames.append(rgb)
         y = np.stack(y)
         if grey_scale is None and chart == "flat":  # the grey's mean to 0.18: an auto-exposure's level, for each chart
-            r0, r1, c0, c1 = charts.truth(_SOURCES["flat"], (rows, cols))["patches"][0]
-            mean = float(y[:, r0:r1, c0:c1].mean())
+            mean = float(y.mean())
             grey_scale = GREY / mean if mean > 0 else 1.0
+        if crop is not None:
+            rgb_mean = proc.linear_rgb((total / len(stack)).astype(np.float32)).astype(np.float64)
+            means[chart] = (rgb_mean if rgb_mean.ndim == 2 else rgb_mean @ LUMA) * (grey_scale or 1.0)
         raw[chart], lum[chart], sensors[chart], shots[chart] = stack, y * (grey_scale or 1.0), s, shot
         if colour_frames:
             rgbs[chart] = np.stack(colour_frames) * (grey_scale or 1.0)
         procs[chart] = proc
     return Captures(float(lux), raw, procs, lum, sensors, shots, int(config.sensor.height), picture_height_cm,
                     viewing_distance_cm, rgbs, display or visual_noise.display_viewing(), colour_reference,
-                    float(config.sensor.pixel_pitch_um))
+                    float(config.sensor.pixel_pitch_um), means)
+
+
+def _dark_clamp_dn(sensor: Sensor, shot) -> float:
+    """The optical-black clamp, DN: the mean dark signal goes with the black level, as a camera's optically black
+    pixels (dark current and all) take it out; the dark signal's pattern and noise stay."""
+    return 0.0 if shot.dark_mean_e is None else float(np.mean(shot.dark_mean_e)) * sensor.transfer.gain_dn_per_e
+
+
+#: the margin a patch is processed with, pixels: more than the demosaicing's and the defect correction's reach
+PATCH_MARGIN = 8
+
+
+def _patch_window(shape: tuple[int, int], pattern: str) -> tuple[tuple[int, int, int, int], tuple[slice, slice]]:
+    """The flat chart's grey patch with :data:`PATCH_MARGIN` around it (its corner even, so the CFA's phase is the
+    frame's): the window processed, and the patch within it."""
+    r0, r1, c0, c1 = charts.truth(_SOURCES["flat"], shape)["patches"][0]
+    a0, b0 = max(r0 - PATCH_MARGIN, 0) // 2 * 2, max(c0 - PATCH_MARGIN, 0) // 2 * 2
+    a1, b1 = min(r1 + PATCH_MARGIN, shape[0]), min(c1 + PATCH_MARGIN, shape[1])
+    return (a0, a1, b0, b1), (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
 
 
 def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int = 0, metrics=None,

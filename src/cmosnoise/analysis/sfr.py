@@ -16,6 +16,15 @@ filter actually used (Asplund's note: the correction of ISO 12233:2014/2017 Anne
 From the SFR: MTF50 (the frequency where it falls to 0.5, linearly interpolated), the MTF at Nyquist (0.5
 cycles/pixel) and the share of the SFR's area from 0 to the sampling frequency that lies above Nyquist.
 
+**Its standard error** (``se``), from the pixels' own spread: each ESF bin's mean has the variance ``v_i`` of its
+pixels' values over their number (the pixels independent: noise, fixed pattern and defects all count). The
+windowed LSF's DFT ``X(w) = sum_j a_j (e_(j+1) - e_j) exp(-i w m_j)`` (``a`` the window, ``m`` the centring's
+shifted index) is a linear sum of the bins, of variance ``sum_i v_i |u_(i-1) - u_i|^2``; the shift adds one
+sample a step (``m_(i-1) - m_i = -1`` modulo n), so that is ``A + B - 2 C cos w`` with ``A = sum v_i a_(i-1)^2``,
+``B = sum v_i a_i^2``, ``C = sum v_i a_(i-1) a_i``. The noise's share along the signal's phase is half of it, so
+``se = sqrt((A + B - 2 C cos w) / 2) / |X(0)|``, through the same ``sinc^2`` correction; ``mtf50_se`` is its value
+at MTF50 over the SFR's slope there.
+
 Distances are measured perpendicular to the edge, so the frequencies are cycles per pixel across it (ISO 12233
 bins along the rows and scales the frequency by the cosine of the angle: the same thing).
 
@@ -68,6 +77,9 @@ class SfrResult:
         The SFR at 0.5 cycles per pixel.
     above_nyquist : float
         The share of the SFR's area from 0 to 1 cycle per pixel that lies above 0.5: aliasing's room.
+    se : (n,) float64 array, optional
+        The SFR's standard error at each frequency from the pixels' spread (the module docstring); None where not
+        estimated.
     """
 
     frequency: np.ndarray
@@ -77,10 +89,26 @@ class SfrResult:
     mtf50: float
     mtf_nyquist: float
     above_nyquist: float
+    se: np.ndarray | None = None
+
+    def se_at(self, frequency: float) -> float:
+        """The SFR's standard error at ``frequency`` (cycles per pixel), interpolated; nan where not estimated."""
+        if self.se is None or not np.isfinite(frequency):
+            return float("nan")
+        return float(np.interp(frequency, self.frequency, self.se))
+
+    @property
+    def mtf50_se(self) -> float:
+        """MTF50's standard error, cycles per pixel: the SFR's at MTF50 over the SFR's slope there."""
+        if self.se is None or not np.isfinite(self.mtf50):
+            return float("nan")
+        slope = np.gradient(self.sfr, self.frequency)
+        return self.se_at(self.mtf50) / max(abs(float(np.interp(self.mtf50, self.frequency, slope))), 1e-12)
 
     def as_dict(self) -> dict:
         """The figures (not the curve) as plain numbers."""
-        return {"mtf50_cy_per_px": self.mtf50, "mtf_nyquist": self.mtf_nyquist, "above_nyquist": self.above_nyquist,
+        return {"mtf50_cy_per_px": self.mtf50, "mtf50_se": self.mtf50_se, "mtf_nyquist": self.mtf_nyquist,
+                "mtf_nyquist_se": self.se_at(0.5), "above_nyquist": self.above_nyquist,
                 "angle_deg": self.angle_deg, "contrast": self.contrast}
 
 
@@ -200,11 +228,14 @@ def esfr(image: np.ndarray, region: tuple[int, int, int, int] | None = None) -> 
         sums[empty] = np.interp(np.nonzero(empty)[0], filled, sums[filled] / counts[filled])
         counts[empty] = 1
     esf = sums / counts
+    centres = (np.arange(esf.size) + first + 0.5) * step
+    bin_var = _bin_variance(idx - first, a[keep] - np.interp(dist[keep], centres, esf), counts)
     # 4. the LSF, centred and windowed
     lsf = np.diff(esf)
     n = lsf.size
     centre = float((lsf * np.arange(n)).sum() / lsf.sum())
     shift = int(round(centre - (n - 1) / 2))
+    window = np.roll(np.hamming(n), shift)  # the window each unshifted LSF sample gets
     lsf = np.roll(lsf, -shift)
     lsf = lsf * np.hamming(n)
     # 5. |DFT|, normalised, corrected for the [-1, 1] derivative at the bins' spacing
@@ -213,14 +244,36 @@ def esfr(image: np.ndarray, region: tuple[int, int, int, int] | None = None) -> 
     sfr = spectrum / spectrum[0]
     # the [-1, 1] derivative and the binning (each bin the mean of the ESF over its width): two boxes of the bins'
     # width, sinc(f d) each
-    sfr = sfr / np.maximum(np.sinc(freq * step) ** 2, 0.1)
+    correction = np.maximum(np.sinc(freq * step) ** 2, 0.1)
+    sfr = sfr / correction
+    # the standard error (the module docstring): bin i enters LSF samples i - 1 (+) and i (-)
+    before = np.concatenate([[0.0], window])  # a_(i-1), bins 0..n
+    after = np.concatenate([window, [0.0]])  # a_i
+    big_a, big_b, big_c = (float(np.sum(bin_var * before ** 2)), float(np.sum(bin_var * after ** 2)),
+                           float(np.sum(bin_var * before * after)))
+    noise = np.maximum(big_a + big_b - 2.0 * big_c * np.cos(2.0 * np.pi * freq * step), 0.0)
+    se = np.sqrt(noise / 2.0) / spectrum[0] / correction
     nyq = float(np.interp(0.5, freq, sfr))
     inside = freq <= 1.0
     from scipy.integrate import trapezoid
 
     total = float(trapezoid(sfr[inside], freq[inside]))
     above = float(trapezoid(sfr[inside & (freq >= 0.5)], freq[inside & (freq >= 0.5)]))
-    return SfrResult(freq, sfr, angle, contrast, mtf50(freq, sfr), nyq, above / total if total > 0 else float("nan"))
+    return SfrResult(freq, sfr, angle, contrast, mtf50(freq, sfr), nyq, above / total if total > 0 else float("nan"),
+                     se)
+
+
+def _bin_variance(bins: np.ndarray, residual: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Each ESF bin's mean's variance: its pixels' variance about the ESF (``residual``: each pixel less the ESF
+    interpolated at its own distance, so the edge's slope within a bin is not counted as noise) over their number;
+    a bin of one pixel (or none) takes the median of the others' pixel variances."""
+    sq = np.bincount(bins, weights=residual ** 2, minlength=counts.size)
+    raw = np.bincount(bins, minlength=counts.size)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pixel_var = np.where(raw > 1, sq / np.maximum(raw - 1, 1), np.nan)
+    fill = np.nanmedian(pixel_var) if np.isfinite(pixel_var).any() else 0.0
+    pixel_var = np.where(np.isfinite(pixel_var), pixel_var, fill)
+    return pixel_var / counts
 
 
 def raw_channel(raw: np.ndarray, pattern: str, region: tuple[int, int, int, int] | None = None) -> SfrResult:
@@ -265,12 +318,14 @@ def raw_channel(raw: np.ndarray, pattern: str, region: tuple[int, int, int, int]
             results.append(esfr(sub, sub_region))
     f = results[0].frequency / 2.0
     curve = np.mean([np.interp(f, r.frequency / 2.0, r.sfr) for r in results], axis=0)
+    # the two grids' pixels are different pixels: their errors independent, the mean's the root mean square over 2
+    se = np.sqrt(np.sum([np.interp(f, r.frequency / 2.0, r.se) ** 2 for r in results], axis=0)) / len(results)
     keep = f <= 1.0
-    f, curve = f[keep], curve[keep]
+    f, curve, se = f[keep], curve[keep], se[keep]
     from scipy.integrate import trapezoid
 
     total = float(trapezoid(curve, f))
     above = float(trapezoid(curve[f >= 0.5], f[f >= 0.5]))
     return SfrResult(f, curve, float(np.mean([r.angle_deg for r in results])),
                      float(np.mean([r.contrast for r in results])), mtf50(f, curve),
-                     float(np.interp(0.5, f, curve)), above / total if total > 0 else float("nan"))
+                     float(np.interp(0.5, f, curve)), above / total if total > 0 else float("nan"), se)

@@ -36,7 +36,9 @@ sRGB (rows, cols, 3):
   not in any public text read, so none is applied.
 
 **Banding** (row or column noise, VFPN) is a 1-D pattern: the line means of L* filtered by the luminance CSF along
-their axis. Isotropic noise of any spectrum also has line means, of variance ``1 / rows`` of its own: white noise
+their axis. Lines are a small modulation of a grey, so their L* is their luminance times L*'s slope at the patch's
+mean (:func:`lightness_slope`): linear, so a noisy pixel's L* does not bend them (a patch's negative pixels, a dark
+frame's, are kept). Isotropic noise of any spectrum also has line means, of variance ``1 / rows`` of its own: white noise
 alone would read as banding (0.9 JND at 1 lux on the default sensor). So the lines are estimated from two
 independent groups of the patch's rows (eight, for column banding: each group's column means): their filtered
 profiles share the lines, not the noise, so the mean product over every pair of different groups is an unbiased
@@ -241,13 +243,18 @@ def lightness(y: np.ndarray) -> np.ndarray:
     return np.where(y > e, 116 * np.cbrt(y) - 16, y * (29 / 3) ** 3)
 
 
-def _check(y, what: str) -> np.ndarray:
+def lightness_slope(y: float) -> float:
+    """dL*/dY at relative luminance ``y`` (> 0): ``116 / 3 y^(-2/3)``, ``(29/3)^3`` below ``(6/29)^3``."""
+    return float(116.0 / 3.0 * y ** (-2.0 / 3.0) if y > (6 / 29) ** 3 else (29 / 3) ** 3)
+
+
+def _check(y, what: str, negative: bool = False) -> np.ndarray:
     a = np.asarray(y)
     if a.ndim != 2 or a.dtype.kind not in "uif" or min(a.shape) < 4:
         raise CmosnoiseError(f"{what}: give one 2-D patch of relative luminance, at least 4 x 4; got {a.shape}")
     a = a.astype(np.float64)
-    if not np.isfinite(a).all() or (a < 0).any():
-        raise CmosnoiseError(f"{what}: the luminance must be finite and >= 0")
+    if not np.isfinite(a).all() or (not negative and (a < 0).any()):
+        raise CmosnoiseError(f"{what}: the luminance must be finite{'' if negative else ' and >= 0'}")
     return a
 
 
@@ -512,11 +519,17 @@ def banding(y: np.ndarray, axis: str = "columns", rows: int | None = None,
         just-detectable noise: 1 is the threshold), ``visible``, ``threshold_sigma_l``, ``estimate_se`` (the
         lines' variance estimate's standard error without lines, L*^2) and the viewing conditions.
     """
-    a = _check(y, "banding")
+    a = _check(y, "banding", negative=True)
     if axis not in ("columns", "rows"):
         raise CmosnoiseError(f"banding: axis = {axis!r}; give columns or rows")
     view = _viewing(rows, picture_height_cm, viewing_distance_cm, viewing, a.shape[0])
-    lum = lightness(a)
+    grey = float(a.mean())
+    if not grey > 0:
+        raise CmosnoiseError(f"banding: the patch's mean luminance is {grey:.3g}; give a patch brighter than black")
+    # the lines are a small modulation of the grey: their L* is the luminance's times L*'s slope at the grey's
+    # mean (linear, so the noise's part of each group stays independent and its square adds no lines; L* of each
+    # noisy pixel would bend the lines by the noise's level)
+    lum = (a - grey) * lightness_slope(grey)
     lines = lum if axis == "columns" else lum.T  # each column a line: the profile runs along the second axis
     groups = min(BANDING_GROUPS, lines.shape[0] // 2)
     if groups < 2:
