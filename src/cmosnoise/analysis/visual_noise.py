@@ -244,7 +244,18 @@ def lightness(y: np.ndarray) -> np.ndarray:
 
 
 def lightness_slope(y: float) -> float:
-    """dL*/dY at relative luminance ``y`` (> 0): ``116 / 3 y^(-2/3)``, ``(29/3)^3`` below ``(6/29)^3``."""
+    """dL*/dY at relative luminance ``y``: ``116 / 3 y^(-2/3)``, ``(29/3)^3`` below ``(6/29)^3``.
+
+    Parameters
+    ----------
+    y : float
+        Relative luminance (1: white), > 0.
+
+    Returns
+    -------
+    float
+        L* per unit of relative luminance.
+    """
     return float(116.0 / 3.0 * y ** (-2.0 / 3.0) if y > (6 / 29) ** 3 else (29 / 3) ** 3)
 
 
