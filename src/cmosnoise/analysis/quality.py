@@ -661,6 +661,7 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
         r = edge_cap.cache["sfr"]
         keep = r.frequency <= 1.0
         out["sfr"] = {"lux": edge_cap.lux, "frequency": r.frequency[keep].tolist(), "sfr": r.sfr[keep].tolist(),
+                      "se": None if r.se is None else r.se[keep].tolist(),
                       "angle_deg": r.angle_deg}
     if colour_cap is not None:
         col = colour_cap.cache["colour"]

@@ -290,11 +290,14 @@ def mtf_plot(doc: dict) -> bytes:
         s = r.get("sfr")
         if s:
             ax.plot(s["frequency"], s["sfr"], "-", color=colour, label=f"{name} at {s['lux']:g} lux")
+            if s.get("se"):
+                f, v, e = (np.asarray(s[k], float) for k in ("frequency", "sfr", "se"))
+                ax.fill_between(f, v - 2 * e, v + 2 * e, color=colour, alpha=0.15, lw=0)
     ax.axvline(0.5, color="0.5", lw=0.8, ls=":", label="Nyquist")
     ax.axhline(0.5, color="0.5", lw=0.8, ls="--")
     ax.set_xlim(0, 1)
     return _finished(fig, ax, "spatial frequency [cycles/pixel]", "SFR",
-                     "ISO 12233 e-SFR of the output luminance (slanted edge)")
+                     "ISO 12233 e-SFR of the output luminance (slanted edge; shaded: 2 standard errors)")
 
 
 def colour_plot(doc: dict) -> bytes:
