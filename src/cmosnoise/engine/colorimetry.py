@@ -23,8 +23,9 @@ _E = (6.0 / 29.0) ** 3
 if numba is not None:
     @numba.njit(cache=True, nogil=True, inline="always")
     def _f(t):  # pragma: no cover - compiled
-        if t > _E:
-            return t ** (1.0 / 3.0)
+        if t > _E:  # the cube root: single precision's (twice as fast as double's), one Newton step to double's
+            y = np.float64(np.float32(t) ** np.float32(1.0 / 3.0))
+            return y - (y * y * y - t) / (3.0 * y * y)
         return t * ((29.0 / 6.0) ** 2 / 3.0) + 4.0 / 29.0
 
     @numba.njit(parallel=True, cache=True, nogil=True)
