@@ -39,6 +39,23 @@ os.environ["CMOSNOISE_COMPILE"] = "foreground"
 # machine's real GPU instead.
 if not os.environ.get("CMOSNOISE_TEST_GPU"):
     os.environ.setdefault("NUMBA_ENABLE_CUDASIM", "1")
+# The explorer's token (app/explore.py): one random token for the session's explorers (their processes inherit it),
+# and every urllib request of a test carries it unless the test builds an opener of its own to show that a request
+# without it is refused.
+import secrets as _secrets  # noqa: E402
+import urllib.request as _urlreq  # noqa: E402
+
+EXPLORE_TOKEN = os.environ.setdefault("CMOSNOISE_EXPLORE_TOKEN", "test-" + _secrets.token_urlsafe(24))
+
+
+class _ExplorerToken(_urlreq.BaseHandler):
+    def http_request(self, req):
+        if not req.has_header("X-cmosnoise-token"):
+            req.add_unredirected_header("X-cmosnoise-token", EXPLORE_TOKEN)
+        return req
+
+
+_urlreq.install_opener(_urlreq.build_opener(_ExplorerToken))
 # numba's target as the package sets it (engine/jit.py: the host's full vector width), before a test module
 # imports numba itself: this process and its children then key the compile cache alike
 import numpy as np  # noqa: E402

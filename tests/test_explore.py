@@ -18,7 +18,7 @@ import urllib.request
 import numpy as np
 import pytest
 import tifffile
-from conftest import cli, free_port, stop_process
+from conftest import EXPLORE_TOKEN, cli, free_port, stop_process
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +58,8 @@ def app_page(page, server):
 
     page.route("**/*", gate)
     page.set_viewport_size({"width": 1700, "height": 1000})
-    page.goto(server)
+    page.goto(server + "?token=" + EXPLORE_TOKEN)  # the address the command opens: a cookie, and the token leaves it
+    assert "token" not in page.url
     _wait_rendered(page, "A")
     _wait_rendered(page, "B")
     yield page
@@ -234,6 +235,7 @@ def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
     conn.putheader("Content-Length", str(51 * 10**6))
     conn.putheader("X-Filename", "big.png")
     conn.putheader("X-Cmosnoise", "1")
+    conn.putheader("X-Cmosnoise-Token", EXPLORE_TOKEN)
     conn.putheader("Content-Type", "application/octet-stream")
     conn.endheaders()
     conn.send(b"x" * 1000)
@@ -256,11 +258,24 @@ def test_the_server_refuses_bad_requests_and_keeps_serving(server, tmp_path):
         ({"config": {**cfg, "prnu": {**cfg["prnu"], "sigma_pct": "abc"}}}, 422, "prnu.sigma_pct"),
         ({"config": cfg, "region": [0, 480, 0, 640], "step": 0}, 400, "step"),
         ({"config": {**cfg, "sensor": {**cfg["sensor"], "width": 30000, "height": 30000}}}, 422, "50 MP"),
+        # a file key naming a file on the server (#79): the server reads no file a page names
+        ({"config": {**cfg, "light": {**cfg["light"], "illuminant": "/etc/passwd"}}}, 422, "reads no file a page names"),
+        ({"config": {**cfg, "optics": {**cfg["optics"], "psf": str(tmp_path / "p.npy")}}}, 422, "upload it"),
+        ({"config": {**cfg, "optics": {**cfg["optics"], "chief_ray_angle": "upload:nosuch"}}}, 422, "optics.chief_ray_angle"),
     ]:
         status, body, _ = _post(server + "api/render", json.dumps(payload).encode(), {"Content-Type": "application/json"})
         assert status == code and needle in json.loads(body)["error"], (payload.get("scene"), status, body[:200])
     status, body, _ = _post(server + "api/render", b"{not json", {"Content-Type": "application/json"})
     assert status == 400
+    # a file the page uploaded is one a file key may name: a PSF as .npy, by its id
+    buf = io.BytesIO()
+    np.save(buf, np.outer([1, 2, 1], [1, 2, 1]).astype(float))
+    status, body, _ = _post(server + "api/upload", buf.getvalue(), {"X-Filename": "psf.npy",
+                                                                        "Content-Type": "application/octet-stream"})
+    assert status == 200, body
+    psf = {**cfg, "optics": {**cfg["optics"], "psf": "upload:" + json.loads(body)["id"]}}
+    status, body, _ = _post(server + "api/render", json.dumps({"config": psf, "step": 4}).encode())
+    assert status == 200, body[:300]
     # a request made stale by a newer one of the same pane is dropped, not queued
     newer = {"config": cfg, "pane": "A", "client": "t", "seq": 10}
     assert _post(server + "api/render", json.dumps(newer).encode())[0] == 200
@@ -469,3 +484,68 @@ def test_image_quality_of_both_panes_and_their_difference_in_jnd(app_page, serve
     page.click("#qMeasure")
     _wait(page, "document.getElementById('qStatus').classList.contains('err')")
     assert "lux" in page.text_content("#qStatus") and page.eval_on_selector_all("#qTable tbody tr", "r => r.length") == 0
+
+
+def test_only_the_token_opens_the_explorer_and_the_command_never_prints_it_whole(browser):
+    """Jupyter's model (#79): a random token made at start, in the address the command opens and writes to a file
+    of the owner's alone; every route but the page's own files refuses a request without it (403, one line); the
+    page without it is a note saying where the address is. Chromium with the address drives the page; a browser
+    without it is refused."""
+    import os
+    import re
+    import stat
+
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if k != "CMOSNOISE_EXPLORE_TOKEN"}  # the command's own token
+    proc = subprocess.Popen([sys.executable, "-m", "cmosnoise", "explore", "--no-browser", "--port", str(port),
+                             "--set", "sensor.width=96", "--set", "sensor.height=64"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    try:
+        lines = []
+        deadline = time.monotonic() + 120
+        while not any("Ctrl-C to stop" in line for line in lines):
+            assert time.monotonic() < deadline and proc.poll() is None, lines
+            lines.append(proc.stdout.readline())
+        said = "".join(lines)
+        path = re.search(r"is in (\S+), readable by you alone", said).group(1)
+        assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+        address = open(path).read().strip()
+        token = address.split("token=", 1)[1]
+        assert len(token) >= 43 and token not in said  # 32 random bytes, never printed whole
+        bare = urllib.request.build_opener()  # no token: what another local user has
+        base = f"http://127.0.0.1:{port}/"
+        while True:
+            try:
+                bare.open(base + "explore.js", timeout=5).read()  # the page's own files need no token
+                break
+            except OSError:
+                assert time.monotonic() < deadline and proc.poll() is None
+                time.sleep(0.2)
+        for route, body in [("api/meta", None), ("api/stats", None), ("api/preset?name=x", None),
+                            ("api/render", b"{}"), ("api/check", b"{}"), ("api/quality", b"{}"), ("api/upload", b"x")]:
+            req = urllib.request.Request(base + route, data=body, method="POST" if body else "GET",
+                                         headers={**PAGE_HEADERS, "X-Cmosnoise-Token": "guess" * 9} if body else {})
+            with pytest.raises(urllib.error.HTTPError) as info:
+                bare.open(req, timeout=10)
+            message = json.loads(info.value.read())["error"]
+            assert info.value.code == 403 and "token" in message and "\n" not in message, (route, message)
+        with pytest.raises(urllib.error.HTTPError) as info:
+            bare.open(base, timeout=10)
+        assert info.value.code == 403 and b"address" in info.value.read()
+        # Chromium with the address: the token becomes a cookie and leaves the address; the page renders
+        context = browser.new_context()
+        page = context.new_page()
+        page.goto(address)
+        assert "token" not in page.url
+        _wait_rendered(page, "A")
+        assert page.evaluate("fetch('api/meta').then(r => r.status)") == 200
+        context.close()
+        # another browser, without it: the note, and the API refused
+        other = browser.new_context()
+        page = other.new_page()
+        page.goto(base)
+        assert "carries its token" in page.content()
+        assert page.evaluate("fetch('api/meta').then(r => r.status)") == 403
+        other.close()
+    finally:
+        stop_process(proc)

@@ -6,6 +6,11 @@ itself, and what is kept between requests, is the
 :class:`~cmosnoise.app.workbench.Workbench`'s; this module is the HTTP side
 and its safety.
 
+Its owner alone: a random token made at start (:func:`new_token`) is in the address the command opens and
+writes to a file of the owner's; every route but the page's files refuses a request without it (a cookie after
+the first page load, or the ``X-Cmosnoise-Token`` header), and a file key names no file the page did not upload
+(:func:`~cmosnoise.app.workbench.client_files`).
+
 Safety: it binds 127.0.0.1 unless told otherwise; requests must name a
 loopback host (or the one given with ``--host``). A request that does work
 (every POST) must come from the page itself: ``Sec-Fetch-Site`` same-origin
@@ -32,6 +37,9 @@ import contextlib
 import io
 import json
 import logging
+import math
+import os
+import secrets
 import tempfile
 import threading
 import time
@@ -57,6 +65,14 @@ LATEST_S = 10.0
 #: seconds a connection may take to send a request's headers, and a request's body
 HEADER_TIMEOUT_S = 10.0
 BODY_TIMEOUT_S = 30.0
+#: the header a script may give the explorer's token in (the page itself carries it as a cookie)
+TOKEN_HEADER = "x-cmosnoise-token"
+#: the environment variable that sets the token (a script's or a test's; a new random one otherwise)
+TOKEN_ENV = "CMOSNOISE_EXPLORE_TOKEN"
+#: what a browser without the token is shown
+LOGIN_PAGE = ("<!doctype html><meta charset=utf-8><title>cmosnoise explore</title><p>This explorer answers only "
+              "the address <code>cmosnoise explore</code> opened or wrote, which carries its token. Open that "
+              "address (or the file the command named) in this browser.</p>")
 #: JSON bodies nested deeper than this are refused
 MAX_JSON_DEPTH = 32
 #: the custom header every state-changing request carries (a cross-site page cannot send it without a preflight)
@@ -64,6 +80,16 @@ CSRF_HEADER = "x-cmosnoise"
 LOOPBACK = ("127.0.0.1", "localhost", "::1", "[::1]")
 CSP = ("default-src 'self'; img-src 'self' blob: data:; style-src 'self'; script-src 'self'; connect-src 'self'; "
        "object-src 'none'; base-uri 'none'; frame-ancestors 'none'; form-action 'none'")
+
+
+def new_token() -> str:
+    """A token no one can guess: 32 random bytes from :mod:`secrets`, URL-safe (43 characters).
+
+    Returns
+    -------
+    str
+    """
+    return secrets.token_urlsafe(32)
 
 
 def _check_json(data, depth: int = 0) -> None:
@@ -86,8 +112,12 @@ def _check_json(data, depth: int = 0) -> None:
 
 
 # ------------------------------------------------------------------ the web application
-def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
-    """The Starlette application serving the page and its API around ``bench``."""
+def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, token: str | None = None):
+    """The Starlette application serving the page and its API around ``bench``.
+
+    ``token`` (default: a new one from :func:`new_token`) is asked of every request but the page's own files: a
+    ``?token=`` on the page's address (answered by a redirect that sets it as a cookie of this port), that cookie,
+    or an ``X-Cmosnoise-Token`` header."""
     from starlette.applications import Starlette
     from starlette.middleware import Middleware
     from starlette.middleware.trustedhost import TrustedHostMiddleware
@@ -99,6 +129,19 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     files = {"/": ("explore.html", "text/html; charset=utf-8"), "/explore.js": ("explore.js", "text/javascript"),
              "/explore.css": ("explore.css", "text/css")}
 
+    token = token or new_token()
+    from starlette.responses import RedirectResponse
+
+    def cookie_name(request: Request) -> str:  # cookies are per host, not per port: two explorers keep theirs
+        return f"cmosnoise-token-{request.url.port or 80}"
+
+    def given_token(request: Request) -> str:
+        return (request.headers.get(TOKEN_HEADER) or request.cookies.get(cookie_name(request))
+                or request.query_params.get("token") or "")
+
+    def authorised(request: Request) -> bool:
+        return secrets.compare_digest(given_token(request).encode("utf-8", "replace"), token.encode())
+
     def secured(resp: Response) -> Response:
         resp.headers["Content-Security-Policy"] = CSP
         resp.headers["X-Content-Type-Options"] = "nosniff"
@@ -108,6 +151,17 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
 
     async def page(request: Request):
         name, media = files[request.url.path]
+        if name == "explore.html":
+            if "token" in request.query_params and authorised(request):
+                # the address the command opened: its token becomes this port's cookie, and leaves the address
+                from urllib.parse import urlencode
+
+                rest = urlencode([(k, v) for k, v in request.query_params.multi_items() if k != "token"])
+                resp = RedirectResponse("/" + (f"?{rest}" if rest else ""), status_code=303)
+                resp.set_cookie(cookie_name(request), token, httponly=True, samesite="strict", path="/")
+                return secured(resp)
+            if not authorised(request):
+                return secured(Response(LOGIN_PAGE, status_code=403, media_type="text/html; charset=utf-8"))
         return secured(Response((static / name).read_bytes(), media_type=media))
 
     async def body(request: Request, limit: int) -> bytes:
@@ -160,6 +214,9 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     def errors(func, media: str | None = None):
         async def wrapped(request: Request):
             try:
+                if not authorised(request):
+                    raise BadRequest("refused: the request lacks this explorer's token (open the address "
+                                     "cmosnoise explore gave)", 403)
                 if request.method == "POST":
                     same_origin(request, request.url.path, media or "application/json")
                     bench.count(request.url.path)
@@ -206,7 +263,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     @errors
     async def check(request: Request):
         data = await json_body(request)
-        cfg = validate(data.get("config")).config
+        cfg = bench.validate(data.get("config")).config
         return JSONResponse({"ok": True, "config": cfg.model_dump(mode="json")})
 
     @errors
@@ -222,7 +279,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
         newest, since = bench.latest.get(token, (-1, 0.0))
         if seq >= newest or now - since > LATEST_S:  # a newest seq holds only while it is recent: one huge seq
             bench.latest[token] = (seq, now)          # cannot make the pane's later requests look old for ever
-        spec = validate(data.get("config"))
+        spec = bench.validate(data.get("config"))
         rows, cols = spec.shape
         frame, step = data.get("frame", 0), data.get("step", 1)
         if not isinstance(frame, int) or not 0 <= frame <= 2**32 - 1:
@@ -260,7 +317,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     @errors
     async def figures_route(request: Request):
         data = await json_body(request)
-        spec = validate(data.get("config"))
+        spec = bench.validate(data.get("config"))
         scene = scene_of(data)
         bench.scene_source(scene)
         return JSONResponse(await in_thread(bench.figures, spec, scene, lock=bench.figures_lock))
@@ -269,17 +326,21 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     async def quality_route(request: Request):
         """A pane's image-quality metrics at the page's illuminance (:meth:`Workbench.quality`)."""
         data = await json_body(request)
-        spec = validate(data.get("config"))
+        spec = bench.validate(data.get("config"))
         lux = data.get("lux")
-        if isinstance(lux, bool) or not isinstance(lux, (int, float)):
-            raise BadRequest("lux must be a number (the illuminance on the charts)")
+        try:  # a 400-digit integer is a number JSON carries and a float cannot hold
+            lux = None if isinstance(lux, bool) or not isinstance(lux, (int, float)) else float(lux)
+        except OverflowError:
+            lux = None
+        if lux is None or not math.isfinite(lux):
+            raise BadRequest("lux must be a finite number (the illuminance on the charts, lux)")
         return JSONResponse(await in_thread(bench.quality, spec, lux, lock=bench.figures_lock))
 
     @errors
     async def raw_route(request: Request):
         """Frame k of a pane as .npy (uint16 DN), whole: what ``cmosnoise simulate`` with the exported config writes."""
         data = await json_body(request)
-        spec = validate(data.get("config"))
+        spec = bench.validate(data.get("config"))
         frame = data.get("frame", 0)
         if not isinstance(frame, int) or frame < 0:
             raise BadRequest("frame must be a whole number >= 0")
@@ -304,7 +365,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
     @errors
     async def to_yaml(request: Request):
         data = await json_body(request)
-        cfg = validate(data.get("config")).config
+        cfg = bench.validate(data.get("config")).config
         scene = scene_of(data)
         if scene.startswith("upload:") and scene[7:] in bench.uploads:
             cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"source": bench.uploads[scene[7:]]["name"]})})
@@ -321,7 +382,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK):
             data = load_yaml_text(text)
         except Exception as exc:  # yaml's errors: one line
             raise BadRequest(f"not a valid configuration YAML: {' '.join(str(exc).split())[:200]}") from None
-        cfg = validate(data if data is not None else {}).config
+        cfg = bench.validate(data if data is not None else {}).config
         return JSONResponse({"config": cfg.model_dump(mode="json")})
 
     routes = [Route(path, page) for path in files] + [
@@ -424,16 +485,24 @@ def serve(base: Config, scene: str | None, host: str = "127.0.0.1", port: int = 
         except BadRequest as exc:
             raise CmosnoiseError(f"--scene {scene if scene is not None else bench.scene}: {exc.message}") from None
         hosts = LOOPBACK if host in LOOPBACK else (*LOOPBACK, host)
-        app = create_app(bench, hosts)
+        token = os.environ.get(TOKEN_ENV) or new_token()
+        if len(token) < 16:
+            raise CmosnoiseError(f"{TOKEN_ENV}: a token of {len(token)} characters; give at least 16 (or unset it "
+                                 "for a random one)")
+        app = create_app(bench, hosts, token)
         url = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:{port}/"
+        address = Path(tmp) / "address.txt"  # the whole address, for the owner alone (the folder is 0700)
+        address.write_text(f"{url}?token={token}\n")
+        address.chmod(0o600)
         if host not in LOOPBACK:
-            say(f"warning: serving on {host}:{port}: anyone who can reach this port can use the explorer "
-                "(and the machine's CPU); there is no login")
-        say(f"cmosnoise explore: {url} (Ctrl-C to stop)")
+            say(f"warning: serving on {host}:{port}: anyone who can reach this port and has the token can use the "
+                "explorer (and the machine's CPU)")
+        say(f"cmosnoise explore: {url}?token={token[:4]}... (the whole address, token and all, is in {address}, "
+            "readable by you alone; Ctrl-C to stop)")
         if open_browser:
             import webbrowser
 
-            threading.Timer(1.0, lambda: webbrowser.open(url)).start()
+            threading.Timer(1.0, lambda: webbrowser.open(f"{url}?token={token}")).start()
         _raise_file_limit()
         limiter = _RateLimited()
         for name in ("uvicorn.error", "uvicorn"):

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import inputs
 from ..analysis import figures_of_merit as fom
 from ..analysis import white_pixels
 from ..config import Config, format_validation_error, load_config
@@ -70,6 +71,63 @@ class BadRequest(Exception):
 
 
 # ------------------------------------------------------------------ configuration
+#: the configuration keys whose text may name a file, and the words each takes that are not files
+FILE_KEYS = {("light", "illuminant"): "illuminant", ("light", "spectral_qe"): "camera",
+             ("optics", "relative_illumination"): ("none", "cos4"), ("optics", "psf"): ("none", "diffraction", "gaussian"),
+             ("optics", "chief_ray_angle"): (), ("optics", "angle_relative_qe"): ()}
+#: what a table upload may be (a spectrum, a lens table, a PSF): stored as sent, read by the key's own reader
+TABLE_SUFFIXES = (".csv", ".txt", ".tsv", ".fits", ".fit", ".fts")
+
+
+def _is_name(value: str, words) -> bool:
+    """Whether a file key's text is one of its words (an illuminant or camera set colour-science ships), not a
+    file."""
+    low = value.strip().lower()
+    if words == "illuminant":
+        from ..colour_lib import colour
+
+        return low.startswith("blackbody") or low in {k.lower() for k in colour().SDS_ILLUMINANTS}
+    if words == "camera":
+        from ..colour_lib import colour
+
+        return low in {k.lower() for k in colour().MSDS_CAMERA_SENSITIVITIES}
+    return low in words
+
+
+def client_files(data: dict, uploads: dict, base: Config) -> dict:
+    """A page's configuration with every file key checked: a name it takes, the base configuration's own value
+    (the owner's, from the command line), or ``upload:ID`` of a file this page uploaded (replaced by where the
+    server stored it). Anything else would make the server read a file the requester names: BadRequest.
+
+    Parameters
+    ----------
+    data : dict
+        The configuration's sections, as the page sent them.
+    uploads : dict
+        The workbench's uploads (id -> {"path", ...}).
+    base : Config
+        The configuration the server was started with.
+
+    Returns
+    -------
+    dict
+        ``data`` with uploads' ids replaced by their stored paths (a copy where anything changed).
+    """
+    out = data
+    for (section, key), words in FILE_KEYS.items():
+        part = data.get(section)
+        value = part.get(key) if isinstance(part, dict) else None
+        if not isinstance(value, str) or _is_name(value, words) or value == getattr(getattr(base, section), key):
+            continue
+        if value.startswith("upload:") and value[7:] in uploads:
+            out = {**out, section: {**out[section], key: str(uploads[value[7:]]["path"])}}
+            continue
+        msg = (f"{section}.{key} = {value[:80]!r}: the explorer reads no file a page names; upload it (a CSV, .npy "
+               "or FITS file) and give upload:ID, or start the explorer with --set " f"{section}.{key}=FILE")
+        raise BadRequest(msg, 422, {f"{section}.{key}": msg})
+    return out
+
+
 def validate(data) -> SensorSpec:
     """A pane's configuration (a full or partial dict) validated and resolved as the CLI does; BadRequest names
     each bad field. The workbench takes the :class:`SensorSpec` it returns (resolved once a request)."""
@@ -147,13 +205,18 @@ class Workbench:
         if len(data) > MAX_UPLOAD:
             raise BadRequest(f"the upload is {len(data) / 1e6:.1f} MB; images up to {MAX_UPLOAD / 1e6:g} MB are taken", 413)
         suffix = Path(filename or "image").suffix.lower()
-        if suffix not in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy", ".bmp", ".webp"):
-            raise BadRequest(f"upload {filename!r}: use a PNG, JPEG, TIFF, BMP, WebP or .npy image", 415)
+        if suffix not in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy", ".bmp", ".webp", *TABLE_SUFFIXES):
+            raise BadRequest(f"upload {filename!r}: use a PNG, JPEG, TIFF, BMP, WebP or .npy image, or a CSV or "
+                             "FITS table or PSF", 415)
         uid = secrets.token_hex(8)
         path = self.folder / f"upload-{uid}{suffix}"
         path.write_bytes(data)
-        try:  # refuses bombs from the header, then decodes once to check
-            scene_mod.load_file(path, max_pixels=min(scene_mod.MAX_SCENE_PIXELS, MAX_UPLOAD_PIXELS))
+        try:  # refuses bombs from the header, then decodes once to check (a table or a .npy PSF: its own reader,
+            # through the input gate, when a key names it)
+            if suffix == ".npy":
+                inputs.read_npy(path, "upload", MAX_UPLOAD_PIXELS * 8)
+            elif suffix not in TABLE_SUFFIXES:
+                scene_mod.load_file(path, max_pixels=min(scene_mod.MAX_SCENE_PIXELS, MAX_UPLOAD_PIXELS))
         except CmosnoiseError as exc:
             path.unlink(missing_ok=True)
             msg = str(exc).replace(str(path), filename or "upload")
@@ -161,6 +224,12 @@ class Workbench:
         self.uploads[uid] = {"path": path, "name": Path(filename or "image").name, "bytes": len(data)}
         self._trim_uploads(keep=uid)
         return {"id": uid, "scene": f"upload:{uid}", "name": self.uploads[uid]["name"]}
+
+    def validate(self, data) -> SensorSpec:
+        """:func:`validate` of a page's configuration, its file keys first checked by :func:`client_files`."""
+        if isinstance(data, dict):
+            data = client_files(data, self.uploads, self.base)
+        return validate(data)
 
     def upload_bytes(self) -> int:
         return sum(item["bytes"] for item in self.uploads.values())

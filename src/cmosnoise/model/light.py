@@ -32,6 +32,7 @@ Examples
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -153,7 +154,12 @@ def illuminant_spectrum(name: str) -> tuple[np.ndarray, np.ndarray]:
         _check_wavelengths(t[:, 0], key)
         if not np.isfinite(t[:, 1]).all() or (t[:, 1] < 0).any() or t[:, 1].max() <= 0:
             raise CmosnoiseError(f"{key} {name}: the power must be finite, >= 0 and somewhere > 0")
-        return t[:, 0], t[:, 1]
+        top = float(t[:, 1].max())
+        if top < np.finfo(np.float64).tiny:
+            raise CmosnoiseError(f"{key} {name}: the largest power is {top:g}, below the smallest normal number "
+                                 f"({np.finfo(np.float64).tiny:g}); give a spectrum in any unit whose largest value "
+                                 "is a normal number")
+        return t[:, 0], t[:, 1] / top  # relative: its scale is free, kept away from overflow in the integrals
     shown = ", ".join(sorted(k for k in colour.SDS_ILLUMINANTS if not k.startswith(("FL3.", "ISO", "HP", "ID"))))
     raise CmosnoiseError(f"{key} = {name!r} is not known; give one of {shown}, blackbody:KELVIN or a CSV file")
 
@@ -206,9 +212,10 @@ def qe_spectrum(spectral_qe, qe_peak: float | None, quantum_efficiency) -> tuple
         if table.shape[1] == 1:
             table = np.repeat(table, 3, axis=1)
     if qe_peak is not None:
-        top = float(table.max())
-        if top <= 0:
-            raise CmosnoiseError(f"{key}: the table is 0 everywhere; it cannot be scaled to light.qe_peak")
+        top = float(np.nanmax(table)) if table.size else 0.0
+        if not top >= np.finfo(np.float64).tiny or not math.isfinite(top):
+            raise CmosnoiseError(f"{key}: the table's largest value is {top:g}; it cannot be scaled to "
+                                 "light.qe_peak (give finite values whose largest is a normal number above 0)")
         table = table * (qe_peak / top)
     if not np.isfinite(table).all() or (table < 0).any() or table.max() > 1 or table.max() <= 0:
         raise CmosnoiseError(f"{key}: each QE must be in [0, 1] and somewhere > 0 (electrons per photon); this "
@@ -341,6 +348,11 @@ def integrate(illuminant: str, illuminance_lux: float, spectral_qe, qe_peak: flo
                       float(area_um2))
 
 
+#: the least rate a channel may collect, e-/s (one electron in 30 000 years): below it the light's integrals are
+#: rounding, and a scene's signal relative to it overflows
+MIN_RATE_E_PER_S = 1e-12
+
+
 @functools.lru_cache(maxsize=16)
 def _integrate(illuminant, e_lux, spectral_qe, qe_peak, flat_qe, ir_cut_nm, k, area_um2) -> ChannelLight:
     s_wl, s_pow = illuminant_spectrum(illuminant)
@@ -376,6 +388,10 @@ def _integrate(illuminant, e_lux, spectral_qe, qe_peak, flat_qe, ir_cut_nm, k, a
     b = b / b.sum(axis=1, keepdims=True)
     response = _integral((photon_flux[None, None, :] * qe.T[:, None, :]) * b.T[None, :, :], grid)  # (3, 3)
     mix = response / response.sum(axis=1, keepdims=True)
+    if not (np.isfinite(rates).all() and np.isfinite(mix).all()) or float(rates.min()) < MIN_RATE_E_PER_S:
+        raise CmosnoiseError(f"light: the channels collect {', '.join(f'{r:.3g}' for r in rates)} e-/s from "
+                             f"light.illuminant = {illuminant!r} through the QE; each must be a finite rate of at "
+                             f"least {MIN_RATE_E_PER_S:g} e-/s (give spectra of normal numbers)")
     lux = k * e_lux / np.pi
     for a in (grid, photon_flux, qe, rates, mix):
         a.setflags(write=False)

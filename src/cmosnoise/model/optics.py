@@ -376,11 +376,13 @@ def _file_array(path: str) -> np.ndarray:
     a = a.astype(np.float64)
     if not np.isfinite(a).all() or (a < 0).any():
         raise CmosnoiseError(f"{key} {path}: a PSF's values must be finite and >= 0")
-    total = float(a.sum(dtype=np.float64))
-    if not (np.isfinite(total) and total > 0):
-        raise CmosnoiseError(f"{key} {path}: a PSF's values must sum to a finite number above 0 (they sum to "
-                             f"{total:g})")
-    a = a / a.max()  # its scale is free: kept away from overflow in the sums that follow
+    top = float(a.max())
+    if not top > 0:
+        raise CmosnoiseError(f"{key} {path}: a PSF's values must be somewhere above 0 (they are all 0)")
+    a = a / top  # its scale is free: kept away from overflow in the sums that follow (1e308 everywhere is flat)
+    if not np.isfinite(a).all() or float(a.max()) != 1.0:  # a subnormal peak loses its digits in the division
+        raise CmosnoiseError(f"{key} {path}: a PSF's largest value is {top:g}, too small to be scaled (give values "
+                             f"of at least {np.finfo(np.float64).tiny:g})")
     a.setflags(write=False)
     return a
 

@@ -935,6 +935,33 @@ def to_cfa(rgb: np.ndarray, pattern: str, responsivity=(1.0, 1.0, 1.0)) -> np.nd
     return layout.cfa_pick(rgb, cfa_mod.tile(pattern), np.asarray(responsivity, dtype=np.float64))
 
 
+#: the most mean photo-charge a pixel's scene may ask for, e- (a million times a large full well): the frame kernel's
+#: samplers and the ADC take any charge up to it; beyond it (or NaN) a scene is refused before any compiled loop runs
+MAX_CHARGE_E = 1e12
+
+
+def check_charge(charge: np.ndarray, full_well_e: float) -> None:
+    """Refuse a mean photo-charge that is not finite or exceeds :data:`MAX_CHARGE_E` (a scene of 1e308, a rate
+    that overflows), in one line.
+
+    Parameters
+    ----------
+    charge : array, e-
+        The mean photo-charge per pixel (:func:`photo_electrons`).
+    full_well_e : float
+        The pixel's full well, for the message.
+
+    Raises
+    ------
+    CmosnoiseError
+    """
+    top = float(np.max(charge)) if np.size(charge) else 0.0
+    if not top <= MAX_CHARGE_E:  # NaN too
+        raise CmosnoiseError(f"scene: a pixel's mean charge would be {top:g} e-; give a scene (its values, the light, "
+                             f"the integration time) whose charge stays under {MAX_CHARGE_E:g} e- (the full well is "
+                             f"{full_well_e:g} e-)")
+
+
 def photo_electrons(signal: np.ndarray, peak_rate_e_per_s: float, integration_time_s: float) -> np.ndarray:
     """Mean photo-electrons per pixel: ``signal * peak_rate * t_int`` (e-), float32.
 

@@ -510,7 +510,9 @@ class Exposure:
         on_mean = sensor.spec.nonlinearity_on("mean")
 
         def photo():
-            perfect = scene_mod.photo_electrons(signal, sensor.spec.signal_unit_e_per_s, ex.integration_time_s)
+            with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, in one line
+                perfect = scene_mod.photo_electrons(signal, sensor.spec.signal_unit_e_per_s, ex.integration_time_s)
+            scene_mod.check_charge(perfect, c.sensor.full_well_e)
             after_prnu, mean = sensor.photo_response(perfect)
             if on_mean is not None:  # stage 5b on the mean photo-charge: the collection saturates, the shot noise follows
                 mean = on_mean.apply(mean)
