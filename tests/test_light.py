@@ -140,7 +140,7 @@ def test_an_rgb_picture_is_mixed_by_the_light_before_it_is_resampled():
 
 
 def test_light_off_keeps_the_peak_rate_and_the_bits():
-    c = load_config(overrides=["light.illuminance_lux=100"])  # given but off: nothing changes
+    c = load_config(overrides=["light.enabled=false", "light.illuminance_lux=100"])  # given but off: nothing changes
     spec = resolve(c)
     assert spec.light is None and spec.peak_rate_e_per_s == 100000.0
     assert np.array_equal(Sensor(c).expose("photo").frame(0), Sensor(load_config()).expose("photo").frame(0))

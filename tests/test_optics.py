@@ -102,10 +102,13 @@ def test_a_psf_file_is_binned_onto_the_fine_grid_and_bad_ones_are_one_line(tmp_p
     nan = good.copy()
     nan[0, 0] = np.nan
     np.save(tmp_path / "nan.npy", nan)
-    np.save(tmp_path / "huge.npy", np.full((9, 9), 1e308))  # a sum that overflows
+    np.save(tmp_path / "huge.npy", np.full((9, 9), 1e308))  # a sum that overflows: its scale is free
+    np.save(tmp_path / "zero.npy", np.zeros((9, 9)))
     np.save(tmp_path / "objects.npy", np.array([[1, None]], dtype=object), allow_pickle=True)
     (tmp_path / "short.npy").write_bytes((tmp_path / "psf.npy").read_bytes()[:200])
-    for name, needle in [("cube.npy", "2-D"), ("nan.npy", "finite"), ("huge.npy", "sum to a finite"),
+    flat = focal_plane(load_config(overrides=[f"optics.psf={tmp_path / 'huge.npy'}"])).psf.core  # #79: not black
+    assert np.isfinite(flat).all() and np.allclose(flat.sum(axis=(1, 2)), 1.0)
+    for name, needle in [("cube.npy", "2-D"), ("nan.npy", "finite"), ("zero.npy", "somewhere above 0"),
                          ("objects.npy", "holds object"), ("short.npy", "truncated")]:
         with pytest.raises(CmosnoiseError, match=needle) as info:
             focal_plane(load_config(overrides=[f"optics.psf={tmp_path / name}"]))

@@ -555,6 +555,36 @@ def _patch_window(shape: tuple[int, int], pattern: str) -> tuple[tuple[int, int,
     return (a0, a1, b0, b1), (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
 
 
+#: the illuminances one measurement takes: how many, and from what to what, lux (below 1e-3 lux no pixel of any
+#: camera collects a photon in a frame; 1e6 is the light section's own bound)
+MAX_LUX_POINTS, LUX_RANGE = 64, (1e-3, 1e6)
+
+
+def check_lux(lux) -> list[float]:
+    """Illuminances as :func:`measure` takes them: 1 to :data:`MAX_LUX_POINTS`, increasing, within
+    :data:`LUX_RANGE`, or a one-line error.
+
+    Parameters
+    ----------
+    lux : sequence of numbers
+
+    Returns
+    -------
+    list of float
+    """
+    try:
+        values = [float(v) for v in lux]
+    except (TypeError, ValueError, OverflowError):
+        raise CmosnoiseError(f"lux = {str(lux)[:80]}: give a list of illuminances (numbers), lux") from None
+    if not 1 <= len(values) <= MAX_LUX_POINTS:
+        raise CmosnoiseError(f"lux: {len(values)} illuminances; give 1 to {MAX_LUX_POINTS}")
+    if any(not LUX_RANGE[0] <= v <= LUX_RANGE[1] for v in values) or any(b <= a for a, b in zip(values, values[1:])):
+        shown = ", ".join(f"{v:g}" for v in values[:8]) + (", ..." if len(values) > 8 else "")
+        raise CmosnoiseError(f"lux = {shown}: give increasing illuminances from {LUX_RANGE[0]:g} to "
+                             f"{LUX_RANGE[1]:g} lux")
+    return values
+
+
 def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int = 0, metrics=None,
             picture_height_cm: float = visual_noise.PICTURE_HEIGHT_CM,
             viewing_distance_cm: float = visual_noise.VIEWING_DISTANCE_CM,
@@ -595,9 +625,7 @@ def measure(config, lux, frames: int = 8, sizes: dict | None = None, seed: int =
         the brightest illuminance whose edge does not clip) and ``colour`` (the per-patch errors likewise), where
         measured; ``notes`` (why a metric is missing, what it assumes); ``light_switched_on``.
     """
-    lux = [float(v) for v in lux]
-    if not lux or any(not v > 0 for v in lux) or any(b <= a for a, b in zip(lux, lux[1:])):
-        raise CmosnoiseError(f"lux = {lux}: give increasing illuminances above 0")
+    lux = check_lux(lux)
     if int(frames) < 2:
         raise CmosnoiseError(f"frames = {frames}: the temporal noise needs at least 2")
     visual_noise.print_viewing(int(config.sensor.height), picture_height_cm, viewing_distance_cm)  # one line if bad
@@ -711,6 +739,13 @@ def _one_column(spectral_qe) -> bool:
     return not isinstance(spectral_qe, str) and all(len(row) == 2 for row in spectral_qe)
 
 
+#: keys a threshold search cannot vary, and why: the measurement sets them itself
+NOT_SEARCHED = {"seed": "the sensor instances are the search's own (--instances)",
+                "light.illuminance_lux": "the illuminance is --lux", "light.luminance_cd_m2": "the illuminance is --lux",
+                "light.enabled": "the light is on in every measurement",
+                "sensor.width": "each chart has its own size", "sensor.height": "each chart has its own size"}
+
+
 def threshold(config, key: str, low: float, high: float, metric: str, limit: float, lux: float,
               instances: int = 5, frames: int = 4, sizes: dict | None = None, steps: int = 12) -> dict:
     """The value of one parameter at which a metric crosses a limit, per sensor instance, by bisection.
@@ -754,6 +789,11 @@ def threshold(config, key: str, low: float, high: float, metric: str, limit: flo
     """
     if metric not in BY_NAME:
         raise CmosnoiseError(f"metric {metric!r}: not known; choose from {', '.join(BY_NAME)}")
+    if not math.isfinite(limit):
+        raise CmosnoiseError(f"the limit {limit:g} of {metric}: give a finite number")
+    if key in NOT_SEARCHED or key.split(".", 1)[0] == "scene":
+        raise CmosnoiseError(f"--find {key}: {NOT_SEARCHED.get(key, 'the charts are the scene')}; give a setting of "
+                             "the sensor, its lens or its processing")
     if not (math.isfinite(low) and math.isfinite(high) and low < high):
         raise CmosnoiseError(f"the interval {low:g} to {high:g} of {key}: give low < high")
     if instances < 2:

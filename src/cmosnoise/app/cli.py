@@ -590,12 +590,17 @@ def quality(
     error; with --compare, a second configuration beside the first."""
     from rich.table import Table
 
+    from ..analysis.quality import check_lux
     from . import quality as job
 
     try:
         levels = [float(v) for v in lux.split(",") if v.strip()]
     except ValueError:
-        raise CmosnoiseError(f"--lux {lux!r}: give illuminances in lux, comma-separated (e.g. 1,10,100)") from None
+        raise CmosnoiseError(f"--lux {lux[:80]!r}: give illuminances in lux, comma-separated (e.g. 1,10,100)") from None
+    try:  # bounded before any work: at most MAX_LUX_POINTS illuminances, each within the range
+        levels = check_lux(levels)
+    except CmosnoiseError as exc:
+        raise CmosnoiseError(f"--{exc}") from None
     # --lux gives the illuminances: light switched on by --set without one takes the first (each is set in turn)
     keys = [s.split("=", 1)[0].strip() for s in set_ or []]
     lit = ([f"light.illuminance_lux={levels[0]!r}"] if levels and "light.enabled" in keys

@@ -56,8 +56,8 @@ MARGIN = 4
 VIEWS = ("raw", "pre", "processed")
 #: the charts' frames a pane's image quality averages (a 640 x 480 default sensor's: about 0.2 s on 2 cores)
 QUALITY_FRAMES = 8
-#: the illuminances the page may ask quality at, lux
-QUALITY_LUX = (1e-3, 1e6)
+#: the illuminances the page may ask quality at, lux (the measurement's own range)
+from ..analysis.quality import LUX_RANGE as QUALITY_LUX  # noqa: E402
 
 
 class BadRequest(Exception):

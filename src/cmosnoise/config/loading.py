@@ -179,6 +179,23 @@ class _StrictLoader(yaml.SafeLoader):
         finally:
             self._depth -= 1
 
+    def construct_mapping(self, node, deep=False):
+        """A mapping whose keys are each given once: a repeated key would keep its last value without a word."""
+        if isinstance(node, yaml.MappingNode):
+            seen = {}
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.setdefault(key, key_node)
+                except TypeError:  # an unhashable key: the base constructor says so
+                    continue
+                if first is not key_node:
+                    raise yaml.constructor.ConstructorError(
+                        "while reading a mapping", node.start_mark,
+                        f"the key {key!r} is given twice (first {first.start_mark.line + 1}:"
+                        f"{first.start_mark.column + 1}); give each key once", key_node.start_mark)
+        return super().construct_mapping(node, deep)
+
 
 def _strict_number(kind: str):
     """YAML 1.1 reads ``1:2`` as 62 (base 60) and ``010`` as 8 (octal): refused as numbers, with the reason."""
@@ -193,9 +210,10 @@ def _strict_number(kind: str):
         if kind == "int" and len(digits) > 1 and digits[0] == "0" and digits[1:].isdigit():
             raise yaml.constructor.ConstructorError(None, None, f"{node.value!r} would be read as an octal number; "
                                                     "write it without the leading zero", node.start_mark)
-        if kind == "int" and digits[:2].lower() == "0b":
-            raise yaml.constructor.ConstructorError(None, None, f"{node.value!r} would be read as a binary number; "
-                                                    "write the number in decimal", node.start_mark)
+        if kind == "int" and digits[:2].lower() in ("0b", "0x", "0o"):
+            base_name = {"0b": "binary", "0x": "hexadecimal", "0o": "octal"}[digits[:2].lower()]
+            raise yaml.constructor.ConstructorError(None, None, f"{node.value!r} would be read as a {base_name} "
+                                                    "number; write the number in decimal", node.start_mark)
         if len(digits) > MAX_NUMBER_DIGITS:
             raise yaml.constructor.ConstructorError(None, None, f"a number of {len(digits)} digits; at most "
                                                     f"{MAX_NUMBER_DIGITS} are read", node.start_mark)

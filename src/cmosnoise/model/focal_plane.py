@@ -462,6 +462,7 @@ def _build(keyed: _Keyed) -> FocalPlane:
     shape = keyed.key[-1]
     li, op, sen = config.light, config.optics, config.sensor
     pitch = float(sen.pixel_pitch_um)
+    optics.check_tables(op)  # every table it names, read now whether or not this configuration uses it
     light = None
     if li.enabled:
         lux = li.illuminance_lux if li.illuminance_lux is not None else math.pi * li.luminance_cd_m2

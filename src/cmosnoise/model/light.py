@@ -355,6 +355,9 @@ MIN_RATE_E_PER_S = 1e-12
 
 @functools.lru_cache(maxsize=16)
 def _integrate(illuminant, e_lux, spectral_qe, qe_peak, flat_qe, ir_cut_nm, k, area_um2) -> ChannelLight:
+    if not e_lux > 0:
+        raise CmosnoiseError(f"light.illuminance_lux = {e_lux:g}: the light needs an illuminance above 0 (a dark "
+                             "picture: a scene of flat:0, or the dark frames, at any illuminance)")
     s_wl, s_pow = illuminant_spectrum(illuminant)
     table = [list(r) for r in spectral_qe] if isinstance(spectral_qe, tuple) else spectral_qe
     q_wl, q_tab = qe_spectrum(table, qe_peak, flat_qe)
@@ -389,9 +392,10 @@ def _integrate(illuminant, e_lux, spectral_qe, qe_peak, flat_qe, ir_cut_nm, k, a
     response = _integral((photon_flux[None, None, :] * qe.T[:, None, :]) * b.T[None, :, :], grid)  # (3, 3)
     mix = response / response.sum(axis=1, keepdims=True)
     if not (np.isfinite(rates).all() and np.isfinite(mix).all()) or float(rates.min()) < MIN_RATE_E_PER_S:
-        raise CmosnoiseError(f"light: the channels collect {', '.join(f'{r:.3g}' for r in rates)} e-/s from "
-                             f"light.illuminant = {illuminant!r} through the QE; each must be a finite rate of at "
-                             f"least {MIN_RATE_E_PER_S:g} e-/s (give spectra of normal numbers)")
+        raise CmosnoiseError(f"light: the channels collect {', '.join(f'{r:.3g}' for r in rates)} e-/s at "
+                             f"light.illuminance_lux = {e_lux:g} of light.illuminant = {illuminant!r} through the "
+                             f"QE; each must be a finite rate of at least {MIN_RATE_E_PER_S:g} e-/s (more light, "
+                             "or spectra of normal numbers)")
     lux = k * e_lux / np.pi
     for a in (grid, photon_flux, qe, rates, mix):
         a.setflags(write=False)

@@ -712,6 +712,29 @@ def _angle_table(op) -> np.ndarray | None:
     return t
 
 
+def check_tables(op) -> None:
+    """Read and check every lens table the optics section names, used or not (a chief-ray angle without an
+    angle QE or a leaning crosstalk is read too): a file that cannot be a table is one line at once, not accepted
+    in silence.
+
+    Parameters
+    ----------
+    op : OpticsSection
+
+    Raises
+    ------
+    CmosnoiseError
+    """
+    if op.relative_illumination.lower() not in ("none", "cos4"):
+        _ri_table(op.relative_illumination)
+    if op.chief_ray_angle is not None:
+        t = _rows(op.chief_ray_angle, "optics.chief_ray_angle", (2,))
+        if (np.abs(t[:, 1]) > 60).any():
+            raise CmosnoiseError("optics.chief_ray_angle: angles must be from -60 to 60 degrees")
+    if op.angle_relative_qe is not None:
+        _qe_table(op)
+
+
 def _lean_table(config) -> np.ndarray | None:
     """The chief-ray angle's table where crosstalk's kernel leans with it (:func:`_angle_table`), else None."""
     if config.crosstalk.kernel_at_angle_pct is None or not config.crosstalk.enabled:
