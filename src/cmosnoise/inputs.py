@@ -229,7 +229,7 @@ def _tile_compressed_bytes(cards: dict, p: Path, what: str) -> int | None:
     return n * zbits // 8
 
 
-def read_npy(path: str | Path, what: str, limit: int, kinds: str = "uif") -> np.ndarray:
+def read_npy(path: str | Path, what: str, limit: int, kinds: str = "uif", max_elements: int | None = None) -> np.ndarray:
     """A ``.npy`` array, read after its header is checked: a regular file, a dtype of the ``kinds`` given (no
     objects, no pickles), non-negative dimensions whose bytes are at most ``limit`` and are all in the file (a
     truncated file is refused before it is read, a sparse one is read only as far as its header says).
@@ -244,6 +244,8 @@ def read_npy(path: str | Path, what: str, limit: int, kinds: str = "uif") -> np.
         The most bytes the array may hold.
     kinds : str
         The dtype kinds allowed (``numpy.dtype.kind``).
+    max_elements : int, optional
+        The most elements (what a reader that casts it, to float64 say, will hold).
 
     Returns
     -------
@@ -268,8 +270,12 @@ def read_npy(path: str | Path, what: str, limit: int, kinds: str = "uif") -> np.
                                  f"{' or '.join({'u': 'unsigned integers', 'i': 'integers', 'f': 'reals', 'b': 'booleans'}.get(k, k) for k in kinds)}")
         if any((not isinstance(d, int)) or d < 0 for d in shape):
             raise CmosnoiseError(f"{what} {str(p)!r}: an impossible shape {shape}")
-        nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        count = int(np.prod(shape, dtype=object))
+        nbytes = count * dtype.itemsize
         check_decoded(nbytes, p, what, limit)
+        if max_elements is not None and count > max_elements:
+            raise CmosnoiseError(f"{what} {str(p)!r}: {count} values; at most {max_elements} are read (each becomes "
+                                 f"{limit // max_elements} bytes)")
         if fh.tell() + nbytes > size:
             raise CmosnoiseError(f"{what} {str(p)!r}: its header promises {_size(nbytes)} of data that the file does "
                                  "not hold (a truncated file)")

@@ -893,9 +893,12 @@ def run(argv: list[str] | None = None) -> int:
         return result if isinstance(result, int) else 0
     except typer.Exit as exc:
         return exc.exit_code
-    except typer.TyperException as exc:  # usage errors: click's message, status 2
-        exc.show()
-        return exc.exit_code
+    except typer.TyperException as exc:  # usage errors: one line, as every other error, status 2
+        message = " ".join(str(exc.format_message() if hasattr(exc, "format_message") else exc).split())
+        ctx = getattr(exc, "ctx", None)
+        where = f" (see {ctx.command_path} --help)" if ctx is not None else ""
+        print(f"cmosnoise: error: {message}{where}", file=sys.stderr)
+        return getattr(exc, "exit_code", 2)
     except CmosnoiseError as exc:
         message = " ".join(str(exc).split())  # one line, whatever a library put in it
         done = f" ({written_note()})" if written() else ""

@@ -83,6 +83,8 @@ COLUMNS = {
 _MANIFEST = "dataset.json"
 #: the most samples a data set (or a stream) holds
 MAX_SAMPLES = 10**9
+#: the most samples one shard holds
+MAX_SHARD_SIZE = 100000
 
 
 @dataclass(frozen=True)
@@ -181,8 +183,8 @@ def check(recipe: Recipe, sources: Sources | None = None) -> Recipe:
     if r.format not in FORMATS:
         raise CmosnoiseError(f"--format {r.format!r}: choose one of {', '.join(FORMATS)} (zarr is not offered: "
                              "HDF5 holds the same chunked, compressed arrays in one file per shard)")
-    if not 1 <= r.shard_size <= 100000:
-        raise CmosnoiseError(f"--shard-size {r.shard_size}: give 1 to 100000 samples per shard")
+    if not 1 <= r.shard_size <= MAX_SHARD_SIZE:
+        raise CmosnoiseError(f"--shard-size {r.shard_size}: give 1 to {MAX_SHARD_SIZE} samples per shard")
     for name, rng, lo in (("--light", r.light_e, 1e-3), ("--exposure", r.integration_time_s, 1e-7)):
         if rng is not None and not lo <= rng[0] <= rng[1] <= 1e8:
             raise CmosnoiseError(f"{name} {rng[0]:g}:{rng[1]:g}: give LOW:HIGH with {lo:g} <= LOW <= HIGH")
@@ -661,6 +663,10 @@ def _read_h5(p: Path) -> tuple[dict, dict]:
             d = f.get(k)
             if not isinstance(d, h5py.Dataset):
                 raise CmosnoiseError(f"shard {str(p)!r} has no {k!r} array ({_HOLDS})")
+            if d.is_virtual or d.external:  # its data in other files, read without a word where they are missing
+                raise CmosnoiseError(f"shard {str(p)!r}: {k!r} is stored outside the file ("
+                                     f"{'a virtual dataset' if d.is_virtual else 'external storage'}); a shard "
+                                     "holds its own data (make one with cmosnoise dataset)")
             if d.dtype.kind in "OV" or (d.dtype.kind not in "SU" and d.dtype.kind not in "uifb"):
                 raise CmosnoiseError(f"shard {str(p)!r}: {k!r} holds {d.dtype} values; expected numbers or text")
             total += int(np.prod(d.shape, dtype=np.int64)) * max(d.dtype.itemsize, 1)
@@ -911,9 +917,23 @@ def read_manifest(folder: str | Path) -> dict:
     if isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= MAX_SAMPLES:
         raise CmosnoiseError(f"{str(path)!r}: recipe.samples is {samples!r}; expected a whole number from 1 to "
                              f"{MAX_SAMPLES}")
+    size = recipe.get("shard_size", 64)
+    if isinstance(size, bool) or not isinstance(size, int) or not 1 <= size <= MAX_SHARD_SIZE:
+        raise CmosnoiseError(f"{str(path)!r}: recipe.shard_size is {size!r}; expected a whole number from 1 to "
+                             f"{MAX_SHARD_SIZE}")
+    want = -(-samples // size)  # the shards its samples fill, counted before any list of that length is made
+    if len(shards) != want:
+        raise CmosnoiseError(f"{str(path)!r}: it names {len(shards)} shards, and its recipe's {samples} samples of "
+                             f"{size} a shard fill {want}: not a data set's manifest (make one with cmosnoise "
+                             "dataset)")
     for name in shards:
         if not isinstance(name, str) or Path(name).name != name or not name.startswith("shard-"):
             raise CmosnoiseError(f"{str(path)!r}: shard {name!r} is not a shard file's name in the folder")
+    try:
+        Recipe.from_json(json.dumps(recipe))
+    except (TypeError, ValueError) as exc:
+        raise CmosnoiseError(f"{str(path)!r}: its recipe is not a data set's ({' '.join(str(exc).split())[:200]})") \
+            from None
     return m
 
 

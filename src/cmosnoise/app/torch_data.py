@@ -227,7 +227,12 @@ class ShardDataset(Dataset):
             raise IndexError(f"index {index} is outside 0 .. {len(self) - 1}")
         shard, at = divmod(index, self.recipe.shard_size)
         if self._cached is None or self._cached[0] != shard:
-            self._cached = (shard, ds.read_shard(self.folder / self.shards[shard]))
+            read = ds.read_shard(self.folder / self.shards[shard])
+            held, want = len(read[0][ds.ARRAYS[0]]), len(self.recipe.shard_range(shard))
+            if held != want:
+                raise CmosnoiseError(f"{self.folder / self.shards[shard]}: holds {held} samples where its recipe "
+                                     f"puts {want} (a short or foreign shard): remake it with cmosnoise dataset")
+            self._cached = (shard, read)
         arrays, columns = self._cached[1]
         return {k: v[at] for k, v in arrays.items()}, {k: v[at] for k, v in columns.items()}
 

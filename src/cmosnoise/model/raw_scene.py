@@ -201,12 +201,8 @@ def _read(path: str, size: int, mtime_ns: int, raw_cfa, raw_black_dn, raw_white_
     if p.suffix.lower() == ".npy":
         if raw_cfa is None:
             raise CmosnoiseError(f"scene {str(path)!r}: a .npy mosaic needs scene.raw_cfa (its pattern at (0, 0))")
-        inputs.check_decoded(size, p, "scene", MAX_RAW_BYTES)
-        with inputs.open_regular(p, "scene") as fh:
-            try:
-                codes = np.load(fh, allow_pickle=False)
-            except ValueError as exc:
-                raise CmosnoiseError(f"scene {str(path)!r}: not a NumPy array ({exc})") from None
+        # the header's size, as the float64 mosaic it becomes (a sparse file of few bytes on disk is no smaller)
+        codes = inputs.read_npy(p, "scene", MAX_RAW_BYTES, kinds="uif", max_elements=MAX_RAW_BYTES // 8)
         return from_array(codes, raw_cfa, raw_black_dn, raw_white_dn)
     if size > MAX_RAW_BYTES:
         raise CmosnoiseError(f"scene {str(path)!r}: {size} bytes; a raw photograph is read up to "

@@ -290,7 +290,7 @@ def load_file(path: str | Path, scale: float | None = None, max_pixels: int = MA
     suffix = p.suffix.lower()
     try:
         if suffix == ".npy":
-            a = np.load(p, allow_pickle=False)
+            a = inputs.read_npy(p, "scene", MAX_SCENE_BYTES, kinds="uifb")  # the header checked, then read
             if a.ndim == 4 or (a.ndim == 3 and a.shape[-1] > 4):  # a stack: its first plane
                 a = a[0]
         elif suffix in (".tif", ".tiff"):
