@@ -130,3 +130,29 @@ def test_an_unknown_compile_mode_is_refused_in_one_line(monkeypatch):
     monkeypatch.setenv(jit.COMPILE_ENV, "later")
     with pytest.raises(CmosnoiseError, match="CMOSNOISE_COMPILE='later': allowed are foreground, background"):
         jit.compile_mode()
+
+
+@pytest.mark.skipif(jit.fcntl is None, reason="needs POSIX file locks")
+def test_one_lock_whatever_starts_the_command_and_a_held_lock_starts_no_build(tmp_path, monkeypatch):
+    # `cmosnoise` and `python -m cmosnoise` may name one interpreter by two paths: the lock is numba's cache's
+    # key alone (#79). A process holding it (a foreground `cmosnoise compile`) is seen, and no build is started
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    lock, _ = jit.build_files()
+    python = sys.executable
+    monkeypatch.setattr(sys, "executable", "/some/other/path/python3")
+    assert jit.build_files()[0] == lock
+    holder = subprocess.Popen([python, "-c",
+                               "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT); "
+                               "fcntl.flock(fd, fcntl.LOCK_EX); print('held', flush=True); time.sleep(60)", str(lock)],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        monkeypatch.setattr(jit, "_BUILD", {})
+        assert jit.building() and jit.start_build() is None and "process" not in jit._BUILD
+    finally:
+        holder.kill()
+        holder.wait()
+    assert not jit.building()

@@ -74,11 +74,12 @@ def build(background: bool = False, say: Callable[[str], None] = print) -> dict[
     from .run import simulate
 
     lock, _ = jit.build_files()
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    inherited = os.environ.pop(jit.LOCK_FD_ENV, None)  # start_build took the lock and handed it over
+    fd = int(inherited) if inherited and inherited.isdigit() else os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     mode = os.environ.get(jit.COMPILE_ENV)
     os.environ[jit.COMPILE_ENV] = "foreground"  # this process is the one that compiles
     try:
-        if jit.fcntl is not None:
+        if jit.fcntl is not None and not inherited:
             try:
                 jit.fcntl.flock(fd, jit.fcntl.LOCK_EX | jit.fcntl.LOCK_NB)
             except OSError:

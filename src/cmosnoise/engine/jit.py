@@ -203,8 +203,11 @@ def build_files() -> tuple[Path, Path]:
     Both are in the system's temporary folder, named by a digest of what
     keys numba's cache, so two installations never wait for each other.
     """
-    key = "|".join([str(Path(__file__).resolve().parent), sys.executable, os.environ.get("NUMBA_CACHE_DIR", ""),
-                    os.environ.get("NUMBA_CPU_NAME", ""), os.environ.get("NUMBA_CPU_FEATURES", "")])
+    # what keys numba's cache: the package's sources, the interpreter's version (not its path: `cmosnoise` and
+    # `python -m cmosnoise` may name one interpreter by two paths), the cache folder and the target
+    key = "|".join([str(Path(__file__).resolve().parent), sys.implementation.cache_tag,
+                    os.environ.get("NUMBA_CACHE_DIR", ""), os.environ.get("NUMBA_CPU_NAME", ""),
+                    os.environ.get("NUMBA_CPU_FEATURES", "")])
     base = Path(tempfile.gettempdir()) / f"cmosnoise-compile-{hashlib.sha256(key.encode()).hexdigest()[:12]}"
     return base.with_suffix(".lock"), base.with_suffix(".log")
 
@@ -212,6 +215,10 @@ def build_files() -> tuple[Path, Path]:
 #: the background compile this process started: {"process": subprocess.Popen}
 _BUILD: dict = {}
 _BUILD_LOCK = threading.Lock()
+
+
+#: the environment variable naming a file descriptor that already holds the build lock (a child of start_build)
+LOCK_FD_ENV = "CMOSNOISE_COMPILE_LOCK_FD"
 
 
 def building() -> bool:
@@ -252,12 +259,25 @@ def start_build() -> subprocess.Popen | None:
     with _BUILD_LOCK:
         if "process" in _BUILD or building():
             return None
-        _, log = build_files()
-        env = {**os.environ, COMPILE_ENV: "foreground"}
-        with open(log, "w") as fh:
-            _BUILD["process"] = subprocess.Popen(
-                [sys.executable, "-m", "cmosnoise", "compile", "--background"], stdin=subprocess.DEVNULL,
-                stdout=fh, stderr=subprocess.STDOUT, env=env, start_new_session=True, close_fds=True)
+        lock, log = build_files()
+        held = None
+        if fcntl is not None:  # the lock taken here and handed to the child: no second build can start between
+            held = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # another process took it a moment ago: its build runs
+                os.close(held)
+                return None
+        env = {**os.environ, COMPILE_ENV: "foreground", **({LOCK_FD_ENV: str(held)} if held is not None else {})}
+        try:
+            with open(log, "w") as fh:
+                _BUILD["process"] = subprocess.Popen(
+                    [sys.executable, "-m", "cmosnoise", "compile", "--background"], stdin=subprocess.DEVNULL,
+                    stdout=fh, stderr=subprocess.STDOUT, env=env, start_new_session=True, close_fds=True,
+                    pass_fds=() if held is None else (held,))
+        finally:
+            if held is not None:
+                os.close(held)  # the child's copy holds the lock now
         return _BUILD["process"]
 
 
