@@ -509,7 +509,8 @@ def test_only_the_token_opens_the_explorer_and_the_command_never_prints_it_whole
         said = "".join(lines)
         path = re.search(r"is in (\S+), readable by you alone", said).group(1)
         assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
-        address = open(path).read().strip()
+        with open(path) as fh:
+            address = fh.read().strip()
         token = address.split("token=", 1)[1]
         assert len(token) >= 43 and token not in said  # 32 random bytes, never printed whole
         bare = urllib.request.build_opener()  # no token: what another local user has
