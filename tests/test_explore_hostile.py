@@ -298,3 +298,15 @@ def test_a_huge_seq_does_not_make_later_renders_of_its_pane_dropped_for_ever(ser
     time.sleep(explore.LATEST_S + 0.5)
     status, _ = _post(url + "api/render", json.dumps({**body, "seq": 2}).encode(), PAGE)
     assert status == 200  # served again once the huge one has aged
+
+
+def test_the_quality_route_takes_one_finite_illuminance_in_its_range(server, base):
+    # a 400-digit lux is a number JSON carries and a float cannot hold: a 400, not a 500 (#79); the range and
+    # the one illuminance bound the work
+    url, _ = server
+    for lux, needle in [(10**400, "finite number"), ("10", "finite number"), ([1, 2, 3], "finite number"),
+                        (1e-9, "from 0.001"), (1e9, "to 1e+06")]:
+        body = json.dumps({"config": base, "lux": lux}).encode()
+        status, answer = _post(url + "api/quality", body, PAGE)
+        message = json.loads(answer)["error"]
+        assert status == 400 and needle in message and "\n" not in message, (lux, status, message)

@@ -218,6 +218,9 @@ def esfr(image: np.ndarray, region: tuple[int, int, int, int] | None = None) -> 
     # keep the distances every row reaches, so every bin has pixels from many rows
     reach = min(-dist[:, 0].max(), dist[:, -1].min())
     keep = np.abs(dist) < reach
+    if keep.sum() < 4 * OVERSAMPLING:  # a line the noise drew: no distance from it that every row reaches
+        raise CmosnoiseError("sfr: no straight edge found across the region (the line fitted to the rows' edges "
+                             "leaves it)")
     idx = np.floor(dist[keep] / step).astype(np.int64)
     first = idx.min()
     counts = np.bincount(idx - first)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import re
@@ -958,7 +959,11 @@ def _libraries_quiet(argv):
         yield
         return
     warnings.filterwarnings("ignore", module=r"(tifffile|rawpy|imageio|PIL|colour_demosaicing)(\.|$)")
-    with quieted(("tifffile", "rawpy", "imageio", "PIL")):
+    # Dask's client and scheduler (a sweep's, a data set's): what they would log at any moment a signal lands
+    # ("Couldn't gather 1 keys, rescheduling", closed streams) is ours to say in one line; a task's failure
+    # reaches the command as its exception
+    with quieted(("tifffile", "rawpy", "imageio", "PIL")), quieted(("distributed", "tornado", "asyncio"),
+                                                                   logging.CRITICAL):
         yield
 
 
