@@ -739,14 +739,15 @@ def compute_dataset_sample() -> dict:
     return {"command": "cmosnoise " + " ".join(DATASET_SAMPLE[1:]) + " --out d", "camera": str(columns["camera"][0]),
             "mode": str(columns["mode"][0]), "k_dn_per_e": float(columns["k_dn_per_e"][0]),
             "light_e": float(columns["light_e"][0]),
-            "psnr_db": scoring.image_scores(raw, clean, black, white)["psnr_db"],
+            "psnr_db": scoring.image_scores(raw, clean, black, white)["psnr_code_range_db"],
             "mask": {k: int(np.sum((mask & v) > 0)) for k, v in gt.MASK_BITS.items()}}
 
 
 def render_dataset_sample(d: dict) -> str:
     kinds = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in d["mask"].items() if v)
     return (f"The sample above: `{d['command']}`, the {d['camera']} in its {d['mode']} mode (K {d['k_dn_per_e']:g} "
-            f"DN/e-) at {d['light_e']:.0f} e- at the scene's white. The noisy frame is {d['psnr_db']:.1f} dB from the "
+            f"DN/e-) at {d['light_e']:.0f} e- at the scene's white. The noisy frame is {d['psnr_db']:.1f} dB (over the "
+            f"code range) from the "
             f"expected raw without its defects; the mask marks {kinds} pixels.")
 
 

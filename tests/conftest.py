@@ -11,24 +11,29 @@ import sys
 import tempfile
 from dataclasses import dataclass
 
-# One numba compile cache per test session, empty at its start (set before anything imports numba). The
-# suite runs in two pytest-xdist workers (pyproject's addopts), which start after this file has run in the
-# controlling process and so inherit the cache through the environment (CMOSNOISE_TEST_CACHE marks it as
-# the session's, not a developer's). Each worker's first test that renders a frame compiles the kernel
-# into it or loads what the other compiled (numba writes each entry whole), and every later test, in that
-# process or a child, loads it. The test of a first run (moved to the front below) compiles into the
-# session's cache while that is still empty, as a user's first run does; where the other worker got there
-# first, into an empty cache of its own. A NUMBA_CACHE_DIR already set (a developer's lasting cache) is
-# kept, and the first-run test then makes an empty cache of its own.
+# One numba compile cache for the test sessions of this checkout, kept between them (tests/../.cache/numba-tests,
+# ignored by git), so that a developer's second run of the fast tier loads the compiled loops instead of building
+# them again; CMOSNOISE_TEST_FRESH_CACHE=1 gives a session an empty one of its own instead, removed at its end (what
+# a clean clone's first run has anyway). Set before anything imports numba. The suite runs in two pytest-xdist
+# workers (pyproject's addopts), which start after this file has run in the controlling process and so inherit the
+# cache through the environment (CMOSNOISE_TEST_CACHE marks it as the session's, not a developer's own
+# NUMBA_CACHE_DIR, which is kept). numba writes each entry whole, so the workers share it. The test of a first run
+# (slow, moved to the front below) compiles into the session's cache where that is still empty, as a user's first
+# run does; else into an empty cache of its own.
 SESSION_CACHE = None
 if os.environ.get("CMOSNOISE_TEST_CACHE") and os.environ.get("NUMBA_CACHE_DIR") == os.environ["CMOSNOISE_TEST_CACHE"]:
     SESSION_CACHE = os.environ["CMOSNOISE_TEST_CACHE"]  # an xdist worker: the controller's
 elif not os.environ.get("NUMBA_CACHE_DIR"):
-    SESSION_CACHE = tempfile.mkdtemp(prefix="cmosnoise-numba-cache-")
+    if os.environ.get("CMOSNOISE_TEST_FRESH_CACHE"):
+        SESSION_CACHE = tempfile.mkdtemp(prefix="cmosnoise-numba-cache-")
+        # removed when the process that made it exits: pytest's (or xdist's controlling) process, or a script
+        # that imports a test module (benchmarks/fit_coverage.py)
+        atexit.register(shutil.rmtree, SESSION_CACHE, True)
+    else:
+        SESSION_CACHE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), ".cache",
+                                     "numba-tests")
+        os.makedirs(SESSION_CACHE, exist_ok=True)
     os.environ["NUMBA_CACHE_DIR"] = os.environ["CMOSNOISE_TEST_CACHE"] = SESSION_CACHE
-    # removed when the process that made it exits: pytest's (or xdist's controlling) process, or a script
-    # that imports a test module (benchmarks/fit_coverage.py)
-    atexit.register(shutil.rmtree, SESSION_CACHE, True)
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
 # The tests' command lines compile in their own process, as the library does (the console script's default is a
 # background compile while the NumPy specification runs: engine/jit.py, compiled), so that no test leaves a

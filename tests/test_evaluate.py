@@ -8,6 +8,7 @@ from conftest import cli
 
 from cmosnoise.analysis import scoring
 from cmosnoise.app import dataset as ds
+from cmosnoise.errors import CmosnoiseError
 
 WORST = ["--camera", "paper-fig9-vga", "--light", "200:2000", "--set", "exposure.integration_time_s=0.1",
          "--set", "defects.enabled=true", "--set", "defects.clusters.ppm=3000", "--set", "defects.dead_ppm=2000"]
@@ -39,7 +40,7 @@ def test_median_leaves_couplets_and_clusters_and_the_dark_map_removes_them(data,
     # ... and removes most single defects; the dark-map corrector removes couplets and clusters
     assert t.loc["median", "singles_left"] < 0.2 * t.loc["median", "singles_visible"]
     assert t.loc["dark-map", "couplets_left"] == 0 and t.loc["dark-map", "clusters_left"] == 0
-    means = s.groupby("method")["psnr_db"].mean()
+    means = s.groupby("method")["psnr_raw_db"].mean()
     assert means["dark-map"] > means["median"] > means["none"]
     html = (tmp_path / "e" / "report.html").read_text()
     assert "data:image/png;base64," in html and "dark-map" in html and "http" not in html.replace("http-equiv", "")
@@ -66,7 +67,7 @@ def test_a_callable_and_a_folder_of_outputs_are_scored_alike(data, tmp_path):
             "--out", tmp_path / "e", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     _, s = totals(tmp_path / "e")
-    cols = ["psnr_db", "ssim", "singles_left", "couplets_left", "clusters_left"]
+    cols = ["psnr_raw_db", "ssim_raw", "singles_left", "couplets_left", "clusters_left"]
     by = {m: g.sort_values("sample")[cols].to_numpy() for m, g in s.groupby("method")}
     assert np.array_equal(by["mine:identity"], by["none"]) and np.array_equal(by["outputs"], by["none"])
 
@@ -92,19 +93,59 @@ def test_bm3d_denoises_better_than_the_noisy_frame(tmp_path):
                "100:100", "--out", folder).returncode == 0
     r = cli("-q", "evaluate", "--data", folder, "--method", "none", "--method", "bm3d", "--out", tmp_path / "e")
     assert r.returncode == 0, r.stderr
-    means = pd.read_csv(tmp_path / "e" / "scores.csv").groupby("method")["psnr_db"].mean()
+    means = pd.read_csv(tmp_path / "e" / "scores.csv").groupby("method")["psnr_raw_db"].mean()
     assert means["bm3d"] > means["none"] + 1.0
 
 
-def test_psnr_over_the_targets_own_range_is_the_literatures():
-    """#63: beside the PSNR over the white-minus-black range, the PSNR over the target's own range (max - min), as
-    the low-light denoising literature normalises: a ramp of range 100 DN off by 1 DN everywhere is 40 dB
-    exactly; a flat target has no own range (NaN)."""
+def test_the_scores_are_the_literatures_by_hand():
+    """#78: PSNR and SSIM on packed raw, black subtracted, normalised to white, amplified by the exposure ratio and
+    clipped to [0, 1], as PMN's evaluation (trainer_SID.py) computes them: written here from the definition, with
+    NumPy alone for the PSNR and scikit-image's SSIM on the packed channels; the code-range PSNR without the ratio;
+    an output equal to its target scores NaN, not infinity."""
+    from skimage.metrics import structural_similarity
+
     from cmosnoise.analysis import scoring
 
-    target = np.tile(np.linspace(200.0, 300.0, 64), (32, 1))
-    s = scoring.image_scores(target + 1.0, target, 64.0, 4095.0)
+    rng = np.random.default_rng(3)
+    black, white, ratio = 64.0, 4095.0, 20.0
+    target = np.tile(np.linspace(70.0, 250.0, 64), (32, 1))
+    output = target + rng.normal(0.0, 3.0, target.shape)
+    s = scoring.image_scores(output, target, black, white, ratio, "RGGB")
     assert list(s) == [name for name, *_ in scoring.SCORES]
-    assert s["psnr_own_range_db"] == pytest.approx(40.0, abs=1e-9)
-    assert s["psnr_db"] == pytest.approx(10 * np.log10((4095.0 - 64.0) ** 2), abs=1e-9)
-    assert np.isnan(scoring.image_scores(np.full((8, 8), 5.0), np.full((8, 8), 4.0), 0.0, 255.0)["psnr_own_range_db"])
+
+    def lit(a):  # the definition, by hand
+        return np.clip((a - black) / (white - black) * ratio, 0, 1)
+
+    def packed(a):
+        return np.stack([a[0::2, 0::2], a[0::2, 1::2], a[1::2, 0::2], a[1::2, 1::2]])
+
+    mse = np.mean((lit(output) - lit(target)) ** 2)
+    assert s["psnr_raw_db"] == pytest.approx(10 * np.log10(1.0 / mse), abs=1e-9)
+    want = structural_similarity(packed(lit(target)), packed(lit(output)), data_range=1.0, channel_axis=0, win_size=7)
+    assert s["ssim_raw"] == pytest.approx(want, abs=1e-12)
+    code = np.mean((np.clip((output - black) / (white - black), 0, 1) - (target - black) / (white - black)) ** 2)
+    assert s["psnr_code_range_db"] == pytest.approx(10 * np.log10(1.0 / code), abs=1e-9)
+    assert s["psnr_code_range_db"] > s["psnr_raw_db"] + 20  # the ratio of 20 takes 26 dB off a dark sample
+    assert 0 < s["ssim_srgb"] < 1 and np.isfinite(s["psnr_srgb_db"])
+    same = scoring.image_scores(target, target, black, white, ratio, "RGGB")
+    assert np.isnan(same["psnr_raw_db"]) and np.isnan(same["psnr_code_range_db"])
+    with pytest.raises(CmosnoiseError, match="ratio"):
+        scoring.image_scores(output, target, black, white, 0.5)
+
+
+def test_a_dark_samples_noisy_input_scores_as_the_literatures_inputs_do(tmp_path):
+    """#78: the noisy input's SSIM in the literature's form is below 0.9 in median over samples under 1000 e- at
+    the scene's white (at 1000 e- and a ratio of 100 or more, SID's and ELD's inputs score 0.1 to 0.6), and no
+    table holds inf or NaN."""
+    folder = tmp_path / "d"
+    assert cli("-q", "dataset", "-n", "12", "--crop", "64", "--camera", "sony-a7s2", "--level", "0.003:0.03",
+               "--out", folder).returncode == 0
+    r = cli("-q", "evaluate", "--data", folder, "--method", "none", "--out", tmp_path / "e")
+    assert r.returncode == 0, r.stderr
+    s = pd.read_csv(tmp_path / "e" / "scores.csv")
+    dark = s[(s["method"] == "none") & (s["light_e"] < 1000)]
+    assert len(dark) >= 6 and dark["ssim_raw"].median() < 0.9, dark[["light_e", "ratio", "ssim_raw"]]
+    assert (dark["ratio"] >= 30).all()
+    summary = pd.read_csv(tmp_path / "e" / "summary.csv")
+    numbers = summary.select_dtypes("number").to_numpy()
+    assert np.isfinite(numbers).all(), summary

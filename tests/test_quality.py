@@ -111,7 +111,7 @@ def test_one_qe_for_all_channels_is_named_beside_the_colour_error():
 
 
 @pytest.mark.parametrize("args, needle", [
-    (["--lux", "10,1"], "give increasing illuminances above 0"),
+    (["--lux", "10,1"], "give increasing illuminances from 0.001"),
     (["--lux", "ten"], "--lux 'ten': give illuminances in lux"),
     (["--picture-height-cm", "-1"], "viewing conditions"),
     (["--compare-set", "sensor.temperature_c=65", "--instances", "1"], "--instances"),

@@ -90,19 +90,17 @@ def read_bytes(path: str | Path, what: str, limit: int) -> bytes:
     """At most ``limit`` bytes of a regular file; a longer file is refused (its size from reading, not ``stat``)."""
     with open_regular(path, what) as fh:
         try:  # in pieces: one read of limit + 1 bytes would allocate all of them for a file of a few
-            parts, size = [], 0
-            while size <= limit:
-                part = fh.read(min(1 << 20, limit + 1 - size))
+            buf = bytearray()
+            while len(buf) <= limit:
+                part = fh.read(min(1 << 20, limit + 1 - len(buf)))
                 if not part:
                     break
-                parts.append(part)
-                size += len(part)
-            data = b"".join(parts)
+                buf += part
         except OSError as exc:
             raise CmosnoiseError(f"{what} {str(path)!r} cannot be read: {exc.strerror or exc}") from None
-    if len(data) > limit:
+    if len(buf) > limit:
         raise CmosnoiseError(f"{what} {str(path)!r} is larger than {_size(limit)}; at most {_size(limit)} are read")
-    return data
+    return bytes(buf)
 
 
 def read_text(path: str | Path, what: str, limit: int) -> str:

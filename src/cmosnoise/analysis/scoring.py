@@ -1,13 +1,18 @@
 """Scores of a denoiser or a defect corrector against a sample's ground truth.
 
-- **PSNR and SSIM** (scikit-image's metrics) of the output against the
-  target, both normalized as
-  ``(DN - black) / (white - black)``; SSIM over the CFA's colour planes
-  (each plane a channel), so no demosaicing enters the score. The target is
-  the expected raw without its defects (:func:`defect_free`: each masked
-  pixel at the median of its healthy same-colour neighbours' expected
-  values), what a perfect denoiser and defect corrector together give; or
-  the perfect image.
+- **PSNR and SSIM as the low-light raw denoising literature reports them** (scikit-image's metrics): on
+  *packed raw* (the four CFA positions as channels at half resolution), black subtracted, normalised to the
+  white level, **amplified by the sample's exposure ratio and clipped to [0, 1]**, output and target alike:
+  ``clip((DN - black) / (white - black) * ratio, 0, 1)``; SSIM over the four packed channels, data range 1.
+  That is what PMN's evaluation does (``trainer_SID.py``: the short exposure times its ratio, ``clamp(0, 1)``,
+  then PSNR and SSIM of the packed raw; ELD's and SID's evaluations amplify and clip alike), without its
+  rounding to 8 bits. And on **sRGB through one fixed pipeline** (:func:`to_srgb`): the same amplified, clipped
+  mosaic demosaiced bilinearly, white-balanced by the target's grey-world gains (both images the same gains),
+  clipped, encoded by the sRGB curve (IEC 61966-2-1); no colour matrix (the camera's own RGB). And, for a
+  camera's whole code range without a ratio, ``psnr_code_range_db``. The target is the expected raw without
+  its defects (:func:`defect_free`: each masked pixel at the median of its healthy same-colour neighbours'
+  expected values), what a perfect denoiser and defect corrector together give; or the perfect image. A
+  score that would be infinite (an output equal to the target) is NaN, and tables leave it out, counted.
 - **Defects left**, by kind: a defect pixel of the mask is *visible* where
   the noisy frame departs from its healthy same-colour neighbours' median
   in the expected raw by more than ``z`` robust sigmas of that departure
@@ -39,9 +44,11 @@ Z_VISIBLE = 6.0
 #: the image scores :func:`image_scores` gives, each (name, what it is, unit, which way is better): the one list
 #: that ``evaluate``'s tables, summary and report iterate
 SCORES = (
-    ("psnr_db", "PSNR over the camera's white-minus-black range", "dB", "higher"),
-    ("psnr_own_range_db", "PSNR over the target's own range", "dB", "higher"),
-    ("ssim", "SSIM over the CFA's colour planes", "", "higher"),
+    ("psnr_raw_db", "PSNR on packed raw in [0, 1] at the sample's exposure ratio (the literature's)", "dB", "higher"),
+    ("ssim_raw", "SSIM on packed raw in [0, 1] at the sample's exposure ratio (the literature's)", "", "higher"),
+    ("psnr_srgb_db", "PSNR on sRGB through the fixed pipeline, at the exposure ratio", "dB", "higher"),
+    ("ssim_srgb", "SSIM on sRGB through the fixed pipeline, at the exposure ratio", "", "higher"),
+    ("psnr_code_range_db", "PSNR over the camera's whole code range (white minus black), no ratio", "dB", "higher"),
 )
 
 
@@ -50,13 +57,73 @@ def planes(a: np.ndarray) -> np.ndarray:
     return np.stack([a[0::2, 0::2], a[0::2, 1::2], a[1::2, 0::2], a[1::2, 1::2]])
 
 
-def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: float) -> dict:
-    """PSNR (dB) and SSIM of ``output`` against ``target`` (both (H, W), DN), normalized to [0, 1] of the range:
-    the scores of :data:`SCORES`, by name.
+def normalised(a: np.ndarray, black: float, white: float, ratio: float = 1.0) -> np.ndarray:
+    """``clip((a - black) / (white - black) * ratio, 0, 1)``: a raw frame as the literature scores it (float64).
 
-    ``psnr_db`` is over the white-minus-black range (the camera's whole code range: comparable across samples
-    of one camera, high for dark samples); ``psnr_own_range_db`` over the target's own range (its largest minus
-    its smallest value, DN), as the low-light denoising literature normalises each image (NaN for a flat target).
+    Parameters
+    ----------
+    a : (H, W) array, DN
+    black, white : float
+        The black and white levels, DN.
+    ratio : float
+        The exposure ratio the frame is amplified by (1: none).
+
+    Returns
+    -------
+    (H, W) float64 array in [0, 1]
+    """
+    return np.clip((np.asarray(a, np.float64) - black) * (ratio / (white - black)), 0.0, 1.0)
+
+
+def to_srgb(mosaic: np.ndarray, pattern: str, gains: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed pipeline the sRGB scores use: a normalised mosaic in [0, 1] demosaiced bilinearly
+    (colour-demosaicing), times white-balance gains (default: the grey-world gains of this image, green 1),
+    clipped to [0, 1] and encoded by the sRGB curve; a monochrome mosaic is its own grey.
+
+    Parameters
+    ----------
+    mosaic : (H, W) array in [0, 1]
+    pattern : str
+        The CFA (RGGB, ..., or none).
+    gains : (3,) array, optional
+        White-balance gains to apply (another image's, so output and target share them).
+
+    Returns
+    -------
+    (H, W, 3) float64 array, and the gains used
+    """
+    from ..colour_lib import colour_demosaicing
+    from ..model import cfa as cfa_mod
+
+    if cfa_mod.is_mono(pattern):
+        rgb = np.repeat(np.asarray(mosaic, np.float64)[..., None], 3, axis=2)
+    else:
+        rgb = np.asarray(colour_demosaicing().demosaicing_CFA_Bayer_bilinear(mosaic, pattern), np.float64)
+    if gains is None:
+        means = rgb.reshape(-1, 3).mean(axis=0)
+        gains = np.where(means > 0, means[1] / np.where(means > 0, means, 1.0), 1.0)
+    lin = np.clip(rgb * gains, 0.0, 1.0)
+    return np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.power(lin, 1 / 2.4) - 0.055), gains
+
+
+def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: float, ratio: float = 1.0,
+                 pattern: str = "RGGB") -> dict:
+    """The scores of :data:`SCORES` of ``output`` against ``target`` (both (H, W), DN), by name (see the module
+    docstring): NaN where a score would be infinite (an output equal to the target).
+
+    Parameters
+    ----------
+    output, target : (H, W) arrays, DN
+    black, white : float
+        The black and white levels, DN.
+    ratio : float
+        The sample's exposure ratio (both images amplified by it, as the literature scores a short exposure).
+    pattern : str
+        The CFA, for the sRGB pipeline's demosaicing.
+
+    Returns
+    -------
+    dict
     """
     from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
@@ -64,22 +131,29 @@ def image_scores(output: np.ndarray, target: np.ndarray, black: float, white: fl
     if output.shape != target.shape:
         raise CmosnoiseError(f"output: shape {output.shape}, target {target.shape}; they must be the same frame")
     try:
-        black, white = float(black), float(white)
+        black, white, ratio = float(black), float(white), float(ratio)
     except (TypeError, ValueError):
-        raise CmosnoiseError(f"black, white = {black!r}, {white!r}: expected two numbers (DN)") from None
+        raise CmosnoiseError(f"black, white, ratio = {black!r}, {white!r}, {ratio!r}: expected numbers") from None
     if not (np.isfinite(black) and np.isfinite(white) and white > black):
         raise CmosnoiseError(f"black, white = {black!r}, {white!r}: expected finite levels, white above black")
-    scale = 1.0 / (white - black)
-    out = (np.asarray(output, np.float64) - black) * scale
-    ref = (np.asarray(target, np.float64) - black) * scale
+    if not (np.isfinite(ratio) and ratio >= 1):
+        raise CmosnoiseError(f"ratio = {ratio!r}: an exposure ratio is a finite number >= 1")
+
+    def psnr(ref, out) -> float:
+        return float(peak_signal_noise_ratio(ref, out, data_range=1.0)) if np.any(ref != out) else float("nan")
+
+    out, ref = normalised(output, black, white, ratio), normalised(target, black, white, ratio)
     p_out, p_ref = planes(out), planes(ref)
     win = min(7, min(p_ref.shape[1:]) // 2 * 2 - 1)
-    own = float(np.max(target) - np.min(target))
-    mse = float(np.mean((np.asarray(output, np.float64) - np.asarray(target, np.float64)) ** 2))
-    with np.errstate(divide="ignore"):
-        own_db = float(10.0 * np.log10(own * own / mse)) if own > 0 else float("nan")
-    values = (float(peak_signal_noise_ratio(ref, out, data_range=1.0)), own_db,
-              float(structural_similarity(p_ref, p_out, data_range=1.0, channel_axis=0, win_size=win)))
+    ref_rgb, gains = to_srgb(ref, pattern)
+    out_rgb, _ = to_srgb(out, pattern, gains)
+    win_rgb = min(7, min(ref_rgb.shape[:2]) // 2 * 2 - 1)
+    code_out, code_ref = normalised(output, black, white), normalised(target, black, white)
+    values = (psnr(p_ref, p_out),
+              float(structural_similarity(p_ref, p_out, data_range=1.0, channel_axis=0, win_size=win)),
+              psnr(ref_rgb, out_rgb),
+              float(structural_similarity(ref_rgb, out_rgb, data_range=1.0, channel_axis=2, win_size=win_rgb)),
+              psnr(code_ref, code_out))
     return {name: v for (name, *_), v in zip(SCORES, values)}
 
 

@@ -781,7 +781,14 @@ def dataset(
                                                "eld, eld:nikon-d850); repeatable: each sample picks one (default: led)"),
     images: Path | None = typer.Option(None, "--images", help="a folder of images to crop (default: the built-in "
                                           "scenes)"),
-    light: str = typer.Option("50:5000", "--light", help="charge at the scene's white, LOW:HIGH e- (log-uniform)"),
+    level: str = typer.Option("0.003:0.9", "--level", help="the scene's white as a share of each camera's "
+                              "saturation, LOW:HIGH (log-uniform): a clean signal that does not clip"),
+    light: str | None = typer.Option(None, "--light", help="instead of --level: the charge at the scene's white, "
+                                        "LOW:HIGH e- (log-uniform), whatever the camera"),
+    reference_level: float = typer.Option(0.9, "--reference-level", help="the level of the reference exposure each "
+                                          "sample's exposure ratio (reference / level) is against"),
+    allow_clipping: bool = typer.Option(False, "--allow-clipping", help="take a --level above 1 (a white that "
+                                        "saturates)"),
     exposure: str | None = typer.Option(None, "--exposure", help="integration time LOW:HIGH s (log-uniform; "
                                            "default: each camera's)"),
     temperature: str | None = typer.Option(None, "--temperature", help="LOW:HIGH C (uniform; default: each "
@@ -819,7 +826,9 @@ def dataset(
     sources = ds.image_sources(images) if images is not None else ds.BUILTIN_SCENES
     white_e_per_s = _white_e_per_s(white_threshold)
     recipe = ds.Recipe(samples=samples, crop=shape, seed=seed, cameras=tuple(camera or ("led",)), sources=sources,
-                       light_e=pair(light, "--light"), integration_time_s=pair(exposure, "--exposure"),
+                       light_e=pair(light, "--light"), level=pair(level, "--level"),
+                       reference_level=reference_level, allow_clipping=allow_clipping,
+                       integration_time_s=pair(exposure, "--exposure"),
                        temperature_c=pair(temperature, "--temperature"), overrides=tuple(set_ or ()),
                        white_threshold_e_per_s=white_e_per_s, shard_size=shard_size, format=format_.lower())
     with _counting(ctx, "dataset", "samples") as progress:

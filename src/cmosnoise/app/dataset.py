@@ -77,7 +77,8 @@ ARRAYS = ("raw", "expected_raw", "perfect_dn", "mask")
 COLUMNS = {
     "sample": "int64", "camera": "str", "mode": "str", "binning": "str", "iso": "float64", "gain_db": "float64",
     "k_dn_per_e": "float64", "black_level_dn": "float64", "white_level_dn": "float64", "cfa": "str",
-    "light_e": "float64", "integration_time_s": "float64", "temperature_c": "float64", "seed": "int64",
+    "light_e": "float64", "level": "float64", "ratio": "float64", "clipped_share": "float64",
+    "integration_time_s": "float64", "temperature_c": "float64", "seed": "int64",
     "source": "str", "window_row": "int64", "window_col": "int64", "config": "str",
 }
 _MANIFEST = "dataset.json"
@@ -96,7 +97,12 @@ class Recipe:
     setting) and virtual camera families (``led``, ``eld``, ``eld:nikon-d850``,
     :mod:`cmosnoise.config.virtual_cameras`), each picked with equal
     probability. ``sources`` are image paths or built-in scene names.
-    ``light_e`` is the charge at the scene's white (e-), log-uniform;
+    ``level`` is where the scene's white lands, a share of the camera's own saturation (the full well, or the
+    ADC's white level above black if that comes first), log-uniform: each camera and gain gets a clean signal
+    that does not clip; ``light_e`` (instead) is the charge at the scene's white in e-, whatever the camera.
+    ``ratio`` is each sample's exposure ratio, ``reference_level / level``: how much a reference exposure whose
+    white lands at ``reference_level`` outshines it (SID's and ELD's short against long exposures; the literature's
+    metrics amplify the short exposure by it);
     ``integration_time_s`` log-uniform; ``temperature_c`` uniform.
     ``overrides`` are ``--set`` texts applied to every sample last.
 
@@ -112,8 +118,14 @@ class Recipe:
         Presets and virtual camera families, as above.
     sources : tuple of str
         Image paths or built-in scene names.
-    light_e : (float, float)
-        The charge at the scene's white, e-, log-uniform.
+    light_e : (float, float) or None
+        The charge at the scene's white, e-, log-uniform (None: by ``level``).
+    level : (float, float)
+        The scene's white as a share of the camera's saturation, log-uniform (without ``light_e``).
+    reference_level : float
+        The reference exposure's level the ratio is against.
+    allow_clipping : bool
+        Whether a level above 1 (a white that saturates) is taken.
     integration_time_s : (float, float) or None
         Log-uniform, s (None: each camera's).
     temperature_c : (float, float) or None
@@ -133,7 +145,10 @@ class Recipe:
     seed: int = 0
     cameras: tuple[str, ...] = ("led",)
     sources: tuple[str, ...] = BUILTIN_SCENES
-    light_e: tuple[float, float] = (50.0, 5000.0)
+    light_e: tuple[float, float] | None = None
+    level: tuple[float, float] = (0.003, 0.9)
+    reference_level: float = 0.9
+    allow_clipping: bool = False
     integration_time_s: tuple[float, float] | None = None
     temperature_c: tuple[float, float] | None = None
     overrides: tuple[str, ...] = ()
@@ -156,7 +171,8 @@ class Recipe:
     @classmethod
     def from_json(cls, text: str) -> Recipe:
         data = json.loads(text)
-        for k in ("crop", "cameras", "sources", "light_e", "integration_time_s", "temperature_c", "overrides"):
+        for k in ("crop", "cameras", "sources", "light_e", "level", "integration_time_s", "temperature_c",
+                  "overrides"):
             if data.get(k) is not None:
                 data[k] = tuple(data[k])
         return cls(**data)
@@ -188,6 +204,14 @@ def check(recipe: Recipe, sources: Sources | None = None) -> Recipe:
     for name, rng, lo in (("--light", r.light_e, 1e-3), ("--exposure", r.integration_time_s, 1e-7)):
         if rng is not None and not lo <= rng[0] <= rng[1] <= 1e8:
             raise CmosnoiseError(f"{name} {rng[0]:g}:{rng[1]:g}: give LOW:HIGH with {lo:g} <= LOW <= HIGH")
+    top = 100.0 if r.allow_clipping else 1.0
+    if len(r.level) != 2 or not 1e-6 <= r.level[0] <= r.level[1] <= top:
+        raise CmosnoiseError(f"--level {r.level[0]:g}:{r.level[1]:g}: give LOW:HIGH, shares of the camera's "
+                             f"saturation, 1e-06 <= LOW <= HIGH <= {top:g}"
+                             + ("" if r.allow_clipping else " (a white above 1 saturates: --allow-clipping)"))
+    if not 0 < r.reference_level <= top:
+        raise CmosnoiseError(f"--reference-level {r.reference_level:g}: give a share of the saturation in (0, "
+                             f"{top:g}]")
     if r.temperature_c is not None and not -60 <= r.temperature_c[0] <= r.temperature_c[1] <= 150:
         raise CmosnoiseError(f"--temperature {r.temperature_c[0]:g}:{r.temperature_c[1]:g}: give LOW:HIGH in C, "
                              "-60 <= LOW <= HIGH <= 150")
@@ -357,7 +381,8 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
                              "smaller crop or larger images")
     row = 2 * int(rng.integers((img.shape[0] - h) // 2 + 1))  # even corners: the CFA phase of the source kept
     col = 2 * int(rng.integers((img.shape[1] - w) // 2 + 1))
-    light = math.exp(rng.uniform(math.log(recipe.light_e[0]), math.log(recipe.light_e[1])))
+    span = recipe.light_e if recipe.light_e is not None else recipe.level
+    drawn = math.exp(rng.uniform(math.log(span[0]), math.log(span[1])))
     t = base.exposure.integration_time_s
     if recipe.integration_time_s is not None:
         t = math.exp(rng.uniform(*(math.log(v) for v in recipe.integration_time_s)))
@@ -370,7 +395,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
         "sensor": {"width": w, "height": h, "temperature_c": temp},
         "scene": {"source": source, "window": [row, col],
                   **({"source_size": [BUILTIN_SIZE, BUILTIN_SIZE]} if scene_mod.is_builtin(source) else {})},
-        "exposure": {"integration_time_s": t, "peak_rate_e_per_s": light / t},
+        "exposure": {"integration_time_s": t, **({"peak_rate_e_per_s": drawn / t} if recipe.light_e else {})},
         "run": {"frames": 1, "first_frame": 0},
     }
     merged = deep_merge(updates, sample)
@@ -382,15 +407,33 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     if config.light.enabled:  # a data set's light is its own axis (--light, e- at the white): not lux as well
         raise CmosnoiseError(f"sample {index} ({camera}): light.enabled is on, but a data set sets each sample's "
                              "light itself (--light, electrons at the scene's white); leave light in lux off")
+    saturation = _saturation_e(config)
+    if recipe.light_e is not None:
+        light, level = drawn, drawn / saturation
+    else:  # the white where asked on this camera at this gain: its charge from the camera's own saturation
+        light, level = drawn * saturation, drawn
+        config = config.model_copy(update={"exposure": config.exposure.model_copy(
+            update={"peak_rate_e_per_s": light / t})})
     sensor = config.sensor
     gain_row = physics.gain_row(config)
     columns = {"sample": index, "camera": camera, "mode": (gain_row.mode or "") if gain_row else "",
                "binning": sensor.binning,
                "iso": sensor.iso if sensor.iso is not None else math.nan,
                "gain_db": sensor.gain_db if sensor.gain_db is not None else math.nan,
-               "cfa": sensor.cfa, "light_e": light, "integration_time_s": t, "temperature_c": temp, "seed": seed,
+               "cfa": sensor.cfa, "light_e": light, "level": level, "ratio": recipe.reference_level / level,
+               "integration_time_s": t, "temperature_c": temp, "seed": seed,
                "source": source, "window_row": row, "window_col": col}
     return SampleSettings(index, config, columns)
+
+
+def _saturation_e(config) -> float:
+    """The charge a camera saturates at, e-: its full well, or the ADC's white level above black if that comes
+    first (:attr:`cmosnoise.model.spec.SensorSpec.saturation_e`, from the transfer alone)."""
+    from ..model.spec import transfer
+
+    config = physics.apply_gain(config)  # the gain table's row (ISO, conversion gain) sets K and the full well
+    t = transfer(config)
+    return float(min(config.sensor.full_well_e, (t.max_code - t.black_level_dn) / t.gain_dn_per_e))
 
 
 #: samples whose frames the GPU makes in one launch (:func:`make_samples`): their maps are stacked on the host and
@@ -487,8 +530,9 @@ def _finish(recipe: Recipe, shot, st: SampleSettings, raw) -> tuple[dict, dict]:
     """A sample's arrays (its noisy ``raw`` and its truths) and columns."""
     truth = ground_truth.truth(shot, recipe.white_threshold_e_per_s)
     t = shot.sensor.transfer
+    clipped = float(np.mean(np.asarray(raw) >= t.max_code)) if hasattr(raw, "shape") else math.nan
     columns = {**st.columns, "k_dn_per_e": t.gain_dn_per_e, "black_level_dn": t.black_level_dn,
-               "white_level_dn": float(t.max_code), "config": st.config.to_yaml()}
+               "white_level_dn": float(t.max_code), "clipped_share": clipped, "config": st.config.to_yaml()}
     arrays = {"raw": raw, "expected_raw": truth.expected_raw, "perfect_dn": truth.perfect_dn, "mask": truth.mask}
     return arrays, columns
 
@@ -674,6 +718,68 @@ def _read_h5(p: Path) -> tuple[dict, dict]:
         arrays = {k: f[k][()] for k in ARRAYS}
         columns = {k: _decoded(f["settings"][k][()]) for k in COLUMNS}
     return arrays, columns
+
+
+def read_sample(path: str | Path, at: int) -> tuple[dict, dict]:
+    """Sample ``at`` of a shard alone: in an HDF5 shard, its own chunk of each array (one sample a chunk) and its
+    row of the settings, checked as :func:`read_shard` checks the whole; in another format, the shard read whole.
+
+    Parameters
+    ----------
+    path : str or Path
+        The shard.
+    at : int
+        The sample's place in the shard.
+
+    Returns
+    -------
+    (dict, dict)
+        Its arrays (rows, cols) and its settings, by name.
+    """
+    p = Path(path)
+    if p.suffix.lower() != ".h5":
+        arrays, columns = read_shard(p)
+        return {k: v[at] for k, v in arrays.items()}, {k: v[at] for k, v in columns.items()}
+    inputs.check_regular(p, "shard")
+    try:
+        import h5py
+
+        with h5py.File(p, "r") as f:
+            n = _h5_header(p, f)
+            if not 0 <= at < n:
+                raise CmosnoiseError(f"shard {str(p)!r} holds {n} samples; sample {at} is not one of them")
+            arrays = {k: f[k][at:at + 1] for k in ARRAYS}
+            columns = {k: _decoded(f["settings"][k][at:at + 1]) for k in COLUMNS}
+    except CmosnoiseError:
+        raise
+    except Exception as exc:  # a damaged file: the reader's own words, one line
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise CmosnoiseError(f"shard {str(p)!r} cannot be read: {first}") from None
+    arrays, columns = _checked_shard(p, arrays, columns)
+    return {k: v[0] for k, v in arrays.items()}, {k: v[0] for k, v in columns.items()}
+
+
+def _h5_header(p: Path, f) -> int:
+    """An HDF5 shard's datasets checked from their headers (present, numbers or text, stored in the file, one
+    shape, a setting per sample): its number of samples."""
+    import h5py
+
+    n = None
+    for k in (*ARRAYS, *(f"settings/{c}" for c in COLUMNS)):
+        d = f.get(k)
+        if not isinstance(d, h5py.Dataset):
+            raise CmosnoiseError(f"shard {str(p)!r} has no {k!r} array ({_HOLDS})")
+        if d.is_virtual or d.external:
+            raise CmosnoiseError(f"shard {str(p)!r}: {k!r} is stored outside the file ("
+                                 f"{'a virtual dataset' if d.is_virtual else 'external storage'}); a shard holds its "
+                                 "own data (make one with cmosnoise dataset)")
+        if d.dtype.kind in "OV" or (d.dtype.kind not in "SU" and d.dtype.kind not in "uifb"):
+            raise CmosnoiseError(f"shard {str(p)!r}: {k!r} holds {d.dtype} values; expected numbers or text")
+        if not d.shape or (n is not None and d.shape[0] != n):
+            raise CmosnoiseError(f"shard {str(p)!r}: {k!r} has shape {d.shape}; a shard's arrays and settings hold "
+                                 f"one entry per sample ({n})")
+        n = d.shape[0]
+    return int(n)
 
 
 def _checked_shard(p: Path, arrays: dict, columns: dict) -> tuple[dict, dict]:

@@ -182,8 +182,10 @@ def score(data: str | Path, methods: list[str], outputs: str | Path | None = Non
                                          f"a raw frame is {raw.shape}")
                 row = {"sample": meta["sample"], "method": name, "camera": meta["camera"], "mode": meta["mode"],
                        "iso": meta["iso"], "gain_db": meta["gain_db"], "k_dn_per_e": meta["k_dn_per_e"],
-                       "light_e": meta["light_e"], "source": meta["source"],
-                       **scoring.image_scores(out, truth, meta["black_level_dn"], meta["white_level_dn"])}
+                       "light_e": meta["light_e"], "ratio": _ratio(meta), "clipped_share": meta.get("clipped_share", 0.0),
+                       "source": meta["source"],
+                       **scoring.image_scores(out, truth, meta["black_level_dn"], meta["white_level_dn"],
+                                              _ratio(meta), meta["cfa"])}
                 left = scoring.defects_left(raw, out, arrays["expected_raw"][i], arrays["mask"][i], meta["cfa"])
                 for kind, v in left.items():
                     row[f"{kind}_visible"], row[f"{kind}_left"] = v["visible"], v["left"]
@@ -194,15 +196,34 @@ def score(data: str | Path, methods: list[str], outputs: str | Path | None = Non
     return pd.DataFrame(rows)
 
 
+#: a sample with more of its pixels at the white level than this is left out of the tables (counted): its scores
+#: measure the clip, not the method
+MAX_CLIPPED_SHARE = 0.01
+
+
+def _ratio(meta: dict) -> float:
+    """A sample's exposure ratio (1 for a data set made before ratios were recorded)."""
+    r = meta.get("ratio", 1.0)
+    return float(r) if r is not None and math.isfinite(float(r)) and float(r) >= 1 else 1.0
+
+
+def scored(scores):
+    """The rows the tables average: samples that do not clip (:data:`MAX_CLIPPED_SHARE`), and how many were left
+    out."""
+    keep = scores["clipped_share"].fillna(0.0) <= MAX_CLIPPED_SHARE
+    return scores[keep], int(scores.loc[~keep, "sample"].nunique())
+
+
 def _means() -> dict:
     """Each image score of :data:`.scoring.SCORES` as a pandas aggregation: its mean, under its own name."""
     return {name: (name, "mean") for name, *_ in scoring.SCORES}
 
 
 def summarize(scores):
-    """Per method, camera, mode and light level: each image score's mean (:data:`.scoring.SCORES`: PSNR, SSIM),
-    and the defects visible and left by kind."""
-    s = scores.copy()
+    """Per method, camera, mode and light level: each image score's mean over the samples that do not clip
+    (:func:`scored`; NaN scores, an output equal to its target, left out), and the defects visible and left by
+    kind."""
+    s = scored(scores)[0].copy()
     s["light"] = _light_bin(s["light_e"])
     counts = [c for c in s.columns if c.endswith("_visible") or c.endswith("_left")]
     g = s.groupby(["method", "camera", "mode", "light"], sort=True, dropna=False)
@@ -216,7 +237,7 @@ def scene_table(scores):
     Parameters
     ----------
     scores : pandas.DataFrame
-        :func:`score`'s rows (``source``, ``method``, ``psnr_db``, ``sample``).
+        :func:`score`'s rows (``source``, ``method``, ``psnr_raw_db``, ``sample``).
 
     Returns
     -------
@@ -224,7 +245,8 @@ def scene_table(scores):
         Indexed by source; a column per method, in the scores' order, and ``samples``.
     """
     methods = list(dict.fromkeys(scores["method"]))
-    table = scores.pivot_table(index="source", columns="method", values="psnr_db",
+    scores = scored(scores)[0]
+    table = scores.pivot_table(index="source", columns="method", values="psnr_raw_db",
                                aggfunc="mean").reindex(columns=methods)  # a method's column kept if all NaN
     table.columns.name = None
     table["samples"] = scores.groupby("source")["sample"].nunique()
@@ -245,11 +267,14 @@ def _plots(scores) -> dict[str, bytes]:
     ax.set_xscale("log")
     ax.set_xlim(lo / 1.5, hi * 1.5)  # set first: one light level alone would make an empty range
     ax.set_autoscalex_on(False)
-    for name, g in scores.groupby("method", sort=False):
-        g = g.sort_values("light_e")
-        ax.plot(g["light_e"], g["psnr_db"], "o", ms=4, alpha=0.7, label=name)
+    kept = scored(scores)[0]
+    markers = "osD^v<>ph*"
+    for j, ((name, camera), g) in enumerate(kept.groupby(["method", "camera"], sort=False)):
+        g = g.sort_values("light_e")  # one series per method and camera: gains of one camera share a marker
+        ax.plot(g["light_e"], g["psnr_raw_db"], markers[j % len(markers)], ms=4, alpha=0.7,
+                label=f"{name}, {camera}")
     ax.set_xlabel("light at the scene's white (e-)")
-    ax.set_ylabel("PSNR against the truth (dB)")
+    ax.set_ylabel("PSNR, packed raw at the exposure ratio (dB)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     out["psnr_vs_light.png"] = plots.to_png_bytes(fig)
@@ -275,7 +300,8 @@ def _plots(scores) -> dict[str, bytes]:
 def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target: str) -> str:
     manifest = ds.read_manifest(data)
     r = manifest["recipe"]
-    per_method = scores.groupby("method", sort=False).agg(
+    kept, left_out = scored(scores)
+    per_method = kept.groupby("method", sort=False).agg(
         **_means(), **{c: (c, "sum") for c in scores.columns if c.endswith("_visible") or c.endswith("_left")})
     per_scene = scene_table(scores)
 
@@ -302,10 +328,16 @@ def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target:
     return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>cmosnoise evaluation</title>"
             f"<style>{css}</style></head><body><h1>cmosnoise evaluation</h1>"
             f"<p>cmosnoise {__version__}; data set {html.escape(str(data))}: {r['samples']} samples of "
-            f"{r['crop'][0]} x {r['crop'][1]}, cameras {html.escape(', '.join(r['cameras']))}, light "
-            f"{r['light_e'][0]:g} to {r['light_e'][1]:g} e-. PSNR (psnr_db) over the white-minus-black range, "
-            f"and (psnr_own_range_db) over each target's own range, as the low-light denoising literature "
-            f"normalises; PSNR and SSIM against the "
+            f"{r['crop'][0]} x {r['crop'][1]}, cameras {html.escape(', '.join(r['cameras']))}, "
+            + (f"light {r['light_e'][0]:g} to {r['light_e'][1]:g} e-" if r.get("light_e") else
+               f"white at {r.get('level', [0, 0])[0]:g} to {r.get('level', [0, 0])[1]:g} of each camera's "
+               "saturation")
+            + f". PSNR and SSIM as the low-light raw denoising literature reports them: packed raw, black "
+            f"subtracted, normalised to white, amplified by each sample's exposure ratio and clipped to [0, 1] "
+            f"(psnr_raw_db, ssim_raw), the same through a fixed sRGB pipeline (psnr_srgb_db, ssim_srgb), and over "
+            f"the whole code range without a ratio (psnr_code_range_db); {left_out} sample(s) with more than "
+            f"{MAX_CLIPPED_SHARE:.0%} of their pixels at the white level left out of the tables; PSNR and SSIM "
+            f"against the "
             f"{'expected raw without its defects (the fixed pattern kept)' if target == 'expected' else 'perfect image'}; a defect is "
             f"visible when the noisy frame departs from its healthy neighbours by {scoring.Z_VISIBLE:g} robust "
             f"sigmas, left when the output still does.</p><h2>Methods</h2><ul>{methods}</ul>"

@@ -80,7 +80,7 @@ def collate(batch: list[dict]) -> dict:
 
 
 def _recipe(samples, crop, cameras, images, seed, light_e, integration_time_s, temperature_c, overrides,
-            white_threshold_e_per_s) -> tuple[ds.Recipe, ds.Sources]:
+            white_threshold_e_per_s, level=(0.003, 0.9)) -> tuple[ds.Recipe, ds.Sources]:
     sources = ds.Sources()
     names = []
     for i, item in enumerate(images if images is not None else ds.BUILTIN_SCENES):
@@ -92,7 +92,8 @@ def _recipe(samples, crop, cameras, images, seed, light_e, integration_time_s, t
             names.append(name)
     crop = (crop, crop) if isinstance(crop, int) else tuple(crop)
     recipe = ds.Recipe(samples=samples, crop=crop, seed=seed, cameras=tuple(cameras), sources=tuple(names),
-                       light_e=tuple(light_e), integration_time_s=integration_time_s and tuple(integration_time_s),
+                       light_e=light_e and tuple(light_e), level=tuple(level),
+                       integration_time_s=integration_time_s and tuple(integration_time_s),
                        temperature_c=temperature_c and tuple(temperature_c), overrides=tuple(overrides),
                        white_threshold_e_per_s=white_threshold_e_per_s)
     return ds.check(recipe, sources), sources
@@ -115,8 +116,8 @@ class NoisyRawDataset(Dataset):
         white with the sensor's CFA phase at (0, 0) (a user's own clean raws). Default: the built-in scenes.
     seed : int
         Sample ``i`` depends on (seed, i) alone.
-    light_e, integration_time_s, temperature_c, overrides, white_threshold_e_per_s
-        As ``cmosnoise dataset``'s --light, --exposure, --temperature, --set, --white-threshold.
+    level, light_e, integration_time_s, temperature_c, overrides, white_threshold_e_per_s
+        As ``cmosnoise dataset``'s --level, --light, --exposure, --temperature, --set, --white-threshold.
     fresh_noise : bool
         False: the same sample for the same index in every epoch. True: epoch ``e`` (:meth:`set_epoch`) draws
         frame ``e`` of each sample's sensor: new temporal noise, the same scene, sensor and truth.
@@ -127,10 +128,10 @@ class NoisyRawDataset(Dataset):
     """
 
     def __init__(self, samples: int, crop=512, cameras=("led",), images=None, seed: int = 0,
-                 light_e=(50.0, 5000.0), integration_time_s=None, temperature_c=None, overrides=(),
+                 light_e=None, level=(0.003, 0.9), integration_time_s=None, temperature_c=None, overrides=(),
                  white_threshold_e_per_s=None, fresh_noise: bool = False, device: str = "cpu"):
         self.recipe, self.sources = _recipe(samples, crop, cameras, images, seed, light_e, integration_time_s,
-                                            temperature_c, overrides, white_threshold_e_per_s)
+                                            temperature_c, overrides, white_threshold_e_per_s, level)
         self.fresh_noise = fresh_noise
         self.epoch = 0
         check_device(device)
@@ -216,6 +217,7 @@ class ShardDataset(Dataset):
             raise CmosnoiseError(f"--data {str(self.folder)!r} lacks {len(missing)} of its {len(self.shards)} "
                                     f"shards ({missing[0]}, ...): complete it with cmosnoise dataset --resume")
         self._cached: tuple[int, tuple[dict, dict]] | None = None
+        self._counted: dict[int, int] = {}  # an HDF5 shard's number of samples, from its header
 
     def __len__(self) -> int:
         return self.recipe.samples
@@ -226,13 +228,24 @@ class ShardDataset(Dataset):
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} is outside 0 .. {len(self) - 1}")
         shard, at = divmod(index, self.recipe.shard_size)
-        if self._cached is None or self._cached[0] != shard:
-            read = ds.read_shard(self.folder / self.shards[shard])
-            held, want = len(read[0][ds.ARRAYS[0]]), len(self.recipe.shard_range(shard))
-            if held != want:
-                raise CmosnoiseError(f"{self.folder / self.shards[shard]}: holds {held} samples where its recipe "
-                                     f"puts {want} (a short or foreign shard): remake it with cmosnoise dataset")
-            self._cached = (shard, read)
+        path = self.folder / self.shards[shard]
+        want = len(self.recipe.shard_range(shard))
+        if path.suffix.lower() == ".h5":  # one sample a chunk: a shuffled order reads what an ordered one does
+            if shard not in self._counted:
+                import h5py
+
+                with h5py.File(path, "r") as f:
+                    self._counted[shard] = ds._h5_header(path, f)
+            held = self._counted[shard]
+        else:  # npz and FITS decode whole: the last shard kept
+            if self._cached is None or self._cached[0] != shard:
+                self._cached = (shard, ds.read_shard(path))
+            held = len(self._cached[1][0][ds.ARRAYS[0]])
+        if held != want:
+            raise CmosnoiseError(f"{path}: holds {held} samples where its recipe puts {want} (a short or foreign "
+                                 "shard): remake it with cmosnoise dataset")
+        if path.suffix.lower() == ".h5":
+            return ds.read_sample(path, at)
         arrays, columns = self._cached[1]
         return {k: v[at] for k, v in arrays.items()}, {k: v[at] for k, v in columns.items()}
 

@@ -13,6 +13,8 @@ Examples
 
 import numpy as np
 
+from ..errors import CmosnoiseError
+
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 CHANNEL_INDEX = {"R": 0, "G": 1, "B": 2}
 
@@ -103,3 +105,130 @@ def masks(pattern: str, shape: tuple[int, int]) -> np.ndarray:
     cmap = channel_map(pattern, shape)
     return np.stack([cmap == c for c in range(3)])
 
+
+
+#: the packed channels' order: R, the green on R's rows, the green on B's rows, B (as the raw denoising
+#: literature packs RGGB: SID, ELD, PMN)
+PACKED = ("R", "Gr", "Gb", "B")
+
+
+def _positions(pattern: str) -> list[tuple[int, int]]:
+    """The (row, col) in the 2 x 2 cell of each packed channel of :data:`PACKED`, for ``pattern``."""
+    if pattern not in BAYER_PATTERNS:
+        raise CmosnoiseError(f"pattern {pattern!r}: a Bayer phase is one of {', '.join(BAYER_PATTERNS)}")
+    cells = [(i, j) for i in (0, 1) for j in (0, 1)]
+    r = next(c for c in cells if pattern[2 * c[0] + c[1]] == "R")
+    b = next(c for c in cells if pattern[2 * c[0] + c[1]] == "B")
+    gr = (r[0], 1 - r[1])  # the green beside R on its row
+    gb = (b[0], 1 - b[1])
+    return [r, gr, gb, b]
+
+
+def pack(mosaic: np.ndarray, pattern: str) -> np.ndarray:
+    """A Bayer mosaic as four half-resolution channels in :data:`PACKED` order, for any phase.
+
+    Parameters
+    ----------
+    mosaic : (..., H, W) array
+        H and W even.
+    pattern : str
+        The mosaic's phase at (0, 0): RGGB, BGGR, GRBG or GBRG.
+
+    Returns
+    -------
+    (..., 4, H/2, W/2) array
+        R, Gr, Gb, B: the same values, reordered (:func:`unpack` gives the mosaic back exactly).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cmosnoise import cfa
+    >>> x = np.arange(16).reshape(4, 4)
+    >>> bool((cfa.unpack(cfa.pack(x, "GBRG"), "GBRG") == x).all())
+    True
+    """
+    a = np.asarray(mosaic)
+    if a.ndim < 2 or a.shape[-2] % 2 or a.shape[-1] % 2:
+        raise CmosnoiseError(f"mosaic: shape {a.shape}; a Bayer mosaic has an even number of rows and columns")
+    return np.stack([a[..., i::2, j::2] for i, j in _positions(pattern)], axis=-3)
+
+
+def unpack(packed: np.ndarray, pattern: str) -> np.ndarray:
+    """The mosaic of :func:`pack`'s channels, of phase ``pattern``.
+
+    Parameters
+    ----------
+    packed : (..., 4, h, w) array
+        R, Gr, Gb, B.
+    pattern : str
+        The phase the mosaic is to have at (0, 0).
+
+    Returns
+    -------
+    (..., 2h, 2w) array
+    """
+    p = np.asarray(packed)
+    if p.ndim < 3 or p.shape[-3] != 4:
+        raise CmosnoiseError(f"packed: shape {p.shape}; packed raw has 4 channels (R, Gr, Gb, B) before its rows")
+    out = np.empty(p.shape[:-3] + (2 * p.shape[-2], 2 * p.shape[-1]), p.dtype)
+    for k, (i, j) in enumerate(_positions(pattern)):
+        out[..., i::2, j::2] = p[..., k, :, :]
+    return out
+
+
+def bayer_flip(mosaic: np.ndarray, pattern: str, axis: str) -> np.ndarray:
+    """A flip that keeps every pixel's colour and the phase: Liu et al.'s Bayer-preserving augmentation ("Learning
+    raw image denoising with Bayer pattern unification and Bayer preserving augmentation", CVPRW 2019): the mosaic
+    is flipped, then its first and last row (``axis="rows"``, an up-down flip) or column (``"columns"``, left-right)
+    are cropped, which brings the flipped phase back to ``pattern``.
+
+    Parameters
+    ----------
+    mosaic : (..., H, W) array
+    pattern : str
+        Its phase (RGGB, BGGR, GRBG, GBRG; ``none``: a plain flip, nothing cropped).
+    axis : {"rows", "columns"}
+
+    Returns
+    -------
+    (..., H - 2, W) or (..., H, W - 2) array
+        Of phase ``pattern``; each pixel the colour it had.
+    """
+    a = np.asarray(mosaic)
+    if axis not in ("rows", "columns"):
+        raise CmosnoiseError(f"axis = {axis!r}: flip the rows (up-down) or the columns (left-right)")
+    along = -2 if axis == "rows" else -1
+    flipped = np.flip(a, axis=along)
+    if is_mono(pattern):
+        return flipped
+    if pattern not in BAYER_PATTERNS:
+        raise CmosnoiseError(f"pattern {pattern!r}: a Bayer phase is one of {', '.join(BAYER_PATTERNS)} (or none)")
+    if a.shape[along] % 2 or a.shape[along] < 4:
+        raise CmosnoiseError(f"mosaic: {a.shape[along]} {axis}; a Bayer-preserving flip needs an even number, at "
+                             "least 4")
+    inner = [slice(None)] * a.ndim
+    inner[along] = slice(1, -1)
+    return flipped[tuple(inner)]
+
+
+def bayer_crop(mosaic: np.ndarray, pattern: str, row: int, col: int, height: int, width: int) -> tuple:
+    """A crop of a mosaic and the phase it has (a crop at an odd corner changes it: recorded, not hidden).
+
+    Parameters
+    ----------
+    mosaic : (..., H, W) array
+    pattern : str
+    row, col, height, width : int
+        The crop's corner and size, inside the mosaic.
+
+    Returns
+    -------
+    (array, str)
+        The crop and its phase (:func:`crop_pattern`).
+    """
+    a = np.asarray(mosaic)
+    if not (0 <= row and 0 <= col and height > 0 and width > 0 and row + height <= a.shape[-2]
+            and col + width <= a.shape[-1]):
+        raise CmosnoiseError(f"crop ({row}, {col}) of {height} x {width}: not inside the {a.shape[-2]} x "
+                             f"{a.shape[-1]} mosaic")
+    return a[..., row:row + height, col:col + width], crop_pattern(pattern, row, col)
