@@ -110,3 +110,28 @@ def test_a_shuffled_epoch_reads_each_sample_alone(tmp_path, monkeypatch):
     for i, (arrays, columns) in enumerate(ordered):
         assert all(np.array_equal(arrays[k], shuffled[i][0][k]) for k in ds.ARRAYS)
         assert columns["sample"] == shuffled[i][1]["sample"] == i
+
+
+@pytest.mark.parametrize("camera", ["sony-imx900", "sony-a7s2"])
+def test_a_named_camera_at_60_c_shows_its_white_pixels_in_the_mask(camera):
+    # 2048 x 2048 pixels at 60 C for 1 s: the mask's white pixels are as many as the dark-current model expects
+    # above its threshold (the assumed tail's 50 ppm, moved with the temperature, and the body's pixels above it),
+    # within 5 standard deviations of the binomial count
+    from cmosnoise import Sensor, load_config
+    from cmosnoise.analysis import ground_truth as gt
+
+    c = load_config(preset=camera, overrides=["sensor.width=2048", "sensor.height=2048", "sensor.temperature_c=60",
+                                              "exposure.integration_time_s=1"])
+    sensor = Sensor(c, seed=3)
+    mask = gt.mask(sensor)
+    seen = int(((mask & gt.MASK_BITS["white"]) > 0).sum())
+    p = sensor.dark_state.expected_ppm_above() * 1e-6
+    want, sd = p * mask.size, (p * (1 - p) * mask.size) ** 0.5
+    assert 50e-6 <= p < 200e-6 and abs(seen - want) < 5 * sd, (seen, want, sd)
+
+
+def test_a_temperature_on_a_camera_without_dark_current_says_so(tmp_path):
+    r = cli("dataset", "-n", "2", "--crop", "16", "--camera", "led", "--temperature", "50:60", "--out", tmp_path / "d")
+    assert r.returncode == 0, r.stderr
+    said = [x for x in (r.stdout + r.stderr).splitlines() if "--temperature" in x]
+    assert len(said) == 1 and "no dark-current model" in said[0] and "led" in said[0], r.stdout + r.stderr

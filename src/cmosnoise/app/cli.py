@@ -831,6 +831,8 @@ def dataset(
                        integration_time_s=pair(exposure, "--exposure"),
                        temperature_c=pair(temperature, "--temperature"), overrides=tuple(set_ or ()),
                        white_threshold_e_per_s=white_e_per_s, shard_size=shard_size, format=format_.lower())
+    for note in ds.notes(recipe):
+        _say(ctx, f"note: {note}")
     with _counting(ctx, "dataset", "samples") as progress:
         ds.build(recipe, out, resume=resume, overwrite=overwrite, scheduler=scheduler, workers=workers,
                  progress=progress, say=lambda m: _say(ctx, m), device=device)

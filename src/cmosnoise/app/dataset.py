@@ -235,6 +235,36 @@ def check(recipe: Recipe, sources: Sources | None = None) -> Recipe:
     return r
 
 
+def notes(recipe: Recipe, sources: Sources | None = None) -> list[str]:
+    """What a recipe asks that some of its cameras cannot show, one line each: a ``--temperature`` range on a
+    camera without a dark-current model (ELD's and LED's virtual cameras, calibrated on exposures too short to
+    see it) changes nothing of its samples.
+
+    Parameters
+    ----------
+    recipe : Recipe
+    sources : Sources, optional
+
+    Returns
+    -------
+    list of str
+    """
+    if recipe.temperature_c is None:
+        return []
+    sources = sources or Sources()
+    blind = []
+    for cam in recipe.cameras:
+        name = cam.partition("@")[0]
+        on = False if name in virtual_cameras.FAMILIES else sources.preset(name).dark_current.enabled
+        if not on:
+            blind.append(cam)
+    if not blind:
+        return []
+    return [f"--temperature {recipe.temperature_c[0]:g}:{recipe.temperature_c[1]:g}: {', '.join(blind)} "
+            f"{'has' if len(blind) == 1 else 'have'} no dark-current model, so the temperature changes nothing of "
+            "their samples"]
+
+
 def _gain_update(cam: str) -> dict:
     _, _, gain = cam.partition("@")
     key, _, value = gain.partition("=")

@@ -236,8 +236,14 @@ def at_temperature(points: list[Point], temperature_c: float, doubling_c: float 
     if white_threshold is not None:
         count = {"threshold": white_threshold[0], "threshold_source": f"fixed by {white_threshold[1]}"}
     elif near.threshold is not None:
-        count = {"threshold": near.threshold,
-                 "threshold_source": f"the nearest characterization point's ({near.temperature_c:g} C) tail threshold"}
+        # outside the points the tail is its nearest point's, doubled every tail_doubling_c: its threshold moves
+        # with it, so a camera characterized at one temperature counts the same tail as white at any other
+        # (the body's pixels, which double faster, would otherwise cross a fixed threshold by the thousand)
+        outside = t < pts[0].temperature_c or t > pts[-1].temperature_c
+        moved = 2.0 ** ((t - near.temperature_c) / tail_doubling_c) if outside else 1.0
+        count = {"threshold": near.threshold * moved,
+                 "threshold_source": f"the nearest characterization point's ({near.temperature_c:g} C) tail threshold"
+                                     + (f", doubled every {tail_doubling_c:g} C to {t:g} C" if outside else "")}
     else:
         count = {"threshold": None, "threshold_source": "none: no characterization point has a tail threshold"}
     at_point = [k for k, p in enumerate(pts) if p.temperature_c == t]
