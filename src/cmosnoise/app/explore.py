@@ -47,6 +47,8 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from starlette.requests import Request
+from starlette.responses import JSONResponse, PlainTextResponse, RedirectResponse, Response
 
 from .. import inputs
 from ..config import Config
@@ -118,53 +120,72 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, toke
     ``token`` (default: a new one from :func:`new_token`) is asked of every request but the page's own files: a
     ``?token=`` on the page's address (answered by a redirect that sets it as a cookie of this port), that cookie,
     or an ``X-Cmosnoise-Token`` header."""
-    from starlette.applications import Starlette
-    from starlette.middleware import Middleware
-    from starlette.middleware.trustedhost import TrustedHostMiddleware
-    from starlette.requests import Request
-    from starlette.responses import JSONResponse, PlainTextResponse, Response
-    from starlette.routing import Route
+    return _Explorer(bench, token or new_token()).app(allowed_hosts)
 
-    static = resources.files("cmosnoise.app") / "static"
-    files = {"/": ("explore.html", "text/html; charset=utf-8"), "/explore.js": ("explore.js", "text/javascript"),
-             "/explore.css": ("explore.css", "text/css")}
 
-    token = token or new_token()
-    from starlette.responses import RedirectResponse
+class _Explorer:
+    """The HTTP side of a workbench: its page, its token, the checks every request passes, one method a route."""
 
-    def cookie_name(request: Request) -> str:  # cookies are per host, not per port: two explorers keep theirs
+    #: the routes that do work, each (path, method name, HTTP method, the body's media type)
+    ROUTES = (("/api/meta", "meta", "GET", None), ("/api/stats", "stats", "GET", None),
+              ("/api/preset", "preset", "GET", None), ("/api/check", "check", "POST", None),
+              ("/api/render", "render", "POST", None), ("/api/figures", "figures_route", "POST", None),
+              ("/api/quality", "quality_route", "POST", None), ("/api/raw", "raw_route", "POST", None),
+              ("/api/upload", "upload", "POST", "application/octet-stream"), ("/api/yaml", "to_yaml", "POST", None),
+              ("/api/load", "from_yaml", "POST", None))
+
+    def __init__(self, bench: Workbench, token: str):
+        self.bench, self.token = bench, token
+        self.static = resources.files("cmosnoise.app") / "static"
+        self.files = {"/": ("explore.html", "text/html; charset=utf-8"),
+                      "/explore.js": ("explore.js", "text/javascript"), "/explore.css": ("explore.css", "text/css")}
+
+    def app(self, allowed_hosts: tuple[str, ...]):
+        """The Starlette application: the page's files, the routes of :data:`ROUTES`, the host check."""
+        from starlette.applications import Starlette
+        from starlette.middleware import Middleware
+        from starlette.middleware.trustedhost import TrustedHostMiddleware
+        from starlette.routing import Route
+
+        routes = [Route(path, self.page) for path in self.files] + [
+            Route(path, self.errors(getattr(self, name), media), methods=[method])
+            for path, name, method, media in self.ROUTES]
+        hosts = sorted({h.strip("[]") for h in allowed_hosts} | {h for h in allowed_hosts})
+        return Starlette(routes=routes, middleware=[Middleware(TrustedHostMiddleware, allowed_hosts=hosts)])
+
+    def cookie_name(self, request: Request) -> str:  # cookies are per host, not per port: two explorers keep theirs
         return f"cmosnoise-token-{request.url.port or 80}"
 
-    def given_token(request: Request) -> str:
-        return (request.headers.get(TOKEN_HEADER) or request.cookies.get(cookie_name(request))
+    def given_token(self, request: Request) -> str:
+        return (request.headers.get(TOKEN_HEADER) or request.cookies.get(self.cookie_name(request))
                 or request.query_params.get("token") or "")
 
-    def authorised(request: Request) -> bool:
-        return secrets.compare_digest(given_token(request).encode("utf-8", "replace"), token.encode())
+    def authorised(self, request: Request) -> bool:
+        return secrets.compare_digest(self.given_token(request).encode("utf-8", "replace"), self.token.encode())
 
-    def secured(resp: Response) -> Response:
+    def secured(self, resp: Response) -> Response:
         resp.headers["Content-Security-Policy"] = CSP
         resp.headers["X-Content-Type-Options"] = "nosniff"
         resp.headers["Referrer-Policy"] = "no-referrer"
         resp.headers["Cache-Control"] = "no-store"
         return resp
 
-    async def page(request: Request):
-        name, media = files[request.url.path]
+    async def page(self, request: Request):
+        name, media = self.files[request.url.path]
         if name == "explore.html":
-            if "token" in request.query_params and authorised(request):
+            if "token" in request.query_params and self.authorised(request):
                 # the address the command opened: its token becomes this port's cookie, and leaves the address
                 from urllib.parse import urlencode
 
                 rest = urlencode([(k, v) for k, v in request.query_params.multi_items() if k != "token"])
                 resp = RedirectResponse("/" + (f"?{rest}" if rest else ""), status_code=303)
-                resp.set_cookie(cookie_name(request), token, httponly=True, samesite="strict", path="/")
-                return secured(resp)
-            if not authorised(request):
-                return secured(Response(LOGIN_PAGE, status_code=403, media_type="text/html; charset=utf-8"))
-        return secured(Response((static / name).read_bytes(), media_type=media))
+                resp.set_cookie(self.cookie_name(request), self.token, httponly=True, samesite="strict", path="/")
+                return self.secured(resp)
+            if not self.authorised(request):
+                return self.secured(Response(LOGIN_PAGE, status_code=403, media_type="text/html; charset=utf-8"))
+        return self.secured(Response((self.static / name).read_bytes(), media_type=media))
 
-    async def body(request: Request, limit: int) -> bytes:
+    async def body(self, request: Request, limit: int) -> bytes:
         declared = request.headers.get("content-length")
         if declared is not None and declared.isdigit() and int(declared) > limit:
             raise BadRequest(f"request body of {int(declared) / 1e6:.1f} MB; at most {limit / 1e6:g} MB", 413)
@@ -183,8 +204,8 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, toke
         except asyncio.TimeoutError:
             raise BadRequest(f"the request body took longer than {BODY_TIMEOUT_S:g} s to arrive", 408) from None
 
-    async def json_body(request: Request) -> dict:
-        raw = await body(request, MAX_BODY)
+    async def json_body(self, request: Request) -> dict:
+        raw = await self.body(request, MAX_BODY)
         try:
             data = json.loads(raw)
         except RecursionError:
@@ -196,7 +217,7 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, toke
         _check_json(data)
         return data
 
-    def same_origin(request: Request, endpoint: str, media: str) -> None:
+    def same_origin(self, request: Request, endpoint: str, media: str) -> None:
         """Refuse, before any work, a request that does not come from the page itself (see the module docstring)."""
         site = request.headers.get("sec-fetch-site")
         if site is not None and site not in ("same-origin", "none"):
@@ -211,75 +232,70 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, toke
         if ctype != media:
             raise BadRequest(f"{endpoint} takes {media}, not {ctype or 'a body without a content type'}", 415)
 
-    def errors(func, media: str | None = None):
+    def errors(self, func, media: str | None = None):
         async def wrapped(request: Request):
             try:
-                if not authorised(request):
+                if not self.authorised(request):
                     raise BadRequest("refused: the request lacks this explorer's token (open the address "
                                      "cmosnoise explore gave)", 403)
                 if request.method == "POST":
-                    same_origin(request, request.url.path, media or "application/json")
-                    bench.count(request.url.path)
-                return secured(await func(request))
+                    self.same_origin(request, request.url.path, media or "application/json")
+                    self.bench.count(request.url.path)
+                return self.secured(await func(request))
             except BadRequest as exc:
-                return secured(JSONResponse({"error": exc.message, "errors": exc.errors}, status_code=exc.status))
+                return self.secured(JSONResponse({"error": exc.message, "errors": exc.errors}, status_code=exc.status))
             except CmosnoiseError as exc:
-                return secured(JSONResponse({"error": " ".join(str(exc).split())[:400], "errors": {}}, status_code=422))
+                return self.secured(JSONResponse({"error": " ".join(str(exc).split())[:400], "errors": {}}, status_code=422))
         return wrapped
 
-    def run_locked(lock, func, *args):
+    def run_locked(self, lock, func, *args):
         with lock:
             return func(*args)
 
-    async def in_thread(func, *args, lock=None):
+    async def in_thread(self, func, *args, lock=None):
         from starlette.concurrency import run_in_threadpool
 
-        return await run_in_threadpool(run_locked, lock or bench.lock, func, *args)
+        return await run_in_threadpool(self.run_locked, lock or self.bench.lock, func, *args)
 
-    @errors
-    async def stats(request: Request):
+    async def stats(self, request: Request):
         """What the server did and holds: requests that did work, uploads, cache bytes (read by the tests)."""
-        return JSONResponse({"served": dict(bench.served), "uploads": len(bench.uploads),
-                             "upload_bytes": bench.upload_bytes(), "sensor_cache_bytes": bench.cache_bytes()})
+        return JSONResponse({"served": dict(self.bench.served), "uploads": len(self.bench.uploads),
+                             "upload_bytes": self.bench.upload_bytes(), "sensor_cache_bytes": self.bench.cache_bytes()})
 
-    @errors
-    async def meta(request: Request):
+    async def meta(self, request: Request):
         from ..analysis.figures_of_merit import FIGURE_NAMES
         from ..analysis.noise_budget import SOURCE_NAMES
 
         return JSONResponse({"fields": fields(), "presets": preset_names(), "scenes": list(scene_mod.BUILTINS),
                              "names": {"figures": FIGURE_NAMES, "budget": SOURCE_NAMES},
-                             "base": bench.base.model_dump(mode="json"), "scene": bench.scene,
+                             "base": self.bench.base.model_dump(mode="json"), "scene": self.bench.scene,
                              "limits": {"upload_mb": MAX_UPLOAD / 1e6, "sensor_mp": MAX_SENSOR_PIXELS / 1e6}})
 
-    @errors
-    async def preset(request: Request):
+    async def preset(self, request: Request):
         name = request.query_params.get("name", "")
         if name not in preset_names():
             raise BadRequest(f"unknown preset {name!r}", 404)
         cfg = resolve(load_config(preset=name)).config
         return JSONResponse({"config": cfg.model_dump(mode="json"), "scene": preset_data(name).get("scene", {}).get("source")})
 
-    @errors
-    async def check(request: Request):
-        data = await json_body(request)
-        cfg = bench.validate(data.get("config")).config
+    async def check(self, request: Request):
+        data = await self.json_body(request)
+        cfg = self.bench.validate(data.get("config")).config
         return JSONResponse({"ok": True, "config": cfg.model_dump(mode="json")})
 
-    @errors
-    async def render(request: Request):
+    async def render(self, request: Request):
         t_in = time.perf_counter()
-        data = await json_body(request)
+        data = await self.json_body(request)
         pane, seq = str(data.get("pane", "A"))[:8], data.get("seq", 0)
         if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < 2**53:
             raise BadRequest("seq must be a whole number from 0 to 2**53 - 1 (the page's count of its requests)")
         client = str(data.get("client", ""))[:40]
-        token = f"{client}/{pane}"
+        pane_key = f"{client}/{pane}"
         now = time.monotonic()
-        newest, since = bench.latest.get(token, (-1, 0.0))
+        newest, since = self.bench.latest.get(pane_key, (-1, 0.0))
         if seq >= newest or now - since > LATEST_S:  # a newest seq holds only while it is recent: one huge seq
-            bench.latest[token] = (seq, now)          # cannot make the pane's later requests look old for ever
-        spec = bench.validate(data.get("config"))
+            self.bench.latest[pane_key] = (seq, now)          # cannot make the pane's later requests look old for ever
+        spec = self.bench.validate(data.get("config"))
         rows, cols = spec.shape
         frame, step = data.get("frame", 0), data.get("step", 1)
         if not isinstance(frame, int) or not 0 <= frame <= 2**32 - 1:
@@ -291,17 +307,17 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, toke
             raise BadRequest(f"the picture would be larger than {MAX_OUT_SIDE} pixels a side: use a larger step")
 
         def work():
-            if bench.latest.get(token, (-1, 0.0))[0] > seq:  # a newer request of this pane came in: drop this one
+            if self.bench.latest.get(pane_key, (-1, 0.0))[0] > seq:  # a newer request of this pane came in: drop this one
                 return None
             t0 = time.perf_counter()
-            img, info = bench.picture(spec, scene_of(data), str(data.get("view", "pre")), frame,
+            img, info = self.bench.picture(spec, self.scene_of(data), str(data.get("view", "pre")), frame,
                                       (r0, r1, c0, c1), step)
             info["ms"] = round(1000 * (time.perf_counter() - t0), 1)
             if data.get("couplets"):
-                info["couplets"] = bench.couplets(spec, (r0, r1, c0, c1))
+                info["couplets"] = self.bench.couplets(spec, (r0, r1, c0, c1))
             return img, info
 
-        result = await in_thread(work)
+        result = await self.in_thread(work)
         if result is None:  # not an error: a newer request of this pane came in (a browser logs 4xx as errors)
             return Response(status_code=204, headers={"X-Dropped": "a newer request of this pane came in"})
         img, info = result
@@ -314,19 +330,17 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, toke
         info["ms_handler"] = round(1000 * (time.perf_counter() - t_in), 1)
         return Response(rgba.tobytes(), media_type="application/octet-stream", headers={"X-Render": json.dumps(info)})
 
-    @errors
-    async def figures_route(request: Request):
-        data = await json_body(request)
-        spec = bench.validate(data.get("config"))
-        scene = scene_of(data)
-        bench.scene_source(scene)
-        return JSONResponse(await in_thread(bench.figures, spec, scene, lock=bench.figures_lock))
+    async def figures_route(self, request: Request):
+        data = await self.json_body(request)
+        spec = self.bench.validate(data.get("config"))
+        scene = self.scene_of(data)
+        self.bench.scene_source(scene)
+        return JSONResponse(await self.in_thread(self.bench.figures, spec, scene, lock=self.bench.figures_lock))
 
-    @errors
-    async def quality_route(request: Request):
+    async def quality_route(self, request: Request):
         """A pane's image-quality metrics at the page's illuminance (:meth:`Workbench.quality`)."""
-        data = await json_body(request)
-        spec = bench.validate(data.get("config"))
+        data = await self.json_body(request)
+        spec = self.bench.validate(data.get("config"))
         lux = data.get("lux")
         try:  # a 400-digit integer is a number JSON carries and a float cannot hold
             lux = None if isinstance(lux, bool) or not isinstance(lux, (int, float)) else float(lux)
@@ -334,66 +348,52 @@ def create_app(bench: Workbench, allowed_hosts: tuple[str, ...] = LOOPBACK, toke
             lux = None
         if lux is None or not math.isfinite(lux):
             raise BadRequest("lux must be a finite number (the illuminance on the charts, lux)")
-        return JSONResponse(await in_thread(bench.quality, spec, lux, lock=bench.figures_lock))
+        return JSONResponse(await self.in_thread(self.bench.quality, spec, lux, lock=self.bench.figures_lock))
 
-    @errors
-    async def raw_route(request: Request):
+    async def raw_route(self, request: Request):
         """Frame k of a pane as .npy (uint16 DN), whole: what ``cmosnoise simulate`` with the exported config writes."""
-        data = await json_body(request)
-        spec = bench.validate(data.get("config"))
+        data = await self.json_body(request)
+        spec = self.bench.validate(data.get("config"))
         frame = data.get("frame", 0)
         if not isinstance(frame, int) or frame < 0:
             raise BadRequest("frame must be a whole number >= 0")
-        raw = await in_thread(bench.raw, spec, scene_of(data), frame)
+        raw = await self.in_thread(self.bench.raw, spec, self.scene_of(data), frame)
         buf = io.BytesIO()
         np.save(buf, raw, allow_pickle=False)
         return Response(buf.getvalue(), media_type="application/octet-stream")
 
-    def scene_of(data: dict) -> str:
-        scene = data.get("scene") or bench.scene
+    def scene_of(self, data: dict) -> str:
+        scene = data.get("scene") or self.bench.scene
         if not isinstance(scene, str):
             raise BadRequest("scene must be a built-in name or an uploaded image's id (a string)")
         return scene
 
-    async def upload(request: Request):
-        data = await body(request, MAX_UPLOAD)
+    async def upload(self, request: Request):
+        data = await self.body(request, MAX_UPLOAD)
         name = request.headers.get("x-filename", "image.png")[:200]
-        return JSONResponse(await in_thread(bench.add_upload, data, name))
+        return JSONResponse(await self.in_thread(self.bench.add_upload, data, name))
 
-    upload = errors(upload, "application/octet-stream")
 
-    @errors
-    async def to_yaml(request: Request):
-        data = await json_body(request)
-        cfg = bench.validate(data.get("config")).config
-        scene = scene_of(data)
-        if scene.startswith("upload:") and scene[7:] in bench.uploads:
-            cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"source": bench.uploads[scene[7:]]["name"]})})
+    async def to_yaml(self, request: Request):
+        data = await self.json_body(request)
+        cfg = self.bench.validate(data.get("config")).config
+        scene = self.scene_of(data)
+        if scene.startswith("upload:") and scene[7:] in self.bench.uploads:
+            cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"source": self.bench.uploads[scene[7:]]["name"]})})
         else:
-            cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"source": bench.scene_source(scene)})})
+            cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"source": self.bench.scene_source(scene)})})
         return PlainTextResponse(cfg.to_yaml(), media_type="application/x-yaml")
 
-    @errors
-    async def from_yaml(request: Request):
-        text = (await json_body(request)).get("yaml")
+    async def from_yaml(self, request: Request):
+        text = (await self.json_body(request)).get("yaml")
         if not isinstance(text, str):
             raise BadRequest("the body must be {\"yaml\": \"the configuration's text\"}")
         try:
             data = load_yaml_text(text)
         except Exception as exc:  # yaml's errors: one line
             raise BadRequest(f"not a valid configuration YAML: {' '.join(str(exc).split())[:200]}") from None
-        cfg = bench.validate(data if data is not None else {}).config
+        cfg = self.bench.validate(data if data is not None else {}).config
         return JSONResponse({"config": cfg.model_dump(mode="json")})
-
-    routes = [Route(path, page) for path in files] + [
-        Route("/api/meta", meta), Route("/api/stats", stats), Route("/api/preset", preset), Route("/api/check", check, methods=["POST"]),
-        Route("/api/render", render, methods=["POST"]), Route("/api/figures", figures_route, methods=["POST"]),
-        Route("/api/quality", quality_route, methods=["POST"]),
-        Route("/api/raw", raw_route, methods=["POST"]), Route("/api/upload", upload, methods=["POST"]),
-        Route("/api/yaml", to_yaml, methods=["POST"]), Route("/api/load", from_yaml, methods=["POST"]),
-    ]
-    hosts = sorted({h.strip("[]") for h in allowed_hosts} | {h for h in allowed_hosts})
-    return Starlette(routes=routes, middleware=[Middleware(TrustedHostMiddleware, allowed_hosts=hosts)])
 
 
 class _RateLimited(logging.Filter):
