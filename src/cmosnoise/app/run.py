@@ -58,30 +58,13 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
     ``progress`` then counts tiles times frames.
     """
     phase = phase or (lambda _name: None)
-
-    spec = resolve(config)
-    source = spec.config.scene.source
-    if Path(source).is_file():  # record a file scene by its absolute path: config.yaml reruns from anywhere
-        scene_mod.check_file(source)  # a bad scene file is refused before the sensor is set up
-        spec = spec.with_config(merge_updates(spec.config, {"scene": {"source": str(Path(source).resolve())}}))
+    spec, tile = _checked(config, device, tile)
     config = spec.config
-    if config.run.dng and not config.adc.enabled:
-        raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
-    check_device(device)  # before anything is drawn or written
-    if tile is not None:
-        from . import tiled  # it builds on this module's summary
-
-        tile = tiles.check_size(tile)
-        if device != "cpu":
-            raise CmosnoiseError(f"--device {device} with --tile: tiles are made by the CPU kernel (the GPU makes "
-                                 "whole frames, or crops of one exposure)")
-        tiled.check(config)
-        tiled.check_fits(config, tile)
-    else:
-        footprint.check_fits(config)  # before anything is drawn or written
     folder = OutputFolder(out, overwrite)  # fails early if out cannot be written or exists
     folder.check_space(output_bytes(config) * (2 if tile is not None and config.run.frames > 1 else 1))
     if tile is not None:
+        from . import tiled  # it builds on this module's summary
+
         with folder as tmp:
             summary = tiled.simulate_tiled(spec, tmp, tile, progress, phase, client)
             write_json(tmp / "summary.json", summary)
@@ -207,12 +190,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         # that compiled the kernel (a machine's first) has none to give (None): the summary figures' loops then
         # compile beside its frames, under the launch lock, and two of the four frames after frame 0 of a 640 x
         # 480 run waited 1.1 and 2.5 s for them (measured; a frame takes 5 ms)
-        if sensor.timings.get("kernel_compile"):
-            steady = None
-        elif n > 1:
-            steady = float(np.median(np.diff(stamps[1:])))
-        else:
-            steady = stamps[-1] - stamps[0]
+        steady = _steady_frame_s(stamps, n, bool(sensor.timings.get("kernel_compile")))
         summary["timings_s"]["frame_s"] = None if steady is None else round(steady, 6)
         summary["timings_s"]["set_up"] = round(max(t_frames - n * (steady or 0.0), 0.0), 6)
         t0 = time.perf_counter()
@@ -235,6 +213,44 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
             phase("report")
             (tmp / "report.html").write_text(report.build(sensor, summary, frame0[0], processor, pre_view, processed))
     return summary
+
+
+def _checked(config: SensorSpec | Config, device: str, tile: int | None) -> tuple[SensorSpec, int | None]:
+    """A run's configuration resolved and checked before anything is drawn or written: a file scene recorded by
+    its absolute path (config.yaml reruns from anywhere) and refused if bad, the DNG's ADC, the device, the tile
+    and the memory the run needs."""
+    spec = resolve(config)
+    source = spec.config.scene.source
+    if Path(source).is_file():
+        scene_mod.check_file(source)  # a bad scene file is refused before the sensor is set up
+        spec = spec.with_config(merge_updates(spec.config, {"scene": {"source": str(Path(source).resolve())}}))
+    config = spec.config
+    if config.run.dng and not config.adc.enabled:
+        raise CmosnoiseError("run.dng = true needs adc.enabled = true: a DNG holds integer raw codes, not electrons")
+    check_device(device)
+    if tile is None:
+        footprint.check_fits(config)
+        return spec, None
+    from . import tiled
+
+    tile = tiles.check_size(tile)
+    if device != "cpu":
+        raise CmosnoiseError(f"--device {device} with --tile: tiles are made by the CPU kernel (the GPU makes "
+                             "whole frames, or crops of one exposure)")
+    tiled.check(config)
+    tiled.check_fits(config, tile)
+    return spec, tile
+
+
+def _steady_frame_s(stamps: list[float], n: int, compiled_here: bool) -> float | None:
+    """The steady time per frame: the median of the frames after frame 0 (what the frames took beyond it is
+    set-up), None for a run that compiled the kernel (the summary figures' loops then compile beside its
+    frames, under the launch lock)."""
+    if compiled_here:
+        return None
+    if n > 1:
+        return float(np.median(np.diff(stamps[1:])))
+    return stamps[-1] - stamps[0]
 
 
 def processing_summary(processor: Processor, t_dark: float, t_process: float) -> dict:
