@@ -140,39 +140,11 @@ def _intercept(times: np.ndarray, means: np.ndarray, var_means: np.ndarray) -> t
     return float(coef[0]), se, float(coef[1])
 
 
-def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s: float | None = None,
-                seed: int = 0, phase: Callable[[str], None] = lambda name: None) -> dict:
-    """Fit ``ds`` (a :class:`~cmosnoise.io.stacks.Dataset`); ``base`` (a Config) gives what is not fitted.
-
-    Returns ``{"parameters": {...}, "not_fitted": {...}, "dark": {T: {...}}, "plots": {...}, "meta": {...}}``.
-    ``phase`` is told each part as it starts ("photon transfer", "black level", ...: a progress display's text).
-    """
-    P: dict = {}
-    not_fitted: dict = {}
-    plots: dict = {}
-    selection: dict = {}
+def _photon_transfer(ds, P: dict, not_fitted: dict, selection: dict, plots: dict) -> tuple:
+    """K from the photon transfer (EMVA 1288), the QE and the mean response's nonlinearity where the photons
+    are known, each into ``P`` (or ``not_fitted``): (the transfer's fit, the (signal, variance, flat, dark)
+    points, the nonlinearity's fit or None)."""
     rows, cols = ds.shape
-    # an EMVA 1288 data set is one channel (the standard measures a colour sensor channel by channel): monochrome
-    # unless told otherwise; a manifest without a CFA takes the base configuration's
-    pattern = ds.cfa or ("none" if ds.kind == "emva" else base.sensor.cfa)
-    bits = ds.bits  # the output's range
-    if bits is None:
-        top = max(s.max_dn for s in ds.stacks)
-        bits = next(b for b in range(8, 17) if top < 2**b)
-    # codes a step apart: an ADC of fewer bits, its codes scaled to the output's range (a 14-bit ADC in 16 bits);
-    # the quantizer's variance is step^2 / 12 DN^2
-    step = min(ds.code_step, 2 ** (bits - 8))
-    sat_dn = 2**bits - step
-    temps = ds.temperatures
-    t_basis = _temperature_basis(ds, temperature_c, base)
-    t_ref = temperature_c if temperature_c is not None else (temps[-1] if temps else base.sensor.temperature_c)
-    for st in ds.stacks:  # stacks measured at no stated temperature: at the reference one
-        if st.temperature_c is None:
-            st.temperature_c = t_ref
-    temps = ds.temperatures
-
-    # ---------------------------------------------------------------- photon transfer
-    phase("photon transfer")
     flats = ds.of_kind("flat")
     pts = []
     for f in flats:
@@ -217,9 +189,12 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         not_fitted["quantum_efficiency"] = not_fitted["nonlinearity"] = why
     plots["ptc"] = {"mu": ptc["mu"].tolist(), "v": ptc["v"].tolist(), "linear": ptc["linear"].tolist(), "K": k,
                     "saturation_index": ptc["saturation_index"]}
+    return ptc, pts, nonlin
 
-    # ---------------------------------------------------------------- black level (reference temperature)
-    phase("black level")
+
+def _black_level(ds, t_ref: float, sat_dn: float, P: dict) -> float:
+    """The black level (DN) into ``P``: the intercept of the dark mean over the dark stacks' exposure times at
+    the reference temperature, or one stack's mean."""
     darks_ref = [d for d in ds.of_kind("dark") if d.temperature_c == t_ref] or ds.of_kind("dark")
     usable = [d for d in darks_ref if float(np.mean(d.mean >= DARK_FIT_LIMIT * sat_dn)) < 0.01]
     times = np.array([d.exposure_s for d in usable])
@@ -237,9 +212,50 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
         P["black_level_dn"] = _p(b, None, f"mean of the only dark exposure time ({d.exposure_s:g} s): includes its dark signal")
     else:
         raise CmosnoiseError("black level: no dark stack below saturation; the fit needs dark stacks")
-    black = P["black_level_dn"]["value"]
     if ds.black_level_dn is not None:
         P["black_level_dn"]["metadata_dn"] = ds.black_level_dn
+    return P["black_level_dn"]["value"]
+
+
+def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s: float | None = None,
+                seed: int = 0, phase: Callable[[str], None] = lambda name: None) -> dict:
+    """Fit ``ds`` (a :class:`~cmosnoise.io.stacks.Dataset`); ``base`` (a Config) gives what is not fitted.
+
+    Returns ``{"parameters": {...}, "not_fitted": {...}, "dark": {T: {...}}, "plots": {...}, "meta": {...}}``.
+    ``phase`` is told each part as it starts ("photon transfer", "black level", ...: a progress display's text).
+    """
+    P: dict = {}
+    not_fitted: dict = {}
+    plots: dict = {}
+    selection: dict = {}
+    rows, cols = ds.shape
+    # an EMVA 1288 data set is one channel (the standard measures a colour sensor channel by channel): monochrome
+    # unless told otherwise; a manifest without a CFA takes the base configuration's
+    pattern = ds.cfa or ("none" if ds.kind == "emva" else base.sensor.cfa)
+    bits = ds.bits  # the output's range
+    if bits is None:
+        top = max(s.max_dn for s in ds.stacks)
+        bits = next(b for b in range(8, 17) if top < 2**b)
+    # codes a step apart: an ADC of fewer bits, its codes scaled to the output's range (a 14-bit ADC in 16 bits);
+    # the quantizer's variance is step^2 / 12 DN^2
+    step = min(ds.code_step, 2 ** (bits - 8))
+    sat_dn = 2**bits - step
+    temps = ds.temperatures
+    t_basis = _temperature_basis(ds, temperature_c, base)
+    t_ref = temperature_c if temperature_c is not None else (temps[-1] if temps else base.sensor.temperature_c)
+    for st in ds.stacks:  # stacks measured at no stated temperature: at the reference one
+        if st.temperature_c is None:
+            st.temperature_c = t_ref
+    temps = ds.temperatures
+
+    # ---------------------------------------------------------------- photon transfer
+    phase("photon transfer")
+    ptc, pts, nonlin = _photon_transfer(ds, P, not_fitted, selection, plots)
+    k = ptc["K"]
+
+    # ---------------------------------------------------------------- black level (reference temperature)
+    phase("black level")
+    black = _black_level(ds, t_ref, sat_dn, P)
 
     i_sat = ptc["saturation_index"]
     if i_sat < len(ptc["mu"]) - 1:
@@ -396,7 +412,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
                         ci95_pct=r["ci95_pct"])
     # ---------------------------------------------------------------- PRNU and column gain
     phase("PRNU and column gain")
-    cands = [(f, _dark_at(ds, f)) for f in flats]
+    cands = [(f, _dark_at(ds, f)) for f in ds.of_kind("flat")]
     cands = [(f, d) for f, d in cands if d is not None and 0.1 * sat_dn < f.mean.mean() < 0.8 * sat_dn]
     if not cands:
         not_fitted["prnu, column_noise.gain_sigma_pct"] = ("needs a flat stack between 10 % and 80 % of saturation "
@@ -698,20 +714,9 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
                      f"{n}-frame mean image, less the temporal {what} noise ({int((~keep).sum())} outliers out)")
 
 
-def fitted_config(base, result: dict):
-    """``base`` (a Config) with every fitted value: what ``cmosnoise simulate --config`` runs."""
-    from ..config.loading import merge_updates
-
-    P, meta = result["parameters"], result["meta"]
-
-    def v(name, default=None):
-        return P[name]["value"] if name in P else default
-
-    k, black, bits = v("system_gain_K_dn_per_e"), v("black_level_dn"), meta["bits"]
-    out_bits = meta.get("output_bits", bits)
-    top = 2 ** (out_bits - bits) * (2**bits - 1)  # the top output code
-    black = _written(P, "black_level_dn", 0.0, top - 1, round(black, 3))
-    full = v("full_well_e", base.sensor.full_well_e)
+def _fitted_nonlinearity(result: dict, full: float) -> tuple[float, dict | None]:
+    """The full well (on the charge before the transfer where the nonlinearity acts on it) and the
+    nonlinearity section of the fitted transfer, None where it is not increasing over the full well (noted)."""
     nonlin = result.get("_nonlinearity")
     nl_update = None
     if nonlin is not None:
@@ -729,16 +734,12 @@ def fitted_config(base, result: dict):
                          "curve_e": None, "coefficients": coefficients}
         else:
             result["not_fitted"]["nonlinearity"] = "the fitted transfer is not increasing over the full well: left off"
-    u: dict = {
-        "sensor": {"width": meta["shape"][1], "height": meta["shape"][0], "cfa": meta["cfa"],
-                   "full_well_e": round(float(full), 1), "temperature_c": meta["temperature_c"]},
-        "adc": {"enabled": True, "bits": bits, "output_bits": out_bits if out_bits != bits else None,
-                "black_level_dn": black, "full_scale_e": (top - black) / k, "gain_dn_per_e": None},
-    }
-    if base.gain_table:  # the data measure one setting: the base's table (whose rows would set K and the read
-        # noise again) gives way to the fitted values; fitted_gain_config writes a table from several settings
-        u["gain_table"] = []
-        u["sensor"].update({"iso": None, "gain_db": None})
+    return full, nl_update
+
+
+def _dark_points(result: dict) -> list[dict]:
+    """The dark current's characterization points the fit found, each with a tail where its ppm exceeds the
+    body's own; a temperature without dark current to speak of is noted in ``result['not_fitted']``."""
     points = []
     for T, res in sorted(result["dark"].items()):
         p = res["parameters"]
@@ -759,6 +760,68 @@ def fitted_config(base, result: dict):
             point["tail"] = {"ppm_above": p["tail.ppm_above"]["value"], "threshold_e_per_s": res["threshold"],
                              "max_e_per_s": p["tail.max_e_per_s"]["value"]}
         points.append(point)
+    return points
+
+
+def _readout_updates(P: dict, result: dict) -> dict:
+    """The source follower's, the row noise's and the column noise's fitted sections (a flicker tail only where
+    the fitted body can carry it; else noted in ``result['not_fitted']``)."""
+    def v(name, default=None):
+        return P[name]["value"] if name in P else default
+
+    out: dict = {}
+    loc, scale = v("source_follower.flicker.gumbel_loc_e"), v("source_follower.flicker.gumbel_scale_e")
+    ppm, mx = v("source_follower.flicker.tail.ppm_above"), v("source_follower.flicker.tail.max_e")
+    thr = P["source_follower.flicker.tail.ppm_above"]["threshold_e"]
+    tail = None
+    base_ppm = fit_readout.ppm_above(thr, loc, scale, 0.0, 0.0)
+    if mx is not None and ppm > base_ppm * 1.001 and mx > 0:
+        tail = {"ppm_above": ppm, "threshold_e": thr, "max_e": mx}
+        from ..model.heavy_tail import UnreachablePpm
+        from ..model.stages.source_follower import flicker_model
+
+        try:  # a tail the body and its maximum can give (a fraction of a pixel's ppm often cannot)
+            flicker_model(loc, scale, ppm, thr, mx)
+        except UnreachablePpm as exc:
+            tail = None
+            result["not_fitted"]["source_follower.flicker.tail"] = (
+                f"the fitted tail ({ppm:.3g} ppm above {thr:g} e-, up to {mx:.3g} e-) cannot be put on the fitted "
+                f"body ({exc}); left out: too few tail pixels to model")
+    out["source_follower"] = {"enabled": True, "thermal_sigma_e": v("source_follower.thermal_sigma_e"),
+                            "flicker": {"enabled": True, "gumbel_loc_e": loc, "gumbel_scale_e": scale, "tail": tail}}
+    out["row_noise"] = {"enabled": True, "sigma_e": v("row_noise.sigma_e"), "fixed_sigma_e": v("row_noise.fixed_sigma_e")}
+    out["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
+                         "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
+                                      "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+    return out
+
+
+def fitted_config(base, result: dict):
+    """``base`` (a Config) with every fitted value: what ``cmosnoise simulate --config`` runs."""
+    from ..config.loading import merge_updates
+
+    P, meta = result["parameters"], result["meta"]
+
+    def v(name, default=None):
+        return P[name]["value"] if name in P else default
+
+    k, black, bits = v("system_gain_K_dn_per_e"), v("black_level_dn"), meta["bits"]
+    out_bits = meta.get("output_bits", bits)
+    top = 2 ** (out_bits - bits) * (2**bits - 1)  # the top output code
+    black = _written(P, "black_level_dn", 0.0, top - 1, round(black, 3))
+    full = v("full_well_e", base.sensor.full_well_e)
+    full, nl_update = _fitted_nonlinearity(result, full)
+    u: dict = {
+        "sensor": {"width": meta["shape"][1], "height": meta["shape"][0], "cfa": meta["cfa"],
+                   "full_well_e": round(float(full), 1), "temperature_c": meta["temperature_c"]},
+        "adc": {"enabled": True, "bits": bits, "output_bits": out_bits if out_bits != bits else None,
+                "black_level_dn": black, "full_scale_e": (top - black) / k, "gain_dn_per_e": None},
+    }
+    if base.gain_table:  # the data measure one setting: the base's table (whose rows would set K and the read
+        # noise again) gives way to the fitted values; fitted_gain_config writes a table from several settings
+        u["gain_table"] = []
+        u["sensor"].update({"iso": None, "gain_db": None})
+    points = _dark_points(result)
     if result["dark"] and not points:
         u["dark_current"] = {"enabled": False}
     if points:
@@ -768,29 +831,7 @@ def fitted_config(base, result: dict):
             if val is not None and math.isfinite(val) and 0 < val <= 100:
                 u["dark_current"][name] = val
     if "source_follower.thermal_sigma_e" in P:
-        loc, scale = v("source_follower.flicker.gumbel_loc_e"), v("source_follower.flicker.gumbel_scale_e")
-        ppm, mx = v("source_follower.flicker.tail.ppm_above"), v("source_follower.flicker.tail.max_e")
-        thr = P["source_follower.flicker.tail.ppm_above"]["threshold_e"]
-        tail = None
-        base_ppm = fit_readout.ppm_above(thr, loc, scale, 0.0, 0.0)
-        if mx is not None and ppm > base_ppm * 1.001 and mx > 0:
-            tail = {"ppm_above": ppm, "threshold_e": thr, "max_e": mx}
-            from ..model.heavy_tail import UnreachablePpm
-            from ..model.stages.source_follower import flicker_model
-
-            try:  # a tail the body and its maximum can give (a fraction of a pixel's ppm often cannot)
-                flicker_model(loc, scale, ppm, thr, mx)
-            except UnreachablePpm as exc:
-                tail = None
-                result["not_fitted"]["source_follower.flicker.tail"] = (
-                    f"the fitted tail ({ppm:.3g} ppm above {thr:g} e-, up to {mx:.3g} e-) cannot be put on the fitted "
-                    f"body ({exc}); left out: too few tail pixels to model")
-        u["source_follower"] = {"enabled": True, "thermal_sigma_e": v("source_follower.thermal_sigma_e"),
-                                "flicker": {"enabled": True, "gumbel_loc_e": loc, "gumbel_scale_e": scale, "tail": tail}}
-        u["row_noise"] = {"enabled": True, "sigma_e": v("row_noise.sigma_e"), "fixed_sigma_e": v("row_noise.fixed_sigma_e")}
-        u["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
-                             "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
-                                          "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+        u.update(_readout_updates(P, result))
     if "section" in result.get("_telegraph", {}):  # random telegraph pixels: those found, or none (off)
         sec = result["_telegraph"]["section"]
         u.setdefault("source_follower", {})["rts"] = sec if sec is not None else {"enabled": False}

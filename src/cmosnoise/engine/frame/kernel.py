@@ -378,7 +378,7 @@ if numba is not None:
             res[big[t]] = _ptrs_from(bl[t], base + np.uint64(big[t]), frame, seq, k0, k1, attempt)
 
     @numba.njit(**_JIT)
-    def _render_rows(i0, i1, p, at, colterm, gain, fr, sq, cell_black, out_dn, out_e):
+    def _render_rows(i0, i1, p, at, colterm, gain, fr, sq, cell_black, out_dn, out_e):  # noqa: C901 - one fused pass
         """Rows ``i0`` to ``i1`` of the region (one thread's block): every stage of each row, in order.
 
         Compiled on its own, not inside :func:`_render`'s parallel loop: numba's
