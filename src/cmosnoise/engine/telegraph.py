@@ -321,3 +321,27 @@ def per_pixel(index: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.nda
         ok = counts > extra
         sums[ok] = sums[ok] + values[first[ok] + extra]
     return index[first], sums
+
+
+# ------------------------------------------------------------------ a population's values as a frame's kernels take them
+#: the column array of a region that holds none of a population's pixels (a compiled loop takes no empty array)
+_NO_COLUMN = np.zeros(1, np.int64)
+
+
+def plus_charge(mean_e: np.ndarray, index: np.ndarray, extra: np.ndarray, origin=(0, 0),
+                cols: int | None = None) -> np.ndarray:
+    """``mean_e`` (float32, (h, w), its first pixel at ``origin`` of a frame ``cols`` wide) at the pixels ``index``
+    (the frame's) plus ``extra`` (e-), rounded to float32 as every mean charge is: the one place a blinking
+    pixel's mean of a frame is made."""
+    index = index.astype(np.int64)
+    if tuple(origin) != (0, 0):
+        index = (index // cols - origin[0]) * mean_e.shape[1] + (index % cols - origin[1])
+    return (mean_e.ravel()[index].astype(np.float64) + extra).astype(np.float32)
+
+
+def sparse_rows(index: np.ndarray, values: np.ndarray, region, cols: int):
+    """Per-pixel values at sorted pixel indices inside ``region``, by region row: (row pointers (h + 1,) int64,
+    region columns int64, values)."""
+    r, c = positions(index, region, cols)
+    ptr = np.searchsorted(r, np.arange(region[1] - region[0] + 1)).astype(np.int64)
+    return ptr, (np.ascontiguousarray(c) if c.size else _NO_COLUMN), np.ascontiguousarray(values)

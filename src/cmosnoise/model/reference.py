@@ -29,10 +29,9 @@ import math
 
 import numpy as np
 
-from ..engine.frame import kernel
 from ..engine.frame.plan import KEY_ROWS, FramePlan
 from ..engine.samplers import Stream
-from ..engine.telegraph import per_pixel, positions
+from ..engine.telegraph import per_pixel, plus_charge, positions
 from .seeds import pixel_index
 from .stages import column_noise, random_telegraph, read_noise, row_noise, shot_noise, source_follower
 
@@ -91,7 +90,7 @@ def electrons(plan: FramePlan, k: int, region: tuple[int, int, int, int],
         pixels = plan.blinkers.within(region, cols_total)
         extra = random_telegraph.blink_charge(pixels, k, plan.sequence, plan.frame_period_s, plan.exposure_s,
                                               plan.blink_key)
-        means = kernel.plus_charge(plan.blink_mean_e, pixels.index, extra, plan.origin, cols_total)
+        means = plus_charge(plan.blink_mean_e, pixels.index, extra, plan.origin, cols_total)
         at_blink = positions(pixels.index, region, cols_total)
         patched = (noisy if plan.blink_noisy else exact).copy()
         if parts is not None:

@@ -255,7 +255,7 @@ def pixels(s, it, out_dn, out_e):
     blink = find(blink_ptr[p], blink_col, r, c) if has_blink else -1
     n = 0.0
     blink_mean = 0.0
-    if blink >= 0:  # stage 4b: a blinking pixel's mean charge of this frame, float32 (kernel.plus_charge)
+    if blink >= 0:  # stage 4b: a blinking pixel's mean charge of this frame, float32 (telegraph.plus_charge)
         held = exact[p, r, c] if blink_exact else noisy[p, r, c]
         blink_mean = np.float64(np.float32(np.float64(held) + blink_extra[b, blink - blinks[p]]))
     if has_noisy:

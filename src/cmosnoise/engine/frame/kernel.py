@@ -832,12 +832,12 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
     out_e = np.empty((h, w) if (electrons or not adc_on) else (1, 1), np.float32)
     rts_ptr, rts_col, rts_val = _DUMMY_PTR, _DUMMY_COL, _DUMMY1
     if plan.traps is not None:
-        rts_ptr, rts_col, rts_val = sparse_rows(*telegraph.per_pixel(*trap_values(plan, frame, (r0, r1, c0, c1))),
+        rts_ptr, rts_col, rts_val = telegraph.sparse_rows(*telegraph.per_pixel(*trap_values(plan, frame, (r0, r1, c0, c1))),
                                                 (r0, r1, c0, c1), cols)
     blink_ptr, blink_col, blink_mean = _DUMMY_PTR, _DUMMY_COL, _DUMMY_F32
     if plan.blinkers is not None:
         pixels, means = blink_means(plan, frame, (r0, r1, c0, c1))
-        blink_ptr, blink_col, blink_mean = sparse_rows(pixels, means, (r0, r1, c0, c1), cols)
+        blink_ptr, blink_col, blink_mean = telegraph.sparse_rows(pixels, means, (r0, r1, c0, c1), cols)
     flags = switches(plan, electrons, rts_val.size > 0 and plan.traps is not None,
                      blink_mean.size > 0 and plan.blinkers is not None)
     k_adc, black, top, step = plan.adc if adc_on else (1.0, 0.0, 0, 1)
@@ -901,23 +901,5 @@ def blink_means(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.nda
     with ONE_LAUNCH:
         _blink_values(int(frame), np.uint64(plan.sequence), pixels.up, pixels.down, pixels.size, pixels.index,
                       pixels.slot, float(plan.frame_period_s), float(plan.exposure_s), k0, k1, extra)
-    return pixels.index, plus_charge(plan.blink_mean_e, pixels.index, extra, plan.origin, plan.shape[1])
+    return pixels.index, telegraph.plus_charge(plan.blink_mean_e, pixels.index, extra, plan.origin, plan.shape[1])
 
-
-def plus_charge(mean_e: np.ndarray, index: np.ndarray, extra: np.ndarray, origin=(0, 0),
-                cols: int | None = None) -> np.ndarray:
-    """``mean_e`` (float32, (h, w), its first pixel at ``origin`` of a frame ``cols`` wide) at the pixels ``index``
-    (the frame's) plus ``extra`` (e-), rounded to float32 as every mean charge is: the one place a blinking
-    pixel's mean of a frame is made."""
-    index = index.astype(np.int64)
-    if tuple(origin) != (0, 0):
-        index = (index // cols - origin[0]) * mean_e.shape[1] + (index % cols - origin[1])
-    return (mean_e.ravel()[index].astype(np.float64) + extra).astype(np.float32)
-
-
-def sparse_rows(index: np.ndarray, values: np.ndarray, region, cols: int):
-    """Per-pixel values at sorted pixel indices inside ``region``, by region row: (row pointers (h + 1,) int64,
-    region columns int64, values)."""
-    r, c = telegraph.positions(index, region, cols)
-    ptr = np.searchsorted(r, np.arange(region[1] - region[0] + 1)).astype(np.int64)
-    return ptr, (np.ascontiguousarray(c) if c.size else _DUMMY_COL), np.ascontiguousarray(values)
