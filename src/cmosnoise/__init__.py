@@ -46,6 +46,9 @@ _MODULES = {
     "prnu": "model.stages.prnu", "crosstalk": "model.stages.crosstalk", "dark_current": "model.stages.dark_current",
     "shot_noise": "model.stages.shot_noise", "source_follower": "model.stages.source_follower",
     "row_noise": "model.stages.row_noise", "column_noise": "model.stages.column_noise", "adc": "model.stages.adc",
+    # stage 15, the sensor's defective pixels, beside the ISP's correction of them (cmosnoise.defects, the older
+    # name, kept; cmosnoise.defect_correction the same module)
+    "pixel_defects": "model.stages.defects", "defect_correction": "isp.defects",
     "calibration": "isp.calibration", "defects": "isp.defects", "reconstruction": "isp.reconstruction",
     "process": "isp.process",
     "noise_budget": "analysis.noise_budget", "sfr": "analysis.sfr", "colour_error": "analysis.colour_error",

@@ -24,6 +24,7 @@ from .config.loading import preset_names as preset_names
 from .config.schema import Config as Config
 from .errors import CmosnoiseError as CmosnoiseError
 from .isp import calibration as calibration
+from .isp import defects as defect_correction  # noqa: F401  (an alias, re-exported: the tables name it)
 from .isp import defects as defects
 from .isp import process as process
 from .isp import reconstruction as reconstruction
@@ -54,6 +55,7 @@ from .model.stages import adc as adc
 from .model.stages import column_noise as column_noise
 from .model.stages import crosstalk as crosstalk
 from .model.stages import dark_current as dark_current
+from .model.stages import defects as pixel_defects  # noqa: F401  (stage 15 by its physics)
 from .model.stages import prnu as prnu
 from .model.stages import row_noise as row_noise
 from .model.stages import shot_noise as shot_noise

@@ -27,7 +27,15 @@ What each does (all fixed; the temporal noise acts on them as on any pixel):
   collected (with the ADC off: ``level * full well`` e-).
 
 The kind codes are bits, so a pixel that is two things carries both in the
-ground truth's mask (:mod:`cmosnoise.analysis.ground_truth`).
+ground truth's mask (:mod:`cmosnoise.analysis.ground_truth`). As
+``cmosnoise.pixel_defects`` it stands beside the ISP's correction of these
+pixels, ``cmosnoise.defect_correction`` (``cmosnoise.defects``).
+
+Examples
+--------
+>>> from cmosnoise import pixel_defects
+>>> pixel_defects.cluster_size([0.5, 0.5], [0.2, 0.7]).tolist()
+[2, 3]
 """
 
 from __future__ import annotations
@@ -53,8 +61,17 @@ _WORD_COLUMN, _WORD_ROW = 5, 7  # and + 1: the line's size and sign
 
 @dataclass(frozen=True)
 class Lines:
-    """Bad columns or rows: their indices (int64, ascending), kinds (LINE_*), and values (offset e-, gain factor, or
-    stuck level as a fraction of the top code)."""
+    """Bad columns or rows.
+
+    Parameters
+    ----------
+    index : (n,) int64 array
+        The lines, ascending.
+    kind : (n,) array
+        Each line's kind (LINE_OFFSET, LINE_GAIN, LINE_STUCK).
+    value : (n,) float64 array
+        Its offset (e-), gain factor, or stuck level (a fraction of the top code).
+    """
 
     index: np.ndarray
     kind: np.ndarray
@@ -70,11 +87,26 @@ class Lines:
 class Defects:
     """A sensor's defects. Pixels are addressed ``r * cols + c`` (uint64, ascending).
 
-    ``pixel_kind`` holds DEAD, STUCK, LOW_GAIN or HIGH_GAIN; ``pixel_value`` the
-    stuck level (fraction of the top code) or the gain factor (0 for dead).
-    ``cluster_index`` the hot pixels of every cluster, ``cluster_id`` the
-    index of the pixel each cluster started from, ``cluster_sizes`` each
-    cluster's size (in order of their start).
+    Parameters
+    ----------
+    shape : (rows, cols)
+        The sensor's.
+    pixel_index : (n,) uint64 array
+        The defective pixels.
+    pixel_kind : (n,) uint8 array
+        DEAD, STUCK, LOW_GAIN or HIGH_GAIN.
+    pixel_value : (n,) float64 array
+        The stuck level (a fraction of the top code) or the gain factor (0 for dead).
+    cluster_index : (m,) uint64 array
+        The hot pixels of every cluster.
+    cluster_id : (m,) int64 array
+        The pixel each one's cluster started from.
+    cluster_sizes : (k,) int64 array
+        Each cluster's size, in the order of their start.
+    hot_e_per_s : float
+        A cluster pixel's extra dark current, e-/s.
+    columns, rows : Lines
+        The bad lines.
     """
 
     shape: tuple[int, int]
@@ -143,7 +175,20 @@ def _lines(section, key: tuple[int, int], count: int, word: int) -> Lines:
 
 
 def cluster_size(weights, u: np.ndarray) -> np.ndarray:
-    """Cluster sizes (2, 3, ...) from uniforms by the relative ``weights`` of sizes 2, 3, ... (inverse CDF)."""
+    """Cluster sizes from uniforms by the inverse CDF of the sizes' relative weights.
+
+    Parameters
+    ----------
+    weights : sequence of float
+        The relative weights of sizes 2, 3, ...
+    u : array
+        Uniforms in [0, 1).
+
+    Returns
+    -------
+    int array, the shape of ``u``
+        Sizes 2, 3, ...
+    """
     w = np.asarray(weights, np.float64)
     cdf = np.cumsum(w) / w.sum()
     return 2 + np.minimum(np.searchsorted(cdf, u, side="right"), w.size - 1)
@@ -169,7 +214,21 @@ def _grow(seed: int, size: int, shape: tuple[int, int], k0, k1) -> list[int]:
 
 
 def draw(section, key: tuple[int, int], shape: tuple[int, int]) -> Defects:
-    """The defects of a ``defects`` section on a sensor of ``shape`` = (rows, cols)."""
+    """The defects of a ``defects`` section on a sensor (see the module docstring for the streams).
+
+    Parameters
+    ----------
+    section : DefectsSection
+        The configuration's ``defects``.
+    key : (int, int)
+        The stage's fixed Philox key.
+    shape : (rows, cols)
+        The sensor's.
+
+    Returns
+    -------
+    Defects
+    """
     rows, cols = shape
     k0, k1 = (np.uint64(w) for w in key)
     s = section
@@ -253,7 +312,17 @@ def collected(photo_e: np.ndarray, dark_e: np.ndarray | None, defects: Defects, 
 
 
 def line_offsets(defects: Defects) -> tuple[np.ndarray, np.ndarray]:
-    """The offset lines' offsets at the readout, e-: (per row (rows,), per column (cols,)) float64, 0 elsewhere."""
+    """The offset lines' offsets at the readout.
+
+    Parameters
+    ----------
+    defects : Defects
+
+    Returns
+    -------
+    (rows,) and (cols,) float64 arrays
+        Per row and per column, e-; 0 off the offset lines.
+    """
     rows, cols = defects.shape
     out = []
     for lines, n in ((defects.rows, rows), (defects.columns, cols)):
@@ -266,9 +335,25 @@ def line_offsets(defects: Defects) -> tuple[np.ndarray, np.ndarray]:
 
 def stick(raw: np.ndarray, defects: Defects, region: tuple[int, int, int, int], top: float,
           rounded: bool | None = None) -> np.ndarray:
-    """``raw`` (the region's frame) with the stuck rows, then columns, then pixels at ``round(level * top)``
-    (``rounded``; default: for an unsigned-integer ``raw``, a code) or ``level * top`` (the ideal readout's e-).
-    Changes ``raw`` in place; returns it."""
+    """``raw`` with the stuck rows, then columns, then pixels at their level.
+
+    Parameters
+    ----------
+    raw : (rows, cols) array
+        The region's frame; changed in place.
+    defects : Defects
+    region : (row0, row1, col0, col1)
+        Where ``raw`` sits on the sensor.
+    top : float
+        The top code (or the full well, e-, for the ideal readout).
+    rounded : bool, optional
+        ``round(level * top)`` (a code) or ``level * top``; default: rounded for an unsigned-integer ``raw``.
+
+    Returns
+    -------
+    array
+        ``raw``.
+    """
     r0, r1, c0, c1 = region
     rounded = raw.dtype.kind == "u" if rounded is None else rounded
 
@@ -287,11 +372,23 @@ def stick(raw: np.ndarray, defects: Defects, region: tuple[int, int, int, int], 
 
 
 def stuck_pixels(defects: Defects, top: float, rounded: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Every stuck pixel of the whole sensor once, with the value :func:`stick` gives it: (flat pixel index (n,)
-    int64, value (n,) float64: ``round(level * top)`` if ``rounded``, else ``level * top``).
+    """Every stuck pixel of the whole sensor once, with the value :func:`stick` gives it.
 
     Rows, then columns, then pixels, the later winning where they meet, as
     :func:`stick` sets them; for a kernel that sets them in parallel (the GPU's).
+
+    Parameters
+    ----------
+    defects : Defects
+    top : float
+        The top code (or the full well, e-).
+    rounded : bool
+        ``round(level * top)``, or ``level * top``.
+
+    Returns
+    -------
+    (n,) int64 and (n,) float64 arrays
+        The flat pixel indices and their values.
     """
     rows, cols = defects.shape
 
