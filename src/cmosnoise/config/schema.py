@@ -642,18 +642,53 @@ class SourceFollowerSection(Section):
     rts: SourceFollowerRtsSection = Field(default_factory=SourceFollowerRtsSection)
 
 
+def _check_corners(section: str, corners) -> None:
+    """A ``corner_hz`` range: two finite frequencies, ``0 < low < high`` (the frame rate's bound is the sensor's)."""
+    if corners is None:
+        return
+    low, high = corners
+    if not (math.isfinite(low) and math.isfinite(high) and 0 < low < high):
+        raise ValueError(f"{section}.corner_hz = [{low}, {high}]: need two frequencies in Hz with 0 < low < high "
+                         "(null: from a thousandth of the frame rate to what the readout resolves)")
+
+
 class RowNoiseSection(Section):
     enabled: bool = True
     sigma_e: float = Field(0.4, ge=0, le=10000, description="temporal row noise, e- rms per row per frame")
     fixed_sigma_e: float = Field(0.0, ge=0, le=10000, description="fixed row offsets, e- rms (the paper neglects them)")
     sigma_dn: float = Field(0.0, ge=0, le=10000, description="temporal row noise after the gain, DN rms per row per frame "
                                                              "(as ELD calibrates it; adds to sigma_e in variance)")
+    spectrum: Literal["white", "one_over_f"] = Field(
+        "white", description="the temporal row noise in time: white (a new value per row per frame) or one_over_f "
+                             "(a 1/f process sampled at each row's readout time, rows of frame k after those of "
+                             "frame k - 1: banding that drifts and correlates from frame to frame); the rms stays "
+                             "sigma_e")
+    corner_hz: tuple[float, float] | None = Field(
+        None, description="one_over_f: the lowest and highest corner of its Lorentzians, Hz (the 1/f range); "
+                          "null: a thousandth of the frame rate to the row rate")
+
+    @model_validator(mode="after")
+    def _corners(self):
+        _check_corners("row_noise", self.corner_hz)
+        return self
 
 
 class ColumnTemporalSection(Section):
     enabled: bool = True
     gumbel_loc_e: float = Field(0.4, ge=-1000, le=1000, description="location of the per-column sigma's gumbel_r, e- rms")
     gumbel_scale_e: float = Field(0.1, gt=0, le=1000, description="scale of the per-column sigma's gumbel_r, e- rms")
+    spectrum: Literal["white", "one_over_f"] = Field(
+        "white", description="each column's temporal noise in time: white (a new value per frame) or one_over_f (a "
+                             "1/f process per column amplifier sampled at each frame's time); its rms stays the "
+                             "column's sigma")
+    corner_hz: tuple[float, float] | None = Field(
+        None, description="one_over_f: the lowest and highest corner of its Lorentzians, Hz; null: a thousandth of "
+                          "the frame rate to half the frame rate")
+
+    @model_validator(mode="after")
+    def _corners(self):
+        _check_corners("column_noise.temporal", self.corner_hz)
+        return self
 
 
 class ColumnNoiseSection(Section):

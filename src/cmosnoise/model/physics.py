@@ -15,9 +15,11 @@ import functools
 
 from ..config import Config
 from ..errors import CmosnoiseError
+from . import one_over_f
 from .heavy_tail import HeavyTail, UnreachablePpm
 from .stages.dark_current import Point
 from .stages.random_telegraph import check as _check_timing
+from .stages.random_telegraph import frame_period_s as _frame_period_s
 from .stages.source_follower import flicker_model as _flicker_model
 from .units import aa_to_e_per_s, na_per_cm2_to_e_per_s
 
@@ -218,5 +220,9 @@ def check_timing(config: Config) -> None:
     """What random telegraph noise needs of the frame timing (:func:`.stages.random_telegraph.check`)."""
     try:
         _check_timing(config)
+        rate = 1.0 / _frame_period_s(config.sensor.frame_rate_hz, config.exposure.integration_time_s)
+        for key, corner in (("row_noise.corner_hz", config.row_noise.corner_hz),
+                            ("column_noise.temporal.corner_hz", config.column_noise.temporal.corner_hz)):
+            one_over_f.corners(key, corner, (0.0, 0.0), rate)
     except ValueError as exc:
         raise _invalid(str(exc)) from None

@@ -121,7 +121,7 @@ def electrons(plan: FramePlan, k: int, region: tuple[int, int, int, int],
     rows_on, columns_on = plan.row_sigma_e is not None, plan.col_sigma_e is not None
     if rows_on:
         rown = (row_noise.temporal(np.arange(r0, r1), plan.row_sigma_e, stream(plan, "row_noise", k))
-                + plan.row_offset_e[win[0], None])
+                + plan.row_offsets(k)[win[0], None])
         n = n + rown
         if parts is not None:
             parts["row_noise"] = rown
@@ -129,7 +129,7 @@ def electrons(plan: FramePlan, k: int, region: tuple[int, int, int, int],
     if columns_on:
         # each column's temporal noise (sigma 0 where the stage has none: adding 0 changes no value), then the
         # column amplifier's gain and offset
-        offset = plan.col_offset_e[None, win[1]] + column_noise.temporal(
+        offset = plan.col_offsets(k)[None, win[1]] + column_noise.temporal(
             plan.col_sigma_e[None, :], np.arange(c0, c1), stream(plan, "column_noise", k), first=v0)
         n = column_noise.apply(n, plan.col_gain[None, win[1]], offset)
     if parts is not None:

@@ -50,6 +50,8 @@ STAGE_IDS = {
     "source_follower_rts": 13,
     "dark_current_rts": 14,
     "defects": 15,
+    "row_noise_flicker": 16,  # the 1/f row offsets in readout order (row_noise.spectrum = one_over_f)
+    "column_noise_flicker": 17,  # each column amplifier's 1/f noise over frames
 }
 
 

@@ -40,11 +40,13 @@ from .seeds import SEQ_DARK_CALIBRATION, SEQ_SCENE, fixed_key, stream_key
 from .spec import SensorSpec, resolve
 from .stages import (
     adc,
+    column_noise,
     crosstalk,
     dark_current,
     defects,
     prnu,
     random_telegraph,
+    row_noise,
     source_follower,
 )
 
@@ -599,15 +601,16 @@ class Exposure:
             def col(a, fill):
                 return np.full(cols, fill) if a is None else a.ravel().astype(np.float64)
 
+            row_flicker, col_flicker, col_sigma = self._flicker(row_sigma, col(fp.column_sigma, 0.0))
             t = s.transfer
             self._plan = FramePlan(
                 shape=s.shape, keys=keys, sequence=self.sequence, full_well_e=float(c.sensor.full_well_e),
                 noisy_e=self._noisy_e, exact_e=self._exact_e,
                 normal_above_e=c.shot_noise.gaussian_above_e if c.shot_noise.gaussian_above_e is not None else np.inf,
                 sf_sigma_e=s.source_follower_sigma if c.source_follower.enabled else None,
-                row_sigma_e=row_sigma if rows_on else None,
-                row_offset_e=row_offset,
-                col_sigma_e=col(fp.column_sigma, 0.0) if columns_on else None,
+                row_sigma_e=(0.0 if row_flicker is not None else row_sigma) if rows_on else None,
+                row_offset_e=row_offset, row_flicker=row_flicker, col_flicker=col_flicker,
+                col_sigma_e=col_sigma if columns_on else None,
                 col_offset_e=col_offset if columns_on else None,
                 col_gain=col(fp.column_gain, 1.0) if columns_on else None,
                 adc=(t.gain_dn_per_e, t.black_level_dn, 2**t.bits - 1, t.step) if c.adc.enabled else None,
@@ -625,6 +628,25 @@ class Exposure:
                 blink_noisy=bool(c.dark_current.shot_noise), window=s.window,
             )
         return self._plan
+
+    def _flicker(self, row_sigma: float, col_sigma: np.ndarray):
+        """(row noise's 1/f offsets or None, each column's 1/f noise or None, the column sigma the kernels draw
+        white noise with: zero where the columns' noise is 1/f) of ``row_noise.spectrum`` and
+        ``column_noise.temporal.spectrum``. The 1/f processes are addressed by the sensor's rows and columns, so
+        a window's are the frame's."""
+        s = self.sensor
+        c = s.config
+        r0, r1, c0, c1 = s.region
+        period = self.frame_period_s
+        row_flicker = col_flicker = None
+        if s.spec.row_flicker is not None and row_sigma > 0:
+            row_flicker = row_noise.Flicker(float(row_sigma), s.spec.row_flicker, int(s.shape[0]),
+                                            period / s.shape[0], stream_key(c.seed, "row_noise_flicker"), r0, r1 - r0)
+        if s.spec.column_flicker is not None:
+            col_flicker = column_noise.Flicker(col_sigma, s.spec.column_flicker, period,
+                                               stream_key(c.seed, "column_noise_flicker"), c0, c1 - c0)
+            col_sigma = np.zeros_like(col_sigma)
+        return row_flicker, col_flicker, col_sigma
 
     def readout_lines(self) -> tuple[bool, float, np.ndarray, bool, np.ndarray]:
         """(rows on, row sigma e-, row offsets (rows,) float64, columns on, column offsets (cols,) float64): the

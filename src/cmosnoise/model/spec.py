@@ -27,10 +27,10 @@ import numpy as np
 
 from ..config import Config, merge_updates
 from . import light as light_mod
-from . import physics
+from . import one_over_f, physics
 from .focal_plane import FocalPlane, focal_plane
 from .heavy_tail import HeavyTail
-from .stages import adc
+from .stages import adc, random_telegraph
 from .stages.dark_current import Point
 from .stages.nonlinearity import Curve
 from .stages.pixel_offset import OffsetModel
@@ -132,6 +132,37 @@ class SensorSpec:
         if rn.sigma_dn == 0:
             return rn.sigma_e
         return float(np.sqrt(rn.sigma_e**2 + (rn.sigma_dn / self.transfer.gain_dn_per_e) ** 2))
+
+    @property
+    def frame_period_s(self) -> float:
+        """Seconds between two frames' starts: ``1 / sensor.frame_rate_hz``, or the exposure (back to back)."""
+        c = self.config
+        return random_telegraph.frame_period_s(c.sensor.frame_rate_hz, c.exposure.integration_time_s)
+
+    @property
+    def row_flicker(self) -> one_over_f.Spectrum | None:
+        """The 1/f row noise's Lorentzians (``row_noise.spectrum = one_over_f``), or None: white.
+
+        Sampled at the row rate (``rows / frame_period``); ``corner_hz`` null: a thousandth of the frame rate to
+        the lesser of half the row rate and a thousand times the frame rate."""
+        rn = self.config.row_noise
+        if not rn.enabled or rn.spectrum == "white":
+            return None
+        rate = 1.0 / self.frame_period_s
+        default = (rate / 1000.0, min(0.5 * rate * self.config.sensor.height, 1000.0 * rate))
+        return one_over_f.lorentzians(*one_over_f.corners("row_noise.corner_hz", rn.corner_hz, default, rate))
+
+    @property
+    def column_flicker(self) -> one_over_f.Spectrum | None:
+        """Each column amplifier's 1/f Lorentzians (``column_noise.temporal.spectrum = one_over_f``), or None.
+
+        Sampled at the frame rate; ``corner_hz`` null: a thousandth of the frame rate to half of it."""
+        cn = self.config.column_noise
+        if not (cn.enabled and cn.temporal.enabled) or cn.temporal.spectrum == "white":
+            return None
+        rate = 1.0 / self.frame_period_s
+        return one_over_f.lorentzians(*one_over_f.corners("column_noise.temporal.corner_hz", cn.temporal.corner_hz,
+                                                (rate / 1000.0, 0.5 * rate), rate))
 
     @property
     def focal_plane(self) -> FocalPlane:
@@ -334,3 +365,4 @@ def resolve(config: Config | SensorSpec) -> SensorSpec:
     return SensorSpec(config, tuple(physics.dark_points(config)), physics.flicker_model(config),
                       physics.prnu_seen_per_sigma(config), transfer(config), physics.offset_model(config),
                       physics.nonlinearity_curve(config))
+

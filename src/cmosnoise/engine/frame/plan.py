@@ -58,6 +58,12 @@ class FramePlan:
     col_sigma_e: np.ndarray | None = None
     col_offset_e: np.ndarray | None = None
     col_gain: np.ndarray | None = None
+    #: the 1/f row offsets (row_noise.spectrum = one_over_f): ``row_flicker(frame, sequence)`` gives the window's
+    #: rows' offsets of a frame, (rows,) float64 e-, added to ``row_offset_e`` (``row_sigma_e`` is then 0)
+    row_flicker: object | None = None
+    #: each column amplifier's 1/f noise: ``col_flicker(frame, sequence)``, (cols,) float64 e-, added to
+    #: ``col_offset_e`` (``col_sigma_e`` is then 0)
+    col_flicker: object | None = None
     #: (K output DN/e-, black level output DN, the ADC's top code, output DN per ADC code); None: float32 e-
     adc: tuple[float, float, int, int] | None = None
     #: the charge-to-voltage transfer (stage 5b): a nonlinearity.Curve (a cubic, or a table)
@@ -92,6 +98,20 @@ class FramePlan:
     def region(self) -> tuple[int, int, int, int]:
         """The rectangle the arrays cover, (row0, row1, col0, col1): the window, or the whole frame."""
         return (0, self.shape[0], 0, self.shape[1]) if self.window is None else tuple(self.window)
+
+    def row_offsets(self, frame: int) -> np.ndarray | None:
+        """The rows' offsets in frame ``frame``, (rows,) float64 e-: ``row_offset_e``, plus the frame's 1/f row
+        offsets when the row noise has them (every copy of the chain adds them so, as one array)."""
+        if self.row_flicker is None:
+            return self.row_offset_e
+        return self.row_offset_e + self.row_flicker(int(frame), int(self.sequence))
+
+    def col_offsets(self, frame: int) -> np.ndarray | None:
+        """The columns' offsets in frame ``frame``, (cols,) float64 e-: ``col_offset_e``, plus each column
+        amplifier's 1/f noise of the frame when it has one."""
+        if self.col_flicker is None:
+            return self.col_offset_e
+        return self.col_offset_e + self.col_flicker(int(frame), int(self.sequence))
 
     @property
     def blink_mean_e(self) -> np.ndarray:
@@ -134,10 +154,10 @@ STAGES = (
           ("sf_sigma_e",), (), ()),
     Stage("row_noise", "row_noise",
           (Switch("row", "row noise: plan.row_sigma_e", lambda p, a: p.row_sigma_e is not None),),
-          ("row_sigma_e", "row_offset_e"), ("row_sigma",), ()),
+          ("row_sigma_e", "row_offset_e", "row_flicker"), ("row_sigma",), ()),
     Stage("column_noise", "column_noise",
           (Switch("column", "column noise and gain: plan.col_gain", lambda p, a: p.col_gain is not None),),
-          ("col_sigma_e", "col_offset_e", "col_gain"), (), ()),
+          ("col_sigma_e", "col_offset_e", "col_gain", "col_flicker"), (), ()),
     Stage("adc", None,
           (Switch("adc", "the ADC, codes out: plan.adc", lambda p, a: p.adc is not None),
            Switch("electrons", "the charge at the ADC input out too: asked for, or the ADC off",

@@ -2,7 +2,9 @@
 
 - Temporal: each column has a fixed sigma drawn once from
   ``gumbel_r(loc, scale)`` clipped at 0 (a few columns much noisier than the
-  rest); in each frame the column gets ``Normal(0, sigma_c)``.
+  rest); in each frame the column gets ``Normal(0, sigma_c)``, or, with
+  ``temporal.spectrum = one_over_f``, ``sigma_c`` times its amplifier's own
+  1/f process sampled at the frame's time (:class:`Flicker`).
 - Vertical fixed pattern noise (VFPN): one ``Normal(0, vfpn_sigma_e)``
   offset per column, fixed.
 - Optional column gain mismatch ``Normal(1, gain_sigma_pct / 100)``, fixed,
@@ -19,11 +21,14 @@ Examples
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from ...engine import fixed_maps
+from ...engine import fixed_maps, gauss_markov
 from ...engine.samplers import Stream
 from ..distributions import gumbel
+from ..one_over_f import Spectrum
 
 # Each fixed column map covers columns ``col0`` to ``col1`` (the whole map: 0 to cols); column ``c``'s value comes
 # from its own counter under the map's fixed key (cmosnoise.engine.fixed_maps.lines), so any span is made alone.
@@ -134,3 +139,49 @@ def apply(signal_e: np.ndarray, gain: np.ndarray | None, offset_e: np.ndarray | 
     if offset_e is not None:
         out = out + offset_e
     return out
+
+
+@dataclass(frozen=True)
+class Flicker:
+    """Each column amplifier's 1/f noise over frames (``column_noise.temporal.spectrum = one_over_f``).
+
+    Parameters
+    ----------
+    sigma_e : (count,) float64
+        Each column's sigma, e- (its temporal sigma map's values).
+    spectrum : Spectrum
+        The unit-variance process's Lorentzians.
+    frame_period_s : float
+        The time between two frames, s: frame ``k`` is grid point ``k``.
+    key : (int, int)
+        The stream's key words (``column_noise_flicker``); column ``c`` is lane ``c``.
+    first, count : int
+        The columns a call makes, ``first <= c < first + count`` (a window's).
+    """
+
+    sigma_e: np.ndarray
+    spectrum: Spectrum
+    frame_period_s: float
+    key: tuple[int, int]
+    first: int
+    count: int
+
+    def __call__(self, frame: int, sequence: int) -> np.ndarray:
+        """Frame ``frame``'s noise of the columns, (count,) float64 e-.
+
+        Parameters
+        ----------
+        frame : int
+            The frame's number.
+        sequence : int
+            The frame series.
+
+        Returns
+        -------
+        (count,) float64, e-
+            Each column's sigma times its process at ``frame frame_period_s``.
+        """
+        x = gauss_markov.sample(self.spectrum.rates_per_s, self.spectrum.weights, self.frame_period_s, int(frame),
+                                int(frame) + 1, self.key, int(sequence),
+                                lanes=np.arange(self.first, self.first + self.count))
+        return self.sigma_e * x[:, 0]

@@ -1,0 +1,218 @@
+"""1/f noise in time (#76): the Gauss-Markov bridges that sample it, the McWhorter sum that makes it 1/f, and the
+row noise in readout order and the column amplifiers over frames that use it. Statistics are tested as
+statistics: each tolerance says which estimator's spread it is five standard errors of."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import cli
+from scipy import integrate, signal
+
+from cmosnoise import Sensor, load_config
+from cmosnoise.engine import gauss_markov as gm
+from cmosnoise.model import one_over_f
+
+QUIET = {"prnu": {"enabled": False}, "crosstalk": {"enabled": False}, "shot_noise": {"enabled": False},
+         "dark_current": {"enabled": False}, "source_follower": {"enabled": False}, "row_noise": {"enabled": False},
+         "column_noise": {"enabled": False}, "read_noise": {"enabled": False}, "pixel_offset": {"enabled": False},
+         "nonlinearity": {"enabled": False}, "defects": {"enabled": False},
+         "adc": {"enabled": True, "bits": 16, "gain_dn_per_e": 4.0, "black_level_dn": 1000},
+         "exposure": {"integration_time_s": 0.02}}
+FPS = 30.0
+ROW = {"row_noise": {"enabled": True, "sigma_e": 2.0, "spectrum": "one_over_f"}}
+COLUMN = {"column_noise": {"enabled": True, "vfpn_sigma_e": 0.0,
+                           "temporal": {"enabled": True, "gumbel_loc_e": 2.0, "gumbel_scale_e": 0.3,
+                                        "spectrum": "one_over_f"}}}
+
+
+def _config(extra: dict, rows: int = 48, cols: int = 64):
+    out = {k: dict(v) for k, v in QUIET.items()}
+    for k, v in extra.items():
+        out[k] = {**out.get(k, {}), **v}
+    out["sensor"] = {"width": cols, "height": rows, "frame_rate_hz": FPS, **out.get("sensor", {})}
+    return load_config(extra=out)
+
+
+def _slope(f, p, band):
+    """The log-log slope of a Welch spectrum over ``band`` and its standard error. Each Welch bin of M averaged
+    segments has ln P spread about ``1/sqrt(M)``; the slope's standard error is the regression's (residual spread
+    over the spread of ln f), times sqrt(2) because a Hann window's neighbouring bins are correlated."""
+    x, y = np.log(f[band]), np.log(p[band])
+    (slope, icpt), res, *_ = np.polyfit(x, y, 1, full=True)
+    s = math.sqrt(float(res[0]) / (x.size - 2))
+    return float(slope), math.sqrt(2.0) * s / math.sqrt(float(np.sum((x - x.mean()) ** 2)))
+
+
+# ------------------------------------------------------------------ the bridges
+def test_a_block_of_the_process_is_the_same_bits_wherever_it_is_made():
+    rates, weights = 2 * np.pi * np.array([0.3, 7.0, 150.0]), np.array([0.5, 0.3, 0.2])
+    whole = gm.sample(rates, weights, 1e-3, 0, 5000, (11, 12), 3)
+    for a, b in ((0, 1), (1, 2), (4095, 4097), (1234, 5000), (2000, 2100)):
+        np.testing.assert_array_equal(gm.sample(rates, weights, 1e-3, a, b, (11, 12), 3), whole[a:b])
+    far = gm.sample(rates, weights, 1e-3, 2**40, 2**40 + 300, (11, 12), 3)
+    np.testing.assert_array_equal(gm.sample(rates, weights, 1e-3, 2**40 + 100, 2**40 + 120, (11, 12), 3),
+                                  far[100:120])
+    lanes = gm.sample(rates, weights, 1e-3, 10, 20, (11, 12), 3, lanes=np.arange(5, 40))
+    np.testing.assert_array_equal(gm.sample(rates, weights, 1e-3, 12, 13, (11, 12), 3, lanes=[7, 30])[:, 0],
+                                  lanes[[2, 25], 2])
+    assert not np.array_equal(lanes[0], lanes[1])  # each lane its own process
+    assert not np.array_equal(gm.sample(rates, weights, 1e-3, 0, 50, (11, 12), 4), whole[:50])  # each sequence
+
+
+def test_one_component_has_unit_variance_and_an_exponential_correlation():
+    lam, dt, n = 2.0, 0.01, 2**20
+    x = gm.sample(np.array([lam]), np.array([1.0]), dt, 0, n, (3, 4), 0)
+    a = math.exp(-lam * dt)
+    # the sample variance of an AR(1) series: Var(s^2) ~ 2 sum_k rho_k^2 / n = 2 (1 + a^2) / ((1 - a^2) n)
+    se_var = math.sqrt(2 * (1 + a * a) / ((1 - a * a) * n))
+    assert abs(x.var() - 1.0) < 5 * se_var
+    # Bartlett's variance of an AR(1)'s lag-k autocorrelation estimate:
+    # (1/n) [(1 + a^2)(1 - a^2k) / (1 - a^2) - 2 k a^2k]
+    for k in (1, 10, 50):
+        rho = float(np.mean(x[:-k] * x[k:]) / np.mean(x * x))
+        se = math.sqrt(((1 + a * a) * (1 - a ** (2 * k)) / (1 - a * a) - 2 * k * a ** (2 * k)) / n)
+        assert abs(rho - a**k) < 5 * se, (k, rho, a**k, se)
+    # the top level's nodes and the bridges' midpoints have the law's variance alike (no seam at a top node)
+    top = 2 ** gm.top_level(lam, dt)
+    for offset in (0, 1, top // 2):
+        sel = x[offset::top]
+        assert abs(sel.var() - 1.0) < 5 * math.sqrt(2.0 / sel.size), offset
+
+
+def test_the_bridge_coefficients_are_the_exact_conditional_law():
+    rate, dt = 5.0, 0.01
+    weight, sigma = gm.bridge_constants(rate, dt, 6)
+    for level in range(6):
+        a = math.exp(-rate * dt * 2**level)
+        assert weight[level] == pytest.approx(a / (1 + a * a), rel=1e-13)
+        assert sigma[level] == pytest.approx(math.sqrt((1 - a * a) / (1 + a * a)), rel=1e-12)
+    for x in (1e-9, 1e-4, 0.05, 0.0999, 0.1, 3.0):
+        assert gm.one_minus_a2(x) == pytest.approx(-math.expm1(-2 * x), rel=1e-14)
+
+
+# ------------------------------------------------------------------ the 1/f law
+def test_lorentzians_make_a_one_over_f_spectrum_whose_cds_variance_is_its_integral():
+    s = one_over_f.lorentzians(1e-2, 1e4)
+    assert s.weights.sum() == pytest.approx(1.0, rel=1e-12)
+    f = np.logspace(0, 2, 401)  # two decades inside the corners
+    flat = f * one_over_f.psd(s, f)
+    assert flat.max() / flat.min() - 1 < 0.01  # f S(f) constant within its stated ripple
+    def integral(g, lo, hi):  # over log-spaced pieces: the Lorentzians' corners span six decades
+        edges = np.concatenate([[lo], np.geomspace(max(lo, 1e-6), hi, 200)[1:]])
+        return sum(integrate.quad(g, a, b, limit=100)[0] for a, b in zip(edges[:-1], edges[1:]))
+
+    def S(v):
+        return float(one_over_f.psd(s, v))
+
+    # past 1e12 Hz the spectrum holds (2 / pi) sum_j w_j f_j / 1e12 < 1e-8 of the variance
+    assert integral(S, 0.0, 1e12) == pytest.approx(1.0, rel=1e-6)
+    for dt in (1e-4, 1e-3, 1e-2):  # three decades of CDS interval: the closed form against the integral
+        top = 4.0 / dt  # below: |2 sin(pi f dt)|^2 as it is; above: 2 - 2 cos(2 pi f dt), the cosine by QAWF
+        below = integral(lambda v, dt=dt: S(v) * (2 * math.sin(math.pi * v * dt)) ** 2, 0.0, top)
+        above = 2 * integral(S, top, 1e12) - 2 * integrate.quad(S, top, np.inf, weight="cos", wvar=2 * math.pi * dt)[0]
+        total = below + above
+        assert float(one_over_f.cds_variance(s, dt)) == pytest.approx(total, rel=1e-4), dt
+
+
+# ------------------------------------------------------------------ the row noise in readout order
+def test_row_flicker_is_the_same_bits_in_every_copy_of_the_chain():
+    cfg = _config({**ROW, **COLUMN})
+    shot = Sensor(cfg, seed=21).expose("flat:0.0")
+    for k in (0, 1, 1000, 10**6):  # the kernel against the NumPy reference; a frame alone
+        np.testing.assert_array_equal(shot.frame(k), shot.frame(k, detail=True).raw, err_msg=f"frame {k}")
+    run = list(shot.frames(4))
+    for k in range(4):
+        np.testing.assert_array_equal(run[k], shot.frame(k))
+    region = (6, 30, 10, 50)
+    crop = shot.frame(7, region=region)
+    np.testing.assert_array_equal(crop, shot.frame(7)[6:30, 10:50])
+    tile = Sensor(cfg, seed=21, window=region).expose("flat:0.0")
+    np.testing.assert_array_equal(tile.frame(7), crop)
+    detail = shot.frame(3, detail=True)
+    offsets = shot.plan().row_offsets(3)
+    np.testing.assert_allclose(detail.contributions["row_noise"][:, 0], offsets, rtol=1e-6)
+    # white stays what it was: no flicker in its plan
+    white = Sensor(_config({"row_noise": {"enabled": True, "sigma_e": 2.0}}), seed=21).expose("flat:0.0").plan()
+    assert white.row_flicker is None and white.col_flicker is None and white.row_sigma_e == 2.0
+
+
+def _row_series(spectrum: str, frames: int, rows: int = 64, cols: int = 32, corner=None):
+    extra = {"row_noise": {**ROW["row_noise"], "spectrum": spectrum, "corner_hz": corner}}
+    sensor = Sensor(_config(extra, rows, cols), seed=5)
+    stack = np.stack(list(sensor.expose("flat:0.0").frames(frames))).astype(np.float64)
+    return sensor, (stack.mean(axis=2) - 1000.0) / sensor.transfer.gain_dn_per_e  # (frames, rows) e-
+
+
+@pytest.mark.parametrize("spectrum, want, tol", [("one_over_f", -1.0, 0.2), ("white", 0.0, 0.15)])
+def test_row_offsets_in_readout_order_have_the_spectrums_slope(spectrum, want, tol):
+    sensor, rows = _row_series(spectrum, 256)
+    x = rows.ravel()  # readout order: the rows of frame k after those of frame k - 1
+    assert x.var() == pytest.approx(4.0, rel=0.25)  # the rms stays sigma_e (a loose check; the slope is the test)
+    fs = FPS * rows.shape[1]
+    f, p = signal.welch(x, fs=fs, nperseg=2048)
+    band = (f >= 4 * fs / 2048) & (f <= fs / 8)  # inside the corners (0.03 Hz to 960 Hz), clear of DC and Nyquist
+    slope, se = _slope(f, p, band)
+    assert 5 * se < tol  # the test can tell the slope to its tolerance
+    assert abs(slope - want) < tol, (slope, se)
+    if spectrum == "one_over_f":  # the level too: the Welch estimate's median bin against the law's spectrum
+        ratio = np.median(p[band] / (4.0 * one_over_f.psd(sensor.spec.row_flicker, f[band])))
+        assert 0.8 < ratio < 1.25, ratio
+
+
+def test_the_row_offsets_frame_to_frame_correlation_is_what_the_spectrum_implies():
+    sensor, rows = _row_series("one_over_f", 513, rows=32, cols=16, corner=[3.0, 400.0])
+    rho = float(one_over_f.autocorrelation(sensor.spec.row_flicker, 1.0 / FPS))
+    products = (rows[:-1] * rows[1:]).mean(axis=1) / 4.0  # each frame pair's estimate
+    # batch means: 16 batches of 32 pairs are independent to within exp(-2 pi 3 Hz 32 / 30 Hz) = 2e-9
+    batches = products[: 16 * 32].reshape(16, 32).mean(axis=1)
+    se = batches.std(ddof=1) / math.sqrt(batches.size)
+    assert abs(batches.mean() - rho) < 5 * se, (batches.mean(), rho, se)
+    assert 0.05 < rho < 0.5  # a correlation the test can see
+
+
+# ------------------------------------------------------------------ the column amplifiers over frames
+@pytest.mark.parametrize("spectrum, want, tol", [("one_over_f", -1.0, 0.2), ("white", 0.0, 0.15)])
+def test_column_noise_over_frames_has_the_spectrums_slope(spectrum, want, tol):
+    extra = {"column_noise": {**COLUMN["column_noise"],
+                              "temporal": {**COLUMN["column_noise"]["temporal"], "spectrum": spectrum}}}
+    sensor = Sensor(_config(extra, rows=8, cols=64), seed=9)
+    stack = np.stack(list(sensor.expose("flat:0.0").frames(512))).astype(np.float64)
+    cols = (stack.mean(axis=1) - 1000.0) / sensor.transfer.gain_dn_per_e  # (frames, cols) e-
+    cols = cols / cols.std(axis=0)  # each column to unit rms: the average spectrum weighs them alike
+    f, p = signal.welch(cols, fs=1.0, nperseg=256, axis=0)
+    p = p.mean(axis=1)
+    band = (f >= 2 / 256) & (f <= 0.25)  # 2/256 to 1/4 cycles per frame
+    slope, se = _slope(f, p, band)
+    assert 5 * se < tol
+    assert abs(slope - want) < tol, (slope, se)
+
+
+def test_the_gpu_refuses_a_plan_whose_offsets_change_from_frame_to_frame_in_one_line():
+    from cmosnoise.engine.frame import cuda_kernel
+    from cmosnoise.errors import CmosnoiseError
+
+    plan = Sensor(_config(ROW), seed=1).expose("flat:0.0").plan()
+    with pytest.raises(CmosnoiseError, match="one_over_f.*device cpu"):
+        cuda_kernel.DevicePlan(plan)
+
+
+# ------------------------------------------------------------------ bad input
+@pytest.mark.parametrize("args, needles", [
+    (["--set", "row_noise.spectrum=pink"], ["row_noise.spectrum", "pink", "one_over_f"]),
+    (["--set", "row_noise.spectrum=one_over_f", "--set", "row_noise.corner_hz=[10, 1]"],
+     ["row_noise.corner_hz", "0 < low < high"]),
+    (["--set", "row_noise.spectrum=one_over_f", "--set", "row_noise.corner_hz=[0, 1]"],
+     ["row_noise.corner_hz", "0 < low < high"]),
+    (["--set", "row_noise.spectrum=one_over_f", "--set", "row_noise.corner_hz=[5, 5]"],
+     ["row_noise.corner_hz", "0 < low < high"]),
+    (["--set", "sensor.frame_rate_hz=30", "--set", "column_noise.temporal.corner_hz=[1, 40000]"],
+     ["column_noise.temporal.corner_hz", "30000 Hz"]),
+])
+def test_a_bad_spectrum_or_corner_range_is_one_line(tmp_path, args, needles):
+    r = cli("simulate", "--set", "sensor.width=64", "--set", "sensor.height=48", *args, "--out", tmp_path / "o")
+    lines = [x for x in r.stderr.strip().splitlines() if " compil" not in x]
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    for n in needles:
+        assert n in lines[0], lines[0]
+    assert not (tmp_path / "o").exists()
