@@ -42,7 +42,7 @@ from ..errors import CmosnoiseError
 from ..estimators import Z95, robust_centre
 from ..model import physics
 from ..model.spec import resolve
-from . import fit_dark, fit_photo, fit_readout, fit_telegraph, white_pixels
+from . import fit_dark, fit_photo, fit_readout, fit_telegraph, noise_spectrum, white_pixels
 from .fit_readout import centred_series, sigma_from_variance
 
 #: a dark pixel's mean counts for its dark current only below this fraction of the way from black to saturation
@@ -378,13 +378,14 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
 
     # ---------------------------------------------------------------- readout: the longest dark stack
     phase("readout noise")
+    spectra = _spectra(ds)
     if not longs:
         n_max = max((d.n for d in ds.of_kind("dark")), default=0)
         not_fitted["source_follower, row_noise, column_noise (temporal, vfpn)"] = (
             f"needs a dark stack of at least {MIN_READOUT_FRAMES} frames (50 to 100 recommended); the longest has {n_max}")
     else:
         _readout(st, k, black, dark_maps.get(st.temperature_c), slope_var.get(st.temperature_c), P, plots, base, seed,
-                 not_fitted, selection, exclude=rts_pixels, step=step)
+                 not_fitted, selection, exclude=rts_pixels, step=step, spectra=spectra)
 
     # ---------------------------------------------------------------- crosstalk from spots
     phase("crosstalk")
@@ -441,12 +442,65 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
     return {"parameters": P, "not_fitted": not_fitted, "dark": dark_fits, "plots": plots,
             "_crosstalk_off": crosstalk_off, "selection": selection,
             "_nonlinearity": nonlin if nonlin is not None and nonlin["bent"] else None,
-            "_telegraph": telegraph,
+            "_telegraph": telegraph, "spectra": spectra,
             "meta": {"bits": bits - (step.bit_length() - 1), "output_bits": bits, "step_dn": step,
                      "shape": [rows, cols], "cfa": pattern, "temperature_c": t_ref,
                      "temperature_basis": t_basis,
                      "temperatures": temps, "source": ds.source, "input": ds.kind},
             "_maps": dark_maps}
+
+
+def _stack_shares(st, base, spectra: dict) -> dict:
+    """What the stack ``st`` sees of the row noise and the column amplifiers where their spectra are 1/f, at the
+    default corners of the stack's frame rate (the manifest's frame period, else the base's timing), against
+    white noise (:mod:`.noise_spectrum`): ``rows`` (its double-centred row means' variance), ``frame_ratio`` (the
+    frame means' spread over the rows', white ``1 / (H - 1)``), ``row_mean`` (the rows' spread in the stack's
+    mean image), ``columns`` (a column's variance over the frames), ``column_mean`` (a column's mean over the
+    frames); 1 (white's) where the spectrum is white."""
+    from ..model import one_over_f
+    from ..model.stages.random_telegraph import frame_period_s
+
+    rows = st.shape[0]
+    period = st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s)
+    out = {"rows": 1.0, "frame_ratio": 1.0 / (rows - 1), "row_mean": 1.0, "columns": 1.0, "column_mean": 1.0}
+    if spectra.get("rows_in_readout_order", {}).get("verdict") == "one_over_f":
+        spectrum = one_over_f.lorentzians(*one_over_f.row_corners(1.0 / period, rows))
+        out["rows"] = noise_spectrum.seen_share_rows(spectrum, st.n, rows, period / rows)
+        out["frame_ratio"] = noise_spectrum.frame_mean_ratio_rows(spectrum, st.n, rows, period / rows)
+        out["row_mean"] = noise_spectrum.stack_mean_share_rows(spectrum, st.n, rows, period / rows)
+    if spectra.get("columns_over_frames", {}).get("verdict") == "one_over_f":
+        spectrum = one_over_f.lorentzians(*one_over_f.column_corners(1.0 / period))
+        out["columns"] = noise_spectrum.seen_share_frames(spectrum, st.n, period)
+        out["column_mean"] = noise_spectrum.stack_mean_share_frames(spectrum, st.n, period)
+    return out
+
+
+def _column_dof(st, base, part: float, white: float) -> float:
+    """The degrees of freedom of a column's variance over the stack's frames where the column amplifiers' noise is
+    1/f at the default corners (:func:`.noise_spectrum.variance_dof_frames`)."""
+    from ..model import one_over_f
+    from ..model.stages.random_telegraph import frame_period_s
+
+    period = st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s)
+    spectrum = one_over_f.lorentzians(*one_over_f.column_corners(1.0 / period))
+    return noise_spectrum.variance_dof_frames(spectrum, st.n, period, part, white)
+
+
+def _spectra(ds) -> dict:
+    """The longest dark stack's noise in time (:mod:`.noise_spectrum`): the rows in readout order and the columns
+    over frames, each a summary or why it is not given (a stack too short)."""
+    darks = ds.of_kind("dark")
+    if not darks:
+        return {}
+    st = max(darks, key=lambda d: (d.n, -d.exposure_s))
+    out = {}
+    for key, make in (("rows_in_readout_order", lambda: noise_spectrum.rows_in_readout_order(st.row_means)),
+                      ("columns_over_frames", lambda: noise_spectrum.columns_over_frames(st.col_means))):
+        try:
+            out[key] = {**make().summary(), "stack_frames": st.n}
+        except CmosnoiseError as exc:
+            out[key] = {"not_given": str(exc)}
+    return out
 
 
 #: a part of the read noise whose interval reaches this many times the total's upper end is not identifiable
@@ -595,7 +649,8 @@ def _telegraph(st, k: float, P: dict, not_fitted: dict, seed: int, out: dict, pl
 
 
 def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dict, base, seed: int,
-             not_fitted: dict, selection: dict, exclude: np.ndarray | None = None, step: int = 1) -> None:
+             not_fitted: dict, selection: dict, exclude: np.ndarray | None = None, step: int = 1,
+             spectra: dict | None = None) -> None:
     """Source follower, row and column noise, VFPN and fixed row offsets from one long dark stack ``st``; the
     read noise's shape (Tukey-lambda) where the pixels' noise is not normal, and the black level's error per
     frame. What cannot be fitted goes to ``not_fitted``; each stage test's p-value to ``selection``. ``step``:
@@ -680,7 +735,8 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
                     f"but their sigmas spread by {shp['spread']:.0%}: the flicker model holds it; no Tukey-lambda read "
                     "noise")
     e2, e2_se = fit_readout.frame_error_variance(st.row_means, st.col_means,
-                                                 float(np.mean(st.pixel_var)) / fit_readout.own_share(rows, cols))
+                                                 float(np.mean(st.pixel_var)) / fit_readout.own_share(rows, cols),
+                                                 row_ratio=_stack_shares(st, base, spectra or {})["frame_ratio"])
     _select(selection, "black_level.frame_sigma_dn", float(stats.norm.sf(e2 / e2_se)) if e2_se > 0 else 1.0,
             "the frames' means' spread beyond the rows', columns' and pixels' share, against 0 (one-sided z)")
     P["black_level.frame_sigma_dn"] = _p(**sigma_from_variance(e2, e2_se),
@@ -692,10 +748,21 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     dof = (n - 1) * (rows - 1)  # each row's temporal mean and each frame's mean removed
     v_row = float(np.sum(rs * rs)) / dof
     se = v_row * math.sqrt(2 / dof)
-    P["row_noise.sigma_e"] = _p(**sigma_from_variance(v_row - vbar / cols, se),
-                                method=f"variance of the rows' means over {n} frames, less the pixels' share")
+    shares = _stack_shares(st, base, spectra or {})
+    share_r, share_c = shares["rows"], shares["columns"]
+    P["row_noise.sigma_e"] = _p(**sigma_from_variance((v_row - vbar / cols) / share_r, se / share_r),
+                                method=f"variance of the rows' means over {n} frames, less the pixels' share" + (
+                                    f"; over {share_r:.3f}, what the stack sees of a 1/f row noise (its spectrum "
+                                    "in readout order; the default corners)" if share_r != 1 else ""))
     s2_cols = cs.var(axis=0, ddof=1)
-    cfit = fit_readout.fit_column_sigma(s2_cols, vbar / rows, n)
+    dof_frames = n
+    if share_c != 1:  # the columns' own part of the variance, as a 1/f process over frames shows it to the stack,
+        # and the wider spread of a slow process's variance estimate: the likelihood's effective frames
+        s2_cols = vbar / rows + (s2_cols - vbar / rows) / share_c
+        part = max(float(np.median(s2_cols)) - vbar / rows, 0.0)
+        dof_frames = 1 + _column_dof(st, base, part, vbar / rows) * share_c**2 * (
+            (part + vbar / rows) / (part * share_c + vbar / rows)) ** 2
+    cfit = fit_readout.fit_column_sigma(s2_cols, vbar / rows, dof_frames)
     for name in cfit.names:
         v, ci = cfit.interval(name)
         P[f"column_noise.temporal.{name}"] = _p(float(v), ci, f"each column's mean over {n} frames: chi-square "
@@ -707,8 +774,11 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
     for axis, name, series, count in [("col", "column_noise.vfpn_sigma_e", s2_cols, rows),
                                       ("row", "row_noise.fixed_sigma_e", rs.var(axis=0, ddof=1), cols)]:
         cov, se = fit_readout.split_half_covariance(img, keep, axis)
-        # the temporal column (row) noise averaged over the frames is common to both halves too
-        est = cov - (float(np.mean(series)) - vbar / count) / n
+        # the temporal column (row) noise averaged over the frames is common to both halves too (1/f noise
+        # averages less: its slow part stays in the stack's mean)
+        temporal = (float(np.mean(series)) - vbar / count) / n
+        est = cov - (temporal * shares["column_mean"] if axis == "col" else
+                     temporal / share_r * shares["row_mean"])
         what = "column" if axis == "col" else "row"
         P[name] = _p(**sigma_from_variance(est, se), method=f"covariance of each {what}'s mean over two halves of the "
                      f"{n}-frame mean image, less the temporal {what} noise ({int((~keep).sum())} outliers out)")
@@ -793,6 +863,11 @@ def _readout_updates(P: dict, result: dict) -> dict:
     out["column_noise"] = {"enabled": True, "vfpn_sigma_e": v("column_noise.vfpn_sigma_e"),
                          "temporal": {"gumbel_loc_e": v("column_noise.temporal.gumbel_loc_e"),
                                       "gumbel_scale_e": v("column_noise.temporal.gumbel_scale_e")}}
+    # the noise in time: 1/f where the dark stack's spectrum says so (its corners left at their defaults: a stack
+    # resolves the slope over its band, not where the 1/f range ends), else white
+    spectra = result.get("spectra", {})
+    for key, section in (("rows_in_readout_order", out["row_noise"]), ("columns_over_frames", out["column_noise"]["temporal"])):
+        section["spectrum"] = "one_over_f" if spectra.get(key, {}).get("verdict") == "one_over_f" else "white"
     return out
 
 

@@ -570,7 +570,8 @@ def pixel_noise_shape(pixel_var: np.ndarray, pixel_m4: np.ndarray, n: int, known
     return {**shp, "common_dn2": (common, common_se), "spread": spread, "scale_dn": (scale, [lo, hi])}
 
 
-def frame_error_variance(row_means: np.ndarray, col_means: np.ndarray, pixel_var: float) -> tuple[float, float]:
+def frame_error_variance(row_means: np.ndarray, col_means: np.ndarray, pixel_var: float,
+                         row_ratio: float | None = None) -> tuple[float, float]:
     """The variance of the black level's error per frame (DN^2) and its standard error, from a dark stack's row
     means (frames, rows), column means (frames, cols) and mean pixel temporal variance.
 
@@ -579,7 +580,9 @@ def frame_error_variance(row_means: np.ndarray, col_means: np.ndarray, pixel_var
     + p/(rows cols)``. The rows' means about the frame's spread by
     ``(rho^2 + p/cols)(1 - 1/rows)``, the columns' by ``(gamma^2 + p/rows)(1 - 1/cols)``,
     which leaves ``e^2 = var(fm) - vr/(rows - 1) - vc/(cols - 1) + p/(rows cols)``;
-    its standard error is that of a variance over the frames, ``var(fm) sqrt(2/(n - 1))``.
+    its standard error is that of a variance over the frames, ``var(fm) sqrt(2/(n - 1))``. A row noise with
+    a 1/f spectrum in readout order puts more into the frame means than ``vr / (rows - 1)``: ``row_ratio``
+    replaces ``1 / (rows - 1)`` (:func:`.noise_spectrum.frame_mean_ratio_rows`).
     """
     n, rows = row_means.shape
     cols = col_means.shape[1]
@@ -587,4 +590,7 @@ def frame_error_variance(row_means: np.ndarray, col_means: np.ndarray, pixel_var
     vr = float(np.mean((row_means - fm[:, None]).var(axis=0, ddof=1)))
     vc = float(np.mean((col_means - fm[:, None]).var(axis=0, ddof=1)))
     v_fm = float(np.var(fm, ddof=1))
-    return v_fm - vr / (rows - 1) - vc / (cols - 1) + pixel_var / (rows * cols), v_fm * math.sqrt(2 / (n - 1))
+    ratio = 1.0 / (rows - 1) if row_ratio is None else float(row_ratio)
+    pixels_in_rows = pixel_var / cols * (1 - 1 / rows)  # white: its share of the frame means is 1 / (rows - 1)
+    rows_part = (vr - pixels_in_rows) * ratio + pixels_in_rows / (rows - 1)
+    return v_fm - rows_part - vc / (cols - 1) + pixel_var / (rows * cols), v_fm * math.sqrt(2 / (n - 1))

@@ -10,6 +10,7 @@ implementation where it is installed).
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from ..analysis import characterize as ch
 from ..analysis import emva_evaluation as ev
-from ..analysis import emva_files
+from ..analysis import emva_files, noise_spectrum
 from ..analysis.characterize import Measurement
 from ..analysis.emva_reference import reference_results
 from ..errors import CmosnoiseError
@@ -69,7 +70,8 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
         model = ch.model_values(sensor, m.stack_texp_s, series_e=m.mu_p * (sensor.config.sensor.qe_mean() or 1.0),
                                 shortest_texp_s=float(np.min(m.texp_s)))
     results = ev.evaluate(m)
-    notes = ev.footnotes(results) + (spec.notes if spec is not None else [])
+    spectra = noise_spectrum.of_stack(m.stack_dark)
+    notes = ev.footnotes(results) + [spectra_note(spectra)] + (spec.notes if spec is not None else [])
     series = {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
               "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark}
     if m.dark_texp_s is not None:
@@ -79,8 +81,10 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
         series["focal_plane_lux_s"] = light.pop("focal_plane_lux_s")
     with folder as tmp:
         plot_curves(m, results, tmp)
+        plot_spectra(m.stack_dark, tmp / "noise_spectra.png")
         write_json(tmp / "characterization.json", {"measured": results, "model": model, "notes": notes,
-                                                   "series": series, **({"light": light} if light else {})})
+                                                   "series": series, "spectra": spectra,
+                                                   **({"light": light} if light else {})})
     reference = None
     if export_folder is not None:
         with export_folder as tmp:
@@ -89,7 +93,58 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
             reference = reference_results(emva_export / DESCRIPTOR)
         except CmosnoiseError:
             reference = None  # emva1288 not installed: nothing to compare with
-    return {"measured": results, "model": model, "notes": notes, "reference": reference}
+    return {"measured": results, "model": model, "notes": notes, "reference": reference, "spectra": spectra}
+
+
+def spectra_note(spectra: dict) -> str:
+    """One line on the dark stack's noise in time: each spectrum's verdict and slope, or why it is not given."""
+    parts, missing = [], []
+    for key, d in spectra.items():
+        name = key.replace("_", " ")
+        if "not_given" in d:
+            missing.append(name)
+        else:
+            lo, hi = d["interval"]
+            parts.append(f"{name} {d['verdict'].replace('_', ' ')} (slope {d['slope']:.2f}, 95 % {lo:.2f} to {hi:.2f})")
+    line = "noise in time, from the dark stack: " + ("; ".join(parts) if parts else "no spectrum")
+    if missing:
+        line += (f"; {', '.join(missing)} need at least {noise_spectrum.MIN_FRAMES} frames "
+                 f"(--stack-frames {noise_spectrum.MIN_FRAMES})")
+    return line
+
+
+def plot_spectra(stack: np.ndarray, path: Path) -> Path | None:
+    """The dark stack's Welch spectra (those it resolves) on log axes, each with its fitted slope over its band;
+    None when it resolves none."""
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
+
+    made = []
+    for make in (noise_spectrum.over_frames, lambda a: noise_spectrum.over_frames(a, columns=True),
+                 noise_spectrum.readout_order):
+        with contextlib.suppress(CmosnoiseError):  # a spectrum the stack cannot resolve is not drawn
+            made.append(make(stack))
+    if not made:
+        return None
+    fig = Figure(figsize=(4.2 * len(made), 3.8), dpi=100)
+    for i, e in enumerate(made):
+        ax = fig.add_subplot(1, len(made), i + 1)
+        ok = e.f > 0
+        ax.loglog(e.f[ok], e.psd[ok], ".-", ms=3, lw=0.8, label="Welch estimate")
+        inside = (e.f >= e.band[0]) & (e.f <= e.band[1])
+        ref = np.exp(np.mean(np.log(e.psd[inside]) - e.slope * np.log(e.f[inside])))
+        ax.loglog(e.f[inside], ref * e.f[inside] ** e.slope, "-", lw=2,
+                  label=f"slope {e.slope:.2f} +- {1.96 * e.slope_se:.2f}: {e.verdict.replace('_', ' ')}")
+        ax.set_xlabel(f"frequency [{e.unit}]")
+        ax.set_ylabel(f"power [DN^2 per {e.unit.split()[-1]}]")
+        ax.set_title(e.series, fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.yaxis.set_minor_formatter(NullFormatter())
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    return path
 
 
 def _light_axis(spec, m: Measurement) -> dict | None:

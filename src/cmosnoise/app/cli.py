@@ -412,7 +412,8 @@ def characterize(
                        if key in reference and not math.isfinite(reference[key])]
             if missing:
                 typer.echo(f"  emva1288 gave no value (nan) for: {', '.join(missing)}")
-    _say(ctx, f"wrote characterization.json, photon_transfer.png, snr.png to {out}/"
+    spectra = ", noise_spectra.png" if (Path(out) / "noise_spectra.png").exists() else ""
+    _say(ctx, f"wrote characterization.json, photon_transfer.png, snr.png{spectra} to {out}/"
                + (f"; EMVA 1288 data set to {emva_export}/" if emva_export else ""))
 
 

@@ -225,6 +225,7 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
                          for T, r in result["dark"].items()},
         "round_trip": trip, "emva_round_trip": emva, "settings": per_setting,
         "selection": result.get("selection", {}),
+        "spectra": result.get("spectra", {}),
     }
     if truth_cfg is not None:
         doc["truth"] = {"source": str(truth), "rows": compare_with_truth(result["parameters"], truth_cfg,

@@ -144,6 +144,17 @@ def cds_variance(spectrum: Spectrum, dt_s) -> np.ndarray:
     return 2.0 * (1.0 - autocorrelation(spectrum, dt_s))
 
 
+def row_corners(frame_rate_hz: float, rows: int) -> tuple[float, float]:
+    """The row noise's default 1/f range, Hz: a thousandth of the frame rate to the lesser of half the row rate
+    (``rows x frame rate``) and a thousand times the frame rate."""
+    return frame_rate_hz / 1000.0, min(0.5 * frame_rate_hz * rows, 1000.0 * frame_rate_hz)
+
+
+def column_corners(frame_rate_hz: float) -> tuple[float, float]:
+    """The column amplifiers' default 1/f range, Hz: a thousandth of the frame rate to half of it."""
+    return frame_rate_hz / 1000.0, 0.5 * frame_rate_hz
+
+
 def corners(key: str, given, default: tuple[float, float], frame_rate_hz: float) -> tuple[float, float]:
     """A stage's 1/f range, Hz: ``given`` (a ``corner_hz`` pair) checked against the frame rate, or ``default``.
 

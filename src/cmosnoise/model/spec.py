@@ -149,7 +149,7 @@ class SensorSpec:
         if not rn.enabled or rn.spectrum == "white":
             return None
         rate = 1.0 / self.frame_period_s
-        default = (rate / 1000.0, min(0.5 * rate * self.config.sensor.height, 1000.0 * rate))
+        default = one_over_f.row_corners(rate, self.config.sensor.height)
         return one_over_f.lorentzians(*one_over_f.corners("row_noise.corner_hz", rn.corner_hz, default, rate))
 
     @property
@@ -162,7 +162,7 @@ class SensorSpec:
             return None
         rate = 1.0 / self.frame_period_s
         return one_over_f.lorentzians(*one_over_f.corners("column_noise.temporal.corner_hz", cn.temporal.corner_hz,
-                                                (rate / 1000.0, 0.5 * rate), rate))
+                                                          one_over_f.column_corners(rate), rate))
 
     @property
     def focal_plane(self) -> FocalPlane:
