@@ -62,6 +62,7 @@ SOURCE_NAMES = {
     "flicker": "source follower, flicker (1/f)",
     "row": "row noise",
     "column": "column noise",
+    "column_alternating": "even/odd column banks",
     "rts_traps": "random telegraph traps",
     "rts_blinking": "blinking (dark-current RTS) pixels",
     "quantization": "quantization",
@@ -183,6 +184,9 @@ def temporal_variances(sensor: Sensor, signal_e: float = 0.0) -> dict[str, float
         out["rts_blinking"] = (float(var.sum()) + shot) / n * g2 * slope2
     if fp.column_sigma is not None:
         out["column"] = map_moment(sensor, "column_sigma", "mean_square")
+    alt = c.column_noise.alternating
+    if c.column_noise.enabled and alt.enabled and alt.temporal_sigma_e > 0:
+        out["column_alternating"] = alt.temporal_sigma_e**2
     if c.adc.enabled:  # the ideal readout (ADC off) is not quantized
         out.update(after_gain_variances(sensor))
         out["quantization"] = t.quantization_var_dn2 / t.gain_dn_per_e**2
@@ -430,6 +434,9 @@ def readout_terms(sensor: Sensor, signal_e: float = 0.0, photo_e: np.ndarray | N
     if "traps" in rts:
         read = read + rts["traps"][1]
     col_read = fp.column_sigma.astype(np.float64) ** 2 if fp.column_sigma is not None else 0.0  # after it
+    alt = c.column_noise.alternating
+    if c.column_noise.enabled and alt.enabled:  # the even and odd banks' offsets per frame: the amplifiers'
+        col_read = col_read + alt.temporal_sigma_e**2
     row_off = fp.row_offset.astype(np.float64) if fp.row_offset is not None else 0.0
     col_off = fp.vfpn.astype(np.float64) if fp.vfpn is not None else 0.0
     if exposure is not None:  # the fixed row and column offsets with the offset lines

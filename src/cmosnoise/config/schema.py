@@ -576,6 +576,18 @@ def _default_dark_points():
     ]
 
 
+class DarkGlowSection(Section):
+    """Amplifier glow (stage 4c): a dark-current rate rising from a corner or an edge."""
+
+    enabled: bool = False
+    rate_e_per_s: float = Field(0.0, ge=0, le=1e7, description="the glow's rate at its source, e-/s per pixel")
+    source: Literal["top_left", "top_right", "bottom_left", "bottom_right", "top", "bottom", "left", "right"] = Field(
+        "top_right", description="where the amplifiers sit: a corner (the glow falls with the distance from its "
+                                 "point) or an edge (with the distance from its line)")
+    length_px: float = Field(100.0, gt=0, le=1e6, description="the distance over which the glow falls by a factor "
+                                                               "e, pixels")
+
+
 class DarkCurrentSection(Section):
     """Dark current (stage 4, docs/model.md sections 3 and 4)."""
 
@@ -586,6 +598,7 @@ class DarkCurrentSection(Section):
     points: list[DarkPoint] = Field(default_factory=lambda: [DarkPoint(**p) for p in _default_dark_points()], min_length=1,
                                     description="characterization points (one or more temperatures)")
     rts: DarkCurrentRtsSection = Field(default_factory=DarkCurrentRtsSection)
+    glow: DarkGlowSection = Field(default_factory=DarkGlowSection)
     white_threshold_e_per_s: float | None = Field(
         None, ge=0, le=1e9, description="count white pixels above this rate, e-/s per pixel, at every temperature "
         "(null: the nearest characterization point's tail threshold)")
@@ -691,9 +704,23 @@ class ColumnTemporalSection(Section):
         return self
 
 
+class ColumnAlternatingSection(Section):
+    """Two-phase column amplifiers (even and odd columns read by two banks): each bank's offset."""
+
+    enabled: bool = False
+    fixed_sigma_e: float = Field(0.0, ge=0, le=10000, description="each bank's fixed offset, e- rms: one "
+                                                                  "Normal(0, sigma) for the even columns and one for "
+                                                                  "the odd, drawn once (their difference's rms is "
+                                                                  "sqrt(2) sigma)")
+    temporal_sigma_e: float = Field(0.0, ge=0, le=10000, description="each bank's offset per frame, e- rms: one "
+                                                                     "Normal(0, sigma) for the even columns and one "
+                                                                     "for the odd, every frame")
+
+
 class ColumnNoiseSection(Section):
     enabled: bool = True
     temporal: ColumnTemporalSection = Field(default_factory=ColumnTemporalSection)
+    alternating: ColumnAlternatingSection = Field(default_factory=ColumnAlternatingSection)
     vfpn_sigma_e: float = Field(0.8, ge=0, le=10000, description="vertical fixed pattern noise: column offsets, e- rms")
     gain_sigma_pct: float = Field(0.0, ge=0, le=50, description="column gain mismatch, % rms")
 

@@ -48,6 +48,7 @@ from . import physics
 from .seeds import fixed_key
 from .spec import SensorSpec
 from .stages import (
+    amplifier_glow,
     column_noise,
     dark_current,
     defects,
@@ -135,7 +136,7 @@ def dependencies(spec: SensorSpec) -> dict[str, object]:
     return {
         "prnu_gain": (c.prnu.enabled, c.prnu.sigma_pct),
         "dark_rate": (c.dark_current.enabled, c.dark_current.doubling_c, c.dark_current.tail_doubling_c,
-                      spec.dark_points, c.sensor.temperature_c),
+                      spec.dark_points, c.sensor.temperature_c, c.dark_current.glow),
         "flicker_sigma": (sf.enabled, sf.flicker),
         "row_offset": (rn.enabled, rn.fixed_sigma_e),
         "column": c.column_noise,
@@ -319,7 +320,11 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
         maps["dark_state"] = state
 
         def dark():
-            return dark_current.rate_map(state, region, cols, fixed_key(seed, "dark_current"), engine)
+            rates = dark_current.rate_map(state, region, cols, fixed_key(seed, "dark_current"), engine)
+            if d.glow.enabled and d.glow.rate_e_per_s > 0:  # stage 4c: the amplifiers' glow on top
+                rates = rates + amplifier_glow.glow_map(region, shape, d.glow.rate_e_per_s, d.glow.source,
+                                                        d.glow.length_px)
+            return rates
 
         maps["dark_rate"] = held("dark_rate", dark)
     sf = c.source_follower
@@ -357,6 +362,10 @@ def _column_maps(c, col0: int, col1: int) -> tuple:
                                                 fixed_key(seed, "column_noise", 0))
     if cn.vfpn_sigma_e > 0:
         vfpn = column_noise.vfpn_offsets(col0, col1, cn.vfpn_sigma_e, fixed_key(seed, "column_noise", 1))
+    alt = cn.alternating
+    if alt.enabled and alt.fixed_sigma_e > 0:  # the two banks' offsets join the columns' own
+        banks = column_noise.alternating_offsets(col0, col1, alt.fixed_sigma_e, fixed_key(seed, "column_noise", 3))
+        vfpn = banks if vfpn is None else vfpn + banks
     if cn.gain_sigma_pct > 0:
         gain = column_noise.gain_map(col0, col1, cn.gain_sigma_pct, fixed_key(seed, "column_noise", 2))
     return sigma, vfpn, gain

@@ -630,9 +630,9 @@ class Exposure:
         return self._plan
 
     def _flicker(self, row_sigma: float, col_sigma: np.ndarray):
-        """(row noise's 1/f offsets or None, each column's 1/f noise or None, the column sigma the kernels draw
-        white noise with: zero where the columns' noise is 1/f) of ``row_noise.spectrum`` and
-        ``column_noise.temporal.spectrum``. The 1/f processes are addressed by the sensor's rows and columns, so
+        """(row noise's 1/f offsets or None, the columns' offsets that change from frame to frame or None, the
+        column sigma the kernels draw white noise with: zero where the columns' noise is 1/f) of
+        ``row_noise.spectrum``, ``column_noise.temporal.spectrum`` and ``column_noise.alternating``. The 1/f processes are addressed by the sensor's rows and columns, so
         a window's are the frame's."""
         s = self.sensor
         c = s.config
@@ -642,10 +642,17 @@ class Exposure:
         if s.spec.row_flicker is not None and row_sigma > 0:
             row_flicker = row_noise.Flicker(float(row_sigma), s.spec.row_flicker, int(s.shape[0]),
                                             period / s.shape[0], stream_key(c.seed, "row_noise_flicker"), r0, r1 - r0)
+        parts = []
         if s.spec.column_flicker is not None:
-            col_flicker = column_noise.Flicker(col_sigma, s.spec.column_flicker, period,
-                                               stream_key(c.seed, "column_noise_flicker"), c0, c1 - c0)
+            parts.append(column_noise.Flicker(col_sigma, s.spec.column_flicker, period,
+                                              stream_key(c.seed, "column_noise_flicker"), c0, c1 - c0))
             col_sigma = np.zeros_like(col_sigma)
+        alt = c.column_noise.alternating
+        if c.column_noise.enabled and alt.enabled and alt.temporal_sigma_e > 0:
+            parts.append(column_noise.Alternating(float(alt.temporal_sigma_e),
+                                                  stream_key(c.seed, "column_noise_alternating"), c0, c1 - c0))
+        if parts:
+            col_flicker = parts[0] if len(parts) == 1 else column_noise.Summed(tuple(parts))
         return row_flicker, col_flicker, col_sigma
 
     def readout_lines(self) -> tuple[bool, float, np.ndarray, bool, np.ndarray]:

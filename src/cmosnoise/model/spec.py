@@ -282,6 +282,8 @@ def dark_read_variances(config: Config) -> dict[str, float]:
     if cn.enabled and cn.temporal.enabled:
         col = gumbel(cn.temporal.gumbel_loc_e, cn.temporal.gumbel_scale_e)
         out["column"] = _mean_square(col.sf, abs(cn.temporal.gumbel_loc_e) + 60 * cn.temporal.gumbel_scale_e)
+    if cn.enabled and cn.alternating.enabled and cn.alternating.temporal_sigma_e > 0:
+        out["column_alternating"] = cn.alternating.temporal_sigma_e**2
     if config.adc.enabled:
         t = transfer(config)
         k2 = t.gain_dn_per_e**2

@@ -61,8 +61,9 @@ class FramePlan:
     #: the 1/f row offsets (row_noise.spectrum = one_over_f): ``row_flicker(frame, sequence)`` gives the window's
     #: rows' offsets of a frame, (rows,) float64 e-, added to ``row_offset_e`` (``row_sigma_e`` is then 0)
     row_flicker: object | None = None
-    #: each column amplifier's 1/f noise: ``col_flicker(frame, sequence)``, (cols,) float64 e-, added to
-    #: ``col_offset_e`` (``col_sigma_e`` is then 0)
+    #: the columns' offsets that change from frame to frame (each amplifier's 1/f noise, the even and odd banks'
+    #: offsets): ``col_flicker(frame, sequence)``, (cols,) float64 e-, added to ``col_offset_e`` (with 1/f noise
+    #: ``col_sigma_e`` is 0)
     col_flicker: object | None = None
     #: (K output DN/e-, black level output DN, the ADC's top code, output DN per ADC code); None: float32 e-
     adc: tuple[float, float, int, int] | None = None

@@ -9,6 +9,12 @@
   offset per column, fixed.
 - Optional column gain mismatch ``Normal(1, gain_sigma_pct / 100)``, fixed,
   scaling the signal that passes through the column amplifier.
+- Two-phase column amplifiers (``alternating``): the even and the odd
+  columns are read by two banks, each with its own offset, fixed
+  (``Normal(0, fixed_sigma_e)`` per bank, once) and per frame
+  (``Normal(0, temporal_sigma_e)`` per bank, every frame): the even/odd
+  column pattern a dark frame shows (:func:`alternating_offsets`,
+  :class:`Alternating`).
 
 Examples
 --------
@@ -185,3 +191,95 @@ class Flicker:
                                 int(frame) + 1, self.key, int(sequence),
                                 lanes=np.arange(self.first, self.first + self.count))
         return self.sigma_e * x[:, 0]
+
+
+def alternating_offsets(col0: int, col1: int, sigma_e: float, key: tuple[int, int]) -> np.ndarray:
+    """The two banks' fixed offsets on columns ``col0`` to ``col1``: the even columns get bank 0's, the odd bank 1's.
+
+    Parameters
+    ----------
+    col0, col1 : int
+        The columns, ``col0 <= c < col1``.
+    sigma_e : float
+        Each bank's offset's standard deviation, e-.
+    key : (int, int)
+        The map's fixed key (``column_noise``, part 3): bank ``b``'s value is line ``b`` of it.
+
+    Returns
+    -------
+    (1, col1 - col0) float32 array, e-
+        Each column's bank offset.
+    """
+    banks = sigma_e * fixed_maps.lines(0, 2, key)
+    return banks[np.arange(col0, col1) % 2].astype(np.float32)[None, :]
+
+
+@dataclass(frozen=True)
+class Alternating:
+    """The two banks' offsets per frame (``column_noise.alternating.temporal_sigma_e``): a call gives a frame's.
+
+    Parameters
+    ----------
+    sigma_e : float
+        Each bank's offset's standard deviation per frame, e-.
+    key : (int, int)
+        The stream's key words (``column_noise_alternating``): bank ``b``'s normal is index ``b`` of the frame.
+    first, count : int
+        The columns a call makes, ``first <= c < first + count``.
+    """
+
+    sigma_e: float
+    key: tuple[int, int]
+    first: int
+    count: int
+
+    def __call__(self, frame: int, sequence: int) -> np.ndarray:
+        """Frame ``frame``'s bank offset of each column, (count,) float64 e-.
+
+        Parameters
+        ----------
+        frame : int
+            The frame's number.
+        sequence : int
+            The frame series.
+
+        Returns
+        -------
+        (count,) float64, e-
+            Bank ``c mod 2``'s offset in the frame.
+        """
+        banks = self.sigma_e * Stream(self.key, int(frame), int(sequence)).normal(np.arange(2))
+        return banks[np.arange(self.first, self.first + self.count) % 2]
+
+
+@dataclass(frozen=True)
+class Summed:
+    """Several per-frame column offsets (each a call of ``(frame, sequence)`` giving (count,) e-) added in order.
+
+    Parameters
+    ----------
+    parts : tuple of callables
+        The parts, each like :class:`Flicker` or :class:`Alternating`.
+    """
+
+    parts: tuple
+
+    def __call__(self, frame: int, sequence: int) -> np.ndarray:
+        """The parts' sum in frame ``frame``, (count,) float64 e-.
+
+        Parameters
+        ----------
+        frame : int
+            The frame's number.
+        sequence : int
+            The frame series.
+
+        Returns
+        -------
+        (count,) float64, e-
+            The sum, the first part first.
+        """
+        total = self.parts[0](frame, sequence)
+        for part in self.parts[1:]:
+            total = total + part(frame, sequence)
+        return total
