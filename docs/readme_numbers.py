@@ -11,6 +11,7 @@ page under docs/). Data live in ``docs/numbers/NAME.json``.
     python docs/readme_numbers.py images               # the pages' pictures, into docs/img
     python docs/readme_numbers.py images light         # the light page's pictures alone
     python docs/readme_numbers.py images explore_quality  # the explorer's image-quality box alone
+    python docs/readme_numbers.py images noise_in_time    # the measured-sensors page's noise in time
 
 ``speed`` and ``kernel_parts`` (and ``speed_avx2``, ``kernel_parts_avx2``), ``explore``, ``sweep_speed``, ``fit_speed`` and
 ``fit_coverage`` are measured by the scripts in ``benchmarks/`` (``BENCHMARKS``; machine-dependent or minutes
@@ -925,7 +926,130 @@ def render_quality_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
+# ---------------------------------------------------------------- noise in time (#76)
+NOISE_IN_TIME_QUIET = ["prnu.enabled=false", "crosstalk.enabled=false", "shot_noise.enabled=false",
+                       "dark_current.enabled=false", "row_noise.enabled=false", "column_noise.enabled=false",
+                       "read_noise.enabled=false", "pixel_offset.enabled=false", "nonlinearity.enabled=false",
+                       "defects.enabled=false", "source_follower.thermal_sigma_e=3", "source_follower.flicker.enabled=false",
+                       "adc.bits=16", "adc.gain_dn_per_e=4", "adc.black_level_dn=1000", "sensor.frame_rate_hz=30",
+                       "exposure.integration_time_s=0.02", "sensor.width=64", "sensor.height=64"]
+
+
+def _time_stack(sets: list[str], frames: int, seed: int = 5):
+    import numpy as np
+
+    from cmosnoise import Sensor, load_config
+
+    sensor = Sensor(load_config(overrides=[*NOISE_IN_TIME_QUIET, *sets]), seed=seed)
+    stack = np.stack(list(sensor.expose("flat:0.0").frames(frames))).astype(np.float64)
+    return sensor, (stack - 1000.0) / sensor.transfer.gain_dn_per_e
+
+
+ROW_1F = ["row_noise.enabled=true", "row_noise.sigma_e=2", "row_noise.spectrum=one_over_f"]
+COL_1F = ["column_noise.enabled=true", "column_noise.vfpn_sigma_e=0", "column_noise.temporal.gumbel_loc_e=2",
+          "column_noise.temporal.gumbel_scale_e=0.3", "column_noise.temporal.spectrum=one_over_f"]
+
+
+def compute_noise_in_time() -> dict:
+    """Row noise in readout order and column noise over frames, white and 1/f: the dark stack's spectra as
+    `cmosnoise characterize` reads them, and the rows' frame-to-frame correlation against the law's."""
+    import numpy as np
+
+    from cmosnoise.analysis import noise_spectrum as ns
+    from cmosnoise.model import one_over_f
+
+    out: dict = {"frames": 256, "size": "64 x 64", "settings": NOISE_IN_TIME_QUIET}
+    for name, sets in (("rows_white", ROW_1F[:2]), ("rows_one_over_f", ROW_1F), ("columns_white", COL_1F[:4]),
+                       ("columns_one_over_f", COL_1F)):
+        _, stack = _time_stack(sets, 256)
+        e = ns.readout_order(stack) if name.startswith("rows") else ns.over_frames(stack, columns=True)
+        out[name] = {"slope": round(e.slope, 4), "se": round(e.slope_se, 4), "verdict": e.verdict,
+                     "band": [round(b, 5) for b in e.band], "unit": e.unit}
+    sensor, stack = _time_stack([*ROW_1F, "row_noise.corner_hz=[3, 400]"], 513)
+    rows = stack.mean(axis=2)
+    products = (rows[:-1] * rows[1:]).mean(axis=1) / 4.0
+    batches = products[:512].reshape(16, 32).mean(axis=1)
+    out["row_lag1"] = {"corner_hz": [3, 400], "measured": round(float(batches.mean()), 4),
+                       "se": round(float(batches.std(ddof=1) / np.sqrt(16)), 4),
+                       "law": round(float(one_over_f.autocorrelation(sensor.spec.row_flicker, 1 / 30.0)), 4)}
+    return out
+
+
+def render_noise_in_time(d: dict) -> str:
+    def row(label, e):
+        return (f"| {label} | {e['slope']:.2f} +- {1.96 * e['se']:.2f} | {e['verdict'].replace('_', ' ')} | "
+                f"{e['band'][0]:g} to {e['band'][1]:g} {e['unit']} |")
+
+    lag = d["row_lag1"]
+    return "\n".join([
+        f"Measured on {d['frames']} dark frames of {d['size']} pixels at 30 frames/s (3 e- of white pixel noise "
+        "under the pattern; `python docs/readme_numbers.py compute noise_in_time`), as `characterize` reads them:",
+        "", "| series | slope (95 %) | verdict | band |", "|---|---|---|---|",
+        row("row noise, white, in readout order", d["rows_white"]),
+        row("row noise, one_over_f, in readout order", d["rows_one_over_f"]),
+        row("column noise, white, over frames", d["columns_white"]),
+        row("column noise, one_over_f, over frames", d["columns_one_over_f"]), "",
+        f"With `row_noise.corner_hz: [{lag['corner_hz'][0]}, {lag['corner_hz'][1]}]` a row's offset correlates "
+        f"with the same row's in the next frame by {lag['measured']:.3f} +- {lag['se']:.3f} (513 frames, batch "
+        f"means); the law's `rho(1 / 30 s)` is {lag['law']:.3f}."])
+
+
+def noise_in_time_picture(path: Path) -> None:
+    """The measured-sensors page's picture: a dark stack's row offsets in readout order, white and 1/f, their
+    spectra against the law's, and a long dark frame with amplifier glow and two column banks."""
+    import numpy as np
+
+    from cmosnoise import Sensor, load_config
+    from cmosnoise.analysis import noise_spectrum as ns
+    from cmosnoise.app import plots
+    from cmosnoise.model import one_over_f
+
+    fig, axes = plots.figure(1, 3, figsize=(14, 3.8))
+    series, stacks = {}, {}
+    for label, sets in (("white", ROW_1F[:2]), ("one_over_f", ROW_1F)):
+        sensor, stack = _time_stack(sets, 256)
+        series[label] = (sensor, stack.mean(axis=2).ravel())
+        stacks[label] = (sensor, stack)
+    for label, (_, x) in series.items():
+        axes[0].plot(np.arange(4 * 64), x[:4 * 64], lw=0.9, label=f"row_noise.spectrum: {label}")
+    for k in range(1, 4):
+        axes[0].axvline(64 * k, color="grey", lw=0.5, ls=":")
+    axes[0].set_xlabel("row in readout order (four frames of 64 rows)")
+    axes[0].set_ylabel("row mean [e-]")
+    axes[0].set_title("row noise in readout order (2 e- rms)", fontsize=10)
+    axes[0].legend(fontsize=8)
+    fs = 30.0 * 64
+    for label, (_, stack) in stacks.items():
+        e = ns.readout_order(stack)  # as characterize reads it: each row's and each frame's mean taken away
+        keep = e.f >= e.band[0]
+        axes[1].loglog(e.f[keep] * fs, e.psd[keep] / fs, lw=0.8,
+                       label=f"{label}: Welch, slope {e.slope:.2f}")
+    law = series["one_over_f"][0].spec.row_flicker
+    f = np.logspace(np.log10(fs / 32), np.log10(fs / 2), 200)
+    axes[1].loglog(f, 4.0 * one_over_f.psd(law, f), "k--", lw=1.2, label="the law: 4 e-^2 S(f)")
+    axes[1].set_xlabel("frequency [Hz] (rows read at 1920 Hz)")
+    axes[1].set_ylabel("power [e-^2 / Hz]")
+    axes[1].set_title("their spectra (256 frames)", fontsize=10)
+    axes[1].legend(fontsize=8)
+    dark = Sensor(load_config(overrides=[*NOISE_IN_TIME_QUIET[:-2], "sensor.width=160", "sensor.height=96",
+                                         "dark_current.enabled=true", "dark_current.glow.enabled=true",
+                                         "dark_current.glow.rate_e_per_s=400", "dark_current.glow.length_px=25",
+                                         "column_noise.enabled=true", "column_noise.vfpn_sigma_e=0",
+                                         "column_noise.temporal.enabled=false", "column_noise.alternating.enabled=true",
+                                         "column_noise.alternating.fixed_sigma_e=10", "exposure.integration_time_s=1"]),
+                  seed=2)
+    frame = (dark.expose("flat:0.0").frame(0).astype(np.float64) - 1000.0) / 4.0
+    im = axes[2].imshow(frame, cmap="gray", vmin=np.percentile(frame, 1), vmax=np.percentile(frame, 75),
+                        interpolation="nearest")
+    fig.colorbar(im, ax=axes[2], fraction=0.03, label="e- (to the 75th percentile)")
+    axes[2].set_title("1 s dark: glow (top right), two column banks", fontsize=10)
+    axes[2].set_xticks([])
+    axes[2].set_yticks([])
+    path.write_bytes(plots.to_png_bytes(fig, dpi=90))
+
+
 SECTIONS = {
+    "noise_in_time": (compute_noise_in_time, render_noise_in_time),
     "quality_hot": (compute_quality_hot, render_quality_hot),
     "quality_speed": (None, render_quality_speed),
     "characterize": (compute_characterize, render_characterize),
@@ -1060,6 +1184,7 @@ def images() -> None:
     light_pictures(out)
     aliasing_picture(out / "zoneplate_aliasing.png")
     explore_quality_picture(out / "explore_quality.png")
+    noise_in_time_picture(out / "noise_in_time.png")
 
 
 def explore_quality_picture(path: Path) -> None:
@@ -1126,6 +1251,8 @@ def main(argv: list[str]) -> int:
             aliasing_picture(ROOT / "docs" / "img" / "zoneplate_aliasing.png")
         elif names == ["explore_quality"]:  # the explorer's image-quality box alone
             explore_quality_picture(ROOT / "docs" / "img" / "explore_quality.png")
+        elif names == ["noise_in_time"]:  # the measured-sensors page's noise in time
+            noise_in_time_picture(ROOT / "docs" / "img" / "noise_in_time.png")
         else:
             images()
         return 0
