@@ -197,6 +197,66 @@ def test_the_gpu_refuses_a_plan_whose_offsets_change_from_frame_to_frame_in_one_
         cuda_kernel.DevicePlan(plan)
 
 
+# ------------------------------------------------------------------ a pixel's flicker in time
+def _pixel(spectrum="one_over_f", cds=True, tau=1e-5, corner=None) -> dict:
+    return {"source_follower": {"enabled": True, "thermal_sigma_e": 0.0,
+                                "flicker": {"enabled": True, "gumbel_loc_e": 3.0, "gumbel_scale_e": 0.3, "tail": None,
+                                            "spectrum": spectrum, "corner_hz": corner},
+                                "rts": {"cds": cds, "cds_interval_s": tau}}}
+
+
+def test_through_cds_a_pixels_one_over_f_flicker_grows_with_the_interval_as_its_integral():
+    frames = 64
+    base = Sensor(_config(_pixel(), 32, 32), seed=2)
+    sigma2 = base.fixed_pattern.flicker_sigma.astype(np.float64) ** 2  # at the reference interval, 1e-5 s
+    spectrum = base.spec.pixel_flicker
+    for tau in (1e-6, 1e-5, 1e-4, 1e-3):  # three decades of CDS interval
+        sensor = Sensor(_config(_pixel(tau=tau), 32, 32), seed=2)
+        stack = (np.stack(list(sensor.expose("flat:0.0").frames(frames))).astype(np.float64) - 1000.0) / 4.0
+        ratio = stack.var(axis=0, ddof=1) / sigma2  # each pixel's, against its sigma at the reference interval
+        # the law: D(tau) / D(tau_ref), D the CDS transfer's integral of the 1/f spectrum (tested above against
+        # quad); each pixel's ratio spreads as a chi-square over 63 degrees of freedom: the mean's standard error
+        # from their spread over the 1024 pixels
+        want = float(one_over_f.cds_variance(spectrum, tau) / one_over_f.cds_variance(spectrum, 1e-5))
+        se = ratio.std(ddof=1) / math.sqrt(ratio.size)
+        assert abs(ratio.mean() - want) < 5 * se, (tau, ratio.mean(), want, se)
+    assert want > 4 and float(one_over_f.cds_variance(spectrum, 1e-6) / one_over_f.cds_variance(spectrum, 1e-5)) < 0.2
+    white = Sensor(_config(_pixel("white"), 32, 32), seed=2).expose("flat:0.0")
+    np.testing.assert_array_equal(white.frame(5), base.expose("flat:0.0").frame(5))  # at tau_ref: white's bits
+
+
+@pytest.mark.parametrize("spectrum, want, tol", [("one_over_f", -1.0, 0.2), ("white", 0.0, 0.15)])
+def test_without_cds_a_pixels_flicker_over_frames_has_the_spectrums_slope(spectrum, want, tol):
+    from cmosnoise.analysis import noise_spectrum as ns
+
+    # the corners inside what 30 frames/s resolve (0.03 to 15 Hz): above it the level aliases into white
+    sensor = Sensor(_config(_pixel(spectrum, cds=False, corner=[0.03, 15.0]), 16, 16), seed=2)
+    stack = np.stack(list(sensor.expose("flat:0.0").frames(512))).astype(np.float64)
+    e = ns.over_frames(stack)  # 2/256 to 1/4 cycles per frame, averaged over the pixels
+    assert 5 * e.slope_se < tol
+    assert abs(e.slope - want) < tol, (e.slope, e.slope_se)
+    # the level's variance is the map's: sigma_i^2 (a 1/f process seen over 512 frames, less its slow part)
+    seen = ((stack - 1000.0) / 4.0).var(axis=0, ddof=1) / sensor.fixed_pattern.flicker_sigma.astype(np.float64) ** 2
+    share = ns.seen_share_frames(sensor.spec.pixel_flicker, 512, 1 / FPS) if spectrum == "one_over_f" else 1.0
+    assert seen.mean() == pytest.approx(share, rel=0.15)
+
+
+def test_a_pixels_flicker_level_is_the_same_bits_in_every_copy_of_the_chain():
+    cfg = _config(_pixel(cds=False), 24, 32)
+    shot = Sensor(cfg, seed=21).expose("flat:0.0")
+    for k in (0, 1, 1000, 10**6):
+        np.testing.assert_array_equal(shot.frame(k), shot.frame(k, detail=True).raw, err_msg=f"frame {k}")
+    run = list(shot.frames(3))
+    for k in range(3):
+        np.testing.assert_array_equal(run[k], shot.frame(k))
+    region = (4, 20, 6, 30)
+    tile = Sensor(cfg, seed=21, window=region).expose("flat:0.0")
+    np.testing.assert_array_equal(tile.frame(8), shot.frame(8)[4:20, 6:30])
+    np.testing.assert_array_equal(shot.frame(8, region=region), shot.frame(8)[4:20, 6:30])
+    d = shot.frame(2, detail=True)
+    np.testing.assert_allclose(d.contributions["source_follower"], d.electrons, atol=1e-4)  # the only stage on
+
+
 # ------------------------------------------------------------------ bad input
 @pytest.mark.parametrize("args, needles", [
     (["--set", "row_noise.spectrum=pink"], ["row_noise.spectrum", "pink", "one_over_f"]),
@@ -208,6 +268,9 @@ def test_the_gpu_refuses_a_plan_whose_offsets_change_from_frame_to_frame_in_one_
      ["row_noise.corner_hz", "0 < low < high"]),
     (["--set", "sensor.frame_rate_hz=30", "--set", "column_noise.temporal.corner_hz=[1, 40000]"],
      ["column_noise.temporal.corner_hz", "30000 Hz"]),
+    (["--set", "sensor.frame_rate_hz=30", "--set", "source_follower.flicker.corner_hz=[1, 1e6]"],
+     ["source_follower.flicker.corner_hz", "30000 Hz"]),
+    (["--set", "source_follower.flicker.spectrum=brown"], ["source_follower.flicker.spectrum", "one_over_f"]),
 ])
 def test_a_bad_spectrum_or_corner_range_is_one_line(tmp_path, args, needles):
     r = cli("simulate", "--set", "sensor.width=64", "--set", "sensor.height=48", *args, "--out", tmp_path / "o")

@@ -637,6 +637,23 @@ class FlickerSection(Section):
     gumbel_scale_e: float = Field(0.25, gt=0, le=1000, description="scale of the gumbel_r body, e- rms")
     tail: FlickerTail | None = Field(default_factory=lambda: FlickerTail(ppm_above=100, threshold_e=4.0, max_e=12.0),
                                         description="RTS tail of very noisy pixels; null: no tail")
+    spectrum: Literal["white", "one_over_f"] = Field(
+        "white", description="the flicker in time: white (a new normal each frame, the paper's) or one_over_f (each "
+                             "pixel a 1/f process: through CDS, source_follower.rts.cds, a frame shows its change "
+                             "over the CDS interval, whose variance grows with the interval; without CDS its level, "
+                             "correlated from frame to frame)")
+    corner_hz: tuple[float, float] | None = Field(
+        None, description="one_over_f: the lowest and highest corner of its Lorentzians, Hz; null: a thousandth of "
+                          "the frame rate to a thousand times it")
+    reference_cds_interval_s: float = Field(
+        1e-5, gt=0, le=10, description="one_over_f through CDS: the CDS interval at which the sigmas above are a "
+                                       "frame's (at another interval the flicker scales by the CDS transfer's "
+                                       "integral of the 1/f spectrum)")
+
+    @model_validator(mode="after")
+    def _corners(self):
+        _check_corners("source_follower.flicker", self.corner_hz)
+        return self
 
 
 class SourceFollowerSection(Section):

@@ -97,21 +97,23 @@ def bridge_constants(rate_per_s: float, dt_s: float, levels: int) -> tuple[np.nd
     return weight, sigma
 
 
-#: the counter's second word: a node index's bits 32 to 47, and the lane (one process each) above them
-INDEX_BITS, LANE_BITS = 48, 16
+#: the counter's second word: a node index's high bits, and the lane (one process each) in its top LANE_BITS bits
+#: (16 by default: grid points to 2**48; a call may give the lane up to 32 bits, its grid points then below 2**32)
+LANE_BITS = 16
 
 
-def _normals(index: np.ndarray, lane: np.ndarray, sequence: int, tag: np.ndarray, key: tuple[int, int]) -> np.ndarray:
+def _normals(index: np.ndarray, lane: np.ndarray, sequence: int, tag: np.ndarray, key: tuple[int, int],
+             lane_bits: int = LANE_BITS) -> np.ndarray:
     """One standard normal per node: ``index``, ``lane`` and ``tag`` (uint64) broadcast together; the counter is
-    (index's low word, its bits 32 to 47 with the lane above, sequence, tag) under ``key``."""
+    (index's low word, its high bits with the lane in the top ``lane_bits`` bits, sequence, tag) under ``key``."""
     index, lane, tag = np.broadcast_arrays(*(np.asarray(a, np.uint64) for a in (index, lane, tag)))
     k0, k1 = (np.uint64(w) for w in key)
-    word1 = (index >> np.uint64(32)) | (lane << np.uint64(INDEX_BITS - 32))
+    word1 = (index >> np.uint64(32)) | (lane << np.uint64(32 - lane_bits))
     return normal_from(*uniform_pair(index & _MASK32, word1, np.full(index.shape, sequence, np.uint64), tag, k0, k1))
 
 
 def sample(rates_per_s: np.ndarray, weights: np.ndarray, dt_s: float, n0: int, n1: int, key: tuple[int, int],
-           sequence: int, lanes=None) -> np.ndarray:
+           sequence: int, lanes=None, lane_bits: int = LANE_BITS) -> np.ndarray:
     """A sum of Gauss-Markov components, ``sum_j sqrt(w_j) x_j(n dt)``, at grid points ``n0 <= n < n1``.
 
     The components are bridged together, level by level (one array of every component and lane per level),
@@ -132,7 +134,10 @@ def sample(rates_per_s: np.ndarray, weights: np.ndarray, dt_s: float, n0: int, n
     sequence : int
         The frame series (each has its own process).
     lanes : (m,) int array, optional
-        Independent processes (a column's number, say), each below ``2**16``; default one, lane 0.
+        Independent processes (a column's number, say), each below ``2**lane_bits``; default one, lane 0.
+    lane_bits : int
+        The counter's bits for the lane, 16 (the grid points then reach ``2**48``) to 32 (a pixel's index; the
+        grid points then stay below ``2**32``).
 
     Returns
     -------
@@ -140,13 +145,16 @@ def sample(rates_per_s: np.ndarray, weights: np.ndarray, dt_s: float, n0: int, n
         The process's values.
     """
     rates, weights = np.asarray(rates_per_s, np.float64).ravel(), np.asarray(weights, np.float64).ravel()
-    if not 0 <= n0 < n1 <= 2**INDEX_BITS:
-        raise ValueError(f"grid points {n0}..{n1}: need 0 <= n0 < n1 <= 2**{INDEX_BITS}")
+    if not LANE_BITS <= lane_bits <= 32:
+        raise ValueError(f"lane_bits = {lane_bits}: need {LANE_BITS} to 32")
+    top_point = 2 ** (64 - lane_bits)
+    if not 0 <= n0 < n1 <= top_point:
+        raise ValueError(f"grid points {n0}..{n1}: need 0 <= n0 < n1 <= 2**{64 - lane_bits}")
     if not 0 < rates.size <= MAX_COMPONENTS or weights.shape != rates.shape:
         raise ValueError(f"{rates.size} rates and {weights.size} weights: need 1 to {MAX_COMPONENTS}, as many of each")
     lane = np.zeros(1, np.uint64) if lanes is None else np.asarray(lanes, np.int64).ravel()
-    if lanes is not None and (lane.size == 0 or lane.min() < 0 or lane.max() >= 2**LANE_BITS):
-        raise ValueError(f"lanes: need 0 <= lane < 2**{LANE_BITS}")
+    if lanes is not None and (lane.size == 0 or lane.min() < 0 or lane.max() >= 2**lane_bits):
+        raise ValueError(f"lanes: need 0 <= lane < 2**{lane_bits}")
     lane = lane.astype(np.uint64)[None, :, None]
     tops = np.array([top_level(float(r), float(dt_s)) for r in rates])
     constants = [bridge_constants(float(r), float(dt_s), int(t)) for r, t in zip(rates, tops)]
@@ -166,12 +174,13 @@ def sample(rates_per_s: np.ndarray, weights: np.ndarray, dt_s: float, n0: int, n
             out[going[:, None], :, np.nonzero(even)[0][None, :]] = np.moveaxis(past[:, :, parent[even]], 1, 2)
             weight = np.array([constants[j][0][level] for j in going])[:, None, None]
             sigma = np.array([constants[j][1][level] for j in going])[:, None, None]
-            z = _normals(index[odd][None, None, :], lane, sequence, which[going] + np.uint64(level), key)
+            z = _normals(index[odd][None, None, :], lane, sequence, which[going] + np.uint64(level), key, lane_bits)
             mid = weight * (past[:, :, parent[odd]] + past[:, :, parent[odd] + 1]) + sigma * z
             out[going[:, None], :, odd[None, :]] = np.moveaxis(mid, 1, 2)
         starting = np.nonzero(tops == level)[0]
         if starting.size:  # a component's top nodes: independent standard normals
-            out[starting] = _normals(index[None, None, :], lane, sequence, which[starting] + np.uint64(level), key)
+            out[starting] = _normals(index[None, None, :], lane, sequence, which[starting] + np.uint64(level), key,
+                                     lane_bits)
         values, lo = out, new_lo
     total = np.zeros(values.shape[1:2] + (n1 - n0,))
     for j in range(rates.size):  # in the components' order: the same sum in any block

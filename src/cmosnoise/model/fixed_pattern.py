@@ -137,7 +137,7 @@ def dependencies(spec: SensorSpec) -> dict[str, object]:
         "prnu_gain": (c.prnu.enabled, c.prnu.sigma_pct),
         "dark_rate": (c.dark_current.enabled, c.dark_current.doubling_c, c.dark_current.tail_doubling_c,
                       spec.dark_points, c.sensor.temperature_c, c.dark_current.glow),
-        "flicker_sigma": (sf.enabled, sf.flicker),
+        "flicker_sigma": (sf.enabled, sf.flicker, spec.flicker_cds_factor),
         "row_offset": (rn.enabled, rn.fixed_sigma_e),
         "column": c.column_noise,
         "pixel_offset": (c.pixel_offset.enabled, spec.offsets),
@@ -329,8 +329,14 @@ def draw(spec: SensorSpec, cache: PatternCache | None = None,
         maps["dark_rate"] = held("dark_rate", dark)
     sf = c.source_follower
     if sf.enabled and sf.flicker.enabled:
-        maps["flicker_sigma"] = held("flicker_sigma", lambda: source_follower.flicker_sigma_map(
-            spec.flicker, region, cols, fixed_key(seed, "source_follower"), engine))
+        factor = spec.flicker_cds_factor  # a 1/f flicker through CDS at another interval than its sigmas'
+
+        def flicker():
+            sigma = source_follower.flicker_sigma_map(spec.flicker, region, cols, fixed_key(seed, "source_follower"),
+                                                      engine)
+            return sigma if factor == 1.0 else (sigma * np.float32(factor)).astype(np.float32)
+
+        maps["flicker_sigma"] = held("flicker_sigma", flicker)
     if c.row_noise.enabled and c.row_noise.fixed_sigma_e > 0:
         maps["row_offset"] = held("row_offset", lambda: row_noise.fixed_offsets(r0, r1, c.row_noise.fixed_sigma_e,
                                                                                  fixed_key(seed, "row_noise")))

@@ -155,6 +155,11 @@ def column_corners(frame_rate_hz: float) -> tuple[float, float]:
     return frame_rate_hz / 1000.0, 0.5 * frame_rate_hz
 
 
+def pixel_corners(frame_rate_hz: float) -> tuple[float, float]:
+    """A pixel's default 1/f flicker range, Hz: a thousandth of the frame rate to a thousand times it."""
+    return frame_rate_hz / 1000.0, 1000.0 * frame_rate_hz
+
+
 def corners(key: str, given, default: tuple[float, float], frame_rate_hz: float) -> tuple[float, float]:
     """A stage's 1/f range, Hz: ``given`` (a ``corner_hz`` pair) checked against the frame rate, or ``default``.
 

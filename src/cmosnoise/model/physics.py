@@ -222,7 +222,8 @@ def check_timing(config: Config) -> None:
         _check_timing(config)
         rate = 1.0 / _frame_period_s(config.sensor.frame_rate_hz, config.exposure.integration_time_s)
         for key, corner in (("row_noise.corner_hz", config.row_noise.corner_hz),
-                            ("column_noise.temporal.corner_hz", config.column_noise.temporal.corner_hz)):
+                            ("column_noise.temporal.corner_hz", config.column_noise.temporal.corner_hz),
+                            ("source_follower.flicker.corner_hz", config.source_follower.flicker.corner_hz)):
             one_over_f.corners(key, corner, (0.0, 0.0), rate)
     except ValueError as exc:
         raise _invalid(str(exc)) from None

@@ -104,7 +104,10 @@ def electrons(plan: FramePlan, k: int, region: tuple[int, int, int, int],
         n = plan.nonlinearity.apply(n)
     converted = n
     if plan.offset_e is not None:
-        n = n + plan.offset_e[win]
+        offsets = plan.offsets(k)
+        n = n + offsets[win]
+        if parts is not None and plan.pixel_flicker is not None:
+            parts["pixel_flicker"] = (offsets - plan.offset_e)[win]
     if plan.sf_sigma_e is not None:
         sfn = source_follower.noise(plan.sf_sigma_e[win], stream(plan, "source_follower", k), index)
         n = n + sfn

@@ -53,6 +53,7 @@ STAGE_IDS = {
     "row_noise_flicker": 16,  # the 1/f row offsets in readout order (row_noise.spectrum = one_over_f)
     "column_noise_flicker": 17,  # each column amplifier's 1/f noise over frames
     "column_noise_alternating": 18,  # the even and the odd columns' banks' offsets per frame
+    "source_follower_flicker": 19,  # each pixel's 1/f flicker level without CDS
 }
 
 

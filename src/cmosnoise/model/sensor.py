@@ -228,10 +228,12 @@ class Sensor:
         """Each pixel's fixed source-follower sigma, thermal and flicker together (e-), (rows, cols) float32."""
         if self._sf_sigma is None:
             thermal = self.config.source_follower.thermal_sigma_e
+            # a 1/f flicker a frame shows as its level (no CDS) is drawn by its bridges, not in this normal
+            flicker = None if self.spec.flicker_in_frames else self._fixed.flicker_sigma
             self._sf_sigma = cached(
                 self.cache, "sf_sigma", (self.seed, self.shape, self.window, dependencies(self.spec)["flicker_sigma"],
-                                         thermal),
-                lambda: source_follower.total_sigma(thermal, self._fixed.flicker_sigma, self.map_shape))
+                                         thermal, self.spec.flicker_in_frames),
+                lambda: source_follower.total_sigma(thermal, flicker, self.map_shape))
         return self._sf_sigma
 
     @property
@@ -602,6 +604,11 @@ class Exposure:
                 return np.full(cols, fill) if a is None else a.ravel().astype(np.float64)
 
             row_flicker, col_flicker, col_sigma = self._flicker(row_sigma, col(fp.column_sigma, 0.0))
+            pixel_flicker = None
+            if s.spec.flicker_in_frames and fp.flicker_sigma is not None:
+                pixel_flicker = source_follower.Flicker(fp.flicker_sigma, s.spec.pixel_flicker, self.frame_period_s,
+                                                        stream_key(c.seed, "source_follower_flicker"),
+                                                        (s.region[0], s.region[2]), int(s.shape[1]))
             t = s.transfer
             self._plan = FramePlan(
                 shape=s.shape, keys=keys, sequence=self.sequence, full_well_e=float(c.sensor.full_well_e),
@@ -615,7 +622,9 @@ class Exposure:
                 col_gain=col(fp.column_gain, 1.0) if columns_on else None,
                 adc=(t.gain_dn_per_e, t.black_level_dn, 2**t.bits - 1, t.step) if c.adc.enabled else None,
                 nonlinearity=s.spec.nonlinearity_on("charge"),
-                offset_e=fp.pixel_offset,
+                offset_e=(fp.pixel_offset if fp.pixel_offset is not None or pixel_flicker is None
+                          else np.zeros(s.map_shape, np.float32)),
+                pixel_flicker=pixel_flicker,
                 cell_offsets_dn=tuple(float(v) for v in c.black_level.channel_offsets_dn),
                 frame_black_sigma_dn=float(c.black_level.frame_sigma_dn),
                 read_noise=((c.read_noise.distribution, float(c.read_noise.scale_dn), float(c.read_noise.shape))
@@ -714,6 +723,8 @@ class Exposure:
             keep["pixel_offset"] = fp.pixel_offset[win]
         if "source_follower" in parts:
             keep["source_follower"] = parts["source_follower"].astype(np.float32)
+        if "pixel_flicker" in parts:  # a 1/f flicker level, added with the offsets: the source follower's
+            keep["source_follower"] = keep.get("source_follower", np.zeros(n.shape, np.float32)) + parts["pixel_flicker"]
         if "traps" in parts:
             keep["source_follower_rts"] = sparse(*parts["traps"])
         if parts["rows_on"]:

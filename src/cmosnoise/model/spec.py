@@ -165,6 +165,36 @@ class SensorSpec:
                                                           one_over_f.column_corners(rate), rate))
 
     @property
+    def pixel_flicker(self) -> one_over_f.Spectrum | None:
+        """Each pixel's flicker Lorentzians (``source_follower.flicker.spectrum = one_over_f``), or None: white.
+
+        ``corner_hz`` null: a thousandth of the frame rate to a thousand times it."""
+        sf = self.config.source_follower
+        if not (sf.enabled and sf.flicker.enabled) or sf.flicker.spectrum == "white":
+            return None
+        rate = 1.0 / self.frame_period_s
+        return one_over_f.lorentzians(*one_over_f.corners("source_follower.flicker.corner_hz", sf.flicker.corner_hz,
+                                                          one_over_f.pixel_corners(rate), rate))
+
+    @property
+    def flicker_in_frames(self) -> bool:
+        """Whether each frame shows the pixel's 1/f flicker level itself (``one_over_f`` without CDS: drawn per
+        frame by its bridges) rather than a white normal of its sigma (white, or ``one_over_f`` through CDS)."""
+        return self.pixel_flicker is not None and not self.config.source_follower.rts.cds
+
+    @property
+    def flicker_cds_factor(self) -> float:
+        """What the flicker sigmas are multiplied by: ``sqrt(D(tau) / D(tau_ref))`` for a 1/f flicker through CDS
+        (``D`` the CDS output's variance, :func:`.one_over_f.cds_variance`; ``tau`` the CDS interval, ``tau_ref``
+        the one the sigmas hold at); 1 otherwise."""
+        spectrum, sf = self.pixel_flicker, self.config.source_follower
+        if spectrum is None or not sf.rts.cds or sf.rts.cds_interval_s == sf.flicker.reference_cds_interval_s:
+            return 1.0
+        ratio = one_over_f.cds_variance(spectrum, sf.rts.cds_interval_s) / one_over_f.cds_variance(
+            spectrum, sf.flicker.reference_cds_interval_s)
+        return float(math.sqrt(float(ratio)))
+
+    @property
     def focal_plane(self) -> FocalPlane:
         """The optical image of this configuration's light, lens and pixel (:func:`.focal_plane.focal_plane`, made
         once per light and lens): what every scene is drawn into and each pixel integrates."""

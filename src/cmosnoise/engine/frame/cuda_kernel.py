@@ -289,8 +289,9 @@ class DevicePlan:
             if p.window is not None:
                 raise CmosnoiseError(f"a plan of the window {p.window} (a tile) is made by the CPU kernel; the GPU "
                                      "takes a whole sensor's exposure and makes crops of it")
-            if p.row_flicker is not None or p.col_flicker is not None:
-                raise CmosnoiseError("row_noise.spectrum / column_noise.temporal.spectrum = one_over_f, or "
+            if p.row_flicker is not None or p.col_flicker is not None or p.pixel_flicker is not None:
+                raise CmosnoiseError("row_noise.spectrum / column_noise.temporal.spectrum = one_over_f, "
+                                     "source_follower.flicker.spectrum = one_over_f without CDS, or "
                                      "column_noise.alternating.temporal_sigma_e: offsets that change from frame to "
                                      "frame, which the GPU's batches do not take yet; use device cpu (the same bits)")
             if tuple(p.shape) != shape or (p.adc is None) != (plans[0].adc is None):

@@ -857,7 +857,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
             col_gain=plan.col_gain if plan.col_gain is not None else _DUMMY1, keys=plan.keys, k_adc=float(k_adc),
             black=float(black), top=float(top), step=float(step), loggam_table=plan.loggam_table, nl_table=nl,
             nl_scale=float(nl_scale), nl_a=nl_a, nl_b=nl_b, nl_c=nl_c,
-            offset=plan.offset_e if plan.offset_e is not None else _DUMMY2,
+            offset=plan.offsets(frame) if plan.offset_e is not None else _DUMMY2,
             cell_offsets=np.asarray(plan.cell_offsets_dn, np.float64),
             frame_black_sigma=float(plan.frame_black_sigma_dn), read_kind=read_kind, read_scale=float(read_scale),
             read_table=read_table, rts_ptr=rts_ptr, rts_col=rts_col, rts_val=rts_val, blink_ptr=blink_ptr,

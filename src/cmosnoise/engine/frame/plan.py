@@ -70,6 +70,9 @@ class FramePlan:
     #: the charge-to-voltage transfer (stage 5b): a nonlinearity.Curve (a cubic, or a table)
     nonlinearity: object | None = None
     offset_e: np.ndarray | None = None  #: per-pixel offsets (rows, cols) float32, e- (stage 5c)
+    #: each pixel's 1/f flicker level (source_follower.flicker one_over_f without CDS): ``pixel_flicker(frame,
+    #: sequence)`` gives the window's (rows, cols) float32 e-, added to ``offset_e`` (then never None)
+    pixel_flicker: object | None = None
     cell_offsets_dn: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  #: black level per 2 x 2 cell position
     frame_black_sigma_dn: float = 0.0  #: the black level's error per frame, DN (keys row 4)
     #: (normal | tukey_lambda, scale DN, shape): from the sine normal of the source follower's block (keys row 1)
@@ -106,6 +109,13 @@ class FramePlan:
         if self.row_flicker is None:
             return self.row_offset_e
         return self.row_offset_e + self.row_flicker(int(frame), int(self.sequence))
+
+    def offsets(self, frame: int) -> np.ndarray | None:
+        """The pixels' offsets in frame ``frame``, (rows, cols) float32 e-: ``offset_e``, plus each pixel's 1/f
+        flicker level of the frame when it has one (one array for every copy of the chain)."""
+        if self.pixel_flicker is None:
+            return self.offset_e
+        return self.offset_e + self.pixel_flicker(int(frame), int(self.sequence))
 
     def col_offsets(self, frame: int) -> np.ndarray | None:
         """The columns' offsets in frame ``frame``, (cols,) float64 e-: ``col_offset_e``, plus each column
@@ -152,7 +162,7 @@ STAGES = (
     Stage("source_follower", "source_follower",
           (Switch("source_follower", "the source follower's noise: plan.sf_sigma_e",
                   lambda p, a: p.sf_sigma_e is not None),),
-          ("sf_sigma_e",), (), ()),
+          ("sf_sigma_e", "pixel_flicker"), (), ()),
     Stage("row_noise", "row_noise",
           (Switch("row", "row noise: plan.row_sigma_e", lambda p, a: p.row_sigma_e is not None),),
           ("row_sigma_e", "row_offset_e", "row_flicker"), ("row_sigma",), ()),

@@ -9,6 +9,17 @@ section 4, the same heavy-tail map as the dark current). In each frame the
 pixel gets ``Normal(0, sigma_i)``. That is the paper's simplification:
 the per-pixel noise is Gaussian in time, only its size varies over the array.
 
+With ``flicker.spectrum = one_over_f`` each pixel's flicker is a 1/f
+process of its own (McWhorter's Lorentzians, :mod:`cmosnoise.model.one_over_f`).
+Through CDS a frame shows the process's change over the CDS interval: its
+variance is ``2 (1 - rho(tau))`` of the process's, so the sigmas scale by
+``sqrt(D(tau) / D(tau_ref))`` with the interval (``reference_cds_interval_s``
+is the one the map's sigmas hold at), and successive frames' changes
+correlate by less than ``tau / (2 e T)`` (``T`` the frame period): drawn
+white, as the paper does. Without CDS a frame shows the level itself,
+``sigma_i x_i(t_k)``, each pixel's process sampled at the frame's time by
+exact bridges (:class:`Flicker`): it correlates from frame to frame.
+
 Examples
 --------
 >>> from cmosnoise import Sensor
@@ -20,9 +31,11 @@ Examples
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 
+from ...engine import gauss_markov
 from ...engine.samplers import Stream
 from ..distributions import gumbel
 from ..heavy_tail import HeavyTail
@@ -109,3 +122,61 @@ def noise(sigma_e: np.ndarray, stream: Stream, index: np.ndarray) -> np.ndarray:
     float64 array, e-, the shape of ``sigma_e``
     """
     return np.asarray(sigma_e, np.float64) * stream.normal(index)
+
+
+#: pixels bridged together in one pass of :class:`Flicker` (bounds its arrays: components x pixels x a few nodes)
+FLICKER_CHUNK = 1 << 15
+
+
+@dataclass(frozen=True)
+class Flicker:
+    """Each pixel's 1/f flicker level in a frame (``flicker.spectrum = one_over_f`` without CDS), e-.
+
+    Parameters
+    ----------
+    sigma_e : (rows, cols) float32 array
+        Each pixel's flicker sigma (the map's), e- rms, over the window.
+    spectrum : Spectrum
+        The unit-variance process's Lorentzians.
+    frame_period_s : float
+        Seconds between frames: frame ``k`` is grid point ``k``.
+    key : (int, int)
+        The stream's key words (``source_follower_flicker``); pixel ``r cols + c`` is its lane.
+    origin : (int, int)
+        The window's first row and column in the sensor.
+    cols : int
+        The sensor's width (a pixel's lane is ``r cols + c``).
+    """
+
+    sigma_e: np.ndarray
+    spectrum: object
+    frame_period_s: float
+    key: tuple[int, int]
+    origin: tuple[int, int]
+    cols: int
+
+    def __call__(self, frame: int, sequence: int) -> np.ndarray:
+        """Frame ``frame``'s flicker of the window's pixels, (rows, cols) float32 e-.
+
+        Parameters
+        ----------
+        frame : int
+            The frame's number (below ``2**32``).
+        sequence : int
+            The frame series.
+
+        Returns
+        -------
+        (rows, cols) float32, e-
+            ``sigma_i x_i(frame frame_period_s)``.
+        """
+        h, w = self.sigma_e.shape
+        r0, c0 = self.origin
+        lanes = ((np.arange(r0, r0 + h)[:, None] * self.cols) + np.arange(c0, c0 + w)[None, :]).ravel()
+        x = np.empty(lanes.size)
+        for a in range(0, lanes.size, FLICKER_CHUNK):
+            part = lanes[a:a + FLICKER_CHUNK]
+            x[a:a + part.size] = gauss_markov.sample(
+                self.spectrum.rates_per_s, self.spectrum.weights, self.frame_period_s, int(frame), int(frame) + 1,
+                self.key, int(sequence), lanes=part, lane_bits=32)[:, 0]
+        return (self.sigma_e.astype(np.float64) * x.reshape(h, w)).astype(np.float32)
