@@ -19,6 +19,7 @@ SMALLEST = {
     "bench_chain.py": ["--frames", "2", "--repeats", "1", "--cli-frames", "2", "--cli-repeats", "1", "--width",
                        "320", "--height", "180"],
     "bench_dataset.py": ["--samples", "2", "--crop", "64", "--repeats", "1"],
+    "bench_flicker.py": ["--frames", "2", "--repeats", "1"],
     "bench_measured_stages.py": ["--frames", "2", "--repeats", "1"],
     "bench_telegraph.py": ["--frames", "2", "--repeats", "1"],
     "bench_run.py": ["--megapixels", "1", "--repeats", "1"],

@@ -43,7 +43,16 @@ EXTRA = {"measured-stages": {
     "optics": {"psf": "diffraction", "f_number": 2.8, "relative_illumination": "cos4", "focal_length_mm": 2.0,
                "chief_ray_angle": [[0, 0], [0.1, 25]], "microlens_compensation": 0.4,
                "angle_relative_qe": [[0, 1, 1, 1], [20, 0.7, 0.8, 0.9]]},
-    "crosstalk": {"kernel_at_angle_pct": [[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]}}}
+    "crosstalk": {"kernel_at_angle_pct": [[0.6, 4, 1.9], [3, 76, 8], [0.6, 4, 1.9]]}},
+    # noise in time (#76): the row noise 1/f in readout order, the column amplifiers 1/f over frames, two column
+    # banks fixed and per frame, amplifier glow, and each pixel's 1/f flicker level without CDS
+    "noise-in-time": {
+    "sensor": {"frame_rate_hz": 30},
+    "row_noise": {"spectrum": "one_over_f", "sigma_e": 1.5},
+    "column_noise": {"temporal": {"spectrum": "one_over_f"},
+                     "alternating": {"enabled": True, "fixed_sigma_e": 1.0, "temporal_sigma_e": 0.5}},
+    "dark_current": {"glow": {"enabled": True, "rate_e_per_s": 300.0, "source": "top_left", "length_px": 20.0}},
+    "source_follower": {"flicker": {"spectrum": "one_over_f"}, "rts": {"cds": False}}}}
 
 
 def digest(a: np.ndarray) -> str:

@@ -160,27 +160,45 @@ def sample(rates_per_s: np.ndarray, weights: np.ndarray, dt_s: float, n0: int, n
     constants = [bridge_constants(float(r), float(dt_s), int(t)) for r, t in zip(rates, tops)]
     which = (np.arange(rates.size, dtype=np.uint64) * np.uint64(64))[:, None, None]
     last = n1 - 1
-    values, lo = None, 0
+    # first the nodes each level needs, then all their normals in one call (they do not depend on the values:
+    # a call's cost was its many small calls), then the bridges level by level
+    plan, index_parts, tag_parts = [], [], []
     for level in range(int(tops.max()), -1, -1):
-        new_lo, new_hi = n0 >> level, -((-last) >> level)
-        index = np.arange(new_lo, new_hi + 1, dtype=np.uint64)
+        lo_l = n0 >> level
+        index = np.arange(lo_l, -((-last) >> level) + 1, dtype=np.uint64)
+        going, starting = np.nonzero(tops > level)[0], np.nonzero(tops == level)[0]
+        odd = np.nonzero((index & np.uint64(1)) == 1)[0]
+        for comps, at in ((going, odd), (starting, np.arange(index.size))):
+            if comps.size and at.size:
+                index_parts.append(np.broadcast_to(index[at][None, :], (comps.size, at.size)).ravel())
+                tag_parts.append(np.repeat(which[comps, 0, 0] + np.uint64(level), at.size))
+        plan.append((level, lo_l, index, going, starting, odd))
+    z_all = _normals(np.concatenate(index_parts)[None, :], lane[0], sequence, np.concatenate(tag_parts)[None, :],
+                     key, lane_bits)  # (lanes, nodes)
+    used = 0
+
+    def take(comps, count):
+        nonlocal used
+        z = z_all[:, used:used + comps * count].reshape(lane.shape[1], comps, count)
+        used += comps * count
+        return np.moveaxis(z, 0, 1)  # (comps, lanes, count)
+
+    values, lo = None, 0
+    for level, new_lo, index, going, starting, odd in plan:
         out = np.zeros((rates.size, lane.shape[1], index.size))
-        if values is not None:  # the components already started: their midpoints bridged from the coarser level
-            going = np.nonzero(tops > level)[0]
-            even = (index & np.uint64(1)) == 0
+        if values is not None and going.size:  # the components already started: midpoints from the coarser level
+            even = np.nonzero((index & np.uint64(1)) == 0)[0]
             parent = (index >> np.uint64(1)).astype(np.int64) - lo
-            odd = np.nonzero(~even)[0]
             past = values[going]
-            out[going[:, None], :, np.nonzero(even)[0][None, :]] = np.moveaxis(past[:, :, parent[even]], 1, 2)
-            weight = np.array([constants[j][0][level] for j in going])[:, None, None]
-            sigma = np.array([constants[j][1][level] for j in going])[:, None, None]
-            z = _normals(index[odd][None, None, :], lane, sequence, which[going] + np.uint64(level), key, lane_bits)
-            mid = weight * (past[:, :, parent[odd]] + past[:, :, parent[odd] + 1]) + sigma * z
-            out[going[:, None], :, odd[None, :]] = np.moveaxis(mid, 1, 2)
-        starting = np.nonzero(tops == level)[0]
+            out[going[:, None], :, even[None, :]] = np.moveaxis(past[:, :, parent[even]], 1, 2)
+            if odd.size:
+                weight = np.array([constants[j][0][level] for j in going])[:, None, None]
+                sigma = np.array([constants[j][1][level] for j in going])[:, None, None]
+                mid = (weight * (past[:, :, parent[odd]] + past[:, :, parent[odd] + 1])
+                       + sigma * take(going.size, odd.size))
+                out[going[:, None], :, odd[None, :]] = np.moveaxis(mid, 1, 2)
         if starting.size:  # a component's top nodes: independent standard normals
-            out[starting] = _normals(index[None, None, :], lane, sequence, which[starting] + np.uint64(level), key,
-                                     lane_bits)
+            out[starting] = take(starting.size, index.size)
         values, lo = out, new_lo
     total = np.zeros(values.shape[1:2] + (n1 - n0,))
     for j in range(rates.size):  # in the components' order: the same sum in any block
