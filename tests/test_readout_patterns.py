@@ -8,18 +8,12 @@ import numpy as np
 import pytest
 from conftest import cli
 from scipy import stats
+from test_flicker_in_time import QUIET  # one quiet sensor for the tests of noise in time
 
 from cmosnoise import Sensor, load_config
 from cmosnoise.analysis import noise_budget
 from cmosnoise.model.seeds import fixed_key
 from cmosnoise.model.stages import amplifier_glow, column_noise
-
-QUIET = {"prnu": {"enabled": False}, "crosstalk": {"enabled": False}, "shot_noise": {"enabled": False},
-         "dark_current": {"enabled": False}, "source_follower": {"enabled": False}, "row_noise": {"enabled": False},
-         "column_noise": {"enabled": False}, "read_noise": {"enabled": False}, "pixel_offset": {"enabled": False},
-         "nonlinearity": {"enabled": False}, "defects": {"enabled": False},
-         "adc": {"enabled": True, "bits": 16, "gain_dn_per_e": 4.0, "black_level_dn": 1000},
-         "exposure": {"integration_time_s": 0.02}}
 
 
 def _config(extra: dict, rows: int = 32, cols: int = 48):
