@@ -218,7 +218,7 @@ def test_with_optics_every_tile_is_that_rectangle_of_the_whole_frame(source, f_n
         assert np.array_equal(raw, whole[r0:r1, c0:c1]), region
 
 
-@pytest.mark.parametrize("sigma_px", [2, 7])
+@pytest.mark.parametrize("sigma_px", [2, pytest.param(7, marks=pytest.mark.slow)])  # 7 px: 50 s, the full suite's
 def test_a_tile_of_a_50_mp_sensor_is_the_crop_of_a_larger_part_bit_for_bit(sigma_px):
     # a 50 MP sensor (8688 x 5792): the signal of a tile against that of a part of 3000 x 1000 pixels around it
     # (the bands of the columns' pass start at the region's first row: tiles cut them elsewhere)
