@@ -133,7 +133,8 @@ def _field_info(model: type[BaseModel], key: str):
             return None
         if i == len(parts) - 1:
             return info
-        node = _submodel(info.annotation)
-        if node is None:
+        sub = _submodel(info.annotation)
+        if sub is None:
             return None
+        node = sub
     return None

@@ -85,10 +85,11 @@ def apply_values(data: dict, values: dict[str, Any], defaults: dict | None = Non
 
 
 def _apply(out: dict, path: list[str], value: Any, defaults: dict | None, text: str) -> None:
-    node, default = out, defaults
+    node: Any = out  # a mapping, or a list where the path names an item
+    default = defaults
     for i, p in enumerate(path):
         last = i == len(path) - 1
-        key = _index(node, p, text, path[: i + 1]) if isinstance(node, list) else p
+        key: Any = _index(node, p, text, path[: i + 1]) if isinstance(node, list) else p
         if default is not None:
             try:
                 default = default[key]
@@ -371,7 +372,7 @@ def inactive_notes(data: dict, given: dict) -> list[str]:
             continue
         shown = ", ".join(f"{dotted}.{k}" for k in keys)
         out.append(f"{shown} set while {dotted}.enabled is false: no effect (set {dotted}.enabled=true to use it)")
-    sensor = given.get("sensor") if isinstance(given.get("sensor"), dict) else {}
+    sensor: dict = given["sensor"] if isinstance(given.get("sensor"), dict) else {}
     if "pixel_pitch_um" in sensor:
         dark = data.get("dark_current", {}) if isinstance(data.get("dark_current"), dict) else {}
         points = dark.get("points", defaults["dark_current"]["points"])

@@ -57,7 +57,7 @@ def _near_keys(loc) -> list[str]:
 
     from .schema import Config
 
-    model = Config
+    model: type[BaseModel] = Config
     names = [p for p in loc if isinstance(p, str) and not p.startswith(("list[", "dict[", "function-"))]
     for part in names[:-1]:
         field = model.model_fields.get(part)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import json
 import math
-from typing import Literal
+from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
@@ -1113,7 +1113,10 @@ class _Top(dict):
     are mappings); alone, a section of one scalar (``seed: 0``) would be written in flow style."""
 
 
-class _Dumper(getattr(yaml, "CSafeDumper", yaml.SafeDumper)):  # libyaml's emitter where PyYAML has it
+_BaseDumper: Any = getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml's emitter where PyYAML has it
+
+
+class _Dumper(_BaseDumper):
     """PyYAML's safe dumper that writes :class:`_Top` as a block mapping."""
 
 

@@ -66,14 +66,15 @@ def _log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
-def _log_linear(rng: np.random.Generator, law: tuple[float, float, float], k: float) -> float:
+def _log_linear(rng: np.random.Generator, law: tuple[float, ...], k: float) -> float:
     slope, bias, sigma = law
     return float(math.exp(slope * math.log(k) + bias + rng.normal(0.0, sigma)))
 
 
 def _between_cameras(rng: np.random.Generator, term: str) -> tuple[float, float, float]:
     laws = np.array([c[term] for c in ELD.values()])
-    return tuple(float(rng.uniform(lo, hi)) for lo, hi in zip(laws.min(axis=0), laws.max(axis=0)))
+    lo, hi = laws.min(axis=0), laws.max(axis=0)
+    return float(rng.uniform(lo[0], hi[0])), float(rng.uniform(lo[1], hi[1])), float(rng.uniform(lo[2], hi[2]))
 
 
 def sample(family: str, rng: np.random.Generator) -> tuple[str, dict]:
@@ -82,7 +83,8 @@ def sample(family: str, rng: np.random.Generator) -> tuple[str, dict]:
     if family == "led":
         name = "led-virtual"
         k = _log_uniform(rng, *LED["k"])
-        g, r = _between_cameras(rng, "G"), _between_cameras(rng, "R")
+        g: tuple[float, ...] = _between_cameras(rng, "G")
+        r: tuple[float, ...] = _between_cameras(rng, "R")
         shape = float(rng.uniform(*LED["shape"]))
         bias = [float(v) for v in rng.uniform(*LED["colour_bias_dn"], size=4)]
     else:
@@ -90,7 +92,7 @@ def sample(family: str, rng: np.random.Generator) -> tuple[str, dict]:
         cam = ELD[name]
         k = _log_uniform(rng, *cam["k"])
         g, r = cam["G"], cam["R"]
-        shape = float(rng.uniform(*cam["shape"]))
+        shape = float(rng.uniform(cam["shape"][0], cam["shape"][1]))
         bias = [float(v) for v in rng.uniform(*LED["colour_bias_dn"], size=4)]
     top = 2**BITS - 1 - BLACK_LEVEL_DN
     updates = {

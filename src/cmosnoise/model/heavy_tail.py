@@ -26,6 +26,7 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -115,7 +116,7 @@ class HeavyTail:
     tail_max : float >= 0 (same units as the body)
     """
 
-    body: object
+    body: Any  #: a frozen scipy.stats distribution (its sf, ppf, pdf)
     tail_fraction: float
     tail_max: float
 

@@ -183,7 +183,7 @@ class Sensor:
         ``peak_rate_e_per_s`` is the light from here: light in lux (``light.enabled``) is switched off with it
         (an EMVA 1288 series sets its own irradiation, the same in every channel).
         """
-        updates = {}
+        updates: dict[str, float | None] = {}
         if integration_time_s is not None:
             updates["integration_time_s"] = float(integration_time_s)
         if peak_rate_e_per_s is not None:  # light in e-/s from here (a photon rate would take precedence)
@@ -453,8 +453,8 @@ class Sensor:
         if self.cache is None or not isinstance(scene, str):
             return Exposure(self, self.scene_signal(scene), sequence)
         c = self.config
-        signal_parts = (scene, self.shape, self.window, self.cfa, list(self.spec.channel_responsivity), c.scene.scale,
-                        c.scene.fit, c.scene.window, c.scene.source_size)
+        signal_parts: tuple = (scene, self.shape, self.window, self.cfa, list(self.spec.channel_responsivity),
+                               c.scene.scale, c.scene.fit, c.scene.window, c.scene.source_size)
         if c.scene.raw_cfa is not None:
             signal_parts += (c.scene.raw_cfa, c.scene.raw_black_dn, c.scene.raw_white_dn)
         fp = self.spec.focal_plane
@@ -522,7 +522,7 @@ class Exposure:
                 mean = on_mean.apply(mean)
             return perfect, after_prnu, mean.astype(np.float32)
 
-        photo_parts = (signal_parts, sensor.seed, sensor.shape, sensor.window, sensor.spec.signal_unit_e_per_s, ex.integration_time_s,
+        photo_parts: tuple = (signal_parts, sensor.seed, sensor.shape, sensor.window, sensor.spec.signal_unit_e_per_s, ex.integration_time_s,
                        deps["prnu_gain"], c.crosstalk, c.nonlinearity if on_mean is not None else None)
         if c.crosstalk.kernel_at_angle_pct is not None:  # the lean reads the chief-ray angle
             photo_parts += (c.optics, c.sensor.pixel_pitch_um)
@@ -530,11 +530,12 @@ class Exposure:
         #: the mean photo-charge that shot noise acts on
         self.perfect_e, self.after_prnu_e, self.photo_mean_e = cached(cache, "photo_mean", photo_parts, photo)
         #: stage 4: mean dark electrons (None with dark current off)
-        self.dark_mean_e = None
-        if sensor.fixed_pattern.dark_rate is not None:
+        self.dark_mean_e: np.ndarray | None = None
+        rate = sensor.fixed_pattern.dark_rate
+        if rate is not None:
             self.dark_mean_e = cached(
                 cache, "dark_mean", (sensor.seed, sensor.shape, sensor.window, deps["dark_rate"], ex.integration_time_s),
-                lambda: dark_current.mean_charge(sensor.fixed_pattern.dark_rate, ex.integration_time_s))
+                lambda: dark_current.mean_charge(rate, ex.integration_time_s))
         #: the mean photo- and dark charge a pixel collects, with the defects of stage 15 (the same arrays as
         #: photo_mean_e and dark_mean_e without them)
         self.collected_photo_e, self.collected_dark_e = self.photo_mean_e, self.dark_mean_e
@@ -543,14 +544,15 @@ class Exposure:
             self.collected_photo_e, self.collected_dark_e = defects.collected(
                 self.photo_mean_e, self.dark_mean_e, d, sensor.region, ex.integration_time_s)
         # what shot noise acts on, and what enters as its mean
-        noisy, exact = [], []
+        noisy: list[np.ndarray] = []
+        exact: list[np.ndarray] = []
         (noisy if c.shot_noise.enabled else exact).append(self.collected_photo_e)
         if self.collected_dark_e is not None:
             (noisy if c.dark_current.shot_noise else exact).append(self.collected_dark_e)
-        self._noisy_e = sum(noisy[1:], noisy[0]) if noisy else None
-        self._exact_e = sum(exact[1:], exact[0]) if exact else None
+        self._noisy_e: np.ndarray | None = noisy[0] + noisy[1] if len(noisy) == 2 else (noisy[0] if noisy else None)
+        self._exact_e: np.ndarray | None = exact[0] + exact[1] if len(exact) == 2 else (exact[0] if exact else None)
         self._plan: FramePlan | None = None
-        self._device_plan = None
+        self._device_plan: cuda_kernel.DevicePlan | None = None
         timings["expose"] += time.perf_counter() - t0
 
     @property
@@ -610,6 +612,8 @@ class Exposure:
                                                         stream_key(c.seed, "source_follower_flicker"),
                                                         (s.region[0], s.region[2]), int(s.shape[1]))
             t = s.transfer
+            o0, o1, o2, o3 = (float(v) for v in c.black_level.channel_offsets_dn)
+            cell_offsets = (o0, o1, o2, o3)
             self._plan = FramePlan(
                 shape=s.shape, keys=keys, sequence=self.sequence, full_well_e=float(c.sensor.full_well_e),
                 noisy_e=self._noisy_e, exact_e=self._exact_e,
@@ -625,7 +629,7 @@ class Exposure:
                 offset_e=(fp.pixel_offset if fp.pixel_offset is not None or pixel_flicker is None
                           else np.zeros(s.map_shape, np.float32)),
                 pixel_flicker=pixel_flicker,
-                cell_offsets_dn=tuple(float(v) for v in c.black_level.channel_offsets_dn),
+                cell_offsets_dn=cell_offsets,
                 frame_black_sigma_dn=float(c.black_level.frame_sigma_dn),
                 read_noise=((c.read_noise.distribution, float(c.read_noise.scale_dn), float(c.read_noise.shape))
                             if c.read_noise.enabled else None),
@@ -647,11 +651,12 @@ class Exposure:
         c = s.config
         r0, r1, c0, c1 = s.region
         period = self.frame_period_s
-        row_flicker = col_flicker = None
+        row_flicker: row_noise.Flicker | None = None
+        col_flicker: column_noise.Flicker | column_noise.Alternating | column_noise.Summed | None = None
         if s.spec.row_flicker is not None and row_sigma > 0:
             row_flicker = row_noise.Flicker(float(row_sigma), s.spec.row_flicker, int(s.shape[0]),
                                             period / s.shape[0], stream_key(c.seed, "row_noise_flicker"), r0, r1 - r0)
-        parts = []
+        parts: list[column_noise.Flicker | column_noise.Alternating] = []
         if s.spec.column_flicker is not None:
             parts.append(column_noise.Flicker(col_sigma, s.spec.column_flicker, period,
                                               stream_key(c.seed, "column_noise_flicker"), c0, c1 - c0))
@@ -686,9 +691,9 @@ class Exposure:
     def _electrons(self, k: int, region: tuple[int, int, int, int], keep: dict | None) -> np.ndarray:
         """Charge at the ADC input in frame ``k`` (e-, float64) of ``region``, stage by stage: :mod:`.reference`
         (the NumPy specification the kernels are held to). Fills ``keep`` with each stage's part."""
-        parts = {} if keep is not None else None
+        parts: dict | None = {} if keep is not None else None
         n = reference.electrons(self.plan(), k, region, parts)
-        if keep is not None:
+        if keep is not None and parts is not None:
             self._contributions(n, region, parts, keep)
         return n
 
@@ -847,6 +852,7 @@ class Exposure:
         raw = defects.stick(raw, d, region, s.transfer.max_code if adc_on else s.config.sensor.full_well_e)
         if keep is not None:
             t = s.transfer
+            assert before is not None
             change = t.to_electrons(raw) - t.to_electrons(before) if adc_on else raw - before
             keep["stuck"] = change.astype(np.float32)
         return raw
@@ -860,9 +866,9 @@ class Exposure:
         ``electrons``), plus ``quantization``: what the ADC's rounding and
         clipping added, in e-.
         """
-        keep = {} if detail else None
+        keep: dict | None = {} if detail else None
         raw, electrons = self._render(k, keep, region, electrons=detail)
-        if not detail:
+        if keep is None:
             return raw
         if self.sensor.config.adc.enabled:
             after = sum(keep.get(part, 0.0) for part in ("black_level", "read_noise", "stuck"))

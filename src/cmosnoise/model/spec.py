@@ -226,7 +226,8 @@ class SensorSpec:
         in lux."""
         fp = self.focal_plane
         if fp.light is None:
-            return tuple(float(v) for v in fp.cfa_gain)
+            r, g, b = (float(v) for v in fp.cfa_gain)
+            return r, g, b
         return fp.responsivity
 
     @property

@@ -73,7 +73,7 @@ def row(columns: tuple[str, ...], values: dict) -> list:
 
 def simulated() -> bool:
     """Whether numba's CUDA simulator stands in for a GPU (``NUMBA_ENABLE_CUDASIM=1``)."""
-    return numba is not None and bool(numba.config.ENABLE_CUDASIM)
+    return numba is not None and bool(numba.config.ENABLE_CUDASIM)  # type: ignore[attr-defined]
 
 
 def scalar_numpy(cuda) -> types.ModuleType:
@@ -86,5 +86,7 @@ def scalar_numpy(cuda) -> types.ModuleType:
     for name in ("uint64", "int64", "uint32", "int32", "uint16", "float64", "float32", "inf"):
         setattr(shim, name, getattr(np, name))
     lib = cuda.libdevice
-    shim.floor, shim.rint, shim.abs, shim.sqrt, shim.maximum = lib.floor, lib.rint, lib.fabs, lib.sqrt, lib.fmax
+    for name, function in (("floor", lib.floor), ("rint", lib.rint), ("abs", lib.fabs), ("sqrt", lib.sqrt),
+                           ("maximum", lib.fmax)):
+        setattr(shim, name, function)
     return shim

@@ -22,6 +22,7 @@ import functools
 import logging
 import time
 import types
+from typing import Any
 
 import numpy as np
 
@@ -175,7 +176,7 @@ if numba is not None:
             if ok:
                 return k
 
-    _JIT = dict(fastmath=False, error_model="numpy")
+    _JIT: dict[str, Any] = dict(fastmath=False, error_model="numpy")
     _ROWS_PER_BLOCK = 8
     _frame_states, _inside, _occupancy, _cold_exp = (_cold[name] for name in ("frame_states", "inside", "occupancy",
                                                                               "exp"))
@@ -790,11 +791,12 @@ def preload() -> bool:
 def curve_constants(plan: FramePlan) -> tuple[np.ndarray, float, tuple[float, float, float]]:
     """The charge-to-voltage curve (stage 5b) as the kernels take it, nonlinearity.Curve.apply's constants:
     (table, or a 2-long dummy for the cubic; the scale of the charge; the cubic's three coefficients)."""
-    curve = plan.nonlinearity
+    curve: Any = plan.nonlinearity  # a nonlinearity.Curve (the engine does not import the model)
     if curve is None:
         return _DUMMY_NL, 0.0, (0.0, 0.0, 0.0)
     if curve.coefficients is not None:
-        return _DUMMY_NL, 1.0 / curve.full_well_e, tuple(float(v) for v in curve.coefficients)
+        a, b, c = (float(v) for v in curve.coefficients)
+        return _DUMMY_NL, 1.0 / curve.full_well_e, (a, b, c)
     return curve.table, (curve.table.size - 1) / curve.full_well_e, (0.0, 0.0, 0.0)
 
 
@@ -840,7 +842,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
         blink_ptr, blink_col, blink_mean = telegraph.sparse_rows(pixels, means, (r0, r1, c0, c1), cols)
     flags = switches(plan, electrons, rts_val.size > 0 and plan.traps is not None,
                      blink_mean.size > 0 and plan.blinkers is not None)
-    k_adc, black, top, step = plan.adc if adc_on else (1.0, 0.0, 0, 1)
+    k_adc, black, top, step = plan.adc if plan.adc is not None else (1.0, 0.0, 0, 1)
     nl, nl_scale, (nl_a, nl_b, nl_c) = curve_constants(plan)
     read_kind, read_scale, read_table = read_constants(plan)
     held = _needs_compile()
@@ -880,6 +882,8 @@ _TELEGRAPH_LOOPS = "the random telegraph loops"
 def trap_values(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.ndarray]:
     """(pixel index, what the trap adds in e-) of each trap of ``plan`` inside ``region`` in frame ``frame``
     (random_telegraph.trap_output, compiled)."""
+    if plan.traps is None:
+        raise ValueError("trap_values: the plan has no traps")
     traps = plan.traps.within(region, plan.shape[1])
     out = np.empty(traps.index.size)
     k0, k1 = (np.uint64(w) for w in plan.trap_key)
@@ -894,6 +898,8 @@ def trap_values(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.nda
 def blink_means(plan: FramePlan, frame: int, region) -> tuple[np.ndarray, np.ndarray]:
     """(pixel index, this frame's mean charge, float32 e-) of each blinking pixel inside ``region``: its mean (the
     plan's, whichever of the noisy or exact means holds the dark charge) plus its extra dark charge."""
+    if plan.blinkers is None:
+        raise ValueError("blink_means: the plan has no blinking pixels")
     pixels = plan.blinkers.within(region, plan.shape[1])
     extra = np.empty(pixels.index.size)
     k0, k1 = (np.uint64(w) for w in plan.blink_key)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import collections
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,11 +61,11 @@ class FramePlan:
     col_gain: np.ndarray | None = None
     #: the 1/f row offsets (row_noise.spectrum = one_over_f): ``row_flicker(frame, sequence)`` gives the window's
     #: rows' offsets of a frame, (rows,) float64 e-, added to ``row_offset_e`` (``row_sigma_e`` is then 0)
-    row_flicker: object | None = None
+    row_flicker: Callable[[int, int], np.ndarray] | None = None
     #: the columns' offsets that change from frame to frame (each amplifier's 1/f noise, the even and odd banks'
     #: offsets): ``col_flicker(frame, sequence)``, (cols,) float64 e-, added to ``col_offset_e`` (with 1/f noise
     #: ``col_sigma_e`` is 0)
-    col_flicker: object | None = None
+    col_flicker: Callable[[int, int], np.ndarray] | None = None
     #: (K output DN/e-, black level output DN, the ADC's top code, output DN per ADC code); None: float32 e-
     adc: tuple[float, float, int, int] | None = None
     #: the charge-to-voltage transfer (stage 5b): a nonlinearity.Curve (a cubic, or a table)
@@ -72,7 +73,7 @@ class FramePlan:
     offset_e: np.ndarray | None = None  #: per-pixel offsets (rows, cols) float32, e- (stage 5c)
     #: each pixel's 1/f flicker level (source_follower.flicker one_over_f without CDS): ``pixel_flicker(frame,
     #: sequence)`` gives the window's (rows, cols) float32 e-, added to ``offset_e`` (then never None)
-    pixel_flicker: object | None = None
+    pixel_flicker: Callable[[int, int], np.ndarray] | None = None
     cell_offsets_dn: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  #: black level per 2 x 2 cell position
     frame_black_sigma_dn: float = 0.0  #: the black level's error per frame, DN (keys row 4)
     #: (normal | tukey_lambda, scale DN, shape): from the sine normal of the source follower's block (keys row 1)
@@ -101,33 +102,39 @@ class FramePlan:
     @property
     def region(self) -> tuple[int, int, int, int]:
         """The rectangle the arrays cover, (row0, row1, col0, col1): the window, or the whole frame."""
-        return (0, self.shape[0], 0, self.shape[1]) if self.window is None else tuple(self.window)
+        if self.window is None:
+            return 0, self.shape[0], 0, self.shape[1]
+        r0, r1, c0, c1 = self.window
+        return r0, r1, c0, c1
 
     def row_offsets(self, frame: int) -> np.ndarray | None:
         """The rows' offsets in frame ``frame``, (rows,) float64 e-: ``row_offset_e``, plus the frame's 1/f row
         offsets when the row noise has them (every copy of the chain adds them so, as one array)."""
-        if self.row_flicker is None:
+        if self.row_flicker is None or self.row_offset_e is None:
             return self.row_offset_e
         return self.row_offset_e + self.row_flicker(int(frame), int(self.sequence))
 
     def offsets(self, frame: int) -> np.ndarray | None:
         """The pixels' offsets in frame ``frame``, (rows, cols) float32 e-: ``offset_e``, plus each pixel's 1/f
         flicker level of the frame when it has one (one array for every copy of the chain)."""
-        if self.pixel_flicker is None:
+        if self.pixel_flicker is None or self.offset_e is None:
             return self.offset_e
         return self.offset_e + self.pixel_flicker(int(frame), int(self.sequence))
 
     def col_offsets(self, frame: int) -> np.ndarray | None:
         """The columns' offsets in frame ``frame``, (cols,) float64 e-: ``col_offset_e``, plus each column
         amplifier's 1/f noise of the frame when it has one."""
-        if self.col_flicker is None:
+        if self.col_flicker is None or self.col_offset_e is None:
             return self.col_offset_e
         return self.col_offset_e + self.col_flicker(int(frame), int(self.sequence))
 
     @property
     def blink_mean_e(self) -> np.ndarray:
         """The mean charge that holds the dark charge: ``noisy_e`` or ``exact_e``."""
-        return self.noisy_e if self.blink_noisy else self.exact_e
+        mean = self.noisy_e if self.blink_noisy else self.exact_e
+        if mean is None:
+            raise ValueError("a plan with blinking pixels holds their dark charge in noisy_e or exact_e")
+        return mean
 
     @functools.cached_property
     def loggam_table(self) -> np.ndarray:
