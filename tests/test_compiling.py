@@ -78,7 +78,9 @@ def test_a_first_run_takes_the_numpy_specification_while_the_loops_compile_in_th
         assert lock.read_text().strip() == str(pid)
         second = _simulate(env, tmp_path / "b")
         assert second.returncode == 0, second.stderr
-        assert "another process builds them" in second.stderr and "(pid " not in second.stderr, second.stderr
+        # it starts no build of its own, and says how far the running one is: its pid, its time, its step
+        assert f"another process builds them (pid {pid}, " in second.stderr and " of 3: " in second.stderr, \
+            second.stderr
         # the same bits as a run whose loops compile (or load) in its own process, this one's
         assert cli_run(["simulate", *SMALL, "--frames", "2", "--out", str(tmp_path / "c")]) == 0
         assert np.array_equal(tifffile.imread(tmp_path / "a" / "raw.tiff"), tifffile.imread(tmp_path / "c" / "raw.tiff"))
@@ -156,3 +158,51 @@ def test_one_lock_whatever_starts_the_command_and_a_held_lock_starts_no_build(tm
         holder.kill()
         holder.wait()
     assert not jit.building()
+
+
+def _private_build_files(tmp_path, monkeypatch):
+    """The build's lock, log and failure file in a folder of the test's own."""
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    monkeypatch.setattr(jit, "_ANNOUNCED", set())
+    return jit.build_files()
+
+
+def test_a_run_that_finds_a_build_running_says_how_far_it_is(tmp_path, monkeypatch, caplog):
+    lock, log = _private_build_files(tmp_path, monkeypatch)
+    lock.write_text("4242\n")
+    os.utime(lock, (time.time() - 35, time.time() - 35))
+    log.write_text("step 1 of 3: the default sensor: compiling what its run uses (or loading it ...) ...\n"
+                   "the default sensor: 20.1 s\nstep 2 of 3: every stage on: compiling what its run uses ...\n")
+    state = jit.build_state()
+    assert state.startswith("pid 4242, 3") and state.endswith("s so far, at step 2 of 3: every stage on"), state
+    with caplog.at_level("INFO", logger="cmosnoise.engine.jit"):
+        jit._say_building(None)
+    line = caplog.records[-1].getMessage()
+    assert "another process builds them (pid 4242" in line and "step 2 of 3: every stage on" in line and str(log) in line
+
+
+def test_a_failed_build_is_said_by_the_next_run_with_its_log_and_a_good_one_clears_it(tmp_path, monkeypatch,
+                                                                                       caplog):
+    from cmosnoise.app import compiling
+    from cmosnoise.errors import CmosnoiseError
+
+    lock, log = _private_build_files(tmp_path, monkeypatch)
+    monkeypatch.setattr(compiling, "WARM_UPS", (("a broken run", {"sensor": {"width": -1}}),))
+    said = []
+    with pytest.raises(CmosnoiseError):
+        compiling.build(say=said.append)
+    assert said and said[0].startswith("step 1 of 1: a broken run")
+    reason = jit.last_failure()
+    assert reason is not None and reason.startswith("CmosnoiseError") and "sensor.width" in reason
+    started = type("Started", (), {"pid": 777})()  # what start_build returns: the next run's build
+    with caplog.at_level("INFO", logger="cmosnoise.engine.jit"):
+        jit._say_building(started)
+    line = caplog.records[-1].getMessage()
+    assert line.startswith("the last background compile failed (CmosnoiseError") and str(log) in line
+    assert "pid 777" in line
+    monkeypatch.setattr(compiling, "WARM_UPS", ())  # a build that ends well removes the failure
+    assert compiling.build(say=said.append) == {}
+    assert jit.last_failure() is None and not jit.failure_file().exists()

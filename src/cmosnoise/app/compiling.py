@@ -50,6 +50,17 @@ LENS = {"optics": {"psf": "gaussian", "relative_illumination": "cos4", "chief_ra
 WARM_UPS = (("the default sensor", {}), ("every stage on", EVERY_STAGE), ("a lens", LENS))
 
 
+def _write_failure(reason: str) -> None:
+    """Leave ``reason`` where the next run reads it (:func:`.jit.last_failure`), written whole or not at all."""
+    path = jit.failure_file()
+    try:
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(f"{reason}\n{time.strftime('%Y-%m-%d %H:%M:%S')}\n")
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
 def build(background: bool = False, say: Callable[[str], None] = print) -> dict[str, float] | None:
     """Compile (or load) every loop the runs of :data:`WARM_UPS` use, holding :func:`.jit.build_files`' lock.
 
@@ -93,15 +104,22 @@ def build(background: bool = False, say: Callable[[str], None] = print) -> dict[
         if background:
             os.nice(10)  # the run that started it goes first
         times = {}
-        with tempfile.TemporaryDirectory(prefix="cmosnoise-compile-") as tmp:
-            for i, (what, extra) in enumerate(WARM_UPS):
-                say(f"{what}: compiling what its run uses (or loading it from numba's cache) ...")
-                t0 = time.perf_counter()
-                config = load_config(extra={**extra, "run": {"frames": 2}, "processing": {"enabled": True}})
-                simulate(config, Path(tmp) / str(i))
-                ground_truth.expected_raw(Sensor(config).expose())  # a data set's truth
-                times[what] = time.perf_counter() - t0
-                say(f"{what}: {times[what]:.1f} s")
+        try:
+            with tempfile.TemporaryDirectory(prefix="cmosnoise-compile-") as tmp:
+                for i, (what, extra) in enumerate(WARM_UPS):
+                    # "step i of n: what ..." is what a run that finds this build running reads of it
+                    say(f"step {i + 1} of {len(WARM_UPS)}: {what}: compiling what its run uses (or loading it "
+                        "from numba's cache) ...")
+                    t0 = time.perf_counter()
+                    config = load_config(extra={**extra, "run": {"frames": 2}, "processing": {"enabled": True}})
+                    simulate(config, Path(tmp) / str(i))
+                    ground_truth.expected_raw(Sensor(config).expose())  # a data set's truth
+                    times[what] = time.perf_counter() - t0
+                    say(f"{what}: {times[what]:.1f} s")
+        except BaseException as exc:  # the next run says so, with the log (a Ctrl-C too: the loops are not all built)
+            _write_failure(f"{type(exc).__name__}: {exc}".strip().splitlines()[0][:300])
+            raise
+        jit.failure_file().unlink(missing_ok=True)
         return times
     finally:
         os.close(fd)  # releases the lock

@@ -34,6 +34,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 try:
@@ -212,6 +213,41 @@ def build_files() -> tuple[Path, Path]:
     return base.with_suffix(".lock"), base.with_suffix(".log")
 
 
+def failure_file() -> Path:
+    """Where a background compile that failed leaves its reason (beside :func:`build_files`' lock and log), for
+    the next run to say; a build that ends well removes it."""
+    return build_files()[0].with_suffix(".failed")
+
+
+def build_state() -> str:
+    """What the log of the compile running now says of it: its process, how long it has run and its last step
+    (``pid 1234, 35 s so far, at step 2 of 3: every stage on``); empty where nothing can be read."""
+    lock, log = build_files()
+    parts = []
+    try:
+        pid = lock.read_text().split()[0]
+        parts.append(f"pid {int(pid)}")
+        parts.append(f"{max(0.0, time.time() - lock.stat().st_mtime):.0f} s so far")
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        steps = [line for line in log.read_text(errors="replace").splitlines() if line.startswith("step ")]
+    except OSError:
+        steps = []
+    if steps:
+        parts.append("at " + steps[-1].split(": compiling")[0].split(" ...")[0])
+    return ", ".join(parts)
+
+
+def last_failure() -> str | None:
+    """The reason the last background compile failed (:func:`failure_file`'s first line), or None."""
+    try:
+        text = failure_file().read_text(errors="replace").strip()
+    except OSError:
+        return None
+    return text.splitlines()[0] if text else "no reason written"
+
+
 #: the background compile this process started: {"process": subprocess.Popen}
 _BUILD: dict = {}
 _BUILD_LOCK = threading.Lock()
@@ -331,12 +367,20 @@ def _say_building(started: subprocess.Popen | None) -> None:
             return
         _ANNOUNCED.add("building")
     _, log = build_files()
-    who = f"`cmosnoise compile` (pid {started.pid}) builds" if started is not None else "another process builds"
+    if started is not None:
+        who = f"`cmosnoise compile` (pid {started.pid}) builds them"
+    else:
+        state = build_state()
+        who = "another process builds them" + (f" ({state})" if state else "")
+    failed = last_failure() if started is not None else None
+    before = (f"the last background compile failed ({failed}; its log: {log}), so it starts again; " if failed
+              else "")
     logging.getLogger(__name__).info(
-        f"the compiled loops are not built for this machine yet: this run takes the NumPy specification (the same "
-        f"bits, slower on large frames) while {who} them in the background for the next run (about a minute on 2 idle cores; "
-        f"log: {log})")
+        f"{before}the compiled loops are not built for this machine yet: this run takes the NumPy specification "
+        f"(the same bits, slower on large frames) while {who} in the background for the next run (about a "
+        f"minute on 2 idle cores; log: {log})")
 
 
 __all__ = ["numba", "host_features", "vectors", "ONE_LAUNCH", "cached_for_this_machine", "keyed_on", "announce", "compiled",
-           "compile_mode", "COMPILE_ENV", "build_files", "building", "start_build", "build_process"]
+           "compile_mode", "COMPILE_ENV", "build_files", "building", "start_build", "build_process", "failure_file",
+           "build_state", "last_failure"]
