@@ -752,6 +752,66 @@ def render_dataset_sample(d: dict) -> str:
             f"expected raw without its defects; the mask marks {kinds} pixels.")
 
 
+#: the burst round trip of docs/sensor/camera-from-bursts.md: the camera, its size, the settings, the measurement
+CAMERA_BURSTS = {"preset": "sony-a7s2", "size": ["sensor.width=128", "sensor.height=96"], "isos": [100, 800, 3200],
+                 "measure": ["--long-frames", "48", "--levels", "12"]}
+
+
+def compute_camera_bursts() -> dict:
+    """The sony-a7s2 measured as DNG bursts at three ISOs (`measure --format dng`), fitted from the folder of
+    bursts, the fitted camera characterized at each ISO; beside each figure the true camera's (its gain table's
+    K, the read floor it implies, characterize's model of it). Fixed seeds: deterministic."""
+    import tempfile
+
+    from cmosnoise import Sensor, load_config
+    from cmosnoise.analysis import characterize as ch
+    from cmosnoise.analysis.fit import read_floor_e
+    from cmosnoise.app import cli
+
+    c = CAMERA_BURSTS
+    sets = [a for kv in c["size"] for a in ("--set", kv)]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        assert cli.run(["-q", "measure", "-p", c["preset"], "--isos", ",".join(map(str, c["isos"])), "--format",
+                        "dng", *sets, *c["measure"], "--out", f"{tmp}/lab"]) == 0
+        files = len(list(Path(f"{tmp}/lab/bursts").rglob("*.dng")))
+        assert cli.run(["-q", "fit", "--frames-from", f"{tmp}/lab/bursts", "--no-round-trip", "--out",
+                        f"{tmp}/fit"]) == 0
+        doc = json.loads(Path(f"{tmp}/fit/fit.json").read_text())
+        for iso in c["isos"]:
+            at = [f"sensor.iso={iso}"]
+            truth = load_config(preset=c["preset"], overrides=[*c["size"], *at])
+            assert cli.run(["-q", "characterize", "--config", f"{tmp}/fit/config.yaml", "--set", at[0], "--out",
+                            f"{tmp}/c{iso}"]) == 0
+            m = json.loads(Path(f"{tmp}/c{iso}/characterization.json").read_text())["measured"]
+            k = doc["settings"][str(iso)]["parameters"]["system_gain_K_dn_per_e"]
+            rows.append({"iso": iso, "k_fit": k["value"], "k_ci95": k["ci95"],
+                         "k_true": next(r.k_dn_per_e for r in truth.gain_table if r.iso == iso),
+                         "floor_fit_e": read_floor_e(load_config(f"{tmp}/fit/config.yaml", overrides=at)),
+                         "floor_true_e": read_floor_e(truth),
+                         "emva_k": m["system_gain_K_dn_per_e"], "emva_dark_noise_e": m["temporal_dark_noise_e"],
+                         "model_dark_noise_e": ch.model_values(Sensor(truth))["temporal_dark_noise_e"],
+                         "mode": doc["settings"][str(iso)]["mode"]})
+    return {"command": f"cmosnoise measure -p {c['preset']} --isos {','.join(map(str, c['isos']))} --format dng "
+                       + " ".join(f"--set {kv}" for kv in c["size"]) + " " + " ".join(c["measure"]) + " --out lab",
+            "files": files, "rows": rows}
+
+
+def render_camera_bursts(d: dict) -> str:
+    lines = [f"`{d['command']}` ({d['files']} DNG files), then `cmosnoise fit --frames-from lab/bursts "
+             "--no-round-trip --out lab-fit` and `cmosnoise characterize --config lab-fit/config.yaml --set "
+             "sensor.iso=ISO` at each ISO (`python docs/readme_numbers.py compute camera_bursts`):", "",
+             "| ISO | mode | K fitted (95 % CI), DN/e- | K of the camera | read noise fitted, e- | of the camera "
+             "| EMVA K of the fitted camera | EMVA dark noise of the fitted camera, e- | of the camera, e- |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in d["rows"]:
+        lo, hi = r["k_ci95"]
+        lines.append(f"| {r['iso']} | {r['mode'] or ''} | {r['k_fit']:.4f} ({lo:.4f} to {hi:.4f}) | {r['k_true']:.4f} "
+                     f"| {r['floor_fit_e']:.3f} | {r['floor_true_e']:.3f} | {r['emva_k']:.4f} "
+                     f"| {r['emva_dark_noise_e']:.3f} | {r['model_dark_noise_e']:.3f} |")
+    return "\n".join(lines)
+
+
 def render_dataset_speed(d: dict) -> str:
     gf = d["rows"][0]["per_s"]
     lines = [f"Measured with `{d['command']}` ({d['machine']}), {d['crop']} x {d['crop']} samples with their truth:", "",
@@ -1083,6 +1143,7 @@ SECTIONS = {
     "run_speed": (None, render_run_speed),
     "optics_speed": (None, render_optics_speed),
     "focal_plane_mtf": (compute_focal_plane_mtf, render_focal_plane_mtf),
+    "camera_bursts": (compute_camera_bursts, render_camera_bursts),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
@@ -1109,7 +1170,7 @@ BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
               "optics_speed": ["bench_optics.py", "--megapixels", "12", "--repeats", "5", "--json",
                                "optics_speed.json"],
               "quality_speed": ["bench_quality.py", "--megapixels", "12", "--json", "quality_speed.json"]}
-SLOW = {"sweep_fig9"}
+SLOW = {"sweep_fig9", "camera_bursts"}  # camera_bursts: its own slow test recomputes it (test_camera_bursts.py)
 
 
 # ---------------------------------------------------------------- plumbing

@@ -654,7 +654,7 @@ def quality(
 @app.command()
 def fit(
     ctx: typer.Context,
-    frames_from: Path = typer.Option(..., "--frames-from", help="a manifest .yaml of stacks, or an EMVA 1288 descriptor (file or folder)"),
+    frames_from: Path = typer.Option(..., "--frames-from", help="a manifest .yaml of stacks, an EMVA 1288 descriptor (file or folder), or a folder of a camera's DNG bursts (each file's ISO and exposure from its tags)"),
     temperature: float | None = typer.Option(None, "--temperature", min=-60, max=150, help="temperature of stacks that give none, and the fitted sensor's, C (default: the hottest measured)"),
     threshold: float | None = typer.Option(None, "--threshold-e-per-s", min=0, help="white-pixel threshold (default: the base's, else 8 robust sigma above the median rate)"),
     cfa: str | None = typer.Option(None, "--cfa", help="CFA of the frames where their metadata lack it: RGGB, BGGR, GRBG, GBRG or none"),
@@ -717,6 +717,10 @@ def measure(
     temperatures: str | None = typer.Option(None, "--temperatures", help="comma-separated, C (default: the sensor's)"),
     levels: int = typer.Option(40, "--levels", min=8, max=400, help="flat-field pairs from dark to beyond saturation"),
     long_frames: int = typer.Option(100, "--long-frames", min=4, max=10000, help="frames of the long dark stack at each temperature"),
+    isos: str | None = typer.Option(None, "--isos", help="comma-separated settings of the camera's gain table: the "
+                                       "whole measurement at each (default: the sensor's own)"),
+    format_: str = typer.Option("npy", "--format", help="npy (stacks and a manifest) or dng (a folder of DNG "
+                                "bursts, each file's ISO and exposure time in its tags, as a camera writes them)"),
     out: Path = typer.Option(Path("cmosnoise-measurement"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
@@ -734,11 +738,22 @@ def measure(
         bad = [t for t in temps if not -60 <= t <= 150]
         if bad or not temps:
             raise CmosnoiseError(f"--temperatures {temperatures!r}: each must be -60 to 150 C")
+    settings = None
+    if isos is not None:
+        try:
+            settings = [float(x) for x in isos.split(",") if x.strip()]
+        except ValueError:
+            raise CmosnoiseError(f"--isos {isos!r}: expected ISO settings separated by commas, e.g. 100,800,3200") from None
+        if not settings or any(not 0 < v <= 1e7 for v in settings) or len(set(settings)) != len(settings):
+            raise CmosnoiseError(f"--isos {isos!r}: give distinct ISO settings above 0 and at most 1e7, e.g. "
+                                 "100,800,3200")
     folder = OutputFolder(out, overwrite)
     with folder as tmp, _counting(ctx, "measure", "frames") as progress:
-        fitting.write_measurement(cfg, tmp, cfg.seed, temps, levels, long_frames, say=lambda m: _say(ctx, m),
-                                  progress=progress)
-    _say(ctx, f"wrote {out}/manifest.yaml and its stacks; fit them with: cmosnoise fit --frames-from {out}/manifest.yaml")
+        where = fitting.write_measurement(cfg, tmp, cfg.seed, temps, levels, long_frames, say=lambda m: _say(ctx, m),
+                                          progress=progress, isos=settings, form=format_)
+    shown = f"{out}/{where.relative_to(tmp)}"
+    what = "its stacks" if format_ == "npy" else "the DNG bursts"
+    _say(ctx, f"wrote {shown} ({what}); fit them with: cmosnoise fit --frames-from {shown}")
 
 
 @app.command("compile")
@@ -778,8 +793,9 @@ def dataset(
     out: Path = typer.Option(Path("cmosnoise-dataset"), "--out", "-o", help="output folder"),
     format_: str = typer.Option("hdf5", "--format", help="hdf5 (chunked, compressed shards), npz or fits"),
     camera: list[str] | None = typer.Option(None, "--camera", "--preset", "-p", help="a preset (sony-imx900; "
-                                               "sony-a7s2@iso=1600 for one setting) or a virtual camera family (led, "
-                                               "eld, eld:nikon-d850); repeatable: each sample picks one (default: led)"),
+                                               "sony-a7s2@iso=1600 for one setting), a camera file (fit's config.yaml) "
+                                               "or a virtual camera family (led, eld, eld:nikon-d850); repeatable: "
+                                               "each sample picks one (default: led)"),
     images: Path | None = typer.Option(None, "--images", help="a folder of images to crop (default: the built-in "
                                           "scenes)"),
     level: str = typer.Option("0.003:0.9", "--level", help="the scene's white as a share of each camera's "
@@ -826,7 +842,9 @@ def dataset(
         raise CmosnoiseError(f"--crop {crop!r}: give SIZE or HEIGHTxWIDTH in pixels, e.g. 512 or 256x384") from None
     sources = ds.image_sources(images) if images is not None else ds.BUILTIN_SCENES
     white_e_per_s = _white_e_per_s(white_threshold)
-    recipe = ds.Recipe(samples=samples, crop=shape, seed=seed, cameras=tuple(camera or ("led",)), sources=sources,
+    cameras = tuple(camera or ("led",))
+    recipe = ds.Recipe(samples=samples, crop=shape, seed=seed, cameras=cameras, camera_files=ds.camera_files(cameras),
+                       sources=sources,
                        light_e=pair(light, "--light"), level=pair(level, "--level"),
                        reference_level=reference_level, allow_clipping=allow_clipping,
                        integration_time_s=pair(exposure, "--exposure"),

@@ -56,7 +56,7 @@ from .. import inputs
 from .._version import __version__
 from ..analysis import ground_truth
 from ..config import load_config, virtual_cameras
-from ..config.loading import deep_merge, preset_data, preset_names
+from ..config.loading import deep_merge, load_yaml_text, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError, keeping, note_kept
 from ..io.output import atomic_file, resumable_mode
@@ -94,7 +94,9 @@ class Recipe:
 
     ``cameras`` holds preset names (``sony-imx900``: a random row of its gain
     table per sample; ``sony-imx900@gain_db=3`` or ``sony-a7s2@iso=1600``: that
-    setting) and virtual camera families (``led``, ``eld``, ``eld:nikon-d850``,
+    setting), camera configuration files (``lab-fit/config.yaml``, as ``fit``
+    writes it; their texts are in ``camera_files``, so the recipe alone
+    makes its samples wherever it runs) and virtual camera families (``led``, ``eld``, ``eld:nikon-d850``,
     :mod:`cmosnoise.config.virtual_cameras`), each picked with equal
     probability. ``sources`` are image paths or built-in scene names.
     ``level`` is where the scene's white lands, a share of the camera's own saturation (the full well, or the
@@ -132,6 +134,8 @@ class Recipe:
         Uniform, C (None: each camera's).
     overrides : tuple of str
         ``--set`` texts.
+    camera_files : tuple of (str, str)
+        Each camera configuration file of ``cameras``: (its name there, its YAML text) (:func:`camera_files`).
     white_threshold_e_per_s : float or None
         The mask's white-pixel threshold, e-/s (None: the model's).
     shard_size : int
@@ -152,6 +156,7 @@ class Recipe:
     integration_time_s: tuple[float, float] | None = None
     temperature_c: tuple[float, float] | None = None
     overrides: tuple[str, ...] = ()
+    camera_files: tuple[tuple[str, str], ...] = ()
     white_threshold_e_per_s: float | None = None
     shard_size: int = 64
     format: str = "hdf5"
@@ -175,6 +180,7 @@ class Recipe:
                   "overrides"):
             if data.get(k) is not None:
                 data[k] = tuple(data[k])
+        data["camera_files"] = tuple(tuple(f) for f in data.get("camera_files", ()))
         return cls(**data)
 
 
@@ -192,6 +198,7 @@ def check(recipe: Recipe, sources: Sources | None = None) -> Recipe:
     Recipe
     """
     r = recipe
+    sources = sources or Sources()
     if not 1 <= r.samples <= MAX_SAMPLES:
         raise CmosnoiseError(f"--samples {r.samples}: give 1 to {MAX_SAMPLES}")
     if len(r.crop) != 2 or min(r.crop) < 2 or max(r.crop) > 30000 or any(c % 2 for c in r.crop):
@@ -224,8 +231,14 @@ def check(recipe: Recipe, sources: Sources | None = None) -> Recipe:
             if gain:
                 raise CmosnoiseError(f"--camera {cam!r}: a virtual camera family takes no @setting")
             continue
-        if name not in presets:
-            raise CmosnoiseError(f"--camera {cam!r}: not a preset ({', '.join(presets)}) or a virtual camera family "
+        if name in dict(r.camera_files):
+            try:
+                sources.preset(name, r.camera_files)
+            except CmosnoiseError as exc:
+                raise CmosnoiseError(f"--camera {name!r}: {exc}") from None
+        elif name not in presets:
+            raise CmosnoiseError(f"--camera {cam!r}: not a preset ({', '.join(presets)}), a camera configuration "
+                                 f"file (.yaml, as fit writes it) or a virtual camera family "
                                  f"({', '.join(virtual_cameras.FAMILIES)})")
         if gain:
             _gain_update(cam)
@@ -255,7 +268,7 @@ def notes(recipe: Recipe, sources: Sources | None = None) -> list[str]:
     blind = []
     for cam in recipe.cameras:
         name = cam.partition("@")[0]
-        on = False if name in virtual_cameras.FAMILIES else sources.preset(name).dark_current.enabled
+        on = False if name in virtual_cameras.FAMILIES else sources.preset(name, recipe.camera_files).dark_current.enabled
         if not on:
             blind.append(cam)
     if not blind:
@@ -263,6 +276,31 @@ def notes(recipe: Recipe, sources: Sources | None = None) -> list[str]:
     return [f"--temperature {recipe.temperature_c[0]:g}:{recipe.temperature_c[1]:g}: {', '.join(blind)} "
             f"{'has' if len(blind) == 1 else 'have'} no dark-current model, so the temperature changes nothing of "
             "their samples"]
+
+
+def camera_files(cameras) -> tuple[tuple[str, str], ...]:
+    """The camera configuration files among ``cameras`` (``--camera`` values: a name not a preset or a virtual
+    family, ending in .yaml or .yml, with or without an ``@setting``), each (its name, its text), read once here
+    (at most the configuration files' size) so a recipe carries its cameras.
+
+    Parameters
+    ----------
+    cameras : sequence of str
+
+    Returns
+    -------
+    tuple of (str, str)
+    """
+    from ..config.loading import MAX_CONFIG_BYTES
+
+    out: dict[str, str] = {}
+    for cam in cameras:
+        name = cam.partition("@")[0]
+        if name in virtual_cameras.FAMILIES or name in preset_names() or name in out:
+            continue
+        if name.lower().endswith((".yaml", ".yml")):
+            out[name] = inputs.read_text(Path(name), "camera file", MAX_CONFIG_BYTES)
+    return tuple(out.items())
 
 
 def _gain_update(cam: str) -> dict:
@@ -318,15 +356,25 @@ class Sources:
     preset_texts: dict = field(default_factory=dict)
     patterns: dict = field(default_factory=dict)
 
-    def preset(self, name: str | None):
+    def preset(self, name: str | None, files: tuple = ()):
+        """A preset's (or a camera file's: ``files``, :attr:`Recipe.camera_files`) configuration, loaded once."""
         if name not in self.presets:
-            self.presets[name] = load_config(extra=self.preset_data(name))
+            self.presets[name] = load_config(extra=self.preset_data(name, files))
         return self.presets[name]
 
-    def preset_data(self, name: str | None) -> dict:
-        """A preset file's data (``{}`` for None): what ``load_config(preset=name)`` merges first."""
+    def preset_data(self, name: str | None, files: tuple = ()) -> dict:
+        """A preset file's data (``{}`` for None): what ``load_config(preset=name)`` merges first; a camera
+        file's (``files``: (name, YAML text) pairs) read from its text."""
         if name not in self.preset_texts:
-            self.preset_texts[name] = preset_data(name) if name else {}
+            given = dict(files).get(name) if name else None
+            if given is not None:
+                data = load_yaml_text(given)
+                if not isinstance(data, dict):
+                    raise CmosnoiseError(f"camera file {name!r} must hold a mapping of sections, not "
+                                         f"{type(data).__name__}")
+                self.preset_texts[name] = data
+            else:
+                self.preset_texts[name] = preset_data(name) if name else {}
         return self.preset_texts[name]
 
     def image(self, source: str) -> np.ndarray:
@@ -392,7 +440,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     virtual = name in virtual_cameras.FAMILIES
     preset = None if virtual else name
     # its exposure and temperature are the sample's defaults (a gain row or a virtual camera changes neither)
-    base = sources.preset(preset)
+    base = sources.preset(preset, recipe.camera_files)
     if virtual:
         camera, updates = virtual_cameras.sample(name, rng)
     else:
@@ -431,7 +479,8 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     merged = deep_merge(updates, sample)
     try:
         # the preset's data merged under the sample's, as load_config(preset=...) does, without reading the file
-        config = load_config(extra=deep_merge(sources.preset_data(preset), merged), overrides=list(recipe.overrides))
+        config = load_config(extra=deep_merge(sources.preset_data(preset, recipe.camera_files), merged),
+                             overrides=list(recipe.overrides))
     except CmosnoiseError as exc:
         raise CmosnoiseError(f"sample {index} ({camera}): {exc}") from None
     if config.light.enabled:  # a data set's light is its own axis (--light, e- at the white): not lux as well

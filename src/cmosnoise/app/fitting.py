@@ -22,6 +22,7 @@ from ..analysis import emva_evaluation as ev
 from ..analysis import emva_files
 from ..analysis import fit as fitting
 from ..config import schema
+from ..errors import CmosnoiseError
 from ..io import stacks
 from ..io.output import OutputFolder, write_json
 from ..model.sensor import Sensor
@@ -170,14 +171,15 @@ def run(frames_from: Path, base, out: Path, overwrite: bool, temperature_c: floa
     """
     folder = OutputFolder(out, overwrite)  # refuses a bad output folder before any work
     truth_cfg = None
-    if truth is None and Path(frames_from).is_file() and (Path(frames_from).parent / TRUTH_NAME).is_file():
+    phase("reading the stacks")
+    ds = stacks.load(frames_from, temperature_c)
+    # the truth beside a simulated lab's manifest, or beside its folder of bursts (cmosnoise measure --format dng)
+    if truth is None and ds.kind in ("manifest", "bursts") and (Path(frames_from).parent / TRUTH_NAME).is_file():
         truth = Path(frames_from).parent / TRUTH_NAME
     if truth is not None:
         from ..config import load_config
 
         truth_cfg = load_config(truth)
-    phase("reading the stacks")
-    ds = stacks.load(frames_from, temperature_c)
     if cfa:
         ds.cfa = cfa
     if black_level_dn is not None:
@@ -385,7 +387,8 @@ def dark_exposures(sensor: Sensor, base_s: tuple[float, ...] = (0.25, 0.5, 1.0),
 def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float] | None = None, levels: int = 40,
                       long_frames: int = 100, dark_times: tuple[float, ...] = (0.25, 0.5, 1.0),
                       say: Callable[[str], None] = lambda m: None,
-                      progress: Callable[[int, int], None] | None = None) -> Path:
+                      progress: Callable[[int, int], None] | None = None, isos: list[float] | None = None,
+                      form: str = "npy") -> Path:
     """A lab's measurement of the sensor ``cfg``, simulated, as ``.npy`` stacks and a manifest (what ``fit`` reads).
 
     At each temperature: a ``long_frames`` dark stack at 5 ms (the readout
@@ -400,15 +403,44 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
     made.
     ``folder`` is written into as it is (``cmosnoise measure`` gives it an
     output folder's temporary, so the result is whole or absent).
+
+    ``isos``: the whole measurement at each of these settings of the
+    camera's gain table (``sensor.iso``), each stack naming its ISO, the
+    frames numbered on from one setting to the next. ``form``: ``npy``
+    (stacks and ``manifest.yaml``, whose path is returned) or ``dng`` (one
+    DNG a frame, ISO and exposure time in its tags, in a folder of bursts
+    that :func:`cmosnoise.io.stacks.bursts` reads without a manifest:
+    ``bursts/<kind>/iso<ISO>/<stack>/0000.dng``; the folder's path is
+    returned). A DNG holds no temperature: that form takes one.
     """
     import yaml
 
+    from ..io.dng import write_dng
+
     temperatures = temperatures or [cfg.sensor.temperature_c]
+    if form not in ("npy", "dng"):
+        raise CmosnoiseError(f"--format {form!r}: choose npy (stacks and a manifest) or dng (a folder of bursts)")
+    if form == "dng" and len(temperatures) > 1:
+        raise CmosnoiseError(f"--temperatures {','.join(f'{t:g}' for t in temperatures)} with --format dng: a DNG "
+                             "holds no temperature, so a folder of bursts is one temperature's; give one, or "
+                             "--format npy")
+    if isos is not None and not cfg.gain_table:
+        raise CmosnoiseError(f"--isos {','.join(f'{v:g}' for v in isos)}: the sensor has no gain table to set; "
+                             "give a camera that has one (sony-a7s2, sony-imx900) or leave --isos out")
+    if form == "dng" and not isos:  # a folder of bursts says each file's ISO: the sensor's own setting
+        if cfg.sensor.iso is None:
+            raise CmosnoiseError("--format dng writes each burst's ISO in its files: give --isos (settings of the "
+                                 "sensor's gain table) or a sensor set to an ISO (sensor.iso)")
+        isos = [cfg.sensor.iso]
+    settings: list[float | None] = list(isos) if isos else [None]
+    # what fit compares with: the sensor at the lowest setting (the one fit's parameters are of)
+    truth = cfg if isos is None else cfg.model_copy(update={"sensor": cfg.sensor.model_copy(
+        update={"iso": min(isos), "gain_db": None})})
     folder.mkdir(parents=True, exist_ok=True)
     stacks_: list[dict] = []
     frame = 0
     # the frames to make (a cool sensor's dark stacks at lengthened times as well are added when found)
-    total = len(temperatures) * (long_frames + 8 * len(dark_times)) + 2 * levels + 16 + 8
+    total = len(settings) * (len(temperatures) * (long_frames + 8 * len(dark_times)) + 2 * levels + 16 + 8)
 
     def save(name: str, ex, n: int, **entry) -> None:
         nonlocal frame
@@ -417,32 +449,50 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
             frames.append(ex.frame(frame + i))
             if progress:
                 progress(frame + i + 1, total)
-        arr = np.stack(frames)
         frame += n
-        np.save(folder / name, arr)
-        stacks_.append(dict(entry, files=[name]))
+        if form == "npy":
+            np.save(folder / name, np.stack(frames))
+            stacks_.append(dict(entry, files=[name]))
+            return
+        t = ex.sensor.transfer
+        setting = f"iso{entry['iso']:g}"
+        burst = folder / "bursts" / entry["kind"] / setting / Path(name).stem.removeprefix(setting + "_")
+        burst.mkdir(parents=True, exist_ok=True)
+        for i, f in enumerate(frames):
+            write_dng(burst / f"{i:04d}.dng", f, ex.sensor.cfa, t.black_level_dn, t.max_code, iso=entry["iso"],
+                      exposure_s=entry["exposure_s"])
 
     t_flat = 0.005
-    for j, T in enumerate(temperatures):
-        s = Sensor(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"temperature_c": T})}), seed=seed)
-        # the long stack's frame period: its random telegraph pixels' dwell times are counted in it
-        save(f"dark_{T:g}C_{t_flat:g}s.npy", s.with_exposure(t_flat).expose("flat:0"), long_frames,
-             kind="dark", exposure_s=t_flat, temperature_c=T,
-             frame_period_s=random_telegraph.frame_period_s(cfg.sensor.frame_rate_hz, t_flat))
-        times = dark_exposures(s, dark_times)
-        total += 8 * (len(times) - len(dark_times))
-        for t in times:
-            save(f"dark_{T:g}C_{t:g}s.npy", s.with_exposure(t).expose("flat:0"), 8, kind="dark", exposure_s=t,
-                 temperature_c=T)
-        if j == 0:
-            for i, lvl in enumerate(np.linspace(0.02, 1.3, levels)):
-                ex = s.with_exposure(t_flat, s.saturation_e * float(lvl) / t_flat).expose("flat:1.0")
-                save(f"flat_{i:03d}.npy", ex, 2, kind="flat", exposure_s=t_flat, temperature_c=T, level=round(float(lvl), 4))
-            ex = s.with_exposure(t_flat, s.saturation_e * 0.5 / t_flat).expose("flat:1.0")
-            save("flat_half.npy", ex, 16, kind="flat", exposure_s=t_flat, temperature_c=T, level=0.5)
-            ex = s.with_exposure(t_flat, spot_rate(s, t_flat)).expose(spot_scene(s.shape))
-            save("spots.npy", ex, 8, kind="spot", exposure_s=t_flat, temperature_c=T)
-        say(f"wrote the stacks at {T:g} C")
+    for v in settings:
+        at = cfg if v is None else cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"iso": v,
+                                                                                                 "gain_db": None})})
+        tag: dict = {} if v is None else {"iso": v}
+        pre = "" if v is None else f"iso{v:g}_"
+        for j, T in enumerate(temperatures):
+            s = Sensor(at.model_copy(update={"sensor": at.sensor.model_copy(update={"temperature_c": T})}), seed=seed)
+            # the long stack's frame period: its random telegraph pixels' dwell times are counted in it
+            save(f"{pre}dark_{T:g}C_{t_flat:g}s.npy", s.with_exposure(t_flat).expose("flat:0"), long_frames,
+                 kind="dark", exposure_s=t_flat, temperature_c=T, **tag,
+                 frame_period_s=random_telegraph.frame_period_s(cfg.sensor.frame_rate_hz, t_flat))
+            times = dark_exposures(s, dark_times)
+            total += 8 * (len(times) - len(dark_times))
+            for t in times:
+                save(f"{pre}dark_{T:g}C_{t:g}s.npy", s.with_exposure(t).expose("flat:0"), 8, kind="dark",
+                     exposure_s=t, temperature_c=T, **tag)
+            if j == 0:
+                for i, lvl in enumerate(np.linspace(0.02, 1.3, levels)):
+                    ex = s.with_exposure(t_flat, s.saturation_e * float(lvl) / t_flat).expose("flat:1.0")
+                    save(f"{pre}flat_{i:03d}.npy", ex, 2, kind="flat", exposure_s=t_flat, temperature_c=T, **tag,
+                         level=round(float(lvl), 4))
+                ex = s.with_exposure(t_flat, s.saturation_e * 0.5 / t_flat).expose("flat:1.0")
+                save(f"{pre}flat_half.npy", ex, 16, kind="flat", exposure_s=t_flat, temperature_c=T, **tag, level=0.5)
+                ex = s.with_exposure(t_flat, spot_rate(s, t_flat)).expose(spot_scene(s.shape))
+                save(f"{pre}spots.npy", ex, 8, kind="spot", exposure_s=t_flat, temperature_c=T, **tag)
+            say(f"wrote the stacks at {T:g} C" + ("" if v is None else f", ISO {v:g}"))
+    if form == "dng":
+        (folder / TRUTH_NAME).write_text("# the configuration that made these bursts: cmosnoise fit compares with "
+                                         "it\n" + truth.to_yaml())
+        return folder / "bursts"
     manifest = folder / "manifest.yaml"
     # the files' range (a 14-bit ADC written in 16 bits: 16; the fit finds the ADC's bits from the codes' spacing)
     doc = {"cfa": cfg.sensor.cfa, "bits": cfg.adc.output_bits or cfg.adc.bits, "black_level_dn": cfg.adc.black_level_dn,
@@ -450,5 +500,5 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
     manifest.write_text(f"# a simulated lab measurement (cmosnoise measure); the configuration that made it: "
                         f"{TRUTH_NAME}\n" + yaml.safe_dump(doc, sort_keys=False))
     (folder / TRUTH_NAME).write_text("# the configuration that made these stacks: cmosnoise fit compares with it\n"
-                                     + cfg.to_yaml())
+                                     + truth.to_yaml())
     return manifest

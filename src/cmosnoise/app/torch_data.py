@@ -91,7 +91,8 @@ def _recipe(samples, crop, cameras, images, seed, light_e, integration_time_s, t
             sources.images[name] = np.asarray(item, np.float64)
             names.append(name)
     crop = (crop, crop) if isinstance(crop, int) else tuple(crop)
-    recipe = ds.Recipe(samples=samples, crop=crop, seed=seed, cameras=tuple(cameras), sources=tuple(names),
+    recipe = ds.Recipe(samples=samples, crop=crop, seed=seed, cameras=tuple(cameras),
+                       camera_files=ds.camera_files(cameras), sources=tuple(names),
                        light_e=light_e and tuple(light_e), level=tuple(level),
                        integration_time_s=integration_time_s and tuple(integration_time_s),
                        temperature_c=temperature_c and tuple(temperature_c), overrides=tuple(overrides),

@@ -2,8 +2,13 @@
 
 Written with tifffile: a CFA image (PhotometricInterpretation 32803) for a
 Bayer sensor, LinearRaw with one sample for a monochrome one, with the CFA
-pattern, black and white levels, and colour metadata (ColorMatrix1 for D65
-and AsShotNeutral) describing the simulated sensor's colour space.
+pattern, black and white levels, colour metadata (ColorMatrix1 for D65
+and AsShotNeutral) describing the simulated sensor's colour space, and the
+shot's settings where given: ExposureTime (33434) and ISOSpeedRatings
+(34855) in IFD0, as TIFF/EP puts them (ISO 12234-2, on which DNG builds).
+:func:`read_settings` reads them back, from IFD0 or from a camera's EXIF
+IFD (where cameras write them), so a folder of a camera's bursts says each
+file's ISO and exposure time.
 """
 
 from __future__ import annotations
@@ -48,8 +53,27 @@ def camera_matrices(mixing: np.ndarray | None, responsivity=(1.0, 1.0, 1.0)) -> 
 
 
 def write_dng(path: str | Path, raw: np.ndarray, cfa: str, black_level_dn: float, white_level_dn: int,
-              mixing: np.ndarray | None = None, responsivity=(1.0, 1.0, 1.0)) -> None:
-    """Write one raw frame (uint16) as a DNG, via a temporary file and rename."""
+              mixing: np.ndarray | None = None, responsivity=(1.0, 1.0, 1.0), iso: float | None = None,
+              exposure_s: float | None = None) -> None:
+    """Write one raw frame (uint16) as a DNG, via a temporary file and rename.
+
+    Parameters
+    ----------
+    path : str or Path
+    raw : ndarray, (rows, cols)
+        The codes, DN.
+    cfa : str
+        The CFA pattern (RGGB, ...) or "none".
+    black_level_dn, white_level_dn : float, int
+        The codes' black and white levels.
+    mixing, responsivity
+        The colour metadata's sources (:func:`camera_matrices`).
+    iso : float, optional
+        The shot's ISO, written as ISOSpeedRatings (a SHORT; above 65535 that value, as EXIF 2.3 does, with the
+        whole value as ISOSpeed, 34867).
+    exposure_s : float, optional
+        The exposure time, s, written as ExposureTime.
+    """
     import tifffile
 
     path = Path(path)
@@ -61,6 +85,12 @@ def write_dng(path: str | Path, raw: np.ndarray, cfa: str, black_level_dn: float
         (50714, 5, 1, _rationals([black_level_dn], False), True),  # BlackLevel
         (50717, 4, 1, (int(white_level_dn),), True),  # WhiteLevel
     ]
+    if exposure_s is not None:
+        tags.append((33434, 5, 1, _rationals([exposure_s], False), True))  # ExposureTime
+    if iso is not None:
+        tags.append((34855, 3, 1, (min(int(round(iso)), 65535),), True))  # ISOSpeedRatings
+        if iso > 65535:
+            tags.append((34867, 4, 1, (int(round(iso)),), True))  # ISOSpeed
     if cfa != "none":
         cm, neutral = camera_matrices(mixing, responsivity)
         tags += [
@@ -79,3 +109,41 @@ def write_dng(path: str | Path, raw: np.ndarray, cfa: str, black_level_dn: float
             # not write that combination, so the tag is set afterwards
             with tifffile.TiffFile(tmp, mode="r+b") as tif:
                 tif.pages[0].tags["PhotometricInterpretation"].overwrite(34892)
+
+
+def read_settings(path: str | Path) -> tuple[float | None, float | None]:
+    """A DNG's (ISO, exposure time in s), each None where the file does not say it.
+
+    Read from IFD0 (as :func:`write_dng` and TIFF/EP put them) or from the
+    EXIF IFD a camera writes (ISOSpeedRatings, or its EXIF 2.3 name
+    PhotographicSensitivity, with ISOSpeed where that holds the whole value;
+    ExposureTime), by tifffile.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    (float or None, float or None)
+    """
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        found: dict = {}
+        for tag in page.tags.values():
+            found.setdefault(tag.name, tag.value)
+        exif = found.get("ExifTag")
+        if isinstance(exif, dict):
+            for k, v in exif.items():
+                found.setdefault(k, v)
+    iso = found.get("ISOSpeed") or found.get("ISOSpeedRatings") or found.get("PhotographicSensitivity")
+    if isinstance(iso, (tuple, list)):
+        iso = iso[0] if iso else None
+    t = found.get("ExposureTime")
+    if isinstance(t, (tuple, list)):
+        t = t[0] / t[1] if len(t) == 2 and t[1] else None
+    iso = float(iso) if isinstance(iso, (int, float)) and iso > 0 else None
+    t = float(t) if isinstance(t, (int, float)) and t > 0 else None
+    return iso, t

@@ -27,7 +27,13 @@ them:
   Files are multi-page TIFF, ``.npy`` (2-D, or 3-D with frames first) or
   DNG (one frame each, read by LibRaw through rawpy; its CFA, black level
   and white level are taken from the file). Paths are relative to the
-  manifest; a glob expands in sorted order.
+  manifest; a glob expands in sorted order;
+- a folder of a camera's DNG bursts (:func:`bursts`), no manifest: each
+  file's ISO and exposure time from its tags, its kind from its path (a
+  folder or file name holding ``dark``, ``flat`` or ``spot``), a stack the
+  files of one folder at one ISO and exposure time::
+
+      bursts/dark/iso100/*.dng        bursts/flat/iso100/level_03/*.dng
 
 Each stack is reduced frame by frame (:class:`StackStats`) so a 100-frame
 5 MP stack never sits in memory: per-pixel temporal mean, the per-pixel
@@ -186,7 +192,7 @@ class Dataset:
     cfa: str | None
     black_level_dn: float | None
     source: str
-    kind: str  #: "emva" or "manifest"
+    kind: str  #: "emva", "manifest" or "bursts"
     descriptor: Path | None = None  #: the EMVA descriptor, when that was the input
     #: whether every stack's temperature came from the data (the manifest), not from ``load``'s ``temperature_c``
     temperatures_stated: bool = False
@@ -448,8 +454,104 @@ def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
     return Dataset(stacks, shapes[0], bits, cfa, black, str(path), "manifest", temperatures_stated=stated)
 
 
+# ------------------------------------------------------------------ a folder of DNG bursts
+#: the words of a burst's path that name its kind (a folder's or the file's own name holding one)
+KINDS = ("dark", "flat", "spot")
+#: the most DNG files a folder of bursts is read from
+MAX_BURST_FILES = 100_000
+
+
+def _kind_of(rel: Path) -> str | None:
+    """The kind a burst file's path (relative to the folder) names: its innermost part that holds one word of
+    :data:`KINDS` (``bursts/dark/iso100/0001.dng``: dark), None where none does or a part holds two."""
+    for part in reversed([*rel.parent.parts, rel.stem]):
+        hits = [k for k in KINDS if k in part.lower()]
+        if len(hits) == 1:
+            return hits[0]
+        if hits:
+            return None
+    return None
+
+
+def burst_files(folder: Path) -> list[Path]:
+    """The DNG files under ``folder`` (any depth), sorted by path."""
+    found = []
+    for p in sorted(folder.rglob("*")):
+        if p.suffix.lower() == ".dng" and p.is_file():
+            found.append(p)
+            if len(found) > MAX_BURST_FILES:
+                raise CmosnoiseError(f"--frames-from {str(folder)!r}: more than {MAX_BURST_FILES} DNG files; "
+                                     "fit a folder of fewer bursts")
+    return found
+
+
+def bursts(folder: str | Path, temperature_c: float | None = None) -> Dataset:
+    """A :class:`Dataset` from a folder of a camera's DNG bursts: no manifest, the files say what they are.
+
+    Each DNG's ISO and exposure time are read from its tags
+    (:func:`cmosnoise.io.dng.read_settings`: IFD0 or the camera's EXIF
+    IFD), its kind from its path (the innermost folder or file name that
+    holds ``dark``, ``flat`` or ``spot``). A stack is the files of one folder
+    at one (kind, ISO, exposure time), in name order: darks and flats at each
+    ISO the camera was set to, each flat level in a folder of its own (or at
+    an exposure time of its own). The stacks' ISOs are the gain table's
+    settings (:meth:`Dataset.settings`). The CFA pattern, black and white
+    level come from the files (LibRaw); the temperature is ``temperature_c``
+    (a DNG holds none).
+
+    Parameters
+    ----------
+    folder : str or Path
+    temperature_c : float, optional
+        The sensor's temperature during the bursts, C.
+
+    Returns
+    -------
+    Dataset
+    """
+    from .dng import read_settings
+
+    folder = Path(folder)
+    files = burst_files(folder)
+    if not files:
+        raise CmosnoiseError(f"--frames-from {str(folder)!r}: a folder holding an EMVA 1288 descriptor "
+                             f"({DESCRIPTOR}), one manifest .yaml, or a camera's DNG bursts (found none of them)")
+    groups: dict[tuple, list[Path]] = {}
+    for p in files:
+        rel = p.relative_to(folder)
+        kind = _kind_of(rel)
+        if kind is None:
+            raise CmosnoiseError(f"{str(p)!r}: neither its name nor its folders' say which burst it is "
+                                 f"({', '.join(KINDS)}): put each kind's bursts in a folder named for it, e.g. "
+                                 "dark/iso100/")
+        try:
+            iso, t = read_settings(p)
+        except Exception as exc:
+            raise CmosnoiseError(f"{str(p)!r} cannot be read as a DNG: {' '.join(str(exc).split())[:160]}") from None
+        if iso is None:
+            raise CmosnoiseError(f"{str(p)!r} has no ISO tag (ISOSpeedRatings, 34855, in IFD0 or its EXIF IFD): a "
+                                 "folder of bursts takes each file's ISO from it; write it, or list the files in a "
+                                 "manifest with iso per stack")
+        if t is None:
+            raise CmosnoiseError(f"{str(p)!r} has no ExposureTime tag (33434): a folder of bursts takes each "
+                                 "file's exposure time from it; write it, or list the files in a manifest")
+        groups.setdefault((str(p.parent.relative_to(folder)), kind, iso, t), []).append(p)
+    stacks, meta = [], _Meta()
+    for (where, kind, iso, t), paths in groups.items():
+        name = f"{where}/ ({kind}, ISO {iso:g}, {t:g} s, {len(paths)} files)"
+        stacks.append(_stack(paths, meta, name=name, kind=kind, exposure_s=t, temperature_c=temperature_c,
+                             iso=iso))
+    shapes = sorted({s.shape for s in stacks})
+    if len(shapes) > 1:
+        raise CmosnoiseError(f"--frames-from {str(folder)!r}: the bursts have different frame sizes "
+                             f"({', '.join(f'{c} x {r}' for r, c in shapes)}); one camera's frames have one size")
+    bits = max(8, min(16, int(math.ceil(math.log2(meta.white + 1))))) if meta.white is not None else None
+    return Dataset(stacks, shapes[0], bits, meta.cfa, meta.black, str(folder), "bursts")
+
+
 def load(path: str | Path, temperature_c: float | None = None) -> Dataset:
-    """A :class:`Dataset` from a manifest (``.yaml``/``.yml``) or an EMVA 1288 descriptor (file or folder).
+    """A :class:`Dataset` from a manifest (``.yaml``/``.yml``), an EMVA 1288 descriptor (file or folder) or a
+    folder of DNG bursts (:func:`bursts`).
 
     ``temperature_c`` is the temperature of stacks that do not give one.
     """
@@ -458,9 +560,11 @@ def load(path: str | Path, temperature_c: float | None = None) -> Dataset:
         raise CmosnoiseError(f"--frames-from {str(path)!r}: no such file or folder")
     if path.is_dir() and not descriptor_path(path).is_file():
         manifests = sorted(path.glob("*.yaml")) + sorted(path.glob("*.yml"))
+        if not manifests:
+            return bursts(path, temperature_c)
         if len(manifests) != 1:
-            raise CmosnoiseError(f"--frames-from {str(path)!r}: a folder holding an EMVA 1288 descriptor ({DESCRIPTOR}) "
-                                 "or one manifest .yaml "
+            raise CmosnoiseError(f"--frames-from {str(path)!r}: a folder holding an EMVA 1288 descriptor ({DESCRIPTOR}), "
+                                 "one manifest .yaml or a camera's DNG bursts "
                                  f"(found {len(manifests)} .yaml files)")
         path = manifests[0]
     if path.suffix.lower() in (".yaml", ".yml"):
