@@ -225,3 +225,12 @@ def test_a_folder_of_dng_bursts_fits_as_the_same_frames_in_a_manifest(tmp_path):
             assert np.allclose(v, w, rtol=1e-12, atol=1e-12), k
         else:
             assert v == w, k
+
+
+def test_simulated_dng_frames_say_their_iso_and_exposure_time(tmp_path):
+    """``simulate`` with ``run.dng``: each frame's file holds the sensor's ISO and exposure time, as a camera's."""
+    r = cli("-q", "simulate", "-p", "sony-a7s2", "--set", "sensor.iso=1600", "--set", "sensor.width=32", "--set",
+            "sensor.height=24", "--set", "exposure.integration_time_s=0.004", "--frames", "1", "--set", "run.dng=true",
+            "--out", tmp_path / "s")
+    assert r.returncode == 0, r.stderr
+    assert read_settings(tmp_path / "s" / "dng" / "frame_000000.dng") == (1600.0, 0.004)

@@ -132,7 +132,8 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
                     frame0.extend([raw, electrons])
                 if config.run.dng:
                     write_dng(tmp / "dng" / f"frame_{k:06d}.dng", raw, sensor.cfa, transfer.black_level_dn,
-                              transfer.max_code, processor.mixing, info.responsivity)
+                              transfer.max_code, processor.mixing, info.responsivity, iso=config.sensor.iso,
+                              exposure_s=config.exposure.integration_time_s)
                 if proc_cfg.enabled and n > 1:
                     tp = time.perf_counter()
                     picture = processor.render(raw)
