@@ -33,7 +33,8 @@ SMALLEST = {
     "kernel_parts.py": ["--repeats", "1"],
 }
 #: minutes at their smallest (or a device they need): imported and --help only
-HELP_ONLY = {"bench_explore.py": "a browser and 1080p panes", "bench_fit.py": "a whole VGA fit, twice",
+HELP_ONLY = {"bench_compile_load.py": "a whole build on an empty cache, minutes under load",
+             "bench_explore.py": "a browser and 1080p panes", "bench_fit.py": "a whole VGA fit, twice",
              "bench_gpu.py": "an NVIDIA GPU (benchmarks/gpu_check.sh)", "bench_tiles.py": "50 MP at its smallest",
              "fit_coverage.py": "hundreds of fits"}
 

@@ -206,3 +206,53 @@ def test_a_failed_build_is_said_by_the_next_run_with_its_log_and_a_good_one_clea
     monkeypatch.setattr(compiling, "WARM_UPS", ())  # a build that ends well removes the failure
     assert compiling.build(say=said.append) == {}
     assert jit.last_failure() is None and not jit.failure_file().exists()
+
+
+@pytest.mark.skipif(jit.fcntl is None, reason="needs POSIX file locks")
+def test_an_install_during_a_build_makes_it_start_over_on_the_new_sources_once_said(tmp_path, monkeypatch):
+    """The package installed again while a build runs (its sources' stamp changes after the first step): the
+    build says so in one line and replaces itself by a new build of the same kind (``os.execve``, the same pid
+    and log) that holds the same lock, inherited; no temporary folder is left; after MAX_RESTARTS it goes on."""
+    from cmosnoise.analysis import ground_truth
+    from cmosnoise.app import compiling
+    from cmosnoise.app import run as run_mod
+
+    lock, _ = _private_build_files(tmp_path, monkeypatch)
+    monkeypatch.setattr(compiling, "WARM_UPS", (("one", {}), ("two", {}), ("three", {})))
+    monkeypatch.setattr(run_mod, "simulate", lambda config, out: None)
+    monkeypatch.setattr(ground_truth, "expected_raw", lambda exposure: None)
+    stamps = iter(["before", "before", "after"])  # the build's own, the check before step 1, the one before step 2
+    monkeypatch.setattr(jit, "sources_stamp", lambda: next(stamps, "after"))
+    monkeypatch.delenv(compiling.RESTARTS_ENV, raising=False)
+    seen = {}
+
+    class Replaced(Exception):
+        pass
+
+    def execve(path, args, env):
+        fd = int(env[jit.LOCK_FD_ENV])
+        seen.update(args=args, restarts=env[compiling.RESTARTS_ENV], mode=env[jit.COMPILE_ENV],
+                    inheritable=os.get_inheritable(fd), pid=lock.read_text().strip())
+        other = os.open(lock, os.O_RDWR)  # the lock is held through the exec: nobody else takes it meanwhile
+        try:
+            with pytest.raises(OSError):
+                jit.fcntl.flock(other, jit.fcntl.LOCK_EX | jit.fcntl.LOCK_NB)
+        finally:
+            os.close(other)
+        raise Replaced
+
+    monkeypatch.setattr(os, "execve", execve)
+    said = []
+    with pytest.raises(Replaced):
+        compiling.build(background=False, say=said.append)
+    restarts = [line for line in said if "installed again" in line]
+    assert len(restarts) == 1 and "starting over on the new sources (restart 1 of at most 3)" in restarts[0], said
+    assert [line for line in said if line.startswith("step ")] == [said[0]]  # step 1 ran, step 2 did not
+    assert seen["args"][1:] == ["-m", "cmosnoise", "compile"]  # a foreground build starts over as one
+    assert seen["restarts"] == "1" and seen["mode"] == "foreground" and seen["inheritable"]
+    assert seen["pid"] == str(os.getpid())
+    assert not list(tmp_path.glob("cmosnoise-compile-*/"))  # the build's temporary folder went before the exec
+    # a build that has started over MAX_RESTARTS times goes on to its end
+    monkeypatch.setenv(compiling.RESTARTS_ENV, str(compiling.MAX_RESTARTS))
+    monkeypatch.setattr(jit, "sources_stamp", lambda: str(time.perf_counter_ns()))
+    assert set(compiling.build(say=said.append)) == {"one", "two", "three"}

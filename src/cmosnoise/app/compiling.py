@@ -19,6 +19,7 @@ arrays take other types compiles those variants at its first run, and says so.
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -48,6 +49,26 @@ LENS = {"optics": {"psf": "gaussian", "relative_illumination": "cos4", "chief_ra
 #: (what, the configuration's changes from the defaults): the runs whose loops are built, each 2 frames with
 #: processing (the run statistics compare frames; processed.png takes the pictures' loops)
 WARM_UPS = (("the default sensor", {}), ("every stage on", EVERY_STAGE), ("a lens", LENS))
+
+#: how often a build starts over on sources installed while it ran (:func:`_start_over`), at most
+MAX_RESTARTS = 3
+#: the environment variable counting a build's restarts
+RESTARTS_ENV = "CMOSNOISE_COMPILE_RESTARTS"
+
+
+def _start_over(fd: int, background: bool, say: Callable[[str], None]) -> None:
+    """Replace this process by a new build of the sources installed now, holding the same lock (the same pid, the
+    same log, the lock never let go), said once: an install while a build ran (``pip install`` of the package)
+    left it compiling sources that are gone."""
+    n = int(os.environ.get(RESTARTS_ENV, "0") or 0) + 1
+    say(f"the package was installed again while this build ran (its sources changed): starting over on the new "
+        f"sources (restart {n} of at most {MAX_RESTARTS})")
+    os.set_inheritable(fd, True)
+    env = {**os.environ, jit.LOCK_FD_ENV: str(fd), RESTARTS_ENV: str(n), jit.COMPILE_ENV: "foreground"}
+    args = [sys.executable, "-m", "cmosnoise", "compile", *(["--background"] if background else [])]
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.execve(sys.executable, args, env)
 
 
 def _write_failure(reason: str) -> None:
@@ -104,9 +125,17 @@ def build(background: bool = False, say: Callable[[str], None] = print) -> dict[
         if background:
             os.nice(10)  # the run that started it goes first
         times = {}
+        stamp = jit.sources_stamp()
+        restarts = int(os.environ.get(RESTARTS_ENV, "0") or 0)
+
+        def overtaken() -> bool:
+            return restarts < MAX_RESTARTS and jit.sources_stamp() != stamp
+
         try:
             with tempfile.TemporaryDirectory(prefix="cmosnoise-compile-") as tmp:
                 for i, (what, extra) in enumerate(WARM_UPS):
+                    if overtaken():
+                        break
                     # "step i of n: what ..." is what a run that finds this build running reads of it
                     say(f"step {i + 1} of {len(WARM_UPS)}: {what}: compiling what its run uses (or loading it "
                         "from numba's cache) ...")
@@ -119,6 +148,8 @@ def build(background: bool = False, say: Callable[[str], None] = print) -> dict[
         except BaseException as exc:  # the next run says so, with the log (a Ctrl-C too: the loops are not all built)
             _write_failure(f"{type(exc).__name__}: {exc}".strip().splitlines()[0][:300])
             raise
+        if overtaken():  # an install during a step: its temporary folder is gone, the lock still held
+            _start_over(fd, background, say)
         jit.failure_file().unlink(missing_ok=True)
         return times
     finally:

@@ -213,6 +213,21 @@ def build_files() -> tuple[Path, Path]:
     return base.with_suffix(".lock"), base.with_suffix(".log")
 
 
+def sources_stamp() -> str:
+    """A digest of the installed package's sources (each ``.py`` file's path, size and modification time): a
+    build that finds it changed was overtaken by an install (``pip install`` while it ran), so what it compiles
+    is keyed on sources that are gone (numba keys its cache on each file's stamp)."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*.py")):
+        try:
+            st = p.stat()
+        except OSError:  # a file an install is replacing now
+            continue
+        h.update(f"{p.relative_to(root)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
+    return h.hexdigest()
+
+
 def failure_file() -> Path:
     """Where a background compile that failed leaves its reason (beside :func:`build_files`' lock and log), for
     the next run to say; a build that ends well removes it."""
