@@ -19,6 +19,7 @@ Every process it started is stopped by its id at the end.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
@@ -47,10 +48,8 @@ def _compiled(out: Path, r: subprocess.CompletedProcess) -> bool:
 
 
 def _stop_group(pid: int) -> None:
-    try:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
 
 
 def main() -> None:

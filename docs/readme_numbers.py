@@ -881,6 +881,17 @@ def benchmark_command(name: str) -> str:
                      *(f"docs/numbers/{a}" if a.endswith(".json") else a for a in rest)])
 
 
+def render_compile_load(d: dict) -> str:
+    first, second = d["runs"][0], d["runs"][1]
+    ready = d["compiled_after_s"]
+    return (f"Measured with `{benchmark_command('compile_load')}` ({d['cores']} cores, an empty cache; load: "
+            f"{d['load']}): the `cmosnoise` run took {first['s']:.0f} s on the NumPy specification and started "
+            f"{d['builds_started']} build; `python -m cmosnoise` {second['at_s']:.0f} s later "
+            f"{'joined it' if d['second_run_joined'] else 'did not join it'} ({second['s']:.0f} s); the first run "
+            f"on the compiled loops began {ready:.0f} s after the first run's start"
+            + (" (within 300 s)." if d["within_300_s"] else "."))
+
+
 def render_setup_speed(d: dict) -> str:
     timed = (f"the fastest of at least {d['repeats']} set-ups and of {d['min_time_s']:g} s of them: "
              + ", ".join(str(r["setups_timed"]) for r in d["rows"]) + " timed")
@@ -1144,11 +1155,13 @@ SECTIONS = {
     "optics_speed": (None, render_optics_speed),
     "focal_plane_mtf": (compute_focal_plane_mtf, render_focal_plane_mtf),
     "camera_bursts": (compute_camera_bursts, render_camera_bursts),
+    "compile_load": (None, render_compile_load),
 }
 
 #: sections measured by a benchmark script (machine-dependent), and deterministic ones too slow for the tests
 #: speed on a CPU with AVX-512 and on one with AVX2 only: run the one that fits the machine you measure on
 BENCHMARKS = {"speed": ["bench_chain.py", "--json", "speed.json"],
+              "compile_load": ["bench_compile_load.py", "--json", "compile_load.json"],
               "speed_avx2": ["bench_chain.py", "--json", "speed_avx2.json"],
               "kernel_parts": ["kernel_parts.py", "--json", "kernel_parts.json"],
               "kernel_parts_avx2": ["kernel_parts.py", "--json", "kernel_parts_avx2.json"],
