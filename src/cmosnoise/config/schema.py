@@ -1097,11 +1097,23 @@ class Config(Section):
         return (self.sensor.height, self.sensor.width)
 
     def to_dict(self) -> dict:
-        """Plain data; unset optional keys (null) are left out, as they read back as defaults."""
+        """Plain data; unset optional keys (null) are left out, as they read back as defaults.
+
+        Returns
+        -------
+        dict
+            The sections as JSON-compatible data.
+        """
         return self.model_dump(mode="json", exclude_none=True)
 
     def to_yaml(self) -> str:
-        """Every key, those that are null included (they read back as null)."""
+        """Every key, those that are null included (they read back as null).
+
+        Returns
+        -------
+        str
+            The configuration as YAML, sections in their order.
+        """
         # a top-level block mapping is its sections' texts one after another: each section is dumped on its own
         # and kept by its value (a data set writes one configuration per sample, most of its sections the same)
         return "".join(_section_yaml(json.dumps({k: v}, sort_keys=False))

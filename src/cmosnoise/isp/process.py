@@ -91,9 +91,19 @@ class Processor:
         return max(float(white) - i.black_level_dn, 1e-9)
 
     def check_raw(self, raw) -> np.ndarray:
-        """``raw`` as an array if it is a raw frame this processor can take: 2-D (rows, cols) of at least 2 x 2,
-        integer or real codes (float: every value finite), of the master dark's shape where there is one; else
-        one :class:`CmosnoiseError` naming the argument (a NaN would reach the compiled demosaicing)."""
+        """``raw`` as an array if it is a raw frame this processor can take; else one :class:`CmosnoiseError`
+        naming the argument (a NaN would reach the compiled demosaicing).
+
+        Parameters
+        ----------
+        raw : array_like
+            2-D (rows, cols) of at least 2 x 2, integer or real codes (float: every value finite), of the master
+            dark's shape where there is one.
+
+        Returns
+        -------
+        ndarray, (rows, cols)
+        """
         raw = inputs.check_frame(raw, "raw")
         self.check_shape(raw.shape)
         return raw
@@ -107,7 +117,20 @@ class Processor:
 
     # ------------------------------------------------------------ CFA domain
     def cfa_image(self, raw: np.ndarray, pre: bool = False) -> np.ndarray:
-        """Steps 1 to 3: signal above black (DN), dark-calibrated and defect-corrected, float32."""
+        """Steps 1 to 3: signal above black (DN), dark-calibrated and defect-corrected.
+
+        Parameters
+        ----------
+        raw : ndarray, (rows, cols)
+            A raw frame, DN.
+        pre : bool
+            Stop after the black level's subtraction (the pre-processing view).
+
+        Returns
+        -------
+        ndarray, (rows, cols)
+            float32 DN above black.
+        """
         raw = self.check_raw(raw)
         img = calibration.subtract_black(raw, self.info.black_level_dn)
         if pre:
@@ -123,10 +146,20 @@ class Processor:
 
     # ------------------------------------------------------------ colour
     def linear_rgb(self, cfa_img: np.ndarray, half: bool = False) -> np.ndarray:
-        """Steps 4 to 6: linear light with scene white at 1; (rows, cols, 3), or (rows, cols) for mono.
+        """Steps 4 to 6: linear light with scene white at 1.
 
-        ``half``: demosaic at half resolution (:func:`reconstruction.superpixel`, one pixel per
-        2 x 2 cell, for previews; a mono image is averaged over 2 x 2 instead).
+        Parameters
+        ----------
+        cfa_img : ndarray, (rows, cols)
+            :meth:`cfa_image`'s output.
+        half : bool
+            Demosaic at half resolution (:func:`reconstruction.superpixel`, one pixel per 2 x 2 cell, for
+            previews; a mono image is averaged over 2 x 2 instead).
+
+        Returns
+        -------
+        ndarray
+            (rows, cols, 3), or (rows, cols) for mono; halved with ``half``.
         """
         x = cfa_img / np.float32(self.white_above_black)
         if self.mono:
@@ -163,6 +196,20 @@ class Processor:
         (:func:`reconstruction.superpixel_srgb8`), and at full size with
         bilinear demosaicing (:func:`reconstruction.bilinear_srgb8`); grey
         world, if chosen, takes its gains from the first frame's steps.
+
+        Parameters
+        ----------
+        raw : ndarray, (rows, cols)
+            A raw frame, DN.
+        pre : bool
+            The pre-processing view instead of the full chain.
+        half : bool
+            At half size.
+
+        Returns
+        -------
+        ndarray, (rows, cols, 3) uint8
+            The sRGB picture ((rows, cols) for mono).
         """
         raw = self.check_raw(raw)
         one_pass = (half or (self.settings.demosaic == "bilinear" and min(raw.shape) > reconstruction.EDGE_PAD))

@@ -204,7 +204,22 @@ class PatternCache:
         self._lock = threading.Lock()
 
     def get(self, name: str, parts: tuple, make: Callable[[], object]):
-        """The value of ``name`` for ``parts``, made by ``make()`` (outside the lock) when not held."""
+        """The value of ``name`` for ``parts``, made by ``make()`` (outside the lock) when not held.
+
+        Parameters
+        ----------
+        name : str
+            Which map or value.
+        parts : tuple
+            What it depends on (the key it is held under).
+        make : callable
+            Makes it, with no arguments.
+
+        Returns
+        -------
+        object
+            The held or newly made value.
+        """
         k = name + ":" + key(*parts)
         with self._lock:
             if k in self._items:
@@ -220,7 +235,12 @@ class PatternCache:
         return value
 
     def nbytes(self) -> int:
-        """Bytes the held values weigh."""
+        """Bytes the held values weigh.
+
+        Returns
+        -------
+        int
+        """
         return sum(self._weights.values())
 
     def __len__(self) -> int:

@@ -182,6 +182,18 @@ class Sensor:
         Valid because nothing fixed-pattern depends on the exposure (docs/model.md section 1). A
         ``peak_rate_e_per_s`` is the light from here: light in lux (``light.enabled``) is switched off with it
         (an EMVA 1288 series sets its own irradiation, the same in every channel).
+
+        Parameters
+        ----------
+        integration_time_s : float, optional
+            The exposure time, s (default: this sensor's).
+        peak_rate_e_per_s : float, optional
+            The scene's white as a photo-charge rate, e-/s (default: this sensor's light).
+
+        Returns
+        -------
+        Sensor
+            A sensor of the same instance (seed, maps) at that exposure.
         """
         updates: dict[str, float | None] = {}
         if integration_time_s is not None:
@@ -202,7 +214,20 @@ class Sensor:
     def map_statistic(self, name: str, compute: Callable[[], float]) -> float:
         """A statistic of this sensor's fixed maps (a map's mean, variance, mean square), computed by ``compute()``
         once and kept: the noise budget, the summary and the explorer ask for the same ones many times, and each
-        is a pass over every pixel. ``name`` says which; the value is what ``compute()`` returns, bit for bit."""
+        is a pass over every pixel.
+
+        Parameters
+        ----------
+        name : str
+            Which statistic (the key it is kept under).
+        compute : callable
+            Computes it, with no arguments, the first time it is asked for.
+
+        Returns
+        -------
+        float
+            What ``compute()`` returns, bit for bit.
+        """
         if name not in self._statistics:
             self._statistics[name] = float(compute())
         return self._statistics[name]
@@ -278,10 +303,20 @@ class Sensor:
     def photo_response(self, perfect_e: np.ndarray, rows: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Mean photo-charge of ``perfect_e`` through PRNU (stage 2) and crosstalk (stage 3), e- float64.
 
-        Returns (after PRNU, after crosstalk), each (rows, cols); the one
-        place both stages meet a mean image (exposures and
-        :attr:`flat_response` call it). With ``rows = (row0, row1)``, ``perfect_e`` holds only those rows of
-        the map (``row0`` even), and crosstalk treats their first and last as edges.
+        The one place both stages meet a mean image (exposures and :attr:`flat_response` call it).
+
+        Parameters
+        ----------
+        perfect_e : ndarray, (rows, cols)
+            The photo-charge before PRNU, e-.
+        rows : (int, int), optional
+            ``(row0, row1)``: ``perfect_e`` holds only those rows of the map (``row0`` even), and crosstalk
+            treats their first and last as edges.
+
+        Returns
+        -------
+        (ndarray, ndarray)
+            After PRNU and after crosstalk, each (rows, cols) float64 e-.
         """
         c = self.config
         gain = self._fixed.prnu_gain
@@ -363,7 +398,13 @@ class Sensor:
         return self.spec.white_dn
 
     def raw_info(self) -> RawInfo:
-        """What the processing chain needs to know about this sensor's raw frames."""
+        """What the processing chain needs to know about this sensor's raw frames.
+
+        Returns
+        -------
+        RawInfo
+            The CFA, black and white level, K and the channels' responsivities.
+        """
         c = self.config
         t = self.transfer
         return RawInfo(
@@ -373,7 +414,13 @@ class Sensor:
         )
 
     def stages_on(self) -> dict[str, bool]:
-        """Which stages of docs/model.md run in this configuration."""
+        """Which stages of docs/model.md run in this configuration.
+
+        Returns
+        -------
+        dict of str to bool
+            Each stage's name and whether it runs.
+        """
         c = self.config
         return {
             "prnu": c.prnu.enabled,
@@ -399,9 +446,17 @@ class Sensor:
     def scene_signal(self, scene: str | np.ndarray | None = None) -> np.ndarray:
         """The scene through the CFA, relative signal in [0, 1], (rows, cols).
 
-        ``scene`` is a built-in name or path (see :mod:`cmosnoise.scene`), a
-        linear RGB array (rows, cols, 3) or a CFA-sampled array (rows, cols)
-        at the sensor's size (the window's, for a window); default: the configuration's scene.
+        Parameters
+        ----------
+        scene : str or ndarray, optional
+            A built-in name or path (see :mod:`cmosnoise.scene`), a linear RGB array (rows, cols, 3) or a
+            CFA-sampled array (rows, cols) at the sensor's size (the window's, for a window); default: the
+            configuration's scene.
+
+        Returns
+        -------
+        ndarray, (rows, cols)
+            The relative signal at each pixel, float64 in [0, 1].
         """
         c = self.config
         fp = self.spec.focal_plane
@@ -443,10 +498,21 @@ class Sensor:
     def expose(self, scene: str | np.ndarray | None = None, sequence: int = SEQ_SCENE) -> Exposure:
         """Mean charge of ``scene`` at the configured exposure and temperature.
 
-        ``sequence`` numbers independent frame series of the same sensor
-        (0: the run; 1: the dark frames of a dark calibration). With a
-        cache, a named scene's signal and the exposure's mean images come
-        from it when their inputs are unchanged.
+        With a cache, a named scene's signal and the exposure's mean images come from it when their inputs are
+        unchanged.
+
+        Parameters
+        ----------
+        scene : str or ndarray, optional
+            As :meth:`scene_signal` takes it (default: the configuration's scene).
+        sequence : int
+            Numbers independent frame series of the same sensor (0: the run; 1: the dark frames of a dark
+            calibration).
+
+        Returns
+        -------
+        Exposure
+            The exposure, whose :meth:`Exposure.frame` makes its frames.
         """
         if scene is None:
             scene = self.config.scene.source
@@ -464,12 +530,38 @@ class Sensor:
         return Exposure(self, signal, sequence, signal_parts)
 
     def dark_frames(self, n: int) -> Iterator[np.ndarray]:
-        """``n`` dark frames (no light) for dark calibration, from their own noise sequence."""
+        """``n`` dark frames (no light) for dark calibration, from their own noise sequence.
+
+        Parameters
+        ----------
+        n : int
+            How many frames.
+
+        Returns
+        -------
+        iterator of ndarray
+            Each frame (rows, cols) uint16 DN.
+        """
         n = _whole(n, "n", minimum=1)
         return self.expose("flat:0", sequence=SEQ_DARK_CALIBRATION).frames(n)
 
     def capture(self, scene=None, frames: int = 1, first_frame: int = 0) -> np.ndarray:
-        """Raw frames ``first_frame`` to ``first_frame + frames - 1``, (frames, rows, cols) uint16."""
+        """Raw frames ``first_frame`` to ``first_frame + frames - 1`` of ``scene``.
+
+        Parameters
+        ----------
+        scene : str or ndarray, optional
+            As :meth:`expose` takes it.
+        frames : int
+            How many frames.
+        first_frame : int
+            The first frame's number.
+
+        Returns
+        -------
+        ndarray, (frames, rows, cols)
+            uint16 DN.
+        """
         frames = _whole(frames, "frames", minimum=1)
         first_frame = _whole(first_frame, "first_frame")
         shot = self.expose(scene)
@@ -592,7 +684,13 @@ class Exposure:
 
     # ------------------------------------------------------------ frames
     def plan(self) -> FramePlan:
-        """What every frame of this exposure shares, for the engine (built once, then reused)."""
+        """What every frame of this exposure shares, for the engine (built once, then reused).
+
+        Returns
+        -------
+        FramePlan
+            The frame kernels' input (:mod:`cmosnoise.engine.frame.plan`).
+        """
         if self._plan is None:
             s = self.sensor
             c = s.config
@@ -670,9 +768,14 @@ class Exposure:
         return row_flicker, col_flicker, col_sigma
 
     def readout_lines(self) -> tuple[bool, float, np.ndarray, bool, np.ndarray]:
-        """(rows on, row sigma e-, row offsets (rows,) float64, columns on, column offsets (cols,) float64): the
-        fixed row and column offsets with the offset lines of stage 15 in them; a stage off runs with sigma 0
-        when an offset line needs it. The lines are the window's (its rows and columns) on a window."""
+        """The fixed row and column offsets with the offset lines of stage 15 in them; a stage off runs with
+        sigma 0 when an offset line needs it. The lines are the window's (its rows and columns) on a window.
+
+        Returns
+        -------
+        (bool, float, ndarray, bool, ndarray)
+            Rows on, row sigma e-, row offsets (rows,) float64, columns on, column offsets (cols,) float64.
+        """
         s = self.sensor
         c = s.config
         fp = s.fixed_pattern
@@ -801,8 +904,14 @@ class Exposure:
         return self._stick(raw, region, keep), e.astype(np.float32)
 
     def stuck_pixels(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The stuck pixels and lines of stage 15 as the GPU kernel takes them: (flat pixel index (n,) int64, value
-        (n,) float64: a code in DN, or e- with the ADC off), each pixel once; None where there are none."""
+        """The stuck pixels and lines of stage 15 as the GPU kernel takes them, each pixel once.
+
+        Returns
+        -------
+        (ndarray, ndarray) or None
+            Flat pixel index (n,) int64 and value (n,) float64 (a code in DN, or e- with the ADC off); None where
+            there are none.
+        """
         s = self.sensor
         d = s.fixed_pattern.defects
         if d is None or not d.has_stuck:
@@ -812,7 +921,13 @@ class Exposure:
                                     rounded=adc_on)
 
     def device_plan(self) -> cuda_kernel.DevicePlan:
-        """This exposure's :meth:`plan` on the GPU, with its stuck pixels (uploaded once, then reused)."""
+        """This exposure's :meth:`plan` on the GPU, with its stuck pixels (uploaded once, then reused).
+
+        Returns
+        -------
+        DevicePlan
+            The plan's arrays on the device.
+        """
         if self._device_plan is None:
             self._device_plan = cuda_kernel.DevicePlan(self.plan(), self.stuck_pixels())
         return self._device_plan
@@ -831,9 +946,13 @@ class Exposure:
         electrons : bool
             Also the charge at the ADC input, float32 e-.
 
-        Every item equals ``frame(k, region=...)`` bit for bit. The arrays
-        expose ``__cuda_array_interface__``: ``torch.as_tensor(raw, device="cuda")`` or ``cupy.asarray(raw)``
-        takes them without a copy; ``raw.copy_to_host()`` brings them back.
+        Returns
+        -------
+        (device array, device array or None)
+            The raw frames (B, h, w) and, with ``electrons``, the charge. Every item equals
+            ``frame(k, region=...)`` bit for bit. The arrays expose ``__cuda_array_interface__``:
+            ``torch.as_tensor(raw, device="cuda")`` or ``cupy.asarray(raw)`` takes them without a copy;
+            ``raw.copy_to_host()`` brings them back.
         """
         frames = [_frame_index(k) for k in np.atleast_1d(np.asarray(frames, dtype=object)).tolist()]
         r0, r1, c0, c1 = self._region(region)
@@ -858,13 +977,22 @@ class Exposure:
         return raw
 
     def frame(self, k: int, detail: bool = False, region=None):
-        """Frame ``k``: raw (rows, cols) uint16 DN (float32 e- with the ADC off), or a :class:`FrameDetail`.
+        """Frame ``k`` of this exposure.
 
-        ``region = (row0, row1, col0, col1)`` renders only that rectangle,
-        bit-identical to the same crop of the whole frame. In a FrameDetail,
-        ``contributions`` holds each stage's part in e- (they sum to
-        ``electrons``), plus ``quantization``: what the ADC's rounding and
-        clipping added, in e-.
+        Parameters
+        ----------
+        k : int
+            The frame's number (any frame alone is the same bits as in a run from 0).
+        detail : bool
+            Return a :class:`FrameDetail`: ``contributions`` holds each stage's part in e- (they sum to
+            ``electrons``), plus ``quantization``: what the ADC's rounding and clipping added, in e-.
+        region : (row0, row1, col0, col1), optional
+            Render only that rectangle, bit-identical to the same crop of the whole frame.
+
+        Returns
+        -------
+        ndarray or FrameDetail
+            The raw frame (rows, cols) uint16 DN (float32 e- with the ADC off), or its detail.
         """
         keep: dict | None = {} if detail else None
         raw, electrons = self._render(k, keep, region, electrons=detail)
@@ -876,13 +1004,40 @@ class Exposure:
         return FrameDetail(_frame_index(k), raw, electrons, keep)
 
     def frames(self, n: int, first: int = 0) -> Iterator[np.ndarray]:
-        """Raw frames ``first`` to ``first + n - 1``, one at a time."""
+        """Raw frames ``first`` to ``first + n - 1``, one at a time.
+
+        Parameters
+        ----------
+        n : int
+            How many frames.
+        first : int
+            The first frame's number.
+
+        Returns
+        -------
+        iterator of ndarray
+            Each (rows, cols) uint16 DN.
+        """
         n, first = _whole(n, "n"), _frame_index(first)
         return (self.frame(k) for k in range(first, first + n))
 
     def frames_with_electrons(self, n: int, first: int = 0, region=None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """(raw, charge at the ADC input in e-) for frames ``first`` onwards, one at a time (of ``region`` only,
-        where given)."""
+        """Frames ``first`` onwards with their charge at the ADC input, one at a time.
+
+        Parameters
+        ----------
+        n : int
+            How many frames.
+        first : int
+            The first frame's number.
+        region : (row0, row1, col0, col1), optional
+            Only that rectangle of each.
+
+        Returns
+        -------
+        iterator of (ndarray, ndarray)
+            Each frame's raw (rows, cols) uint16 DN and charge, e-.
+        """
         n, first = _whole(n, "n"), _frame_index(first)
         return (self._render(k, region=region) for k in range(first, first + n))
 

@@ -114,8 +114,19 @@ class SensorSpec:
         return self.nonlinearity if self.config.nonlinearity.enabled else None
 
     def nonlinearity_on(self, acts_on: str) -> Curve | None:
-        """The nonlinearity's curve when the stage is on and acts on ``acts_on`` (``"charge"``: each frame's
-        collected charge, in the frame kernel; ``"mean"``: the mean photo-charge, in the exposure), else None."""
+        """The nonlinearity's curve when the stage is on and acts on ``acts_on``.
+
+        Parameters
+        ----------
+        acts_on : str
+            ``"charge"`` (each frame's collected charge, in the frame kernel) or ``"mean"`` (the mean
+            photo-charge, in the exposure).
+
+        Returns
+        -------
+        Curve or None
+            The curve, or None where the stage is off or acts on the other.
+        """
         return self.active_nonlinearity if self.config.nonlinearity.acts_on == acts_on else None
 
     @property
@@ -238,15 +249,35 @@ class SensorSpec:
         return float(min(t.black_level_dn + white_e * t.gain_dn_per_e, t.max_code))
 
     def with_config(self, config: Config) -> SensorSpec:
-        """This spec with ``config`` in place of its own, where ``config`` differs only in what implies nothing
-        (the exposure, the run, the scene, the processing): nothing is solved again; the frame timing an
-        exposure meets is checked (:func:`physics.check_timing`)."""
+        """This spec with ``config`` in place of its own: nothing is solved again; the frame timing an exposure
+        meets is checked (:func:`physics.check_timing`).
+
+        Parameters
+        ----------
+        config : Config
+            Differs from this spec's only in what implies nothing (the exposure, the run, the scene, the
+            processing).
+
+        Returns
+        -------
+        SensorSpec
+        """
         physics.check_timing(config)
         return SensorSpec(config, self.dark_points, self.flicker, self.prnu_seen_per_sigma, self.transfer,
                           self.offsets, self.nonlinearity)
 
     def updated(self, updates: dict) -> SensorSpec:
-        """A new spec: this configuration with ``updates`` merged in (every value set kept), resolved."""
+        """A new spec: this configuration with ``updates`` merged in (every value set kept), resolved.
+
+        Parameters
+        ----------
+        updates : dict
+            Sections and keys to change, nested as the configuration is.
+
+        Returns
+        -------
+        SensorSpec
+        """
         return resolve(merge_updates(self.config, updates))
 
 
