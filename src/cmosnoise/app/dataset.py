@@ -56,7 +56,7 @@ from .. import inputs
 from .._version import __version__
 from ..analysis import ground_truth
 from ..config import load_config, virtual_cameras
-from ..config.loading import deep_merge, load_yaml_text, preset_data, preset_names
+from ..config.loading import config_data, deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError, keeping, note_kept
 from ..io.output import atomic_file, resumable_mode
@@ -294,9 +294,10 @@ def camera_files(cameras) -> tuple[tuple[str, str], ...]:
     from ..config.loading import MAX_CONFIG_BYTES
 
     out: dict[str, str] = {}
+    presets = preset_names()
     for cam in cameras:
         name = cam.partition("@")[0]
-        if name in virtual_cameras.FAMILIES or name in preset_names() or name in out:
+        if name in virtual_cameras.FAMILIES or name in presets or name in out:
             continue
         if name.lower().endswith((".yaml", ".yml")):
             out[name] = inputs.read_text(Path(name), "camera file", MAX_CONFIG_BYTES)
@@ -368,11 +369,7 @@ class Sources:
         if name not in self.preset_texts:
             given = dict(files).get(name) if name else None
             if given is not None:
-                data = load_yaml_text(given)
-                if not isinstance(data, dict):
-                    raise CmosnoiseError(f"camera file {name!r} must hold a mapping of sections, not "
-                                         f"{type(data).__name__}")
-                self.preset_texts[name] = data
+                self.preset_texts[name] = config_data(given, f"camera file {name!r}")
             else:
                 self.preset_texts[name] = preset_data(name) if name else {}
         return self.preset_texts[name]

@@ -433,9 +433,12 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
                                  "sensor's gain table) or a sensor set to an ISO (sensor.iso)")
         isos = [cfg.sensor.iso]
     settings: list[float | None] = list(isos) if isos else [None]
-    # what fit compares with: the sensor at the lowest setting (the one fit's parameters are of)
-    truth = cfg if isos is None else cfg.model_copy(update={"sensor": cfg.sensor.model_copy(
-        update={"iso": min(isos), "gain_db": None})})
+
+    def at_iso(v: float | None):
+        return cfg if v is None else cfg.model_copy(update={"sensor": cfg.sensor.model_copy(
+            update={"iso": v, "gain_db": None})})
+
+    truth = at_iso(min(isos) if isos else None)  # what fit compares with: the lowest setting, its parameters'
     folder.mkdir(parents=True, exist_ok=True)
     stacks_: list[dict] = []
     frame = 0
@@ -464,8 +467,7 @@ def write_measurement(cfg, folder: Path, seed: int = 0, temperatures: list[float
 
     t_flat = 0.005
     for v in settings:
-        at = cfg if v is None else cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={"iso": v,
-                                                                                                 "gain_db": None})})
+        at = at_iso(v)
         tag: dict = {} if v is None else {"iso": v}
         pre = "" if v is None else f"iso{v:g}_"
         for j, T in enumerate(temperatures):

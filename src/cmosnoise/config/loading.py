@@ -235,15 +235,20 @@ def load_yaml_text(text: str):
 def read_yaml(path: str | Path) -> dict:
     """A configuration file: a regular file of at most MAX_CONFIG_BYTES, strict YAML, a mapping."""
     p = Path(path)
-    text = inputs.read_text(p, "config file", MAX_CONFIG_BYTES)
+    return config_data(inputs.read_text(p, "config file", MAX_CONFIG_BYTES), f"config file {str(p)!r}")
+
+
+def config_data(text: str, where: str) -> dict:
+    """A configuration file's text as data: strict YAML, a mapping of sections (``{}`` for an empty text);
+    ``where`` names the file in the one-line error."""
     try:
         data = load_yaml_text(text)
     except yaml.YAMLError as exc:
-        raise CmosnoiseError(f"config file {str(p)!r} is not valid YAML: {' '.join(str(exc).split())[:300]}") from None
+        raise CmosnoiseError(f"{where} is not valid YAML: {' '.join(str(exc).split())[:300]}") from None
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise CmosnoiseError(f"config file {str(p)!r} must hold a mapping of sections, not {type(data).__name__}")
+        raise CmosnoiseError(f"{where} must hold a mapping of sections, not {type(data).__name__}")
     return data
 
 

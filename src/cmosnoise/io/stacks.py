@@ -442,16 +442,25 @@ def _from_manifest(path: Path, temperature_c: float | None) -> Dataset:
         stacks.append(_stack(paths, meta, name=name, kind=e.kind, exposure_s=e.exposure_s, temperature_c=temp,
                              level=e.level, photons=e.photons, iso=e.iso, gain_db=e.gain_db,
                              frame_period_s=e.frame_period_s))
-    shapes = sorted({s.shape for s in stacks})
-    if len(shapes) > 1:
-        raise CmosnoiseError(f"manifest {str(path)!r}: the stacks have different frame sizes "
-                             f"({', '.join(f'{c} x {r}' for r, c in shapes)}); one sensor's frames have one size")
-    bits = m.bits
-    if bits is None and meta.white is not None:
-        bits = max(8, min(16, int(math.ceil(math.log2(meta.white + 1)))))
+    shape = _one_size(stacks, f"manifest {str(path)!r}: the stacks", "one sensor's")
+    bits = m.bits if m.bits is not None else _bits_of(meta.white)
     cfa = meta.cfa or m.cfa
     black = meta.black if meta.black is not None else m.black_level_dn
-    return Dataset(stacks, shapes[0], bits, cfa, black, str(path), "manifest", temperatures_stated=stated)
+    return Dataset(stacks, shape, bits, cfa, black, str(path), "manifest", temperatures_stated=stated)
+
+
+def _one_size(stacks: list[StackStats], what: str, whose: str) -> tuple[int, int]:
+    """The stacks' one frame size (rows, cols); one line naming ``what`` where they have several."""
+    shapes = sorted({s.shape for s in stacks})
+    if len(shapes) > 1:
+        raise CmosnoiseError(f"{what} have different frame sizes ({', '.join(f'{c} x {r}' for r, c in shapes)}); "
+                             f"{whose} frames have one size")
+    return shapes[0]
+
+
+def _bits_of(white: int | None) -> int | None:
+    """The ADC bits a file's white level implies (8 to 16), None where no file gave one."""
+    return None if white is None else max(8, min(16, int(math.ceil(math.log2(white + 1)))))
 
 
 # ------------------------------------------------------------------ a folder of DNG bursts
@@ -541,12 +550,8 @@ def bursts(folder: str | Path, temperature_c: float | None = None) -> Dataset:
         name = f"{where}/ ({kind}, ISO {iso:g}, {t:g} s, {len(paths)} files)"
         stacks.append(_stack(paths, meta, name=name, kind=kind, exposure_s=t, temperature_c=temperature_c,
                              iso=iso))
-    shapes = sorted({s.shape for s in stacks})
-    if len(shapes) > 1:
-        raise CmosnoiseError(f"--frames-from {str(folder)!r}: the bursts have different frame sizes "
-                             f"({', '.join(f'{c} x {r}' for r, c in shapes)}); one camera's frames have one size")
-    bits = max(8, min(16, int(math.ceil(math.log2(meta.white + 1))))) if meta.white is not None else None
-    return Dataset(stacks, shapes[0], bits, meta.cfa, meta.black, str(folder), "bursts")
+    shape = _one_size(stacks, f"--frames-from {str(folder)!r}: the bursts", "one camera's")
+    return Dataset(stacks, shape, _bits_of(meta.white), meta.cfa, meta.black, str(folder), "bursts")
 
 
 def load(path: str | Path, temperature_c: float | None = None) -> Dataset:
