@@ -87,40 +87,48 @@ def candidates(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
 def three_levels(series: np.ndarray, iterations: int = 300, tol: float = 1e-7):
     """Symmetric three-level normal mixtures of pixels' series, by expectation-maximization, all pixels at once.
 
-    ``series``: (F, P) DN. Returns (centre, A, sigma, q, log-likelihood gain over one normal), each (P,);
-    iterates until no pixel's log-likelihood rises by more than ``tol`` of itself."""
-    x = np.asarray(series, np.float64)
-    f = x.shape[0]
-    mu = np.median(x, axis=0)
-    sigma = np.maximum(1.4826 * np.median(np.abs(x - mu), axis=0), 1e-6)
-    hi, lo = np.percentile(x, [97.5, 2.5], axis=0)
+    ``series``: (F, P) DN. Returns (centre, A, sigma, q, log-likelihood gain over one normal), each (P,); each
+    pixel iterates until its log-likelihood rises by no more than ``tol`` of itself (or ``iterations`` pass),
+    and then leaves the pixels still iterating (so that one slow pixel does not keep the others at work)."""
+    x_all = np.asarray(series, np.float64)
+    f = x_all.shape[0]
+    mu = np.median(x_all, axis=0)
+    sigma = np.maximum(1.4826 * np.median(np.abs(x_all - mu), axis=0), 1e-6)
+    hi, lo = np.percentile(x_all, [97.5, 2.5], axis=0)
     a = np.maximum(np.maximum(hi - mu, mu - lo), 3 * sigma)
     q = np.full(mu.shape, 0.2)
+    loglik = np.full(mu.shape, -np.inf)
     j = np.array([-1.0, 0.0, 1.0])
-    last = np.full(mu.shape, -np.inf)
-    sx = x.sum(axis=0)
+    sx_all = x_all.sum(axis=0)
+    act = np.arange(mu.size)  # the pixels still iterating
+    last = np.full(act.size, -np.inf)
     for _ in range(iterations):
-        w = np.stack([q / 2, 1 - q, q / 2], axis=-1)  # (P, 3)
-        z = (x[:, :, None] - mu[:, None] - j * a[:, None]) / sigma[:, None]  # (F, P, 3)
-        logp = np.log(np.maximum(w, 1e-300)) - 0.5 * z * z - np.log(sigma * math.sqrt(2 * math.pi))[:, None]
+        if act.size == 0:
+            break
+        x, sx = (x_all, sx_all) if act.size == mu.size else (x_all[:, act], sx_all[act])
+        m, am, sg, qa = mu[act], a[act], sigma[act], q[act]
+        w = np.stack([qa / 2, 1 - qa, qa / 2], axis=-1)  # (P, 3)
+        z = (x[:, :, None] - m[:, None] - j * am[:, None]) / sg[:, None]  # (F, P, 3)
+        logp = np.log(np.maximum(w, 1e-300)) - 0.5 * z * z - np.log(sg * math.sqrt(2 * math.pi))[:, None]
         top = logp.max(axis=2, keepdims=True)
         mix = top[..., 0] + np.log(np.exp(logp - top).sum(axis=2))  # (F, P)
-        loglik = mix.sum(axis=0)
+        ll = mix.sum(axis=0)
         r = np.exp(logp - mix[..., None])  # responsibilities
         side = r[..., 0] + r[..., 2]
         sign = r[..., 2] - r[..., 0]
-        q = np.clip(side.mean(axis=0), 1e-9, 1 - 1e-9)
+        q[act] = np.clip(side.mean(axis=0), 1e-9, 1 - 1e-9)
         # centre and amplitude by weighted least squares: sum r (x - mu - j a)^2 least
         s_sign, s_side, s_sx = sign.sum(axis=0), side.sum(axis=0), (sign * x).sum(axis=0)
         det = np.maximum(f * s_side - s_sign**2, 1e-12)
-        mu = (s_side * sx - s_sign * s_sx) / det
-        a = np.abs((f * s_sx - s_sign * sx) / det)
-        res = x[:, :, None] - mu[:, None] - j * a[:, None]
-        sigma = np.maximum(np.sqrt((r * res * res).sum(axis=(0, 2)) / f), 1e-6)
-        if np.all(loglik - last < tol * np.abs(loglik)):
-            break
-        last = loglik
-    one = -0.5 * f * (np.log(2 * math.pi * np.maximum(x.var(axis=0), 1e-300)) + 1)
+        m = (s_side * sx - s_sign * s_sx) / det
+        am = np.abs((f * s_sx - s_sign * sx) / det)
+        res = x[:, :, None] - m[:, None] - j * am[:, None]
+        mu[act], a[act] = m, am
+        sigma[act] = np.maximum(np.sqrt((r * res * res).sum(axis=(0, 2)) / f), 1e-6)
+        loglik[act] = ll
+        going = ~(ll - last < tol * np.abs(ll))
+        act, last = act[going], ll[going]
+    one = -0.5 * f * (np.log(2 * math.pi * np.maximum(x_all.var(axis=0), 1e-300)) + 1)
     return mu, a, sigma, q, loglik - one
 
 
