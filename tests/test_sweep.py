@@ -73,7 +73,10 @@ def test_wilson_interval_and_instance_seeds():
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot connect"),
     (["--metric", "nonsense"], "--metric"),
 ])
-def test_bad_input_is_one_line_before_any_task(tmp_path, args, needle):
+def test_bad_input_is_one_line_before_any_task(tmp_path, monkeypatch, args, needle):
+    from cmosnoise.app import cluster
+
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT", "1s")  # nothing listens on port 1: no need to wait 10 s
     r = cli("sweep", *SMALL, "--instances", "2", *args, "--out", tmp_path / "s")
     assert r.returncode == 2 and needle in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr

@@ -13,6 +13,9 @@ from collections.abc import Callable
 
 from ..errors import CmosnoiseError
 
+#: how long a client tries an existing scheduler's address before ``--scheduler`` is said to be unreachable
+CONNECT_TIMEOUT = "10s"
+
 
 def connect(scheduler: str | None, workers: int | None, say: Callable[[str], None] = lambda m: None):
     """A Dask client: an existing scheduler's, or a LocalCluster of processes on this machine (loopback).
@@ -34,7 +37,7 @@ def connect(scheduler: str | None, workers: int | None, say: Callable[[str], Non
 
     if scheduler:
         try:
-            return Client(scheduler, timeout="10s"), None
+            return Client(scheduler, timeout=CONNECT_TIMEOUT), None
         except (OSError, TimeoutError) as exc:
             raise CmosnoiseError(f"--scheduler {scheduler}: cannot connect ({exc.__class__.__name__}: "
                                  f"{' '.join(str(exc).split())[:160]})") from None
