@@ -27,9 +27,15 @@ def _env(tmp_path, **extra) -> dict:
     return {**env, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "TMPDIR": str(tmp_path / "tmp"), **extra}
 
 
-def _simulate(env, out, *args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cmosnoise", "simulate", *SMALL, *args, "--out", str(out)], env=env,
-                          capture_output=True, text=True, timeout=600)
+#: the console script beside this interpreter (what ``pip install`` wrote), as a user types it
+CONSOLE_SCRIPT = Path(sys.executable).with_name("cmosnoise")
+
+
+def _simulate(env, out, *args, console_script=False) -> subprocess.CompletedProcess:
+    """``python -m cmosnoise simulate`` (or, with ``console_script``, the ``cmosnoise`` command) in ``env``."""
+    entry = [str(CONSOLE_SCRIPT)] if console_script else [sys.executable, "-m", "cmosnoise"]
+    return subprocess.run([*entry, "simulate", *SMALL, *args, "--out", str(out)], env=env, capture_output=True,
+                          text=True, timeout=600)
 
 
 def _pid_of(stderr: str) -> int:
@@ -56,12 +62,13 @@ def _stop_group(pid: int) -> None:
 
 @pytest.mark.skipif(jit.numba is None or jit.fcntl is None, reason="needs numba and POSIX file locks")
 def test_a_first_run_takes_the_numpy_specification_while_the_loops_compile_in_the_background(tmp_path):
-    """With nothing compiled for this machine, `cmosnoise simulate` says that it takes the NumPy specification and
-    which process compiles; it writes the same raw frames as a run that compiles in its own process; the
-    background process is `cmosnoise compile --background`, holding the build's lock with its pid in it; a second
-    run meanwhile starts no second compile."""
+    """With nothing compiled for this machine, the `cmosnoise simulate` command says that it takes the NumPy
+    specification and which process compiles; it writes the same raw frames as a run that compiles in its own
+    process; the background process is `cmosnoise compile --background`, holding the build's lock with its pid in
+    it; a second run meanwhile, started as `python -m cmosnoise`, starts no second compile: it joins the first's."""
     env = _env(tmp_path)
-    first = _simulate(env, tmp_path / "a", "--frames", "2")
+    assert CONSOLE_SCRIPT.exists(), f"the console script {CONSOLE_SCRIPT} (pip install -e . writes it)"
+    first = _simulate(env, tmp_path / "a", "--frames", "2", console_script=True)
     pid = _pid_of(first.stderr) if "(pid " in first.stderr else None
     try:
         assert first.returncode == 0, first.stderr
