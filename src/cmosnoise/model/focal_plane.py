@@ -360,16 +360,16 @@ def _axis_weights(taps: bytes, offset, stride, start, stop, size, source):
     return m
 
 
-def _terms(psf: optics.PointSpread, weights: tuple[int, np.ndarray] | None) -> tuple:
-    """Each channel's separable terms: its core's (:func:`cmosnoise.engine.separable.terms`) and its halo's,
-    each axis's taps convolved with the aperture's ``weights`` (offset, taps) where given (a pixel's), else
-    alone (a fine cell's)."""
+def _terms(psf: optics.PointSpread, weights: tuple[int, np.ndarray] | None, splits: list) -> tuple:
+    """Each channel's separable terms: its core's (``splits``, :func:`_splits`) and its halo's, each axis's taps
+    convolved with the aperture's ``weights`` (offset, taps) where given (a pixel's), else alone (a fine
+    cell's)."""
     w_off, w = weights if weights is not None else (0, np.ones(1))
     out = []
     for c in range(3):
         core = psf.core[c]
         m = core.shape[0] // 2
-        rows, cols = _channel_terms(psf, c)
+        rows, cols = splits[c]
         terms = [Term(np.convolve(r, w), w_off - m, np.convolve(q, w), w_off - m) for r, q in zip(rows, cols)]
         if psf.halo_share[c] > 0:
             sigma = float(psf.halo_sigma_cells[c])
@@ -381,12 +381,14 @@ def _terms(psf: optics.PointSpread, weights: tuple[int, np.ndarray] | None) -> t
     return tuple(out)
 
 
-def _channel_terms(psf: optics.PointSpread, c: int) -> tuple[list, list]:
-    """Channel ``c``'s core as separable terms, made once for cores equal to an earlier channel's."""
-    for prev in range(c):
-        if np.array_equal(psf.core[prev], psf.core[c]):
-            return _channel_terms(psf, prev)
-    return separable.terms(psf.core[c], TERM_TOLERANCE)
+def _splits(psf: optics.PointSpread) -> list[tuple[list, list]]:
+    """Each channel's core as separable terms (:func:`cmosnoise.engine.separable.terms`): one split for each
+    distinct core, which the pixels' terms and the fine cells' share."""
+    out: list[tuple[list, list]] = []
+    for c in range(3):
+        same = [prev for prev in range(c) if np.array_equal(psf.core[prev], psf.core[c])]
+        out.append(out[same[0]] if same else separable.terms(psf.core[c], TERM_TOLERANCE))
+    return out
 
 
 def _no_psf_terms(weights: tuple[int, np.ndarray] | None) -> tuple:
@@ -505,7 +507,8 @@ def _build(keyed: _Keyed) -> FocalPlane:
     if psf is None:
         pixel_terms, fine_terms = _no_psf_terms(aperture), _no_psf_terms(None)
     else:
-        pixel_terms, fine_terms = _terms(psf, aperture), _terms(psf, None)
+        splits = _splits(psf)
+        pixel_terms, fine_terms = _terms(psf, aperture, splits), _terms(psf, None, splits)
     gain = np.asarray(gain, np.float64)
     gain.setflags(write=False)
     return FocalPlane(config, shape, k, light, psf, gain, float(unit), pixel_terms, fine_terms, keyed.key)
