@@ -87,6 +87,25 @@ def test_not_a_data_set(tmp_path):
     assert r.returncode == 2 and "not a data set" in r.stderr
 
 
+def test_the_dark_map_takes_any_crop_of_a_folders_images(tmp_path):
+    """A crop nearly the size of the source image (a folder's, at its own size): the dark-map baseline's dark
+    frames are the flat drawn whole, not at the crop's corner in the flat (which left it: #78)."""
+    import imageio.v3 as iio
+
+    (tmp_path / "src").mkdir()
+    rng = np.random.default_rng(0)
+    iio.imwrite(tmp_path / "src" / "a.png", rng.uniform(0, 255, (60, 80, 3)).astype(np.uint8))
+    folder = tmp_path / "d"
+    assert cli("-q", "dataset", "-n", "2", "--crop", "48", "--camera", "sony-imx900", "--images", tmp_path / "src",
+               "--out", folder).returncode == 0
+    corners = [ds.read_sample(next(folder.glob("shard-*")), i)[1] for i in (0, 1)]
+    assert any(c["window_row"] + c["window_col"] > 0 for c in corners)  # a corner off (0, 0): the case that failed
+    r = cli("-q", "evaluate", "--data", folder, "--method", "dark-map", "--out", tmp_path / "e")
+    assert r.returncode == 0, r.stderr
+    assert len(pd.read_csv(tmp_path / "e" / "scores.csv")) == 2
+
+
+@pytest.mark.slow
 def test_bm3d_denoises_better_than_the_noisy_frame(tmp_path):
     folder = tmp_path / "d"
     assert cli("-q", "dataset", "-n", "2", "--crop", "48", "--camera", "sony-imx900@gain_db=3", "--light",

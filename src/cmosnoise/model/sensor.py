@@ -451,7 +451,8 @@ class Sensor:
         scene : str or ndarray, optional
             A built-in name or path (see :mod:`cmosnoise.scene`), a linear RGB array (rows, cols, 3) or a
             CFA-sampled array (rows, cols) at the sensor's size (the window's, for a window); default: the
-            configuration's scene.
+            configuration's scene. The scene section's window and source size place its own source only: another
+            scene named here is drawn whole.
 
         Returns
         -------
@@ -463,7 +464,10 @@ class Sensor:
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            return fp.pixel_signal(fp.prepare(scene, c.scene), self.cfa, self.window)
+            # the scene section's placement (window, source size, a file's scale and mosaic keys) is its source's:
+            # another scene named here (a dark frame's flat, a chart) is drawn whole, fitted as the section says
+            section = c.scene if scene == c.scene.source else type(c.scene)(source=scene, fit=c.scene.fit)
+            return fp.pixel_signal(fp.prepare(scene, section), self.cfa, self.window)
         try:
             given = np.asarray(scene)
             if given.dtype.kind not in "uifb":  # complex, object, text: not light levels (a cast would drop parts)
