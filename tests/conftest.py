@@ -84,6 +84,28 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.slow)
 
 
+#: a test of the fast tier (not marked slow) whose call takes longer than this on the machine it runs on is named
+#: at the session's end: the fast tier is the inner loop (docs/development.md, "Suite times"), so mark it slow or
+#: make it cheaper. Said, not failed: a timing is not a test's verdict on a shared machine.
+FAST_TIER_LIMIT_S = 5.0
+_LONG_FAST_TESTS: list[tuple[float, str]] = []
+
+
+def pytest_runtest_logreport(report):
+    """Note a call of a test outside the slow tier that took over :data:`FAST_TIER_LIMIT_S` (xdist's workers
+    report to the controlling process, which runs this)."""
+    if report.when == "call" and report.duration > FAST_TIER_LIMIT_S and "slow" not in report.keywords:
+        _LONG_FAST_TESTS.append((report.duration, report.nodeid))
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Name the fast tier's tests that took over :data:`FAST_TIER_LIMIT_S`."""
+    if _LONG_FAST_TESTS:
+        terminalreporter.section(f"tests of the fast tier over {FAST_TIER_LIMIT_S:g} s")
+        for seconds, nodeid in sorted(_LONG_FAST_TESTS, reverse=True):
+            terminalreporter.write_line(f"{seconds:6.1f} s  {nodeid}: mark it slow or make it cheaper")
+
+
 #: what another x86-64 CPU would change, changed in a child process on this one: NumPy's SIMD loops off (its float64
 #: exp, log, power and sin give other last bits without its AVX2 loops, measured), OpenBLAS's Prescott kernels (other
 #: sums in a dot or a LAPACK solve), and glibc's libm without its FMA and AVX2 variants (exp, sin, log and erfc,

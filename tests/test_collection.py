@@ -6,9 +6,12 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 HIDDEN = ("torch", "bm3d", "colour_hdri", "numba_cuda")
 
 
+@pytest.mark.slow
 def test_every_test_file_collects_with_the_optional_extras_hidden(tmp_path):
     (tmp_path / "sitecustomize.py").write_text(textwrap.dedent(f"""
         import sys

@@ -61,6 +61,7 @@ def _stop_group(pid: int) -> None:
 
 
 @pytest.mark.skipif(jit.numba is None or jit.fcntl is None, reason="needs numba and POSIX file locks")
+@pytest.mark.slow
 def test_a_first_run_takes_the_numpy_specification_while_the_loops_compile_in_the_background(tmp_path):
     """With nothing compiled for this machine, the `cmosnoise simulate` command says that it takes the NumPy
     specification and which process compiles; it writes the same raw frames as a run that compiles in its own

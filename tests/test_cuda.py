@@ -147,6 +147,7 @@ def test_a_batch_of_different_sensors_in_one_launch_equals_each_sensors_own_fram
         np.testing.assert_array_equal(raw.copy_to_host()[b], cpu.frame(k), err_msg=f"exposure {b}")
 
 
+@pytest.mark.slow
 def test_plans_of_one_batch_must_share_a_shape_and_the_adc():
     a = _pair(seed=1)[0]
     b = Sensor(load_config(extra={"sensor": {"width": WIDTH // 2, "height": HEIGHT}}), seed=1).expose("photo")
@@ -188,6 +189,7 @@ def test_the_device_arrays_are_the_cuda_array_interface_and_the_plan_is_uploaded
     assert gpu.device_plan() is plan and plan.nbytes() > 0
 
 
+@pytest.mark.slow
 def test_bad_device_and_bad_batches_get_one_line():
     with pytest.raises(CmosnoiseError, match="device = 'gpu': expected one of cpu, cuda"):
         Sensor({}, device="gpu")

@@ -139,6 +139,7 @@ def _public_objects():
 WITHOUT_EXAMPLES: set[str] = set()
 
 
+@pytest.mark.slow
 def test_the_docstrings_examples_run_as_doctests():
     """Every Examples section of the public names (and their members) runs, and gives what it shows; every public
     name but those listed has one."""
@@ -156,6 +157,7 @@ def test_the_docstrings_examples_run_as_doctests():
     assert ran >= 100  # the examples exist (a finder that found none would pass silently)
 
 
+@pytest.mark.slow
 def test_the_sensor_guide_runs_as_written(tmp_path):
     """The guide's first study, as the page shows it: two runs that differ in the temperature, and compare."""
     guide = (ROOT / "docs" / "sensor" / "index.md").read_text()

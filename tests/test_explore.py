@@ -360,6 +360,7 @@ def test_both_panes_and_their_key_figures_show_without_scrolling(app_page, tmp_p
     assert not [n for n in box["names"] if "_" in n]  # no JSON names
 
 
+@pytest.mark.slow
 def test_a_cameras_gain_table_gives_an_iso_menu(app_page):
     """Loading the sony-a7s2 preset into pane A: its ISO is a menu of the table's settings (with the conversion
     gain's name), and picking one redraws the pane with that setting's noise."""
@@ -375,6 +376,7 @@ def test_a_cameras_gain_table_gives_an_iso_menu(app_page):
     assert page.evaluate("() => S.panes.A.config.sensor.iso") == 2000
 
 
+@pytest.mark.slow
 def test_the_play_view_shows_random_telegraph_pixels_flip_and_blink(app_page, server, tmp_path):
     """Pane B with both random telegraph stages on (traps read without CDS, large amplitudes; blinking pixels with
     a large step), pane A without: with common random numbers B - A is zero except at those pixels, and frame by
@@ -448,6 +450,7 @@ def test_the_quick_settings_show_whole_names_and_light_in_lux_renders(app_page):
     assert _pixels(page, "canvasA") != before
 
 
+@pytest.mark.slow
 def test_image_quality_of_both_panes_and_their_difference_in_jnd(app_page, server, tmp_path):
     """#61: the explorer measures each pane's image quality at one illuminance (quality's metric registry) and
     shows A - B, in JND for banding; the numbers are `quality.measure`'s for the pane's configuration and seed."""
@@ -486,6 +489,7 @@ def test_image_quality_of_both_panes_and_their_difference_in_jnd(app_page, serve
     assert "lux" in page.text_content("#qStatus") and page.eval_on_selector_all("#qTable tbody tr", "r => r.length") == 0
 
 
+@pytest.mark.slow
 def test_only_the_token_opens_the_explorer_and_the_command_never_prints_it_whole(browser):
     """Jupyter's model (#79): a random token made at start, in the address the command opens and writes to a file
     of the owner's alone; every route but the page's own files refuses a request without it (403, one line); the

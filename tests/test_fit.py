@@ -214,6 +214,7 @@ def _write_lab_data(folder, seed=3, size=(96, 128)):
     return cfg, s
 
 
+@pytest.mark.slow
 def test_fit_reads_a_manifest_of_tiff_npy_and_dng_and_writes_config_json_report(tmp_path):
     import json
 
@@ -288,6 +289,7 @@ def test_fit_bad_input_gets_one_line_exit_2_and_no_output_folder(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_fit_reads_another_tools_emva_data_set(tmp_path):
     """emva1288's own camera simulator and dataset generator (another tool: PNG or TIFF images, its descriptor
     name, Windows paths) make a data set; the fit finds the camera's K within its interval."""
@@ -317,6 +319,7 @@ def test_fit_reads_another_tools_emva_data_set(tmp_path):
     assert (tmp_path / "f" / "fit_report.html").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_measure_then_fit_recovers_a_per_colour_crosstalk_kernel_from_spots(tmp_path):
     """`cmosnoise measure` writes a lab data set with a spot stack (single lit pixels); `fit` gives the 3 x 3
     sharing of each colour's charge. A spot shows the sharing, not the loss, so the truth is each kernel over its
@@ -381,6 +384,7 @@ def test_a_fitted_value_outside_the_schema_is_written_clipped_and_says_so():
     assert P["column_noise.gain_sigma_pct"] == {"value": 2.0, "method": "m"}
 
 
+@pytest.mark.slow
 def test_a_14_bit_adc_in_a_16_bit_range_is_fitted_as_one(tmp_path):
     """The ZWO ASI294MM writes its 14-bit ADC's codes times 4 in 16 bits. `measure` of its preset (linear here:
     the photon-transfer K of a nonlinearity is another matter) and `fit` from it: the codes' spacing says 14 bits

@@ -322,6 +322,7 @@ def test_source_follower_fit_on_variances_drawn_as_the_likelihood_assumes(noise)
     assert all(abs(math.log(q)) < Z / math.sqrt(2 * (SEEDS - 1)) for q in ratio.values()), ratio
 
 
+@pytest.mark.slow
 def test_column_sigma_fit_on_variances_drawn_as_the_likelihood_assumes():
     """The per-column temporal sigma's Gumbel from 256 columns' variances over 48 frames, drawn exactly as the
     likelihood assumes ((sigma_c^2 + pixels' share) chi2(47)/47, sigma_c = max(gumbel_r, 0)), 600 times: the

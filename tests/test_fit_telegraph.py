@@ -53,6 +53,7 @@ def test_the_fit_finds_exactly_the_trap_pixels_and_their_amplitudes(fitted):
         assert abs(a - truth[p]) <= Z * sigma_e * math.sqrt(16 / FRAMES) + 0.5 / sensor.transfer.gain_dn_per_e, p
 
 
+@pytest.mark.slow
 def test_dwell_times_per_pixel_are_unbiased_and_the_ppm_interval_holds_the_truth(fitted):
     """The ratio of the estimated to the true dwell time, over the pixels found, has mean 1 within 5 se (its
     sample std over sqrt(n)); the Clopper-Pearson interval holds the configured ppm."""
@@ -124,6 +125,7 @@ def test_cmosnoise_fit_finds_the_random_telegraph_pixels_of_a_measurement_and_it
                ("ppm", "median_amplitude_e", "median_tau_low_s", "median_tau_high_s")), doc["round_trip"]
 
 
+@pytest.mark.slow
 def test_a_measurement_without_random_telegraph_pixels_fits_none_and_a_short_stack_says_why(tmp_path):
     import yaml
 
@@ -157,6 +159,7 @@ CDS_CONFIG = {"sensor": {"width": 128, "height": 96, "frame_rate_hz": 30}, "expo
                                           "tau_emission_s": {"min_s": 2e-6, "max_s": 2e-5}}}}
 
 
+@pytest.mark.slow
 def test_three_level_pixels_of_traps_through_cds_are_found_with_their_amplitudes_and_switching():
     """No pixel without a trap is found (the default config's flicker pixels are noisy but normal: the mixture
     must beat one normal at Z); a trap pixel is missed only where it is at a side level in few frames (its q F / 2

@@ -349,6 +349,7 @@ def test_what_a_stack_sees_of_a_one_over_f_process_is_the_exact_quadratic_forms(
     assert ns.frame_mean_ratio_rows(white, K, H, t) == pytest.approx(1 / (H - 1))
 
 
+@pytest.mark.slow
 def test_an_emva1288_data_set_is_white_in_readout_order_and_too_short_over_frames(tmp_path):
     import json
     import subprocess
@@ -369,6 +370,7 @@ def test_an_emva1288_data_set_is_white_in_readout_order_and_too_short_over_frame
 
 
 @pytest.mark.parametrize("spectrum", ["one_over_f", pytest.param("white", marks=pytest.mark.slow)])
+@pytest.mark.slow
 def test_fit_finds_the_spectrum_of_the_row_and_column_noise_and_their_sigmas(tmp_path, spectrum):
     import json
 

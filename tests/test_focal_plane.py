@@ -56,7 +56,10 @@ def _check(r: sfr.SfrResult, want: np.ndarray) -> tuple[float, float]:
 # ------------------------------------------------------------------ the system MTF
 #: the issue's lenses: (pixel pitch um, f-number), each at fill factors 1 and 0.5. Seen: MTF50 within 1.2 % and the
 #: MTF at Nyquist within 0.0055 of the truth (docs/model.md's table, docs/readme_numbers.py focal_plane_mtf)
-LENSES = [(2.2, 2.8), (2.2, 4.0), (2.2, 8.0), (1.0, 2.8), (1.0, 4.0)]
+#: The default lens and two others stay in the fast tier; f/8 (a large core on a fine grid) and the 1 um pixel at
+#: f/2.8 take some 3 to 5 s each and run in the full suite.
+LENSES = [(2.2, 2.8), (2.2, 4.0), pytest.param(2.2, 8.0, marks=pytest.mark.slow),
+          pytest.param(1.0, 2.8, marks=pytest.mark.slow), (1.0, 4.0)]
 
 
 @pytest.mark.parametrize("fill_factor", [1.0, 0.5])
@@ -147,8 +150,10 @@ def test_the_four_spot_filter_takes_the_aliasing_and_the_false_colour_away():
 
 # ------------------------------------------------------------------ the fine grid
 @pytest.mark.parametrize(("sets", "k"), [([], 1), (["optics.psf=diffraction", "optics.f_number=2.8"], 3),
-                                         (["optics.psf=diffraction", "optics.f_number=8"], 2),
-                                         (["optics.psf=diffraction", "optics.f_number=16"], 1),
+                                         pytest.param(["optics.psf=diffraction", "optics.f_number=8"], 2,
+                                                      marks=pytest.mark.slow),
+                                         pytest.param(["optics.psf=diffraction", "optics.f_number=16"], 1,
+                                                      marks=pytest.mark.slow),
                                          (["optics.psf=gaussian", "optics.psf_sigma_px=2"], 1),
                                          (["optics.psf=gaussian", "optics.psf_sigma_px=0.3"], 3),
                                          (["optics.oversample=4"], 4),

@@ -80,6 +80,7 @@ def test_a_row_sets_its_keys_and_wins_over_the_base():
     assert spec.transfer.max_code == 16383 and spec.transfer.black_level_dn == 512
 
 
+@pytest.mark.slow
 def test_fit_builds_a_gain_table_from_stacks_at_several_settings(tmp_path):
     """A lab's stacks of the sony-a7s2 at ISO 1600 and 2000 in one manifest (each stack names its iso): the fit
     makes one fit per setting, each K's 95 % interval holds the table's, the conversion-gain step is found at

@@ -21,6 +21,7 @@ def small(**over):
     return Sensor(cfg)
 
 
+@pytest.mark.slow
 def test_the_mean_of_2000_frames_converges_to_the_expected_raw():
     # a ramp from dark to past the full well: the black level, the mid range and both clips
     sensor = small(exposure={"integration_time_s": 0.03, "peak_rate_e_per_s": 6e5})

@@ -118,6 +118,7 @@ def _start(args, cwd=None):
                             stderr=subprocess.PIPE, text=True, cwd=cwd)
 
 
+@pytest.mark.slow
 def test_two_runs_on_one_folder_at_once_never_mix(tmp_path):
     out = tmp_path / "run"
     size = ["--set", "sensor.width=640", "--set", "sensor.height=480", "--frames", "40", "--no-progress", "--process",
@@ -228,6 +229,7 @@ def test_values_beyond_physics_are_one_line_errors(tmp_path, setting, needle):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_hostile_files_are_refused_before_they_are_read(tmp_path):
     (tmp_path / "laughs.yaml").write_text('a: &a ["x", "x"]\nb: &b [*a, *a]\nc: &c [*b, *b]\nd: [*c, *c]\n')
     (tmp_path / "deep.yaml").write_text("a: " + "[" * 3000 + "]" * 3000 + "\n")

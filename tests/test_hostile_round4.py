@@ -458,6 +458,7 @@ def _stuck_simulate(request, around: str, setup: str = "", **popen):
     return proc
 
 
+@pytest.mark.slow
 def test_a_command_that_swallows_its_signal_is_ended_within_seconds_with_its_folder_absent(tmp_path, request):
     """The watchdog: a job stuck where the signal's exception is swallowed (as inside a compiler's callback) is
     ended GRACE_S after the signal, its temporary output removed, with one line and status 128 + the signal."""
@@ -471,6 +472,7 @@ def test_a_command_that_swallows_its_signal_is_ended_within_seconds_with_its_fol
     assert os.listdir(tmp_path) == [], os.listdir(tmp_path)  # neither the folder nor its temporary
 
 
+@pytest.mark.slow
 def test_a_job_ended_by_the_watchdog_still_says_what_it_kept(tmp_path, request):
     """A data set stopped inside a compile (its signal swallowed): the watchdog's line names the shards kept, not
     "nothing was written" (CI met this: a resume stopped while numba compiled said it had written nothing)."""

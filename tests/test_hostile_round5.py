@@ -45,6 +45,7 @@ def _tiny_spectrum(path):
 
 
 # ------------------------------------------------------------------ 1. no segmentation fault
+@pytest.mark.slow
 def test_a_subnormal_spectrum_is_one_line_in_a_separate_process(tmp_path):
     # it overflowed to NaN in the light's integral and crashed the frame kernel (rc 139 after 26 s, a temporary
     # folder and a lock left): a separate process, so that a crash is seen as one

@@ -255,6 +255,7 @@ def _measured_and_fitted(tmp_path, sets: list[str], seed: int = 0) -> dict:
     return json.loads((tmp_path / "fit" / "fit.json").read_text())
 
 
+@pytest.mark.slow
 def test_fit_recovers_tukey_lambda_read_noise_and_pixel_offsets(tmp_path):
     """A lab data set (`cmosnoise measure`) of a sensor whose pixel noise is Tukey-lambda read noise after the gain
     (shape -0.1, 2 DN) with pixel offsets of 3 e-: the fit's 95 % intervals hold the shape and the offsets'
@@ -278,6 +279,7 @@ def test_fit_recovers_tukey_lambda_read_noise_and_pixel_offsets(tmp_path):
     assert all(row["agree"] is not False for row in doc["round_trip"]), [r for r in doc["round_trip"] if r["agree"] is False]
 
 
+@pytest.mark.slow
 def test_a_sensor_without_dark_current_fits(tmp_path):
     """With dark current off, the fitted body mean is noise about 0 and was below 0 for this seed: the fit once
     failed there ("mean_e_per_s = -0.0062: should be >= 0"); now the point is left out, said so, and the fitted
@@ -361,6 +363,7 @@ def test_read_noise_is_independent_of_the_source_follower_noise_it_shares_a_bloc
     assert np.array_equal(sensor.expose("flat:0.3").frame(2), d.raw)
 
 
+@pytest.mark.slow
 def test_fit_recovers_the_black_level_per_cfa_cell_and_per_frame(tmp_path):
     """A lab data set of a sensor whose black level is off by [2, -1, 0.5, 3] DN on the four CFA positions and
     errs by 0.5 DN a frame: each fitted position's 95 % interval holds its offset from the four's mean, the frame

@@ -54,6 +54,7 @@ def test_two_runs_that_differ_in_nothing_the_charts_see_differ_by_exactly_nothin
     assert a["metrics"] == b["metrics"]
 
 
+@pytest.mark.slow
 def test_a_hot_sensor_is_clearly_noisier_in_low_light_through_the_command(tmp_path):
     r = cli("-q", "quality", *sum((["--set", s] for s in BASE), []), "--compare-set", "sensor.temperature_c=65",
             "--lux", "1,100", "--frames", "3", "--instances", "3", "--out", tmp_path / "q")
@@ -235,6 +236,7 @@ def test_the_threshold_search_finds_each_instances_crossing():
         assert abs(brighter["crossings"][s] / expected - 1) < 5 * wobble, (brighter["crossings"][s], expected)
 
 
+@pytest.mark.slow
 def test_the_threshold_command_says_its_sentence_and_refuses_what_it_cannot_search(tmp_path):
     sets = sum((["--set", s] for s in BASE), [])
     r = cli("quality", *sets, "--find", "column_noise.vfpn_sigma_e=0:20", "--until", "banding_columns=1",
@@ -286,6 +288,7 @@ def test_a_corrector_leaves_fewer_defects_than_none():
 NO_LINES = ["row_noise.enabled=false", "column_noise.enabled=false"]
 
 
+@pytest.mark.slow
 def test_without_line_noise_the_default_sensor_shows_no_banding_at_any_light():
     # row and column noise off: what is left is isotropic (shot, pixel FPN), which the lines-only estimate takes
     # out. Its spread without lines is banding()'s estimate_se: each reading's squared sigma within 5 of it, and

@@ -68,6 +68,7 @@ def test_an_interrupted_sweep_overwrite_keeps_the_old_sweep_byte_identical(tmp_p
     assert not list(tmp_path.glob(".cmosnoise-tmp-*")) and not list(tmp_path.glob(".cmosnoise-lock-*"))
 
 
+@pytest.mark.slow
 def test_a_second_sweep_on_a_running_sweeps_folder_exits_2(tmp_path):
     out = tmp_path / "sweep"
     proc = _spawn_sweep(out)

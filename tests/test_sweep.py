@@ -174,6 +174,7 @@ def test_keys_that_move_together_across_list_items():
     assert tails == [[50, 100, 200], [100, 200, 200]]  # the 65 C point keeps its default 200 ppm
 
 
+@pytest.mark.slow
 def test_python_api_returns_a_dataframe():
     cfg = load_config(extra={"sensor": {"width": 64, "height": 48}})
     df = sw.run(cfg, ["prnu.sigma_pct=1,2"], instances=2, scene="flat:0.5", workers=1)
@@ -182,6 +183,7 @@ def test_python_api_returns_a_dataframe():
     assert all(math.isfinite(v) for v in df["temporal_noise_e"])
 
 
+@pytest.mark.slow
 def test_image_quality_metrics_are_sweep_responses_with_their_own_numbers(tmp_path):
     """--quality-lux adds `quality`'s metric registry to every row: the same numbers as `quality.measure` of that
     point's configuration and instance seed; a --spec on one of them makes the yield; the page names them with
@@ -251,6 +253,7 @@ def test_a_worker_that_dies_mid_sweep_changes_nothing(tmp_path):
     pd.testing.assert_frame_equal(_sorted(tmp_path / "ref" / "results.csv"), _sorted(results))
 
 
+@pytest.mark.slow
 def test_the_sweep_page_fits_a_1440_pixel_window_with_readable_names(tmp_path, page):
     """#63: the index's table overflowed a 1440-pixel window (the yield interval's columns off screen) and showed
     raw names (snr_db_at_100e_mean). Two keys varied, a spec: every column is on screen, named for a person."""
