@@ -225,6 +225,34 @@ def test_the_jacobi_svd_is_the_decomposition_and_its_terms_meet_their_tolerance(
     assert abs(approx.sum() - core.sum()) <= 1e-15 and len(rows) <= 8
 
 
+@pytest.mark.skipif(separable._rotations is None, reason="needs numba")
+def test_the_compiled_jacobi_rotations_are_the_specifications_bits_and_their_sums_are_fsums():
+    """The compiled rotations (every sum by CPython's fsum algorithm) give the NumPy specification's columns and
+    rotations bit for bit, on random matrices and PSF cores; each sum is math.fsum's, on sums that cancel, that
+    span 40 decades and that need fsum's half-even step (1e-16 + 1 + 1e16)."""
+    import math
+
+    rng = np.random.default_rng(11)
+    partials = np.empty(400)
+    for n in (1, 2, 3, 17, 60, 150):
+        for trial in range(40):
+            a = rng.normal(size=n) * 10.0 ** rng.integers(-20, 20, n)
+            b = a if trial % 3 == 0 else rng.normal(size=n) * 10.0 ** rng.integers(-20, 20, n)
+            if trial % 3 == 1:  # products that cancel in pairs, the rest small: the exact sum is what is left
+                a, b = np.concatenate([a, a, a[:1] * 1e-30]), np.concatenate([b, -b, b[:1]])
+            got, want = separable._fsum_products(a, b, partials), math.fsum((a * b).tolist())
+            assert got == want and math.copysign(1, got) == math.copysign(1, want), (n, got, want)
+    assert separable._fsum_products(np.array([1e-16, 1.0, 1e16]), np.ones(3), partials) == math.fsum(
+        [1e-16, 1.0, 1e16])
+    cores = [focal_plane(load_config(overrides=["optics.psf=diffraction", "optics.f_number=4"])).psf.core[c]
+             for c in (0, 2)]
+    for a in [rng.random((7, 5)), rng.normal(size=(30, 30)), rng.normal(size=(40, 13)), *cores]:
+        cols, v = separable._rotations_numpy(a)
+        c_arr, v_arr = np.ascontiguousarray(a.T), np.eye(a.shape[1])
+        separable._rotations(c_arr, v_arr, separable._SWEEPS, separable._ORTHOGONAL)
+        assert np.array_equal(c_arr, np.array(cols)) and np.array_equal(v_arr, np.array(v)), a.shape
+
+
 def test_the_optical_images_compiled_loops_are_their_numpy_specifications_bit_for_bit(monkeypatch):
     import scipy.sparse as sp
 

@@ -12,6 +12,11 @@ frames' bits. So the decomposition here is the one-sided Jacobi method (Hestenes
 written with element-wise NumPy operations, each one correctly rounded, and ``math.fsum`` (correctly rounded too)
 for every sum: each step is a fixed sequence of IEEE operations, so any machine gives the same terms.
 
+The rotations are also compiled (``_rotations``, numba): the same operations in the same order, each sum by
+CPython's own ``fsum`` algorithm (Shewchuk's exact partials, then its half-even correction), so the compiled loop
+gives the specification's bits, and a large core (a 113-sample Gaussian, f/16 on a fine grid) is split in
+milliseconds instead of minutes of Python.
+
 Examples
 --------
 >>> import numpy as np
@@ -27,6 +32,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from .jit import ONE_LAUNCH, compiled, numba  # None where numba is not installed
 
 #: rotations stop once every pair of columns is orthogonal to this share of their norms
 _ORTHOGONAL = 1e-15
@@ -62,6 +69,33 @@ def svd(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if transposed:
         a = a.T.copy()
     m, n = a.shape
+    if numba is not None and compiled("the PSF's separable split", _rotations):
+        c_arr, v_arr = np.ascontiguousarray(a.T), np.eye(n)
+        with ONE_LAUNCH:
+            _rotations(c_arr, v_arr, _SWEEPS, _ORTHOGONAL)
+        cols, v = list(c_arr), list(v_arr)
+    else:
+        cols, v = _rotations_numpy(a)
+    sigma = np.array([math.sqrt(_dot(col, col)) for col in cols])
+    order = sorted(range(n), key=lambda j: (-sigma[j], j))
+    p = min(m, n)
+    u = np.zeros((m, p))
+    s_out = np.zeros(p)
+    vt = np.zeros((p, n))
+    for i, j in enumerate(order[:p]):
+        s_out[i] = sigma[j]
+        if sigma[j] > 0:
+            u[:, i] = cols[j] / sigma[j]
+        vt[i] = v[j]
+    if transposed:
+        return vt.T.copy(), s_out, u.T.copy()
+    return u, s_out, vt
+
+
+def _rotations_numpy(a: np.ndarray) -> tuple[list, list]:
+    """The one-sided Jacobi rotations of ``a``'s columns (m, n): (the rotated columns, the rotations' rows), each
+    a list of n arrays. The specification of ``_rotations``."""
+    n = a.shape[1]
     cols = [a[:, j].copy() for j in range(n)]
     v = [np.eye(n)[j].copy() for j in range(n)]
     for _ in range(_SWEEPS):
@@ -82,20 +116,86 @@ def svd(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                 v[p], v[q] = c * vp - s * vq, s * vp + c * vq
         if not rotated:
             break
-    sigma = np.array([math.sqrt(_dot(col, col)) for col in cols])
-    order = sorted(range(n), key=lambda j: (-sigma[j], j))
-    p = min(m, n)
-    u = np.zeros((m, p))
-    s_out = np.zeros(p)
-    vt = np.zeros((p, n))
-    for i, j in enumerate(order[:p]):
-        s_out[i] = sigma[j]
-        if sigma[j] > 0:
-            u[:, i] = cols[j] / sigma[j]
-        vt[i] = v[j]
-    if transposed:
-        return vt.T.copy(), s_out, u.T.copy()
-    return u, s_out, vt
+    return cols, v
+
+
+_rotations = _fsum_products = None
+if numba is not None:
+    @numba.njit(cache=True, nogil=True)
+    def _fsum_products(a, b, partials):
+        """``math.fsum(a * b)``: the correctly rounded sum of the rounded products, by CPython's algorithm
+        (finite values; ``partials`` a scratch array of at least ``a.size + 1``)."""
+        n = 0
+        for k in range(a.size):
+            x = a[k] * b[k]
+            i = 0
+            for j in range(n):
+                y = partials[j]
+                if abs(x) < abs(y):
+                    x, y = y, x
+                hi = x + y
+                yr = hi - x
+                lo = y - yr
+                if lo != 0.0:
+                    partials[i] = lo
+                    i += 1
+                x = hi
+            n = i
+            if x != 0.0:
+                partials[n] = x
+                n += 1
+        hi = 0.0
+        if n > 0:
+            n -= 1
+            hi = partials[n]
+            lo = 0.0
+            while n > 0:
+                x = hi
+                n -= 1
+                y = partials[n]
+                hi = x + y
+                yr = hi - x
+                lo = y - yr
+                if lo != 0.0:
+                    break
+            if n > 0 and ((lo < 0.0 and partials[n - 1] < 0.0) or (lo > 0.0 and partials[n - 1] > 0.0)):
+                y = lo * 2.0
+                x = hi + y
+                yr = x - hi
+                if y == yr:
+                    hi = x
+        return hi
+
+    @numba.njit(cache=True, nogil=True)
+    def _rotations(cols, v, sweeps, orthogonal):
+        """``_rotations_numpy`` in place: ``cols`` (n, m), a row for each column of the matrix; ``v`` (n, n) the
+        identity at the start."""
+        n, m = cols.shape
+        partials = np.empty(m + 1)
+        for _ in range(sweeps):
+            rotated = False
+            for p in range(n - 1):
+                for q in range(p + 1, n):
+                    alpha = _fsum_products(cols[p], cols[p], partials)
+                    beta = _fsum_products(cols[q], cols[q], partials)
+                    gamma = _fsum_products(cols[p], cols[q], partials)
+                    if gamma == 0.0 or abs(gamma) <= orthogonal * math.sqrt(alpha * beta):
+                        continue
+                    rotated = True
+                    zeta = (beta - alpha) / (2.0 * gamma)
+                    t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                    c = 1.0 / math.sqrt(1.0 + t * t)
+                    s = c * t
+                    for i in range(m):
+                        cp, cq = cols[p, i], cols[q, i]
+                        cols[p, i] = c * cp - s * cq
+                        cols[q, i] = s * cp + c * cq
+                    for i in range(n):
+                        vp, vq = v[p, i], v[q, i]
+                        v[p, i] = c * vp - s * vq
+                        v[q, i] = s * vp + c * vq
+            if not rotated:
+                break
 
 
 def terms(kernel: np.ndarray, tolerance: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
