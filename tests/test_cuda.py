@@ -21,10 +21,10 @@ from cmosnoise.engine.frame import cuda_kernel
 from cmosnoise.errors import CmosnoiseError
 
 SIMULATED = cuda_kernel.simulated()
-#: frame size: small in the simulator (a few seconds a frame), 1080p on a GPU
-WIDTH, HEIGHT = (64, 48) if SIMULATED else (1920, 1080)
+#: frame size: small in the simulator (each pixel of a frame some 10 to 30 ms of Python there), 1080p on a GPU
+WIDTH, HEIGHT = (48, 32) if SIMULATED else (1920, 1080)
 
-#: every stage on, each population dense enough to meet a 64 x 48 frame many times
+#: every stage on, each population dense enough to meet a 48 x 32 frame many times
 EVERY = {"sensor": {"frame_rate_hz": 30}, "column_noise": {"gain_sigma_pct": 1.0}, "row_noise": {"fixed_sigma_e": 0.5},
          "pixel_offset": {"enabled": True, "sigma_e": 4.0, "tail": {"ppm_above": 20000, "threshold_e": 20, "max_e": 200}},
          "nonlinearity": {"enabled": True, "linearity_error_pct": [-1.2, 0.6]},
@@ -73,7 +73,7 @@ VARIANTS = {
 @pytest.mark.gpu
 def test_every_stage_on_equals_the_cpu_kernel_bit_for_bit_with_electrons_and_far_frames(name):
     cpu, gpu = _pair(VARIANTS[name])
-    frames = [0, 3, 1_000_000] if SIMULATED else list(range(8)) + [4_000_000_000]
+    frames = [0, 1_000_000] if SIMULATED else list(range(8)) + [4_000_000_000]
     raw, electrons = gpu.frames_on_device(frames, electrons=True)
     raw, electrons = raw.copy_to_host(), electrons.copy_to_host()
     fp = cpu.sensor.fixed_pattern

@@ -47,8 +47,12 @@ from . import (
 )
 from .cuda_table import scalar_numpy, simulated  # noqa: F401 - callers ask cuda_kernel
 
-#: threads per block of the pixel kernel (along a row: coalesced loads of the maps and stores of the frame)
-BLOCK = 128
+#: threads per block of the pixel kernel (along a row: coalesced loads of the maps and stores of the frame), and of
+#: the kernels over lists (lines, traps, blinking pixels, stuck pixels). In numba's CUDA simulator every thread is a
+#: Python thread, started and polled, and a block's idle threads past a small frame's edge cost as much as working
+#: ones: blocks of 16 there. Each thread makes its own pixel or item (no shared memory, no barrier), so the bits do
+#: not depend on the block's size.
+BLOCK, ITEMS, LINES = (16, 16, 16) if simulated() else (128, 128, 64)
 _LOCK = threading.Lock()
 
 
@@ -543,18 +547,18 @@ class DevicePlan:
                                  blink_extra=blink_extra)
         with strict_arithmetic():
             span = h + w + 4
-            self.k.lines[((span + 63) // 64, n), (64, 1), stream](shared, items)
+            self.k.lines[((span + LINES - 1) // LINES, n), (LINES, 1), stream](shared, items)
             if has_traps:
                 traps = most(self.trap_start)
                 values = cuda.device_array((n, traps), np.float64, stream=stream)
-                self.k.trap_values[((traps + 127) // 128, n), (128, 1), stream](
+                self.k.trap_values[((traps + ITEMS - 1) // ITEMS, n), (ITEMS, 1), stream](
                     d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_trap_start, *self.trap_arrays,
                     self.numbers, self.ints, self.trap_keys, values)
-                self.k.pixel_sums[((groups + 127) // 128, n), (128, 1), stream](
+                self.k.pixel_sums[((groups + ITEMS - 1) // ITEMS, n), (ITEMS, 1), stream](
                     d_which, self.d_trap_groups, self.d_trap_start, self.trap_first, self.trap_arrays[3], d_corners,
                     h, w, cols, values, rts_sum)
             if has_blinkers:
-                self.k.blink_values[((blinks + 127) // 128, n), (128, 1), stream](
+                self.k.blink_values[((blinks + ITEMS - 1) // ITEMS, n), (ITEMS, 1), stream](
                     d_frames, d_which, d_corners, h, w, cols, self.seqs, self.d_blink_start, *self.blink_arrays,
                     self.numbers, self.blink_keys, blink_extra)
             out_dn = cuda.device_array((n, h, w) if adc_on else (1, 1, 1), np.uint16, stream=stream)
@@ -565,6 +569,6 @@ class DevicePlan:
             if self.stuck is not None:
                 where, value, start = self.stuck
                 stuck = most(self.stuck_start)
-                self.k.stick[((stuck + 127) // 128, n), (128, 1), stream](d_which, start, where, value, d_corners,
+                self.k.stick[((stuck + ITEMS - 1) // ITEMS, n), (ITEMS, 1), stream](d_which, start, where, value, d_corners,
                                                                           raw)
         return raw, (out_e if want_e else None)
