@@ -10,6 +10,7 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 # One numba compile cache for the test sessions of this checkout, kept between them (tests/../.cache/numba-tests,
 # ignored by git), so that a developer's second run of the fast tier loads the compiled loops instead of building
@@ -275,6 +276,10 @@ def browser_type_launch_args(browser_type_launch_args):
 
 
 # ------------------------------------------------------------------ processes the tests start (stopped by their id)
+#: Dask's command beside this interpreter (its venv's bin, on the PATH or not)
+DASK = str(Path(sys.executable).with_name("dask"))
+
+
 def free_port() -> int:
     """A free TCP port on the loopback address."""
     import socket

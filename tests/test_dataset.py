@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 import yaml
-from conftest import ANOTHER_CPU, X86_64, cli, free_port, stop_process, wait_for_port
+from conftest import ANOTHER_CPU, DASK, X86_64, cli, free_port, stop_process, wait_for_port
 
 from cmosnoise import Sensor
 from cmosnoise.analysis import ground_truth as gt
@@ -50,12 +50,12 @@ def test_the_same_bytes_in_one_process_on_a_local_cluster_and_on_a_scheduler(tmp
     same_bytes(tmp_path / "two", one)
     port = free_port()
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
+    procs = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port),
                                "--dashboard-address", "127.0.0.1:0", "--no-show"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
     try:
         wait_for_port(port, procs[0])
-        procs.append(subprocess.Popen(["dask", "worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1",
+        procs.append(subprocess.Popen([DASK, "worker", f"tcp://127.0.0.1:{port}", "--host", "127.0.0.1",
                                        "--nthreads", "1", "--nworkers", "1", "--no-dashboard"],
                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
         r = cli(*args, "--scheduler", f"tcp://127.0.0.1:{port}", "--out", tmp_path / "sched")

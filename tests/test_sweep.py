@@ -12,7 +12,7 @@ import time
 
 import pandas as pd
 import pytest
-from conftest import cli, free_port, stop_process, wait_for_port
+from conftest import DASK, cli, free_port, stop_process, wait_for_port
 
 from cmosnoise import CmosnoiseError, load_config
 from cmosnoise.app import sweep as sw
@@ -21,7 +21,7 @@ SMALL = ["--set", "sensor.width=64", "--set", "sensor.height=48", "--scene", "fl
 
 
 def _dask(*args, env):
-    return subprocess.Popen(["dask", *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    return subprocess.Popen([DASK, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
 
 
 def _scheduler(port, env):
