@@ -110,3 +110,13 @@ def test_the_fig9_sweep_shows_what_the_paper_shows():
     for p in pts:
         se = max(p["couplets_std"], 1.0) / p["instances"] ** 0.5
         assert abs(p["couplets_mean"] - p["expected_mean"]) <= Z * se, p
+
+
+@pytest.mark.slow
+def test_the_quality_yields_point_nearest_its_spec_is_what_the_code_gives_now():
+    """quality_yield's point of 0.7 e- column FPN (banding nearest the 1 JND spec), its ten instances recomputed
+    alone: each instance's seed is the same in any sweep, so the row is the stored study's, to 9 digits."""
+    stored = numbers.load("quality_yield")
+    again = json.loads(json.dumps(numbers.compute_quality_yield(values=[0.7])))
+    (point,) = again["points"]
+    assert _close(point, next(p for p in stored["points"] if p["vfpn_sigma_e"] == 0.7))
