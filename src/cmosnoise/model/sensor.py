@@ -451,8 +451,8 @@ class Sensor:
         scene : str or ndarray, optional
             A built-in name or path (see :mod:`cmosnoise.scene`), a linear RGB array (rows, cols, 3) or a
             CFA-sampled array (rows, cols) at the sensor's size (the window's, for a window); default: the
-            configuration's scene. The scene section's window and source size place its own source only: another
-            scene named here is drawn whole.
+            configuration's scene. The scene section's window and source size place any scene but a flat (the
+            same everywhere, drawn at the sensor's size).
 
         Returns
         -------
@@ -464,9 +464,9 @@ class Sensor:
         if scene is None:
             scene = c.scene.source
         if isinstance(scene, str):
-            # the scene section's placement (window, source size, a file's scale and mosaic keys) is its source's:
-            # another scene named here (a dark frame's flat, a chart) is drawn whole, fitted as the section says
-            section = c.scene if scene == c.scene.source else type(c.scene)(source=scene, fit=c.scene.fit)
+            # a flat is the same everywhere: no window of it can leave it (a windowed sensor's dark frames)
+            flat = scene_mod.builtin_name(scene) == "flat" and c.scene.window is not None
+            section = c.scene.model_copy(update={"window": None, "source_size": None}) if flat else c.scene
             return fp.pixel_signal(fp.prepare(scene, section), self.cfa, self.window)
         try:
             given = np.asarray(scene)
