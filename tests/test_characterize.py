@@ -86,6 +86,7 @@ def test_saturation_snr_and_dynamic_range_are_consistent(default_run):
     assert 0.9 * model["saturation_capacity_e"] < res["saturation_capacity_e"] <= model["saturation_capacity_e"]
 
 
+@pytest.mark.slow
 def test_export_round_trips_and_the_reference_implementation_agrees(default_run, tmp_path):
     sensor, m, res, model = default_run
     descriptor = emva_files.export(m, tmp_path)
@@ -111,6 +112,7 @@ def test_load_rejects_a_bad_descriptor(tmp_path):
         emva_files.load(tmp_path / "nothing.txt")
 
 
+@pytest.mark.slow
 def test_characterize_command_end_to_end(tmp_path):
     import json
 

@@ -16,6 +16,7 @@ def _run(tmp_path, name, *args, size=SMALL):
     return tmp_path / name
 
 
+@pytest.mark.slow
 def test_runs_of_one_sensor_with_other_seeds_differ_within_sampling_error(tmp_path):
     """Same configuration, other seeds: a difference beyond Z_FLAG (4) standard errors is a false alarm, about
     one in 800 figures for a Student t of 14 degrees of freedom; the issue asks for 19 of 20 or better, here over

@@ -107,6 +107,7 @@ def test_integral_of_the_survival_function_is_quads(family):
         assert integral_of_sf(d, 0.0, top) == pytest.approx(expected, rel=1e-7)
 
 
+@pytest.mark.slow
 def test_a_run_does_not_import_scipy_stats():
     """Making a sensor, its frames and a run's summary leave scipy.stats and scipy.integrate unimported:
     together they take about 0.6 s, a third of a run's start-up (see docs/performance.md)."""

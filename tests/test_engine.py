@@ -350,6 +350,7 @@ def test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not(tmp_path
         assert kernel.preload(), "this process keys numba's cache unlike its children: the suite would compile twice"
 
 
+@pytest.mark.slow
 def test_numba_imported_first_still_gets_the_full_vector_width_or_says_it_did_not():
     """`import numba` before cmosnoise: the vector width is still chosen (numba's CPU target reads its features
     when it first compiles); where numba had compiled already, vectors() says the 256-bit tuning it got."""

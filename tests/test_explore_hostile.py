@@ -72,6 +72,7 @@ def _memory_mb(pid: int, field: str = "VmHWM") -> float:
     raise AssertionError(field)
 
 
+@pytest.mark.slow
 def test_cross_site_requests_are_refused_before_any_work(server):
     url, _ = server
     base = _get(url + "api/meta")["base"]
@@ -116,6 +117,7 @@ def _png(rows, cols, frames=1) -> bytes:
     return buf.getvalue()
 
 
+@pytest.mark.slow
 def test_bombs_of_many_frames_or_pages_are_refused_from_the_header(server, tmp_path):
     url, proc = server
     # the server's high-water mark before the bombs: an earlier test's render may have compiled the frame kernel in

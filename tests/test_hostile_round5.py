@@ -282,6 +282,7 @@ def test_a_chief_ray_angle_is_read_even_where_nothing_uses_it(tmp_path, content)
 
 
 # ------------------------------------------------------------------ 8. messages that name the right thing
+@pytest.mark.slow
 def test_a_zero_psf_and_a_dim_light_name_themselves(tmp_path):
     np.save(tmp_path / "zero.npy", np.zeros((5, 5)))
     _one_line(cli("simulate", "-n", "1", *S, "--set", f"optics.psf={tmp_path / 'zero.npy'}", "--out", tmp_path / "o"),

@@ -146,6 +146,7 @@ def test_a_point_through_a_gaussian_lens_is_the_gaussian_integrated_over_the_pix
 
 
 @pytest.mark.parametrize("source", ["photo", "edge"])
+@pytest.mark.slow
 def test_the_separable_terms_are_the_fine_grids_own_convolution_within_their_tolerance(source):
     # the optical image made explicitly on the fine grid (the scene's cells convolved with the PSF's core and halo,
     # scipy's direct convolution of the cells drawn with their edge cells repeated) against the separable terms'

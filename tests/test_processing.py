@@ -152,6 +152,7 @@ def _defects_after(method, sensor, shot, raw, master):
     return bad.sum(), white_pixels.count_couplets(bad, sensor.cfa)
 
 
+@pytest.mark.slow
 def test_median_removes_single_white_pixels_but_not_couplets_and_the_map_removes_both():
     cfg = load_config(preset="paper-fig9-5m")
     sensor = Sensor(cfg, seed=0)

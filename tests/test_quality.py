@@ -69,6 +69,7 @@ def test_a_hot_sensor_is_clearly_noisier_in_low_light_through_the_command(tmp_pa
     assert doc["b"]["metrics"]["snr_green"][0] < doc["a"]["metrics"]["snr_green"][0]
 
 
+@pytest.mark.slow
 def test_the_outputs_iterate_the_table_so_a_new_metric_is_one_row(tmp_path, monkeypatch):
     """A metric added to METRICS (one function, one row) reaches quality.json, quality.csv, the console and the
     report without any other change."""

@@ -272,6 +272,7 @@ FULL_DISK = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_a_write_that_fails_midway_is_one_line_and_leaves_nothing(tmp_path):
     out = tmp_path / "o"
     proc = subprocess.run([sys.executable, "-c", FULL_DISK, "simulate", *SMALL, "--frames", "20", "--out", str(out)],

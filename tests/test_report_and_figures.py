@@ -173,6 +173,7 @@ def test_plots_have_labels_units_titles_and_legends():
     plots.to_png_bytes(fig)
 
 
+@pytest.mark.slow
 def test_report_of_a_wide_sensor_is_reduced_with_1_to_1_crops_and_counts_couplets_honestly(tmp_path):
     """A 5 MP report was 40.8 MB; the zoom said '0 couplet(s) circled' when the map had 2."""
     from conftest import cli
