@@ -102,6 +102,21 @@ def test_a_sample_depends_on_its_index_alone():
     assert 0 <= ca["window_row"] <= img.shape[0] - 32
 
 
+
+def test_built_in_scenes_are_drawn_at_a_crop_larger_than_their_size():
+    """A crop taller than BUILTIN_SIZE (a 5 MP crop is 1944 x 2592) draws the built-in at the crop's side: the
+    sample is made (no "the source is 1024 x 1024" error), its corner is on the scene, and its config alone
+    makes the same frame (the scene's size recorded in it)."""
+    rows = ds.BUILTIN_SIZE + 2
+    recipe = ds.Recipe(samples=4, crop=(rows, 16), cameras=("led",), seed=2, sources=("siemens",))
+    assert ds.builtin_shape(recipe.crop) == (rows, ds.BUILTIN_SIZE)
+    assert ds.builtin_shape((64, 64)) == (ds.BUILTIN_SIZE, ds.BUILTIN_SIZE)  # smaller crops: the sets made before
+    arrays, columns = ds.make_sample(recipe, 1)
+    assert arrays["raw"].shape == (rows, 16) and columns["window_row"] == 0
+    config = yaml.safe_load(columns["config"])
+    assert config["scene"]["source_size"] == [rows, ds.BUILTIN_SIZE]
+    assert np.array_equal(Sensor(config).expose().frame(0), arrays["raw"])
+
 _DIGEST_SAMPLES = ("import hashlib\n"
                    "import numpy as np\n"
                    "from cmosnoise.app import dataset as ds\n"

@@ -68,9 +68,17 @@ from ..model.sensor import Sensor, check_device, frames_together
 FORMATS = {"hdf5": ".h5", "npz": ".npz", "fits": ".fits"}
 #: image files a --images folder may hold
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".npy", ".bmp", ".webp", ".dng")
-#: built-in scenes a set draws from when no --images are given (drawn at BUILTIN_SIZE)
+#: built-in scenes a set draws from when no --images are given (drawn at :func:`builtin_shape`)
 BUILTIN_SCENES = ("photo", "colorchecker", "zoneplate", "siemens", "ramp")
+#: the side a built-in scene is drawn at for crops up to this size (larger crops: the crop's size)
 BUILTIN_SIZE = 1024
+
+
+def builtin_shape(crop: tuple[int, int]) -> tuple[int, int]:
+    """(rows, cols) a built-in scene is drawn at for crops of ``crop``: :data:`BUILTIN_SIZE` square, or the crop's
+    own side where it is larger (a 5 MP crop of a built-in is its whole scene, drawn at 2592 x 1944; crops up to
+    1024 keep the scenes, and the bits, of sets made before)."""
+    return max(BUILTIN_SIZE, int(crop[0])), max(BUILTIN_SIZE, int(crop[1]))
 #: the arrays of a sample
 ARRAYS = ("raw", "expected_raw", "perfect_dn", "mask")
 #: each sample's settings, as columns: name -> numpy dtype ("str": text)
@@ -374,10 +382,15 @@ class Sources:
                 self.preset_texts[name] = preset_data(name) if name else {}
         return self.preset_texts[name]
 
-    def image(self, source: str) -> np.ndarray:
-        if source not in self.images:
-            self.images[source] = scene_mod.source_image(source, (BUILTIN_SIZE, BUILTIN_SIZE))
-        return self.images[source]
+    def image(self, source: str, shape: tuple[int, int] = (BUILTIN_SIZE, BUILTIN_SIZE)) -> np.ndarray:
+        """A source's whole image: a file's at its own resolution, a built-in drawn at ``shape`` (rows, cols;
+        :func:`builtin_shape`), each read or drawn once."""
+        key = source
+        if scene_mod.is_builtin(source) and tuple(shape) != (BUILTIN_SIZE, BUILTIN_SIZE):
+            key = f"{source}@{shape[0]}x{shape[1]}"
+        if key not in self.images:
+            self.images[key] = scene_mod.source_image(source, tuple(int(v) for v in shape))
+        return self.images[key]
 
     def check_pattern(self, source: str, pattern: str) -> None:
         """A raw photograph's mosaic keeps its colours: a camera of another CFA pattern is a one-line error (the
@@ -449,8 +462,9 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
             key = "iso" if row.iso is not None else "gain_db"
             updates["sensor"] = {key: getattr(row, key)}
     source = recipe.sources[int(rng.integers(len(recipe.sources)))]
-    img = sources.image(source)
     h, w = recipe.crop
+    size = builtin_shape(recipe.crop)
+    img = sources.image(source, size)
     if img.shape[0] < h or img.shape[1] < w:
         raise CmosnoiseError(f"--crop {h}x{w}: the source {source!r} is {img.shape[0]} x {img.shape[1]}; give a "
                              "smaller crop or larger images")
@@ -469,7 +483,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
         "seed": seed,
         "sensor": {"width": w, "height": h, "temperature_c": temp},
         "scene": {"source": source, "window": [row, col],
-                  **({"source_size": [BUILTIN_SIZE, BUILTIN_SIZE]} if scene_mod.is_builtin(source) else {})},
+                  **({"source_size": list(size)} if scene_mod.is_builtin(source) else {})},
         "exposure": {"integration_time_s": t, **({"peak_rate_e_per_s": drawn / t} if recipe.light_e else {})},
         "run": {"frames": 1, "first_frame": 0},
     }
@@ -597,7 +611,7 @@ def _exposure(recipe: Recipe, index: int, sources: Sources, device: str) -> tupl
     sensor = Sensor(c, device=device)
     sources.check_pattern(c.scene.source, sensor.cfa)
     # the crop's pixels through the CFA, read from the source where they lie (no copy of the window)
-    shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source), tuple(c.scene.window), sensor.shape,
+    shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source, builtin_shape(recipe.crop)), tuple(c.scene.window), sensor.shape,
                                               sensor.cfa, sensor.spec.channel_responsivity))
     return shot, st
 
