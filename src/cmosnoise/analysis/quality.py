@@ -415,7 +415,7 @@ METRICS: list[Metric] = [
            "the raw green pixels' e-SFR at 0.5 cy/px of the sensor"),
     Metric("defects_left_per_mp", "defects left after correction", "per MP", "lower", "flat", _defects_left,
            "defect pixels of the truth's mask visible in a frame (6 robust sigma) that processing.defects leaves, "
-           "singles, couplets and clusters (scoring.defects_left)"),
+           "every kind of scoring.KINDS (scoring.defects_left)"),
     Metric("colour_de2000_mean", "colour error, mean", "dE00", "lower", "colorchecker", _colour_value("mean_de2000"),
            "CIEDE2000 after a least-squares 3 x 3 matrix on the raw patch means, 24 patches, against the chart's own "
            "colours (its spectra under the light, CIE 1931 2 degree, Bradford to D65; colour_error)"),

@@ -17,9 +17,14 @@
   the noisy frame departs from its healthy same-colour neighbours' median
   in the expected raw by more than ``z`` robust sigmas of that departure
   over the healthy pixels, and *left* where the output still does, by the
-  output's own sigma. The kinds: ``singles`` (a white pixel without a
-  white neighbour, a dead, stuck, low- or high-gain pixel), ``couplets``
-  and ``clusters``.
+  output's own sigma. The kinds (:data:`KINDS`): ``whites`` (a white pixel
+  without a white neighbour), ``couplets``, ``clusters``, ``dead``, ``stuck``
+  and ``gain`` (a low- or high-gain pixel). Each pixel counts once: a pixel
+  of a couplet is the couplet's, and a pixel that is two single defects is
+  the one that sets its value (dead, then stuck, then gain, then white). A
+  corrector that maps its defects from dark frames cannot see a dead or a
+  gain pixel there (each reads as its neighbours do in the dark): those kinds
+  are reported apart so that its whites are not judged by them.
 """
 
 from __future__ import annotations
@@ -32,13 +37,19 @@ from ..estimators import robust_sigma
 from ..isp.defects import neighbours_at
 from .ground_truth import MASK_BITS
 
-#: defect kinds as the score groups them: name -> the mask bits that make a pixel one
+#: defect kinds as the score groups them: name -> the mask bits that make a pixel one. The single defects
+#: (:data:`SINGLES`) partition their pixels: a pixel of a couplet is the couplet's, and one that is two of them is
+#: the first of :data:`SINGLES` it is
 KINDS = {
-    "singles": MASK_BITS["white"] | MASK_BITS["dead"] | MASK_BITS["stuck"] | MASK_BITS["low_gain"]
-    | MASK_BITS["high_gain"],
+    "whites": MASK_BITS["white"],
     "couplets": MASK_BITS["couplet"],
     "clusters": MASK_BITS["cluster"],
+    "dead": MASK_BITS["dead"],
+    "stuck": MASK_BITS["stuck"],
+    "gain": MASK_BITS["low_gain"] | MASK_BITS["high_gain"],
 }
+#: the single defects, in the order that decides a pixel that is two of them: the defect that sets its value first
+SINGLES = ("dead", "stuck", "gain", "whites")
 #: the departures a pixel is visible (left) above, in robust sigmas
 Z_VISIBLE = 6.0
 #: the image scores :func:`image_scores` gives, each (name, what it is, unit, which way is better): the one list
@@ -185,8 +196,8 @@ def _departure(img: np.ndarray, expected: np.ndarray, healthy: np.ndarray, patte
 
 def defects_left(noisy: np.ndarray, output: np.ndarray, expected: np.ndarray, mask: np.ndarray,
                  pattern: str, z: float = Z_VISIBLE) -> dict:
-    """Per kind of :data:`KINDS`: how many defects are visible in ``noisy`` and how many of those ``output``
-    leaves, and each pixel's verdict."""
+    """Per kind of :data:`KINDS`: how many defect pixels are visible in ``noisy`` and how many of those ``output``
+    leaves (``{kind: {"visible": n, "left": m}}``; a couplet is two pixels)."""
     import warnings
 
     healthy = mask == 0
@@ -196,12 +207,14 @@ def defects_left(noisy: np.ndarray, output: np.ndarray, expected: np.ndarray, ma
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN neighbourhoods: handled
         sig_noisy = robust_sigma(_departure(noisy, expected, healthy, pattern, rows, cols))
         sig_out = robust_sigma(_departure(output, expected, healthy, pattern, rows, cols))
-        out = {}
+        pixels, out = {}, {}
+        claimed = MASK_BITS["couplet"]  # a white pixel of a couplet is a couplet's
+        for kind in SINGLES:  # each single defect's pixels, less those an earlier kind claimed
+            bits = KINDS[kind]
+            pixels[kind] = np.nonzero(((mask & bits) > 0) & ((mask & claimed) == 0))
+            claimed |= bits
         for kind, bits in KINDS.items():
-            r, c = np.nonzero((mask & bits) > 0)
-            if kind == "singles":  # a white pixel of a couplet is a couplet's
-                solo = (mask[r, c] & MASK_BITS["couplet"]) == 0
-                r, c = r[solo], c[solo]
+            r, c = pixels[kind] if kind in SINGLES else np.nonzero((mask & bits) > 0)
             visible = np.abs(_departure(noisy, expected, healthy, pattern, r, c)) > z * max(sig_noisy, 0.5)
             left = visible & (np.abs(_departure(output, expected, healthy, pattern, r, c)) > z * max(sig_out, 0.5))
             out[kind] = {"visible": int(visible.sum()), "left": int(left.sum())}

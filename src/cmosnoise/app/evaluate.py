@@ -39,7 +39,7 @@ BASELINES = {
               "6 robust sigmas is replaced by their median (isp.defects.correct_isolated)",
     "dark-map": "a defect map from 8 dark frames of the sample's sensor (6 robust sigmas above the master dark's "
                 "median); mapped pixels replaced by their healthy same-colour neighbours' median "
-                "(isp.defects.correct_with_map)",
+                "(isp.defects.correct_with_map); dead and gain pixels, dark in the dark, stay off the map",
     "gaussian": "a Gaussian blur of each CFA colour plane, sigma 1 plane pixel (scipy.ndimage): a plain denoiser",
     "bm3d": "BM3D (the bm3d package of its authors, Tampere University; the extra cmosnoise[bm3d]) on each CFA "
             "colour plane, its noise sigma estimated from the plane (scikit-image's estimate_sigma): a strong "
@@ -260,24 +260,77 @@ def _light_bin(light):
     return pd.cut(light, LIGHT_BINS, labels=labels, right=False).astype(str)
 
 
-def _plots(scores) -> dict[str, bytes]:
-    out = {}
-    fig, ax = plots.figure(figsize=(6.4, 3.8))
+def gain_label(iso, gain_db, mode) -> str:
+    """A sample's gain as the PSNR plot names it: ``ISO 1600``, ``3 dB``, with its mode (``HCG``) where it has one;
+    ``""`` for a camera without a gain table (a virtual camera's samples)."""
+    parts = []
+    if iso is not None and math.isfinite(float(iso)):
+        parts.append(f"ISO {float(iso):g}")
+    elif gain_db is not None and math.isfinite(float(gain_db)):
+        parts.append(f"{float(gain_db):g} dB")
+    if isinstance(mode, str) and mode:
+        parts.append(mode)
+    return " ".join(parts)
+
+
+def psnr_figure(scores):
+    """PSNR against light, a panel per camera, a series per method and gain (colour: the method; marker: the
+    gain), on one light axis shared by the panels.
+
+    Parameters
+    ----------
+    scores : pandas.DataFrame
+        :func:`score`'s rows.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.lines import Line2D
+
+    kept = scored(scores)[0].copy()
+    cameras = list(dict.fromkeys(scores["camera"]))
+    methods = list(dict.fromkeys(scores["method"]))
+    cols = min(3, len(cameras))
+    rows = -(-len(cameras) // cols)
+    fig, axes = plots.figure(rows, cols, figsize=(4.6 * cols, 3.6 * rows), sharex=True, sharey=True, squeeze=False,
+                             layout="constrained")
     lo, hi = float(scores["light_e"].min()), float(scores["light_e"].max())
-    ax.set_xscale("log")
-    ax.set_xlim(lo / 1.5, hi * 1.5)  # set first: one light level alone would make an empty range
-    ax.set_autoscalex_on(False)
-    kept = scored(scores)[0]
-    markers = "osD^v<>ph*"
-    for j, ((name, camera), g) in enumerate(kept.groupby(["method", "camera"], sort=False)):
-        g = g.sort_values("light_e")  # one series per method and camera: gains of one camera share a marker
-        ax.plot(g["light_e"], g["psnr_raw_db"], markers[j % len(markers)], ms=4, alpha=0.7,
-                label=f"{name}, {camera}")
-    ax.set_xlabel("light at the scene's white (e-)")
-    ax.set_ylabel("PSNR, packed raw at the exposure ratio (dB)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    out["psnr_vs_light.png"] = plots.to_png_bytes(fig)
+    kept["gain"] = [gain_label(i, g, m) for i, g, m in zip(kept["iso"], kept["gain_db"], kept["mode"])]
+    markers, colours = "osD^v<>ph*", [f"C{j}" for j in range(10)]
+    for ax, camera in zip(axes.flat, cameras):
+        ax.set_xscale("log")
+        ax.set_xlim(lo / 1.5, hi * 1.5)  # set first: one light level alone would make an empty range
+        ax.set_autoscalex_on(False)
+        of = kept[kept["camera"] == camera]
+        gains = sorted(set(of["gain"]), key=lambda g: (len(g), g))
+        for (name, gain), g in of.groupby(["method", "gain"], sort=False):
+            g = g.sort_values("light_e")
+            ax.plot(g["light_e"], g["psnr_raw_db"], markers[gains.index(gain) % len(markers)], ms=4, alpha=0.75,
+                    color=colours[methods.index(name) % len(colours)],
+                    **({"mfc": "none", "zorder": 3} if name == "none" else {}))  # the noisy input hollow, on top
+        ax.set_title(camera, fontsize=10)
+        ax.grid(alpha=0.3)
+        if len(of):  # a legend of colours (the methods) and one of markers (this camera's gains)
+            handles = [Line2D([], [], ls="", marker="o", ms=5, color=colours[j % len(colours)], label=m,
+                              mfc="none" if m == "none" else None)
+                       for j, m in enumerate(methods) if m in set(of["method"])]
+            handles += [Line2D([], [], ls="", marker=markers[j % len(markers)], ms=5, color="0.35", label=gain)
+                        for j, gain in enumerate(gains) if gain]
+            ax.legend(handles=handles, fontsize=7, ncol=1 + (len(handles) > 9))
+        else:
+            ax.text(0.5, 0.5, "every sample clips", transform=ax.transAxes, ha="center", va="center", color="0.3")
+    for ax in axes.flat[len(cameras):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("light at the scene's white (e-)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("PSNR, packed raw at the ratio (dB)")
+    return fig
+
+
+def _plots(scores) -> dict[str, bytes]:
+    out = {"psnr_vs_light.png": plots.to_png_bytes(psnr_figure(scores))}
     fig, ax = plots.figure(figsize=(6.4, 3.4))
     methods = list(dict.fromkeys(scores["method"]))
     kinds = list(scoring.KINDS)
@@ -340,7 +393,10 @@ def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target:
             f"against the "
             f"{'expected raw without its defects (the fixed pattern kept)' if target == 'expected' else 'perfect image'}; a defect is "
             f"visible when the noisy frame departs from its healthy neighbours by {scoring.Z_VISIBLE:g} robust "
-            f"sigmas, left when the output still does.</p><h2>Methods</h2><ul>{methods}</ul>"
+            f"sigmas, left when the output still does, counted in pixels by kind ({', '.join(scoring.KINDS)}). "
+            f"A defect map made from dark frames (dark-map) cannot see dead or gain pixels: in the dark they "
+            f"read as their neighbours do, so it leaves them; they are counted apart from the white pixels it "
+            f"removes.</p><h2>Methods</h2><ul>{methods}</ul>"
             f"<h2>Per method</h2>{table(per_method)}<h2>Plots</h2>{figs}"
             f"<h2>Per scene</h2><p>Mean PSNR (dB) of each method on the samples cut from each source image: a "
             f"denoiser that blurs loses most on fine detail (the zone plate's rings beyond a colour plane's "
