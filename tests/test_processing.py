@@ -227,6 +227,61 @@ def test_process_command_reproduces_the_simulators_processing(tmp_path):
     np.testing.assert_array_equal(iio.imread(tmp_path / "proc" / "processed.png"), iio.imread(tmp_path / "sim" / "processed.png"))
 
 
+MINE = ("import numpy as np\n"
+        "CALLS = []\n"
+        "def flat(raw, meta):\n"
+        "    CALLS.append((raw.shape, meta['cfa'], meta['black_level_dn']))\n"
+        "    return np.full(raw.shape, meta['black_level_dn'] + 7.0)\n"
+        "def wrong(raw):\n"
+        "    return raw[1:]\n")
+
+
+def test_ones_own_corrector_runs_in_the_chain_in_raw_dn(tmp_path, monkeypatch):
+    """A corrector named by processing.defects.corrector (or --corrector) takes raw DN, black included, and gives
+    raw DN back: one that returns black + 7 everywhere leaves 7 DN above black in the CFA image, after the
+    built-in method, in the API, `simulate --corrector` and `process --corrector` alike."""
+    import imageio.v3 as iio
+
+    (tmp_path / "mine_fix.py").write_text(MINE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import mine_fix
+
+    sensor = Sensor({"sensor": {"width": 32, "height": 24}, "processing": {"defects": {"method": "median",
+                                                                                        "corrector": "mine_fix:flat"}}})
+    proc = Processor(sensor.config.processing, sensor.raw_info())
+    raw = sensor.expose("photo").frame(0)
+    assert np.array_equal(proc.cfa_image(raw), np.full(raw.shape, 7.0, np.float32))
+    assert mine_fix.CALLS[-1] == ((24, 32), "RGGB", float(sensor.transfer.black_level_dn))
+    assert np.array_equal(proc.cfa_image(raw, pre=True), raw.astype(np.float32) - sensor.transfer.black_level_dn)
+    # a callable given to the Processor, and the same through the commands
+    given = Processor(ProcessingSection(), sensor.raw_info(), corrector=lambda r, m: r * 0 + m["black_level_dn"])
+    assert not given.cfa_image(raw).any()
+    r = cli("-q", "simulate", "--preset", "paper-fig9-vga", "--set", "sensor.width=64", "--set", "sensor.height=48",
+            "--corrector", "mine_fix:flat", "--out", tmp_path / "sim", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    picture = iio.imread(tmp_path / "sim" / "processed.png")
+    assert picture.std() == 0  # one flat grey: the corrector's frame
+    r = cli("-q", "process", tmp_path / "sim" / "raw.tiff", "--corrector", "mine_fix:flat", "--out",
+            tmp_path / "proc", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert iio.imread(tmp_path / "proc" / "processed.png").std() == 0
+
+
+@pytest.mark.parametrize("spec, needle", [
+    ("nosuchmodule_xyz:f", "processing.defects.corrector 'nosuchmodule_xyz:f': cannot load it"),
+    ("justaname", "expected module:function"),
+    ("mine_fix:wrong", "processing.defects.corrector 'mine_fix:wrong' returned shape (23, 32)"),
+])
+def test_a_bad_corrector_is_one_line(tmp_path, spec, needle):
+    (tmp_path / "mine_fix.py").write_text(MINE)
+    r = cli("simulate", "--set", "sensor.width=32", "--set", "sensor.height=24", "--corrector", spec,
+            "--out", tmp_path / "o", cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0] and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()
+
+
 def _run(*args):
     return cli(*args)
 

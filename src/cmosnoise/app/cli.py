@@ -131,8 +131,18 @@ def _say(ctx: typer.Context, text: str, level: int = 0) -> None:
         typer.echo(text)
 
 
-def _run_overrides(scene, frames, first_frame, seed, process=None, dark_frames=None, formats=None, report=False) -> dict:
+#: one's own defect corrector for the processing chain (simulate --process, process)
+CorrectorOpt = typer.Option(None, "--corrector", help="your own defect corrector, module:function (raw DN in, raw "
+                                                     "DN out, as evaluate --method takes it), run after "
+                                                     "processing.defects.method; sets processing.defects.corrector")
+
+
+def _run_overrides(scene, frames, first_frame, seed, process=None, dark_frames=None, formats=None, report=False,
+                   corrector=None) -> dict:
     extra: dict = {}
+    if corrector is not None:
+        extra.setdefault("processing", {}).setdefault("defects", {})["corrector"] = corrector
+        extra["processing"]["enabled"] = True  # a corrector is asked for to be used: as --process
     if report:
         extra.setdefault("run", {})["report"] = True
     if process:
@@ -239,6 +249,7 @@ def simulate(
     out: Path = typer.Option(Path("cmosnoise-out"), "--out", "-o", help="output folder"),
     process: bool = typer.Option(False, "--process", help="also write processed.png (and processed.mp4) through the processing chain"),
     dark_frames: int | None = typer.Option(None, "--dark-frames", help="dark calibration: make a master dark from N dark frames"),
+    corrector: str | None = CorrectorOpt,
     format_: list[str] | None = typer.Option(None, "--format", help="extra raw format: dng (raw.tiff is always written)"),
     report: bool = typer.Option(False, "--report", help="also write report.html (self-contained run report)"),
     progress: bool | None = typer.Option(None, "--progress/--no-progress", help="progress bar (default: on a terminal, for long runs)"),
@@ -256,7 +267,8 @@ def simulate(
     """Simulate raw frames of a scene; write raw.tiff, config.yaml, summary.json and preview.png."""
     from .run import simulate as run_simulate
 
-    spec = _sensor(config, preset, [*(set_ or []), *white_threshold_set(white_threshold)], _run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report))
+    spec = _sensor(config, preset, [*(set_ or []), *white_threshold_set(white_threshold)], _run_overrides(scene, frames, first_frame, seed, process, dark_frames, format_, report,
+                                                 corrector))
     cfg = spec.config
     if _level(ctx) < 0:
         progress = False
@@ -335,13 +347,14 @@ def process(
     cfa: str | None = typer.Option(None, "--cfa", help="RGGB, BGGR, GRBG, GBRG or none (default: from the file's metadata)"),
     black_level: float | None = typer.Option(None, "--black-level", help="black level, DN (default: from the metadata)"),
     bits: int | None = typer.Option(None, "--bits", help="bit depth (default: from the metadata)"),
+    corrector: str | None = CorrectorOpt,
     out: Path = typer.Option(Path("cmosnoise-processed"), "--out", "-o", help="output folder"),
     overwrite: bool = OverwriteOpt,
 ):
     """Process raw frames that already exist (from cmosnoise or a real camera) into pictures."""
     from .run import process_file
 
-    cfg = load_config(config, None, set_)
+    cfg = load_config(config, None, set_, extra=_run_overrides(None, None, None, None, corrector=corrector) or None)
     if cfa is not None:
         cfa = "none" if cfa.lower() == "none" else cfa.upper()
     overrides = {k: v for k, v in {"cfa": cfa, "black_level_dn": black_level, "bits": bits}.items() if v is not None}

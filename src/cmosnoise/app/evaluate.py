@@ -14,10 +14,7 @@ plots, and ``report.html`` (self-contained).
 from __future__ import annotations
 
 import html
-import importlib
-import inspect
 import math
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -54,22 +51,9 @@ DARK_FRAMES = 8
 
 
 def _user_method(spec: str) -> Callable:
-    module, _, name = spec.partition(":")
-    if not module or not name:
+    if ":" not in spec:
         raise CmosnoiseError(f"--method {spec!r}: give a built-in ({', '.join(BASELINES)}) or module:function")
-    if "" not in sys.path:
-        sys.path.insert(0, "")  # a module in the current folder, as `python -m` finds it
-    try:
-        fn = getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError) as exc:
-        raise CmosnoiseError(f"--method {spec!r}: cannot load it ({type(exc).__name__}: {exc})") from None
-    if not callable(fn):
-        raise CmosnoiseError(f"--method {spec!r} is not callable")
-    try:
-        takes_meta = len(inspect.signature(fn).parameters) >= 2
-    except (TypeError, ValueError):
-        takes_meta = False
-    return (lambda raw, meta: fn(raw, meta)) if takes_meta else (lambda raw, meta: fn(raw))
+    return isp_defects.load_corrector(spec, "--method")
 
 
 def _gaussian(raw: np.ndarray, meta: dict) -> np.ndarray:

@@ -360,11 +360,14 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     out["ppm_above_threshold"] = dark.get("ppm", math.nan)
     for name in ("white_pixels", "couplets", "couplets_expected_random"):
         out[name] = dark.get(name, math.nan)
-    # what survives dark calibration and the chosen defect corrector (median when none is chosen)
+    # what survives dark calibration and the chosen defect corrector (median when none is chosen), and one's own
+    # corrector after it where processing.defects.corrector names one
     n_dark = cfg.processing.dark_frames or 8
     method = cfg.processing.defects.method if cfg.processing.defects.method != "off" else "median"
     master = calibration.master_dark(sensor.dark_frames(n_dark))
-    proc = Processor(ProcessingSection(dark_frames=n_dark, defects={"method": method}), sensor.raw_info(), master)
+    proc = Processor(ProcessingSection(dark_frames=n_dark, defects={"method": method,
+                                                                    "corrector": cfg.processing.defects.corrector}),
+                     sensor.raw_info(), master)
     bad = np.abs(proc.cfa_image(raw0) - shot.photo_mean_e * k) > DEFECT_TOLERANCE_E * k
     out["residual_defects"] = int(bad.sum())
     out["couplets_after_correction"] = white_pixels.count_couplets(bad, sensor.cfa)

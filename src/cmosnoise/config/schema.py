@@ -118,6 +118,18 @@ class DefectsSection(Section):
         "off", description="off; median: replace pixels outside their same-colour neighbours' range; map: defect map from the master dark"
     )
     threshold_sigma: float = Field(6.0, gt=0, le=1000, description="detection threshold, in robust standard deviations")
+    corrector: str | None = Field(
+        None, description="module:function: your own corrector (raw DN in, raw DN out, black included; f(raw) or "
+                          "f(raw, meta) with meta's cfa, black_level_dn, white_level_dn), run after method, as "
+                          "evaluate --method takes it"
+    )
+
+    @field_validator("corrector")
+    @classmethod
+    def _corrector(cls, v):
+        if v is not None and (not v.partition(":")[0].strip() or not v.partition(":")[2].strip()):
+            raise ValueError(f"{v!r}: expected module:function, e.g. mypkg.fix:correct")
+        return v
 
 
 class WhiteBalanceSection(Section):

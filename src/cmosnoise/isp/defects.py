@@ -1,6 +1,8 @@
 """Defect correction on the CFA image (docs/model.md section 5).
 
-Two correctors, so users can compare them:
+Two correctors, so users can compare them, and a hook for one's own
+(:func:`load_corrector`: ``module:function``, as ``evaluate --method`` and
+``processing.defects.corrector`` take it):
 
 - :func:`correct_isolated` is the single-defect corrector of a typical ISP: a
   pixel that lies outside the range of its same-colour neighbours by more
@@ -26,10 +28,60 @@ Examples
 
 from __future__ import annotations
 
+import importlib
+import inspect
+import sys
+from collections.abc import Callable
+
 import numpy as np
 
+from ..errors import CmosnoiseError
 from ..estimators import robust_sigma
 from ..model import cfa as cfa_mod
+
+
+def load_corrector(spec: str, name: str = "processing.defects.corrector") -> Callable[[np.ndarray, dict], np.ndarray]:
+    """One's own corrector or denoiser, ``module:function``, as a callable ``(raw, meta) -> output``.
+
+    The function takes a raw frame (rows, cols) in DN, black level included, and returns one of its shape:
+    ``f(raw)``, or ``f(raw, meta)`` with ``meta`` a dict that holds at least ``cfa`` (the pattern),
+    ``black_level_dn`` and ``white_level_dn`` (``evaluate`` gives each sample's settings). The module is imported
+    as ``python -m`` finds one: the current folder first.
+
+    Parameters
+    ----------
+    spec : str
+        ``module:function`` (``mypkg.fix:correct``).
+    name : str
+        The option or key the spec came from, for the message.
+
+    Returns
+    -------
+    callable
+        ``(raw, meta) -> output``.
+
+    Raises
+    ------
+    CmosnoiseError
+        ``spec`` is not ``module:function``, does not import, or is not callable.
+    """
+    module, _, attr = str(spec).partition(":")
+    if not module or not attr:
+        raise CmosnoiseError(f"{name} {spec!r}: expected module:function (a callable raw -> raw, or raw, meta -> "
+                             "raw)")
+    if "" not in sys.path:
+        sys.path.insert(0, "")  # a module in the current folder, as `python -m` finds it
+    try:
+        fn = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise CmosnoiseError(f"{name} {spec!r}: cannot load it ({type(exc).__name__}: {exc})") from None
+    if not callable(fn):
+        raise CmosnoiseError(f"{name} {spec!r} is not callable")
+    try:
+        takes_meta = len(inspect.signature(fn).parameters) >= 2
+    except (TypeError, ValueError):
+        takes_meta = False
+    return (lambda raw, meta: fn(raw, meta)) if takes_meta else (lambda raw, meta: fn(raw))
 
 
 def _offsets(pattern: str) -> tuple[np.ndarray, np.ndarray | None]:

@@ -6,7 +6,10 @@ Steps, in order:
 2. dark calibration: subtract a master dark (mean of dark frames of the same
    sensor instance at the same temperature and exposure);
 3. defect correction on the CFA image: ``off``, ``median`` (single defects)
-   or ``map`` (a defect map from the master dark; removes couplets too);
+   or ``map`` (a defect map from the master dark; removes couplets too),
+   then one's own corrector where ``defects.corrector`` names one
+   (``module:function``, :func:`cmosnoise.defects.load_corrector`; or a
+   callable given to :class:`Processor`);
 4. demosaicing (``bilinear``, ``malvar2004``, ``menon2007``);
 5. crosstalk colour-mixing compensation: the inverse of the 3 x 3 matrix the
    kernel and the CFA induce. It needs whole RGB pixels, so it follows the
@@ -61,8 +64,13 @@ class Processor:
     ((48, 64, 3), dtype('uint8'))
     """
 
-    def __init__(self, settings: ProcessingSection, info: RawInfo, master_dark: np.ndarray | None = None):
+    def __init__(self, settings: ProcessingSection, info: RawInfo, master_dark: np.ndarray | None = None,
+                 corrector=None):
         self.settings = settings
+        # one's own corrector: a callable (raw, meta) -> raw given here, or settings.defects.corrector loaded
+        spec = settings.defects.corrector
+        self.corrector = corrector if corrector is not None else (defects.load_corrector(spec) if spec else None)
+        self._corrector_name = getattr(corrector, "__name__", "corrector") if corrector is not None else spec
         self.info = info
         self.master_dark = master_dark
         self.mono = cfa_mod.is_mono(info.cfa)
@@ -142,7 +150,25 @@ class Processor:
             img, _ = defects.correct_isolated(img, self.info.cfa, self.settings.defects.threshold_sigma)
         elif method == "map":
             img = defects.correct_with_map(img, self.info.cfa, self.defect_map)
+        if self.corrector is not None:
+            img = self._own_correction(img)
         return img
+
+    def _own_correction(self, img: np.ndarray) -> np.ndarray:
+        """``img`` (DN above black) through one's own corrector, which takes and gives raw DN, black included."""
+        black = float(self.info.black_level_dn)
+        meta = {"cfa": self.info.cfa, "black_level_dn": black, "white_level_dn": float(self.info.white_level_dn)}
+        try:
+            out = np.asarray(self.corrector(img.astype(np.float64) + black, meta), np.float64)
+        except CmosnoiseError:
+            raise
+        except Exception as exc:
+            raise CmosnoiseError(f"processing.defects.corrector {self._corrector_name!r} failed: "
+                                 f"{type(exc).__name__}: {exc}") from None
+        if out.shape != img.shape:
+            raise CmosnoiseError(f"processing.defects.corrector {self._corrector_name!r} returned shape {out.shape}; "
+                                 f"the raw frame is {img.shape}")
+        return (out - black).astype(img.dtype)
 
     # ------------------------------------------------------------ colour
     def linear_rgb(self, cfa_img: np.ndarray, half: bool = False) -> np.ndarray:
