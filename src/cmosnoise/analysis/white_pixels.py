@@ -105,6 +105,41 @@ def pairs_at(r: np.ndarray, c: np.ndarray, shape: tuple[int, int], pattern: str)
     return np.concatenate(pairs) if pairs else np.zeros((0, 2, 2), int)
 
 
+#: a pixel is left by the processing (a residual defect) when it stands this far from the scene's expected
+#: signal after dark calibration and defect correction, e-: the paper's Fig. 9 judgement, in ``simulate``'s
+#: summary, the sweep's ``residual_defects`` and ``couplets_after_correction``, and the docs' figures alike
+DEFECT_TOLERANCE_E = 150.0
+
+
+def left_after_correction(corrected_dn: np.ndarray, expected_e: np.ndarray, gain_dn_per_e: float, pattern: str,
+                          tolerance_e: float = DEFECT_TOLERANCE_E) -> dict:
+    """What a processing chain leaves: the pixels of a corrected CFA image more than ``tolerance_e`` off the
+    scene's expected signal, and the couplets among them.
+
+    Parameters
+    ----------
+    corrected_dn : ndarray, (rows, cols)
+        The CFA image after dark calibration and defect correction, DN above black
+        (:meth:`cmosnoise.Processor.cfa_image`).
+    expected_e : ndarray, (rows, cols)
+        The expected photo signal, e- (:attr:`Shot.photo_mean_e`).
+    gain_dn_per_e : float
+        K, DN/e-.
+    pattern : str
+        The CFA pattern.
+    tolerance_e : float
+        How far off a pixel is left, e-.
+
+    Returns
+    -------
+    dict
+        ``pixels`` (int), ``couplets`` (int: pairs of same-colour neighbours among them), ``tolerance_e``.
+    """
+    k = float(gain_dn_per_e)
+    bad = np.abs(np.asarray(corrected_dn, np.float64) - np.asarray(expected_e, np.float64) * k) > tolerance_e * k
+    return {"pixels": int(bad.sum()), "couplets": count_couplets(bad, pattern), "tolerance_e": float(tolerance_e)}
+
+
 def count_couplets(mask: np.ndarray, pattern: str) -> int:
     """Number of couplets (pairs of same-colour neighbouring white pixels).
 

@@ -329,6 +329,12 @@ def simulate(
         _say(ctx, f"warning: {warning}")
     if "note" in summary["processing"]:
         _say(ctx, f"note: {summary['processing']['note']}")
+    if "left" in summary["processing"]:
+        p, left = summary["processing"], summary["processing"]["left"]
+        steps = [f"{p['dark_frames']} dark frames" if p["dark_frames"] else "no dark calibration",
+                 f"defects {p['defects']}" + (f" and {p['corrector']}" if p.get("corrector") else "")]
+        _say(ctx, f"processing left {left['pixels']} pixels more than {left['tolerance_e']:g} e- off the scene in "
+                  f"frame {cfg.run.first_frame}, {left['couplets']} couplets among them ({', '.join(steps)})")
     if _level(ctx) >= 1:
         _say(ctx, "files: " + ", ".join(sorted(p.name for p in out.iterdir())))
         t = summary["timings_s"]

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis import white_pixels
 from ..analysis.run_stats import RunStats
 from ..config import Config, ProcessingSection, load_config, merge_updates
 from ..engine.frame import kernel
@@ -202,6 +203,9 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         # everything from the set-up to the last output but the report: set-up, frames, summary and pictures
         summary["timings_s"]["total"] = round(t_frames + t_summary + t_pictures, 6)
         summary["processing"] = processing_summary(processor, t_dark, t_process)
+        if proc_cfg.enabled:  # what the chain leaves of the defects in the first frame (the paper's Fig. 9 count)
+            summary["processing"]["left"] = white_pixels.left_after_correction(
+                processor.cfa_image(frame0[0]), shot.photo_mean_e, transfer.gain_dn_per_e, sensor.cfa)
         if video_info is not None:
             summary["processing"]["video"] = video_info
         rts = telegraph_pixels(sensor)
@@ -260,6 +264,7 @@ def processing_summary(processor: Processor, t_dark: float, t_process: float) ->
         "enabled": s.enabled,
         "dark_frames": s.dark_frames,
         "defects": s.defects.method,
+        **({"corrector": s.defects.corrector} if s.defects.corrector else {}),
         "crosstalk_compensation": s.crosstalk_compensation and processor.mixing is not None,
         "white_balance": s.white_balance.mode,
         "demosaic": s.demosaic,

@@ -42,8 +42,6 @@ from ..errors import CmosnoiseError, keeping, note_kept
 from ..io.output import OutputFolder, resumable_mode
 from .cluster import connect, disconnect, task_result, worker_attribute
 
-#: a pixel is a residual defect after processing when it is this far from the scene's expected signal, e-
-DEFECT_TOLERANCE_E = 150.0
 #: the scene of a yield study (--spec) without --scene: a flat field at half the peak rate
 YIELD_SCENE = "flat:0.5"
 #: tasks in flight at once: the scheduler's memory does not grow with the sweep
@@ -368,9 +366,9 @@ def run_instance(config_data: dict, scene: str, frames: int, seed: int, cache=No
     proc = Processor(ProcessingSection(dark_frames=n_dark, defects={"method": method,
                                                                     "corrector": cfg.processing.defects.corrector}),
                      sensor.raw_info(), master)
-    bad = np.abs(proc.cfa_image(raw0) - shot.photo_mean_e * k) > DEFECT_TOLERANCE_E * k
-    out["residual_defects"] = int(bad.sum())
-    out["couplets_after_correction"] = white_pixels.count_couplets(bad, sensor.cfa)
+    left = white_pixels.left_after_correction(proc.cfa_image(raw0), shot.photo_mean_e, k, sensor.cfa)
+    out["residual_defects"] = left["pixels"]
+    out["couplets_after_correction"] = left["couplets"]
     names = METRICS
     if quality_lux is not None:
         from ..analysis import quality
@@ -517,6 +515,7 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
     checked = [point_config(base, p) for p in points]
     configs = [c.model_dump(mode="json") for c in checked]
     parsed_specs = [parse_spec(s, known) for s in specs or []]
+    from ..analysis import white_pixels
     from ..model import footprint
     from ..model import scene as scene_mod
 
@@ -529,7 +528,7 @@ def plan(base, vary: list[str], instances: int, frames: int = 2, scene: str | No
         scene, why = base.scene.source, "the configuration's scene.source"
     if scene_mod.builtin_name(scene) != "flat":  # every row holds residual_defects, plotted or not
         why += ("; residual_defects and couplets_after_correction count what processing leaves beyond "
-                f"{DEFECT_TOLERANCE_E:g} e- of the expected signal, and on a scene with detail that includes the detail: "
+                f"{white_pixels.DEFECT_TOLERANCE_E:g} e- of the expected signal, and on a scene with detail that includes the detail: "
                 "use a flat scene (flat:0.5) for defect yield")
 
     # what every task would find, found once before any task runs: the scene decodes, each point's sensor fits
