@@ -1,33 +1,40 @@
-"""Training samples with their truth per second, next to getframes 2.6.1's pair generator and a NumPy reference,
-and the memory of a large set.
+"""Training samples with their truth per CPU-second, next to getframes 2.6.1's pair generator and a NumPy
+Poisson-Gaussian synthesis of the same crops, and the memory of a large set.
 
-    python benchmarks/bench_dataset.py [--samples 40] [--crop 512] [--repeats 3] [--memory 10000]
+    python benchmarks/bench_dataset.py [--samples 40] [--crop 256 512] [--repeats 3] [--memory 10000]
+
+Every rate is samples per CPU-second (``time.process_time`` of each process
+that makes them, summed over the workers), each at its best of the repeats,
+all timed in one run.
+
+Each sample is a crop as ``cmosnoise dataset`` makes it (``make_sample``): its
+own sensor instance (set-up), one noisy frame, and its truth (expected raw,
+perfect image, defect mask); writing the shards is timed separately, end to
+end with ``cmosnoise dataset``. Cameras: ``led`` (LED's virtual cameras:
+shot noise, Tukey-lambda read noise, row noise, black-level offsets, as the
+learned-denoising literature) and ``sony-imx900`` (the whole chain: PRNU,
+dark current, source follower, pixel offsets, nonlinearity). One worker is
+this process's child on one thread (``numba.set_num_threads(1)``); two
+workers are two processes of one thread each, the samples split between
+them. The source images are read in the warm-up call that compiles the
+kernel, as ``cmosnoise dataset`` reads them once for all the shards a
+process makes.
+
+Beside them, in the same run:
+
+- the NumPy reference, the ten-line script the field writes, on **the same
+  crops** of each camera's samples (the same source image, corner, light and
+  K, read from the samples' settings before the clock starts): the crop
+  sliced from the linear source, mosaicked through the CFA, a Poisson draw
+  of its electrons, Gaussian read noise of 2 e-, the sample's K and black
+  level, rounding and the white-level clip to uint16, and the mean
+  (float32) as its truth;
+- getframes 2.6.1, ``getframes.dataset.pairs`` on its ``zwo_asi2600mm``
+  preset cut to the crop (``precision="float32"``), random star fields: a
+  raw frame and its truth (the noise-free electrons) per pair.
 
 The truth's cost is also given alone: each led sample's truth over its own
 noisy frame (one thread), their median, mean and largest ratio.
-
-The source images are read in the warm-up call that compiles the kernel, as
-getframes' set-up is paid by its first pair and as ``cmosnoise dataset``
-reads them once for all the shards it makes in a process.
-
-Each sample is a 512 x 512 crop: its own sensor instance (set-up), one noisy
-frame, and its truth (expected raw, perfect image, defect mask), as
-``cmosnoise dataset`` makes them (``make_sample``; writing the shards is
-timed separately, end to end with ``cmosnoise dataset``). Cameras: ``led``
-(LED's virtual cameras: shot noise, Tukey-lambda read noise, row noise,
-black-level offsets, as the learned-denoising literature) and
-``sony-imx900`` (the whole chain: PRNU, dark current, source follower,
-pixel offsets, nonlinearity). One worker is this process on one thread
-(``numba.set_num_threads(1)``); two workers are two processes of one thread
-each, the samples split between them.
-
-Beside them, timed in the same run and alternately:
-
-- getframes 2.6.1, ``getframes.dataset.pairs`` on its ``zwo_asi2600mm``
-  preset cut to 512 x 512 (``precision="float32"``), random star fields: a raw
-  frame and its truth (the noise-free electrons) per pair;
-- the NumPy reference: a Poisson draw, Gaussian read noise and quantization
-  on the same mean image, and that mean as the truth.
 
 ``--memory N`` also makes an N-sample set (64 x 64 crops, hdf5) with
 ``cmosnoise dataset`` in a child process, and one of N / 10 samples, and
@@ -56,38 +63,70 @@ def _one_thread():
 _SOURCES: dict = {}  # this process's source images, read at its first call (as one dataset run reads them once)
 
 
-def ours(recipe_json: str, indices: list[int]) -> int:
+def ours(recipe_json: str, indices: list[int]) -> tuple[int, float]:
+    """Samples ``indices`` of the recipe, made here: (how many, the CPU-seconds they took)."""
     from cmosnoise.app import dataset as ds
 
     _one_thread()
     recipe = ds.Recipe.from_json(recipe_json)
     sources = _SOURCES.setdefault(recipe_json, ds.Sources())
+    for source in recipe.sources:  # every source read once per process, before the clock (as a dataset run)
+        sources.image(source, ds.builtin_shape(recipe.crop))
+    t0 = time.process_time()
     for i in indices:
         ds.make_sample(recipe, i, sources)
-    return len(indices)
+    return len(indices), time.process_time() - t0
 
 
 def getframes_pairs(n: int, crop: int) -> float:
+    """getframes' pairs per CPU-second."""
     import getframes as gf
 
     cam = gf.Camera.from_preset("zwo_asi2600mm", precision="float32").with_config(resolution=(crop, crop))
     scenes = gf.dataset.random_star_fields(n=n + 1, shape=cam.resolution, seed=0)
     it = iter(gf.dataset.pairs(camera=cam, scenes=scenes, exposure=1.0, seed=1))
     next(it)  # its first pair pays for the set-up
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     for _ in it:
         pass
-    return n / (time.perf_counter() - t0)
+    return n / (time.process_time() - t0)
 
 
-def numpy_reference(n: int, crop: int) -> float:
+def same_crops(recipe_json: str, n: int) -> list[dict]:
+    """What the NumPy reference needs of samples 1 to n, read before its clock starts: each crop's source image,
+    corner, CFA channel map, light (e- at the white), K, black and white levels."""
+    from cmosnoise.app import dataset as ds
+    from cmosnoise.model import cfa as cfa_mod
+
+    recipe = ds.Recipe.from_json(recipe_json)
+    sources = ds.Sources()
+    out = []
+    for i in range(1, n + 1):
+        st = ds.settings(recipe, i, sources)
+        arrays, c = ds.make_sample(recipe, i, sources)
+        img = sources.image(c["source"], ds.builtin_shape(recipe.crop))
+        h, w = recipe.crop
+        channel = cfa_mod.channel_map(c["cfa"], (h, w)).astype(np.intp)  # mono: the green
+        out.append({"img": img, "row": c["window_row"], "col": c["window_col"], "shape": (h, w),
+                    "channel": channel, "light": c["light_e"], "k": c["k_dn_per_e"],
+                    "black": c["black_level_dn"], "white": c["white_level_dn"], "seed": st.columns["seed"]})
+    return out
+
+
+def numpy_reference(crops: list[dict]) -> float:
+    """The ten-line Poisson-Gaussian script on the same crops: samples per CPU-second."""
     rng = np.random.default_rng(0)
-    mean = rng.uniform(10, 3000, (crop, crop))
-    t0 = time.perf_counter()
-    for _ in range(n):
-        raw = np.clip(np.rint((rng.poisson(mean) + rng.normal(0, 2.0, mean.shape)) * 0.4 + 64), 0, 4095)
-        raw.astype(np.uint16), mean.astype(np.float32)
-    return n / (time.perf_counter() - t0)
+    t0 = time.process_time()
+    for s in crops:
+        (h, w), r, c = s["shape"], s["row"], s["col"]
+        crop = s["img"][r:r + h, c:c + w]
+        mosaic = crop if crop.ndim == 2 else np.take_along_axis(crop, s["channel"][..., None], 2)[..., 0]
+        electrons = mosaic * s["light"]
+        noisy = rng.poisson(electrons) + rng.normal(0.0, 2.0, electrons.shape)
+        raw = np.clip(np.rint(noisy * s["k"] + s["black"]), 0, s["white"]).astype(np.uint16)
+        truth = (electrons * s["k"] + s["black"]).astype(np.float32)
+        del raw, truth
+    return len(crops) / (time.process_time() - t0)
 
 
 def truth_cost(recipe_json: str, n: int) -> dict:
@@ -116,16 +155,12 @@ def truth_cost(recipe_json: str, n: int) -> dict:
 
 
 def rate(recipe_json: str, n: int, workers: int) -> float:
-    if workers == 1:
-        ours(recipe_json, [0])  # compile, the sources read
-        t0 = time.perf_counter()
-        ours(recipe_json, list(range(1, n + 1)))
-        return n / (time.perf_counter() - t0)
+    """Samples 1 to n per CPU-second, made by ``workers`` processes of one thread each (each warm first)."""
     with ProcessPoolExecutor(workers) as pool:
-        list(pool.map(ours, [recipe_json] * workers, [[0]] * workers))  # each worker warm
-        t0 = time.perf_counter()
-        list(pool.map(ours, [recipe_json] * workers, [list(range(1 + w, n + 1, workers)) for w in range(workers)]))
-        return n / (time.perf_counter() - t0)
+        list(pool.map(ours, [recipe_json] * workers, [[0]] * workers))  # each worker warm: compiled, sources read
+        done = list(pool.map(ours, [recipe_json] * workers,
+                             [list(range(1 + w, n + 1, workers)) for w in range(workers)]))
+    return sum(k for k, _ in done) / sum(t for _, t in done)
 
 
 def peak_rss_mb(samples: int) -> float:
@@ -141,7 +176,7 @@ def peak_rss_mb(samples: int) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=40)
-    ap.add_argument("--crop", type=int, default=512)
+    ap.add_argument("--crop", type=int, nargs="+", default=[256, 512], help="crop sides, pixels")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--memory", type=int, default=0, help="also the peak memory of an N-sample set and of N / 10")
     ap.add_argument("--json", help="also write the rows here (docs/readme_numbers.py section dataset_speed)")
@@ -149,22 +184,27 @@ def main() -> None:
     rows = []
     from cmosnoise.app import dataset as ds
 
-    print(f"{a.crop} x {a.crop} samples with truth per second (best of {a.repeats}; {os.cpu_count()} cores)")
-    print(f"{'':34s}{'samples/s':>10s}{'per core':>10s}{'x getframes/core':>18s}{'x NumPy ref':>13s}")
-    gf = max(getframes_pairs(a.samples, a.crop) for _ in range(a.repeats))
-    ref = max(numpy_reference(a.samples, a.crop) for _ in range(a.repeats))
-    print(f"{'getframes 2.6.1 pairs (1 process)':34s}{gf:10.1f}{gf:10.1f}{1.0:18.2f}{gf / ref:13.2f}")
-    print(f"{'NumPy reference (1 process)':34s}{ref:10.1f}{ref:10.1f}{ref / gf:18.2f}{1.0:13.2f}")
-    rows += [{"label": "getframes 2.6.1 pairs", "workers": 1, "per_s": gf},
-             {"label": "NumPy reference", "workers": 1, "per_s": ref}]
-    for camera in ("led", "sony-imx900"):
-        recipe = ds.Recipe(samples=a.samples + 1, crop=(a.crop, a.crop), cameras=(camera,), seed=1).to_json()
-        for workers in (1, 2):
-            r = max(rate(recipe, a.samples, workers) for _ in range(a.repeats))
-            print(f"{f'cmosnoise {camera}, {workers} worker(s)':34s}{r:10.1f}{r / workers:10.1f}"
-                  f"{r / workers / gf:18.2f}{r / ref:13.2f}")
-            rows.append({"label": f"cmosnoise {camera}", "workers": workers, "per_s": r})
-    led = ds.Recipe(samples=a.samples + 1, crop=(a.crop, a.crop), cameras=("led",), seed=1).to_json()
+    print(f"samples with truth per CPU-second (best of {a.repeats}; {os.cpu_count()} cores)")
+    print(f"{'':42s}{'per CPU-s':>10s}{'x NumPy, same crops':>21s}{'x getframes':>13s}")
+    for crop in a.crop:
+        gf = max(getframes_pairs(a.samples, crop) for _ in range(a.repeats))
+        print(f"{f'{crop} x {crop}: getframes 2.6.1 pairs':42s}{gf:10.1f}{'':>21s}{1.0:13.2f}")
+        rows.append({"crop": crop, "label": "getframes 2.6.1 pairs", "workers": 1, "per_cpu_s": gf,
+                     "against_numpy": None, "against_getframes": 1.0})
+        for camera in ("led", "sony-imx900"):
+            recipe = ds.Recipe(samples=a.samples + 1, crop=(crop, crop), cameras=(camera,), seed=1).to_json()
+            crops = same_crops(recipe, a.samples)
+            ref = max(numpy_reference(crops) for _ in range(a.repeats))
+            print(f"{f'{crop} x {crop}: NumPy on {camera} crops':42s}{ref:10.1f}{1.0:21.2f}{ref / gf:13.2f}")
+            rows.append({"crop": crop, "label": f"NumPy reference, {camera}'s crops", "workers": 1,
+                         "per_cpu_s": ref, "against_numpy": 1.0, "against_getframes": ref / gf})
+            for workers in (1, 2):
+                r = max(rate(recipe, a.samples, workers) for _ in range(a.repeats))
+                print(f"{f'{crop} x {crop}: cmosnoise {camera}, {workers} worker(s)':42s}{r:10.1f}{r / ref:21.2f}"
+                      f"{r / gf:13.2f}")
+                rows.append({"crop": crop, "label": f"cmosnoise {camera}", "workers": workers, "per_cpu_s": r,
+                             "against_numpy": r / ref, "against_getframes": r / gf})
+    led = ds.Recipe(samples=a.samples + 1, crop=(a.crop[0], a.crop[0]), cameras=("led",), seed=1).to_json()
     with ProcessPoolExecutor(1) as pool:  # one thread, in a process of its own
         truth = pool.submit(truth_cost, led, a.samples).result()
     print(f"led truth over its frame, {a.samples} samples: median {truth['median']:.2f}, mean {truth['mean']:.2f}, "
@@ -180,7 +220,7 @@ def main() -> None:
         with open(a.json, "w") as fh:
             json.dump({"command": "python benchmarks/bench_dataset.py " + " ".join(sys.argv[1:-2]),
                        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
-                       "crop": a.crop, "samples": a.samples, "rows": rows, "truth_cost": truth,
+                       "crops": a.crop, "samples": a.samples, "rows": rows, "truth_cost": truth,
                        **({"memory": {"samples": [a.memory // 10, a.memory], "peak_mb": [small, large]}}
                           if a.memory else {})}, fh, indent=2)
 

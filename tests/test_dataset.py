@@ -103,6 +103,18 @@ def test_a_sample_depends_on_its_index_alone():
 
 
 
+
+def test_what_a_process_shares_between_samples_changes_no_setting():
+    """A camera's saturation at a gain is worked out once per process (Sources.saturations): each sample's
+    settings (its light, level, ratio and configuration) are what a fresh process gives them."""
+    recipe = ds.Recipe(samples=40, crop=(32, 32), cameras=("led", "sony-imx900", "sony-a7s2", "sony-a7s2@iso=1600"),
+                       seed=4)
+    shared = ds.Sources()
+    for i in range(24):
+        a, b = ds.settings(recipe, i, shared), ds.settings(recipe, i, ds.Sources())
+        assert a.columns == b.columns and a.config == b.config
+    assert 1 < len(shared.saturations) < 24  # named cameras' gains shared, each virtual camera its own
+
 def test_built_in_scenes_are_drawn_at_a_crop_larger_than_their_size():
     """A crop taller than BUILTIN_SIZE (a 5 MP crop is 1944 x 2592) draws the built-in at the crop's side: the
     sample is made (no "the source is 1024 x 1024" error), its corner is on the scene, and its config alone

@@ -364,6 +364,15 @@ class Sources:
     presets: dict = field(default_factory=dict)
     preset_texts: dict = field(default_factory=dict)
     patterns: dict = field(default_factory=dict)
+    saturations: dict = field(default_factory=dict)
+
+    def saturation_e(self, key: tuple, config) -> float:
+        """:func:`_saturation_e` of ``config``, worked out once per ``key``: a camera, its gain row and the recipe's
+        overrides (what sets K, the black and white levels and the full well; not a sample's seed, crop, light,
+        exposure or temperature)."""
+        if key not in self.saturations:
+            self.saturations[key] = _saturation_e(config)
+        return self.saturations[key]
 
     def preset(self, name: str | None, files: tuple = ()):
         """A preset's (or a camera file's: ``files``, :attr:`Recipe.camera_files`) configuration, loaded once."""
@@ -497,7 +506,9 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     if config.light.enabled:  # a data set's light is its own axis (--light, e- at the white): not lux as well
         raise CmosnoiseError(f"sample {index} ({camera}): light.enabled is on, but a data set sets each sample's "
                              "light itself (--light, electrons at the scene's white); leave light in lux off")
-    saturation = _saturation_e(config)
+    # a camera's saturation at a gain, once per process: a virtual camera's drawn parameters are its key too
+    saturation = sources.saturation_e((preset, json.dumps(updates, sort_keys=True, default=str), recipe.overrides,
+                                       recipe.camera_files), config)
     if recipe.light_e is not None:
         light, level = drawn, drawn / saturation
     else:  # the white where asked on this camera at this gain: its charge from the camera's own saturation
