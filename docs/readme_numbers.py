@@ -819,11 +819,14 @@ def render_camera_bursts(d: dict) -> str:
 
 
 def render_dataset_speed(d: dict) -> str:
-    gf = d["rows"][0]["per_s"]
-    lines = [f"Measured with `{d['command']}` ({d['machine']}), {d['crop']} x {d['crop']} samples with their truth:", "",
-             "| | workers | samples / s | per core against getframes |", "|---|---|---|---|"]
+    lines = [f"Measured with `{d['command']}` ({d['machine']}), samples with their truth per CPU-second (each "
+             "process's CPU time, summed over the workers), all in one run:", "",
+             "| crop | | workers | samples per CPU-second | against NumPy on the same crops | against getframes |",
+             "|---|---|---|---|---|---|"]
     for r in d["rows"]:
-        lines.append(f"| {r['label']} | {r['workers']} | {r['per_s']:.1f} | {r['per_s'] / r['workers'] / gf:.2f} |")
+        numpy = "" if r["against_numpy"] is None else f"{r['against_numpy']:.2f}"
+        lines.append(f"| {r['crop']} x {r['crop']} | {r['label']} | {r['workers']} | {r['per_cpu_s']:.1f} | {numpy} | "
+                     f"{r['against_getframes']:.2f} |")
     if "memory" in d:
         m = d["memory"]
         lines += ["", f"Peak memory of `cmosnoise dataset` (64 x 64 crops): {m['peak_mb'][0]:.0f} MB for "
@@ -831,8 +834,8 @@ def render_dataset_speed(d: dict) -> str:
     if "truth_cost" in d:
         t = d["truth_cost"]
         lines += ["", f"A led sample's truth (expected raw, perfect image, mask) against its noisy frame, one thread, "
-                      f"{t['samples']} samples: {t['median']:.2f} frames at the median, {t['mean']:.2f} on average, "
-                      f"{t['max']:.2f} at most (K {t['max_k_dn_per_e']:.1f} DN/e-)."]
+                      f"{t['samples']} samples of {d['crops'][0]} x {d['crops'][0]}: {t['median']:.2f} frames at the "
+                      f"median, {t['mean']:.2f} on average, {t['max']:.2f} at most (K {t['max_k_dn_per_e']:.1f} DN/e-)."]
     return "\n".join(lines)
 
 
