@@ -369,6 +369,31 @@ def test_an_emva1288_data_set_is_white_in_readout_order_and_too_short_over_frame
     assert (tmp_path / "ch" / "noise_spectra.png").exists()
 
 
+@pytest.mark.slow
+def test_fit_sets_the_pixel_flickers_spectrum_from_the_dark_stack(tmp_path):
+    """A sensor whose pixels flicker as 1/f without CDS (their level correlated from frame to frame): fit reads
+    each pixel's series over the long dark stack, less its rows' and columns' means, finds it 1/f and writes source_follower.flicker.spectrum = one_over_f; the rows and columns stay white."""
+    import json
+
+    import yaml
+
+    args = ["--set", "sensor.width=96", "--set", "sensor.height=64", "--set", "sensor.frame_rate_hz=30",
+            "--set", "source_follower.flicker.spectrum=one_over_f", "--set", "source_follower.rts.cds=false",
+            "--set", "source_follower.flicker.corner_hz=[0.03, 15.0]", "--set", "source_follower.flicker.tail=null",
+            "--set", "source_follower.flicker.gumbel_loc_e=3.0"]
+    assert cli("measure", *args, "--long-frames", "256", "--levels", "12", "--out", tmp_path / "m").returncode == 0
+    r = cli("fit", "--frames-from", tmp_path / "m" / "manifest.yaml", "--out", tmp_path / "f")
+    assert r.returncode == 0, r.stderr
+    spectra = json.loads((tmp_path / "f" / "fit.json").read_text())["spectra"]
+    pixels = spectra["pixels_over_frames"]
+    # (measured: -0.70; the sensor's white noises, dark shot noise and the ADC's, flatten it from -1)
+    assert pixels["verdict"] == "one_over_f" and pixels["slope"] < -0.5, pixels
+    assert spectra["rows_in_readout_order"]["verdict"] == "white"
+    cfg = yaml.safe_load((tmp_path / "f" / "config.yaml").read_text())
+    assert cfg["source_follower"]["flicker"]["spectrum"] == "one_over_f"
+    assert cfg["row_noise"]["spectrum"] == "white"
+
+
 @pytest.mark.parametrize("spectrum", ["one_over_f", pytest.param("white", marks=pytest.mark.slow)])
 @pytest.mark.slow
 def test_fit_finds_the_spectrum_of_the_row_and_column_noise_and_their_sigmas(tmp_path, spectrum):
@@ -383,10 +408,13 @@ def test_fit_finds_the_spectrum_of_the_row_and_column_noise_and_their_sigmas(tmp
     r = cli("fit", "--frames-from", tmp_path / "m" / "manifest.yaml", "--out", tmp_path / "f")
     assert r.returncode == 0, r.stderr
     doc = json.loads((tmp_path / "f" / "fit.json").read_text())
-    assert {k: v["verdict"] for k, v in doc["spectra"].items()} == {"rows_in_readout_order": spectrum,
+    # the pixels' own noise (less their rows' and columns') is white: a 1/f row noise is not read as pixel flicker
+    assert {k: v["verdict"] for k, v in doc["spectra"].items()} == {"pixels_over_frames": "white",
+                                                                   "rows_in_readout_order": spectrum,
                                                                    "columns_over_frames": spectrum}
     cfg = yaml.safe_load((tmp_path / "f" / "config.yaml").read_text())
     assert cfg["row_noise"]["spectrum"] == spectrum and cfg["column_noise"]["temporal"]["spectrum"] == spectrum
+    assert cfg["source_follower"]["flicker"]["spectrum"] == "white"
     truth = {row["parameter"]: row for row in doc["truth"]["rows"]}
     # the sigmas a 1/f stack sees only in part, given back whole: each 95 % interval holds the truth
     for name in ("row_noise.sigma_e", "column_noise.temporal.gumbel_loc_e", "column_noise.temporal.gumbel_scale_e",

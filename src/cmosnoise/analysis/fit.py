@@ -487,14 +487,24 @@ def _column_dof(st, base, part: float, white: float) -> float:
 
 
 def _spectra(ds) -> dict:
-    """The longest dark stack's noise in time (:mod:`.noise_spectrum`): the rows in readout order and the columns
-    over frames, each a summary or why it is not given (a stack too short)."""
+    """The longest dark stack's noise in time (:mod:`.noise_spectrum`): each pixel over frames (its own noise, less
+    its rows' and columns'), the rows in readout order and the columns over frames, each a summary or why it is
+    not given (a stack too short, or one that cannot be read again)."""
     darks = ds.of_kind("dark")
     if not darks:
         return {}
     st = max(darks, key=lambda d: (d.n, -d.exposure_s))
     out = {}
-    for key, make in (("rows_in_readout_order", lambda: noise_spectrum.rows_in_readout_order(st.row_means)),
+
+    def pixels():  # the middle rows that hold MAX_PIXELS pixels, read again, less their rows' and columns' means
+        if st.n < noise_spectrum.MIN_FRAMES:
+            return noise_spectrum.over_frames(np.zeros((st.n, 1, 1)))  # refused, saying what it needs
+        rows = -(-noise_spectrum.MAX_PIXELS // st.shape[1])
+        frames, _ = st.series(4 * st.shape[1] * st.n * rows)
+        return noise_spectrum.over_frames(frames, col_means=st.col_means)
+
+    for key, make in (("pixels_over_frames", pixels),
+                      ("rows_in_readout_order", lambda: noise_spectrum.rows_in_readout_order(st.row_means)),
                       ("columns_over_frames", lambda: noise_spectrum.columns_over_frames(st.col_means))):
         try:
             out[key] = {**make().summary(), "stack_frames": st.n}
@@ -866,7 +876,9 @@ def _readout_updates(P: dict, result: dict) -> dict:
     # the noise in time: 1/f where the dark stack's spectrum says so (its corners left at their defaults: a stack
     # resolves the slope over its band, not where the 1/f range ends), else white
     spectra = result.get("spectra", {})
-    for key, section in (("rows_in_readout_order", out["row_noise"]), ("columns_over_frames", out["column_noise"]["temporal"])):
+    for key, section in (("pixels_over_frames", out["source_follower"]["flicker"]),
+                         ("rows_in_readout_order", out["row_noise"]),
+                         ("columns_over_frames", out["column_noise"]["temporal"])):
         section["spectrum"] = "one_over_f" if spectra.get(key, {}).get("verdict") == "one_over_f" else "white"
     return out
 

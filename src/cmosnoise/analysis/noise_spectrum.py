@@ -4,7 +4,9 @@ What a lab reads off a dark stack to tell white noise from 1/f noise in time
 (docs/model.md stages 6 to 8): Welch's averaged periodogram (scipy.signal's
 ``welch``, Hann segments with half overlap) of
 
-- each pixel's series over the frames, averaged over the pixels;
+- each pixel's series over the frames, averaged over the pixels, less each
+  frame's row and column means (what a row or a column amplifier adds to
+  every pixel of it: a 1/f row noise is not a pixel's 1/f noise);
 - each column's mean over its rows, over the frames, averaged over the columns
   (the column amplifiers), less each frame's mean over the columns (what all
   columns share in a frame: its rows' mean offset, a black-level error);
@@ -154,15 +156,23 @@ def _over_frames(x: np.ndarray, what: str) -> SpectrumEstimate:
     return _fit(what, "cycles per frame", f, p.mean(axis=1), (2.0 / nperseg, 0.25), segments)
 
 
-def over_frames(stack, columns: bool = False) -> SpectrumEstimate:
+def over_frames(stack, columns: bool = False, col_means=None) -> SpectrumEstimate:
     """Each pixel's (or, with ``columns``, each column's mean's) spectrum over the frames, averaged.
+
+    A pixel's series is taken less its frame's row mean and column mean (plus the frame's mean): the pixel's own
+    noise, without the rows' and column amplifiers' (which :func:`readout_order` and :func:`columns_over_frames`
+    measure).
 
     Parameters
     ----------
     stack : (frames, rows, cols) array
-        Dark frames, in any unit (DN or e-), in time order.
+        Dark frames, in any unit (DN or e-), in time order: whole, or some of their rows (then give
+        ``col_means``).
     columns : bool
         Each column's mean over its rows instead of each pixel.
+    col_means : (frames, cols) array, optional
+        Each whole frame's column means, where ``stack`` holds only some of its rows (the frame's mean is then
+        theirs).
 
     Returns
     -------
@@ -177,9 +187,17 @@ def over_frames(stack, columns: bool = False) -> SpectrumEstimate:
     a = _stack(stack)
     if columns:
         return columns_over_frames(a.astype(np.float64).mean(axis=1))
-    flat = a.reshape(a.shape[0], -1)
-    step = max(1, flat.shape[1] // MAX_PIXELS)
-    return _over_frames(flat[:, ::step].astype(np.float64), "pixels over frames")
+    if a.shape[0] < MIN_FRAMES:  # refused before any pixel is read
+        _over_frames(np.zeros((a.shape[0], 1)), "pixels over frames")
+    # whole rows (their row means exact), every k-th, about MAX_PIXELS pixels in all (at least one row)
+    every = max(1, a.shape[1] * a.shape[2] // MAX_PIXELS // max(a.shape[2], 1))
+    x = a[:, ::every, :].astype(np.float64)
+    cm = a.mean(axis=1, dtype=np.float64) if col_means is None else np.asarray(col_means, np.float64)
+    if cm.shape != (a.shape[0], a.shape[2]):
+        raise CmosnoiseError(f"col_means: expected (frames, cols) = ({a.shape[0]}, {a.shape[2]}), got {cm.shape}")
+    y = x - x.mean(axis=2, keepdims=True) - cm[:, None, :] + cm.mean(axis=1)[:, None, None]
+    flat = y.reshape(y.shape[0], -1)
+    return _over_frames(flat[:, :: max(1, flat.shape[1] // MAX_PIXELS)], "pixels over frames")
 
 
 def columns_over_frames(col_means) -> SpectrumEstimate:
