@@ -304,6 +304,27 @@ def test_the_spectra_of_a_dark_stack_tell_white_from_one_over_f_and_rows_from_co
     assert abs(columns["columns_over_frames"]["slope"] + 1) < 0.2
 
 
+@pytest.mark.parametrize("corner, resolved", [([0.3, 3.0], (True, True)), ([0.03, 15.0], (False, True))])
+def test_the_corner_fit_recovers_the_one_over_f_range_within_its_intervals(corner, resolved):
+    """A pixel's 1/f flicker without CDS, 512 frames at 30 frames/s: the fitted corners' 95 % intervals hold the
+    configured ones; a corner below the stack's lowest bin (0.23 Hz) is a bound only, not resolved."""
+    from cmosnoise.analysis import noise_spectrum as ns
+
+    sensor = Sensor(_config(_pixel("one_over_f", cds=False, corner=corner), 16, 16), seed=2)
+    stack = np.stack(list(sensor.expose("flat:0.0").frames(512))).astype(np.float64)
+    got = ns.fit_corners(ns.over_frames(stack), FPS)
+    for (name, true), res in zip((("low_hz", corner[0]), ("high_hz", corner[1])), resolved):
+        lo, hi = got[name]["interval"]
+        assert lo <= true <= hi and got[name]["resolved"] == res, (name, got[name])
+        if res:  # resolved: within a factor of 1.5 either side
+            assert hi / lo < 2.25, got[name]
+    from cmosnoise.errors import CmosnoiseError
+
+    rows = ns.rows_in_readout_order(np.random.default_rng(1).normal(0.0, 1.0, (64, 64)))
+    with pytest.raises(CmosnoiseError, match="a spectrum over frames, not 'rows in readout order'"):
+        ns.fit_corners(rows, FPS)
+
+
 def test_a_stack_too_short_for_a_spectrum_says_what_it_needs():
     from cmosnoise.analysis import noise_spectrum as ns
     from cmosnoise.errors import CmosnoiseError
@@ -389,8 +410,15 @@ def test_fit_sets_the_pixel_flickers_spectrum_from_the_dark_stack(tmp_path):
     # (measured: -0.70; the sensor's white noises, dark shot noise and the ADC's, flatten it from -1)
     assert pixels["verdict"] == "one_over_f" and pixels["slope"] < -0.5, pixels
     assert spectra["rows_in_readout_order"]["verdict"] == "white"
+    # the 1/f range (0.03 to 15 Hz, Nyquist at 30 frames/s; the stack's lowest bin 0.47 Hz): each interval holds
+    # the truth, under the pixels' white floor of dark shot noise and the ADC's
+    high, low = pixels["corners"]["high_hz"], pixels["corners"]["low_hz"]
+    assert high["resolved"] and high["interval"][0] <= 15.0 <= high["interval"][1], high
+    assert low["interval"][0] <= 0.03 <= low["interval"][1], low
     cfg = yaml.safe_load((tmp_path / "f" / "config.yaml").read_text())
     assert cfg["source_follower"]["flicker"]["spectrum"] == "one_over_f"
+    written = cfg["source_follower"]["flicker"]["corner_hz"]
+    assert low["interval"][0] <= written[0] <= low["interval"][1] and written[1] == pytest.approx(high["value"])
     assert cfg["row_noise"]["spectrum"] == "white"
 
 

@@ -378,7 +378,7 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
 
     # ---------------------------------------------------------------- readout: the longest dark stack
     phase("readout noise")
-    spectra = _spectra(ds)
+    spectra = _spectra(ds, base)
     if not longs:
         n_max = max((d.n for d in ds.of_kind("dark")), default=0)
         not_fitted["source_follower, row_noise, column_noise (temporal, vfpn)"] = (
@@ -486,7 +486,7 @@ def _column_dof(st, base, part: float, white: float) -> float:
     return noise_spectrum.variance_dof_frames(spectrum, st.n, period, part, white)
 
 
-def _spectra(ds) -> dict:
+def _spectra(ds, base) -> dict:
     """The longest dark stack's noise in time (:mod:`.noise_spectrum`): each pixel over frames (its own noise, less
     its rows' and columns'), the rows in readout order and the columns over frames, each a summary or why it is
     not given (a stack too short, or one that cannot be read again)."""
@@ -494,6 +494,9 @@ def _spectra(ds) -> dict:
     if not darks:
         return {}
     st = max(darks, key=lambda d: (d.n, -d.exposure_s))
+    from ..model.stages.random_telegraph import frame_period_s
+
+    rate = 1.0 / (st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s))
     out = {}
 
     def pixels():  # the middle rows that hold MAX_PIXELS pixels, read again, less their rows' and columns' means
@@ -507,7 +510,11 @@ def _spectra(ds) -> dict:
                       ("rows_in_readout_order", lambda: noise_spectrum.rows_in_readout_order(st.row_means)),
                       ("columns_over_frames", lambda: noise_spectrum.columns_over_frames(st.col_means))):
         try:
-            out[key] = {**make().summary(), "stack_frames": st.n}
+            est = make()
+            out[key] = {**est.summary(), "stack_frames": st.n}
+            if est.unit == "cycles per frame" and est.verdict == "one_over_f":  # its 1/f range, where resolved
+                out[key]["frame_rate_hz"] = rate
+                out[key]["corners"] = noise_spectrum.fit_corners(est, rate)
         except CmosnoiseError as exc:
             out[key] = {"not_given": str(exc)}
     return out
@@ -876,10 +883,22 @@ def _readout_updates(P: dict, result: dict) -> dict:
     # the noise in time: 1/f where the dark stack's spectrum says so (its corners left at their defaults: a stack
     # resolves the slope over its band, not where the 1/f range ends), else white
     spectra = result.get("spectra", {})
-    for key, section in (("pixels_over_frames", out["source_follower"]["flicker"]),
-                         ("rows_in_readout_order", out["row_noise"]),
-                         ("columns_over_frames", out["column_noise"]["temporal"])):
-        section["spectrum"] = "one_over_f" if spectra.get(key, {}).get("verdict") == "one_over_f" else "white"
+    from ..model import one_over_f
+
+    for key, section, default in (("pixels_over_frames", out["source_follower"]["flicker"], one_over_f.pixel_corners),
+                                  ("rows_in_readout_order", out["row_noise"], None),
+                                  ("columns_over_frames", out["column_noise"]["temporal"], one_over_f.column_corners)):
+        found = spectra.get(key, {})
+        section["spectrum"] = "one_over_f" if found.get("verdict") == "one_over_f" else "white"
+        corners, rate = found.get("corners"), found.get("frame_rate_hz")
+        if corners and default is not None and rate and (corners["low_hz"]["resolved"] or corners["high_hz"]["resolved"]):
+            # a corner the stack resolves is the fitted one; one beyond it (below the lowest bin, above Nyquist)
+            # keeps its default, which the data allow
+            lo, hi = default(rate)
+            lo = corners["low_hz"]["value"] if corners["low_hz"]["resolved"] else min(lo, corners["low_hz"]["interval"][1])
+            hi = corners["high_hz"]["value"] if corners["high_hz"]["resolved"] else max(hi, corners["high_hz"]["interval"][0])
+            if lo < hi:
+                section["corner_hz"] = [lo, hi]
     return out
 
 

@@ -490,3 +490,100 @@ def stack_mean_share_rows(spectrum, frames: int, rows: int, row_time_s: float) -
         same, cross = _row_lag_sums(rate * row_time_s, frames, rows, a_h)
         total += w * (frames * same + 2.0 * np.sum(tri_k * cross)) / frames**2
     return float(total / ((rows - 1) / frames))
+
+
+#: the grid the corner fit searches, decades per step
+CORNER_STEP_DECADES = 0.05
+#: how far below the lowest bin and above Nyquist the grid reaches, decades: a corner out there is only bounded
+CORNER_REACH_DECADES = 2.0
+
+
+def _ar1_sum(f_cpf: np.ndarray, spectrum, frame_rate_hz: float) -> np.ndarray:
+    """The one-sided spectrum, per cycle per frame, of a unit-variance sum of Lorentzians sampled once a frame:
+    each component an AR(1) sequence of ``rho = exp(-2 pi f_c / rate)``, exactly (aliasing included)."""
+    rho = np.exp(-spectrum.rates_per_s / frame_rate_hz)[None, :]
+    c = np.cos(2.0 * math.pi * f_cpf)[:, None]
+    return np.sum(spectrum.weights * 2.0 * (1.0 - rho**2) / (1.0 - 2.0 * rho * c + rho**2), axis=1)
+
+
+def _welch_expected(f_cpf: np.ndarray, df: float, spectrum, frame_rate_hz: float) -> np.ndarray:
+    """What a Welch estimate with Hann segments reads at ``f_cpf`` (bins ``df`` apart): the spectrum seen through
+    the window, whose power response weighs a bin's neighbours 1/6 each and the bin itself 2/3 (a 1/f spectrum
+    reads 11 % high two bins above zero, where the segments' means are taken away)."""
+    return (_ar1_sum(f_cpf - df, spectrum, frame_rate_hz) + 4.0 * _ar1_sum(f_cpf, spectrum, frame_rate_hz)
+            + _ar1_sum(f_cpf + df, spectrum, frame_rate_hz)) / 6.0
+
+
+def fit_corners(estimate: SpectrumEstimate, frame_rate_hz: float) -> dict:
+    """The 1/f range (lowest and highest corner, Hz) that a spectrum over frames shows, with 95 % intervals.
+
+    The model is the simulator's own (:func:`cmosnoise.model.one_over_f.lorentzians`: Lorentzians at equal
+    steps of ``log f`` between the corners, each of equal variance), sampled once a frame (each component an
+    AR(1) sequence, aliasing exact) and seen through the Hann window (a bin reads its neighbours a sixth each),
+    times a level, plus a white floor (the pixel's other noises). Each pair of
+    corners on a grid of :data:`CORNER_STEP_DECADES` takes its level and floor by linear least squares on the
+    bins' relative residuals (``(model - P) / P``, from two bins above the lowest to below Nyquist); the
+    interval of a corner is the grid's range whose residual sum exceeds the best by at most ``2 x 3.84``
+    residual variances (the profile likelihood's 95 % of one parameter; two for the Hann window's correlated
+    neighbouring bins), one grid step wider each side (the grid's resolution). A corner whose interval reaches the
+    grid's end lies beyond what the stack resolves
+    (below its lowest bin, or above Nyquist): it is given as a bound only, ``resolved`` false.
+
+    Parameters
+    ----------
+    estimate : SpectrumEstimate
+        A spectrum over frames (:func:`over_frames`, :func:`columns_over_frames`).
+    frame_rate_hz : float
+        Frames per second of the stack.
+
+    Returns
+    -------
+    dict
+        ``low_hz`` and ``high_hz``, each ``{"value", "interval": [lo, hi], "resolved"}``; ``floor_share`` (the
+        white floor's part of the spectrum at the band's upper end); ``resolved_band_hz`` (the lowest bin to
+        Nyquist, Hz).
+    """
+    from ..model import one_over_f
+
+    if estimate.unit != "cycles per frame":
+        raise CmosnoiseError(f"fit_corners: a spectrum over frames, not {estimate.series!r}")
+    keep = (estimate.f >= estimate.band[0]) & (estimate.f < 0.5) & (estimate.psd > 0)
+    f, p = estimate.f[keep], estimate.psd[keep]
+    df = float(estimate.f[1] - estimate.f[0])
+    if f.size < 8:
+        raise CmosnoiseError(f"the {estimate.series} spectrum has {f.size} bins: too few to fit its corners")
+    lo_hz, nyq_hz = float(f[0]) * frame_rate_hz, 0.5 * frame_rate_hz
+    grid = np.arange(math.log10(lo_hz) - CORNER_REACH_DECADES, math.log10(nyq_hz) + CORNER_REACH_DECADES + 1e-9,
+                     CORNER_STEP_DECADES)
+    sse = np.full((grid.size, grid.size), np.inf)
+    fits = {}
+    for i, la in enumerate(grid):
+        for j in range(i + 1, grid.size):
+            shape = _welch_expected(f, df, one_over_f.lorentzians(10.0**la, 10.0**grid[j]), frame_rate_hz)
+            design = np.stack([shape / p, 1.0 / p], axis=1)  # (A shape + W) / p - 1: linear in A, W
+            coef, *_ = np.linalg.lstsq(design, np.ones_like(p), rcond=None)
+            if coef[0] <= 0 or coef[1] < 0:  # a level must be positive and a floor not negative
+                a = max(float(np.sum(shape / p) / np.sum((shape / p) ** 2)), 0.0)
+                coef = np.array([a, 0.0])
+            r = design @ coef - 1.0
+            sse[i, j] = float(r @ r)
+            fits[i, j] = coef
+    best = np.unravel_index(int(np.argmin(sse)), sse.shape)
+    s2 = sse[best] / max(f.size - 4, 1)
+    inside = sse <= sse[best] + 2.0 * 3.84 * s2
+    rows, cols = np.nonzero(inside)
+
+    def corner(axis_idx, value_idx) -> dict:
+        lo_i, hi_i = int(axis_idx.min()), int(axis_idx.max())
+        edge = lo_i == 0 or hi_i == grid.size - 1
+        # one grid step more each side: a corner between two grid points is as near the one as the other
+        lo, hi = grid[lo_i] - CORNER_STEP_DECADES, grid[hi_i] + CORNER_STEP_DECADES
+        return {"value": float(10.0 ** grid[value_idx]), "interval": [float(10.0**lo), float(10.0**hi)],
+                "resolved": not edge}
+
+    a, w = fits[best]
+    top = _ar1_sum(np.array([estimate.band[1]]), one_over_f.lorentzians(10.0 ** grid[best[0]],
+                                                                          10.0 ** grid[best[1]]), frame_rate_hz)[0]
+    return {"low_hz": corner(rows, best[0]), "high_hz": corner(cols, best[1]),
+            "floor_share": float(w / (a * top + w)) if a * top + w > 0 else 1.0,
+            "resolved_band_hz": [lo_hz, nyq_hz]}
