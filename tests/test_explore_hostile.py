@@ -179,6 +179,7 @@ def test_slow_connections_do_not_stop_a_normal_request_and_are_closed(server):
             s.close()
 
 
+@pytest.mark.slow  # 5.7 s on the slower CPU: over the fast tier's 5 s
 def test_uploads_are_capped_in_number_oldest_first(server):
     url, _ = server
     from cmosnoise.app.workbench import MAX_UPLOADS
