@@ -154,16 +154,7 @@ def score(data: str | Path, methods: list[str], outputs: str | Path | None = Non
             else:
                 truth = arrays["perfect_dn"][i]
             for name, run in runs.items():
-                try:
-                    out = np.asarray(run(raw, meta), np.float64)
-                except CmosnoiseError:
-                    raise
-                except Exception as exc:
-                    raise CmosnoiseError(f"method {name!r} failed on sample {meta['sample']}: "
-                                         f"{type(exc).__name__}: {exc}") from None
-                if out.shape != raw.shape:
-                    raise CmosnoiseError(f"method {name!r} returned shape {out.shape} for sample {meta['sample']}; "
-                                         f"a raw frame is {raw.shape}")
+                out = isp_defects.run_corrector(run, raw, meta, f"method {name!r} on sample {meta['sample']}")
                 row = {"sample": meta["sample"], "method": name, "camera": meta["camera"], "mode": meta["mode"],
                        "iso": meta["iso"], "gain_db": meta["gain_db"], "k_dn_per_e": meta["k_dn_per_e"],
                        "light_e": meta["light_e"], "ratio": _ratio(meta), "clipped_share": meta.get("clipped_share", 0.0),

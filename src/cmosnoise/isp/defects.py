@@ -84,6 +84,36 @@ def load_corrector(spec: str, name: str = "processing.defects.corrector") -> Cal
     return (lambda raw, meta: fn(raw, meta)) if takes_meta else (lambda raw, meta: fn(raw))
 
 
+
+def run_corrector(fn: Callable[[np.ndarray, dict], np.ndarray], raw: np.ndarray, meta: dict, what: str) -> np.ndarray:
+    """``fn(raw, meta)`` (a :func:`load_corrector` callable) as float64, checked: what it raises or a result of
+    another shape is one :class:`CmosnoiseError` that starts with ``what`` (the method or key it came from).
+
+    Parameters
+    ----------
+    fn : callable
+        ``(raw, meta) -> output``.
+    raw : ndarray, (rows, cols)
+        Its input, DN.
+    meta : dict
+        Its settings.
+    what : str
+        Names the corrector in the message (``method 'mine:fix' on sample 3``).
+
+    Returns
+    -------
+    ndarray, (rows, cols) float64
+    """
+    try:
+        out = np.asarray(fn(raw, meta), np.float64)
+    except CmosnoiseError:
+        raise
+    except Exception as exc:
+        raise CmosnoiseError(f"{what} failed: {type(exc).__name__}: {exc}") from None
+    if out.shape != raw.shape:
+        raise CmosnoiseError(f"{what} returned shape {out.shape}; the raw frame is {raw.shape}")
+    return out
+
 def _offsets(pattern: str) -> tuple[np.ndarray, np.ndarray | None]:
     """(R/B or mono offsets, G offsets or None) as arrays (8, 2)."""
     if cfa_mod.is_mono(pattern):

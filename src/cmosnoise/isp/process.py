@@ -158,16 +158,8 @@ class Processor:
         """``img`` (DN above black) through one's own corrector, which takes and gives raw DN, black included."""
         black = float(self.info.black_level_dn)
         meta = {"cfa": self.info.cfa, "black_level_dn": black, "white_level_dn": float(self.info.white_level_dn)}
-        try:
-            out = np.asarray(self.corrector(img.astype(np.float64) + black, meta), np.float64)
-        except CmosnoiseError:
-            raise
-        except Exception as exc:
-            raise CmosnoiseError(f"processing.defects.corrector {self._corrector_name!r} failed: "
-                                 f"{type(exc).__name__}: {exc}") from None
-        if out.shape != img.shape:
-            raise CmosnoiseError(f"processing.defects.corrector {self._corrector_name!r} returned shape {out.shape}; "
-                                 f"the raw frame is {img.shape}")
+        out = defects.run_corrector(self.corrector, img.astype(np.float64) + black, meta,
+                                    f"processing.defects.corrector {self._corrector_name!r}")
         return (out - black).astype(img.dtype)
 
     # ------------------------------------------------------------ colour
