@@ -208,7 +208,7 @@ def test_resume_after_sigterm_loses_nothing_and_repeats_nothing(tmp_path):
     (["--camera", "sony-a7s2@iso=123"], "not in the gain table"),
     (["--light", "5:1"], "--light"),
     (["--set", "defects.dead_ppm=-1"], "defects.dead_ppm"),
-    (["--crop", "2048"], "smaller crop"),
+    (["--crop", "4096"], "the built-in scenes are drawn at most 12 MP"),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, needle):
     r = cli("dataset", "-n", "3", *args, "--out", tmp_path / "bad")

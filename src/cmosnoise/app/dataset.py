@@ -74,11 +74,21 @@ BUILTIN_SCENES = ("photo", "colorchecker", "zoneplate", "siemens", "ramp")
 BUILTIN_SIZE = 1024
 
 
+#: the most pixels a built-in scene is drawn at (linear RGB, 24 bytes a pixel: 288 MB a scene)
+MAX_BUILTIN_PIXELS = 4000 * 3000
+
+
 def builtin_shape(crop: tuple[int, int]) -> tuple[int, int]:
     """(rows, cols) a built-in scene is drawn at for crops of ``crop``: :data:`BUILTIN_SIZE` square, or the crop's
     own side where it is larger (a 5 MP crop of a built-in is its whole scene, drawn at 2592 x 1944; crops up to
-    1024 keep the scenes, and the bits, of sets made before)."""
-    return max(BUILTIN_SIZE, int(crop[0])), max(BUILTIN_SIZE, int(crop[1]))
+    1024 keep the scenes, and the bits, of sets made before); a crop whose scene would pass
+    :data:`MAX_BUILTIN_PIXELS` is a one-line error."""
+    shape = max(BUILTIN_SIZE, int(crop[0])), max(BUILTIN_SIZE, int(crop[1]))
+    if shape[0] * shape[1] > MAX_BUILTIN_PIXELS:
+        raise CmosnoiseError(f"--crop {crop[0]}x{crop[1]}: the built-in scenes are drawn at most "
+                             f"{MAX_BUILTIN_PIXELS / 1e6:g} MP (e.g. 3000 x 4000), and this crop's would be "
+                             f"{shape[0]} x {shape[1]}; give a smaller crop, or --images of larger images")
+    return shape
 #: the arrays of a sample
 ARRAYS = ("raw", "expected_raw", "perfect_dn", "mask")
 #: each sample's settings, as columns: name -> numpy dtype ("str": text)
@@ -341,6 +351,12 @@ def image_sources(folder: str | Path) -> tuple[str, ...]:
     return tuple(str(f) for f in sorted(p.iterdir()) if f.suffix.lower() in IMAGE_SUFFIXES and f.is_file())
 
 
+def _scene_shape(recipe: Recipe, source: str) -> tuple[int, int]:
+    """The shape a source is drawn at: a built-in's for the recipe's crop (:func:`builtin_shape`); a file has its
+    own (the shape is not used)."""
+    return builtin_shape(recipe.crop) if scene_mod.is_builtin(source) else (BUILTIN_SIZE, BUILTIN_SIZE)
+
+
 @dataclass
 class Sources:
     """Each source's whole image at its own resolution, read once per process (a worker's own).
@@ -472,7 +488,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
             updates["sensor"] = {key: getattr(row, key)}
     source = recipe.sources[int(rng.integers(len(recipe.sources)))]
     h, w = recipe.crop
-    size = builtin_shape(recipe.crop)
+    size = _scene_shape(recipe, source)
     img = sources.image(source, size)
     if img.shape[0] < h or img.shape[1] < w:
         raise CmosnoiseError(f"--crop {h}x{w}: the source {source!r} is {img.shape[0]} x {img.shape[1]}; give a "
@@ -622,7 +638,7 @@ def _exposure(recipe: Recipe, index: int, sources: Sources, device: str) -> tupl
     sensor = Sensor(c, device=device)
     sources.check_pattern(c.scene.source, sensor.cfa)
     # the crop's pixels through the CFA, read from the source where they lie (no copy of the window)
-    shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source, builtin_shape(recipe.crop)), tuple(c.scene.window), sensor.shape,
+    shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source, _scene_shape(recipe, c.scene.source)), tuple(c.scene.window), sensor.shape,
                                               sensor.cfa, sensor.spec.channel_responsivity))
     return shot, st
 
