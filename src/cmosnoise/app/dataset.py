@@ -82,7 +82,18 @@ def builtin_shape(crop: tuple[int, int]) -> tuple[int, int]:
     """(rows, cols) a built-in scene is drawn at for crops of ``crop``: :data:`BUILTIN_SIZE` square, or the crop's
     own side where it is larger (a 5 MP crop of a built-in is its whole scene, drawn at 2592 x 1944; crops up to
     1024 keep the scenes, and the bits, of sets made before); a crop whose scene would pass
-    :data:`MAX_BUILTIN_PIXELS` is a one-line error."""
+    :data:`MAX_BUILTIN_PIXELS` is a one-line error.
+
+    Parameters
+    ----------
+    crop : (int, int)
+        The crop's rows and columns.
+
+    Returns
+    -------
+    (int, int)
+        The scene's rows and columns.
+    """
     shape = max(BUILTIN_SIZE, int(crop[0])), max(BUILTIN_SIZE, int(crop[1]))
     if shape[0] * shape[1] > MAX_BUILTIN_PIXELS:
         raise CmosnoiseError(f"--crop {crop[0]}x{crop[1]}: the built-in scenes are drawn at most "
@@ -374,6 +385,8 @@ class Sources:
         The presets' files as data, read once.
     patterns : dict
         A raw photograph's CFA pattern, read once (:meth:`check_pattern`).
+    saturations : dict
+        A camera's saturation at a gain, worked out once (:meth:`saturation_e`).
     """
 
     images: dict = field(default_factory=dict)

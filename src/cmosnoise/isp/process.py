@@ -54,6 +54,10 @@ class Processor:
         What the frames are: CFA, black level, bits, scene white, crosstalk kernel.
     master_dark : (rows, cols) array, DN, optional
         A master dark for dark calibration (black level included).
+    corrector : callable, optional
+        One's own defect corrector, ``(raw, meta) -> raw`` in DN, black included (as
+        :func:`cmosnoise.defects.load_corrector` gives one), run after ``settings.defects.method``; default: the
+        one ``settings.defects.corrector`` names, if any.
 
     Examples
     --------
