@@ -348,11 +348,13 @@ def report_html(scores, summary, pictures: dict[str, bytes], data: Path, target:
 
     methods = "".join(f"<li><b>{html.escape(m)}</b>: {html.escape(BASELINES.get(m, 'your method'))}</li>"
                       for m in per_method.index)
-    figs = "".join(f"<figure><img src='{plots.data_uri(png)}' alt='{html.escape(name)}'>"
+    # the PSNR plot has a panel per camera: the page's width, the others side by side
+    figs = "".join(f"<figure{' class=wide' if name.startswith('psnr') else ''}><img src='{plots.data_uri(png)}' "
+                   f"alt='{html.escape(name)}'>"
                    f"<figcaption>{html.escape(name)}</figcaption></figure>" for name, png in pictures.items())
     css = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}table{border-collapse:collapse;"
            "font-size:13px;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 6px}td.num{text-align:right}"
-           "figure{display:inline-block;margin:.5em}img{max-width:520px}")
+           "figure{display:inline-block;margin:.5em}img{max-width:520px}figure.wide{display:block}figure.wide img{max-width:100%}")
     return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>cmosnoise evaluation</title>"
             f"<style>{css}</style></head><body><h1>cmosnoise evaluation</h1>"
             f"<p>cmosnoise {__version__}; data set {html.escape(str(data))}: {r['samples']} samples of "
