@@ -316,8 +316,8 @@ def test_the_corner_fit_recovers_the_one_over_f_range_within_its_intervals(corne
     for (name, true), res in zip((("low_hz", corner[0]), ("high_hz", corner[1])), resolved):
         lo, hi = got[name]["interval"]
         assert lo <= true <= hi and got[name]["resolved"] == res, (name, got[name])
-        if res:  # resolved: within a factor of 1.5 either side
-            assert hi / lo < 2.25, got[name]
+        if res:  # a requirement, not an estimate: a resolved corner is known to a factor of 1.5 either side
+            assert hi / lo < 2.25, got[name]  # (measured 1.58 and 1.26; the grid's own widening alone is 1.26)
     from cmosnoise.errors import CmosnoiseError
 
     rows = ns.rows_in_readout_order(np.random.default_rng(1).normal(0.0, 1.0, (64, 64)))
@@ -440,9 +440,11 @@ def test_fit_finds_the_spectrum_of_the_row_and_column_noise_and_their_sigmas(tmp
     assert {k: v["verdict"] for k, v in doc["spectra"].items()} == {"pixels_over_frames": "white",
                                                                    "rows_in_readout_order": spectrum,
                                                                    "columns_over_frames": spectrum}
+    assert "corners" not in doc["spectra"]["pixels_over_frames"]  # no 1/f, no corners fitted
     cfg = yaml.safe_load((tmp_path / "f" / "config.yaml").read_text())
     assert cfg["row_noise"]["spectrum"] == spectrum and cfg["column_noise"]["temporal"]["spectrum"] == spectrum
     assert cfg["source_follower"]["flicker"]["spectrum"] == "white"
+    assert cfg["source_follower"]["flicker"].get("corner_hz") is None
     truth = {row["parameter"]: row for row in doc["truth"]["rows"]}
     # the sigmas a 1/f stack sees only in part, given back whole: each 95 % interval holds the truth
     for name in ("row_noise.sigma_e", "column_noise.temporal.gumbel_loc_e", "column_noise.temporal.gumbel_scale_e",

@@ -508,8 +508,10 @@ def _ar1_sum(f_cpf: np.ndarray, spectrum, frame_rate_hz: float) -> np.ndarray:
 
 def _welch_expected(f_cpf: np.ndarray, df: float, spectrum, frame_rate_hz: float) -> np.ndarray:
     """What a Welch estimate with Hann segments reads at ``f_cpf`` (bins ``df`` apart): the spectrum seen through
-    the window, whose power response weighs a bin's neighbours 1/6 each and the bin itself 2/3 (a 1/f spectrum
-    reads 11 % high two bins above zero, where the segments' means are taken away)."""
+    the window. The Hann window's DFT is ``-1/4, 1/2, -1/4`` on a bin and its two neighbours (Harris, "On the use
+    of windows for harmonic analysis with the discrete Fourier transform", Proc. IEEE 66(1), 1978, the Hanning
+    window's spectral coefficients); squared and normalised, a bin reads its neighbours' power 1/6 each and its
+    own 2/3 (a 1/f spectrum reads 11 % high two bins above zero, where the segments' means are taken away)."""
     return (_ar1_sum(f_cpf - df, spectrum, frame_rate_hz) + 4.0 * _ar1_sum(f_cpf, spectrum, frame_rate_hz)
             + _ar1_sum(f_cpf + df, spectrum, frame_rate_hz)) / 6.0
 

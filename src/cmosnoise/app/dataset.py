@@ -650,8 +650,9 @@ def _exposure(recipe: Recipe, index: int, sources: Sources, device: str) -> tupl
     c = st.config
     sensor = Sensor(c, device=device)
     sources.check_pattern(c.scene.source, sensor.cfa)
-    # the crop's pixels through the CFA, read from the source where they lie (no copy of the window)
-    shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source, _scene_shape(recipe, c.scene.source)), tuple(c.scene.window), sensor.shape,
+    # the crop's pixels through the CFA, read from the source where they lie (no copy of the window), a built-in at
+    # the size its settings recorded
+    shot = sensor.expose(scene_mod.window_cfa(sources.image(c.scene.source, tuple(c.scene.source_size or (BUILTIN_SIZE, BUILTIN_SIZE))), tuple(c.scene.window), sensor.shape,
                                               sensor.cfa, sensor.spec.channel_responsivity))
     return shot, st
 
