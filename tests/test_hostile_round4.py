@@ -409,6 +409,34 @@ def test_a_stopped_dataset_resume_says_which_shards_it_kept(tmp_path, request):
     assert proc.returncode == 130 and f"{kept} of 100 shards" in err and "nothing was written" not in err, err
 
 
+def test_a_signal_a_library_swallowed_stops_the_data_set_at_the_next_shard_and_says_what_it_kept(
+        tmp_path, monkeypatch):
+    """CI's clean clone once stopped a data set with its SIGINT swallowed (inside a compile's callback): the
+    job made every shard in the watchdog's grace and then said "nothing was written". The swallowed signal now
+    stops the job after the shard it was in, and the message counts the shards kept."""
+    from cmosnoise import errors
+    from cmosnoise.app import dataset as ds
+
+    real = ds.shard_bytes
+
+    def swallowing(recipe_json, shard, *a, **k):
+        data = real(recipe_json, shard, *a, **k)
+        if shard == 1:
+            errors._received.append(signal.SIGINT)  # what signal_received records before a library eats its raise
+        return data
+
+    monkeypatch.setattr(ds, "shard_bytes", swallowing)
+    errors.clear_terminated()
+    recipe = ds.Recipe(samples=12, crop=(32, 32), cameras=("led",), seed=2, shard_size=2)
+    try:
+        with pytest.raises(errors.Terminated) as caught:
+            ds.build(recipe, tmp_path / "ds")
+    finally:
+        errors.clear_terminated()
+    assert sorted(f.name for f in (tmp_path / "ds").glob("shard-*")) == [recipe.shard_name(0), recipe.shard_name(1)]
+    assert caught.value.kept == f"2 of 6 shards (4 of 12 samples) kept in {tmp_path / 'ds'}; --resume completes it"
+
+
 def test_a_full_disk_after_one_folder_was_committed_says_so(tmp_path, monkeypatch):
     """characterize --emva-export: --out is committed, then the export's disk fills: the message names what was
     written instead of "nothing was written"."""

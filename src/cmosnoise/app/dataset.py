@@ -58,7 +58,7 @@ from ..analysis import ground_truth
 from ..config import load_config, virtual_cameras
 from ..config.loading import config_data, deep_merge, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
-from ..errors import CmosnoiseError, keeping, note_kept
+from ..errors import CmosnoiseError, check_terminated, keeping, note_kept
 from ..io.output import atomic_file, resumable_mode
 from ..model import physics, raw_scene
 from ..model import scene as scene_mod
@@ -1085,8 +1085,8 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
                 if mode == "replace":
                     return f"nothing was written: {out} keeps the data set it held"
                 shards = recipe.shards() - len(missing(recipe, work))
-                return (f"{shards} of {recipe.shards()} shards ({counted[0]} of {total} samples) kept in {out}; "
-                        "--resume completes it")
+                rest = "the data set is whole" if shards == recipe.shards() else "--resume completes it"
+                return f"{shards} of {recipe.shards()} shards ({counted[0]} of {total} samples) kept in {out}; {rest}"
 
             try:
                 with keeping(kept):  # the shards made so far stay where they are resumable
@@ -1095,6 +1095,9 @@ def build(recipe: Recipe, out: str | Path, resume: bool = False, overwrite: bool
                         counted[0] += len(recipe.shard_range(s))
                         if progress:
                             progress(counted[0], total)
+                        # a signal whose exception a library swallowed (LLVM's callbacks into numba) stops the
+                        # job here, with what it kept said, not after the last shard as "nothing was written"
+                        check_terminated()
             except BaseException as exc:
                 note_kept(exc, kept())
                 raise

@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 
 from ..config.loading import load_yaml_text
-from ..errors import CmosnoiseError, keeping, note_kept
+from ..errors import CmosnoiseError, check_terminated, keeping, note_kept
 from ..io.output import OutputFolder, resumable_mode
 from .cluster import connect, disconnect, task_result, worker_attribute
 
@@ -703,6 +703,7 @@ def execute(p: Plan, out: Path, client, resume: bool = False, progress: Callable
             finished += 1
             if progress:
                 progress(finished, total)
+            check_terminated()  # a signal a library swallowed: stop here, the rows so far said, not at the end
             nxt = next(queue, None)
             if nxt is not None:
                 running.add(submit(nxt))
@@ -944,6 +945,7 @@ def run(base, vary: list[str], instances: int, out: str | Path | None = None, fr
                         work.mkdir(parents=True, exist_ok=True)
                         _write_plan(work, p)
                     execute(p, work, client, mode == "resume", progress, device)
+                    check_terminated()
             except BaseException as exc:
                 if mode == "new" and not (out / "results.csv").exists():
                     shutil.rmtree(out, ignore_errors=True)
