@@ -50,13 +50,22 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
+def _named(path: str | Path, what: str) -> Path:
+    """``path`` as a Path; a name no file system takes (a NUL byte in it) is a one-line error, not the
+    ``ValueError`` the system call would raise."""
+    p = Path(path)
+    if "\0" in str(p):
+        raise CmosnoiseError(f"{what} {str(p)!r}: a file name cannot hold a NUL byte")
+    return p
+
+
 def check_regular(path: str | Path, what: str) -> Path:
     """``path`` if it names a regular file (symbolic links followed); else a one-line error.
 
     For files a library opens by name (TIFF, PNG, DNG readers): this check
     comes first, so a FIFO never blocks the reader and a device is never read.
     """
-    p = Path(path)
+    p = _named(path, what)
     try:
         mode = os.stat(p).st_mode
     except FileNotFoundError:
@@ -70,7 +79,7 @@ def check_regular(path: str | Path, what: str) -> Path:
 
 def open_regular(path: str | Path, what: str):
     """Open a regular file for binary reading without ever blocking on a FIFO (checked on the open descriptor)."""
-    p = Path(path)
+    p = _named(path, what)
     try:
         fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
