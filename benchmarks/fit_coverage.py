@@ -26,7 +26,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--json", help="also write the table here (docs/numbers/fit_coverage.json feeds the README)")
     args = ap.parse_args()
-    tasks = [(preset, T, seed) for preset, T in t.COMBOS for seed in range(t.SEEDS)]
+    tasks = [(preset, T, seed) for preset, T in t.COMBOS for seed in range(t.STUDY_SEEDS)]
     t0 = time.perf_counter()
     results = t.run_fits(tasks)
     names = [n for stage in t.STAGES.values() for n in stage]
@@ -43,14 +43,14 @@ def main() -> None:
                 if n in z and hi > lo:
                     z[n][c].append((p["value"] - tr[n]) / ((hi - lo) / 3.92))
     mean_z = {n: {c: sum(v) / len(v) for c, v in d.items() if v} for n, d in z.items()}
-    print(f"{len(tasks)} fits in {time.perf_counter() - t0:.0f} s; intervals holding the truth, of {t.SEEDS}:")
+    print(f"{len(tasks)} fits in {time.perf_counter() - t0:.0f} s; intervals holding the truth, of {t.STUDY_SEEDS}:")
     print(f"  {'':40s} " + " ".join(f"{c:>22s}" for c in combos))
     for n in names:
         print(f"  {n:40s} " + " ".join(f"{hits[n][c]:22d}" for c in combos))
     for n, d in mean_z.items():
         print(f"  mean z {n.split('.')[-1]:33s} " + " ".join(f"{d[c]:+22.2f}" for c in combos))
     if args.json:
-        data = {"command": "python benchmarks/fit_coverage.py", "seeds": t.SEEDS, "size": t.SIZE, "combos": combos,
+        data = {"command": "python benchmarks/fit_coverage.py", "seeds": t.STUDY_SEEDS, "size": t.SIZE, "combos": combos,
                 "hits": hits, "mean_z": mean_z}
         with open(args.json, "w") as f:
             json.dump(data, f, indent=2)
