@@ -327,13 +327,13 @@ def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_
     from cmosnoise.app import sweep as sw
 
     # a shard's samples from different cameras, their frames in launches of GPU_BATCH samples (2: three samples
-    # cross a batch's end)
-    recipe = ds.Recipe(samples=3, crop=(32, 48), seed=4, cameras=("led", "sony-imx900"), sources=ds.BUILTIN_SCENES,
+    # cross a batch's end); crops of 16 x 24, as the simulator's time is its pixels' (a quarter of 32 x 48's)
+    recipe = ds.Recipe(samples=3, crop=(16, 24), seed=4, cameras=("led", "sony-imx900"), sources=ds.BUILTIN_SCENES,
                        shard_size=3)
     assert len({ds.settings(recipe, i).columns["camera"] for i in range(3)}) == 2
     monkeypatch.setattr(ds, "GPU_BATCH", 2)
     assert ds.shard_bytes(recipe.to_json(), 0, "cuda") == ds.shard_bytes(recipe.to_json(), 0)
-    cfg = {"sensor": {"width": 48, "height": 32}}
+    cfg = {"sensor": {"width": 24, "height": 16}}
     base = load_config(extra=cfg)
     assert sw.run_instance(base.model_dump(), "flat:0.3", 2, 17, device="cuda") == \
         sw.run_instance(base.model_dump(), "flat:0.3", 2, 17)
@@ -345,8 +345,8 @@ def test_dataset_and_sweep_with_device_cuda_give_the_cpus_bytes_and_numbers(tmp_
 def test_the_torch_dataset_on_the_gpu_gives_the_cpus_tensors():
     from cmosnoise.torch import NoisyRawDataset
 
-    cpu = NoisyRawDataset(3, crop=(32, 48), seed=2, cameras=("led", "sony-imx900"))
-    gpu = NoisyRawDataset(3, crop=(32, 48), seed=2, cameras=("led", "sony-imx900"), device="cuda")
+    cpu = NoisyRawDataset(3, crop=(16, 24), seed=2, cameras=("led", "sony-imx900"))  # small: the simulator's
+    gpu = NoisyRawDataset(3, crop=(16, 24), seed=2, cameras=("led", "sony-imx900"), device="cuda")  # pixels cost
     assert len({cpu.sample(i)[1]["camera"] for i in range(3)}) == 2  # two cameras among them
     together = gpu.__getitems__([2, 0])  # what a DataLoader with a batch_size asks: one launch
     for i, b in [(0, gpu[0]), (1, gpu[1]), (2, gpu[2]), (2, together[0]), (0, together[1])]:
