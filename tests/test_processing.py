@@ -299,6 +299,41 @@ def test_ones_own_corrector_runs_in_the_chain_in_raw_dn(tmp_path, monkeypatch):
     assert iio.imread(tmp_path / "proc" / "processed.png").std() == 0
 
 
+COUNTING = """
+import os
+
+def fix(raw, meta):
+    with open(os.environ["CORRECTOR_CALLS"], "a") as fh:
+        fh.write("x")
+    return raw
+"""
+
+
+@pytest.mark.parametrize("frames", [1, 3])
+def test_simulate_corrects_each_frame_once(tmp_path, monkeypatch, frames):
+    """Frame 0's corrected CFA image feeds its picture, its video frame and the count of defects left: one's own
+    corrector runs once a frame (it ran twice on frame 0)."""
+    (tmp_path / "counting_fix.py").write_text(COUNTING)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    calls = tmp_path / "calls"
+    monkeypatch.setenv("CORRECTOR_CALLS", str(calls))
+    r = cli("-q", "simulate", "--set", "sensor.width=64", "--set", "sensor.height=48", "--frames", str(frames),
+            "--corrector", "counting_fix:fix", "--out", tmp_path / "sim", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert calls.read_text() == "x" * frames
+
+
+@pytest.mark.parametrize("settings", [{}, {"demosaic": "malvar2004"}, {"white_balance": {"mode": "grey_world"}},
+                                      {"defects": {"method": "median"}}])
+@pytest.mark.parametrize("half", [False, True])
+def test_a_picture_from_its_corrected_cfa_image_is_the_raw_frames(settings, half):
+    sensor = Sensor({"sensor": {"width": 96, "height": 64}})
+    raw = sensor.expose("photo").frame(0)
+    one, other = processor_for(sensor, **settings), processor_for(sensor, **settings)
+    for _ in range(2):  # grey world's gains are set by the first picture: the second takes the one-pass loop
+        assert np.array_equal(one.render(raw, half=half), other.render_cfa(other.cfa_image(raw), half=half))
+
+
 @pytest.mark.parametrize("spec, needle", [
     ("nosuchmodule_xyz:f", "processing.defects.corrector 'nosuchmodule_xyz:f': cannot load it"),
     ("justaname", "expected module:function"),

@@ -41,6 +41,18 @@ from ..model.spec import SensorSpec, resolve
 from .summary import build_summary, run_metadata, sensor_figures
 
 
+def _corrected(processor, raw: np.ndarray, first: list) -> np.ndarray:
+    """``raw`` calibrated and defect-corrected (:meth:`Processor.cfa_image`); the first frame asked for is kept in
+    ``first`` (as (raw, image)) and given again when asked for once more, so that frame 0's picture, video frame
+    and count of the defects left share one correction (one's own corrector runs once a frame)."""
+    if first and first[0][0] is raw:
+        return first[0][1]
+    img = processor.cfa_image(raw)
+    if not first:
+        first.append((raw, img))
+    return img
+
+
 def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[int], contextlib.AbstractContextManager] | None = None,
              phase: Callable[[str], None] | None = None, overwrite: bool = False, device: str = "cpu",
              tile: int | None = None, client=None) -> dict:
@@ -99,6 +111,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         stats = RunStats(transfer.max_code)
         frame0: list[np.ndarray] = []
         rendered0: list[np.ndarray] = []
+        cfa0: list = []  # frame 0 calibrated and corrected: its picture's and the defects' count's (_corrected)
         video = None
         video_info = None
         fps = video_rate(proc_cfg.video_fps, shot.frame_period_s)
@@ -113,7 +126,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
             processed, t = rendered0[0] if rendered0 else None, 0.0
             if processed is None and (proc_cfg.enabled or config.run.report):
                 tp = time.perf_counter()
-                processed = processor.render(frame0[0])
+                processed = processor.render_cfa(_corrected(processor, frame0[0], cfa0))
                 t = time.perf_counter() - tp
             if proc_cfg.enabled:
                 write_png(tmp / "processed.png", processed)
@@ -137,7 +150,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
                               exposure_s=config.exposure.integration_time_s)
                 if proc_cfg.enabled and n > 1:
                     tp = time.perf_counter()
-                    picture = processor.render(raw)
+                    picture = processor.render_cfa(_corrected(processor, raw, cfa0))
                     if video is None:  # frame 0's picture sets the display gain, the same for every frame
                         gain = display_gain(picture) if proc_cfg.video_stretch else 1.0
                         video_info = {"fps": fps, "display_gain": gain, "frames": n}
@@ -205,7 +218,7 @@ def simulate(config: SensorSpec | Config, out: str | Path, progress: Callable[[i
         summary["processing"] = processing_summary(processor, t_dark, t_process)
         if proc_cfg.enabled:  # what the chain leaves of the defects in the first frame (the paper's Fig. 9 count)
             summary["processing"]["left"] = white_pixels.left_after_correction(
-                processor.cfa_image(frame0[0]), shot.photo_mean_e, transfer.gain_dn_per_e, sensor.cfa)
+                _corrected(processor, frame0[0], cfa0), shot.photo_mean_e, transfer.gain_dn_per_e, sensor.cfa)
         if video_info is not None:
             summary["processing"]["video"] = video_info
         rts = telegraph_pixels(sensor)

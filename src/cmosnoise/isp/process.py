@@ -234,18 +234,43 @@ class Processor:
             The sRGB picture ((rows, cols) for mono).
         """
         raw = self.check_raw(raw)
-        one_pass = (half or (self.settings.demosaic == "bilinear" and min(raw.shape) > reconstruction.EDGE_PAD))
-        if (one_pass and not self.mono and reconstruction.one_pass_ready()
-                and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None)):
-            if pre:
-                self.check_shape(raw.shape)
-                img, offset = raw, self.info.black_level_dn
-            else:
-                img, offset = self.cfa_image(raw), 0.0
-            picture = reconstruction.superpixel_srgb8 if half else reconstruction.bilinear_srgb8
-            return picture(img, self.info.cfa, offset, self.white_above_black, self._compensation,
-                           self.white_balance_gains(None))
-        return reconstruction.encode_srgb8(self.linear_rgb(self.cfa_image(raw, pre), half))
+        if not pre:
+            return self.render_cfa(self.cfa_image(raw), half)
+        if self._one_pass(raw.shape, half):
+            self.check_shape(raw.shape)
+            return self._picture(raw, self.info.black_level_dn, half)
+        return reconstruction.encode_srgb8(self.linear_rgb(self.cfa_image(raw, pre=True), half))
+
+    def render_cfa(self, cfa_img: np.ndarray, half: bool = False) -> np.ndarray:
+        """Steps 4 to 7 of a CFA image already calibrated and corrected (:meth:`cfa_image`'s output): the
+        8-bit sRGB picture :meth:`render` gives of its raw frame, bit for bit, without steps 1 to 3 again.
+
+        Parameters
+        ----------
+        cfa_img : ndarray, (rows, cols)
+            float32 DN above black, dark-calibrated and defect-corrected.
+        half : bool
+            At half size.
+
+        Returns
+        -------
+        ndarray, (rows, cols, 3) uint8
+            The sRGB picture ((rows, cols) for mono).
+        """
+        if self._one_pass(cfa_img.shape, half):
+            return self._picture(cfa_img, 0.0, half)
+        return reconstruction.encode_srgb8(self.linear_rgb(cfa_img, half))
+
+    def _one_pass(self, shape: tuple[int, ...], half: bool) -> bool:
+        """Whether steps 4 to 7 run as one compiled pass (same bits as the steps one by one)."""
+        one_pass = half or (self.settings.demosaic == "bilinear" and min(shape) > reconstruction.EDGE_PAD)
+        return bool(one_pass and not self.mono and reconstruction.one_pass_ready()
+                    and (self.settings.white_balance.mode != "grey_world" or self._wb_gains is not None))
+
+    def _picture(self, img: np.ndarray, offset: float, half: bool) -> np.ndarray:
+        picture = reconstruction.superpixel_srgb8 if half else reconstruction.bilinear_srgb8
+        return picture(img, self.info.cfa, offset, self.white_above_black, self._compensation,
+                       self.white_balance_gains(None))
 
 
 # ------------------------------------------------------------------ reading
