@@ -325,6 +325,28 @@ def test_the_corner_fit_recovers_the_one_over_f_range_within_its_intervals(corne
         ns.fit_corners(rows, FPS)
 
 
+@pytest.mark.slow
+def test_characterize_gives_the_one_over_f_range_of_a_simulated_stack_in_hz(tmp_path):
+    """characterize's dark stack of a simulated sensor comes at the sensor's frame rate: its 1/f pixel spectrum
+    has its corners fitted as fit's is (the same function), the intervals holding the configured 0.3 and
+    3 Hz, and said in the note; a descriptor's stack, whose rate is not known, says why it has none."""
+    from cmosnoise.analysis import noise_spectrum as ns
+    from cmosnoise.app import characterizing
+    from cmosnoise.model.spec import resolve
+
+    extra = {**_pixel("one_over_f", cds=False, corner=[0.3, 3.0]), "shot_noise": {"enabled": True}}
+    res = characterizing.run(resolve(_config(extra, 16, 16)), tmp_path / "ch", steps=8, stack_frames=512)
+    pixels = res["spectra"]["pixels_over_frames"]
+    assert pixels["verdict"] == "one_over_f" and pixels["frame_rate_hz"] == FPS, pixels
+    for name, true in (("low_hz", 0.3), ("high_hz", 3.0)):
+        got = pixels["corners"][name]
+        assert got["resolved"] and got["interval"][0] <= true <= got["interval"][1], (name, got)
+    assert "1/f from" in " ".join(res["notes"]) and " Hz" in " ".join(res["notes"]), res["notes"]
+    stack = np.stack(list(Sensor(_config(extra, 16, 16), seed=2).expose("flat:0.0").frames(256)))
+    unknown = ns.of_stack(stack)["pixels_over_frames"]
+    assert unknown["verdict"] == "one_over_f" and "frame rate is not known" in unknown["corners"]["not_given"]
+
+
 def test_a_stack_too_short_for_a_spectrum_says_what_it_needs():
     from cmosnoise.analysis import noise_spectrum as ns
     from cmosnoise.errors import CmosnoiseError

@@ -510,11 +510,7 @@ def _spectra(ds, base) -> dict:
                       ("rows_in_readout_order", lambda: noise_spectrum.rows_in_readout_order(st.row_means)),
                       ("columns_over_frames", lambda: noise_spectrum.columns_over_frames(st.col_means))):
         try:
-            est = make()
-            out[key] = {**est.summary(), "stack_frames": st.n}
-            if est.unit == "cycles per frame" and est.verdict == "one_over_f":  # its 1/f range, where resolved
-                out[key]["frame_rate_hz"] = rate
-                out[key]["corners"] = noise_spectrum.fit_corners(est, rate)
+            out[key] = {**noise_spectrum.with_corners(make(), rate), "stack_frames": st.n}
         except CmosnoiseError as exc:
             out[key] = {"not_given": str(exc)}
     return out

@@ -265,29 +265,59 @@ def rows_in_readout_order(row_means) -> SpectrumEstimate:
     return _fit("rows in readout order", "cycles per row", f, p, (max(4.0 / nperseg, 2.0 / rows), 0.125), segments)
 
 
-def of_stack(stack) -> dict:
+def of_stack(stack, frame_rate_hz: float | None = None) -> dict:
     """The three spectra of a dark stack as ``characterization.json`` keeps them, each a summary or the reason
-    it is not given.
+    it is not given; a 1/f spectrum over frames with its corners (:func:`with_corners`).
 
     Parameters
     ----------
     stack : (frames, rows, cols) array
-        Dark frames in time order.
+        Dark frames in time order, back to back at ``frame_rate_hz``.
+    frame_rate_hz : float or None
+        Frames a second (None: not known, and no corner is fitted).
 
     Returns
     -------
     dict
         ``{"pixels_over_frames", "columns_over_frames", "rows_in_readout_order"}``: each
-        :meth:`SpectrumEstimate.summary`, or ``{"not_given": why}``.
+        :func:`with_corners`' summary, or ``{"not_given": why}``.
     """
     out = {}
     for key, make in (("pixels_over_frames", lambda: over_frames(stack)),
                       ("columns_over_frames", lambda: over_frames(stack, columns=True)),
                       ("rows_in_readout_order", lambda: readout_order(stack))):
         try:
-            out[key] = make().summary()
+            out[key] = with_corners(make(), frame_rate_hz)
         except CmosnoiseError as exc:
             out[key] = {"not_given": str(exc)}
+    return out
+
+
+def with_corners(estimate: SpectrumEstimate, frame_rate_hz: float | None) -> dict:
+    """``estimate``'s summary, and for a 1/f spectrum over frames its range in Hz (:func:`fit_corners`) with
+    the frame rate it used, or why it has none (the rate not known).
+
+    Parameters
+    ----------
+    estimate : SpectrumEstimate
+        Any of the three spectra.
+    frame_rate_hz : float or None
+        The stack's frames a second.
+
+    Returns
+    -------
+    dict
+        :meth:`SpectrumEstimate.summary`, with ``frame_rate_hz`` and ``corners`` for a 1/f spectrum over
+        frames.
+    """
+    out = estimate.summary()
+    if estimate.unit == "cycles per frame" and estimate.verdict == "one_over_f":
+        if frame_rate_hz is None:
+            out["corners"] = {"not_given": "the stack's frame rate is not known, so its 1/f range is not "
+                                           "given in Hz"}
+        else:
+            out["frame_rate_hz"] = float(frame_rate_hz)
+            out["corners"] = fit_corners(estimate, float(frame_rate_hz))
     return out
 
 

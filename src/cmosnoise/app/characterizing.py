@@ -26,6 +26,7 @@ from ..io.output import OutputFolder, write_json
 from ..io.stacks import DESCRIPTOR
 from ..model.sensor import Sensor
 from ..model.spec import SensorSpec
+from ..model.stages.random_telegraph import frame_period_s
 
 
 def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from: Path | None = None,
@@ -48,7 +49,7 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
             raise CmosnoiseError(f"--stack-frames {stack_frames} with --emva-export: an EMVA 1288 descriptor holds pairs "
                                  "of 2 frames, and a stack is what has more; give 3 or more")
     export_folder = OutputFolder(emva_export, overwrite, "--emva-export") if emva_export is not None else None
-    model = None
+    model, rate = None, None
     if frames_from is not None:
         m = emva_files.load(frames_from)
         if spec is not None:
@@ -67,10 +68,12 @@ def run(spec: SensorSpec | None, out: Path, overwrite: bool = False, frames_from
         else:
             m = ch.measure(sensor, steps, stack_frames, keep_frames=emva_export is not None, progress=advance,
                            dark_exposures=dark_exposures)
+        # a simulated stack's frames come back to back at the sensor's rate (a descriptor's carry none)
+        rate = 1.0 / frame_period_s(sensor.config.sensor.frame_rate_hz, float(m.stack_texp_s))
         model = ch.model_values(sensor, m.stack_texp_s, series_e=m.mu_p * (sensor.config.sensor.qe_mean() or 1.0),
                                 shortest_texp_s=float(np.min(m.texp_s)))
     results = ev.evaluate(m)
-    spectra = noise_spectrum.of_stack(m.stack_dark)
+    spectra = noise_spectrum.of_stack(m.stack_dark, rate)
     notes = ev.footnotes(results) + [spectra_note(spectra)] + (spec.notes if spec is not None else [])
     series = {"texp_s": m.texp_s, "mu_p": m.mu_p, "mu_y_dn": m.mu_y, "mu_ydark_dn": m.mu_ydark,
               "s2_y_dn2": m.s2_y, "s2_ydark_dn2": m.s2_ydark}
@@ -105,12 +108,23 @@ def spectra_note(spectra: dict) -> str:
             missing.append(name)
         else:
             lo, hi = d["interval"]
-            parts.append(f"{name} {d['verdict'].replace('_', ' ')} (slope {d['slope']:.2f}, 95 % {lo:.2f} to {hi:.2f})")
+            parts.append(f"{name} {d['verdict'].replace('_', ' ')} (slope {d['slope']:.2f}, 95 % {lo:.2f} to {hi:.2f}"
+                         f"{_corners_said(d.get('corners'))})")
     line = "noise in time, from the dark stack: " + ("; ".join(parts) if parts else "no spectrum")
     if missing:
         line += (f"; {', '.join(missing)} need at least {noise_spectrum.MIN_FRAMES} frames "
                  f"(--stack-frames {noise_spectrum.MIN_FRAMES})")
     return line
+
+
+def _corners_said(corners: dict | None) -> str:
+    """", 1/f from 0.03 to 15 Hz" (a corner beyond the stack's band as its bound: "below 0.5 Hz"), or ""."""
+    if not corners or "low_hz" not in corners:
+        return ""
+    low, high = corners["low_hz"], corners["high_hz"]
+    a = f"{low['value']:.3g}" if low["resolved"] else f"below {low['interval'][1]:.3g}"
+    b = f"{high['value']:.3g}" if high["resolved"] else f"above {high['interval'][0]:.3g}"
+    return f", 1/f from {a} to {b} Hz"
 
 
 def plot_spectra(stack: np.ndarray, path: Path) -> Path | None:
