@@ -439,6 +439,13 @@ def test_fit_sets_the_pixel_flickers_spectrum_from_the_dark_stack(tmp_path):
     assert low["interval"][0] <= 0.03 <= low["interval"][1], low
     cfg = yaml.safe_load((tmp_path / "f" / "config.yaml").read_text())
     assert cfg["source_follower"]["flicker"]["spectrum"] == "one_over_f"
+    # the flicker sigmas as the pixels have them, not as 256 frames see them (0.861 of the variance at 0.03 to
+    # 15 Hz): the configured 3 e- and 0.3 e- inside the intervals (measured: 3.56, 2.84 to 4.28; 0.297, 0.246 to
+    # 0.358; the thermal and flicker split is weakly identified on one stack)
+    P = json.loads((tmp_path / "f" / "fit.json").read_text())["parameters"]
+    for name, true in (("gumbel_loc_e", 3.0), ("gumbel_scale_e", 0.3)):
+        got = P[f"source_follower.flicker.{name}"]
+        assert got["ci95"][0] <= true <= got["ci95"][1] and "1/f flicker's variance" in got["method"], got
     written = cfg["source_follower"]["flicker"]["corner_hz"]
     assert low["interval"][0] <= written[0] <= low["interval"][1] and written[1] == pytest.approx(high["value"])
     assert cfg["row_noise"]["spectrum"] == "white"

@@ -714,6 +714,16 @@ def _readout(st, k: float, black: float, rate_map, rate_var, P: dict, plots: dic
         else:
             P[key] = _p(float(v), ci, where)
     _split_identifiable(P, s2_fit, known_fit, n, where)
+    seen = _pixel_flicker_seen(st, base, spectra or {})
+    if seen < 1.0:  # a 1/f flicker's sigmas as the frames see them: the Gumbel scales with them, exactly
+        for key in ("source_follower.flicker.gumbel_loc_e", "source_follower.flicker.gumbel_scale_e"):
+            got = P[key]
+            if got["value"] is not None:  # judged as seen (_split_identifiable), then scaled
+                got["value"] = float(got["value"] / math.sqrt(seen))
+                if got["ci95"] is not None:
+                    got["ci95"] = [float(c / math.sqrt(seen)) for c in got["ci95"]]
+                got["method"] += (f"; over sqrt({seen:.4f}), the share of a 1/f flicker's variance that {n} frames "
+                                  "see at the fitted corners (no CDS: the stack's mean takes the rest)")
     P["source_follower.flicker.tail.ppm_above"]["threshold_e"] = thr
     if r.get("no_tail"):
         P["source_follower.flicker.tail.ppm_above"]["method"] = ("the body's own share above the threshold; no tail "
@@ -886,16 +896,40 @@ def _readout_updates(P: dict, result: dict) -> dict:
                                   ("columns_over_frames", out["column_noise"]["temporal"], one_over_f.column_corners)):
         found = spectra.get(key, {})
         section["spectrum"] = "one_over_f" if found.get("verdict") == "one_over_f" else "white"
-        corners, rate = found.get("corners"), found.get("frame_rate_hz")
-        if corners and default is not None and rate and (corners["low_hz"]["resolved"] or corners["high_hz"]["resolved"]):
-            # a corner the stack resolves is the fitted one; one beyond it (below the lowest bin, above Nyquist)
-            # keeps its default, which the data allow
-            lo, hi = default(rate)
-            lo = corners["low_hz"]["value"] if corners["low_hz"]["resolved"] else min(lo, corners["low_hz"]["interval"][1])
-            hi = corners["high_hz"]["value"] if corners["high_hz"]["resolved"] else max(hi, corners["high_hz"]["interval"][0])
-            if lo < hi:
-                section["corner_hz"] = [lo, hi]
+        chosen = _fitted_corners(found, default) if default is not None else None
+        if chosen is not None:
+            section["corner_hz"] = list(chosen)
     return out
+
+
+def _fitted_corners(found: dict, default) -> tuple[float, float] | None:
+    """The 1/f range a spectrum over frames (``fit.json``'s summary) gives, Hz: a corner the stack resolves is the
+    fitted one; one beyond it (below the lowest bin, above Nyquist) keeps its default (``default(rate)``), which
+    the data allow. None where the spectrum resolved neither corner."""
+    corners, rate = found.get("corners"), found.get("frame_rate_hz")
+    if not corners or "low_hz" not in corners or not rate or not (corners["low_hz"]["resolved"]
+                                                                   or corners["high_hz"]["resolved"]):
+        return None
+    lo, hi = default(rate)
+    lo = corners["low_hz"]["value"] if corners["low_hz"]["resolved"] else min(lo, corners["low_hz"]["interval"][1])
+    hi = corners["high_hz"]["value"] if corners["high_hz"]["resolved"] else max(hi, corners["high_hz"]["interval"][0])
+    return (float(lo), float(hi)) if lo < hi else None
+
+
+def _pixel_flicker_seen(st, base, spectra: dict) -> float:
+    """What a pixel's variance over the stack ``st``'s frames sees of its 1/f flicker (no CDS: the level drifts
+    from frame to frame, and the pixel's mean over the stack takes a part of it), against white noise's; 1 where
+    the pixels' spectrum over frames is not 1/f. At the corners the configuration is given
+    (:func:`_fitted_corners`, else the defaults of the stack's rate)."""
+    from ..model import one_over_f
+    from ..model.stages.random_telegraph import frame_period_s
+
+    found = spectra.get("pixels_over_frames", {})
+    if found.get("verdict") != "one_over_f":
+        return 1.0
+    period = st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s)
+    corners = _fitted_corners(found, one_over_f.pixel_corners) or one_over_f.pixel_corners(1.0 / period)
+    return noise_spectrum.seen_share_frames(one_over_f.lorentzians(*corners), st.n, period)
 
 
 def fitted_config(base, result: dict):
