@@ -188,13 +188,34 @@ def test_column_noise_over_frames_has_the_spectrums_slope(spectrum, want, tol):
     assert abs(slope - want) < tol, (slope, se)
 
 
-def test_the_gpu_refuses_a_plan_whose_offsets_change_from_frame_to_frame_in_one_line():
+@pytest.mark.gpu
+def test_the_gpu_gives_the_cpus_bits_with_offsets_that_change_from_frame_to_frame():
+    """1/f row, column and pixel noise (no CDS) and the column banks' temporal offsets on the GPU (numba's CUDA
+    simulator without one): whole frames far apart, crops at several corners, and a batch that mixes such a
+    plan with one whose offsets are fixed, each item the CPU kernel's frame bit for bit (#76)."""
     from cmosnoise.engine.frame import cuda_kernel
-    from cmosnoise.errors import CmosnoiseError
 
-    plan = Sensor(_config(ROW), seed=1).expose("flat:0.0").plan()
-    with pytest.raises(CmosnoiseError, match="one_over_f.*device cpu"):
-        cuda_kernel.DevicePlan(plan)
+    timed = {**ROW, "column_noise": {**COLUMN["column_noise"], "alternating": {"enabled": True, "temporal_sigma_e": 0.7}},
+             **_pixel("one_over_f", cds=False), "shot_noise": {"enabled": True}}
+    rows, cols = 12, 16  # the simulator's time is its pixels'
+    cpu = Sensor(_config(timed, rows, cols), seed=4).expose("photo")
+    still = Sensor(_config({"shot_noise": {"enabled": True}}, rows, cols), seed=5).expose("photo")
+    gpu = Sensor(_config(timed, rows, cols), seed=4, device="cuda").expose("photo")
+    made = cpu.plan()
+    assert made.row_flicker is not None and made.pixel_flicker is not None
+    assert type(made.col_flicker).__name__ == "Summed"  # the amplifiers' 1/f noise and the banks' offsets
+    frames = [0, 3, 1_000_000]
+    raw, _ = gpu.frames_on_device(frames)
+    for b, k in enumerate(frames):
+        np.testing.assert_array_equal(raw.copy_to_host()[b], cpu.frame(k), err_msg=f"frame {k}")
+    plan = cuda_kernel.DevicePlan([cpu.plan(), still.plan()], [cpu.stuck_pixels(), still.stuck_pixels()])
+    which, frames, corners = [0, 1, 0], [7, 7, 2], [(0, 0), (5, 6), (6, 8)]
+    raw, electrons = plan.render(frames, corners, (6, 8), electrons=True, plans=which)
+    raw, electrons = raw.copy_to_host(), electrons.copy_to_host()
+    for b, (q, k, (r, c)) in enumerate(zip(which, frames, corners)):
+        expected, expected_e = (cpu, still)[q]._render(k)
+        np.testing.assert_array_equal(raw[b], expected[r:r + 6, c:c + 8], err_msg=f"item {b}")
+        np.testing.assert_array_equal(electrons[b], expected_e[r:r + 6, c:c + 8], err_msg=f"item {b}")
 
 
 # ------------------------------------------------------------------ a pixel's flicker in time

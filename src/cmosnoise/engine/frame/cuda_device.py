@@ -133,16 +133,17 @@ def lines(s, it):
     if b >= frames.size or t >= h + w + 4:
         return
     p = which[b]
+    po = it.offsets_of[b]  # the offsets' row: the plan's, or the item's own (offsets that change each frame)
     fr = np.uint64(frames[b])
     sq = seqs[p]
     if t < h:
         if flags[p, S_ROW]:
             r = corners[b, 0] + t
-            rowval[b, t] = numbers[p, ROW_SIGMA] * normal(r, fr, sq, keys[p, KEY_ROW, 0], keys[p, KEY_ROW, 1]) + row_offset[p, r]
+            rowval[b, t] = numbers[p, ROW_SIGMA] * normal(r, fr, sq, keys[p, KEY_ROW, 0], keys[p, KEY_ROW, 1]) + row_offset[po, r]
     elif t < h + w:
         if flags[p, S_COL]:
             c = corners[b, 1] + (t - h)
-            colterm[b, t - h] = col_offset[p, c] + col_sigma[p, c] * normal(c, fr, sq, keys[p, KEY_COL, 0], keys[p, KEY_COL, 1])
+            colterm[b, t - h] = col_offset[po, c] + col_sigma[p, c] * normal(c, fr, sq, keys[p, KEY_COL, 0], keys[p, KEY_COL, 1])
     else:
         q = t - h - w
         sigma = numbers[p, FRAME_BLACK_SIGMA]
@@ -242,6 +243,7 @@ def pixels(s, it, out_dn, out_e):
     if j >= w or i >= h or b >= frames.size:
         return
     p = which[b]
+    po = it.offsets_of[b]  # the pixels' offsets' row (lines(), the same)
     has_noisy, has_exact, has_sf, has_row, has_col, adc_on, want_e = (
         flags[p, S_NOISY], flags[p, S_EXACT], flags[p, S_SF], flags[p, S_ROW], flags[p, S_COL], flags[p, S_ADC],
         flags[p, S_ELECTRONS])
@@ -286,11 +288,11 @@ def pixels(s, it, out_dn, out_e):
     if has_sf:
         noise = np.float64(sf[p, r, c]) * z
         if has_offset:
-            n = (n + np.float64(offset[p, r, c])) + noise
+            n = (n + np.float64(offset[po, r, c])) + noise
         else:
             n = n + noise
     elif has_offset:  # stage 5c
-        n = n + np.float64(offset[p, r, c])
+        n = n + np.float64(offset[po, r, c])
     if has_rts:  # stage 6b
         e = find(rts_ptr[p], rts_col, r, c)
         if e >= 0:

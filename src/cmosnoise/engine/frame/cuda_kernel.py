@@ -293,11 +293,6 @@ class DevicePlan:
             if p.window is not None:
                 raise CmosnoiseError(f"a plan of the window {p.window} (a tile) is made by the CPU kernel; the GPU "
                                      "takes a whole sensor's exposure and makes crops of it")
-            if p.row_flicker is not None or p.col_flicker is not None or p.pixel_flicker is not None:
-                raise CmosnoiseError("row_noise.spectrum / column_noise.temporal.spectrum = one_over_f, "
-                                     "source_follower.flicker.spectrum = one_over_f without CDS, or "
-                                     "column_noise.alternating.temporal_sigma_e: offsets that change from frame to "
-                                     "frame, which the GPU's batches do not take yet; use device cpu (the same bits)")
             if tuple(p.shape) != shape or (p.adc is None) != (plans[0].adc is None):
                 raise CmosnoiseError(f"plans in one batch: plan {q} is {p.shape} with the ADC "
                                      f"{'off' if p.adc is None else 'on'}, plan 0 {shape} with it "
@@ -415,6 +410,32 @@ class DevicePlan:
             cell_offsets=self.cell_offsets, keys=self.keys, seqs=self.seqs, nl=self.nl, offset=self.offset,
             read_table=self.read_table, rts_ptr=self.rts_ptr, rts_col=self.rts_col, trap_groups=self.d_trap_groups,
             blink_ptr=self.blink_ptr, blink_col=self.blink_col, blink_start=self.d_blink_start)
+
+    def _offsets(self, frames: np.ndarray, which: np.ndarray, stream=0):
+        """What a launch's items read of the row, column and pixel offsets: :attr:`shared` and each item's plan,
+        or, where a plan's offsets change from frame to frame (1/f row, column or pixel noise, the column banks'
+        temporal offsets), each item's own offsets of its frame: the plan's ``row_offsets(frame)``,
+        ``col_offsets(frame)`` and ``offsets(frame)``, made on the host by the exact bridges every copy of the
+        chain uses (so the same bits as the CPU kernel), and uploaded for the launch, one row an item."""
+        plans = [self.plans[q] for q in which]
+        if not any(p.row_flicker is not None or p.col_flicker is not None or p.pixel_flicker is not None
+                   for p in plans):
+            return self.shared, self.k.cuda.to_device(which, stream=stream)
+        rows, cols = self.shape
+
+        def each(name, method, dtype, size, always=False):  # zeros where a plan has none (as in __init__)
+            if not always and all(getattr(p, name) is None for p in plans):
+                return self.k.cuda.to_device(np.zeros((1,) * (len(size) + 1), dtype), stream=stream)
+            out = np.zeros((len(plans), *size), dtype)
+            for b, (p, k) in enumerate(zip(plans, frames)):
+                if getattr(p, name) is not None:
+                    out[b] = getattr(p, method)(int(k))
+            return self.k.cuda.to_device(out, stream=stream)
+
+        shared = self.shared._replace(row_offset=each("row_offset_e", "row_offsets", np.float64, (rows,), True),
+                                      col_offset=each("col_offset_e", "col_offsets", np.float64, (cols,)),
+                                      offset=each("offset_e", "offsets", np.float32, (rows, cols)))
+        return shared, self.k.cuda.to_device(np.arange(len(plans), dtype=np.int64), stream=stream)
 
     @staticmethod
     def _padded(tables: list) -> np.ndarray:
@@ -541,10 +562,10 @@ class DevicePlan:
         groups, blinks = most(self.trap_groups), most(self.blink_start)
         rts_sum = cuda.device_array((n, groups) if has_traps else (1, 1), np.float64, stream=stream)
         blink_extra = cuda.device_array((n, blinks) if has_blinkers else (1, 1), np.float64, stream=stream)
-        shared = self.shared
+        shared, offsets_of = self._offsets(frames, which, stream)
         items = cuda_table.Items(frames=d_frames, which=d_which, corners=d_corners, h=h, w=w, cols=cols, flags=flags,
                                  rowval=rowval, colterm=colterm, cell_black=cell_black, rts_sum=rts_sum,
-                                 blink_extra=blink_extra)
+                                 blink_extra=blink_extra, offsets_of=offsets_of)
         with strict_arithmetic():
             span = h + w + 4
             self.k.lines[((span + LINES - 1) // LINES, n), (LINES, 1), stream](shared, items)

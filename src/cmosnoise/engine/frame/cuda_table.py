@@ -44,10 +44,12 @@ Shared = collections.namedtuple("Shared", (
 #: items' ``h`` x ``w`` of a frame ``cols`` wide; the plans' ``flags`` (P, len(SWITCHES)) for this launch; the
 #: items' row terms ``rowval`` (B, h), column terms ``colterm`` (B, w) and ``cell_black`` (B, 4) that the line
 #: kernel makes for the pixel kernel; the trapped pixels' sums ``rts_sum`` and the blinking pixels'
-#: ``blink_extra`` (B, ...), made by the telegraph kernels.
+#: ``blink_extra`` (B, ...), made by the telegraph kernels; ``offsets_of`` (B,): the row of ``Shared``'s
+#: ``row_offset``, ``col_offset`` and ``offset`` each item reads (its plan's, or, where offsets change from frame
+#: to frame, the item's own row of a launch's arrays: :meth:`.cuda_kernel.DevicePlan.render`).
 Items = collections.namedtuple("Items", (
     "frames", "which", "corners", "h", "w", "cols", "flags", "rowval", "colterm", "cell_black", "rts_sum",
-    "blink_extra"))
+    "blink_extra", "offsets_of"))
 
 
 def row(columns: tuple[str, ...], values: dict) -> list:
