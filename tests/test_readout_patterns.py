@@ -72,13 +72,17 @@ def test_the_banks_offsets_per_frame_have_their_variance_and_every_copy_of_the_c
     assert abs(measured - sum(parts.values())) < 5 * sigma**2 * math.sqrt(2 / (frames - 1))
 
 
-def test_the_gpu_refuses_the_banks_offsets_per_frame_in_one_line():
-    from cmosnoise.engine.frame import cuda_kernel
-    from cmosnoise.errors import CmosnoiseError
-
-    plan = Sensor(_config(_alternating(0.0, 1.0)), seed=1).expose("flat:0.0").plan()
-    with pytest.raises(CmosnoiseError, match="alternating.*device cpu"):
-        cuda_kernel.DevicePlan(plan)
+@pytest.mark.gpu
+def test_the_gpu_gives_the_cpus_bits_with_the_banks_offsets_per_frame():
+    """The banks' offsets of each frame are made on the host and uploaded with the batch (the GPU refused them
+    before #76's last step): frames far apart, the CPU kernel's bits (numba's CUDA simulator without a GPU)."""
+    cfg = _config(_alternating(0.5, 1.0), 8, 12)  # small: the simulator's time is its pixels'
+    cpu = Sensor(cfg, seed=1).expose("flat:0.2")
+    gpu = Sensor(cfg, seed=1, device="cuda").expose("flat:0.2")
+    frames = [0, 5, 1_000_000]
+    raw, _ = gpu.frames_on_device(frames)
+    for b, k in enumerate(frames):
+        np.testing.assert_array_equal(raw.copy_to_host()[b], cpu.frame(k), err_msg=f"frame {k}")
 
 
 # ------------------------------------------------------------------ amplifier glow
