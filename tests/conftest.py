@@ -71,23 +71,15 @@ import cmosnoise.engine.jit  # noqa: E402, F401
 from cmosnoise import load_config  # noqa: E402
 from cmosnoise.model.spec import resolve  # noqa: E402
 
-#: the longest files, seconds of the full suite (their tests' durations summed, Intel Xeon 2 cores, #75): handed
-#: to the workers longest first, so that the suite does not end with one worker running a long file while the
-#: other idles (it ended with test_sweep.py's three minutes, alphabetically late). Others follow alphabetically.
-LONG_FILES = {"test_cuda.py": 355, "test_docs.py": 234, "test_compiling.py": 196, "test_engine.py": 192,
-              "test_sweep.py": 186, "test_benchmarks.py": 172, "test_fit_stages.py": 160,
-              "test_readme_numbers.py": 146, "test_flicker_in_time.py": 101, "test_foreign_emva.py": 92,
-              "test_fit_telegraph.py": 84, "test_fit_provenance.py": 82, "test_fit.py": 79, "test_quality.py": 77,
-              "test_characterize.py": 74, "test_reliability.py": 67, "test_explore.py": 67,
-              "test_hostile_round4.py": 55}
+#: the longest file (its fit round trip is some three minutes): started at once, on the other worker
+LONGEST_FILE = "test_fit_stages.py"
 
 
 def pytest_collection_modifyitems(items):
     """The first-run test before every other (it needs the session's compile cache still empty), then the
-    files longest first (:data:`LONG_FILES`). xdist hands files to its two workers in this order as each
-    runs short of work (pyproject's ``--dist loadfile --no-loadscope-reorder``): the first-run test's file to
-    one, the longest other file to the other, and the short files fill in at the end."""
-    items.sort(key=lambda item: (item.name != FIRST_RUN_TEST, -LONG_FILES.get(item.path.name, 0)))  # stable
+    longest file. xdist hands files to its two workers in this order (pyproject's ``--no-loadscope-reorder``):
+    the first-run test's file to one, the longest file to the other."""
+    items.sort(key=lambda item: (item.name != FIRST_RUN_TEST, item.path.name != LONGEST_FILE))  # stable
     for item in items:  # a GPU test is slow too: `-m "not slow"` leaves the CUDA simulator's tests out
         if item.get_closest_marker("gpu") and not item.get_closest_marker("slow"):
             item.add_marker(pytest.mark.slow)
