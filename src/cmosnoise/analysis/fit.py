@@ -450,6 +450,14 @@ def fit_dataset(ds, base, temperature_c: float | None = None, threshold_e_per_s:
             "_maps": dark_maps}
 
 
+def _stack_period(st, base) -> float:
+    """Seconds from one frame of the stack ``st`` to the next: the manifest's frame period, else the base's timing
+    (its frame rate, or the exposure: frames back to back)."""
+    from ..model.stages.random_telegraph import frame_period_s
+
+    return st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s)
+
+
 def _stack_shares(st, base, spectra: dict) -> dict:
     """What the stack ``st`` sees of the row noise and the column amplifiers where their spectra are 1/f, at the
     default corners of the stack's frame rate (the manifest's frame period, else the base's timing), against
@@ -458,10 +466,9 @@ def _stack_shares(st, base, spectra: dict) -> dict:
     mean image), ``columns`` (a column's variance over the frames), ``column_mean`` (a column's mean over the
     frames); 1 (white's) where the spectrum is white."""
     from ..model import one_over_f
-    from ..model.stages.random_telegraph import frame_period_s
 
     rows = st.shape[0]
-    period = st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s)
+    period = _stack_period(st, base)
     out = {"rows": 1.0, "frame_ratio": 1.0 / (rows - 1), "row_mean": 1.0, "columns": 1.0, "column_mean": 1.0}
     if spectra.get("rows_in_readout_order", {}).get("verdict") == "one_over_f":
         spectrum = one_over_f.lorentzians(*one_over_f.row_corners(1.0 / period, rows))
@@ -479,9 +486,8 @@ def _column_dof(st, base, part: float, white: float) -> float:
     """The degrees of freedom of a column's variance over the stack's frames where the column amplifiers' noise is
     1/f at the default corners (:func:`.noise_spectrum.variance_dof_frames`)."""
     from ..model import one_over_f
-    from ..model.stages.random_telegraph import frame_period_s
 
-    period = st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s)
+    period = _stack_period(st, base)
     spectrum = one_over_f.lorentzians(*one_over_f.column_corners(1.0 / period))
     return noise_spectrum.variance_dof_frames(spectrum, st.n, period, part, white)
 
@@ -494,9 +500,8 @@ def _spectra(ds, base) -> dict:
     if not darks:
         return {}
     st = max(darks, key=lambda d: (d.n, -d.exposure_s))
-    from ..model.stages.random_telegraph import frame_period_s
 
-    rate = 1.0 / (st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s))
+    rate = 1.0 / _stack_period(st, base)
     out = {}
 
     def pixels():  # the middle rows that hold MAX_PIXELS pixels, read again, less their rows' and columns' means
@@ -922,12 +927,11 @@ def _pixel_flicker_seen(st, base, spectra: dict) -> float:
     the pixels' spectrum over frames is not 1/f. At the corners the configuration is given
     (:func:`_fitted_corners`, else the defaults of the stack's rate)."""
     from ..model import one_over_f
-    from ..model.stages.random_telegraph import frame_period_s
 
     found = spectra.get("pixels_over_frames", {})
     if found.get("verdict") != "one_over_f":
         return 1.0
-    period = st.frame_period_s or frame_period_s(base.sensor.frame_rate_hz, st.exposure_s)
+    period = _stack_period(st, base)
     corners = _fitted_corners(found, one_over_f.pixel_corners) or one_over_f.pixel_corners(1.0 / period)
     return noise_spectrum.seen_share_frames(one_over_f.lorentzians(*corners), st.n, period)
 
