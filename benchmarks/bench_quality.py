@@ -11,7 +11,7 @@ first compile (2 cores); each metric on a 12 MP image under a second. Each time 
   S-CIELAB, CPIQ) and both bandings of a 12 MP grey, the e-SFR of a 12 MP edge and of its raw green pixels, the
   colour error of a 12 MP ColorChecker mosaic (its patch means and the fit).
 
-    python benchmarks/bench_quality.py [--megapixels 12] [--repeats 3] [--json FILE]
+    python benchmarks/bench_quality.py [--megapixels 12] [--repeats 3] [--chart-frames 8] [--json FILE]
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--megapixels", type=float, default=12.0)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--chart-frames", type=int, default=8,
+                    help="frames of each chart in the quality.measure row (the command's 8; the suite's smoke run 2)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
@@ -49,8 +51,8 @@ def main(argv=None) -> int:
     lux = [1, 3, 10, 30, 100, 1000]
     quality.measure(cfg, lux[:1], frames=2)  # the compiles and caches of the first call
     rows = [{"label": "one frame of the sensor (reference)", "s": frame_s}]
-    rows.append({"label": f"quality.measure, {len(lux)} illuminances, 8 frames of each chart",
-                 "s": fastest(lambda: quality.measure(cfg, lux, frames=8), args.repeats)})
+    rows.append({"label": f"quality.measure, {len(lux)} illuminances, {args.chart_frames} frames of each chart",
+                 "s": fastest(lambda: quality.measure(cfg, lux, frames=args.chart_frames), args.repeats)})
     rng = np.random.default_rng(0)
     grey = np.clip(0.18 + 0.01 * rng.standard_normal((height, width)), 0, None)
     rows.append({"label": "visual luminance noise of a whole grey",

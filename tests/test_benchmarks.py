@@ -24,7 +24,7 @@ SMALLEST = {
     "bench_telegraph.py": ["--frames", "2", "--repeats", "1"],
     "bench_run.py": ["--megapixels", "1", "--repeats", "1"],
     "bench_optics.py": ["--megapixels", "0.1", "--repeats", "1", "--memory-megapixels", "0.1"],
-    "bench_quality.py": ["--megapixels", "0.1", "--repeats", "1"],
+    "bench_quality.py": ["--megapixels", "0.1", "--repeats", "1", "--chart-frames", "2"],
     "bench_setup.py": ["--sizes", "1", "--repeats", "1"],
     "bench_sweep.py": ["--instances", "2"],
     "bias_source_follower.py": ["--fits", "2", "--frames", "8"],
