@@ -18,10 +18,9 @@ from pathlib import Path
 # a clean clone's first run has anyway). Set before anything imports numba. The suite runs in two pytest-xdist
 # workers (pyproject's addopts), which start after this file has run in the controlling process and so inherit the
 # cache through the environment (CMOSNOISE_TEST_CACHE marks it as the session's, not a developer's own
-# NUMBA_CACHE_DIR, which is kept). numba writes each entry whole, so the workers share it. The test of a whole
-# background build (slow, moved to the front below, on the other worker than the test of a first run) builds into
-# the session's cache where that is still empty, as a user's `cmosnoise compile` does; else into an empty cache of
-# its own. The test of a first run compiles into an empty cache of its own.
+# NUMBA_CACHE_DIR, which is kept). numba writes each entry whole, so the workers share it. The test of a first run
+# (slow, moved to the front below) compiles into the session's cache where that is still empty, as a user's first
+# run does; else into an empty cache of its own.
 SESSION_CACHE = None
 if os.environ.get("CMOSNOISE_TEST_CACHE") and os.environ.get("NUMBA_CACHE_DIR") == os.environ["CMOSNOISE_TEST_CACHE"]:
     SESSION_CACHE = os.environ["CMOSNOISE_TEST_CACHE"]  # an xdist worker: the controller's
@@ -37,10 +36,6 @@ elif not os.environ.get("NUMBA_CACHE_DIR"):
         os.makedirs(SESSION_CACHE, exist_ok=True)
     os.environ["NUMBA_CACHE_DIR"] = os.environ["CMOSNOISE_TEST_CACHE"] = SESSION_CACHE
 FIRST_RUN_TEST = "test_the_first_run_says_once_that_it_compiles_and_later_runs_do_not"
-#: the test of a whole background build (tests/test_compiling.py): where the session's cache is still empty it
-#: builds into it, so that the rest of the suite loads every loop of the build's warm-ups instead of compiling them
-#: on demand, and on both workers at once
-BUILD_TEST = "test_a_process_takes_the_loops_once_the_background_compile_has_built_them"
 # The tests' command lines compile in their own process, as the library does (the console script's default is a
 # background compile while the NumPy specification runs: engine/jit.py, compiled), so that no test leaves a
 # compiling process behind; the tests of the background compile set it themselves and stop what they start.
@@ -76,19 +71,15 @@ import cmosnoise.engine.jit  # noqa: E402, F401
 from cmosnoise import load_config  # noqa: E402
 from cmosnoise.model.spec import resolve  # noqa: E402
 
-#: the longest file (its fit round trip is some three minutes): third, once the frame kernel is in the cache
+#: the longest file (its fit round trip is some three minutes): started at once, on the other worker
 LONGEST_FILE = "test_fit_stages.py"
 
 
 def pytest_collection_modifyitems(items):
-    """The first-run test before every other, then the whole build (it needs the session's compile cache still
-    empty), then the longest file. xdist hands files to its two workers in this order (pyproject's
-    ``--no-loadscope-reorder``): the first-run test's file to one, the build's to the other, so that the two
-    compiles of an empty cache run side by side; the longest file, which compiles the frame kernel's variants
-    of the fit, then loads them. (It started beside the first-run test once, compiling the frame kernel while
-    that test compiled it too: 168 s of CI's clean clone against 57 s on a warm cache.)"""
-    items.sort(key=lambda item: (item.name != FIRST_RUN_TEST, item.name != BUILD_TEST,
-                                 item.path.name != LONGEST_FILE))  # stable
+    """The first-run test before every other (it needs the session's compile cache still empty), then the
+    longest file. xdist hands files to its two workers in this order (pyproject's ``--no-loadscope-reorder``):
+    the first-run test's file to one, the longest file to the other."""
+    items.sort(key=lambda item: (item.name != FIRST_RUN_TEST, item.path.name != LONGEST_FILE))  # stable
     for item in items:  # a GPU test is slow too: `-m "not slow"` leaves the CUDA simulator's tests out
         if item.get_closest_marker("gpu") and not item.get_closest_marker("slow"):
             item.add_marker(pytest.mark.slow)

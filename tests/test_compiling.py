@@ -103,18 +103,10 @@ def test_a_process_takes_the_loops_once_the_background_compile_has_built_them(tm
     """The background compile runs to its end (`cmosnoise compile --background`, every warm-up): a process that
     found the frame kernel missing then finds it in the cache and loads it, without compiling (numba counts no
     cache miss), mid-run, as a long first run does; a later command line run says nothing of compiling and its
-    frame comes from the kernel. The cache is the session's where it is still empty (conftest.py runs this test
-    first on its worker), so that the rest of the suite loads what this built, and this process (which keys
-    numba's cache as its children do: conftest imported engine.jit first) loads it too; else one of its own."""
+    frame comes from the kernel."""
     import json
 
-    from conftest import SESSION_CACHE
-
     env = _env(tmp_path)
-    shared = SESSION_CACHE is not None and os.environ.get("NUMBA_CACHE_DIR") == SESSION_CACHE and not [
-        f for _, _, files in os.walk(SESSION_CACHE) for f in files]  # (importing makes empty folders)
-    if shared:
-        env["NUMBA_CACHE_DIR"] = SESSION_CACHE
     probe = ("from cmosnoise.engine import jit\nfrom cmosnoise.engine.frame import kernel\n"
              "from cmosnoise import Sensor, load_config\n"
              "first = jit.compiled('the frame kernel', kernel._render, say=False)\n"
@@ -139,11 +131,6 @@ def test_a_process_takes_the_loops_once_the_background_compile_has_built_them(tm
     assert "compil" not in after.stderr and "NumPy" not in after.stderr, after.stderr
     stages = json.loads((tmp_path / "a" / "summary.json").read_text())["timings_s"]["stages"]
     assert "frame_kernel" in stages and "frame_numpy" not in stages, stages
-    if shared:
-        from cmosnoise.engine.frame import kernel
-
-        assert kernel._render.signatures or kernel.preload(), \
-            "this process keys numba's cache unlike its children: the suite would compile twice"
 
 
 def test_an_unknown_compile_mode_is_refused_in_one_line(monkeypatch):
