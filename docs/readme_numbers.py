@@ -957,9 +957,10 @@ def render_run_speed(d: dict) -> str:
     return "\n".join(lines)
 
 
-def compute_quality_hot() -> dict:
+def compute_quality_hot(instances: int = 3) -> dict:
     """`cmosnoise quality`'s comparison of the default sensor at 25 C and at 65 C: 1, 10 and 100 lux,
-    8 frames, the default charts, 3 paired sensor instances."""
+    8 frames, the default charts, ``instances`` paired sensor instances (seeds 0, 1, ...; the table shows the
+    first instance's values and the differences over all). With one instance there are no differences."""
     from cmosnoise import load_config
     from cmosnoise.analysis import quality
     from cmosnoise.app.quality import difference
@@ -967,14 +968,16 @@ def compute_quality_hot() -> dict:
     a_cfg = load_config()
     b_cfg = load_config(overrides=["sensor.temperature_c=65"])
     lux = [1.0, 10.0, 100.0]
-    a = [quality.measure(a_cfg, lux, frames=8, seed=s) for s in range(3)]
-    b = [quality.measure(b_cfg, lux, frames=8, seed=s) for s in range(3)]
-    d = difference(a, b)
+    a = [quality.measure(a_cfg, lux, frames=8, seed=s) for s in range(instances)]
+    b = [quality.measure(b_cfg, lux, frames=8, seed=s) for s in range(instances)]
     keys = ["snr_green", "visual_noise_l", "visual_noise_iso15739", "visual_noise_scielab", "banding_columns",
             "banding_rows", "mtf50"]
-    return {"lux": lux, "a": {k: a[0]["metrics"][k] for k in keys}, "b": {k: b[0]["metrics"][k] for k in keys},
-            "diff": {k: d[k] for k in keys}, "snr10": [a[0]["snr10_lux"], b[0]["snr10_lux"]],
-            "threshold_l": a[0]["visual_threshold_l"]}
+    out = {"lux": lux, "a": {k: a[0]["metrics"][k] for k in keys}, "b": {k: b[0]["metrics"][k] for k in keys},
+           "snr10": [a[0]["snr10_lux"], b[0]["snr10_lux"]], "threshold_l": a[0]["visual_threshold_l"]}
+    if instances > 1:
+        d = difference(a, b)
+        out["diff"] = {k: d[k] for k in keys}
+    return out
 
 
 def render_quality_hot(d: dict) -> str:
