@@ -103,3 +103,54 @@ def test_the_yaml_made_by_sections_is_the_whole_documents():
                           width=100)
         assert c.to_yaml() == whole
         assert ds.load_sample_config(c.to_yaml()) == c
+
+
+def _whole_validation(config, updates):
+    """merge_updates as the whole merged data validated (what it was before it validated by section)."""
+    from cmosnoise.config.loading import config_values, deep_merge, validate_data
+
+    return validate_data(deep_merge(config_values(config), updates))
+
+
+def _gain_updates(row) -> dict:
+    updates: dict = {"adc": {"gain_dn_per_e": row.k_dn_per_e, "full_scale_e": None}}
+    for dotted, value in row.set.items():
+        node = updates
+        *parents, leaf = dotted.split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    return updates
+
+
+def test_merge_updates_by_section_is_the_whole_validation():
+    """merge_updates validates only the sections an update names (a data set's sample and a gain row change a
+    few of 25): over every preset, a data set's sample keys, single sections, every gain row, and updates that
+    must fail, it gives the configuration the whole merged data's validation gives (values, set keys at every
+    depth, YAML) and the same error."""
+    from cmosnoise.config.loading import config_values, merge_updates
+
+    compared = 0
+    for name in preset_names():
+        base = load_config(preset=name)
+        updates = [{"sensor": {"temperature_c": 41.5, "width": 64, "height": 48}, "seed": 7,
+                    "run": {"frames": 1, "first_frame": 0}},
+                   {"scene": {"source": "zoneplate", "window": [2, 4]}, "exposure": {"integration_time_s": 0.01}},
+                   {"prnu": {"sigma_pct": 2}}, {"dark_current": {"white_threshold_e_per_s": 50.0}},
+                   {"gain_table": []} if not base.gain_table else {"description": "changed"}]
+        updates += [_gain_updates(row) for row in base.gain_table]
+        for u in updates:
+            fast, whole = merge_updates(base, u), _whole_validation(base, u)
+            assert fast == whole, (name, u)
+            assert config_values(fast) == config_values(whole), (name, u)  # the set keys, at every depth
+            assert fast.to_yaml() == whole.to_yaml(), (name, u)
+            compared += 1
+    assert compared > 60
+    base = load_config(preset="sony-imx900")
+    for bad in ({"adc": {"black_level_dn": 1e9}}, {"sensor": {"no_such_key": 1}}, {"seed": True},
+                {"no_such_section": {}}, {"sensor": {"iso": 123456}}):
+        with pytest.raises(CmosnoiseError) as fast:
+            merge_updates(base, bad)
+        with pytest.raises(CmosnoiseError) as whole:
+            _whole_validation(base, bad)
+        assert str(fast.value) == str(whole.value)
