@@ -115,6 +115,37 @@ def test_what_a_process_shares_between_samples_changes_no_setting():
         assert a.columns == b.columns and a.config == b.config
     assert 1 < len(shared.saturations) < 24  # named cameras' gains shared, each virtual camera its own
 
+def test_a_sample_merged_into_its_cameras_template_is_the_whole_validation(monkeypatch):
+    """A sample's configuration is its camera's (with the overrides) validated once per process, the sample's keys
+    merged in (Sources.template, sample_config): over every named camera and virtual family, gains, ranges of
+    temperature and exposure, an override beside the sample's keys and one that sets a key of theirs (which must
+    win), each sample's configuration and columns are what the whole validation of its merged data gives."""
+    from cmosnoise.config import virtual_cameras
+    from cmosnoise.config.loading import config_values
+
+    cameras = ("led", "sony-imx900", "sony-a7s2", "sony-a7s2@iso=1600", "zwo-asi294mm", "sony-imx571",
+               *virtual_cameras.FAMILIES)
+    recipes = [ds.Recipe(samples=40, crop=(32, 48), cameras=cameras, seed=9, temperature_c=(20.0, 60.0),
+                         integration_time_s=(0.001, 0.1)),
+               ds.Recipe(samples=40, crop=(32, 32), cameras=cameras, seed=2, overrides=("prnu.sigma_pct=1.5",)),
+               ds.Recipe(samples=40, crop=(32, 32), cameras=cameras, seed=3, light_e=(20.0, 2000.0),
+                         overrides=("sensor.temperature_c=47", "row_noise.enabled=true"))]
+    made = {}
+    for r, recipe in enumerate(recipes):
+        shared = ds.Sources()
+        made[r] = [ds.settings(recipe, i, shared) for i in range(30)]
+        assert sum(t is not None for t in shared.templates.values()) >= 1
+    assert all(st.config.sensor.temperature_c == 47 for st in made[2])  # the override wins over the sample's
+    monkeypatch.setattr(ds.Sources, "template", lambda self, *args: None)  # every sample wholly validated
+    for r, recipe in enumerate(recipes):
+        whole = ds.Sources()
+        for i, fast in enumerate(made[r]):
+            slow = ds.settings(recipe, i, whole)
+            assert fast.columns == slow.columns, (r, i)
+            assert fast.config == slow.config and config_values(fast.config) == config_values(slow.config), (r, i)
+            assert fast.config.to_yaml() == slow.config.to_yaml(), (r, i)
+
+
 def test_built_in_scenes_are_drawn_at_a_crop_larger_than_their_size():
     """A crop taller than BUILTIN_SIZE (a 5 MP crop is 1944 x 2592) draws the built-in at the crop's side: the
     sample is made (no "the source is 1024 x 1024" error), its corner is on the scene, and its config alone

@@ -56,7 +56,7 @@ from .. import inputs
 from .._version import __version__
 from ..analysis import ground_truth
 from ..config import load_config, virtual_cameras
-from ..config.loading import config_data, deep_merge, preset_data, preset_names
+from ..config.loading import config_data, deep_merge, merge_updates, parse_override, preset_data, preset_names
 from ..engine.samplers import SCHEME_VERSION
 from ..errors import CmosnoiseError, check_terminated, keeping, note_kept
 from ..io.output import atomic_file, resumable_mode
@@ -387,6 +387,8 @@ class Sources:
         A raw photograph's CFA pattern, read once (:meth:`check_pattern`).
     saturations : dict
         A camera's saturation at a gain, worked out once (:meth:`saturation_e`).
+    templates : dict
+        A camera's configuration with the recipe's overrides, validated once (:meth:`template`).
     """
 
     images: dict = field(default_factory=dict)
@@ -394,6 +396,7 @@ class Sources:
     preset_texts: dict = field(default_factory=dict)
     patterns: dict = field(default_factory=dict)
     saturations: dict = field(default_factory=dict)
+    templates: dict = field(default_factory=dict)
 
     def saturation_e(self, key: tuple, config) -> float:
         """:func:`_saturation_e` of ``config``, worked out once per ``key``: a camera, its gain row and the recipe's
@@ -402,6 +405,17 @@ class Sources:
         if key not in self.saturations:
             self.saturations[key] = _saturation_e(config)
         return self.saturations[key]
+
+    def template(self, name: str | None, files: tuple = (), overrides: tuple = ()):
+        """A camera's configuration with the recipe's ``overrides``, validated once (:func:`sample_config` merges
+        each sample into it); None where it does not validate without a sample's keys."""
+        key = (name, files, tuple(overrides))
+        if key not in self.templates:
+            try:
+                self.templates[key] = load_config(extra=self.preset_data(name, files), overrides=list(overrides))
+            except CmosnoiseError:
+                self.templates[key] = None
+        return self.templates[key]
 
     def preset(self, name: str | None, files: tuple = ()):
         """A preset's (or a camera file's: ``files``, :attr:`Recipe.camera_files`) configuration, loaded once."""
@@ -527,9 +541,7 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
     }
     merged = deep_merge(updates, sample)
     try:
-        # the preset's data merged under the sample's, as load_config(preset=...) does, without reading the file
-        config = load_config(extra=deep_merge(sources.preset_data(preset, recipe.camera_files), merged),
-                             overrides=list(recipe.overrides))
+        config = sample_config(recipe, sources, preset, merged)
     except CmosnoiseError as exc:
         raise CmosnoiseError(f"sample {index} ({camera}): {exc}") from None
     if config.light.enabled:  # a data set's light is its own axis (--light, e- at the white): not lux as well
@@ -554,6 +566,56 @@ def settings(recipe: Recipe, index: int, sources: Sources | None = None) -> Samp
                "integration_time_s": t, "temperature_c": temp, "seed": seed,
                "source": source, "window_row": row, "window_col": col}
     return SampleSettings(index, config, columns)
+
+
+def sample_config(recipe: Recipe, sources: Sources, preset: str | None, merged: dict):
+    """A sample's configuration: the camera's data (``preset``: a preset or camera file; None: the defaults) with
+    the sample's ``merged`` over it and the recipe's overrides last, validated.
+
+    What ``load_config(extra=preset's data + merged, overrides=...)`` gives,
+    made cheaply: the camera's configuration with the overrides is validated
+    once per process (:meth:`Sources.template`) and the sample's keys are
+    merged into it by :func:`~cmosnoise.config.merge_updates`, which
+    validates only the sections they name. An override wins over the
+    sample's keys; where one sets a key the sample sets too (or the camera
+    alone does not validate) the whole validation is done, as it is to say
+    an error (``tests/test_dataset.py`` holds the two equal).
+
+    Parameters
+    ----------
+    recipe : Recipe
+    sources : Sources
+    preset : str or None
+    merged : dict
+        The sample's keys (a virtual camera's drawn parameters, a gain, its crop, seed, exposure), as data.
+
+    Returns
+    -------
+    Config
+    """
+    template = sources.template(preset, recipe.camera_files, recipe.overrides)
+    if template is not None and not _overridden(recipe.overrides, merged):
+        try:
+            return merge_updates(template, merged)
+        except CmosnoiseError:
+            pass  # the whole validation below says it as a configuration file would
+    # the preset's data merged under the sample's, as load_config(preset=...) does, without reading the file
+    return load_config(extra=deep_merge(sources.preset_data(preset, recipe.camera_files), merged),
+                       overrides=list(recipe.overrides))
+
+
+def _overridden(overrides: tuple, merged: dict) -> bool:
+    """Whether an override sets a key of ``merged`` (one path the start of the other): it then wins over it."""
+    def leaves(d: dict, at: tuple) -> Iterator[tuple]:
+        for k, v in d.items():
+            yield from leaves(v, (*at, k)) if isinstance(v, dict) and v else [(*at, k)]
+
+    paths = list(leaves(merged, ()))
+    for text in overrides:
+        key = tuple(parse_override(text)[0])
+        if any(p[:len(key)] == key or key[:len(p)] == p for p in paths):
+            return True
+    return False
 
 
 def _saturation_e(config) -> float:
