@@ -171,7 +171,7 @@ def announce(what: str, *dispatchers) -> None:
         if what in _ANNOUNCED:
             return
         _ANNOUNCED.add(what)
-    if any(d.signatures for d in dispatchers) or any(cached_for_this_machine(d) for d in dispatchers):
+    if any(d.overloads for d in dispatchers) or any(cached_for_this_machine(d) for d in dispatchers):
         return
     logging.getLogger(__name__).info(f"compiling {what} for this machine (once; a few seconds) ...")
 
@@ -360,7 +360,7 @@ def compiled(what: str, *dispatchers, say: bool = True) -> bool:
     """
     if numba is None:
         return False
-    if any(d.signatures for d in dispatchers):
+    if any(d.overloads for d in dispatchers):  # the compiled variants, a dict (.signatures lists them: 15 us)
         return True
     if compile_mode() == "background":
         if building():  # a syscall, no file read: the NumPy specification until the build ends

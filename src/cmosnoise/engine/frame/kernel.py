@@ -738,7 +738,7 @@ def _needs_compile() -> int:
     nothing is cached for this machine and vector width."""
     if numba is None:
         return -1
-    held = len(_render.signatures)
+    held = len(_render.overloads)  # the compiled variants (.signatures lists them: 15 us a call)
     if not held and not jit.cached_for_this_machine(_render):
         _logger.info(f"compiling the frame kernel for this machine ({jit.vectors()}; once; about half a minute on idle cores, up to two minutes on a busy machine) ...")
     return held
@@ -763,7 +763,7 @@ def preload() -> bool:
     a parallel region from this thread, and the OpenMP layer would keep a
     second team of threads for it beside the main thread's.
     """
-    if numba is None or _render.signatures:
+    if numba is None or _render.overloads:
         return False
     flags = np.zeros(N_SWITCHES, np.bool_)
     inputs = Inputs(noisy=_DUMMY2, exact=_DUMMY2, flags=flags, normal_above=0.0, full_well=1.0, sf=_DUMMY2,
@@ -866,7 +866,7 @@ def render(plan: FramePlan, frame: int, region=None, electrons: bool = False, ti
             blink_col=blink_col, blink_mean=blink_mean)
         _render(inputs, Where(int(frame), int(plan.sequence), r0, r1, c0, c1, cols, ar0, ac0), out_dn, out_e)
     elapsed = time.perf_counter() - t0
-    if len(_render.signatures) > held and elapsed > 2.0:  # a cache load takes well under a second: a compile
+    if len(_render.overloads) > held and elapsed > 2.0:  # a cache load takes well under a second: a compile
         what = "the frame kernel" if held == 0 else "a variant of the frame kernel for these switches' types"
         _logger.info(f"compiled {what} in {elapsed:.0f} s ({jit.vectors()}); later runs reuse it")
         if timings is not None:
