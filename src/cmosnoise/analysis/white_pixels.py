@@ -64,7 +64,8 @@ def couplet_pairs(mask: np.ndarray, pattern: str) -> np.ndarray:
         Each couplet's two pixels, ((r1, c1), (r2, c2)).
     """
     mask = np.asarray(mask, dtype=bool)
-    return pairs_at(*np.nonzero(mask), mask.shape, pattern)
+    r, c = np.nonzero(mask)
+    return _pairs(r, c, mask.shape, pattern, lambda rr, cc: mask[rr, cc])
 
 
 def pairs_at(r: np.ndarray, c: np.ndarray, shape: tuple[int, int], pattern: str) -> np.ndarray:
@@ -93,13 +94,19 @@ def pairs_at(r: np.ndarray, c: np.ndarray, shape: tuple[int, int], pattern: str)
     [[[1, 1], [1, 3]]]
     """
     r, c = np.asarray(r, np.int64), np.asarray(c, np.int64)
+    index = r * shape[1] + c
+    return _pairs(r, c, shape, pattern, lambda rr, cc: np.isin(rr * shape[1] + cc, index))
+
+
+def _pairs(r: np.ndarray, c: np.ndarray, shape: tuple[int, int], pattern: str, white) -> np.ndarray:
+    """The couplets among the white pixels at (``r``, ``c``), row-major: ``white(rows, cols)`` says which of
+    those pixels are white (a lookup in the map where it is held, a search among the coordinates where not)."""
     rows, cols = shape
-    index = r * cols + c
     pairs = []
     for (dr, dc), start in _pair_starts(np.ones((2, 2), bool), pattern):
         ok = start[r % 2, c % 2] & (r + dr < rows) & (c + dc >= 0) & (c + dc < cols)
         rs, cs = r[ok], c[ok]
-        hit = np.isin((rs + dr).astype(np.int64) * cols + cs + dc, index)
+        hit = white(rs + dr, cs + dc)
         rs, cs = rs[hit], cs[hit]
         pairs.append(np.stack([np.stack([rs, cs], -1), np.stack([rs + dr, cs + dc], -1)], 1))
     return np.concatenate(pairs) if pairs else np.zeros((0, 2, 2), int)
