@@ -2,6 +2,7 @@
 Poisson-Gaussian synthesis of the same crops, and the memory of a large set.
 
     python benchmarks/bench_dataset.py [--samples 40] [--crop 256 512] [--repeats 3] [--memory 10000]
+    python benchmarks/bench_dataset.py --phases [--crop 256]   # where a sample's time goes
 
 Every rate is samples per CPU-second (``time.process_time`` of each process
 that makes them, summed over the workers), each at its best of the repeats,
@@ -154,6 +155,50 @@ def truth_cost(recipe_json: str, n: int) -> dict:
             "max_k_dn_per_e": float(gains[int(r.argmax())])}
 
 
+def phases(recipe_json: str, n: int) -> dict:
+    """Where a sample's time goes, one thread, ms a sample over samples 1 to n (each warm): its settings and
+    configuration, its sensor (resolved, its maps drawn), the crop through the CFA, the exposure, the frame, the
+    truth and the configuration's YAML (the shard's column)."""
+    from cmosnoise.analysis import ground_truth
+    from cmosnoise.app import dataset as ds
+    from cmosnoise.model import scene as scene_mod
+    from cmosnoise.model.sensor import Sensor
+
+    _one_thread()
+    recipe = ds.Recipe.from_json(recipe_json)
+    sources = ds.Sources()
+    for source in recipe.sources:  # every source read before the clock (as a dataset run reads them once)
+        sources.image(source, ds.builtin_shape(recipe.crop))
+    ds.make_sample(recipe, 0, sources)  # compiled
+    spent: dict = {}
+
+    def tick(name, t0):
+        t = time.perf_counter()
+        spent[name] = spent.get(name, 0.0) + t - t0
+        return t
+
+    for i in range(1, n + 1):
+        t = time.perf_counter()
+        st = ds.settings(recipe, i, sources)
+        t = tick("settings", t)
+        c = st.config
+        sensor = Sensor(c)
+        t = tick("sensor", t)
+        size = tuple(c.scene.source_size or (ds.BUILTIN_SIZE, ds.BUILTIN_SIZE))
+        img = scene_mod.window_cfa(sources.image(c.scene.source, size), tuple(c.scene.window), sensor.shape,
+                                   sensor.cfa, sensor.spec.channel_responsivity)
+        t = tick("crop through the CFA", t)
+        shot = sensor.expose(img)
+        t = tick("exposure", t)
+        shot.frame(0)
+        t = tick("frame", t)
+        ground_truth.truth(shot, recipe.white_threshold_e_per_s)
+        t = tick("truth", t)
+        c.to_yaml()
+        tick("configuration's YAML", t)
+    return {k: v / n * 1e3 for k, v in spent.items()}
+
+
 def rate(recipe_json: str, n: int, workers: int) -> float:
     """Samples 1 to n per CPU-second, made by ``workers`` processes of one thread each (each warm first)."""
     with ProcessPoolExecutor(workers) as pool:
@@ -180,7 +225,19 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--memory", type=int, default=0, help="also the peak memory of an N-sample set and of N / 10")
     ap.add_argument("--json", help="also write the rows here (docs/readme_numbers.py section dataset_speed)")
+    ap.add_argument("--phases", action="store_true", help="only where a sample's time goes, per camera and crop")
     a = ap.parse_args()
+    if a.phases:
+        from cmosnoise.app import dataset as ds
+
+        for crop in a.crop:
+            for camera in ("led", "sony-imx900"):
+                recipe = ds.Recipe(samples=a.samples + 1, crop=(crop, crop), cameras=(camera,), seed=1).to_json()
+                with ProcessPoolExecutor(1) as pool:  # one thread, in a process of its own
+                    ms = pool.submit(phases, recipe, a.samples).result()
+                print(f"{crop} x {crop} {camera}, ms a sample: " + ", ".join(f"{k} {v:.2f}" for k, v in ms.items())
+                      + f"; total {sum(ms.values()):.2f}")
+        return
     rows = []
     from cmosnoise.app import dataset as ds
 
