@@ -112,23 +112,13 @@ def _whole_validation(config, updates):
     return validate_data(deep_merge(config_values(config), updates))
 
 
-def _gain_updates(row) -> dict:
-    updates: dict = {"adc": {"gain_dn_per_e": row.k_dn_per_e, "full_scale_e": None}}
-    for dotted, value in row.set.items():
-        node = updates
-        *parents, leaf = dotted.split(".")
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[leaf] = value
-    return updates
-
-
 def test_merge_updates_by_section_is_the_whole_validation():
     """merge_updates validates only the sections an update names (a data set's sample and a gain row change a
     few of 25): over every preset, a data set's sample keys, single sections, every gain row, and updates that
     must fail, it gives the configuration the whole merged data's validation gives (values, set keys at every
     depth, YAML) and the same error."""
     from cmosnoise.config.loading import config_values, merge_updates
+    from cmosnoise.model.physics import gain_updates
 
     compared = 0
     for name in preset_names():
@@ -138,7 +128,7 @@ def test_merge_updates_by_section_is_the_whole_validation():
                    {"scene": {"source": "zoneplate", "window": [2, 4]}, "exposure": {"integration_time_s": 0.01}},
                    {"prnu": {"sigma_pct": 2}}, {"dark_current": {"white_threshold_e_per_s": 50.0}},
                    {"gain_table": []} if not base.gain_table else {"description": "changed"}]
-        updates += [_gain_updates(row) for row in base.gain_table]
+        updates += [gain_updates(row) for row in base.gain_table]
         for u in updates:
             fast, whole = merge_updates(base, u), _whole_validation(base, u)
             assert fast == whole, (name, u)

@@ -65,6 +65,19 @@ def gain_row(config: Config):
     return next((r for r in rows if r.binning == sen.binning), rows[0])
 
 
+def gain_updates(row) -> dict:
+    """What a gain table's row sets, as a (partial) configuration: its K (``adc.gain_dn_per_e``, the full scale
+    then from it) and its ``set`` keys (dotted) as nested sections."""
+    updates: dict = {"adc": {"gain_dn_per_e": row.k_dn_per_e, "full_scale_e": None}}
+    for dotted, value in row.set.items():
+        node = updates
+        *parents, leaf = dotted.split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    return updates
+
+
 def apply_gain(config: Config) -> Config:
     """``config`` at its gain setting: the selected row's K (``adc.gain_dn_per_e``) and its ``set`` keys merged in
     (docs/model.md stage 9b); unchanged without a setting. The row wins over the keys it sets."""
@@ -73,13 +86,7 @@ def apply_gain(config: Config) -> Config:
     row = gain_row(config)
     if row is None:
         return config
-    updates: dict = {"adc": {"gain_dn_per_e": row.k_dn_per_e, "full_scale_e": None}}
-    for dotted, value in row.set.items():
-        node = updates
-        *parents, leaf = dotted.split(".")
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[leaf] = value
+    updates = gain_updates(row)
     where = (f"iso {row.iso:g}" if row.iso is not None else f"gain_db {row.gain_db:g}") + (
         f", binning {row.binning}" if row.binning is not None else "")
     try:
