@@ -19,7 +19,13 @@ this process's child on one thread (``numba.set_num_threads(1)``); two
 workers are two processes of one thread each, the samples split between
 them. The source images are read in the warm-up call that compiles the
 kernel, as ``cmosnoise dataset`` reads them once for all the shards a
-process makes.
+process makes; the warm-up also makes one sample (past the timed ones) of
+each camera and gain the timed samples use, as a data set's first samples
+do: a gain row's set-up is made once a process (its nonlinearity solved, its
+template validated) and shared by every later sample of that row. What it
+costs is printed apart (``set-up a camera and gain``: the first sample of a
+gain row against a later one's median), once a process and row: 2 x 50 ms
+over a data set of thousands of samples, but a third of a 20-sample run.
 
 Beside them, in the same run:
 
@@ -45,6 +51,7 @@ prints both peak resident sizes: flat in N when the shards stream.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import subprocess
 import sys
@@ -60,6 +67,10 @@ def _one_thread():
 
     numba.set_num_threads(1)
 
+
+#: every worker a fresh interpreter (spawned): a forked one would inherit this process's caches, filled by the
+#: reference's samples (same_crops makes the very samples timed: their gain rows solved, their sections' YAML)
+_FRESH = multiprocessing.get_context("spawn")
 
 _SOURCES: dict = {}  # this process's source images, read at its first call (as one dataset run reads them once)
 
@@ -77,6 +88,48 @@ def ours(recipe_json: str, indices: list[int]) -> tuple[int, float]:
     for i in indices:
         ds.make_sample(recipe, i, sources)
     return len(indices), time.process_time() - t0
+
+
+def _gain_key(columns: dict) -> tuple:
+    """A sample's camera and gain (its row of the gain table), as text: what its set-up is shared by."""
+    return tuple(str(columns[k]) for k in ("camera", "mode", "iso", "gain_db"))
+
+
+def warm_indices(recipe_json: str, n: int, look: int = 400) -> list[int]:
+    """One sample past samples 1 to n (n + 1 onwards) of each camera and gain those samples use but sample 0
+    does not: made before the clock, they set up each gain row as a data set's first samples do, without warming
+    the timed samples' own values."""
+    from cmosnoise.app import dataset as ds
+
+    recipe = ds.Recipe.from_json(recipe_json)
+    sources = _SOURCES.setdefault(recipe_json, ds.Sources())
+    wanted = ({_gain_key(ds.settings(recipe, i, sources).columns) for i in range(1, n + 1)}
+              - {_gain_key(ds.settings(recipe, 0, sources).columns)})
+    out = []
+    for i in range(n + 1, n + 1 + look):
+        key = _gain_key(ds.settings(recipe, i, sources).columns)
+        if key in wanted:
+            out.append(i)
+            wanted.discard(key)
+        if not wanted:
+            break
+    return out
+
+
+def warm(recipe_json: str, n: int) -> list[float]:
+    """This process warm: sample 0 (compiled, sources read), then one sample of each further camera and gain
+    of samples 1 to n (:func:`warm_indices`); the CPU-seconds of each of those."""
+    ours(recipe_json, [0])
+    return [ours(recipe_json, [i])[1] for i in warm_indices(recipe_json, n)]
+
+
+def setup_ms(recipe_json: str, n: int) -> float:
+    """What setting up a camera and gain costs, ms, in a fresh process of one thread: the first sample of each
+    gain row after sample 0's against the median of the next samples (samples 1 to n); 0 where they use no
+    other."""
+    firsts = warm(recipe_json, n)
+    later = [ours(recipe_json, [i])[1] for i in range(1, n + 1)]
+    return float(np.median(firsts) - np.median(later)) * 1e3 if firsts else 0.0
 
 
 def getframes_pairs(n: int, crop: int) -> float:
@@ -164,12 +217,9 @@ def phases(recipe_json: str, n: int) -> dict:
     from cmosnoise.model import scene as scene_mod
     from cmosnoise.model.sensor import Sensor
 
-    _one_thread()
     recipe = ds.Recipe.from_json(recipe_json)
-    sources = ds.Sources()
-    for source in recipe.sources:  # every source read before the clock (as a dataset run reads them once)
-        sources.image(source, ds.builtin_shape(recipe.crop))
-    ds.make_sample(recipe, 0, sources)  # compiled
+    warm(recipe_json, n)  # compiled, every source read, each camera and gain set up (as the rates' workers)
+    sources = _SOURCES[recipe_json]
     spent: dict = {}
 
     def tick(name, t0):
@@ -201,8 +251,10 @@ def phases(recipe_json: str, n: int) -> dict:
 
 def rate(recipe_json: str, n: int, workers: int) -> float:
     """Samples 1 to n per CPU-second, made by ``workers`` processes of one thread each (each warm first)."""
-    with ProcessPoolExecutor(workers) as pool:
-        list(pool.map(ours, [recipe_json] * workers, [[0]] * workers))  # each worker warm: compiled, sources read
+    # each worker warm as it starts: compiled, sources read, each camera and gain set up (as a data set's first
+    # samples)
+    with ProcessPoolExecutor(workers, mp_context=_FRESH, initializer=warm,
+                             initargs=(recipe_json, n)) as pool:
         done = list(pool.map(ours, [recipe_json] * workers,
                              [list(range(1 + w, n + 1, workers)) for w in range(workers)]))
     return sum(k for k, _ in done) / sum(t for _, t in done)
@@ -233,12 +285,13 @@ def main() -> None:
         for crop in a.crop:
             for camera in ("led", "sony-imx900"):
                 recipe = ds.Recipe(samples=a.samples + 1, crop=(crop, crop), cameras=(camera,), seed=1).to_json()
-                with ProcessPoolExecutor(1) as pool:  # one thread, in a process of its own
+                with ProcessPoolExecutor(1, mp_context=_FRESH) as pool:  # one thread, in a process of its own
                     ms = pool.submit(phases, recipe, a.samples).result()
                 print(f"{crop} x {crop} {camera}, ms a sample: " + ", ".join(f"{k} {v:.2f}" for k, v in ms.items())
                       + f"; total {sum(ms.values()):.2f}")
         return
-    rows = []
+    rows: list = []
+    setups: dict = {}
     from cmosnoise.app import dataset as ds
 
     print(f"samples with truth per CPU-second (best of {a.repeats}; {os.cpu_count()} cores)")
@@ -251,6 +304,11 @@ def main() -> None:
         for camera in ("led", "sony-imx900"):
             recipe = ds.Recipe(samples=a.samples + 1, crop=(crop, crop), cameras=(camera,), seed=1).to_json()
             crops = same_crops(recipe, a.samples)
+            with ProcessPoolExecutor(1, mp_context=_FRESH) as pool:  # one thread, in a fresh process of its own
+                setup = pool.submit(setup_ms, recipe, a.samples).result()
+            print(f"{f'{crop} x {crop}: {camera} set-up a camera and gain':42s}{setup:8.1f} ms, once a process "
+                  "and gain row")
+            setups[f"{crop} {camera}"] = setup
             ref = max(numpy_reference(crops) for _ in range(a.repeats))
             print(f"{f'{crop} x {crop}: NumPy on {camera} crops':42s}{ref:10.1f}{1.0:21.2f}{ref / gf:13.2f}")
             rows.append({"crop": crop, "label": f"NumPy reference, {camera}'s crops", "workers": 1,
@@ -262,7 +320,7 @@ def main() -> None:
                 rows.append({"crop": crop, "label": f"cmosnoise {camera}", "workers": workers, "per_cpu_s": r,
                              "against_numpy": r / ref, "against_getframes": r / gf})
     led = ds.Recipe(samples=a.samples + 1, crop=(a.crop[0], a.crop[0]), cameras=("led",), seed=1).to_json()
-    with ProcessPoolExecutor(1) as pool:  # one thread, in a process of its own
+    with ProcessPoolExecutor(1, mp_context=_FRESH) as pool:  # one thread, in a process of its own
         truth = pool.submit(truth_cost, led, a.samples).result()
     print(f"led truth over its frame, {a.samples} samples: median {truth['median']:.2f}, mean {truth['mean']:.2f}, "
           f"largest {truth['max']:.2f} (K {truth['max_k_dn_per_e']:.1f} DN/e-)")
@@ -277,7 +335,7 @@ def main() -> None:
         with open(a.json, "w") as fh:
             json.dump({"command": "python benchmarks/bench_dataset.py " + " ".join(sys.argv[1:-2]),
                        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
-                       "crops": a.crop, "samples": a.samples, "rows": rows, "truth_cost": truth,
+                       "crops": a.crop, "samples": a.samples, "rows": rows, "setup_ms": setups, "truth_cost": truth,
                        **({"memory": {"samples": [a.memory // 10, a.memory], "peak_mb": [small, large]}}
                           if a.memory else {})}, fh, indent=2)
 
