@@ -454,7 +454,8 @@ def _merged_by_section(config: Config, updates: dict) -> Config:
     for key, value in updates.items():
         current = getattr(config, key) if key in Config.model_fields else None
         if isinstance(current, BaseModel) and isinstance(value, dict):
-            value = type(current).model_validate(
-                deep_merge(current.model_dump(mode="json", exclude_unset=True), value))
+            section = current.model_dump(mode="json", exclude_unset=True)  # a fresh dict: merged into, not copied
+            _merge_into(section, value)
+            value = type(current).model_validate(section)
         setattr(out, key, value)
     return out
