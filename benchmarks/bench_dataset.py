@@ -123,13 +123,15 @@ def warm(recipe_json: str, n: int) -> list[float]:
     return [ours(recipe_json, [i])[1] for i in warm_indices(recipe_json, n)]
 
 
-def setup_ms(recipe_json: str, n: int) -> float:
+def setup_ms(recipe_json: str, n: int) -> float | None:
     """What setting up a camera and gain costs, ms, in a fresh process of one thread: the first sample of each
-    gain row after sample 0's against the median of the next samples (samples 1 to n); 0 where they use no
-    other."""
+    gain row after sample 0's against the median of the next samples (samples 1 to n); None where they use no
+    other (led's virtual cameras have no gain table)."""
     firsts = warm(recipe_json, n)
+    if not firsts:
+        return None
     later = [ours(recipe_json, [i])[1] for i in range(1, n + 1)]
-    return float(np.median(firsts) - np.median(later)) * 1e3 if firsts else 0.0
+    return float(np.median(firsts) - np.median(later)) * 1e3
 
 
 def getframes_pairs(n: int, crop: int) -> float:
@@ -306,8 +308,8 @@ def main() -> None:
             crops = same_crops(recipe, a.samples)
             with ProcessPoolExecutor(1, mp_context=_FRESH) as pool:  # one thread, in a fresh process of its own
                 setup = pool.submit(setup_ms, recipe, a.samples).result()
-            print(f"{f'{crop} x {crop}: {camera} set-up a camera and gain':42s}{setup:8.1f} ms, once a process "
-                  "and gain row")
+            shown = "no further gain row" if setup is None else f"{setup:8.1f} ms, once a process and gain row"
+            print(f"{f'{crop} x {crop}: {camera} set-up a camera and gain':42s}{shown}")
             setups[f"{crop} {camera}"] = setup
             ref = max(numpy_reference(crops) for _ in range(a.repeats))
             print(f"{f'{crop} x {crop}: NumPy on {camera} crops':42s}{ref:10.1f}{1.0:21.2f}{ref / gf:13.2f}")

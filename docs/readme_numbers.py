@@ -827,6 +827,15 @@ def render_dataset_speed(d: dict) -> str:
         numpy = "" if r["against_numpy"] is None else f"{r['against_numpy']:.2f}"
         lines.append(f"| {r['crop']} x {r['crop']} | {r['label']} | {r['workers']} | {r['per_cpu_s']:.1f} | {numpy} | "
                      f"{r['against_getframes']:.2f} |")
+    if d.get("setup_ms"):
+        parts = [f"{k.split(' ', 1)[1]} at {k.split(' ', 1)[0]} x {k.split(' ', 1)[0]} {v:.0f} ms"
+                 for k, v in d["setup_ms"].items() if v is not None]
+        parts += [f"{cam} none (no gain table)" for cam in dict.fromkeys(
+            k.split(" ", 1)[1] for k, v in d["setup_ms"].items() if v is None)]
+        lines += ["", "Each worker is a fresh process, warmed before the clock as a data set's first samples warm it "
+                      "(compiled, sources read, one sample of each camera and gain the timed ones use). Setting up a "
+                      "camera and gain (its nonlinearity solved, its template validated), once a process and gain "
+                      "row, not in the rates: " + ", ".join(parts) + "."]
     if "memory" in d:
         m = d["memory"]
         lines += ["", f"Peak memory of `cmosnoise dataset` (64 x 64 crops): {m['peak_mb'][0]:.0f} MB for "
