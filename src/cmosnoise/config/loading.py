@@ -441,8 +441,9 @@ def _merged_by_section(config: Config, updates: dict) -> Config:
     Each section that ``updates`` names is validated again from its set
     values with the update merged in (what the whole validation does to it),
     every other top-level value is validated as it is assigned, and the
-    configuration's own checks run on each assignment; the sections it does
-    not name are shared with ``config``, already valid. The same
+    configuration's own checks (``Config._cross_checks``, which only raise)
+    run on each assignment, or once where there is none; the sections it
+    does not name are shared with ``config``, already valid. The same
     configuration as validating the whole merged data, values and set keys
     alike (``tests/test_config.py`` holds them equal over every preset and
     gain row), at a fraction of its cost: a data set's sample and a gain
@@ -450,12 +451,20 @@ def _merged_by_section(config: Config, updates: dict) -> Config:
     validation raises, for :func:`merge_updates` to say it as the whole
     validation does.
     """
-    out = config.model_copy()  # the set keys copied; every assignment below validates and marks its key set
+    sections, others = {}, {}
     for key, value in updates.items():
         current = getattr(config, key) if key in Config.model_fields else None
         if isinstance(current, BaseModel) and isinstance(value, dict):
             section = current.model_dump(mode="json", exclude_unset=True)  # a fresh dict: merged into, not copied
             _merge_into(section, value)
-            value = type(current).model_validate(section)
+            sections[key] = type(current).model_validate(section)
+        else:
+            others[key] = value
+    # the validated sections put in at once (marked set), then every other value assigned, validated as it is
+    # (each assignment runs the configuration's own checks); with none, those checks run once, on the whole
+    out = config.model_copy(update=sections)
+    for key, value in others.items():
         setattr(out, key, value)
+    if not others:
+        out._cross_checks()
     return out
