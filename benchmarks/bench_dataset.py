@@ -6,7 +6,11 @@ Poisson-Gaussian synthesis of the same crops, and the memory of a large set.
 
 Every rate is samples per CPU-second (``time.process_time`` of each process
 that makes them, summed over the workers), each at its best of the repeats,
-all timed in one run.
+all timed in one run. The repeats are interleaved (each times every row
+once), and each ratio is the median, with its range, of the repeats' own
+ratios to the references timed in the same repeat: on a shared machine a
+rate moves by a third between runs, and a ratio of two rates measured
+minutes apart moves less.
 
 Each sample is a crop as ``cmosnoise dataset`` makes it (``make_sample``): its
 own sensor instance (set-up), one noisy frame, and its truth (expected raw,
@@ -296,31 +300,52 @@ def main() -> None:
     setups: dict = {}
     from cmosnoise.app import dataset as ds
 
-    print(f"samples with truth per CPU-second (best of {a.repeats}; {os.cpu_count()} cores)")
-    print(f"{'':42s}{'per CPU-s':>10s}{'x NumPy, same crops':>21s}{'x getframes':>13s}")
+    print(f"samples with truth per CPU-second, the best of {a.repeats} repeats; against NumPy and getframes: the "
+          f"median (and range) of each repeat's ratio to the references timed just before it; {os.cpu_count()} cores")
+    print(f"{'':42s}{'per CPU-s':>10s}{'x NumPy, same crops':>24s}{'x getframes':>24s}")
+
+    def row(crop, label, workers, rates, numpy, gf):
+        """A row: the best rate; each repeat's ratio to the references of that repeat (median, least, most)."""
+        out = {"crop": crop, "label": label, "workers": workers, "per_cpu_s": max(rates)}
+        for key, ref in (("against_numpy", numpy), ("against_getframes", gf)):
+            paired = None if ref is None else [r / q for r, q in zip(rates, ref)]
+            out[key] = None if paired is None else float(np.median(paired))
+            out[key + "_range"] = None if paired is None else [min(paired), max(paired)]
+        shown = ["" if out[k] is None else f"{out[k]:.2f} ({out[k + '_range'][0]:.2f}-{out[k + '_range'][1]:.2f})"
+                 for k in ("against_numpy", "against_getframes")]
+        named = label if label.startswith(("getframes", "NumPy")) else f"{label}, {workers} worker(s)"
+        print(f"{f'{crop} x {crop}: {named}':42s}{out['per_cpu_s']:10.1f}{shown[0]:>24s}"
+              f"{shown[1]:>24s}")
+        rows.append(out)
+
     for crop in a.crop:
-        gf = max(getframes_pairs(a.samples, crop) for _ in range(a.repeats))
-        print(f"{f'{crop} x {crop}: getframes 2.6.1 pairs':42s}{gf:10.1f}{'':>21s}{1.0:13.2f}")
-        rows.append({"crop": crop, "label": "getframes 2.6.1 pairs", "workers": 1, "per_cpu_s": gf,
-                     "against_numpy": None, "against_getframes": 1.0})
+        recipes, crops = {}, {}
         for camera in ("led", "sony-imx900"):
-            recipe = ds.Recipe(samples=a.samples + 1, crop=(crop, crop), cameras=(camera,), seed=1).to_json()
-            crops = same_crops(recipe, a.samples)
+            recipes[camera] = ds.Recipe(samples=a.samples + 1, crop=(crop, crop), cameras=(camera,),
+                                        seed=1).to_json()
+            crops[camera] = same_crops(recipes[camera], a.samples)
             with ProcessPoolExecutor(1, mp_context=_FRESH) as pool:  # one thread, in a fresh process of its own
-                setup = pool.submit(setup_ms, recipe, a.samples).result()
+                setup = pool.submit(setup_ms, recipes[camera], a.samples).result()
             shown = "no further gain row" if setup is None else f"{setup:8.1f} ms, once a process and gain row"
             print(f"{f'{crop} x {crop}: {camera} set-up a camera and gain':42s}{shown}")
             setups[f"{crop} {camera}"] = setup
-            ref = max(numpy_reference(crops) for _ in range(a.repeats))
-            print(f"{f'{crop} x {crop}: NumPy on {camera} crops':42s}{ref:10.1f}{1.0:21.2f}{ref / gf:13.2f}")
-            rows.append({"crop": crop, "label": f"NumPy reference, {camera}'s crops", "workers": 1,
-                         "per_cpu_s": ref, "against_numpy": 1.0, "against_getframes": ref / gf})
+        # the repeats interleaved: each times getframes, then per camera the NumPy script and our one and two
+        # workers, so that a ratio compares rates measured minutes apart at most, not a whole run apart (the
+        # machine's speed drifts by a third between runs)
+        gf: list = []
+        ref: dict = {camera: [] for camera in recipes}
+        ours_r: dict = {(camera, w): [] for camera in recipes for w in (1, 2)}
+        for _ in range(a.repeats):
+            gf.append(getframes_pairs(a.samples, crop))
+            for camera, recipe in recipes.items():
+                ref[camera].append(numpy_reference(crops[camera]))
+                for workers in (1, 2):
+                    ours_r[camera, workers].append(rate(recipe, a.samples, workers))
+        row(crop, "getframes 2.6.1 pairs", 1, gf, None, gf)
+        for camera in recipes:
+            row(crop, f"NumPy reference, {camera}'s crops", 1, ref[camera], ref[camera], gf)
             for workers in (1, 2):
-                r = max(rate(recipe, a.samples, workers) for _ in range(a.repeats))
-                print(f"{f'{crop} x {crop}: cmosnoise {camera}, {workers} worker(s)':42s}{r:10.1f}{r / ref:21.2f}"
-                      f"{r / gf:13.2f}")
-                rows.append({"crop": crop, "label": f"cmosnoise {camera}", "workers": workers, "per_cpu_s": r,
-                             "against_numpy": r / ref, "against_getframes": r / gf})
+                row(crop, f"cmosnoise {camera}", workers, ours_r[camera, workers], ref[camera], gf)
     led = ds.Recipe(samples=a.samples + 1, crop=(a.crop[0], a.crop[0]), cameras=("led",), seed=1).to_json()
     with ProcessPoolExecutor(1, mp_context=_FRESH) as pool:  # one thread, in a process of its own
         truth = pool.submit(truth_cost, led, a.samples).result()
@@ -337,7 +362,7 @@ def main() -> None:
         with open(a.json, "w") as fh:
             json.dump({"command": "python benchmarks/bench_dataset.py " + " ".join(sys.argv[1:-2]),
                        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
-                       "crops": a.crop, "samples": a.samples, "rows": rows, "setup_ms": setups, "truth_cost": truth,
+                       "crops": a.crop, "samples": a.samples, "repeats": a.repeats, "rows": rows, "setup_ms": setups, "truth_cost": truth,
                        **({"memory": {"samples": [a.memory // 10, a.memory], "peak_mb": [small, large]}}
                           if a.memory else {})}, fh, indent=2)
 

@@ -819,14 +819,25 @@ def render_camera_bursts(d: dict) -> str:
 
 
 def render_dataset_speed(d: dict) -> str:
+    paired = "against_numpy_range" in d["rows"][0]
     lines = [f"Measured with `{d['command']}` ({d['machine']}), samples with their truth per CPU-second (each "
-             "process's CPU time, summed over the workers), all in one run:", "",
+             "process's CPU time, summed over the workers), all in one run"
+             + (f", the best of {d.get('repeats', 3)} repeats; the ratios are the median (and range) of each repeat's "
+                "own, to the references timed in that repeat:" if paired else ":"), "",
              "| crop | | workers | samples per CPU-second | against NumPy on the same crops | against getframes |",
              "|---|---|---|---|---|---|"]
+
+    def ratio(r, key):
+        if r[key] is None:
+            return ""
+        span = r.get(key + "_range")
+        if not span or f"{span[0]:.2f}" == f"{span[1]:.2f}":
+            return f"{r[key]:.2f}"
+        return f"{r[key]:.2f} ({span[0]:.2f} to {span[1]:.2f})"
+
     for r in d["rows"]:
-        numpy = "" if r["against_numpy"] is None else f"{r['against_numpy']:.2f}"
-        lines.append(f"| {r['crop']} x {r['crop']} | {r['label']} | {r['workers']} | {r['per_cpu_s']:.1f} | {numpy} | "
-                     f"{r['against_getframes']:.2f} |")
+        lines.append(f"| {r['crop']} x {r['crop']} | {r['label']} | {r['workers']} | {r['per_cpu_s']:.1f} | "
+                     f"{ratio(r, 'against_numpy')} | {ratio(r, 'against_getframes')} |")
     if d.get("setup_ms"):
         parts = [f"{k.split(' ', 1)[1]} at {k.split(' ', 1)[0]} x {k.split(' ', 1)[0]} {v:.0f} ms"
                  for k, v in d["setup_ms"].items() if v is not None]
