@@ -441,7 +441,7 @@ def _merged_by_section(config: Config, updates: dict) -> Config:
     Each section that ``updates`` names is validated again from its set
     values with the update merged in (what the whole validation does to it),
     every other top-level value is validated as it is assigned, and the
-    configuration's own checks (``Config._cross_checks``, which only raise)
+    configuration's own checks (``Config._check_across_sections``, which only raise)
     run on each assignment, or once where there is none; the sections it
     does not name are shared with ``config``, already valid. The same
     configuration as validating the whole merged data, values and set keys
@@ -466,5 +466,5 @@ def _merged_by_section(config: Config, updates: dict) -> Config:
     for key, value in others.items():
         setattr(out, key, value)
     if not others:
-        out._cross_checks()
+        out._check_across_sections()
     return out

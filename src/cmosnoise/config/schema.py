@@ -1064,6 +1064,14 @@ class Config(Section):
 
     @model_validator(mode="after")
     def _cross_checks(self):
+        self._check_across_sections()
+        return self
+
+    def _check_across_sections(self) -> None:
+        """What no section can check alone (the black level below the top code, a gain in the gain table, the
+        light given once, ...): raises ValueError, changes nothing. Run on every validation and assignment
+        (:meth:`_cross_checks`), and by :func:`~cmosnoise.config.merge_updates` once after it puts validated
+        sections in."""
         top = self.adc.top_code
         if self.adc.black_level_dn >= top:
             raise ValueError(
@@ -1084,7 +1092,9 @@ class Config(Section):
                 raise ValueError(f"sensor.{index} = {value:g} is not in the gain table; it has "
                                  f"{', '.join(f'{h:g}' for h in sorted(set(have)))}")
             if not any(getattr(r, index) == value and r.binning in (None, binning) for r in self.gain_table):
-                modes = sorted({r.binning for r in self.gain_table if getattr(r, index) == value})
+                # every row at this value has a binning of its own here (a row without one would have matched)
+                modes = sorted({r.binning for r in self.gain_table
+                                if getattr(r, index) == value and r.binning is not None})
                 raise ValueError(f"sensor.binning = {binning!r}: the gain table has no row for it at sensor.{index} = "
                                  f"{value:g}; it has binning {', '.join(modes)} there")
         elif self.sensor.binning != "1x1" and any(r.binning is not None for r in self.gain_table):
@@ -1100,7 +1110,6 @@ class Config(Section):
             raise ValueError("give the light once: light (lux) or exposure.peak_rate_photons_per_s")
         if isinstance(self.crosstalk.kernel_pct, dict) and self.sensor.cfa == "none" and self.crosstalk.enabled:
             raise ValueError("crosstalk.kernel_pct: a per-colour kernel needs a colour sensor (sensor.cfa is 'none')")
-        return self
 
     # convenience -----------------------------------------------------------
     @property
