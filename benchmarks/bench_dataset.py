@@ -72,9 +72,12 @@ def _one_thread():
     numba.set_num_threads(1)
 
 
-#: every worker a fresh interpreter (spawned): a forked one would inherit this process's caches, filled by the
-#: reference's samples (same_crops makes the very samples timed: their gain rows solved, their sections' YAML)
-_FRESH = multiprocessing.get_context("spawn")
+#: every worker forked from a fresh interpreter (a fork server that has imported cmosnoise and made nothing): a
+#: worker forked from this process would inherit its caches, filled by the reference's samples (same_crops makes
+#: the very samples timed: their gain rows solved, their sections' YAML); a spawned one pays the imports each
+#: time (some 3 s: 9 of them made the suite's smallest run 34 s)
+_FRESH = multiprocessing.get_context("forkserver")
+_FRESH.set_forkserver_preload(["cmosnoise.app.dataset", "cmosnoise.analysis.ground_truth"])
 
 _SOURCES: dict = {}  # this process's source images, read at its first call (as one dataset run reads them once)
 
