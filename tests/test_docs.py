@@ -19,6 +19,7 @@ from conftest import cli
 import cmosnoise
 
 ROOT = Path(__file__).resolve().parent.parent
+PACKAGE_ROOT = str(Path(cmosnoise.__file__).resolve().parent.parent)
 SKIP = {"_build", "generated", "auto_examples"}
 
 
@@ -122,7 +123,10 @@ def test_every_python_example_in_the_docs_runs(page, code, tmp_path):
             compile(code, page, "exec")  # checked to compile here; it runs where a GPU is
             return
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}  # a real device, where one is
-    env["PYTHONPATH"] = str(ROOT / "src")
+    # the package these tests import (the checkout's src/ in a developer's editable install, the virtual
+    # environment's copy in CI's): src/ always made a clean clone compile every loop a second time, numba's cache
+    # being keyed by the source file's path (some 2 minutes of the suite, in the first example that ran)
+    env["PYTHONPATH"] = PACKAGE_ROOT
     r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
     assert r.returncode == 0, f"{page}:\n{code}\n{r.stderr[-3000:]}"
 
