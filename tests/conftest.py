@@ -92,11 +92,21 @@ FAST_TIER_LIMIT_S = 5.0
 _LONG_FAST_TESTS: list[tuple[float, str]] = []
 
 
+#: where the session's timeline goes, if anywhere: each test's phase as "worker start stop phase nodeid" (epoch
+#: seconds), for finding what a clean clone's suite waits on (docs/development.md, "Suite times")
+TIMELINE = os.environ.get("CMOSNOISE_TEST_TIMELINE")
+
+
 def pytest_runtest_logreport(report):
     """Note a call of a test outside the slow tier that took over :data:`FAST_TIER_LIMIT_S` (xdist's workers
-    report to the controlling process, which runs this)."""
+    report to the controlling process, which runs this); with ``CMOSNOISE_TEST_TIMELINE`` set, write each phase's
+    start and stop to that file."""
     if report.when == "call" and report.duration > FAST_TIER_LIMIT_S and "slow" not in report.keywords:
         _LONG_FAST_TESTS.append((report.duration, report.nodeid))
+    if TIMELINE and hasattr(report, "start") and not os.environ.get("PYTEST_XDIST_WORKER"):  # the controller's
+        worker = getattr(getattr(getattr(report, "node", None), "gateway", None), "id", "main")
+        with open(TIMELINE, "a") as fh:
+            fh.write(f"{worker} {report.start:.2f} {report.stop:.2f} {report.when} {report.nodeid}\n")
 
 
 def pytest_terminal_summary(terminalreporter):
